@@ -1,0 +1,94 @@
+"""Place/transition nets with unit arcs and a static priority relation (SPEC §3).
+
+A net is compiled once into bit masks: a marking of a 1-safe net is a Python
+``int`` whose bit ``i`` is set when place ``i`` holds a token, so enabledness
+and firing are two mask operations.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal
+
+Kind = Literal["event", "start", "invariant", "interrupt", "success", "failure"]
+CONTROLLABLE_KINDS: frozenset[str] = frozenset({"start", "interrupt"})
+
+
+@dataclass(frozen=True)
+class Transition:
+    """One transition variant.
+
+    ``name`` is the logical name shown to users (``teleop.start``); ``id`` is
+    unique in the net (``teleop.start#2`` for the second variant).  ``pre`` and
+    ``post`` are place indices; a place in both is a test (self-loop).
+    """
+
+    id: str
+    name: str
+    kind: Kind
+    pre: frozenset[int]
+    post: frozenset[int]
+    skillset: str
+    skill: str | None = None  # the skill, for start/invariant/interrupt/modes
+    element: str | None = None  # event, invariant or mode name
+    pre_mask: int = field(default=0, compare=False)
+    post_mask: int = field(default=0, compare=False)
+
+    @property
+    def controllable(self) -> bool:
+        """Skill starts and interrupts are operator commands (SPEC §5)."""
+        return self.kind in CONTROLLABLE_KINDS
+
+    @property
+    def is_invariant(self) -> bool:
+        return self.kind == "invariant"
+
+
+@dataclass(frozen=True)
+class PetriNet:
+    """A 1-safe net; ``initial`` is the initial marking as a bit mask.
+
+    ``priority`` lists pairs ``(high, low)`` of transition-index *groups*:
+    every transition in ``high`` has priority over every one in ``low``.
+    For skillset nets there is one pair per skillset: invariants over the rest.
+    """
+
+    name: str
+    places: tuple[str, ...]
+    transitions: tuple[Transition, ...]
+    initial: int
+    priority: tuple[tuple[frozenset[int], frozenset[int]], ...] = ()
+
+    def place_index(self, name: str) -> int:
+        return self._place_index[name]
+
+    @property
+    def _place_index(self) -> dict[str, int]:
+        cache = self.__dict__.get("_pi")
+        if cache is None:
+            cache = {p: i for i, p in enumerate(self.places)}
+            object.__setattr__(self, "_pi", cache)
+        return cache
+
+    def marked(self, marking: int) -> list[str]:
+        """Names of the marked places, in place order."""
+        return [p for i, p in enumerate(self.places) if marking >> i & 1]
+
+    def marking_of(self, places: list[str] | set[str]) -> int:
+        """The bit mask with exactly ``places`` marked."""
+        m = 0
+        for p in places:
+            m |= 1 << self._place_index[p]
+        return m
+
+    def transition_ids(self) -> list[str]:
+        return [t.id for t in self.transitions]
+
+
+def compile_transition(t: Transition) -> Transition:
+    """Return ``t`` with its bit masks filled from ``pre`` and ``post``."""
+    pre = sum(1 << i for i in t.pre)
+    post = sum(1 << i for i in t.post)
+    object.__setattr__(t, "pre_mask", pre)
+    object.__setattr__(t, "post_mask", post)
+    return t

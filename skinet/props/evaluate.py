@@ -1,0 +1,38 @@
+"""Evaluation of state formulas on combined markings (SPEC §4, ``safe(phi, m)``)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from typing import Any
+
+from skinet.lang.expr import And, Const, Expr, Implies, Not, Or
+from skinet.net.petrinet import PetriNet
+from skinet.props.formula import PlaceAtom
+
+
+def evaluate(expr: Expr, atom: Callable[[PlaceAtom], Any]) -> Any:
+    """Evaluate a boolean formula; ``atom`` gives each atom's value.
+
+    Values are Python bools or numpy boolean arrays (evaluated over many
+    markings at once, broadcasting as numpy does).
+    """
+    if isinstance(expr, Const):
+        return expr.value
+    if isinstance(expr, PlaceAtom):
+        return atom(expr)
+    if isinstance(expr, Not):
+        v = evaluate(expr.arg, atom)
+        return (not v) if isinstance(v, bool) else ~v
+    if isinstance(expr, And):
+        return evaluate(expr.left, atom) & evaluate(expr.right, atom)
+    if isinstance(expr, Or):
+        return evaluate(expr.left, atom) | evaluate(expr.right, atom)
+    if isinstance(expr, Implies):
+        left = evaluate(expr.left, atom)
+        return evaluate(expr.right, atom) | ((not left) if isinstance(left, bool) else ~left)
+    raise TypeError(f"not a state formula: {expr!r}")
+
+
+def holds(expr: Expr, marking: Mapping[str, int], nets: Mapping[str, PetriNet]) -> bool:
+    """``safe(expr, marking)``: ``marking`` maps each skillset to its bit-mask marking."""
+    return bool(evaluate(expr, lambda a: bool(marking[a.skillset] >> nets[a.skillset].place_index(a.place) & 1)))

@@ -1,0 +1,134 @@
+"""A supervised system: several skillsets, their nets, and safety properties.
+
+Pure: built from texts already read (see :mod:`skinet.files` for loading).
+A *combined marking* maps each skillset name to its net marking (bit mask).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+from skinet.errors import SourceError
+from skinet.lang.model import Skillset
+from skinet.net.build import build_net, idle_place, resource_place, running_place
+from skinet.net.petrinet import PetriNet
+from skinet.props.formula import Property
+from skinet.props.parser import parse_properties
+
+Marking = dict[str, int]
+
+
+@dataclass(frozen=True)
+class Component:
+    """One skillset of the system with its full and eventless nets."""
+
+    skillset: Skillset
+    net: PetriNet
+    eventless: PetriNet
+    manager: str = ""  # ROS 2 node of the skillset manager, e.g. /spot/spot_skillset_manager
+
+    @property
+    def name(self) -> str:
+        return self.skillset.name
+
+
+@dataclass(frozen=True)
+class System:
+    name: str
+    components: tuple[Component, ...]
+    properties: tuple[Property, ...]
+    sources: Mapping[str, str] = field(default_factory=dict)  # file name -> text, for digests
+
+    def component(self, name: str) -> Component:
+        for c in self.components:
+            if c.name == name:
+                return c
+        raise KeyError(name)
+
+    @property
+    def nets(self) -> dict[str, PetriNet]:
+        return {c.name: c.net for c in self.components}
+
+    def initial_marking(self) -> Marking:
+        return {c.name: c.net.initial for c in self.components}
+
+    def property(self, name: str) -> Property:
+        for p in self.properties:
+            if p.name == name:
+                return p
+        raise KeyError(name)
+
+
+def build_system(
+    name: str,
+    skillsets: Sequence[tuple[Skillset, str]],
+    properties_text: str,
+    properties_source: str = "<properties>",
+    sources: Mapping[str, str] | None = None,
+) -> System:
+    """Assemble a system from parsed skillsets (each with its manager node) and properties text."""
+    seen: set[str] = set()
+    components = []
+    for ss, manager in skillsets:
+        if ss.name in seen:
+            raise SourceError.at(ss.source, ss.pos, f"skillset '{ss.name}' appears twice in system '{name}'")
+        seen.add(ss.name)
+        components.append(Component(ss, build_net(ss), build_net(ss, eventless=True), manager))
+    props = parse_properties(properties_text, {s.name: s for s, _ in skillsets}, properties_source)
+    return System(name, tuple(components), tuple(props), dict(sources or {}))
+
+
+def marking_to_json(system: System, marking: Mapping[str, int]) -> dict[str, dict]:
+    """``{skillset: {"resources": {r: state}, "running": [skill, ...]}}``."""
+    out: dict[str, dict] = {}
+    for c in system.components:
+        m = marking[c.name]
+        idx = c.net.place_index
+        resources = {
+            r.name: next(s for s in r.states if m >> idx(resource_place(r.name, s)) & 1)
+            for r in c.skillset.resources
+        }
+        running = [k.name for k in c.skillset.skills if m >> idx(running_place(k.name)) & 1]
+        out[c.name] = {"resources": resources, "running": running}
+    return out
+
+
+def marking_from_json(system: System, data: object, source: str = "<state>") -> Marking:
+    """Inverse of :func:`marking_to_json`; omitted resources are initial, omitted skills idle."""
+    if not isinstance(data, dict):
+        raise SourceError.at(source, None, "state must be an object mapping skillset names to states")
+    unknown = sorted(set(data) - {c.name for c in system.components})
+    if unknown:
+        names = ", ".join(c.name for c in system.components)
+        raise SourceError.at(source, None, f"unknown skillset '{unknown[0]}' (skillsets: {names})")
+    marking: Marking = {}
+    for c in system.components:
+        entry = data.get(c.name, {})
+        if not isinstance(entry, dict):
+            raise SourceError.at(source, None, f"state of '{c.name}' must be an object")
+        extra = sorted(set(entry) - {"resources", "running"})
+        if extra:
+            raise SourceError.at(source, None, f"unknown key '{extra[0]}' in state of '{c.name}' (keys: resources, running)")
+        resources = entry.get("resources", {})
+        running = entry.get("running", [])
+        if not isinstance(resources, dict) or not isinstance(running, list):
+            raise SourceError.at(source, None, f"state of '{c.name}': 'resources' must be an object and 'running' a list")
+        places: set[str] = set()
+        declared = {r.name: r for r in c.skillset.resources}
+        for rname in resources:
+            if rname not in declared:
+                raise SourceError.at(source, None, f"unknown resource '{rname}' of '{c.name}' (resources: {', '.join(declared)})")
+        for r in c.skillset.resources:
+            state = resources.get(r.name, r.initial)
+            if state not in r.states:
+                raise SourceError.at(source, None, f"unknown state '{state}' of resource '{c.name}:{r.name}' (states: {', '.join(r.states)})")
+            places.add(resource_place(r.name, state))
+        skills = {k.name for k in c.skillset.skills}
+        for k in running:
+            if k not in skills:
+                raise SourceError.at(source, None, f"unknown skill '{k}' of '{c.name}' (skills: {', '.join(sorted(skills))})")
+        for k in c.skillset.skills:
+            places.add(running_place(k.name) if k.name in running else idle_place(k.name))
+        marking[c.name] = c.net.marking_of(places)
+    return marking

@@ -1,0 +1,135 @@
+"""Algorithm 1 with implicit constraints (SPEC §5; seed paper, Algorithm 1).
+
+For each skillset, each transition firable at the live marking is fired (with
+its invariant cascade); a property it violates at once is an *explicit*
+constraint, one whose result lies in mu1 = Sat(AF not phi) an *implicit*
+constraint, and one whose result the predictor could not decide (truncated
+exploration) is *unknown*, never reported as safe.
+
+Cost: O(T x R x P) formula evaluations for T firable transitions, R results
+per cascade and P properties; cascades are tiny in practice.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Literal, Protocol
+
+from skinet.net.semantics import steps
+from skinet.props.evaluate import holds
+from skinet.system import Marking, System
+
+Constraint = Literal["explicit", "implicit", "unknown"]
+_RANK: dict[str, int] = {"explicit": 3, "implicit": 2, "unknown": 1}
+
+
+@dataclass(frozen=True)
+class PredictionVerdict:
+    """What the predictor knows of one marking for one property."""
+
+    status: Literal["dangerous", "safe", "undecided"]
+    steps: int | None = None  # bound on steps to the violation, when dangerous
+    witness: tuple[str, ...] = ()  # transition names leading to a violation
+
+
+class Prediction(Protocol):
+    """mu1 as Algorithm 1 consumes it (implemented by :mod:`skinet.verify.predict`)."""
+
+    def verdict(self, prop: str, marking: Mapping[str, int]) -> PredictionVerdict: ...
+
+
+@dataclass(frozen=True)
+class UnsafeTransition:
+    skillset: str
+    transition: str  # logical name, e.g. "go_to_waypoint.start"
+    kind: str
+    controllable: bool
+    property: str
+    constraint: Constraint
+    steps: int | None = None  # 0 for explicit; bound for implicit
+    witness: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class Recovery:
+    skillset: str
+    transition: str
+    kind: str
+    controllable: bool
+
+
+@dataclass
+class Analysis:
+    """Algorithm 1's result at one live marking."""
+
+    marking: Marking
+    violated: list[str] = field(default_factory=list)  # properties failing now
+    unsafe: list[UnsafeTransition] = field(default_factory=list)  # the literal algorithm
+    recovery: dict[str, list[Recovery]] = field(default_factory=dict)  # per violated property
+
+    def operator_unsafe(self) -> list[UnsafeTransition]:
+        """Unsafe transitions for properties that hold now (the operator view, SPEC §5)."""
+        return [u for u in self.unsafe if u.property not in self.violated]
+
+
+def analyse(system: System, marking: Mapping[str, int], prediction: Prediction | None = None) -> Analysis:
+    """Run Algorithm 1 at ``marking`` (a stable combined marking).
+
+    ``prediction`` is mu1; ``None`` means mu1 is empty (explicit constraints only).
+    Variants of one logical transition and the several results of a cascade are
+    merged, keeping the worst constraint (explicit > implicit > unknown).
+    """
+    nets = system.nets
+    result = Analysis(dict(marking))
+    result.violated = [p.name for p in system.properties if not holds(p.expr, marking, nets)]
+    worst: dict[tuple[str, str, str], UnsafeTransition] = {}
+    recovers: dict[tuple[str, str, str], bool] = {}
+    order: list[tuple[str, str]] = []
+    for comp in system.components:
+        for t, results in steps(comp.net, marking[comp.name]):
+            if (comp.name, t.name) not in order:
+                order.append((comp.name, t.name))
+            for m in results:
+                after = dict(marking)
+                after[comp.name] = m
+                for p in system.properties:
+                    key = (comp.name, t.name, p.name)
+                    found = _judge(p.name, holds(p.expr, after, nets), after, prediction)
+                    if p.name in result.violated:
+                        # Every result must restore the property for a recovery.
+                        recovers[key] = recovers.get(key, True) and found is None
+                    if found is None:
+                        continue
+                    constraint, n, witness = found
+                    old = worst.get(key)
+                    if old is None or _RANK[constraint] > _RANK[old.constraint]:
+                        worst[key] = UnsafeTransition(
+                            comp.name, t.name, t.kind, t.controllable, p.name, constraint, n, witness
+                        )
+    kinds = {(c.name, t.name): t for c in system.components for t in c.net.transitions}
+    for ss, tname in order:
+        for p in system.properties:
+            if (ss, tname, p.name) in worst:
+                result.unsafe.append(worst[(ss, tname, p.name)])
+            if recovers.get((ss, tname, p.name)):
+                t = kinds[(ss, tname)]
+                result.recovery.setdefault(p.name, []).append(Recovery(ss, tname, t.kind, t.controllable))
+    for p in result.violated:
+        result.recovery.setdefault(p, [])
+    return result
+
+
+def _judge(
+    prop: str, safe: bool, after: Mapping[str, int], prediction: Prediction | None
+) -> tuple[Constraint, int | None, tuple[str, ...]] | None:
+    if not safe:
+        return "explicit", 0, ()
+    if prediction is None:
+        return None
+    v = prediction.verdict(prop, after)
+    if v.status == "dangerous":
+        return "implicit", v.steps, v.witness
+    if v.status == "undecided":
+        return "unknown", None, ()
+    return None
