@@ -15,7 +15,7 @@ from itertools import product
 from skinet.lang.dnf import Clause, dnf
 from skinet.lang.expr import And, Const, Expr, Not
 from skinet.lang.model import Effect, Skillset
-from skinet.net.petrinet import Kind, PetriNet, Transition, compile_transition
+from skinet.net.petrinet import Kind, PetriNet, Transition
 
 
 def resource_place(resource: str, state: str) -> str:
@@ -70,9 +70,7 @@ def build_net(skillset: Skillset, eventless: bool = False) -> PetriNet:
             seen.add((pre_i, post_i))
             tid = spec.name if len(seen) == 1 else f"{spec.name}#{len(seen)}"
             transitions.append(
-                compile_transition(
-                    Transition(tid, spec.name, spec.kind, pre_i, post_i, skillset.name, spec.skill, spec.element)
-                )
+                Transition(tid, spec.name, spec.kind, pre_i, post_i, skillset.name, spec.skill, spec.element)
             )
 
     initial = {resource_place(r.name, r.initial) for r in skillset.resources}
@@ -128,7 +126,8 @@ def _variants(
         skill_pre, skill_post = [idle_place(spec.skill or "")], [running_place(spec.skill or "")]
     elif spec.skill is not None:
         skill_pre, skill_post = [running_place(spec.skill)], [idle_place(spec.skill)]
-    post_clauses: list[Clause] = [{}] if spec.postcondition is None else spec.postcondition
+    # An unsatisfiable postcondition moves nothing: the skill still stops.
+    post_clauses: list[Clause] = spec.postcondition or [{}]
     for clause in spec.guard:
         for post_clause in post_clauses:
             moved = [r for r in states if r in spec.effects or r in post_clause]

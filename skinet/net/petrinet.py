@@ -31,8 +31,12 @@ class Transition:
     skillset: str
     skill: str | None = None  # the skill, for start/invariant/interrupt/modes
     element: str | None = None  # event, invariant or mode name
-    pre_mask: int = field(default=0, compare=False)
-    post_mask: int = field(default=0, compare=False)
+    pre_mask: int = field(default=0, compare=False, init=False)
+    post_mask: int = field(default=0, compare=False, init=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "pre_mask", sum(1 << i for i in self.pre))
+        object.__setattr__(self, "post_mask", sum(1 << i for i in self.post))
 
     @property
     def controllable(self) -> bool:
@@ -83,12 +87,3 @@ class PetriNet:
 
     def transition_ids(self) -> list[str]:
         return [t.id for t in self.transitions]
-
-
-def compile_transition(t: Transition) -> Transition:
-    """Return ``t`` with its bit masks filled from ``pre`` and ``post``."""
-    pre = sum(1 << i for i in t.pre)
-    post = sum(1 << i for i in t.post)
-    object.__setattr__(t, "pre_mask", pre)
-    object.__setattr__(t, "post_mask", post)
-    return t
