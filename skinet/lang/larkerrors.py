@@ -1,58 +1,94 @@
-"""Turn lark syntax errors into ``FILE:LINE:COL: error: ...`` diagnostics."""
+"""Turn lark syntax errors into ``FILE:LINE:COL: error: ...`` diagnostics.
+
+Shared by the skillset grammar and the property/CTL grammar.
+"""
 
 from __future__ import annotations
 
-from lark.exceptions import UnexpectedCharacters, UnexpectedEOF, UnexpectedInput, UnexpectedToken
+from typing import Any
 
-from skinet.errors import Pos, SourceError
+from lark import Lark, Token
+from lark.exceptions import UnexpectedCharacters, UnexpectedInput, UnexpectedToken
 
-_READABLE = {
-    "NAME": "name", "IDENT": "identifier", "IDENTIFIER": "identifier", "NUMBER": "number",
-    "LBRACE": "'{'", "RBRACE": "'}'", "LPAR": "'('", "RPAR": "')'", "LSQB": "'['", "RSQB": "']'",
-    "COLON": "':'", "COMMA": "','", "DOT": "'.'", "EQUAL": "'='", "MORETHAN": "'>'", "LESSTHAN": "'<'",
-    "_NL": "end of line", "$END": "end of input", "TEMPORAL": "temporal operator", "QUANT": "'E' or 'A'",
-}
+from skinet.errors import Diagnostic, Pos, SourceError
 
-
-def readable(terminal: str) -> str:
-    """A user-facing name for a lark terminal (``RBRACE`` -> ``'}'``)."""
-    if terminal in _READABLE:
-        return _READABLE[terminal]
-    if terminal.startswith("__ANON") or terminal.startswith("ANON"):
-        return "token"
-    return f"'{terminal.lower()}'" if terminal.isupper() else f"'{terminal}'"
+_MAX_EXPECTED = 10
+_DISPLAY = {"$END": "end of input", "NAME": "identifier", "NUMBER": "number", "_NL": "end of line"}
 
 
-def syntax_error(exc: UnexpectedInput, text: str, source: str) -> SourceError:
-    """A :class:`SourceError` at the position of ``exc`` naming what was expected."""
-    expected: set[str] = set()
+def syntax_error(parser: Lark, exc: UnexpectedInput, text: str, source: str) -> SourceError:
+    """:func:`syntax_diagnostic` wrapped in a :class:`SourceError`."""
+    return SourceError([syntax_diagnostic(parser, exc, text, source)])
+
+
+def syntax_diagnostic(parser: Lark, exc: UnexpectedInput, text: str, source: str) -> Diagnostic:
+    """A readable ``unexpected 'X', expected one of: ...`` diagnostic."""
     if isinstance(exc, UnexpectedToken):
-        expected = set(exc.accepts or exc.expected)
-        token = exc.token
-        if token.type == "$END":
+        expected = _expected_before(parser, text, exc.token) or exc.accepts or exc.expected
+        if exc.token.type == "$END":
+            stripped = text.rstrip()
+            line = stripped.count("\n") + 1
+            column = len(stripped) - (stripped.rfind("\n") + 1) + 1
             found = "end of input"
-        else:
-            found = "end of line" if token.type == "_NL" else f"'{token}'"
-    elif isinstance(exc, UnexpectedCharacters):
-        expected = set(exc.allowed or ())
-        found = f"character '{text[exc.pos_in_stream]}'" if exc.pos_in_stream < len(text) else "end of input"
-    elif isinstance(exc, UnexpectedEOF):
-        expected = set(exc.expected)
-        found = "end of input"
-    else:  # pragma: no cover - lark has no other subclasses
-        found = "input"
-    line, column = _position(exc, text)
-    names = sorted({readable(t) for t in expected})
-    message = f"unexpected {found}"
-    if names:
-        message += f", expected {names[0]}" if len(names) == 1 else f", expected one of: {', '.join(names)}"
-    return SourceError.at(source, Pos(line, column), message)
+            return Diagnostic(source, Pos(line, column), "error", f"unexpected {found}, expected {_expected_text(parser, expected)}")
+        found = "end of line" if exc.token.type == "_NL" else f"'{exc.token}'"
+        return Diagnostic(
+            source, Pos(exc.line, exc.column), "error", f"unexpected {found}, expected {_expected_text(parser, expected)}"
+        )
+    if isinstance(exc, UnexpectedCharacters):
+        if text.startswith("/*", exc.pos_in_stream):
+            return Diagnostic(source, Pos(exc.line, exc.column), "error", "unterminated comment '/*'")
+        char = text[exc.pos_in_stream] if exc.pos_in_stream < len(text) else ""
+        return Diagnostic(
+            source, Pos(exc.line, exc.column), "error",
+            f"unexpected character '{char}', expected {_expected_text(parser, exc.allowed)}",
+        )
+    return Diagnostic(  # pragma: no cover - lark's LALR raises only the two above
+        source, Pos(exc.line, exc.column), "error", "syntax error"
+    )
 
 
-def _position(exc: UnexpectedInput, text: str) -> tuple[int, int]:
-    line = getattr(exc, "line", -1)
-    column = getattr(exc, "column", -1)
-    if line is None or line < 1:
-        lines = text.split("\n")
-        return len(lines), len(lines[-1]) + 1
-    return line, column
+def _expected_before(parser: Lark, text: str, failing: Token) -> set[str] | None:
+    """Terminals acceptable just before ``failing`` was read.
+
+    LALR reduces on the failing lookahead before noticing the error, which would
+    shrink the expected set (``(a == b }`` would only list ``')'`` and ``'=>'``);
+    replaying the parse interactively and stopping before that token gives the
+    full set.  Only runs on the error path.
+    """
+    interactive = parser.parse_interactive(text)
+    try:
+        for token in interactive.iter_parse():
+            if token.start_pos == failing.start_pos and token.type == failing.type:
+                return set(interactive.accepts())
+    except UnexpectedInput:
+        return None
+    if failing.type == "$END":
+        return set(interactive.accepts())
+    return None
+
+
+def _expected_text(parser: Lark, names: Any) -> str:
+    """``one of: '{', identifier`` from a set of terminal names."""
+    shown = sorted({d for d in (_terminal_display(parser, n) for n in names or ()) if d})
+    if not shown:
+        return "nothing"
+    if len(shown) == 1:
+        return shown[0]
+    if len(shown) > _MAX_EXPECTED:
+        shown = shown[:_MAX_EXPECTED] + ["..."]
+    return "one of: " + ", ".join(shown)
+
+
+def _terminal_display(parser: Lark, name: str) -> str | None:
+    """Readable form of a terminal (``'{'``, ``identifier``); None for ignored ones."""
+    if name in _DISPLAY:
+        return _DISPLAY[name]
+    if name in parser.ignore_tokens:
+        return None
+    for term in parser.terminals:
+        if term.name == name:
+            if term.pattern.type == "str":
+                return f"'{term.pattern.value}'"
+            return None
+    return None
