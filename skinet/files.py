@@ -1,0 +1,98 @@
+"""Reading model files from disk: the only module of the core that does I/O.
+
+A *system file* (TOML) names the skillsets, the properties file and, for each
+skillset, the ROS 2 node of its manager; paths are relative to the file::
+
+    [system]
+    name = "spot_arm"
+    properties = "spot_arm.props"
+
+    [[skillsets]]
+    model = "spot.rl"
+    manager = "/spot/spot_skillset_manager"
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import tomllib
+from pathlib import Path
+
+from skinet.errors import Diagnostic, Pos, SourceError
+from skinet.lang.model import Model
+from skinet.lang.parser import parse_model
+from skinet.system import Marking, System, build_system, marking_from_json
+
+
+def read_text(path: str | Path) -> str:
+    """File contents, or a :class:`SourceError` naming the file and the OS reason."""
+    try:
+        return Path(path).read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
+        raise SourceError.at(str(path), None, f"cannot read file: {reason}") from None
+
+
+def load_model(path: str | Path) -> Model:
+    """Parse and validate a ``.rl`` file."""
+    return parse_model(read_text(path), str(path))
+
+
+def load_system(path: str | Path) -> tuple[System, list[Diagnostic]]:
+    """Load a system file and everything it names; returns the warnings too."""
+    path = Path(path)
+    text = read_text(path)
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise _toml_error(str(path), exc) from None
+    where = str(path)
+    system = data.get("system")
+    if not isinstance(system, dict) or not isinstance(system.get("name"), str):
+        raise SourceError.at(where, None, "missing [system] table with a 'name' string")
+    entries = data.get("skillsets")
+    if not isinstance(entries, list) or not entries:
+        raise SourceError.at(where, None, "missing [[skillsets]] entries (each with 'model' and 'manager')")
+    skillsets = []
+    warnings: list[Diagnostic] = []
+    sources: dict[str, str] = {}
+    for n, entry in enumerate(entries, 1):
+        if not isinstance(entry, dict) or not isinstance(entry.get("model"), str):
+            raise SourceError.at(where, None, f"skillsets entry {n} needs a 'model' path")
+        model_path = path.parent / entry["model"]
+        model_text = read_text(model_path)
+        model = parse_model(model_text, str(model_path))
+        warnings.extend(model.warnings)
+        if len(model.skillsets) != 1:
+            raise SourceError.at(str(model_path), None, f"expected exactly one skillset, found {len(model.skillsets)}")
+        skillset = model.skillsets[0]
+        expected = entry.get("name")
+        if expected is not None and expected != skillset.name:
+            raise SourceError.at(where, None, f"skillsets entry {n} names '{expected}' but {entry['model']} declares '{skillset.name}'")
+        sources[model_path.name] = model_text
+        skillsets.append((skillset, str(entry.get("manager", ""))))
+    props_name = system.get("properties")
+    props_text, props_source = "", "<no properties>"
+    if props_name is not None:
+        props_path = path.parent / str(props_name)
+        props_text, props_source = read_text(props_path), str(props_path)
+        sources[props_path.name] = props_text
+    return build_system(system["name"], skillsets, props_text, props_source, sources), warnings
+
+
+def load_state(path: str | Path, system: System) -> Marking:
+    """A combined marking from a JSON state file (see :func:`skinet.system.marking_from_json`)."""
+    text = read_text(path)
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise SourceError.at(str(path), Pos(exc.lineno, exc.colno), f"invalid JSON: {exc.msg}") from None
+    return marking_from_json(system, data, str(path))
+
+
+def _toml_error(source: str, exc: tomllib.TOMLDecodeError) -> SourceError:
+    match = re.search(r"\(at line (\d+), column (\d+)\)$", str(exc))
+    message = re.sub(r"\s*\(at line \d+, column \d+\)$|\s*\(at end of document\)$", "", str(exc))
+    pos = Pos(int(match.group(1)), int(match.group(2))) if match else None
+    return SourceError.at(source, pos, f"invalid TOML: {message}")

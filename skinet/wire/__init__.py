@@ -1,0 +1,1 @@
+"""The language-neutral contract between services: keys, messages, codec (SPEC §1)."""

@@ -1,0 +1,36 @@
+"""msgpack encoding of messages, with errors that never escape as crashes."""
+
+from __future__ import annotations
+
+from typing import TypeVar
+
+import msgpack
+from pydantic import BaseModel, ValidationError
+
+M = TypeVar("M", bound=BaseModel)
+
+
+class DecodeError(ValueError):
+    """A payload that is not a valid message of the expected type."""
+
+
+def encode(message: BaseModel) -> bytes:
+    return msgpack.packb(message.model_dump(mode="json"), use_bin_type=True)
+
+
+def decode(payload: bytes, kind: type[M]) -> M:
+    """Decode ``payload`` as ``kind``; raises :class:`DecodeError` with a one-line reason."""
+    try:
+        data = msgpack.unpackb(payload, raw=False, strict_map_key=True)
+    except Exception as exc:  # msgpack raises several unrelated types
+        raise DecodeError(f"not msgpack: {exc}") from None
+    if not isinstance(data, dict):
+        raise DecodeError(f"expected a map, got {type(data).__name__}")
+    if data.get("v") != 1:
+        raise DecodeError(f"unsupported schema version {data.get('v')!r} (expected 1)")
+    try:
+        return kind.model_validate(data)
+    except ValidationError as exc:
+        first = exc.errors()[0]
+        where = ".".join(str(x) for x in first["loc"]) or "message"
+        raise DecodeError(f"invalid {kind.__name__}: {where}: {first['msg']}") from None

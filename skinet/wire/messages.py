@@ -1,0 +1,155 @@
+"""Messages exchanged over Zenoh (SPEC §1), as pydantic models.
+
+Every message carries ``v``, the schema version; a receiver rejects other
+versions.  JSON Schemas in ``schemas/`` are generated from these models
+(``python -m skinet.wire.schemas``) and a test fails when they drift.
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+SCHEMA_VERSION = 1
+
+
+class _Message(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    v: Literal[1] = Field(SCHEMA_VERSION, description="schema version")
+
+
+class SkillsetStatus(BaseModel):
+    """Observed state of one skillset: resource states and running skills."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    resources: dict[str, str] = Field(default_factory=dict, description="resource -> state")
+    running: list[str] = Field(default_factory=list, description="skills running or interrupting")
+
+
+class CanonicalEvent(_Message):
+    """A model-level event of one skillset, published by the bridge."""
+
+    system: str
+    skillset: str
+    seq: int = Field(ge=0, description="per-skillset sequence number, +1 per event")
+    stamp: float = Field(description="source time, seconds since the epoch")
+    source: str = Field("", description="publishing instance")
+    transition: str | None = Field(None, description="logical transition, e.g. 'teleop.start'; None: status only")
+    status: SkillsetStatus | None = Field(None, description="status observed after the event, when known")
+    info: str = Field("", description="free text from the manager (response name, ids)")
+
+
+class PropertyVerdict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    name: str
+    holds: bool
+
+
+class LiveState(_Message):
+    """The monitor's live marking after an event."""
+
+    system: str
+    seq: int = Field(ge=0, description="monitor publication counter")
+    stamp: float
+    skillsets: dict[str, SkillsetStatus]
+    event: str = Field("", description="the event that led here, 'skillset:transition#seq'")
+    divergence: str | None = Field(None, description="why the model could not explain the event")
+
+
+class Verdicts(_Message):
+    system: str
+    seq: int = Field(ge=0)
+    stamp: float
+    properties: list[PropertyVerdict]
+
+
+class UnsafeEntry(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    skillset: str
+    transition: str
+    kind: str
+    controllable: bool
+    property: str
+    constraint: Literal["explicit", "implicit", "unknown"]
+    steps: int | None = None
+    witness: list[str] = Field(default_factory=list)
+
+
+class RecoveryEntry(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    property: str
+    skillset: str
+    transition: str
+    controllable: bool
+
+
+class UnsafeReport(_Message):
+    """Algorithm 1's result after an event (operator view plus the literal count)."""
+
+    system: str
+    seq: int = Field(ge=0)
+    stamp: float
+    unsafe: list[UnsafeEntry]
+    recovery: list[RecoveryEntry] = Field(default_factory=list)
+    violated: list[str] = Field(default_factory=list)
+    literal_count: int = Field(0, description="size of the literal algorithm's list (paper Fig. 3)")
+    prediction_stale: bool = Field(description="True when implicit constraints are not up to date")
+
+
+class StateSpaceReport(_Message):
+    """The paper's ``state_space`` topic."""
+
+    system: str
+    stamp: float
+    time: float = Field(description="exploration seconds")
+    timeout_reached: bool
+    depth: int
+    markings: int
+    edges: int
+
+
+class ModelBundle(_Message):
+    """Every source a predictor needs to rebuild the system."""
+
+    system: str
+    digest: str
+    skillsets: list[tuple[str, str, str]] = Field(description="(file name, .rl text, manager node)")
+    properties: str
+    properties_name: str = "properties"
+
+
+class PredictRequest(_Message):
+    system: str
+    digest: str
+    seq: int = Field(ge=0, description="monitor query counter")
+    skillsets: dict[str, SkillsetStatus] = Field(description="the live marking")
+    budget: float = Field(1.0, gt=0, description="exploration time budget, seconds")
+
+
+class Risk(BaseModel):
+    """mu1 verdict of one marking reachable in one step, for one property."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    skillsets: dict[str, SkillsetStatus]
+    property: str
+    status: Literal["dangerous", "undecided"]
+    steps: int | None = None
+    witness: list[str] = Field(default_factory=list)
+
+
+class PredictReply(_Message):
+    system: str
+    digest: str
+    seq: int
+    ok: bool
+    error: str = ""
+    instance: str = ""
+    report: StateSpaceReport | None = None
+    risks: list[Risk] = Field(default_factory=list, description="non-safe one-step successors; others are safe")
+
+
+MESSAGES: dict[str, type[BaseModel]] = {
+    m.__name__: m
+    for m in (CanonicalEvent, LiveState, Verdicts, UnsafeReport, StateSpaceReport, ModelBundle, PredictRequest, PredictReply)
+}
