@@ -21,6 +21,7 @@ from skinet.verify.algorithm1 import analyse
 from skinet.verify.ctl import Kripke, check
 from skinet.verify.explore import explore
 from skinet.verify.predict import Forecast, forecast
+from skinet.cli import demo
 from skinet.cli.render import analysis_text, seconds, table
 
 DESCRIPTION = """\
@@ -31,6 +32,7 @@ properties and reports the commands and events that would violate them now
 
 EPILOG = """\
 examples:
+  skinet demo
   skinet parse skillsets/spot.rl
   skinet net skillsets/spot.rl --eventless --format tina -o spot.net
   skinet unsafe skillsets/spot_arm.toml --state state.json
@@ -96,6 +98,8 @@ def build_parser() -> argparse.ArgumentParser:
     _system_args(c)
     c.add_argument("formula", help='e.g. "AG not (spot:Busy and manipulator:Busy)"')
     c.set_defaults(func=cmd_ctl)
+
+    demo.add_parser(sub)
     return p
 
 

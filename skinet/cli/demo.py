@@ -1,0 +1,64 @@
+"""``skinet demo``: the paper's two runs, as the operator would have seen them."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from skinet.files import load_system, read_text
+from skinet.mission import StepRecord, parse_scenario, replay
+
+MISSIONS = ("unassisted.toml", "assisted.toml")
+
+
+def default_scenarios() -> list[Path]:
+    """The paper's runs: ``skillsets/missions/`` here, else beside the installed package."""
+    for root in (Path.cwd(), Path(__file__).resolve().parents[2]):
+        folder = root / "skillsets" / "missions"
+        if all((folder / m).exists() for m in MISSIONS):
+            return [folder / m for m in MISSIONS]
+    return [Path("skillsets/missions") / m for m in MISSIONS]
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    c = sub.add_parser("demo", help="replay the paper's unassisted and assisted runs (the main job)")
+    c.add_argument("scenarios", nargs="*", help="scenario files (default: skillsets/missions/{unassisted,assisted}.toml)")
+    c.add_argument("--no-predict", action="store_true", help="explicit constraints only")
+    c.add_argument("--all-steps", action="store_true", help="print every step, not only the notable ones")
+    c.set_defaults(func=cmd_demo)
+
+
+def cmd_demo(args: argparse.Namespace) -> int:
+    paths = [Path(p) for p in args.scenarios] or default_scenarios()
+    for path in paths:
+        scenario = parse_scenario(read_text(path), str(path))
+        system, _ = load_system(path.parent / scenario.system)
+        records = replay(system, scenario, predict=not args.no_predict)
+        print(f"== {scenario.name} run ({path}): {len(records)} steps, system {system.name}")
+        for r in records:
+            if args.all_steps or r.violations or r.warnings or r.divergence or r.step.consider:
+                print(_line(r))
+        violations = [(p, r.index) for r in records for p in r.violations]
+        warnings = [(w, r.index) for r in records for w in r.warnings]
+        print(f"   violations: {len(violations)}" + "".join(f"; {p} at step {i}" for p, i in violations))
+        print(f"   warnings before risky commands: {len(warnings)}"
+              + "".join(f"; {w.skillset}:{w.transition} unsafe for {w.property} ({w.constraint}) at step {i}" for w, i in warnings))
+        print()
+    return 0
+
+
+def _line(r: StepRecord) -> str:
+    s = r.step
+    what = f"{s.skillset}:{s.transition}" if s.transition else f"(considers {s.skillset}:{s.consider})"
+    status = " ".join(f"{p}={'ok' if ok else 'VIOLATED'}" for p, ok in r.holds.items())
+    line = f"  step {r.index:>3}  t={s.t:>6.1f}s  {what:<42} {status}  unsafe={r.unsafe_count}"
+    for p in r.violations:
+        line += f"\n             !! {p} violated"
+    for w in r.warnings:
+        steps = "" if w.steps in (None, 0) else f", within {w.steps} steps"
+        line += f"\n             SkiNet: {w.skillset}:{w.transition} is unsafe for {w.property} ({w.constraint}{steps}); operator refrains"
+    if r.divergence:
+        line += f"\n             model divergence: {r.divergence}"
+    if s.note:
+        line += f"\n             ({s.note})"
+    return line

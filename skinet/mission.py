@@ -1,0 +1,97 @@
+"""Mission scenarios and their replay on the core (MISSION.md, SPEC §5).
+
+A scenario is a TOML file of timed steps; each step is a model transition of
+one skillset (``transition = "teleop.start"``: an operator command, an event
+or a skill outcome) or an operator *considering* a command without issuing it
+(``consider = "arm_ready.start"``), which shows whether SkiNet warns about it.
+The simulator of issue 5 plays the same files through the whole chain.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass, field
+
+from skinet.errors import SourceError
+from skinet.live import LiveSystem
+from skinet.props.evaluate import holds
+from skinet.system import System
+from skinet.verify.algorithm1 import UnsafeTransition, analyse
+from skinet.verify.predict import forecast
+
+
+@dataclass(frozen=True)
+class Step:
+    t: float
+    skillset: str
+    transition: str | None = None
+    consider: str | None = None
+    note: str = ""
+
+
+@dataclass(frozen=True)
+class Scenario:
+    name: str
+    system: str  # path of the system file, relative to the scenario file
+    steps: tuple[Step, ...]
+
+
+@dataclass
+class StepRecord:
+    """What the operator would have seen after (or before, for ``consider``) one step."""
+
+    index: int
+    step: Step
+    holds: dict[str, bool]
+    violations: list[str] = field(default_factory=list)  # properties that became false here
+    warnings: list[UnsafeTransition] = field(default_factory=list)  # flags on the considered command
+    unsafe_count: int = 0  # operator-view unsafe transitions after the step
+    divergence: str | None = None
+
+
+def parse_scenario(text: str, source: str = "<scenario>") -> Scenario:
+    """Parse a scenario file; errors name the file and the step number."""
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise SourceError.at(source, None, f"invalid TOML: {exc}") from None
+    head = data.get("scenario", {})
+    if not isinstance(head.get("name"), str) or not isinstance(head.get("system"), str):
+        raise SourceError.at(source, None, "missing [scenario] table with 'name' and 'system' strings")
+    steps = []
+    last = 0.0
+    for n, s in enumerate(data.get("steps", []), 1):
+        if not isinstance(s, dict) or not isinstance(s.get("skillset"), str):
+            raise SourceError.at(source, None, f"step {n}: needs a 'skillset' string")
+        if (s.get("transition") is None) == (s.get("consider") is None):
+            raise SourceError.at(source, None, f"step {n}: give exactly one of 'transition' or 'consider'")
+        t = float(s.get("t", last))
+        if t < last:
+            raise SourceError.at(source, None, f"step {n}: time {t} goes backwards (previous step at {last})")
+        last = t
+        steps.append(Step(t, s["skillset"], s.get("transition"), s.get("consider"), str(s.get("note", ""))))
+    return Scenario(head["name"], head["system"], tuple(steps))
+
+
+def replay(system: System, scenario: Scenario, predict: bool = True, budget: float = 5.0) -> list[StepRecord]:
+    """Play ``scenario`` on the live nets, running Algorithm 1 after every step."""
+    live = LiveSystem(system)
+    nets = system.nets
+    before = {p.name: holds(p.expr, live.marking, nets) for p in system.properties}
+    records = []
+    for i, step in enumerate(scenario.steps, 1):
+        if step.consider is not None:
+            analysis = analyse(system, live.marking, forecast(system, live.marking, budget=budget) if predict else None)
+            flagged = [u for u in analysis.operator_unsafe() if u.skillset == step.skillset and u.transition == step.consider]
+            records.append(StepRecord(i, step, dict(before), [], flagged, len(analysis.operator_unsafe())))
+            continue
+        outcome = live.apply(step.skillset, step.transition)
+        now = {p.name: holds(p.expr, live.marking, nets) for p in system.properties}
+        newly = [p for p, ok in now.items() if before[p] and not ok]
+        analysis = analyse(system, live.marking, forecast(system, live.marking, budget=budget) if predict else None)
+        records.append(StepRecord(i, step, now, newly, [], len(analysis.operator_unsafe()), outcome.divergence))
+        before = now
+    return records
+
+
+__all__ = ["Scenario", "Step", "StepRecord", "parse_scenario", "replay"]
