@@ -1,0 +1,198 @@
+"""The ``skinet`` command line: outputs, exit codes and error messages."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from skinet.cli.main import main
+
+ROOT = Path(__file__).resolve().parents[2]
+SYSTEM = str(ROOT / "skillsets" / "spot_arm.toml")
+CORPUS = ROOT.parent / "shared" / "corpus"
+
+
+def run(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str, str]:
+    code = main(list(argv))
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def state(tmp_path: Path, data: object) -> str:
+    path = tmp_path / "state.json"
+    path.write_text(json.dumps(data))
+    return str(path)
+
+
+def test_parse_summary(capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, err = run(capsys, "parse", str(CORPUS / "manipulator.rl"))
+    assert code == 0 and err == ""
+    assert out.splitlines()[1:3] == ["  resources (2):", "    arm_status: Hp Motion Static (initial Hp)"]
+    assert "  skills (5): arm_moving_manual arm_moving_goaldriven arm_moving_interaction arm_moving_pickplace arm_moving_to_HP" in out
+
+
+def test_parse_json(capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, _ = run(capsys, "parse", str(CORPUS / "isae_robot" / "isae_robot.rl"), "--json")
+    data = json.loads(out)
+    assert code == 0
+    assert data[0]["events"] == ["estop", "battery_to_low", "battery_to_ok"]
+    assert data[0]["resources"]["battery_status"] == {"states": ["BatteryOk", "BatteryLow"], "initial": "BatteryOk"}
+
+
+def test_parse_error_has_position_and_no_traceback(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    bad = tmp_path / "bad.rl"
+    bad.write_text("skillset s {\n  resource r { state { A B } initial C transition all }\n}\n")
+    code, out, err = run(capsys, "parse", str(bad))
+    assert code == 1 and out == ""
+    assert err == f"{bad}:2:38: error: initial state 'C' of resource 'r' is not declared\n"
+
+
+def test_missing_file(capsys: pytest.CaptureFixture[str]) -> None:
+    code, _, err = run(capsys, "parse", "no/such.rl")
+    assert code == 1
+    assert err == "no/such.rl: error: cannot read file: No such file or directory\n"
+
+
+def test_net_tina_has_priorities(capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, _ = run(capsys, "net", str(ROOT / "skillsets" / "spot.rl"), "--format", "tina")
+    assert code == 0
+    assert out.startswith("net spot\n")
+    assert sum(line.startswith("pr ") for line in out.splitlines()) == 1
+    assert "tr {go_to_waypoint.start} : {go_to_waypoint.start}" in out
+
+
+def test_net_eventless_json_to_file(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    target = tmp_path / "net.json"
+    code, out, _ = run(capsys, "net", str(ROOT / "skillsets" / "spot.rl"), "--eventless", "-o", str(target))
+    data = json.loads(target.read_text())
+    assert code == 0 and out == ""
+    assert all(t["kind"] != "event" for t in data["transitions"])
+    assert len(data["places"]) == 18
+
+
+def test_unsafe_initial_marking(capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, _ = run(capsys, "unsafe", SYSTEM)
+    assert code == 0
+    assert "properties: action_guard holds, safety_guard holds" in out
+    assert "unsafe transitions (0):" in out
+    assert "prediction: complete, 63 markings" in out
+
+
+def test_unsafe_paper_warning_safety_guard(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    s = state(tmp_path, {"spot": {"resources": {"power_status": "PowerOn", "posture": "Standing"}},
+                         "manipulator": {"resources": {"arm_status": "RD"}}})
+    code, out, _ = run(capsys, "unsafe", SYSTEM, "--state", s, "--json")
+    data = json.loads(out)
+    assert code == 0
+    assert data["unsafe"] == [{
+        "skillset": "spot", "transition": "go_to_waypoint.start", "kind": "start", "controllable": True,
+        "property": "safety_guard", "constraint": "explicit", "steps": 0, "witness": [],
+    }]
+    assert data["prediction"]["complete"] is True
+
+
+def test_unsafe_paper_warning_action_guard(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    s = state(tmp_path, {"spot": {"resources": {"power_status": "PowerOn", "posture": "Standing",
+                                                "control_mode": "Busy"}, "running": ["teleop"]}})
+    code, out, _ = run(capsys, "unsafe", SYSTEM, "--state", s, "--no-predict")
+    assert code == 0
+    assert "  manipulator  arm_ready.start  action_guard  explicit    controllable  0" in out
+    assert "prediction: off (explicit constraints only)" in out
+
+
+def test_unsafe_violated_now_lists_recovery(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    s = state(tmp_path, {"spot": {"resources": {"power_status": "PowerOn", "posture": "Standing",
+                                                "control_mode": "Busy"}, "running": ["teleop"]},
+                         "manipulator": {"resources": {"mutex": "Busy", "arm_status": "Moving"}, "running": ["arm_ready"]}})
+    code, out, _ = run(capsys, "unsafe", SYSTEM, "--state", s)
+    assert code == 0
+    assert "properties: action_guard VIOLATED, safety_guard holds" in out
+    assert ("action_guard is violated now; recovery transitions: spot:power_switchoff, spot:teleop.interrupt, spot:teleop.success.done, "
+            "spot:teleop.failure.link_lost, manipulator:arm_ready.interrupt, manipulator:arm_ready.success.ready, "
+            "manipulator:arm_ready.failure.blocked") in out
+    code, literal, _ = run(capsys, "unsafe", SYSTEM, "--state", s, "--literal", "--json")
+    assert len(json.loads(literal)["unsafe"]) > 0
+
+
+def test_state_errors(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    s = state(tmp_path, {"spot": {"resources": {"posture": "Flying"}}})
+    code, _, err = run(capsys, "unsafe", SYSTEM, "--state", s)
+    assert code == 1
+    assert err == f"{s}: error: unknown state 'Flying' of resource 'spot:posture' (states: Sitting, Standing)\n"
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"spot": ')
+    code, _, err = run(capsys, "unsafe", SYSTEM, "--state", str(bad))
+    assert err == f"{bad}:1:10: error: invalid JSON: Expecting value\n"
+
+
+def test_system_file_errors(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    sysfile = tmp_path / "s.toml"
+    sysfile.write_text("[system]\nname = \n")
+    code, _, err = run(capsys, "explore", str(sysfile))
+    assert code == 1
+    assert err == f"{sysfile}:2:8: error: invalid TOML: Invalid value\n"
+    sysfile.write_text('[system]\nname = "x"\n')
+    code, _, err = run(capsys, "explore", str(sysfile))
+    assert err == f"{sysfile}: error: missing [[skillsets]] entries (each with 'model' and 'manager')\n"
+
+
+def test_bad_property_reports_candidates(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    for name in ("spot.rl", "manipulator.rl"):
+        (tmp_path / name).write_text((ROOT / "skillsets" / name).read_text())
+    (tmp_path / "p.props").write_text("g = not spot:Bussy\n")
+    (tmp_path / "s.toml").write_text(
+        '[system]\nname = "x"\nproperties = "p.props"\n[[skillsets]]\nmodel = "spot.rl"\n[[skillsets]]\nmodel = "manipulator.rl"\n'
+    )
+    code, _, err = run(capsys, "unsafe", str(tmp_path / "s.toml"))
+    assert code == 1
+    assert err == f"{tmp_path / 'p.props'}:1:9: error: unknown name 'spot:Bussy' (candidates: spot:Busy)\n"
+
+
+def test_explore_report(capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, _ = run(capsys, "explore", SYSTEM, "--json")
+    data = json.loads(out)
+    assert code == 0
+    assert (data["complete"], data["markings"], data["edges"], data["deadlocks"]) == (True, 63, 220, 0)
+    assert data["properties"]["action_guard"] == {"violating": 24, "dangerous": 24, "undecided": 0, "safe": 39}
+    assert data["properties"]["safety_guard"] == {"violating": 6, "dangerous": 6, "undecided": 0, "safe": 57}
+
+
+def test_explore_truncated(capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, _ = run(capsys, "explore", SYSTEM, "--max-depth", "2", "--json")
+    data = json.loads(out)
+    assert (data["complete"], data["depth"]) == (False, 1)
+    assert data["frontier"] > 0 and data["properties"]["action_guard"]["undecided"] > 0
+
+
+def test_ctl(capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, _ = run(capsys, "ctl", SYSTEM, "EF (spot:Busy and manipulator:Busy)")
+    assert code == 0
+    assert out.splitlines()[1:] == ["satisfied by 63 of 63 markings", "at the start marking: holds"]
+    code, out, _ = run(capsys, "ctl", SYSTEM, "AG not (spot:Busy and manipulator:Busy)", "--json")
+    data = json.loads(out)
+    assert (data["satisfying"], data["start"]) == (0, "fails")
+
+
+def test_ctl_syntax_error(capsys: pytest.CaptureFixture[str]) -> None:
+    code, _, err = run(capsys, "ctl", SYSTEM, "AG (spot:Busy")
+    assert code == 1
+    assert err.startswith("<formula>:1:14: error: unexpected end of input, expected one of: ')'")
+
+
+def test_demo_reproduces_the_paper(capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, _ = run(capsys, "demo")
+    assert code == 0
+    assert "   violations: 3; action_guard at step 26; safety_guard at step 33; action_guard at step 38" in out
+    assert ("   warnings before risky commands: 2; spot:go_to_waypoint.start unsafe for safety_guard (explicit) at step 29;"
+            " manipulator:arm_ready.start unsafe for action_guard (explicit) at step 37") in out
+    assert "   violations: 0" in out
+
+
+def test_help_explains(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit):
+        main(["--help"])
+    out = capsys.readouterr().out
+    for command in ("demo", "parse", "net", "unsafe", "explore", "ctl"):
+        assert command in out

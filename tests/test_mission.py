@@ -1,0 +1,57 @@
+"""The paper's two runs replayed on the core (MISSION.md acceptance, core part)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from skinet.errors import SourceError
+from skinet.files import load_system
+from skinet.mission import parse_scenario, replay
+
+MISSIONS = Path(__file__).resolve().parents[1] / "skillsets" / "missions"
+
+
+def run(name: str):
+    scenario = parse_scenario((MISSIONS / f"{name}.toml").read_text(), name)
+    system, _ = load_system(MISSIONS / scenario.system)
+    return replay(system, scenario)
+
+
+def test_unassisted_run_has_exactly_the_three_violations() -> None:
+    records = run("unassisted")
+    assert [(r.index, r.step.skillset, r.step.transition, r.violations) for r in records if r.violations] == [
+        (26, "spot", "teleop.start", ["action_guard"]),
+        (33, "spot", "go_to_waypoint.start", ["safety_guard"]),
+        (38, "manipulator", "arm_ready.start", ["action_guard"]),
+    ]
+    assert all(r.divergence is None for r in records)
+
+
+def test_assisted_run_warns_before_risky_commands_and_never_violates() -> None:
+    records = run("assisted")
+    assert not any(r.violations for r in records)
+    assert all(all(r.holds.values()) for r in records)
+    warned = [(r.index, [(w.skillset, w.transition, w.property, w.constraint, w.controllable) for w in r.warnings])
+              for r in records if r.step.consider]
+    assert warned == [
+        (29, [("spot", "go_to_waypoint.start", "safety_guard", "explicit", True)]),
+        (37, [("manipulator", "arm_ready.start", "action_guard", "explicit", True)]),
+    ]
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("[scenario]\nname = 'x'\n", "s.toml: error: missing [scenario] table with 'name' and 'system' strings"),
+        ("[scenario]\nname='x'\nsystem='y'\n[[steps]]\nskillset='a'\n",
+         "s.toml: error: step 1: give exactly one of 'transition' or 'consider'"),
+        ("[scenario]\nname='x'\nsystem='y'\n[[steps]]\nt=2\nskillset='a'\ntransition='b'\n[[steps]]\nt=1\nskillset='a'\ntransition='b'\n",
+         "s.toml: error: step 2: time 1.0 goes backwards (previous step at 2.0)"),
+    ],
+)
+def test_scenario_errors(text: str, message: str) -> None:
+    with pytest.raises(SourceError) as info:
+        parse_scenario(text, "s.toml")
+    assert str(info.value) == message
