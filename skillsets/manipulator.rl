@@ -2,6 +2,8 @@
 // (design/MISSION.md).  mutex is Busy while a movement skill runs;
 // arm_status is HP (home position), RD (ready position), Moving, or Away
 // (somewhere else after a joystick session or an interrupted movement).
+// An emergency stop leaves the arm Away; the in_motion invariant then stops
+// the running movement skill and frees the mutex.
 
 type {
     Float
@@ -45,6 +47,12 @@ skillset manipulator {
             mutex -> Busy
             arm_status -> Moving
         }
+        invariant {
+            in_motion {
+                guard arm_status == Moving
+                effect mutex -> Free
+            }
+        }
         interrupt {
             interrupting true
             effect {
@@ -74,6 +82,12 @@ skillset manipulator {
         start {
             mutex -> Busy
             arm_status -> Moving
+        }
+        invariant {
+            in_motion {
+                guard arm_status == Moving
+                effect mutex -> Free
+            }
         }
         progress {
             period 100 ms
@@ -109,6 +123,12 @@ skillset manipulator {
             mutex -> Busy
             arm_status -> Moving
         }
+        invariant {
+            in_motion {
+                guard arm_status == Moving
+                effect mutex -> Free
+            }
+        }
         interrupt {
             interrupting true
             effect {
@@ -138,6 +158,12 @@ skillset manipulator {
         start {
             mutex -> Busy
             arm_status -> Moving
+        }
+        invariant {
+            in_motion {
+                guard arm_status == Moving
+                effect mutex -> Free
+            }
         }
         interrupt {
             interrupting true

@@ -110,10 +110,23 @@ def test_unsafe_violated_now_lists_recovery(capsys: pytest.CaptureFixture[str], 
     assert code == 0
     assert "properties: action_guard VIOLATED, safety_guard holds" in out
     assert ("action_guard is violated now; recovery transitions: spot:power_switchoff, spot:teleop.interrupt, spot:teleop.success.done, "
-            "spot:teleop.failure.link_lost, manipulator:arm_ready.interrupt, manipulator:arm_ready.success.ready, "
+            "spot:teleop.failure.link_lost, manipulator:arm_emergency_stop, manipulator:arm_ready.interrupt, manipulator:arm_ready.success.ready, "
             "manipulator:arm_ready.failure.blocked") in out
-    code, literal, _ = run(capsys, "unsafe", SYSTEM, "--state", s, "--literal", "--json")
-    assert len(json.loads(literal)["unsafe"]) > 0
+
+
+
+def test_literal_list_keeps_violated_properties(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    s = state(tmp_path, {"spot": {"resources": {"power_status": "PowerOn", "posture": "Standing",
+                                                "control_mode": "Busy"}, "running": ["go_to_waypoint"]},
+                         "manipulator": {"resources": {"arm_status": "RD"}}})
+    _, operator, _ = run(capsys, "unsafe", SYSTEM, "--state", s, "--json")
+    _, literal, _ = run(capsys, "unsafe", SYSTEM, "--state", s, "--literal", "--json")
+    shown = lambda out: [(u["property"], u["transition"]) for u in json.loads(out)["unsafe"]]  # noqa: E731
+    assert shown(operator) == [("action_guard", "arm_joystick.start"), ("action_guard", "arm_RD_to_HP.start")]
+    assert shown(literal) == [
+        ("action_guard", "arm_joystick.start"), ("safety_guard", "arm_joystick.start"),
+        ("action_guard", "arm_RD_to_HP.start"), ("safety_guard", "arm_RD_to_HP.start"),
+    ]
 
 
 def test_state_errors(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:

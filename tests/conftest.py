@@ -1,0 +1,66 @@
+"""Shared fixtures: the real-world corpus and the paper's system (SPEC §2-§5).
+
+The corpus lives in ``shared/corpus`` beside the repository root; it is read in
+place, never copied into the project.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from skinet.lang.model import Skillset
+from skinet.lang.parser import parse_skillset
+from skinet.system import System, build_system
+
+REPO = Path(__file__).resolve().parents[1]
+CORPUS = REPO.parent / "shared" / "corpus"
+CORPUS_FILES = ("spot.rl", "manipulator.rl", "isae_robot/isae_robot.rl")
+SKILLSETS = REPO / "skillsets"
+PAPER_FILES = ("spot.rl", "manipulator.rl")
+PAPER_MANAGERS = {"spot": "/spot/spot_skillset_manager", "manipulator": "/kinova/manipulator_skillset_manager"}
+
+
+def load_corpus_skillset(name: str) -> Skillset:
+    """Parse one corpus file (``name`` relative to the corpus folder)."""
+    return parse_skillset((CORPUS / name).read_text(encoding="utf-8"), name)
+
+
+def load_paper_skillset(name: str) -> Skillset:
+    """Parse one of the paper's skillsets from ``skillsets/``."""
+    return parse_skillset((SKILLSETS / name).read_text(encoding="utf-8"), name)
+
+
+def load_paper_system() -> System:
+    """The paper's system: spot + manipulator with ``spot_arm.props``."""
+    skillsets = [load_paper_skillset(f) for f in PAPER_FILES]
+    props = (SKILLSETS / "spot_arm.props").read_text(encoding="utf-8")
+    return build_system(
+        "spot_arm", [(ss, PAPER_MANAGERS[ss.name]) for ss in skillsets], props, "spot_arm.props"
+    )
+
+
+@pytest.fixture(scope="session")
+def corpus_dir() -> Path:
+    """``shared/corpus`` beside the repository root."""
+    assert CORPUS.is_dir(), f"corpus folder missing: {CORPUS}"
+    return CORPUS
+
+
+@pytest.fixture(scope="session")
+def corpus_skillset():
+    """Loader of corpus skillsets: ``corpus_skillset("spot.rl")``."""
+    return load_corpus_skillset
+
+
+@pytest.fixture(scope="session")
+def paper_skillset():
+    """Loader of the paper's skillsets: ``paper_skillset("spot.rl")``."""
+    return load_paper_skillset
+
+
+@pytest.fixture(scope="session")
+def paper_system() -> System:
+    """The paper's system, built once per session (systems are immutable)."""
+    return load_paper_system()
