@@ -121,7 +121,7 @@ def _parse(text: str, start: str, skillsets: Mapping[str, Skillset], source: str
     try:
         tree: Tree = _lark(start).parse(text)
     except UnexpectedInput as exc:
-        raise syntax_error(exc, text, source) from None
+        raise syntax_error(_lark(start), exc, text, source) from None
     try:
         return _Build(skillsets, source, text).transform(tree)
     except VisitError as exc:
