@@ -3,10 +3,15 @@
 from __future__ import annotations
 
 import argparse
+import re
 from pathlib import Path
 
+from skinet.errors import SourceError
 from skinet.files import load_system, read_text
-from skinet.mission import StepRecord, parse_scenario, replay
+from skinet.mission import Scenario, StepRecord, parse_scenario, replay
+from skinet.mission_log import records_to_log
+from skinet.system import System
+from skinet.wire.log import log_line
 
 MISSIONS = ("unassisted.toml", "assisted.toml")
 
@@ -25,6 +30,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     c.add_argument("scenarios", nargs="*", help="scenario files (default: skillsets/missions/{unassisted,assisted}.toml)")
     c.add_argument("--no-predict", action="store_true", help="explicit constraints only")
     c.add_argument("--all-steps", action="store_true", help="print every step, not only the notable ones")
+    c.add_argument("--log", metavar="DIR", help="write each run as a monitor log DIR/<run>.jsonl (see skinet timeline)")
+    c.add_argument("--timeline", metavar="DIR", help="draw each run as an operator timeline DIR/<run>.png")
     c.set_defaults(func=cmd_demo)
 
 
@@ -43,8 +50,30 @@ def cmd_demo(args: argparse.Namespace) -> int:
         print(f"   violations: {len(violations)}" + "".join(f"; {p} at step {i}" for p, i in violations))
         print(f"   warnings before risky commands: {len(warnings)}"
               + "".join(f"; {w.skillset}:{w.transition} unsafe for {w.property} ({w.constraint}) at step {i}" for w, i in warnings))
+        if args.log or args.timeline:
+            _write_run(args, system, scenario, records)
         print()
     return 0
+
+
+def _write_run(args: argparse.Namespace, system: System, scenario: Scenario, records: list[StepRecord]) -> None:
+    """``--log`` and ``--timeline``: the run as the monitor would have published it."""
+    entries = records_to_log(system, scenario, records, predict=not args.no_predict)
+    stem = re.sub(r"[^A-Za-z0-9_.\-]", "_", scenario.name) or "run"
+    if args.log:
+        path = Path(args.log) / f"{stem}.jsonl"
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            path.write_text("".join(log_line(e.key, e.message, e.t) + "\n" for e in entries), encoding="utf-8")
+        except OSError as exc:
+            raise SourceError.at(str(path), None, f"cannot write file: {exc.strerror}") from None
+        print(f"   log: {path} ({len(entries)} messages)")
+    if args.timeline:
+        from skinet.cli.timeline import save_timeline
+
+        title = f"{system.name}: {scenario.name} run"
+        path = save_timeline(entries, title, Path(args.timeline) / f"{stem}.png", system)
+        print(f"   timeline: {path}")
 
 
 def _line(r: StepRecord) -> str:

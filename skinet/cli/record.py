@@ -1,0 +1,158 @@
+"""``skinet record``: write what is published under ``skinet/<system>/**`` to a monitor log.
+
+A thin Zenoh shell over :mod:`skinet.wire.log`: every sample is decoded with
+the codec (the key says which message to expect), written as one JSON line
+with its receive time, and flushed; undecodable payloads are counted and
+skipped.  The model bundle is asked for once, so that ``skinet timeline`` knows
+every skill and resource of the system.
+"""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+import threading
+import time
+import uuid
+from typing import TextIO
+
+import zenoh
+from pydantic import BaseModel
+
+from services.common.zenoh_config import add_zenoh_args, config_from_args
+from skinet.errors import SkinetError, SourceError
+from skinet.wire import keys
+from skinet.wire.codec import DecodeError, decode
+from skinet.wire.log import log_line
+from skinet.wire.messages import (
+    MESSAGES, CanonicalEvent, LiveState, ModelBundle, StateSpaceReport, UnsafeReport, Verdicts,
+)
+
+BY_KEY: dict[str, type[BaseModel]] = {
+    "events": CanonicalEvent, "state": LiveState, "verdicts": Verdicts, "unsafe": UnsafeReport,
+    "state_space": StateSpaceReport, "model": ModelBundle,
+}
+SHOW_SKIPPED = 5  # undecodable payloads reported on standard error, then only counted
+MODEL_RETRY = 2.0  # seconds between model queries while none answered
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    c = sub.add_parser("record", help="record the monitor's messages of a system into a JSON Lines log")
+    c.add_argument("system", metavar="SYSTEM_NAME", help="system name, as in skinet/<system>/... keys")
+    c.add_argument("-o", "--output", required=True, metavar="LOG.jsonl", help="log file to write (overwritten)")
+    c.add_argument("--duration", type=float, help="stop after this many seconds (default: until Ctrl-C)")
+    c.add_argument("--count", type=int, help="stop after writing this many messages")
+    c.add_argument("--no-model", action="store_true", help="do not query the monitor's model bundle")
+    add_zenoh_args(c)
+    c.set_defaults(func=cmd_record)
+
+
+def message_type(system: str, key: str) -> type[BaseModel] | None:
+    """The message expected on ``key`` (None: unknown key, try every type)."""
+    parts = key.split("/")
+    if len(parts) >= 3 and parts[0] == keys.ROOT and parts[1] == system:
+        return BY_KEY.get(parts[2])
+    return None
+
+
+def decode_any(system: str, key: str, payload: bytes) -> BaseModel:
+    """Decode ``payload`` as the message its key implies; raises :class:`DecodeError`."""
+    kind = message_type(system, key)
+    if kind is not None:
+        return decode(payload, kind)
+    for candidate in MESSAGES.values():
+        try:
+            return decode(payload, candidate)
+        except DecodeError:
+            continue
+    raise DecodeError("not any known message")
+
+
+class Recorder:
+    """Writes decoded samples to ``out`` (thread-safe); ``done`` is set after ``count`` lines."""
+
+    def __init__(self, out: TextIO, system: str, count: int | None = None):
+        self.out, self.system, self.count = out, system, count
+        self.written = 0
+        self.skipped = 0
+        self.has_model = False
+        self.done = threading.Event()
+        self._lock = threading.Lock()
+
+    def on_sample(self, sample: zenoh.Sample) -> None:
+        if sample.kind != zenoh.SampleKind.PUT:
+            return
+        self.add(str(sample.key_expr), sample.payload.to_bytes(), time.time())
+
+    def on_reply(self, reply: zenoh.Reply) -> None:
+        if reply.ok is not None:
+            self.add(str(reply.ok.key_expr), reply.ok.payload.to_bytes(), time.time())
+
+    def add(self, key: str, payload: bytes, t: float) -> None:
+        try:
+            message = decode_any(self.system, key, payload)
+        except DecodeError as exc:
+            with self._lock:
+                self.skipped += 1
+                if self.skipped <= SHOW_SKIPPED:
+                    print(f"skinet record: skipped undecodable payload on {key}: {exc}", file=sys.stderr)
+            return
+        line = log_line(key, message, t)
+        with self._lock:
+            if self.done.is_set():
+                return
+            if isinstance(message, ModelBundle):
+                if self.has_model:
+                    return
+                self.has_model = True
+            self.out.write(line + "\n")
+            self.out.flush()
+            self.written += 1
+            if self.count is not None and self.written >= self.count:
+                self.done.set()
+
+    def close(self) -> None:
+        """Stop writing (later samples are dropped) and close the log."""
+        with self._lock:
+            self.done.set()
+            self.out.close()
+
+
+def cmd_record(args: argparse.Namespace) -> int:
+    system = keys.check_chunk(args.system, "system name")
+    try:
+        session = zenoh.open(config_from_args(args))
+    except zenoh.ZError as exc:
+        raise SkinetError(f"cannot open a Zenoh session: {exc}") from None
+    try:
+        out = open(args.output, "w", encoding="utf-8")
+    except OSError as exc:
+        session.close()
+        raise SourceError.at(args.output, None, f"cannot write file: {exc.strerror}") from None
+    recorder = Recorder(out, system, args.count)
+    stop = recorder.done
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    try:
+        _sub = session.declare_subscriber(f"{keys.ROOT}/{system}/**", recorder.on_sample)  # noqa: F841 (kept alive)
+        _token = session.liveliness().declare_token(keys.alive(system, "recorder", uuid.uuid4().hex[:8]))  # noqa: F841
+        print(f"skinet record: recording {keys.ROOT}/{system}/** to {args.output}", file=sys.stderr)
+        deadline = None if args.duration is None else time.monotonic() + args.duration
+        asked = -MODEL_RETRY
+        while not stop.is_set():
+            now = time.monotonic()
+            if deadline is not None and now >= deadline:
+                break
+            if not args.no_model and not recorder.has_model and now - asked >= MODEL_RETRY:
+                asked = now
+                session.get(keys.model(system), handler=recorder.on_reply, timeout=MODEL_RETRY)
+            stop.wait(0.1 if deadline is None else max(0.0, min(0.1, deadline - now)))
+    except KeyboardInterrupt:
+        pass
+    finally:
+        recorder.close()
+        session.close()
+    print(f"skinet record: {recorder.written} messages written to {args.output}"
+          f" ({recorder.skipped} undecodable skipped)", file=sys.stderr)
+    return 0

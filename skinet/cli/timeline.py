@@ -1,0 +1,68 @@
+"""``skinet timeline``: draw a monitor log as an operator timeline (paper Fig. 3 / Fig. 4).
+
+matplotlib is imported only when a picture is drawn (Agg canvas, no display).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+from skinet.errors import SkinetError, SourceError
+from skinet.files import load_system, read_text
+from skinet.system import System
+from skinet.wire.log import Entry, read_log
+from skinet.wire.messages import LiveState
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    c = sub.add_parser("timeline", help="draw a monitor log (skinet record, skinet demo --log) as a timeline picture")
+    c.add_argument("log", metavar="LOG.jsonl", help="monitor log, JSON Lines")
+    c.add_argument("-o", "--output", required=True, metavar="timeline.png",
+                   help="picture to write (format from the extension: png, svg, pdf)")
+    c.add_argument("--title", help="title (default: system and log name)")
+    c.add_argument("--system", help="system file (.toml) giving the lanes when the log has no model bundle")
+    c.add_argument("--dpi", type=int, default=100, help="resolution of raster pictures (default: 100)")
+    c.set_defaults(func=cmd_timeline)
+
+
+def save_timeline(entries: Sequence[Entry], title: str, output: str | Path, system: System | None = None,
+                  dpi: int = 100) -> Path:
+    """Draw ``entries`` and write the picture; raises :class:`SourceError` when it cannot be written."""
+    from skinet.plot.timeline import draw  # matplotlib is slow to import
+
+    figure = draw(entries, title, system)
+    path = Path(output)
+    try:
+        if path.parent != Path(""):
+            path.parent.mkdir(parents=True, exist_ok=True)
+        figure.savefig(path, dpi=dpi)
+    except (OSError, ValueError) as exc:
+        reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
+        raise SourceError.at(str(path), None, f"cannot write picture: {reason}") from None
+    return path
+
+
+def cmd_timeline(args: argparse.Namespace) -> int:
+    entries = read_log(read_text(args.log).splitlines(), args.log)
+    system = None
+    if args.system:
+        system, warnings = load_system(args.system)
+        for w in warnings:
+            print(str(w), file=sys.stderr)
+    title = args.title if args.title is not None else _default_title(entries, args.log)
+    try:
+        path = save_timeline(entries, title, args.output, system, args.dpi)
+    except SkinetError as exc:
+        if isinstance(exc, SourceError):
+            raise
+        raise SourceError.at(args.log, None, str(exc)) from None
+    print(f"timeline of {len(entries)} messages written to {path}")
+    return 0
+
+
+def _default_title(entries: Sequence[Entry], log: str) -> str:
+    names = sorted({e.message.system for e in entries if isinstance(e.message, LiveState)})
+    return f"{', '.join(names) or 'unknown system'}: {Path(log).stem}"

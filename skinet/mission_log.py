@@ -1,0 +1,98 @@
+"""A replayed mission as the monitor log it would have produced (MISSION.md, SPEC §1).
+
+:func:`records_to_log` turns the :class:`~skinet.mission.StepRecord` list of
+:func:`~skinet.mission.replay` into the messages seen on ``skinet/<system>/**``
+during the run: the model bundle, then per step the bridge's
+:class:`CanonicalEvent` and the monitor's :class:`LiveState`,
+:class:`Verdicts`, :class:`UnsafeReport` (and :class:`StateSpaceReport` when
+predicting), stamped with the step time.  Steps where the operator only
+*considers* a command publish nothing.  Pure: no I/O.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+from skinet.live import LiveSystem
+from skinet.mission import Scenario, StepRecord
+from skinet.system import Marking, System
+from skinet.verify.algorithm1 import analyse
+from skinet.verify.predict import forecast
+from skinet.wire import keys
+from skinet.wire.convert import bundle, state_space_report, statuses
+from skinet.wire.log import Entry
+from skinet.wire.messages import (
+    CanonicalEvent, LiveState, PropertyVerdict, RecoveryEntry, UnsafeEntry, UnsafeReport, Verdicts,
+)
+
+SOURCE = "replay"
+
+
+def records_to_log(
+    system: System, scenario: Scenario, records: Sequence[StepRecord], predict: bool = True, budget: float = 5.0
+) -> list[Entry]:
+    """The log of one replayed run (``records`` from ``replay(system, scenario)``).
+
+    Markings are recomputed from the scenario and Algorithm 1 is run again on
+    each, as the monitor does; raises ``ValueError`` when ``records`` do not
+    belong to ``scenario``.
+    """
+    if [r.step for r in records] != list(scenario.steps):
+        raise ValueError(f"records do not match the steps of scenario '{scenario.name}'")
+    name = system.name
+    model = bundle(system)
+    out = [Entry(0.0, keys.model(name, model.digest), "ModelBundle", model)]
+    live = LiveSystem(system)
+    out += _monitor_step(system, live.marking, 0, 0.0, "", None, predict, budget)
+    seqs: dict[str, int] = {}
+    step_seq = 0
+    for r in records:
+        s = r.step
+        if s.transition is None:
+            continue
+        live.apply(s.skillset, s.transition)
+        seq = seqs[s.skillset] = seqs.get(s.skillset, -1) + 1
+        status = statuses(system, live.marking).get(s.skillset)
+        event = CanonicalEvent(system=name, skillset=s.skillset, seq=seq, stamp=s.t, source=SOURCE,
+                               transition=s.transition, status=status, info=s.note)
+        out.append(Entry(s.t, keys.events(name, s.skillset), "CanonicalEvent", event))
+        step_seq += 1
+        published = _monitor_step(system, live.marking, step_seq, s.t, f"{s.skillset}:{s.transition}#{seq}",
+                                  r.divergence, predict, budget)
+        verdicts = next(e.message for e in published if isinstance(e.message, Verdicts))
+        if {v.name: v.holds for v in verdicts.properties} != r.holds:
+            raise ValueError(f"step {r.index}: verdicts differ from the record (not a replay of this scenario?)")
+        out += published
+    return out
+
+
+def _monitor_step(system: System, marking: Marking, seq: int, t: float, event: str, divergence: str | None,
+                  predict: bool, budget: float) -> list[Entry]:
+    """What the monitor publishes after one step: state, verdicts, unsafe (and state space)."""
+    name = system.name
+    prediction = forecast(system, marking, budget=budget) if predict else None
+    analysis = analyse(system, marking, prediction)
+    unsafe = [
+        UnsafeEntry(skillset=u.skillset, transition=u.transition, kind=u.kind, controllable=u.controllable,
+                    property=u.property, constraint=u.constraint, steps=u.steps, witness=list(u.witness))
+        for u in analysis.operator_unsafe()
+    ]
+    recovery = [
+        RecoveryEntry(property=p, skillset=r.skillset, transition=r.transition, controllable=r.controllable)
+        for p, rs in analysis.recovery.items() for r in rs
+    ]
+    props = [PropertyVerdict(name=p.name, holds=p.name not in analysis.violated) for p in system.properties]
+    out = [
+        Entry(t, keys.state(name), "LiveState", LiveState(
+            system=name, seq=seq, stamp=t, skillsets=statuses(system, marking), event=event, divergence=divergence)),
+        Entry(t, keys.verdicts(name), "Verdicts", Verdicts(system=name, seq=seq, stamp=t, properties=props)),
+        Entry(t, keys.unsafe(name), "UnsafeReport", UnsafeReport(
+            system=name, seq=seq, stamp=t, unsafe=unsafe, recovery=recovery, violated=analysis.violated,
+            literal_count=len(analysis.unsafe), prediction_stale=not predict)),
+    ]
+    if prediction is not None:
+        out.append(Entry(t, keys.state_space(name), "StateSpaceReport", state_space_report(system, prediction, t)))
+    return out
+
+
+__all__ = ["records_to_log"]

@@ -1,0 +1,1 @@
+"""Pictures drawn with matplotlib (Agg canvas, no display); outside the pure core."""
