@@ -7,6 +7,8 @@ from typing import TypeVar
 import msgpack
 from pydantic import BaseModel, ValidationError
 
+from skinet.wire.messages import SCHEMA_VERSION
+
 M = TypeVar("M", bound=BaseModel)
 
 
@@ -23,11 +25,12 @@ def decode(payload: bytes, kind: type[M]) -> M:
     try:
         data = msgpack.unpackb(payload, raw=False, strict_map_key=True)
     except Exception as exc:  # msgpack raises several unrelated types
-        raise DecodeError(f"not msgpack: {exc}") from None
+        raise DecodeError(f"not msgpack: {str(exc) or type(exc).__name__}") from None
     if not isinstance(data, dict):
         raise DecodeError(f"expected a map, got {type(data).__name__}")
-    if data.get("v") != 1:
-        raise DecodeError(f"unsupported schema version {data.get('v')!r} (expected 1)")
+    version = data.get("v")
+    if type(version) is not int or version != SCHEMA_VERSION:  # not True, not 1.0
+        raise DecodeError(f"unsupported schema version {version!r} (expected {SCHEMA_VERSION})")
     try:
         return kind.model_validate(data)
     except ValidationError as exc:

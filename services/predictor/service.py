@@ -1,0 +1,248 @@
+"""The predictor: a stateless Zenoh queryable answering prediction requests (SPEC §1, §6).
+
+A :class:`~skinet.wire.messages.PredictRequest` arrives on ``skinet/<system>/predict``
+with the live marking and the digest of the monitor's model.  An instance that does
+not know the digest fetches the :class:`~skinet.wire.messages.ModelBundle` from
+``skinet/<system>/model/<digest>``, rebuilds the system and keeps it in a small LRU
+cache; then it explores from the marking within the request's budget and replies
+with the state-space report and the non-safe one-step successors.  Every failure is
+answered with ``ok=False`` and a one-line ``error`` (SPEC §7: bad input never crashes
+a service).
+
+Threading: Zenoh runs query callbacks on its own threads, and a ``get`` issued from
+inside one (the model fetch) may deadlock.  The callback therefore only decodes the
+request (cheap) and hands valid ones to a bounded worker pool; when the pool is full
+it answers ``busy`` at once rather than holding the caller's ``get`` open.  Workers
+finish every query with ``with query:`` so the caller's ``get`` returns as soon as
+the reply is sent (ZENOH.md).
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections import Counter, OrderedDict
+from concurrent.futures import ThreadPoolExecutor
+
+import zenoh
+
+from skinet.errors import SkinetError
+from skinet.system import System
+from skinet.verify.predict import forecast
+from skinet.wire import keys
+from skinet.wire.codec import DecodeError, decode, encode
+from skinet.wire.convert import bundle, marking_of, risks, state_space_report, system_from_bundle
+from skinet.wire.messages import ModelBundle, PredictReply, PredictRequest
+
+log = logging.getLogger("skinet.predictor")
+
+
+class FetchError(Exception):
+    """The model of a digest could not be obtained."""
+
+
+def _one_line(text: str) -> str:
+    return "; ".join(line.strip() for line in text.splitlines() if line.strip()) or "unknown error"
+
+
+class Predictor:
+    """One predictor instance on a session; see :func:`start_predictor`."""
+
+    def __init__(
+        self,
+        session: zenoh.Session,
+        instance_id: str,
+        *,
+        workers: int = 2,
+        max_pending: int = 8,
+        cache_size: int = 4,
+        fetch_timeout: float = 2.0,
+        max_budget: float = 10.0,
+    ):
+        self.session = session
+        self.instance_id = keys.check_chunk(instance_id, "instance id")
+        self.fetch_timeout = fetch_timeout
+        self.max_budget = max_budget
+        self.cache_size = cache_size
+        self.counts: Counter[str] = Counter()  # ok, failed, busy, fetched
+        self._cache: OrderedDict[str, System] = OrderedDict()
+        self._lock = threading.Lock()  # cache and counts (callbacks and workers)
+        self._fetch_lock = threading.Lock()  # one fetch at a time; waiters then hit the cache
+        self._slots = threading.BoundedSemaphore(max_pending)  # queued + running requests
+        self._pool = ThreadPoolExecutor(workers, thread_name_prefix=f"predictor-{instance_id}")
+        self._closed = False
+        self._queryable = session.declare_queryable(keys.predict("*"), self._on_query, complete=True)
+        self._token = session.liveliness().declare_token(keys.alive(keys.ANY_SYSTEM, "predictor", instance_id))
+        log.info("predictor %s serving %s", instance_id, keys.predict("*"))
+
+    # -- Zenoh thread -----------------------------------------------------------------
+
+    def _on_query(self, query: zenoh.Query) -> None:
+        """Decode and admit a query; answer at once when it is bad or the pool is full."""
+        try:
+            key = str(query.key_expr)
+            request = self._decode(query, key)
+            if isinstance(request, PredictReply):
+                with query:
+                    self._reply(query, request)
+                return
+            reason = "busy: too many pending requests"
+            if self._slots.acquire(blocking=False):
+                try:
+                    self._pool.submit(self._serve, query, request)
+                    return
+                except RuntimeError:  # close() shut the pool down while this query was arriving
+                    self._slots.release()
+                    reason = "predictor shutting down"
+            with query:
+                self._reply(query, self._failure(request.system, request.digest, request.seq, reason), "busy")
+        except Exception:  # never let an exception escape into Zenoh
+            log.exception("predictor %s: query callback failed", self.instance_id)
+            try:
+                query.drop()  # finalize now rather than at the caller's timeout
+            except Exception:
+                pass  # already dropped
+
+    def _decode(self, query: zenoh.Query, key: str) -> PredictRequest | PredictReply:
+        """The request, or the failure reply to send for it."""
+        system = key.split("/")[1] if key.count("/") == 2 and "*" not in key else keys.ANY_SYSTEM
+        if query.payload is None:
+            return self._failure(system, "", 0, "empty payload")
+        try:
+            request = decode(query.payload.to_bytes(), PredictRequest)
+        except DecodeError as exc:
+            return self._failure(system, "", 0, str(exc))
+        try:
+            keys.check_chunk(request.system, "system")
+            keys.check_chunk(request.digest, "digest")
+        except ValueError as exc:
+            return self._failure(system, "", request.seq, str(exc))
+        if not zenoh.KeyExpr(key).intersects(zenoh.KeyExpr(keys.predict(request.system))):
+            mismatch = f"system '{request.system}' does not match key '{key}'"
+            return self._failure(system, request.digest, request.seq, mismatch)
+        return request
+
+    # -- worker threads ---------------------------------------------------------------
+
+    def _serve(self, query: zenoh.Query, request: PredictRequest) -> None:
+        with query:
+            try:
+                self._reply(query, self.answer(request))
+            except Exception:
+                log.exception("predictor %s: request %s failed", self.instance_id, request.seq)
+            finally:
+                self._slots.release()
+
+    def answer(self, request: PredictRequest) -> PredictReply:
+        """Compute the reply to one request (SPEC §6); failures become ``ok=False``."""
+        try:
+            system = self._system(request.system, request.digest)
+            marking = marking_of(system, request.skillsets, "request")
+            fc = forecast(system, marking, budget=min(request.budget, self.max_budget))
+            return PredictReply(
+                system=request.system, digest=request.digest, seq=request.seq, ok=True, instance=self.instance_id,
+                report=state_space_report(system, fc, time.time()), risks=risks(system, marking, fc),
+            )
+        except (FetchError, SkinetError) as exc:
+            return self._failure(request.system, request.digest, request.seq, str(exc))
+        except Exception as exc:  # a bug or a pathological model: answer, log, keep serving
+            log.exception("predictor %s: unexpected error", self.instance_id)
+            return self._failure(request.system, request.digest, request.seq, f"{type(exc).__name__}: {exc}")
+
+    def _system(self, name: str, digest: str) -> System:
+        """The system of ``digest``, from the cache or fetched from its monitor."""
+        with self._lock:
+            if digest in self._cache:
+                self._cache.move_to_end(digest)
+                return self._cache[digest]
+        with self._fetch_lock:
+            with self._lock:
+                if digest in self._cache:
+                    return self._cache[digest]
+            system = self._fetch(name, digest)
+            with self._lock:
+                self._cache[digest] = system
+                while len(self._cache) > self.cache_size:
+                    self._cache.popitem(last=False)
+                self.counts["fetched"] += 1
+            return system
+
+    def _fetch(self, name: str, digest: str) -> System:
+        """Query ``skinet/<system>/model/<digest>``; the first bundle that hashes to ``digest`` wins."""
+        key = keys.model(name, digest)  # both checked by _decode
+        problems: list[str] = []
+        for reply in self.session.get(key, timeout=self.fetch_timeout):
+            if reply.ok is None:
+                problems.append(f"error reply: {reply.err.payload.to_string()}")
+                continue
+            try:
+                system = system_from_bundle(decode(reply.ok.payload.to_bytes(), ModelBundle))
+            except (DecodeError, SkinetError) as exc:
+                problems.append(str(exc))
+                continue
+            got = bundle(system).digest
+            if got == digest:
+                log.info("predictor %s: fetched model %s", self.instance_id, key)
+                return system
+            problems.append(f"bundle hashes to {got}")
+        reasons = "; ".join(dict.fromkeys(problems))  # a frozen server can yield 'Timeout' twice
+        raise FetchError(f"cannot fetch model {key}: {reasons or 'no reply'}")
+
+    # -- replies ----------------------------------------------------------------------
+
+    def _failure(self, system: str, digest: str, seq: int, error: str) -> PredictReply:
+        return PredictReply(system=system, digest=digest, seq=seq, ok=False, error=_one_line(error),
+                            instance=self.instance_id)
+
+    def _reply(self, query: zenoh.Query, reply: PredictReply, failure: str = "failed") -> None:
+        kind = "ok" if reply.ok else failure
+        with self._lock:
+            self.counts[kind] += 1
+        if not reply.ok:
+            log.warning("predictor %s: %s request %s/%s: %s",
+                        self.instance_id, kind, reply.system, reply.seq, reply.error)
+        try:
+            query.reply(keys.predict(reply.system), encode(reply), express=True)
+        except zenoh.ZError as exc:  # the session closed under us, or a key the query does not accept
+            log.warning("predictor %s: cannot reply to %s: %s", self.instance_id, query.key_expr, exc)
+
+    def close(self) -> None:
+        """Stop serving: withdraw the token and the queryable, then answer the queued work.
+
+        The session stays open (it may be shared); a standalone instance closes it
+        afterwards, so no admitted query is lost.
+        """
+        if self._closed:
+            return
+        self._closed = True
+        for entity in (self._token, self._queryable):
+            try:
+                entity.undeclare()
+            except zenoh.ZError:  # session already closed
+                pass
+        self._pool.shutdown(wait=True)
+        log.info("predictor %s stopped (%s)", self.instance_id, dict(self.counts))
+
+
+def start_predictor(
+    session: zenoh.Session,
+    instance_id: str,
+    *,
+    workers: int = 2,
+    max_pending: int = 8,
+    cache_size: int = 4,
+    fetch_timeout: float = 2.0,
+    max_budget: float = 10.0,
+) -> Predictor:
+    """Serve predictions on ``session`` (shared or own); returns a handle with ``.close()``.
+
+    Args:
+        workers: threads computing forecasts.
+        max_pending: requests queued or running before answering ``busy``.
+        cache_size: systems kept (least recently used dropped first).
+        fetch_timeout: seconds to wait for a model bundle.
+        max_budget: cap on a request's exploration budget, seconds.
+    """
+    return Predictor(session, instance_id, workers=workers, max_pending=max_pending,
+                     cache_size=cache_size, fetch_timeout=fetch_timeout, max_budget=max_budget)

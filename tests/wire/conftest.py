@@ -1,0 +1,56 @@
+"""One realistic instance of every wire message (SPEC §1), built from the paper's system."""
+
+from __future__ import annotations
+
+import pytest
+from pydantic import BaseModel
+
+from skinet.system import System
+from skinet.verify.predict import forecast
+from skinet.wire.convert import bundle, marking_of, risks, state_space_report, statuses
+from skinet.wire.messages import (
+    CanonicalEvent, LiveState, PredictReply, PredictRequest, PropertyVerdict, RecoveryEntry, SkillsetStatus,
+    UnsafeEntry, UnsafeReport, Verdicts,
+)
+
+# Arm moving (mutex Busy): starting Spot would break action_guard in one step.
+ARM_READY = {"manipulator": {"resources": {"mutex": "Busy", "arm_status": "Away"}, "running": ["arm_ready"]}}
+
+
+def sample_messages(system: System) -> dict[str, BaseModel]:
+    """Message name -> an instance with every optional part filled in."""
+    live = {k: SkillsetStatus.model_validate(v) for k, v in ARM_READY.items()}
+    marking = marking_of(system, live)
+    fc = forecast(system, marking, budget=5.0)
+    found = risks(system, marking, fc)
+    assert found, "the sample marking should have at least one risk"
+    report = state_space_report(system, fc, 1700000000.5)
+    b = bundle(system)
+    skillsets = statuses(system, marking)
+    return {
+        "CanonicalEvent": CanonicalEvent(
+            system=system.name, skillset="manipulator", seq=7, stamp=1700000000.25, source="bridge-1",
+            transition="arm_ready.start", status=skillsets["manipulator"], info="ok id=3"),
+        "LiveState": LiveState(system=system.name, seq=8, stamp=1700000000.3, skillsets=skillsets,
+                               event="manipulator:arm_ready.start#7", divergence="no transition explains it"),
+        "Verdicts": Verdicts(system=system.name, seq=8, stamp=1700000000.3,
+                             properties=[PropertyVerdict(name="action_guard", holds=True)]),
+        "UnsafeReport": UnsafeReport(
+            system=system.name, seq=8, stamp=1700000000.3,
+            unsafe=[UnsafeEntry(skillset="spot", transition="init_power.start", kind="start", controllable=True,
+                                property="action_guard", constraint="implicit", steps=1,
+                                witness=["spot:init_power.start"])],
+            recovery=[RecoveryEntry(property="action_guard", skillset="manipulator", transition="arm_ready.end",
+                                    controllable=False)],
+            violated=["safety_guard"], literal_count=12, prediction_stale=False),
+        "StateSpaceReport": report,
+        "ModelBundle": b,
+        "PredictRequest": PredictRequest(system=system.name, digest=b.digest, seq=3, skillsets=skillsets, budget=0.5),
+        "PredictReply": PredictReply(system=system.name, digest=b.digest, seq=3, ok=True, instance="p1",
+                                     report=report, risks=found),
+    }
+
+
+@pytest.fixture(scope="session")
+def samples(paper_system: System) -> dict[str, BaseModel]:
+    return sample_messages(paper_system)
