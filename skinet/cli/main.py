@@ -22,7 +22,10 @@ from skinet.verify.ctl import Kripke, check
 from skinet.verify.explore import explore
 from skinet.verify.predict import Forecast, forecast
 from skinet.cli import demo
+from skinet.cli import record as record_cli
+from skinet.cli import timeline as timeline_cli
 from skinet.cli.render import analysis_text, seconds, table
+from skinet.cli.run import add_commands as add_service_commands
 
 DESCRIPTION = """\
 SkiNet Live: predictive runtime verification of skill-based robots.
@@ -38,6 +41,8 @@ examples:
   skinet unsafe skillsets/spot_arm.toml --state state.json
   skinet explore skillsets/spot_arm.toml --budget 2
   skinet ctl skillsets/spot_arm.toml "AG not (spot:Busy and manipulator:Busy)"
+  skinet run skillsets/spot_arm.toml --listen tcp/127.0.0.1:7447
+  skinet router --listen tcp/0.0.0.0:7447
 
 state files (--state) are JSON: {"spot": {"resources": {"posture": "Standing"},
 "running": ["teleop"]}}; omitted resources are initial, omitted skills idle."""
@@ -100,6 +105,9 @@ def build_parser() -> argparse.ArgumentParser:
     c.set_defaults(func=cmd_ctl)
 
     demo.add_parser(sub)
+    record_cli.add_parser(sub)
+    timeline_cli.add_parser(sub)
+    add_service_commands(sub)
     return p
 
 

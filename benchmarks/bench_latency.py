@@ -1,0 +1,359 @@
+"""(d) Monitor latency and throughput: event -> published UnsafeReport (SPEC §1 fast path).
+
+In-process: one peer session carries the events, the monitor and the
+measuring subscriber.  Across processes: this process publishes events to a
+loopback router, a ``python -m services.monitor`` process (client mode)
+answers through the same router, and this process receives the UnsafeReports
+(publisher -> router -> monitor -> router -> subscriber).  Each figure sits
+beside raw Zenoh measured in the same run and the same topology: put ->
+subscriber, an echo (put -> subscriber -> put -> subscriber, the monitor's
+shape with no work) and get -> reply.  No predictor runs: the fast path must
+not depend on one.  Events cycle through the paper's mission (14 transitions,
+each with its observed status, as the bridge sends them).
+
+Targets: in-process p99 <= 1 ms; across processes p99 <= 5 ms and a burst of
+events sustained at >= 20 000 events/s with no loss (the UnsafeReport of every
+step received, counted by seq).  The monitor process runs twice: with express
+publications (default) and with ``--no-express`` (Zenoh batches the three
+messages of a step).  The burst row gives the CPU time per event of each
+process, which on a small machine is what bounds the rate.
+
+    python benchmarks/bench_latency.py [--events 2000] [--burst 20000] [--profile]
+"""
+
+from __future__ import annotations
+
+import argparse
+import cProfile
+import pstats
+import os
+import signal
+import socket
+import statistics
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+from common import table, verdict
+
+import msgpack  # noqa: E402
+import zenoh  # noqa: E402
+
+from services.common.zenoh_config import session_config  # noqa: E402
+from services.monitor import start_monitor  # noqa: E402
+from skinet.files import load_system  # noqa: E402
+from skinet.live import LiveSystem  # noqa: E402
+from skinet.system import marking_to_json  # noqa: E402
+from skinet.wire import keys  # noqa: E402
+from skinet.wire.codec import encode  # noqa: E402
+from skinet.wire.messages import CanonicalEvent, SkillsetStatus  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+SYSTEM_FILE = ROOT / "skillsets" / "spot_arm.toml"
+MISSION = [
+    ("spot", "init_power.start"), ("spot", "init_power.success.powered_on"), ("spot", "stand_up.start"),
+    ("spot", "stand_up.success.standing"), ("manipulator", "arm_ready.start"), ("manipulator", "arm_ready.success.ready"),
+    ("spot", "teleop.start"), ("spot", "teleop.success.done"), ("manipulator", "arm_RD_to_HP.start"),
+    ("manipulator", "arm_RD_to_HP.success.at_home"), ("spot", "sit_down.start"), ("spot", "sit_down.success.sitting"),
+    ("spot", "safe_poweroff.start"), ("spot", "safe_poweroff.success.powered_off"),
+]
+BLOCK = dict(congestion_control=zenoh.CongestionControl.BLOCK, express=True)
+FAST = dict(indirect=False)  # measuring callbacks run on Zenoh's thread: the instrument adds no hop
+
+
+def events(n: int) -> list[tuple[str, bytes]]:
+    """``n`` encoded CanonicalEvents cycling through the mission, with observed statuses."""
+    system = load_system(SYSTEM_FILE)[0]
+    live = LiveSystem(system)
+    seq = {"spot": -1, "manipulator": -1}
+    out = []
+    for i in range(n):
+        skillset, transition = MISSION[i % len(MISSION)]
+        assert live.apply(skillset, transition).divergence is None
+        seq[skillset] += 1
+        status = SkillsetStatus(**marking_to_json(system, live.marking)[skillset])
+        ev = CanonicalEvent(system="spot_arm", skillset=skillset, seq=seq[skillset], stamp=time.time(),
+                            source="bench", transition=transition, status=status)
+        out.append((keys.events("spot_arm", skillset), encode(ev)))
+    return out
+
+
+class Arrivals:
+    """Counts samples on a key and wakes a waiter at the ``n``-th one (keeps payloads if asked)."""
+
+    def __init__(self, session: zenoh.Session, key: str):
+        self.count = 0
+        self.last = 0.0
+        self.kept: list[zenoh.ZBytes] | None = None
+        self._target = -1
+        self._event = threading.Event()
+        self._sub = session.declare_subscriber(key, zenoh.handlers.Callback(self._on, **FAST))
+
+    def _on(self, sample: zenoh.Sample) -> None:
+        self.count += 1
+        self.last = time.perf_counter()
+        if self.kept is not None:
+            self.kept.append(sample.payload)
+        if self.count >= self._target:
+            self._event.set()
+
+    def expect(self, n: int) -> None:
+        self._event.clear()
+        self._target = n
+
+    def wait(self, timeout: float = 5.0) -> float:
+        if not self._event.wait(timeout):
+            raise TimeoutError(f"{self._target - self.count} samples missing")
+        return self.last
+
+    def close(self) -> None:
+        self._sub.undeclare()
+
+
+def ping_pong(send: Callable[[int], None], arrivals: Arrivals, n: int, warmup: int = 200) -> list[float]:
+    """Latency of ``n`` sends, one at a time, each waiting for its arrival."""
+    out = []
+    base = arrivals.count
+    for i in range(warmup + n):
+        arrivals.expect(base + i + 1)
+        t0 = time.perf_counter()
+        send(i)
+        t1 = arrivals.wait()
+        if i >= warmup:
+            out.append(t1 - t0)
+    return out
+
+
+def get_reply(session: zenoh.Session, key: str, n: int, warmup: int = 200) -> list[float]:
+    out = []
+    for i in range(warmup + n):
+        t0 = time.perf_counter()
+        replies = [r for r in session.get(key, payload=b"x", express=True) if r.ok is not None]
+        if not replies:
+            raise RuntimeError("no reply")
+        if i >= warmup:
+            out.append(time.perf_counter() - t0)
+    return out
+
+
+def stats(samples: list[float]) -> tuple[str, str, str]:
+    q = statistics.quantiles(samples, n=100, method="inclusive")
+    return f"{statistics.median(samples) * 1e6:.0f}", f"{q[98] * 1e6:.0f}", f"{max(samples) * 1e6:.0f}"
+
+
+def echo_entities(session: zenoh.Session) -> list:
+    """Raw Zenoh baseline: ping -> pong, and a queryable, with no work."""
+    pong = session.declare_publisher("bench/pong", **BLOCK)
+    return [
+        pong,
+        session.declare_subscriber("bench/ping", zenoh.handlers.Callback(lambda s: pong.put(s.payload))),
+        session.declare_queryable("bench/query", lambda q: (q.reply("bench/query", b"y"), q.drop())),
+    ]
+
+
+# -- in-process ------------------------------------------------------------------------
+
+
+def in_process(n: int, profile: bool) -> list[list[object]]:
+    system = load_system(SYSTEM_FILE)[0]
+    session = zenoh.open(session_config("peer", multicast_scouting=False))
+    rows = []
+    try:
+        one_way = session.declare_publisher("bench/direct", **BLOCK)
+        direct = Arrivals(session, "bench/direct")
+        rows.append(["in-process", "Zenoh put -> subscriber", *stats(ping_pong(lambda i: one_way.put(b"x"), direct, n)),
+                     "", ""])
+        direct.close()
+        keep = echo_entities(session)
+        ping = session.declare_publisher("bench/ping", **BLOCK)
+        pong = Arrivals(session, "bench/pong")
+        rows.append(["in-process", "Zenoh echo (put -> sub -> put -> sub)",
+                     *stats(ping_pong(lambda i: ping.put(b"x"), pong, n)), "", ""])
+        rows.append(["in-process", "Zenoh get -> reply", *stats(get_reply(session, "bench/query", n)), "", ""])
+        pong.close()
+        for indirect in (True, False):
+            monitor = start_monitor(session, system, indirect=indirect)
+            payloads = events(n + 200)
+            publishers = {k: session.declare_publisher(k, **BLOCK) for k in {k for k, _ in payloads}}
+            reports = Arrivals(session, keys.unsafe("spot_arm"))
+            profiler = cProfile.Profile() if profile and not indirect else None  # runs in this thread then
+            if profiler:
+                profiler.enable()
+            lat = ping_pong(lambda i: publishers[payloads[i][0]].put(payloads[i][1]), reports, n)
+            if profiler:
+                profiler.disable()
+            c = monitor.counters
+            assert c.applied == n + 200 and c.lost == c.divergences == c.errors == 0, c
+            p99 = statistics.quantiles(lat, n=100, method="inclusive")[98]
+            where = "event callback in a thread of its own" if indirect else "direct event callback"
+            rows.append(["in-process", f"monitor: event -> UnsafeReport ({where})", *stats(lat), "p99 <= 1000",
+                         verdict(p99 <= 1e-3)])
+            reports.close()
+            monitor.close()
+            for p in publishers.values():
+                p.undeclare()
+            if profiler:
+                print("\nprofile of the in-process run, event callback on the publishing thread (tottime):")
+                pstats.Stats(profiler).sort_stats("tottime").print_stats(25)
+        del keep
+    finally:
+        session.close()
+    return rows
+
+
+# -- across processes ------------------------------------------------------------------
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def spawn(args: list[str]) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, *args], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                            text=True, start_new_session=True)
+
+
+def wait_token(session: zenoh.Session, key: str, timeout: float = 10.0) -> None:
+    seen = threading.Event()
+    sub = session.liveliness().declare_subscriber(key, lambda s: seen.set(), history=True)
+    try:
+        if not seen.wait(timeout):
+            raise TimeoutError(f"no liveliness token on {key}")
+    finally:
+        sub.undeclare()
+
+
+def cpu_seconds(pid: int) -> float:
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def across_processes(n: int, burst: int) -> list[list[object]]:
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    client = ["--mode", "client", "--connect", endpoint, "--no-multicast-scouting"]
+    router = spawn(["-m", "skinet.cli.main", "router", "--listen", endpoint, "--no-multicast-scouting"])
+    procs = [router]
+    rows = []
+    try:
+        assert router.stdout is not None and "listening" in router.stdout.readline()
+        procs.append(spawn([__file__, "--echo", endpoint]))
+        a = zenoh.open(session_config("client", connect=[endpoint], multicast_scouting=False))
+        b = zenoh.open(session_config("client", connect=[endpoint], multicast_scouting=False))
+        try:
+            wait_token(a, "bench/alive/echo")
+            one_way = a.declare_publisher("bench/direct", **BLOCK)
+            direct = Arrivals(b, "bench/direct")
+            time.sleep(0.2)  # let the router learn b's subscriber (no token to wait on)
+            rows.append(["router", "Zenoh put -> subscriber", *stats(ping_pong(lambda i: one_way.put(b"x"), direct, n)),
+                         "", ""])
+            direct.close()
+            ping = a.declare_publisher("bench/ping", **BLOCK)
+            pong = Arrivals(a, "bench/pong")
+            time.sleep(0.2)
+            rows.append(["router", "Zenoh echo (put -> sub -> put -> sub)",
+                         *stats(ping_pong(lambda i: ping.put(b"x"), pong, n)), "", ""])
+            rows.append(["router", "Zenoh get -> reply", *stats(get_reply(a, "bench/query", n)), "", ""])
+            pong.close()
+            for flags in ([], ["--no-express"]):
+                name = "monitor" + (" " + " ".join(flags) if flags else "")
+                monitor = spawn(["-m", "services.monitor", str(SYSTEM_FILE), *client, "--id", "bench",
+                                 "--log-level", "WARNING", *flags])
+                procs.append(monitor)
+                wait_token(a, keys.alive("spot_arm", "monitor", "bench"))
+                payloads = events(n + 200 + burst)
+                publishers = {k: a.declare_publisher(k, **BLOCK) for k in {k for k, _ in payloads}}
+                reports = Arrivals(a, keys.unsafe("spot_arm"))
+                time.sleep(0.2)
+                lat = ping_pong(lambda i: publishers[payloads[i][0]].put(payloads[i][1]), reports, n)
+                p99 = statistics.quantiles(lat, n=100, method="inclusive")[98]
+                rows.append(["router", f"{name}: event -> UnsafeReport", *stats(lat), "p99 <= 5000",
+                             verdict(p99 <= 5e-3)])
+                cpu = {"monitor": monitor.pid, "router": router.pid}
+                rows.append(throughput(name, publishers, payloads[n + 200:], reports, n + 200, cpu))
+                reports.close()
+                for pub in publishers.values():
+                    pub.undeclare()
+                monitor.send_signal(signal.SIGTERM)
+                monitor.wait(5)
+                gone = threading.Event()
+                watch = a.liveliness().declare_subscriber(keys.alive("spot_arm", "monitor", "bench"),
+                                                          lambda s: gone.set(), history=False)
+                gone.wait(1.0)  # its token's deletion, so the next monitor's token is not confused with it
+                watch.undeclare()
+        finally:
+            a.close()
+            b.close()
+    finally:
+        for p in reversed(procs):
+            if p.poll() is None:
+                p.send_signal(signal.SIGTERM)
+            try:
+                p.wait(5)
+            except subprocess.TimeoutExpired:
+                p.kill()
+    return rows
+
+
+def throughput(name: str, publishers: dict, payloads: list[tuple[str, bytes]], reports: Arrivals, done: int,
+               pids: dict[str, int]) -> list[object]:
+    """Publish ``payloads`` as fast as BLOCK allows; rate = events / (last report - first put)."""
+    reports.expect(reports.count + len(payloads))
+    reports.kept = []
+    before = {k: cpu_seconds(pid) for k, pid in pids.items()}
+    me = time.process_time()
+    t0 = time.perf_counter()
+    for key, payload in payloads:
+        publishers[key].put(payload)
+    t_put = time.perf_counter() - t0
+    try:
+        t1 = reports.wait(timeout=60)
+    except TimeoutError:
+        t1 = reports.last
+    rate = len(payloads) / (t1 - t0)
+    seqs = [msgpack.unpackb(p.to_bytes())["seq"] for p in reports.kept]
+    reports.kept = None
+    lost = len(set(range(done + 1, done + len(payloads) + 1)) - set(seqs))  # steps 1.. follow the events
+    per = {k: (cpu_seconds(pid) - before[k]) / len(payloads) * 1e6 for k, pid in pids.items()}
+    per["bench"] = (time.process_time() - me) / len(payloads) * 1e6
+    cpu = ", ".join(f"{k} {v:.0f}" for k, v in per.items())
+    note = f"{len(payloads)} events in {t1 - t0:.2f} s (publisher done in {t_put:.2f} s), {lost} lost; CPU µs/event: {cpu}"
+    return ["router", f"{name}: burst, {note}", f"{rate:,.0f}/s", "", "", ">= 20,000/s, no loss",
+            verdict(rate >= 20_000 and lost == 0)]
+
+
+def echo_process(endpoint: str) -> None:
+    """The raw-Zenoh peer of the cross-process baseline (client of the router)."""
+    session = zenoh.open(session_config("client", connect=[endpoint], multicast_scouting=False))
+    keep = echo_entities(session)
+    token = session.liveliness().declare_token("bench/alive/echo")
+    stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    while not stop.wait(0.5):
+        pass
+    token.undeclare()
+    del keep
+    session.close()
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--events", type=int, default=2000, help="ping-pong events per latency row")
+    parser.add_argument("--burst", type=int, default=20000, help="events of the throughput burst")
+    parser.add_argument("--profile", action="store_true", help="cProfile the in-process monitor run")
+    parser.add_argument("--echo", help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.echo:
+        return echo_process(args.echo)
+    rows = in_process(args.events, args.profile)
+    rows += across_processes(args.events, args.burst)
+    print(f"\nlatency over {args.events} events after 200 warm-up (µs), loopback, no predictor")
+    print(table(["where", "path", "p50", "p99", "max", "target", ""], rows))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,151 @@
+"""Embedded default (SPEC §7): monitor and predictor on one peer session, with a live view.
+
+``skinet run SYSTEM.toml`` opens one Zenoh ``peer`` session (no router; ZENOH.md:
+share one session in a process), starts the monitor and a predictor on it, and
+shows the operator view: redrawn in place on a terminal, one line per change
+otherwise.  ``--listen`` lets a bridge in another process connect.  ``skinet
+router`` runs a Zenoh router from the Python wheel.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import os
+import signal
+import sys
+import threading
+import time
+from collections.abc import Callable
+from typing import TextIO
+
+import zenoh
+
+from services.common.zenoh_config import session_config
+from services.monitor import Monitor, MonitorView, start_monitor
+from skinet.cli.render import seconds, table
+from skinet.files import load_system
+
+CLEAR = "\x1b[H\x1b[J"  # cursor home, clear to end of screen
+
+
+def render(view: MonitorView) -> list[str]:
+    """The operator view: skillsets, properties, unsafe transitions, predictor, counters."""
+    st, u, p, c = view.state, view.unsafe, view.predictor, view.counters
+    out = [f"SkiNet Live  system {st.system}  step {st.seq}  last event {st.event or '-'}"]
+    if st.divergence:
+        out.append(f"  MODEL DIVERGENCE: {st.divergence}")
+    out.append("skillsets")
+    width = max(len(n) for n in st.skillsets)
+    for name, s in st.skillsets.items():
+        res = " ".join(f"{r}={v}" for r, v in s.resources.items())
+        out.append(f"  {name.ljust(width)}  {res}; running: {', '.join(s.running) or '-'}")
+    out.append("properties")
+    for v in view.verdicts.properties:
+        line = f"  {v.name}: {'holds' if v.holds else 'VIOLATED'}"
+        if not v.holds:
+            rec = [f"{r.skillset}:{r.transition}{'' if r.controllable else ' (event)'}"
+                   for r in u.recovery if r.property == v.name]
+            line += f"; recovery: {', '.join(rec) or 'none'}"
+        out.append(line)
+    freshness = "STALE (explicit constraints only)" if u.prediction_stale else "fresh"
+    out.append(f"unsafe transitions ({len(u.unsafe)}), prediction {freshness}")
+    if u.unsafe:
+        rows = [[e.skillset, e.transition, e.property, e.constraint,
+                 "controllable" if e.controllable else "uncontrollable",
+                 "-" if e.steps is None else e.steps, " -> ".join(e.witness)] for e in u.unsafe]
+        out.extend("  " + r for r in table(rows, ["skillset", "transition", "property", "constraint",
+                                                  "control", "steps", "witness"]).splitlines())
+    space = view.state_space
+    explored = "-" if space is None else (
+        f"{seconds(space.time)}, {space.markings} markings, {space.edges} edges, depth {space.depth}, "
+        f"{'TRUNCATED' if space.timeout_reached else 'complete'}")
+    out.append(f"predictor  last exploration: {explored}")
+    out.append(f"  queries sent {p.sent}, answered {p.answered}, timed out {p.timed_out}, unanswered {p.unanswered}, "
+               f"failed {p.failed}, superseded {p.superseded}{', one in flight' if p.in_flight else ''}")
+    out.append(f"events  received {c.received}, applied {c.applied}, malformed {c.malformed}, duplicates "
+               f"{c.duplicates}, out of order {c.out_of_order}, lost {c.lost}, divergences {c.divergences}")
+    return out
+
+
+def summary(view: MonitorView) -> str:
+    """One line per change, for logs and pipes."""
+    u = view.unsafe
+    props = " ".join(f"{v.name}={'ok' if v.holds else 'VIOLATED'}" for v in view.verdicts.properties)
+    unsafe = ", ".join(f"{e.skillset}:{e.transition}({e.property} {e.constraint})" for e in u.unsafe) or "none"
+    div = f" DIVERGENCE: {view.state.divergence}" if view.state.divergence else ""
+    return (f"[{view.state.seq}] {view.state.event or 'start'} | {props} | unsafe: {unsafe} | "
+            f"prediction {'stale' if u.prediction_stale else 'fresh'}{div}")
+
+
+def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
+    """``skinet run``: see the module docstring; returns the exit status."""
+    from services.predictor.service import start_predictor
+
+    system, _ = load_system(args.system)
+    stop = _stop_on_signals()
+    session = zenoh.open(session_config("peer", args.connect, args.listen, args.zenoh_config,
+                                        not args.no_multicast_scouting))
+    monitor: Monitor | None = None
+    predictor = None
+    try:
+        predictor = start_predictor(session, f"embedded-{os.getpid()}")  # first: the monitor asks at once
+        monitor = start_monitor(session, system, budget=args.budget)
+        if args.once:
+            deadline = time.monotonic() + args.budget + 2.0  # the first prediction, if any comes
+            view = monitor.snapshot()
+            while view.unsafe.prediction_stale and time.monotonic() < deadline:
+                monitor.wait_change(view.version, 0.1)
+                view = monitor.snapshot()
+            print("\n".join(render(view)), file=out, flush=True)
+            return 0
+        _follow(monitor, stop, args.duration, out)
+        return 0
+    finally:
+        if monitor is not None:
+            monitor.close()
+        session.close()
+        if predictor is not None:
+            predictor.close()
+
+
+def _follow(monitor: Monitor, stop: threading.Event, duration: float | None, out: TextIO) -> None:
+    """Redraw (terminal) or log (pipe) the view whenever it changes, until stopped."""
+    tty = out.isatty()
+    end = None if duration is None else time.monotonic() + duration
+    shown: tuple | None = None
+    while not stop.is_set() and (end is None or time.monotonic() < end):
+        view = monitor.snapshot()
+        stats = dataclasses.astuple(view.predictor)
+        if shown is None or view.version != shown[0] or (tty and stats != shown[1]):
+            if tty:
+                out.write(CLEAR + "\n".join(render(view)) + "\n")
+            else:
+                out.write(summary(view) + "\n")
+            out.flush()
+            shown = (view.version, stats)
+        monitor.wait_change(view.version, 0.25)
+
+
+def router(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
+    """``skinet router``: a Zenoh router (mode "router" of the Python wheel) until interrupted."""
+    stop = _stop_on_signals()
+    session = zenoh.open(session_config("router", args.connect, args.listen or ["tcp/0.0.0.0:7447"],
+                                        args.zenoh_config, not args.no_multicast_scouting))
+    try:
+        print(f"zenoh router {session.zid()} listening on {', '.join(args.listen or ['tcp/0.0.0.0:7447'])}",
+              file=out, flush=True)
+        while not stop.wait(0.5):
+            pass
+    finally:
+        session.close()
+    return 0
+
+
+def _stop_on_signals() -> threading.Event:
+    stop = threading.Event()
+    handler: Callable[..., None] = lambda *_: stop.set()
+    if threading.current_thread() is threading.main_thread():
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, handler)
+    return stop

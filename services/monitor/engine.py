@@ -1,0 +1,231 @@
+"""The monitor's fast path without I/O (SPEC §1 monitor, §5, §7).
+
+:class:`Engine` checks each event's sequence number, advances the live marking
+with :class:`~skinet.live.LiveSystem`, runs Algorithm 1 and returns the
+encoded :class:`LiveState`, :class:`Verdicts` and :class:`UnsafeReport`.
+
+The work per event is compiled once per marking, in the spirit of rosbags'
+generated deserialisers: the result of ``LiveSystem.apply`` is cached per
+(skillset marking, transition, observed status), and the msgpack bytes of the
+three messages per (combined marking, prediction) with holes for the fields of
+a step (seq, stamp, event, divergence).  Both caches are bounded and exact (the
+core functions are pure); a step packs four small values and joins bytes.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import OrderedDict
+from dataclasses import dataclass, field
+from typing import Any
+
+import msgpack
+
+from skinet.live import LiveSystem
+from skinet.system import Marking, System
+from skinet.verify.algorithm1 import analyse
+from skinet.wire.convert import RiskTable, statuses
+from skinet.wire.messages import (
+    CanonicalEvent, LiveState, PropertyVerdict, RecoveryEntry, UnsafeEntry, UnsafeReport, Verdicts,
+)
+
+MarkingKey = tuple[int, ...]
+
+
+@dataclass
+class Counters:
+    """What happened to the payloads received on the events key."""
+
+    received: int = 0  # payloads on the events key
+    applied: int = 0  # events applied to the live marking
+    malformed: int = 0  # garbage, wrong schema or another system's events
+    duplicates: int = 0  # seq equal to the last applied one
+    out_of_order: int = 0  # seq older than the last applied one
+    lost: int = 0  # seq numbers skipped (gaps), events never seen
+    divergences: int = 0  # events the model could not explain (SPEC §7)
+    errors: int = 0  # unexpected exceptions while handling a payload (bugs)
+
+
+class Template:
+    """The msgpack encoding of a message with holes for some fields (same bytes as packing the dict)."""
+
+    def __init__(self, body: dict[str, Any], holes: tuple[str, ...]):
+        packer = msgpack.Packer(use_bin_type=True)
+        self.pairs: list[tuple[bytes, str]] = []  # constant bytes, then the field to pack after them
+        const = packer.pack_map_header(len(body))
+        for name, value in body.items():
+            const += packer.pack(name)
+            if name in holes:
+                self.pairs.append((const, name))
+                const = b""
+            else:
+                const += packer.pack(value)
+        self.tail = const
+
+    def fill(self, packer: msgpack.Packer, values: dict[str, Any]) -> bytes:
+        pack = packer.pack
+        return b"".join([const + pack(values[name]) for const, name in self.pairs]) + self.tail
+
+
+@dataclass(frozen=True)
+class Frame:
+    """The messages of one combined marking and prediction, to be filled per step."""
+
+    live: Template
+    verdicts: Template
+    unsafe: Template
+
+
+@dataclass(frozen=True)
+class Step:
+    """The encoded messages of one step of the live marking."""
+
+    seq: int
+    key: MarkingKey
+    changed: bool
+    divergence: str | None
+    live: bytes
+    verdicts: bytes
+    unsafe: bytes
+
+
+@dataclass
+class Prediction:
+    """A predictor's answer for one marking, as Algorithm 1 consumes it."""
+
+    token: int  # identifies the table in the frame cache
+    table: RiskTable
+
+
+@dataclass
+class Engine:
+    """Sequence check, live marking, Algorithm 1 and message bodies (not thread-safe)."""
+
+    system: System
+    cache_size: int = 4096
+    prediction_cache: int = 256
+    counters: Counters = field(default_factory=Counters)
+
+    def __post_init__(self) -> None:
+        self.live = LiveSystem(self.system)
+        self.names = tuple(c.name for c in self.system.components)
+        self.seq = -1  # monitor step counter; the initial state is step 0
+        self.last_seq: dict[tuple[str, str], int] = {}
+        self.predictions: OrderedDict[MarkingKey, Prediction] = OrderedDict()
+        self._applied: dict[tuple, tuple[int | None, bool, str | None]] = {}
+        self._frames: dict[tuple[MarkingKey, int], Frame] = {}
+        self._tokens = 0
+        self._packer = msgpack.Packer(use_bin_type=True)
+
+    @property
+    def key(self) -> MarkingKey:
+        return tuple(map(self.live.marking.__getitem__, self.names))
+
+    def marking(self) -> Marking:
+        return dict(self.live.marking)
+
+    def initial(self) -> Step:
+        """Step 0: the initial marking, published at start."""
+        return self._step("", False, None)
+
+    def check_seq(self, ev: CanonicalEvent) -> tuple[bool, str | None]:
+        """Whether to apply ``ev`` given its seq (per skillset and source), and what to log.
+
+        A duplicate or older seq is counted and not applied; a gap is counted
+        in ``lost`` and the event applied.  A stream may start at any seq.
+        """
+        stream = (ev.skillset, ev.source)
+        last = self.last_seq.get(stream)
+        if last is not None and ev.seq <= last:
+            if ev.seq == last:
+                self.counters.duplicates += 1
+                return False, f"duplicate event {ev.skillset}#{ev.seq} from '{ev.source}' ignored"
+            self.counters.out_of_order += 1
+            return False, f"out-of-order event {ev.skillset}#{ev.seq} (last {last}) from '{ev.source}' ignored"
+        if ev.skillset in self.live.marking:  # unknown skillsets are not tracked
+            self.last_seq[stream] = ev.seq
+        if last is not None and ev.seq > last + 1:
+            self.counters.lost += ev.seq - last - 1
+            return True, f"lost events {ev.skillset}#{last + 1}..{ev.seq - 1} from '{ev.source}'"
+        return True, None
+
+    def apply(self, ev: CanonicalEvent) -> Step:
+        """Advance the live marking by ``ev`` (already seq-checked) and build its step."""
+        status = ev.status
+        observed = None if status is None else (tuple(status.resources.items()), tuple(status.running))
+        before = self.live.marking.get(ev.skillset)
+        ckey = (ev.skillset, before, ev.transition, observed)
+        hit = self._applied.get(ckey)
+        if hit is None:
+            out = self.live.apply(ev.skillset, ev.transition, None if status is None else status.model_dump())
+            hit = (self.live.marking.get(ev.skillset), out.changed, out.divergence)
+            if len(self._applied) >= self.cache_size:
+                self._applied.clear()
+            self._applied[ckey] = hit
+        elif before is not None:
+            self.live.marking[ev.skillset] = hit[0]  # type: ignore[assignment]
+        self.counters.applied += 1
+        if hit[2] is not None:
+            self.counters.divergences += 1
+        return self._step(f"{ev.skillset}:{ev.transition or 'status'}#{ev.seq}", hit[1], hit[2])
+
+    def prediction(self, key: MarkingKey | None = None) -> Prediction | None:
+        """The prediction for the live marking (``key`` when known), if any (SPEC §5)."""
+        return self.predictions.get(self.key if key is None else key)
+
+    def add_prediction(self, key: MarkingKey, table: RiskTable) -> bool:
+        """Remember a predictor's answer for marking ``key``; True when it is the live one."""
+        self._tokens += 1
+        self.predictions[key] = Prediction(self._tokens, table)
+        self.predictions.move_to_end(key)
+        while len(self.predictions) > max(1, self.prediction_cache):
+            self.predictions.popitem(last=False)
+        return key == self.key
+
+    def refresh(self) -> bytes:
+        """The UnsafeReport of the current step again, with the current prediction."""
+        return self._frame(self.key).unsafe.fill(self._packer, {"seq": self.seq, "stamp": time.time()})
+
+    def _step(self, event: str, changed: bool, divergence: str | None) -> Step:
+        self.seq += 1
+        key = self.key
+        frame = self._frame(key)
+        values = {"seq": self.seq, "stamp": time.time(), "event": event, "divergence": divergence}
+        fill = self._packer
+        return Step(self.seq, key, changed, divergence, frame.live.fill(fill, values),
+                    frame.verdicts.fill(fill, values), frame.unsafe.fill(fill, values))
+
+    def _frame(self, key: MarkingKey) -> Frame:
+        pred = self.predictions.get(key)
+        fkey = (key, pred.token if pred else 0)
+        frame = self._frames.get(fkey)
+        if frame is None:
+            frame = self._build(pred)
+            if len(self._frames) >= self.cache_size:
+                self._frames.clear()
+            self._frames[fkey] = frame
+        return frame
+
+    def _build(self, pred: Prediction | None) -> Frame:
+        """Run Algorithm 1 and build the message bodies (seq and stamp set per step)."""
+        name, marking = self.system.name, self.live.marking
+        analysis = analyse(self.system, marking, pred.table if pred else None)
+        unsafe = [
+            UnsafeEntry(skillset=u.skillset, transition=u.transition, kind=u.kind, controllable=u.controllable,
+                        property=u.property, constraint=u.constraint, steps=u.steps, witness=list(u.witness))
+            for u in analysis.operator_unsafe()
+        ]
+        recovery = [
+            RecoveryEntry(property=p, skillset=r.skillset, transition=r.transition, controllable=r.controllable)
+            for p, rs in analysis.recovery.items() for r in rs
+        ]
+        props = [PropertyVerdict(name=p.name, holds=p.name not in analysis.violated) for p in self.system.properties]
+        step = ("seq", "stamp")
+        return Frame(
+            Template(LiveState(system=name, seq=0, stamp=0.0, skillsets=statuses(self.system, marking))
+                     .model_dump(mode="json"), (*step, "event", "divergence")),
+            Template(Verdicts(system=name, seq=0, stamp=0.0, properties=props).model_dump(mode="json"), step),
+            Template(UnsafeReport(system=name, seq=0, stamp=0.0, unsafe=unsafe, recovery=recovery,
+                                  violated=analysis.violated, literal_count=len(analysis.unsafe),
+                                  prediction_stale=pred is None).model_dump(mode="json"), step),
+        )

@@ -1,0 +1,234 @@
+"""The monitor service: the fast path of SPEC §1 as a Zenoh shell around :class:`Engine`.
+
+Subscribes to ``keys.events(system, "*")``; per event it publishes
+:class:`LiveState`, :class:`Verdicts` and :class:`UnsafeReport` (one step;
+the three share the step's ``seq``).  It answers the model queryable, holds a
+liveliness token and asks the predictor for the live marking without ever
+waiting for it (:mod:`services.monitor.prediction`); when a prediction for the
+live marking arrives, the UnsafeReport of the same step is published again with
+``prediction_stale=False`` together with the :class:`StateSpaceReport`.
+Predictions are kept per marking (``prediction_cache``): a marking seen again is
+fresh at once and not queried again.  Bad payloads are counted and logged,
+never raised (SPEC §7).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import threading
+import uuid
+from dataclasses import dataclass
+
+import zenoh
+
+from services.monitor.engine import Counters, Engine, MarkingKey, Step
+from services.monitor.prediction import PredictionClient, PredictorStats
+from skinet.system import System
+from skinet.wire import keys
+from skinet.wire.codec import DecodeError, decode, encode
+from skinet.wire.convert import RiskTable, bundle
+from skinet.wire.messages import CanonicalEvent, LiveState, PredictReply, StateSpaceReport, UnsafeReport, Verdicts
+
+log = logging.getLogger("skinet.monitor")
+_LOG_FIRST = 10  # log the first occurrences of each problem, then every 1000th
+
+
+@dataclass(frozen=True)
+class MonitorView:
+    """A consistent copy of what the monitor last published, for operator views."""
+
+    version: int  # grows with every publication
+    state: LiveState
+    verdicts: Verdicts
+    unsafe: UnsafeReport
+    state_space: StateSpaceReport | None
+    counters: Counters
+    predictor: PredictorStats
+
+
+class Monitor:
+    """A running monitor; build it with :func:`start_monitor`."""
+
+    def __init__(self, session: zenoh.Session, system: System, *, instance_id: str | None = None,
+                 budget: float = 1.0, query_timeout: float | None = None, retry: float = 0.5,
+                 prediction_cache: int = 256, indirect: bool = True, express: bool = True):
+        self.session, self.system = session, system
+        self.instance_id = keys.check_chunk(instance_id or uuid.uuid4().hex[:8], "instance id")
+        name = keys.check_chunk(system.name, "system name")
+        self.bundle = bundle(system)
+        self.digest = self.bundle.digest
+        self._model_payload = encode(self.bundle)
+        self._engine = Engine(system, prediction_cache=prediction_cache)
+        self._lock = threading.Lock()
+        self._changed = threading.Condition(self._lock)
+        self._version = 0
+        self._closed = False
+        self._last: dict[str, bytes] = {}
+        self._waiters = 0  # threads in wait_change: notify only when someone listens
+        opts = dict(congestion_control=zenoh.CongestionControl.BLOCK, express=express)
+        self._pub = {k: session.declare_publisher(key, **opts) for k, key in (
+            ("state", keys.state(name)), ("verdicts", keys.verdicts(name)),
+            ("unsafe", keys.unsafe(name)), ("state_space", keys.state_space(name)))}
+        self._predict = PredictionClient(session, system, self.digest, self._on_prediction,
+                                         budget=budget, timeout=query_timeout, retry=retry)
+        with self._lock:
+            self._publish(self._engine.initial())
+        self._queryable = session.declare_queryable(keys.model(name, self.digest), self._on_model_query)
+        self._predictors = session.liveliness().declare_subscriber(
+            keys.alive("*", "predictor", "*"), self._on_predictor_token)
+        self._sub = session.declare_subscriber(
+            keys.events(name, "*"), zenoh.handlers.Callback(self._on_event, indirect=indirect))
+        # Declared last: whoever sees the token also sees the declarations above.
+        self._token = session.liveliness().declare_token(keys.alive(name, "monitor", self.instance_id))
+        self._predict.want(self._engine.key, self._engine.marking())
+
+    # -- public API -----------------------------------------------------------------
+
+    @property
+    def counters(self) -> Counters:
+        with self._lock:
+            return dataclasses.replace(self._engine.counters)
+
+    @property
+    def predictor_stats(self) -> PredictorStats:
+        return self._predict.snapshot()
+
+    def snapshot(self) -> MonitorView:
+        """The latest published messages, counters and predictor statistics (thread-safe)."""
+        with self._lock:
+            last, version, counters = dict(self._last), self._version, dataclasses.replace(self._engine.counters)
+        space = decode(last["state_space"], StateSpaceReport) if "state_space" in last else None
+        return MonitorView(version, decode(last["state"], LiveState), decode(last["verdicts"], Verdicts),
+                           decode(last["unsafe"], UnsafeReport), space, counters, self.predictor_stats)
+
+    def wait_change(self, version: int, timeout: float | None = None) -> bool:
+        """Block until something newer than ``version`` was published; False on timeout."""
+        with self._changed:
+            self._waiters += 1
+            try:
+                return self._changed.wait_for(lambda: self._version > version or self._closed, timeout)
+            finally:
+                self._waiters -= 1
+
+    def close(self) -> None:
+        """Undeclare everything (the session stays open: it may be shared)."""
+        with self._changed:
+            if self._closed:
+                return
+            self._closed = True  # callbacks still running return at once
+            self._changed.notify_all()
+        for entity in (self._sub, self._predictors, self._queryable, self._token):
+            try:
+                entity.undeclare()
+            except zenoh.ZError:
+                pass  # session already closed
+        self._predict.close()
+        with self._lock:
+            for pub in self._pub.values():
+                try:
+                    pub.undeclare()
+                except zenoh.ZError:
+                    pass
+
+    # -- callbacks --------------------------------------------------------------------
+
+    def _on_event(self, sample: zenoh.Sample) -> None:
+        try:
+            ev = decode(sample.payload.to_bytes(), CanonicalEvent)
+            if ev.system != self.system.name:
+                raise DecodeError(f"event of system '{ev.system}' on {sample.key_expr}")
+        except DecodeError as exc:
+            with self._lock:
+                c = self._engine.counters
+                c.received += 1
+                c.malformed += 1
+                self._warn(c.malformed, "malformed event payload: %s", exc)
+            return
+        try:
+            with self._lock:
+                if self._closed:
+                    return
+                engine = self._engine
+                engine.counters.received += 1
+                fresh, problem = engine.check_seq(ev)
+                c = engine.counters
+                if problem:
+                    self._warn(c.duplicates + c.out_of_order + c.lost, "%s", problem)
+                if not fresh:
+                    return
+                step = engine.apply(ev)
+                self._publish(step)
+                if step.divergence:
+                    self._warn(c.divergences, "divergence at %s#%d: %s", ev.skillset, ev.seq, step.divergence)
+                if engine.prediction(step.key) is None:
+                    self._predict.want(step.key, engine.marking())
+        except Exception:  # a bug must not stop the monitor
+            with self._lock:
+                self._engine.counters.errors += 1
+            log.exception("error while handling an event")
+
+    def _on_prediction(self, key: MarkingKey, reply: PredictReply) -> None:
+        try:
+            table = RiskTable(self.system, reply.risks)
+            with self._lock:
+                if self._closed:
+                    return
+                if not self._engine.add_prediction(key, table):
+                    self._predict.superseded()
+                    return
+                unsafe = self._engine.refresh()
+                self._pub["unsafe"].put(unsafe)
+                self._last["unsafe"] = unsafe
+                if reply.report is not None:
+                    space = encode(reply.report)
+                    self._pub["state_space"].put(space)
+                    self._last["state_space"] = space
+                self._bump()
+        except Exception:
+            log.exception("error while applying a prediction")
+
+    def _on_model_query(self, query: zenoh.Query) -> None:
+        with query:
+            query.reply(keys.model(self.system.name, self.digest), self._model_payload)
+
+    def _on_predictor_token(self, sample: zenoh.Sample) -> None:
+        if sample.kind == zenoh.SampleKind.PUT:
+            with self._lock:
+                stale = self._engine.prediction() is None
+                key, marking = self._engine.key, self._engine.marking()
+            if stale:
+                self._predict.poke()
+                self._predict.want(key, marking)
+
+    # -- helpers (call with the lock held) --------------------------------------------
+
+    def _publish(self, step: Step) -> None:
+        for name, payload in (("state", step.live), ("verdicts", step.verdicts), ("unsafe", step.unsafe)):
+            self._pub[name].put(payload)
+            self._last[name] = payload
+        self._bump()
+
+    def _bump(self) -> None:
+        self._version += 1
+        if self._waiters:
+            self._changed.notify_all()
+
+    @staticmethod
+    def _warn(count: int, fmt: str, *args: object) -> None:
+        if count <= _LOG_FIRST or count % 1000 == 0:
+            log.warning(fmt + " [#%d]", *args, count)
+
+
+def start_monitor(session: zenoh.Session, system: System, **options: object) -> Monitor:
+    """Start a monitor of ``system`` on ``session`` (which may be shared, SPEC §7).
+
+    Options: ``instance_id``, ``budget`` (predictor exploration seconds, default 1),
+    ``query_timeout`` (default budget + 1 s), ``retry`` (seconds between queries
+    nobody answers, default 0.5), ``prediction_cache`` (markings whose prediction
+    is kept, default 256), ``indirect`` (run the event callback in a Python thread
+    of its own rather than on Zenoh's, default True), ``express`` (publish without
+    batching, default True; False lets Zenoh batch the three messages of a step,
+    which doubles burst throughput, see ``benchmarks/bench_latency.py``).
+    """
+    return Monitor(session, system, **options)  # type: ignore[arg-type]

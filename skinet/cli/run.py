@@ -1,0 +1,39 @@
+"""``skinet run`` and ``skinet router``: arguments only; Zenoh is imported when they run (SPEC §7)."""
+
+from __future__ import annotations
+
+import argparse
+import os
+
+
+def _zenoh_args(c: argparse.ArgumentParser, listen_help: str) -> None:
+    c.add_argument("--listen", "-l", action="append", help=listen_help)
+    c.add_argument("--connect", "-e", action="append", help="endpoint to connect to (repeatable)")
+    c.add_argument("--zenoh-config", default=os.environ.get("SKINET_ZENOH_CONFIG"), help="JSON5 Zenoh configuration file")
+    c.add_argument("--no-multicast-scouting", action="store_true", help="disable multicast scouting")
+
+
+def add_commands(sub: argparse._SubParsersAction) -> None:
+    c = sub.add_parser("run", help="monitor and predictor in one process with a live operator view (SPEC §7)")
+    c.add_argument("system", help="system file (.toml), e.g. skillsets/spot_arm.toml")
+    c.add_argument("--once", action="store_true", help="print one view (after the first prediction) and exit")
+    c.add_argument("--duration", type=float, help="stop after this many seconds")
+    c.add_argument("--budget", type=float, default=1.0, help="prediction budget in seconds (default: 1)")
+    _zenoh_args(c, "endpoint on which a bridge in another process can connect, e.g. tcp/127.0.0.1:7447")
+    c.set_defaults(func=cmd_run)
+
+    c = sub.add_parser("router", help="run a Zenoh router (the Python wheel in router mode) until interrupted")
+    _zenoh_args(c, "endpoint to listen on (repeatable; default: tcp/0.0.0.0:7447)")
+    c.set_defaults(func=cmd_router)
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    from services.embedded import run
+
+    return run(args)
+
+
+def cmd_router(args: argparse.Namespace) -> int:
+    from services.embedded import router
+
+    return router(args)
