@@ -10,6 +10,10 @@ skillset, the ROS 2 node of its manager; paths are relative to the file::
     [[skillsets]]
     model = "spot.rl"
     manager = "/spot/spot_skillset_manager"
+
+``[system] types = "spot_arm.types.json"`` names the type map (ONERA's JSON
+format) that gives each ``.rl`` type its ROS 2 message; :func:`load_typemap`
+reads it.
 """
 
 from __future__ import annotations
@@ -22,6 +26,7 @@ from pathlib import Path
 from skinet.errors import Diagnostic, Pos, SourceError
 from skinet.lang.model import Model
 from skinet.lang.parser import parse_model
+from skinet.ros.typemap import TypeMap, parse_typemap
 from skinet.system import Marking, System, build_system, marking_from_json
 
 
@@ -79,6 +84,22 @@ def load_system(path: str | Path) -> tuple[System, list[Diagnostic]]:
         props_text, props_source = read_text(props_path), str(props_path)
         sources[props_path.name] = props_text
     return build_system(system["name"], skillsets, props_text, props_source, sources), warnings
+
+
+def load_typemap(path: str | Path) -> TypeMap:
+    """The type map named by ``[system] types`` in a system file (empty when absent)."""
+    path = Path(path)
+    try:
+        data = tomllib.loads(read_text(path))
+    except tomllib.TOMLDecodeError as exc:
+        raise _toml_error(str(path), exc) from None
+    name = data.get("system", {}).get("types") if isinstance(data.get("system"), dict) else None
+    if name is None:
+        return {}
+    if not isinstance(name, str):
+        raise SourceError.at(str(path), None, "[system] 'types' must be a path string")
+    types_path = path.parent / name
+    return parse_typemap(read_text(types_path), str(types_path))
 
 
 def load_state(path: str | Path, system: System) -> Marking:

@@ -1,0 +1,12 @@
+"""bridge_ros2: skillset manager topics (CDR on Zenoh, or a rosbag2 file) to canonical events (SPEC §1).
+
+``start_bridge(session, system, typemap)`` runs it live; ``replay_bag(path, system,
+typemap, emit)`` replays a recording; the derivation itself is
+:mod:`skinet.ros.derive`.
+"""
+
+from services.bridge_ros2.feed import Feed
+from services.bridge_ros2.replay import replay_bag
+from services.bridge_ros2.service import Bridge, start_bridge
+
+__all__ = ["Bridge", "Feed", "replay_bag", "start_bridge"]

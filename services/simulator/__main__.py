@@ -1,0 +1,86 @@
+"""``python -m services.simulator SCENARIO.toml``: play a scenario on simulated managers (SPEC §7)."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import signal
+import sys
+import time
+from pathlib import Path
+
+import zenoh
+
+from services.common.zenoh_config import add_zenoh_args, config_from_args
+from services.simulator.driver import StepRun
+from services.simulator.service import Simulator
+from skinet.errors import SkinetError
+from skinet.files import load_system, load_typemap, read_text
+from skinet.mission import parse_scenario
+from skinet.ros.keys import KeyStyle
+
+
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(
+        prog="python -m services.simulator",
+        description="Simulate the skillset managers of a scenario's system on Zenoh (ROS 2 topic keys, CDR) "
+                    "and play the scenario's steps as operator requests and skill outcomes.",
+    )
+    parser.add_argument("scenario", help="scenario TOML file (its [scenario] system names the system file)")
+    parser.add_argument("--speed", type=float, default=float(os.environ.get("SKINET_SPEED", "1")),
+                        help="time scale: step t is played at t/SPEED seconds; 0 = as fast as possible (default: 1)")
+    parser.add_argument("--start-delay", type=float, default=0.0,
+                        help="seconds to wait before the first step (time for a bridge to connect)")
+    parser.add_argument("--linger", type=float, default=1.0,
+                        help="seconds to keep serving after the last step (default: 1)")
+    parser.add_argument("--rmw-zenoh", action="store_true", help="rmw_zenoh keys and attachments instead of "
+                        "zenoh-bridge-ros2dds keys")
+    parser.add_argument("--namespace", default="", help="zenoh-bridge-ros2dds namespace prefix of the keys")
+    parser.add_argument("--domain", type=int, default=0, help="ROS domain id in rmw_zenoh keys (default: 0)")
+    parser.add_argument("--log-level", default=os.environ.get("SKINET_LOG_LEVEL", "INFO"), help="default: INFO")
+    add_zenoh_args(parser)
+    return parser.parse_args(argv)
+
+
+def _line(run: StepRun) -> str:
+    s = run.step
+    what = f"{s.skillset}:{s.transition}" if s.transition else f"(considers {s.skillset}:{s.consider})"
+    flag = "" if run.ok else "   (no effect)"
+    return f"step {run.index:>3}  t={s.t:>6.1f}s  {run.action:<9} {what}{' ' + run.detail if run.detail else ''}{flag}"
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    logging.basicConfig(level=args.log_level.upper(), format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    try:
+        path = Path(args.scenario)
+        scenario = parse_scenario(read_text(path), str(path))
+        system_path = path.parent / scenario.system
+        system, _ = load_system(system_path)
+        typemap = load_typemap(system_path)
+    except SkinetError as exc:
+        print(str(exc), file=sys.stderr)
+        return 2
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
+    session = zenoh.open(config_from_args(args))
+    try:
+        sim = Simulator(session, system, typemap,
+                        style=KeyStyle(args.rmw_zenoh, args.namespace, args.domain))
+        time.sleep(max(0.0, args.start_delay))
+        try:
+            sim.drive(scenario, args.speed, on_step=lambda run: print(_line(run), flush=True))
+        except ValueError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
+        time.sleep(max(0.0, args.linger))
+        sim.close()
+    except KeyboardInterrupt:
+        return 130
+    finally:
+        session.close()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,165 @@
+"""Playing a mission scenario on the simulated managers (MISSION.md, SPEC §7).
+
+Each ``transition`` step of a scenario (:mod:`skinet.mission`) becomes, at time
+``t / speed``, what would cause it on the real robot:
+
+- ``k.start``: a ``Skill<K>Request`` on ``skill/<k>/request``, as an operator GUI sends it;
+- ``k.interrupt``: a ``SkillInterrupt`` with the running id on ``skill/<k>/interrupt``;
+- an event name: an ``EventRequest`` on ``event_request``;
+- ``k.success.m`` / ``k.failure.m`` (``k.success`` for an unnamed mode): the simulated
+  implementation terminates ``k`` in mode ``m``.
+
+Requests travel over Zenoh; the driver waits until the manager has handled each one
+before the next step.  ``consider`` steps do nothing on the robot; every step is then
+reported to ``on_step`` (tests use it to look at the monitor at that moment).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Literal
+
+import zenoh
+
+from skinet.lang.model import Skillset
+from skinet.mission import Scenario, Step
+from skinet.ros.interfaces import event_request_topic, skill_topic
+from skinet.ros.keys import ManagerTopic, manager_topics, rmw_attachment
+from skinet.ros.typestore import default_instance, encode
+
+if TYPE_CHECKING:
+    from services.simulator.service import Simulator
+
+log = logging.getLogger("skinet.simulator")
+
+Action = Literal["start", "interrupt", "event", "success", "failure", "consider"]
+
+
+@dataclass(frozen=True)
+class Planned:
+    """What the driver does for one step."""
+
+    action: Action
+    skill: str | None = None
+    name: str = ""  # event name or mode name
+
+
+@dataclass(frozen=True)
+class StepRun:
+    """One step as played: ``ok`` is false when the robot did not do it (e.g. skill not running)."""
+
+    index: int  # 1-based, as in :class:`skinet.mission.StepRecord`
+    step: Step
+    action: Action
+    ok: bool
+    detail: str = ""  # the request id, or why the step did nothing
+
+
+def plan(skillset: Skillset, step: Step) -> Planned:
+    """The driver's action for ``step``; ``ValueError`` on a name the skillset lacks."""
+    if step.consider is not None:
+        return Planned("consider")
+    name = step.transition or ""
+    if name in {e.name for e in skillset.events}:
+        return Planned("event", name=name)
+    skills = {k.name: k for k in skillset.skills}
+    head, _, rest = name.partition(".")
+    if head not in skills:
+        raise ValueError(f"'{name}' is neither an event nor a skill transition of '{skillset.name}'")
+    kind, _, mode = rest.partition(".")
+    if rest in ("start", "interrupt"):
+        return Planned(rest, head)  # type: ignore[arg-type]
+    if kind in ("success", "failure") and any(m.kind == kind and m.name == mode for m in skills[head].modes):
+        return Planned(kind, head, mode)  # type: ignore[arg-type]
+    raise ValueError(f"'{name}' cannot be driven on '{skillset.name}' (use k.start, k.interrupt, "
+                     f"k.success.m, k.failure.m or an event; invariant failures follow from resource changes)")
+
+
+class Operator:
+    """Sends requests to the managers over Zenoh, like an operator GUI."""
+
+    def __init__(self, session: zenoh.Session, simulator: Simulator):
+        self.simulator = simulator
+        self._publishers: dict[tuple[str, str], tuple[ManagerTopic, zenoh.Publisher]] = {}
+        for name, node in simulator.nodes.items():
+            for t in manager_topics(node.component.skillset):
+                if t.kind in ("skill_request", "skill_interrupt", "event_request"):
+                    key = simulator.style.key(node.component.manager, t, node.store)
+                    pub = session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
+                    self._publishers[(name, t.topic)] = (t, pub)
+        self._sequence = 0
+
+    def send(self, skillset: str, topic: str, timeout: float = 5.0, **values: object) -> bool:
+        """Publish one request and wait until the manager has handled it."""
+        t, pub = self._publishers[(skillset, topic)]
+        node = self.simulator.nodes[skillset]
+        payload = encode(node.store, t.typename, default_instance(node.store, t.typename, **values))
+        attachment = None
+        if self.simulator.style.rmw_zenoh:
+            self._sequence += 1
+            attachment = rmw_attachment(self._sequence, time.time_ns(), b"operator-gui-gid"[:16])
+        before = self.simulator.handled(skillset, topic)
+        pub.put(payload, attachment=attachment)
+        return self.simulator.wait_handled(skillset, topic, before + 1, timeout)
+
+    def close(self) -> None:
+        for _, pub in self._publishers.values():
+            pub.undeclare()
+
+
+def drive(simulator: Simulator, scenario: Scenario, speed: float = 1.0,
+          on_step: Callable[[StepRun], None] | None = None) -> list[StepRun]:
+    """Play ``scenario`` on ``simulator`` (``speed`` <= 0 or ``inf``: as fast as possible).
+
+    Raises ``ValueError`` before anything is sent when a step names something the
+    system lacks.
+    """
+    plans = []
+    for i, step in enumerate(scenario.steps, 1):
+        if step.skillset not in simulator.nodes:
+            raise ValueError(f"step {i}: unknown skillset '{step.skillset}' (skillsets: {', '.join(simulator.nodes)})")
+        try:
+            plans.append(plan(simulator.nodes[step.skillset].component.skillset, step))
+        except ValueError as exc:
+            raise ValueError(f"step {i}: {exc}") from None
+    operator = Operator(simulator.session, simulator)
+    runs: list[StepRun] = []
+    origin = time.monotonic()
+    try:
+        for i, (step, p) in enumerate(zip(scenario.steps, plans), 1):
+            if speed > 0 and not math.isinf(speed):
+                delay = origin + step.t / speed - time.monotonic()
+                if delay > 0:
+                    time.sleep(delay)
+            ss = simulator.nodes[step.skillset].component.skillset
+            ok, detail = True, ""
+            if p.action == "start":
+                detail = f"{scenario.name}-{i}"
+                ok = operator.send(step.skillset, skill_topic(ss, p.skill or "", "request"), id=detail)
+                ok = ok and simulator.skill_status(step.skillset, p.skill or "") == (True, detail)
+            elif p.action == "interrupt":
+                running, detail = simulator.skill_status(step.skillset, p.skill or "")
+                ok = operator.send(step.skillset, skill_topic(ss, p.skill or "", "interrupt"), id=detail)
+                ok = ok and running
+            elif p.action == "event":
+                detail = f"{scenario.name}-{i}"
+                ok = operator.send(step.skillset, event_request_topic(ss), id=detail, name=p.name)
+            elif p.action in ("success", "failure"):
+                ok = simulator.terminate(step.skillset, p.skill or "", p.action, p.name)
+                detail = "" if ok else f"{p.skill} is not running"
+            run = StepRun(i, step, p.action, ok, detail)
+            if not ok:
+                log.warning("step %d (%s:%s) had no effect: %s", i, step.skillset, step.transition, detail or "timeout")
+            runs.append(run)
+            if on_step is not None:
+                on_step(run)
+    finally:
+        operator.close()
+    return runs
+
+
+__all__ = ["Operator", "Planned", "StepRun", "drive", "plan"]

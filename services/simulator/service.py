@@ -1,0 +1,215 @@
+"""Simulated skillset managers on Zenoh, as a ROS 2 gateway would carry them (SPEC §7).
+
+Each skillset of the system gets a :class:`~services.simulator.manager.Manager`
+behind the manager's topics on the keys of :mod:`skinet.ros.keys`
+(``zenoh-bridge-ros2dds`` layout by default, ``rmw_zenoh`` with its type hashes
+and 33-byte attachments on request), with CDR payloads of the generated types.
+
+Inputs (``status_request``, ``event_request``, ``skill/<k>/request``,
+``skill/<k>/interrupt``) are handled under one lock per manager, like the
+generated node's mutex, and the resulting messages are published in order with
+``CongestionControl.BLOCK`` (ZENOH.md).  The simulated implementations are
+driven by method calls: :meth:`Simulator.terminate`, :meth:`Simulator.raise_event`;
+an interruption of an ``interrupting true`` skill completes at once.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import threading
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import zenoh
+
+from services.simulator.driver import StepRun, drive
+from services.simulator.manager import INTERRUPTING, READY, Manager, Message
+from skinet.mission import Scenario
+from skinet.ros.keys import KeyStyle, ManagerTopic, manager_topics, rmw_attachment
+from skinet.ros.typestore import Typestore, build_typestore, decode, encode
+from skinet.system import Component, System
+
+log = logging.getLogger("skinet.simulator")
+
+INPUTS = ("status_request", "event_request", "skill_request", "skill_interrupt")
+OUTPUTS = ("status", "event_response", "skill_response")
+
+
+@dataclass
+class _Node:
+    """One simulated manager node and its Zenoh declarations."""
+
+    component: Component
+    store: Typestore
+    manager: Manager
+    topics: dict[str, ManagerTopic]  # node-relative topic -> topic
+    publishers: dict[str, Any]  # node-relative topic -> zenoh.Publisher (outputs)
+    lock: threading.Lock
+    gid: bytes
+    sequence: int = 0
+    statuses: int = 0  # SkillsetStatus messages published
+    handled: dict[str, int] = field(default_factory=dict)  # node-relative input topic -> inputs handled
+
+
+class Simulator:
+    """Every skillset manager of ``system`` on ``session`` (close with :meth:`close`)."""
+
+    def __init__(
+        self,
+        session: zenoh.Session,
+        system: System,
+        typemap: Mapping[str, str],
+        *,
+        style: KeyStyle = KeyStyle(),
+        clock: Callable[[], float] = time.time,
+        extra_types: Mapping[str, str] | None = None,
+    ):
+        self.session = session
+        self.system = system
+        self.style = style
+        self._cond = threading.Condition()
+        self._subscribers: list[Any] = []
+        self.nodes: dict[str, _Node] = {}
+        for comp in system.components:
+            store = build_typestore(comp.skillset, typemap, extra_types)
+            manager = Manager(comp.skillset, store, info=comp.manager or f"{comp.name}_skillset_manager", clock=clock)
+            topics = {t.topic: t for t in manager_topics(comp.skillset)}
+            node = _Node(comp, store, manager, topics, {}, threading.Lock(), os.urandom(16))
+            for t in topics.values():
+                if t.kind in OUTPUTS:
+                    key = style.key(comp.manager, t, store)
+                    node.publishers[t.topic] = session.declare_publisher(
+                        key, congestion_control=zenoh.CongestionControl.BLOCK)
+            # One subscriber for all inputs keeps their order (see services.bridge_ros2.service).
+            inputs = {t.topic: t for t in topics.values() if t.kind in INPUTS}
+            self._subscribers.append(session.declare_subscriber(
+                style.all_topics(comp.manager, comp.skillset), self._handler(node, inputs)))
+            self.nodes[comp.name] = node
+            log.info("simulated manager %s of skillset %s", comp.manager, comp.name)
+
+    # -- Zenoh side -----------------------------------------------------------------------
+
+    def _handler(self, node: _Node, inputs: dict[str, ManagerTopic]) -> Callable[[zenoh.Sample], None]:
+        def on_sample(sample: zenoh.Sample) -> None:
+            topic = inputs.get(self.style.topic(node.component.manager, str(sample.key_expr)) or "")
+            if topic is None:
+                return  # one of the manager's own outputs
+            try:
+                msg = decode(node.store, topic.typename, sample.payload.to_bytes())
+                self._handle(node, topic, msg)
+            except Exception as exc:  # bad CDR (rosbags raises several types); never crash (SPEC §7)
+                log.warning("%s: %s ignored: %s", node.component.name, topic.topic, exc)
+            finally:
+                self._count(node, topic.topic)
+
+        return on_sample
+
+    def _handle(self, node: _Node, topic: ManagerTopic, msg: Any) -> None:
+        m = node.manager
+        with node.lock:
+            if topic.kind == "status_request":
+                out = m.status_request()
+            elif topic.kind == "event_request":
+                out = m.event_request(msg.id, msg.name)
+            elif topic.kind == "skill_request":
+                out = m.skill_request(topic.skill or "", msg.id, msg.input)
+            else:
+                out = m.interrupt(topic.skill or "", msg.id)
+                if not out:
+                    log.info("%s: interrupt '%s' of %s ignored (not the running id or not running)",
+                             node.component.name, msg.id, topic.skill)
+                elif m.skills[topic.skill or ""].state == INTERRUPTING:
+                    out += m.interrupted(topic.skill or "")  # the implementation stops at once
+            self._publish(node, out)
+
+    def _publish(self, node: _Node, messages: list[Message]) -> None:
+        if not node.publishers:
+            return  # closed
+        for message in messages:
+            payload = encode(node.store, message.typename, message.msg)
+            attachment = None
+            if self.style.rmw_zenoh:
+                node.sequence += 1
+                attachment = rmw_attachment(node.sequence, time.time_ns(), node.gid)
+            node.publishers[message.topic].put(payload, attachment=attachment)
+            node.statuses += message.topic == node.manager.status_topic
+
+    def _count(self, node: _Node, topic: str) -> None:
+        with self._cond:
+            node.handled[topic] = node.handled.get(topic, 0) + 1
+            self._cond.notify_all()
+
+    def statuses_published(self) -> dict[str, int]:
+        """SkillsetStatus messages published so far, per skillset."""
+        out = {}
+        for name, node in self.nodes.items():
+            with node.lock:
+                out[name] = node.statuses
+        return out
+
+    def handled(self, skillset: str, topic: str) -> int:
+        """Inputs handled so far on a node-relative topic (for callers waiting on their request)."""
+        with self._cond:
+            return self.nodes[skillset].handled.get(topic, 0)
+
+    def wait_handled(self, skillset: str, topic: str, count: int, timeout: float = 5.0) -> bool:
+        """Wait until ``count`` inputs in total were handled on ``topic`` of ``skillset``'s manager."""
+        node = self.nodes[skillset]
+        with self._cond:
+            return self._cond.wait_for(lambda: node.handled.get(topic, 0) >= count, timeout)
+
+    # -- the simulated skill implementations ------------------------------------------------
+
+    def terminate(self, skillset: str, skill: str, kind: str, mode: str = "") -> bool:
+        """End a running skill in a success or failure mode; False when it is not running."""
+        node = self.nodes[skillset]
+        with node.lock:
+            out = node.manager.terminate(skill, kind, mode)
+            self._publish(node, out)
+        return bool(out)
+
+    def raise_event(self, skillset: str, event: str) -> None:
+        """An event raised by the implementation itself (response id = status info)."""
+        node = self.nodes[skillset]
+        with node.lock:
+            self._publish(node, node.manager.raise_event(event))
+
+    def skill_status(self, skillset: str, skill: str) -> tuple[bool, str]:
+        """(running or interrupting, id of the current or last execution), as the status shows them."""
+        node = self.nodes[skillset]
+        with node.lock:
+            s = node.manager.skills[skill]
+            return s.state != READY, s.id
+
+    def drive(self, scenario: Scenario, speed: float = 1.0,
+              on_step: Callable[[StepRun], None] | None = None) -> list[StepRun]:
+        """Play ``scenario``: operator requests and skill outcomes at ``t / speed`` (see :func:`drive`)."""
+        return drive(self, scenario, speed, on_step)
+
+    def close(self) -> None:
+        """Undeclare everything (the session stays open: it may be shared).
+
+        Publishers are undeclared under each manager's lock: undeclaring one while a
+        Zenoh thread publishes on it fails ("Already borrowed").
+        """
+        subscribers, self._subscribers = self._subscribers, []
+        for sub in subscribers:
+            _undeclare(sub)
+        for node in self.nodes.values():
+            with node.lock:
+                publishers, node.publishers = list(node.publishers.values()), {}
+                for pub in publishers:
+                    _undeclare(pub)
+
+
+def _undeclare(entity: Any) -> None:
+    try:
+        entity.undeclare()
+    except zenoh.ZError:
+        pass  # session already closed
+
+
+__all__ = ["Simulator"]

@@ -1,0 +1,171 @@
+"""Zenoh keys of a skillset manager's topics, as ROS 2 gateways carry them (ZENOH.md).
+
+A manager declares its topics relative to its node (``~/spot_skillset/status``,
+corpus README), so a topic's fully qualified name is the node name plus the
+node-relative topic.  Two ways of getting ROS 2 traffic onto Zenoh:
+
+- ``zenoh-bridge-ros2dds``: key = the FQN without its leading slash, below the
+  bridge's optional ``namespace``; the payload is the CDR sample as is.
+- ``rmw_zenoh``: key = ``<domain>/<FQN without leading slash>/<DDS type name>/<type
+  hash>``; every sample carries a 33-byte attachment (sequence number, source
+  timestamp, GID).
+
+Pure functions; the type hash comes from ``rosbags`` (``Typestore.hash_rihs01``).
+"""
+
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass
+from typing import Literal
+
+from rosbags.typesys.store import Typestore
+
+from skinet.lang.model import Skillset
+from skinet.ros.interfaces import (
+    event_request_topic,
+    event_response_topic,
+    skill_topic,
+    skill_type,
+    status_request_topic,
+    status_topic,
+    topic_prefix,
+)
+from skinet.ros.typestore import msg_typename
+
+EMPTY_TYPE = "std_msgs/msg/Empty"
+ATTACHMENT_SIZE = 33
+GID_SIZE = 16
+
+TopicKind = Literal[
+    "status", "status_request", "event_request", "event_response",
+    "skill_request", "skill_response", "skill_interrupt",
+]
+
+
+@dataclass(frozen=True)
+class ManagerTopic:
+    """One topic of a manager that the simulator or the bridge uses (corpus README)."""
+
+    kind: TopicKind
+    topic: str  # node-relative: ``spot_skillset/skill/teleop/request``
+    typename: str  # full ROS type name: ``spot_skillset_interfaces/msg/SkillsetStatus``
+    skill: str | None = None  # the skill's model name for skill topics
+
+
+def manager_topics(skillset: Skillset) -> list[ManagerTopic]:
+    """Status, event and skill request/response/interrupt topics of ``skillset``'s manager.
+
+    Data and progress topics are left out: they carry no model-level change.
+    """
+    t = lambda name: msg_typename(skillset, name)  # noqa: E731
+    out = [
+        ManagerTopic("status", status_topic(skillset), t("SkillsetStatus")),
+        ManagerTopic("status_request", status_request_topic(skillset), EMPTY_TYPE),
+        ManagerTopic("event_request", event_request_topic(skillset), t("EventRequest")),
+        ManagerTopic("event_response", event_response_topic(skillset), t("EventResponse")),
+    ]
+    for k in skillset.skills:
+        out += [
+            ManagerTopic("skill_request", skill_topic(skillset, k, "request"), t(skill_type(k, "Request")), k.name),
+            ManagerTopic("skill_response", skill_topic(skillset, k, "response"), t(skill_type(k, "Response")), k.name),
+            ManagerTopic("skill_interrupt", skill_topic(skillset, k, "interrupt"), t("SkillInterrupt"), k.name),
+        ]
+    return out
+
+
+def topic_fqn(manager: str, topic: str) -> str:
+    """``/spot/spot_skillset_manager`` + ``spot_skillset/status`` -> ``/spot/spot_skillset_manager/spot_skillset/status``."""
+    node = manager.strip("/")
+    if not node:
+        raise ValueError("a manager node name is needed (e.g. /spot/spot_skillset_manager)")
+    return f"/{node}/{topic.strip('/')}"
+
+
+def bridge_key(manager: str, topic: str, namespace: str = "") -> str:
+    """Key of a topic through ``zenoh-bridge-ros2dds`` (its ``namespace`` option prefixes it)."""
+    key = topic_fqn(manager, topic).lstrip("/")
+    ns = namespace.strip("/")
+    return f"{ns}/{key}" if ns else key
+
+
+def dds_type_name(typename: str) -> str:
+    """``std_msgs/msg/String`` -> ``std_msgs::msg::dds_::String_`` (the DDS name rmw uses)."""
+    pkg, sub, name = typename.split("/")
+    return f"{pkg}::{sub}::dds_::{name}_"
+
+
+def type_hash(store: Typestore, typename: str) -> str:
+    """``RIHS01_<sha256>``, the hash ``rmw_zenoh`` puts in its keys."""
+    return store.hash_rihs01(typename)
+
+
+def rmw_zenoh_key(manager: str, topic: str, typename: str, hash_: str = "*", domain: int = 0) -> str:
+    """Key of a topic through ``rmw_zenoh``; ``hash_="*"`` matches any type hash (subscribers)."""
+    return f"{domain}/{topic_fqn(manager, topic).lstrip('/')}/{dds_type_name(typename)}/{hash_}"
+
+
+@dataclass(frozen=True)
+class KeyStyle:
+    """How topics map to keys: ``zenoh-bridge-ros2dds`` (default) or ``rmw_zenoh``."""
+
+    rmw_zenoh: bool = False
+    namespace: str = ""  # zenoh-bridge-ros2dds namespace
+    domain: int = 0  # ROS domain id (rmw_zenoh)
+
+    def key(self, manager: str, topic: ManagerTopic, store: Typestore | None = None) -> str:
+        """Publication key (with the exact type hash when ``store`` is given) or subscription key."""
+        if not self.rmw_zenoh:
+            return bridge_key(manager, topic.topic, self.namespace)
+        hash_ = type_hash(store, topic.typename) if store is not None else "*"
+        return rmw_zenoh_key(manager, topic.topic, topic.typename, hash_, self.domain)
+
+    def _node(self, manager: str) -> str:
+        node = topic_fqn(manager, "")[1:].rstrip("/")
+        if self.rmw_zenoh:
+            return f"{self.domain}/{node}"
+        ns = self.namespace.strip("/")
+        return f"{ns}/{node}" if ns else node
+
+    def all_topics(self, manager: str, skillset: Skillset) -> str:
+        """One key expression for every topic of the manager (``.../spot_skillset/**``).
+
+        One subscriber on it sees the samples in the order they were sent, which
+        separate subscribers per key do not guarantee (their callbacks run on
+        different threads).
+        """
+        return f"{self._node(manager)}/{topic_prefix(skillset)}/**"
+
+    def topic(self, manager: str, key: str) -> str | None:
+        """Node-relative topic of a key matched by :meth:`all_topics` (``None`` if not the manager's)."""
+        head = self._node(manager) + "/"
+        if not key.startswith(head):
+            return None
+        rest = key[len(head):]
+        if self.rmw_zenoh:
+            parts = rest.split("/")
+            if len(parts) < 3:
+                return None
+            rest = "/".join(parts[:-2])  # drop the DDS type name and the type hash
+        return rest
+
+
+def rmw_attachment(sequence: int, timestamp_ns: int, gid: bytes) -> bytes:
+    """The 33-byte ``rmw_zenoh`` attachment: int64 sequence, int64 timestamp, GID length byte + GID."""
+    if len(gid) != GID_SIZE:
+        raise ValueError(f"a GID has {GID_SIZE} bytes, got {len(gid)}")
+    return struct.pack("<qqB", sequence, timestamp_ns, GID_SIZE) + gid
+
+
+def parse_rmw_attachment(data: bytes) -> tuple[int, int, bytes]:
+    """``(sequence, timestamp_ns, gid)`` of an ``rmw_zenoh`` attachment; ``ValueError`` if malformed."""
+    if len(data) != ATTACHMENT_SIZE or data[16] != GID_SIZE:
+        raise ValueError(f"not an rmw_zenoh attachment ({len(data)} bytes)")
+    sequence, timestamp = struct.unpack_from("<qq", data)
+    return sequence, timestamp, bytes(data[17:])
+
+
+__all__ = [
+    "ATTACHMENT_SIZE", "EMPTY_TYPE", "KeyStyle", "ManagerTopic", "TopicKind", "bridge_key", "dds_type_name",
+    "manager_topics", "parse_rmw_attachment", "rmw_attachment", "rmw_zenoh_key", "topic_fqn", "type_hash",
+]
