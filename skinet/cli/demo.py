@@ -7,7 +7,7 @@ import re
 from pathlib import Path
 
 from skinet.errors import SourceError
-from skinet.files import load_system, read_text
+from skinet.files import load_system, load_typemap, read_text
 from skinet.mission import Scenario, StepRecord, parse_scenario, replay
 from skinet.mission_log import records_to_log
 from skinet.system import System
@@ -29,6 +29,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     c = sub.add_parser("demo", help="replay the paper's unassisted and assisted runs (the main job)")
     c.add_argument("scenarios", nargs="*", help="scenario files (default: skillsets/missions/{unassisted,assisted}.toml)")
     c.add_argument("--no-predict", action="store_true", help="explicit constraints only")
+    c.add_argument("--core", action="store_true",
+                   help="replay on the core library only (no simulator, ROS 2 encoding, bridge, Zenoh)")
     c.add_argument("--all-steps", action="store_true", help="print every step, not only the notable ones")
     c.add_argument("--log", metavar="DIR", help="write each run as a monitor log DIR/<run>.jsonl (see skinet timeline)")
     c.add_argument("--timeline", metavar="DIR", help="draw each run as an operator timeline DIR/<run>.png")
@@ -40,8 +42,16 @@ def cmd_demo(args: argparse.Namespace) -> int:
     for path in paths:
         scenario = parse_scenario(read_text(path), str(path))
         system, _ = load_system(path.parent / scenario.system)
-        records = replay(system, scenario, predict=not args.no_predict)
+        if args.core:
+            records = replay(system, scenario, predict=not args.no_predict)
+            how = "core replay"
+        else:
+            from services.chain import run_chain  # Zenoh only when the chain runs
+
+            records = run_chain(system, load_typemap(path.parent / scenario.system), scenario, predict=not args.no_predict)
+            how = "simulated managers -> CDR -> bridge -> monitor -> predictor, embedded Zenoh session"
         print(f"== {scenario.name} run ({path}): {len(records)} steps, system {system.name}")
+        print(f"   chain: {how}")
         for r in records:
             if args.all_steps or r.violations or r.warnings or r.divergence or r.step.consider:
                 print(_line(r))

@@ -1,0 +1,101 @@
+"""The whole chain on the embedded default (MISSION.md acceptance, issue 5).
+
+Simulated skillset managers -> ROS 2 encoding (CDR on bridge keys) -> bridge
+-> monitor -> predictor, all on one Zenoh peer session in this process.  A
+scenario is driven through the simulator and, after each step, the monitor's
+published view is read back into the same :class:`~skinet.mission.StepRecord`
+the core replay gives, so both can be printed and compared alike.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping
+
+import zenoh
+
+from services.bridge_ros2 import start_bridge
+from services.common.zenoh_config import session_config
+from services.monitor.service import MonitorView, start_monitor
+from services.predictor.service import start_predictor
+from services.simulator import Simulator
+from services.simulator.driver import StepRun
+from skinet.mission import Scenario, StepRecord
+from skinet.system import System
+from skinet.verify.algorithm1 import UnsafeTransition
+
+
+class ChainError(RuntimeError):
+    """The chain did not settle in time (a service is stuck or lost messages)."""
+
+
+def run_chain(
+    system: System,
+    typemap: Mapping[str, str],
+    scenario: Scenario,
+    *,
+    predict: bool = True,
+    speed: float = 0.0,
+    settle: float = 10.0,
+) -> list[StepRecord]:
+    """Drive ``scenario`` through the whole chain and record what the monitor published.
+
+    ``speed`` <= 0 plays as fast as the chain settles; ``settle`` bounds the
+    wait for each step's effects (and, with ``predict``, for fresh predictions).
+    """
+    session = zenoh.open(session_config("peer", multicast_scouting=False))
+    services: list = []
+    try:
+        monitor = start_monitor(session, system)
+        services.append(monitor)
+        if predict:
+            services.append(start_predictor(session, "embedded"))
+        simulator = Simulator(session, system, typemap)
+        services.append(simulator)
+        bridge = start_bridge(session, system, typemap)
+        services.append(bridge)
+        _wait(lambda: monitor.counters.applied >= len(system.components), settle, "initial statuses")
+        records: list[StepRecord] = []
+        before = {p.name: True for p in system.properties}
+
+        def on_step(run: StepRun) -> None:
+            nonlocal before
+            if not bridge.wait_statuses(simulator.statuses_published()):
+                raise ChainError(f"step {run.index}: the bridge did not receive every status")
+            _wait(lambda: monitor.counters.applied >= bridge.counters.events, settle, f"step {run.index} applied")
+            if predict:
+                _wait(lambda: not monitor.snapshot().unsafe.prediction_stale, settle, f"step {run.index} prediction")
+            view = monitor.snapshot()
+            record = _record(run, view, before)
+            if run.step.transition is not None:
+                before = record.holds
+            records.append(record)
+
+        simulator.drive(scenario, speed=speed, on_step=on_step)
+        return records
+    finally:
+        for service in reversed(services):
+            service.close()
+        session.close()
+
+
+def _record(run: StepRun, view: MonitorView, before: dict[str, bool]) -> StepRecord:
+    holds = {v.name: v.holds for v in view.verdicts.properties}
+    unsafe = view.unsafe.unsafe
+    warnings: list[UnsafeTransition] = []
+    if run.step.consider is not None:
+        warnings = [
+            UnsafeTransition(u.skillset, u.transition, u.kind, u.controllable, u.property, u.constraint, u.steps, tuple(u.witness))
+            for u in unsafe if u.skillset == run.step.skillset and u.transition == run.step.consider
+        ]
+        return StepRecord(run.index, run.step, dict(before), [], warnings, len(unsafe))
+    violations = [p for p, ok in holds.items() if before.get(p, True) and not ok]
+    return StepRecord(run.index, run.step, holds, violations, [], len(unsafe), view.state.divergence)
+
+
+def _wait(condition, timeout: float, what: str) -> None:
+    deadline = time.monotonic() + timeout
+    while not condition():
+        if time.monotonic() > deadline:
+            raise ChainError(f"timed out waiting for {what}")
+        time.sleep(0.002)
