@@ -39,7 +39,7 @@ class ComponentGraph:
     dist_seed: np.ndarray
     roots: list[int]
     seeds: list[int]
-    _csr: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
+    _csr: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]] = field(default_factory=dict, repr=False)
 
     @property
     def size(self) -> int:
@@ -59,14 +59,15 @@ class ComponentGraph:
             ptr = np.zeros(len(lists) + 1, dtype=np.int64)
             np.cumsum(deg, out=ptr[1:])
             flat = np.array([b for x in lists for b in x], dtype=np.int64)
-            self._csr[key] = ptr
-            self._csr[key + "_t"] = flat
-            self._csr[key + "_d"] = deg
-        return self._csr[key], self._csr[key + "_t"], self._csr[key + "_d"]
+            self._csr[key] = (ptr, flat, deg)  # one assignment: graphs are shared between threads
+        return self._csr[key]
 
     def edge_count(self) -> int:
         """Distinct (marking, successor) pairs, self-loops included."""
         return sum(len(s) for s in self.succ) + int(self.loop.sum())
+
+
+CACHE_SIZE = 64  # component graphs remembered per net
 
 
 def explore_component(
@@ -75,8 +76,31 @@ def explore_component(
     """Breadth-first search of ``eventless`` from ``roots`` and ``seeds``.
 
     Roots and seeds are stabilized first (a transient marking is replaced by
-    the stable markings its cascade ends in).
+    the stable markings its cascade ends in).  The last :data:`CACHE_SIZE`
+    graphs of each net are memoised: a live system usually moves one
+    component at a time, so the others' graphs are reused.  Cached graphs are
+    shared: treat them as read-only.  Safe under threads (at worst a graph is
+    computed twice).
     """
+    key = (name, frozenset(roots), frozenset(seeds))
+    # Cached on the (frozen, immutable) net itself, as PetriNet caches its place index.
+    cache: dict[tuple[str, frozenset[int], frozenset[int]], ComponentGraph]
+    cache = eventless.__dict__.setdefault("_component_graphs", {})
+    graph = cache.pop(key, None)
+    if graph is None:
+        graph = _explore(name, eventless, key[1], key[2])
+        for stale in list(cache)[: max(0, len(cache) + 1 - CACHE_SIZE)]:
+            cache.pop(stale, None)  # least recently used first
+    cache[key] = graph
+    return graph
+
+
+def forget_component_graphs(eventless: PetriNet) -> None:
+    """Drop the graphs memoised for ``eventless`` (for cold measurements)."""
+    eventless.__dict__.pop("_component_graphs", None)
+
+
+def _explore(name: str, eventless: PetriNet, roots: Iterable[int], seeds: Iterable[int]) -> ComponentGraph:
     root_states = sorted({s for r in roots for s in stabilize(eventless, r)})
     seed_states = sorted({s for r in seeds for s in stabilize(eventless, r)} - set(root_states))
     states: list[int] = []

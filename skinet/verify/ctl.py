@@ -15,6 +15,7 @@ Sistla (1986) on predecessors generated from the product structure; ``AF`` and
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -22,14 +23,18 @@ import numpy as np
 from skinet.lang.expr import And, Const, Expr, Implies, Not, Or
 from skinet.props.evaluate import evaluate
 from skinet.props.formula import PlaceAtom, Temporal, Until
-from skinet.verify.explore import StateSpace, expand_codes
+from skinet.verify.explore import CHUNK, StateSpace, expand_codes, unique_codes
 
 UNREACHED = np.iinfo(np.int32).max
 
 
 @dataclass
 class Kripke:
-    """Successor structure of a :class:`StateSpace`, precomputed for fixpoints."""
+    """Successor structure of a :class:`StateSpace`, precomputed for fixpoints.
+
+    Per box element: ``stored``, ``expanded``, ``frontier``, ``deadlock`` and
+    ``loop`` (one byte each) and ``outdeg`` (two bytes for the usual sizes).
+    """
 
     space: StateSpace
 
@@ -39,27 +44,38 @@ class Kripke:
         self.expanded = s.expanded()
         self.frontier = self.stored & ~self.expanded
         self.rev = [g.csr(reverse=True) for g in s.components]
-        outdeg = np.zeros(s.box, dtype=np.int32)
-        loop = np.zeros(s.box, dtype=bool)
-        for i, g in enumerate(s.components):
-            outdeg += s.local(g.csr()[2], i).astype(np.int32)
-            loop |= s.local(g.loop, i)
+        bound = 1 + sum(int(g.csr()[2].max(initial=0)) for g in s.components)
+        dtype = np.int16 if bound <= np.iinfo(np.int16).max else np.int32
+        outdeg = np.zeros(s.shape, dtype=dtype)
+        loop = np.zeros(s.shape, dtype=bool)
+        for i, g in enumerate(s.components):  # broadcast in place: no box-sized temporaries
+            view = [1] * len(s.shape)
+            view[i] = s.shape[i]
+            outdeg += g.csr()[2].astype(dtype).reshape(view)
+            loop |= g.loop.reshape(view)
+        outdeg, loop = outdeg.reshape(-1), loop.reshape(-1)
         self.deadlock = self.expanded & (outdeg == 0) & ~loop
         # Deadlocks are sinks: their only successor is themselves.
-        self.loop = loop | self.deadlock
-        self.outdeg = outdeg + self.loop
+        loop |= self.deadlock
+        outdeg += loop
+        self.loop, self.outdeg = loop, outdeg
+
+    def predecessor_chunks(self, codes: np.ndarray) -> Iterator[np.ndarray]:
+        """Expanded non-loop predecessors of ``codes`` (one entry per edge), chunk by chunk."""
+        s = self.space
+        for lo in range(0, codes.size, CHUNK):
+            preds = expand_codes(codes[lo:lo + CHUNK], s.strides, s.shape, self.rev)
+            yield preds[self.expanded[preds]]
 
     def predecessors(self, codes: np.ndarray) -> np.ndarray:
         """Expanded non-loop predecessors of ``codes`` (one entry per edge)."""
-        s = self.space
-        preds = expand_codes(codes, s.strides, s.shape, self.rev)
-        return preds[self.expanded[preds]]
+        return np.concatenate([np.empty(0, dtype=np.int64), *self.predecessor_chunks(codes)])
 
     def ex(self, z: np.ndarray, frontier_value: bool) -> np.ndarray:
         """EX z: some successor satisfies z."""
-        out = np.zeros_like(z)
-        out[self.predecessors(np.flatnonzero(z & self.stored))] = True
-        out |= self.loop & z
+        out = self.loop & z
+        for p in self.predecessor_chunks(np.flatnonzero(z & self.stored)):
+            out[p] = True
         out &= self.expanded
         if frontier_value:
             out |= self.frontier
@@ -77,37 +93,47 @@ class Kripke:
         sat = g & self.stored
         ok = f & self.stored & (self.expanded | frontier_value)
         if frontier_value:
-            sat = sat | (ok & self.frontier)
+            sat |= ok & self.frontier
         layer = np.flatnonzero(sat)
         while layer.size:
-            p = self.predecessors(layer)
-            p = p[ok[p] & ~sat[p]]
-            p = np.unique(p)
-            sat[p] = True
-            layer = p
+            found = []
+            for p in self.predecessor_chunks(layer):
+                p = unique_codes(p[ok[p] & ~sat[p]])
+                sat[p] = True
+                found.append(p)
+            layer = np.concatenate(found)
         return sat
 
-    def au(self, f: np.ndarray, g: np.ndarray, frontier_value: bool) -> tuple[np.ndarray, np.ndarray]:
-        """A[f U g] and each satisfying marking's rank (max steps to reach g)."""
-        rank = np.full(self.space.box, UNREACHED, dtype=np.int32)
+    def au(
+        self, f: np.ndarray, g: np.ndarray, frontier_value: bool, ranks: bool = True
+    ) -> tuple[np.ndarray, np.ndarray | None]:
+        """A[f U g] and, with ``ranks``, each satisfying marking's rank (max steps to reach g).
+
+        Counting algorithm: a marking of ``f`` joins once every successor has;
+        a loop is never discharged, so it keeps ``f`` alive forever.
+        """
+        rank = np.full(self.space.box, UNREACHED, dtype=np.int32) if ranks else None
         sat = g & self.stored
-        rank[sat] = 0
+        if rank is not None:
+            rank[sat] = 0
         ok = f & self.expanded
-        remaining = self.outdeg.copy()  # a loop is never discharged: it keeps f alive forever
+        remaining = self.outdeg.copy()
         if frontier_value:
             sat |= self.frontier & f
         layer = np.flatnonzero(sat)
         level = 0
         while layer.size:
             level += 1
-            p = self.predecessors(layer)
-            p = p[ok[p] & ~sat[p]]
-            np.subtract.at(remaining, p, 1)
-            p = np.unique(p)
-            p = p[remaining[p] == 0]
-            sat[p] = True
-            rank[p] = level
-            layer = p
+            found = []
+            for p in self.predecessor_chunks(layer):
+                p = p[ok[p] & ~sat[p]]
+                np.subtract.at(remaining, p, 1)
+                p = unique_codes(p[remaining[p] == 0])
+                sat[p] = True
+                if rank is not None:
+                    rank[p] = level
+                found.append(p)
+            layer = np.concatenate(found)
         return sat, rank
 
     def eg(self, f: np.ndarray, frontier_value: bool) -> np.ndarray:
@@ -115,21 +141,20 @@ class Kripke:
         sat = f & self.stored
         if not frontier_value:
             sat &= self.expanded
-        # count successors inside sat
-        inside = np.zeros(self.space.box, dtype=np.int32)
-        codes = np.flatnonzero(sat)
-        p = self.predecessors(codes)
-        np.add.at(inside, p, 1)
-        inside += (self.loop & sat)
-        removable = sat & self.expanded & (inside == 0)
-        layer = np.flatnonzero(removable)
+        inside = (self.loop & sat).astype(self.outdeg.dtype)  # successors inside sat
+        for p in self.predecessor_chunks(np.flatnonzero(sat)):
+            np.add.at(inside, p, 1)
+        layer = np.flatnonzero(sat & self.expanded & (inside == 0))
         while layer.size:
             sat[layer] = False
-            p = self.predecessors(layer)
-            p = p[sat[p]]
-            np.subtract.at(inside, p, 1)
-            p = np.unique(p)
-            layer = p[inside[p] == 0]
+            found = []
+            for p in self.predecessor_chunks(layer):
+                p = p[sat[p]]
+                np.subtract.at(inside, p, 1)
+                p = unique_codes(p[inside[p] == 0])
+                sat[p] = False
+                found.append(p)
+            layer = np.concatenate(found)
         return sat
 
 
@@ -165,7 +190,7 @@ def check(kripke: Kripke, formula: Expr) -> Result:
         if formula.quantifier == "E":
             return Result(kripke.eu(a.lower, b.lower, False), kripke.eu(a.upper, b.upper, True))
         lo, rank = kripke.au(a.lower, b.lower, False)
-        hi, _ = kripke.au(a.upper, b.upper, True)
+        hi, _ = kripke.au(a.upper, b.upper, True, ranks=False)
         return Result(lo, hi, rank)
     if isinstance(formula, Temporal):
         a = check(kripke, formula.arg)
@@ -179,7 +204,7 @@ def check(kripke: Kripke, formula: Expr) -> Result:
             return Result(kripke.eu(everywhere, a.lower, False), kripke.eu(everywhere, a.upper, True))
         if op == "AF":
             lo, rank = kripke.au(everywhere, a.lower, False)
-            hi, _ = kripke.au(everywhere, a.upper, True)
+            hi, _ = kripke.au(everywhere, a.upper, True, ranks=False)
             return Result(lo, hi, rank)
         if op == "EG":
             return Result(kripke.eg(a.lower, False), kripke.eg(a.upper, True))

@@ -7,7 +7,9 @@ markings of component ``i``); each layer's successors are generated with
 vectorised arithmetic on codes, and a dense ``depth`` array over the box
 records what has been seen.  Work per layer is linear in the layer's edges, so
 exploration stops honestly between layers when the time budget runs out.
-Memory: 2 bytes of depth per box element plus the current layer.
+Memory: 6 bytes per box element (depth, and a scratch array that deduplicates
+new codes), 8 bytes per marking of the current and next layers, and
+temporaries bounded by expanding a layer in chunks.
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ from skinet.verify.component import ComponentGraph, explore_component
 
 UNSEEN = -1
 DEFAULT_MAX_BOX = 1 << 30
+CHUNK = 1 << 13  # codes expanded at once: bounds the temporaries of one layer
 
 
 class ExplorationTooLarge(SkinetError):
@@ -134,6 +137,27 @@ def explore(
     t0 = time.perf_counter()
     marking = dict(marking or system.initial_marking())
     graphs = component_graphs(system, marking, event_seeds)
+    return explore_graphs(graphs, budget=budget, max_depth=max_depth, max_box=max_box, progress=progress, started=t0)
+
+
+def explore_graphs(
+    graphs: Sequence[ComponentGraph],
+    *,
+    budget: float | None = None,
+    max_depth: int | None = None,
+    max_box: int = DEFAULT_MAX_BOX,
+    progress: Callable[[int, int, float], None] | None = None,
+    started: float | None = None,
+) -> StateSpace:
+    """Breadth-first search of the asynchronous product of ``graphs``.
+
+    Sources are every combination of the components' roots and, for each
+    component's seed, the roots with that one component moved to the seed.
+    ``started`` (a :func:`time.perf_counter` value, default now) is when the
+    budget began; see :func:`explore` for the other arguments.
+    """
+    t0 = time.perf_counter() if started is None else started
+    graphs = list(graphs)
     shape = tuple(g.size for g in graphs)
     box = int(np.prod(shape, dtype=np.int64))
     if box > max_box:
@@ -144,26 +168,31 @@ def explore(
         )
     strides = tuple(int(np.prod(shape[i + 1:], dtype=np.int64)) for i in range(len(shape)))
     depth = np.full(box, UNSEEN, dtype=np.int16)
-    root = sum(g.roots[0] * s for g, s in zip(graphs, strides))
     sources = _sources(graphs, strides)
     depth[sources] = 0
     space = StateSpace(graphs, shape, strides, depth, -1, False, len(sources), 0, 0.0, [len(sources)])
-    del root
     fwd = [g.csr() for g in graphs]
     loops = [g.loop for g in graphs]
-    scratch = np.empty(box, dtype=np.int64)
+    scratch = np.empty(box, dtype=np.int32)  # deduplicates a chunk's new codes
     layer = sources
     d = 0
     while layer.size:
         if (budget is not None and time.perf_counter() - t0 > budget) or (max_depth is not None and d >= max_depth):
             break
-        succ, n_edges = _expand(layer, strides, shape, fwd, loops)
-        space.edges += n_edges
-        new = succ[depth[succ] == UNSEEN]
-        if new.size:
-            scratch[new] = np.arange(new.size)
-            new = new[scratch[new] == np.arange(new.size)]
+        if d + 1 > np.iinfo(depth.dtype).max:
+            depth = space.depth = depth.astype(np.int32)
+        found = []
+        for lo in range(0, layer.size, CHUNK):
+            succ, n_edges = _expand(layer[lo:lo + CHUNK], strides, shape, fwd, loops)
+            space.edges += n_edges
+            new = succ[depth[succ] == UNSEEN]
+            idx = np.arange(new.size, dtype=np.int32)
+            scratch[new] = idx
+            new = new[scratch[new] == idx]
             depth[new] = d + 1
+            found.append(new)
+        new = np.concatenate(found)
+        if new.size:
             space.layers.append(int(new.size))
         space.markings += int(new.size)
         space.expanded_depth = d
@@ -190,6 +219,14 @@ def _sources(graphs: list[ComponentGraph], strides: tuple[int, ...]) -> np.ndarr
             for c in codes:
                 out.add(c - (c // strides[i] % g.size) * strides[i] + seed * strides[i])
     return np.array(sorted(out), dtype=np.int64)
+
+
+def unique_codes(codes: np.ndarray) -> np.ndarray:
+    """Sorted distinct values of ``codes``."""
+    codes = np.sort(codes)
+    if codes.size > 1:
+        codes = codes[np.concatenate(([True], codes[1:] != codes[:-1]))]
+    return codes
 
 
 def expand_codes(
