@@ -85,5 +85,14 @@ class PetriNet:
             m |= 1 << self._place_index[p]
         return m
 
+    @property
+    def invariant_transitions(self) -> tuple[Transition, ...]:
+        """The invariant transitions, computed once (hot in cascades)."""
+        cache = self.__dict__.get("_inv")
+        if cache is None:
+            cache = tuple(t for t in self.transitions if t.is_invariant)
+            object.__setattr__(self, "_inv", cache)
+        return cache
+
     def transition_ids(self) -> list[str]:
         return [t.id for t in self.transitions]

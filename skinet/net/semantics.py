@@ -24,6 +24,8 @@ def fire(t: Transition, marking: int) -> int:
 def enabled(net: PetriNet, marking: int) -> list[Transition]:
     """Transitions firable at ``marking`` under the net's priority relation."""
     on = [i for i, t in enumerate(net.transitions) if marking & t.pre_mask == t.pre_mask]
+    if not net.priority:
+        return [net.transitions[i] for i in on]
     blocked: set[int] = set()
     on_set = set(on)
     for high, low in net.priority:
@@ -34,7 +36,7 @@ def enabled(net: PetriNet, marking: int) -> list[Transition]:
 
 def invariants_enabled(net: PetriNet, marking: int) -> list[Transition]:
     """Invariant transitions enabled at ``marking`` (non-empty: transient)."""
-    return [t for t in net.transitions if t.is_invariant and marking & t.pre_mask == t.pre_mask]
+    return [t for t in net.invariant_transitions if marking & t.pre_mask == t.pre_mask]
 
 
 def is_stable(net: PetriNet, marking: int) -> bool:
@@ -48,6 +50,8 @@ def stabilize(net: PetriNet, marking: int) -> frozenset[int]:
     All orders of simultaneously enabled invariants are explored.  Each
     invariant firing stops one running skill, so the cascade terminates.
     """
+    if not invariants_enabled(net, marking):  # the common case: already stable
+        return frozenset((marking,))
     done: set[int] = set()
     result: set[int] = set()
     todo = [marking]
