@@ -19,10 +19,10 @@ from skinet.system import Marking, System
 from skinet.verify.algorithm1 import analyse
 from skinet.verify.predict import forecast
 from skinet.wire import keys
-from skinet.wire.convert import bundle, state_space_report, statuses
+from skinet.wire.convert import analysis_bodies, bundle, state_space_report, statuses
 from skinet.wire.log import Entry
 from skinet.wire.messages import (
-    CanonicalEvent, LiveState, PropertyVerdict, RecoveryEntry, UnsafeEntry, UnsafeReport, Verdicts,
+    CanonicalEvent, LiveState, UnsafeReport, Verdicts,
 )
 
 SOURCE = "replay"
@@ -72,16 +72,7 @@ def _monitor_step(system: System, marking: Marking, seq: int, t: float, event: s
     name = system.name
     prediction = forecast(system, marking, budget=budget) if predict else None
     analysis = analyse(system, marking, prediction)
-    unsafe = [
-        UnsafeEntry(skillset=u.skillset, transition=u.transition, kind=u.kind, controllable=u.controllable,
-                    property=u.property, constraint=u.constraint, steps=u.steps, witness=list(u.witness))
-        for u in analysis.operator_unsafe()
-    ]
-    recovery = [
-        RecoveryEntry(property=p, skillset=r.skillset, transition=r.transition, controllable=r.controllable)
-        for p, rs in analysis.recovery.items() for r in rs
-    ]
-    props = [PropertyVerdict(name=p.name, holds=p.name not in analysis.violated) for p in system.properties]
+    props, unsafe, recovery = analysis_bodies(system, analysis)
     out = [
         Entry(t, keys.state(name), "LiveState", LiveState(
             system=name, seq=seq, stamp=t, skillsets=statuses(system, marking), event=event, divergence=divergence)),

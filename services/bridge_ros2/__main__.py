@@ -17,7 +17,8 @@ import threading
 import zenoh
 
 from services.bridge_ros2.replay import replay_bag
-from services.bridge_ros2.service import default_instance_id, default_source, start_bridge
+from services.bridge_ros2.service import default_source, start_bridge
+from services.common.cli import add_instance_arg, add_log_arg, setup_logging
 from services.common.zenoh_config import add_zenoh_args, config_from_args
 from skinet.errors import SkinetError
 from skinet.files import load_system, load_typemap
@@ -41,19 +42,18 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         help="zenoh-bridge-ros2dds namespace prefixing the keys")
     parser.add_argument("--domain", type=int, default=int(os.environ.get("ROS_DOMAIN_ID", "0")),
                         help="ROS domain id in rmw_zenoh keys (default: $ROS_DOMAIN_ID or 0)")
-    parser.add_argument("--instance", default=os.environ.get("SKINET_INSTANCE") or default_instance_id(),
-                        help="instance id in the liveliness token (default: HOST-PID)")
+    add_instance_arg(parser)
     parser.add_argument("--source", default=None, help="source name in the events (default: bridge_ros2/INSTANCE)")
     parser.add_argument("--replay", metavar="BAG", help="replay a rosbag2 file (directory or .db3/.mcap) and exit")
     parser.add_argument("--realtime", action="store_true", help="with --replay: keep the recorded timing")
-    parser.add_argument("--log-level", default=os.environ.get("SKINET_LOG_LEVEL", "INFO"), help="default: INFO")
+    add_log_arg(parser)
     add_zenoh_args(parser)
     return parser.parse_args(argv)
 
 
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
-    logging.basicConfig(level=args.log_level.upper(), format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    setup_logging(args)
     try:
         system, _ = load_system(args.system)
         typemap = load_typemap(args.system)

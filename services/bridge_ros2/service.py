@@ -21,8 +21,6 @@ from __future__ import annotations
 import logging
 import os
 import queue
-import re
-import socket
 import threading
 import time
 from collections.abc import Callable, Mapping
@@ -31,6 +29,7 @@ from typing import Any
 import zenoh
 
 from services.bridge_ros2.feed import Counters, Feed
+from services.common.cli import default_instance_id
 from skinet.ros.keys import EMPTY_TYPE, KeyStyle, ManagerTopic, manager_topics, rmw_attachment
 from skinet.ros.typestore import default_instance, encode
 from skinet.system import System
@@ -38,11 +37,6 @@ from skinet.wire import keys
 from skinet.wire.codec import encode as wire_encode
 
 log = logging.getLogger("skinet.bridge_ros2")
-
-
-def default_instance_id() -> str:
-    """``<host>-<pid>``, reduced to the characters a key chunk allows."""
-    return re.sub(r"[^A-Za-z0-9_\-.]", "_", f"{socket.gethostname()}-{os.getpid()}")
 
 
 def default_source(instance: str | None = None) -> str:
@@ -177,4 +171,4 @@ def start_bridge(session: zenoh.Session, system: System, typemap: Mapping[str, s
     return Bridge(session, system, typemap, **options)
 
 
-__all__ = ["Bridge", "default_instance_id", "default_source", "start_bridge"]
+__all__ = ["Bridge", "default_source", "start_bridge"]

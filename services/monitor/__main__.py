@@ -11,6 +11,7 @@ from collections.abc import Sequence
 
 import zenoh
 
+from services.common.cli import add_log_arg, setup_logging
 from services.common.zenoh_config import add_zenoh_args, config_from_args
 from services.monitor.service import start_monitor
 from skinet.errors import SourceError
@@ -29,14 +30,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--query-timeout", type=float, help="predict query timeout, seconds (default: budget + 1)")
     p.add_argument("--no-express", dest="express", action="store_false",
                    help="let Zenoh batch publications (higher burst throughput; default: express)")
-    p.add_argument("--log-level", default="INFO", help="logging level (default: INFO)")
+    add_log_arg(p)
     add_zenoh_args(p)
     return p
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    logging.basicConfig(level=args.log_level.upper(), format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    setup_logging(args)
     try:
         system, warnings = load_system(args.system)
     except SourceError as exc:

@@ -24,9 +24,9 @@ import msgpack
 from skinet.live import LiveSystem
 from skinet.system import Marking, System
 from skinet.verify.algorithm1 import analyse
-from skinet.wire.convert import RiskTable, statuses
+from skinet.wire.convert import RiskTable, analysis_bodies, statuses
 from skinet.wire.messages import (
-    CanonicalEvent, LiveState, PropertyVerdict, RecoveryEntry, UnsafeEntry, UnsafeReport, Verdicts,
+    CanonicalEvent, LiveState, UnsafeReport, Verdicts,
 )
 
 MarkingKey = tuple[int, ...]
@@ -210,16 +210,7 @@ class Engine:
         """Run Algorithm 1 and build the message bodies (seq and stamp set per step)."""
         name, marking = self.system.name, self.live.marking
         analysis = analyse(self.system, marking, pred.table if pred else None)
-        unsafe = [
-            UnsafeEntry(skillset=u.skillset, transition=u.transition, kind=u.kind, controllable=u.controllable,
-                        property=u.property, constraint=u.constraint, steps=u.steps, witness=list(u.witness))
-            for u in analysis.operator_unsafe()
-        ]
-        recovery = [
-            RecoveryEntry(property=p, skillset=r.skillset, transition=r.transition, controllable=r.controllable)
-            for p, rs in analysis.recovery.items() for r in rs
-        ]
-        props = [PropertyVerdict(name=p.name, holds=p.name not in analysis.violated) for p in self.system.properties]
+        props, unsafe, recovery = analysis_bodies(self.system, analysis)
         step = ("seq", "stamp")
         return Frame(
             Template(LiveState(system=name, seq=0, stamp=0.0, skillsets=statuses(self.system, marking))

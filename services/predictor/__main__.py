@@ -4,15 +4,13 @@ from __future__ import annotations
 
 import argparse
 import logging
-import os
-import re
 import signal
-import socket
 import sys
 import threading
 
 import zenoh
 
+from services.common.cli import add_instance_arg, add_log_arg, setup_logging
 from services.common.zenoh_config import add_zenoh_args, config_from_args
 from services.predictor.service import start_predictor
 from skinet.wire.keys import check_chunk
@@ -20,18 +18,12 @@ from skinet.wire.keys import check_chunk
 log = logging.getLogger("skinet.predictor")
 
 
-def default_instance_id() -> str:
-    """``<host>-<pid>``, reduced to the characters a key chunk allows."""
-    return re.sub(r"[^A-Za-z0-9_\-.]", "_", f"{socket.gethostname()}-{os.getpid()}")
-
-
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(
         prog="python -m services.predictor",
         description="Answer SkiNet prediction requests on skinet/*/predict (stateless; run as many as you like).",
     )
-    parser.add_argument("--instance", default=os.environ.get("SKINET_INSTANCE") or default_instance_id(),
-                        help="instance id in the liveliness token (default: HOST-PID)")
+    add_instance_arg(parser)
     parser.add_argument("--workers", type=int, default=2, help="threads computing forecasts (default: 2)")
     parser.add_argument("--max-pending", type=int, default=8,
                         help="requests queued or running before 'busy' (default: 8)")
@@ -40,14 +32,14 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         help="seconds to wait for a model bundle (default: 2)")
     parser.add_argument("--max-budget", type=float, default=10.0,
                         help="cap on a request's budget, seconds (default: 10)")
-    parser.add_argument("--log-level", default=os.environ.get("SKINET_LOG_LEVEL", "INFO"), help="default: INFO")
+    add_log_arg(parser)
     add_zenoh_args(parser)
     return parser.parse_args(argv)
 
 
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
-    logging.basicConfig(level=args.log_level.upper(), format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    setup_logging(args)
     try:
         check_chunk(args.instance, "instance id")
     except ValueError as exc:

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import logging
 import os
 import signal
 import sys
@@ -12,6 +11,7 @@ from pathlib import Path
 
 import zenoh
 
+from services.common.cli import add_log_arg, setup_logging
 from services.common.zenoh_config import add_zenoh_args, config_from_args
 from services.simulator.driver import StepRun
 from services.simulator.service import Simulator
@@ -38,7 +38,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         "zenoh-bridge-ros2dds keys")
     parser.add_argument("--namespace", default="", help="zenoh-bridge-ros2dds namespace prefix of the keys")
     parser.add_argument("--domain", type=int, default=0, help="ROS domain id in rmw_zenoh keys (default: 0)")
-    parser.add_argument("--log-level", default=os.environ.get("SKINET_LOG_LEVEL", "INFO"), help="default: INFO")
+    add_log_arg(parser)
     add_zenoh_args(parser)
     return parser.parse_args(argv)
 
@@ -52,7 +52,7 @@ def _line(run: StepRun) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
-    logging.basicConfig(level=args.log_level.upper(), format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    setup_logging(args)
     try:
         path = Path(args.scenario)
         scenario = parse_scenario(read_text(path), str(path))

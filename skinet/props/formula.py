@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 from skinet.errors import Pos
-from skinet.lang.expr import Expr
+from skinet.lang.expr import And, Expr, Implies, Not, Or
 
 
 @dataclass(frozen=True)
@@ -54,3 +54,14 @@ class Property:
     expr: Expr
     text: str
     pos: Pos | None = None
+
+
+def is_temporal(expr: Expr) -> bool:
+    """True when ``expr`` uses a CTL operator anywhere (it is not a state formula)."""
+    if isinstance(expr, (Temporal, Until)):
+        return True
+    if isinstance(expr, Not):
+        return is_temporal(expr.arg)
+    if isinstance(expr, (And, Or, Implies)):
+        return is_temporal(expr.left) or is_temporal(expr.right)
+    return False

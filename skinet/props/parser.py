@@ -20,7 +20,7 @@ from skinet.lang.expr import And, Const, Implies, Not, Or
 from skinet.lang.larkerrors import syntax_error
 from skinet.lang.model import Skillset
 from skinet.net.build import idle_place, resource_place, running_place
-from skinet.props.formula import PlaceAtom, Property, Temporal, Until
+from skinet.props.formula import PlaceAtom, Property, Temporal, Until, is_temporal
 
 
 @cache
@@ -145,7 +145,7 @@ def parse_properties(text: str, skillsets: Mapping[str, Skillset], source: str =
             raise SourceError.at(source, p.pos, f"duplicate property '{p.name}'{where}")
         seen[p.name] = p
     for p in props:
-        if _is_temporal(p.expr):
+        if is_temporal(p.expr):
             raise SourceError.at(source, p.pos, f"property '{p.name}' uses a temporal operator; properties are state formulas")
     return props
 
@@ -153,13 +153,3 @@ def parse_properties(text: str, skillsets: Mapping[str, Skillset], source: str =
 def parse_formula(text: str, skillsets: Mapping[str, Skillset], source: str = "<formula>"):
     """Parse one CTL formula (SPEC §6): boolean operators, EX AX EF AF EG AG, E[U], A[U]."""
     return _parse(text.strip(), "expr", skillsets, source)
-
-
-def _is_temporal(expr) -> bool:
-    if isinstance(expr, (Temporal, Until)):
-        return True
-    if isinstance(expr, Not):
-        return _is_temporal(expr.arg)
-    if isinstance(expr, (And, Or, Implies)):
-        return _is_temporal(expr.left) or _is_temporal(expr.right)
-    return False

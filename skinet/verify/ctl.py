@@ -22,7 +22,7 @@ import numpy as np
 
 from skinet.lang.expr import And, Const, Expr, Implies, Not, Or
 from skinet.props.evaluate import evaluate
-from skinet.props.formula import PlaceAtom, Temporal, Until
+from skinet.props.formula import PlaceAtom, Temporal, Until, is_temporal
 from skinet.verify.explore import CHUNK, StateSpace, expand_codes, unique_codes
 
 UNREACHED = np.iinfo(np.int32).max
@@ -170,7 +170,7 @@ class Result:
 def check(kripke: Kripke, formula: Expr) -> Result:
     """Evaluate ``formula`` (state formulas, EX AX EF AF EG AG EU AU) on ``kripke``."""
     s = kripke.space
-    if isinstance(formula, (PlaceAtom, Const)) or not _temporal(formula):
+    if isinstance(formula, (PlaceAtom, Const)) or not is_temporal(formula):
         v = evaluate(formula, lambda a: _atom(s, a))
         v = np.broadcast_to(np.asarray(v, dtype=bool), (s.box,)) & kripke.stored
         return Result(v.copy(), v.copy())
@@ -213,16 +213,6 @@ def check(kripke: Kripke, formula: Expr) -> Result:
             hi_ef = kripke.eu(everywhere, ~a.lower & everywhere, True)
             return Result(~hi_ef & everywhere, ~lo_ef & everywhere)
     raise TypeError(f"not a CTL formula: {formula!r}")
-
-
-def _temporal(expr: Expr) -> bool:
-    if isinstance(expr, (Temporal, Until)):
-        return True
-    if isinstance(expr, Not):
-        return _temporal(expr.arg)
-    if isinstance(expr, (And, Or, Implies)):
-        return _temporal(expr.left) or _temporal(expr.right)
-    return False
 
 
 def _atom(space: StateSpace, atom: PlaceAtom) -> np.ndarray:

@@ -16,9 +16,11 @@ from skinet.net.semantics import steps
 from skinet.props.evaluate import holds
 from skinet.system import Marking, System, build_system, marking_from_json, marking_to_json
 from skinet.lang.parser import parse_skillset
-from skinet.verify.algorithm1 import PredictionVerdict
+from skinet.verify.algorithm1 import Analysis, PredictionVerdict
 from skinet.verify.predict import Forecast
-from skinet.wire.messages import ModelBundle, Risk, SkillsetStatus, StateSpaceReport
+from skinet.wire.messages import (
+    ModelBundle, PropertyVerdict, RecoveryEntry, Risk, SkillsetStatus, StateSpaceReport, UnsafeEntry,
+)
 
 
 def statuses(system: System, marking: Mapping[str, int]) -> dict[str, SkillsetStatus]:
@@ -92,3 +94,20 @@ class RiskTable:
     def verdict(self, prop: str, marking: Mapping[str, int]) -> PredictionVerdict:
         key = json.dumps(marking_to_json(self.system, marking), sort_keys=True)
         return self.table.get((key, prop), PredictionVerdict("safe"))
+
+
+def analysis_bodies(
+    system: System, analysis: Analysis
+) -> tuple[list[PropertyVerdict], list[UnsafeEntry], list[RecoveryEntry]]:
+    """Algorithm 1's result as message parts: verdicts, operator-view entries, recovery (SPEC §5)."""
+    props = [PropertyVerdict(name=p.name, holds=p.name not in analysis.violated) for p in system.properties]
+    unsafe = [
+        UnsafeEntry(skillset=u.skillset, transition=u.transition, kind=u.kind, controllable=u.controllable,
+                    property=u.property, constraint=u.constraint, steps=u.steps, witness=list(u.witness))
+        for u in analysis.operator_unsafe()
+    ]
+    recovery = [
+        RecoveryEntry(property=p, skillset=r.skillset, transition=r.transition, controllable=r.controllable)
+        for p, rs in analysis.recovery.items() for r in rs
+    ]
+    return props, unsafe, recovery

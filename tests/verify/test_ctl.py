@@ -22,7 +22,7 @@ from hypothesis import strategies as st
 from skinet.lang.expr import And, Const, Expr, Implies, Not, Or
 from skinet.lang.parser import parse_skillset
 from skinet.net.petrinet import PetriNet
-from skinet.props.formula import PlaceAtom, Temporal, Until
+from skinet.props.formula import PlaceAtom, Temporal, Until, is_temporal
 from skinet.props.parser import parse_formula
 from skinet.system import build_system
 from skinet.verify.component import ComponentGraph
@@ -210,16 +210,6 @@ def ranked(f: Expr) -> bool:
     return isinstance(f, Until) and f.quantifier == "A" or isinstance(f, Temporal) and f.op == "AF"
 
 
-def temporal(f: Expr) -> bool:
-    if isinstance(f, (Temporal, Until)):
-        return True
-    if isinstance(f, Not):
-        return temporal(f.arg)
-    if isinstance(f, (And, Or, Implies)):
-        return temporal(f.left) or temporal(f.right)
-    return False
-
-
 # --- complete explorations: engine == definition --------------------------------------------
 
 
@@ -295,7 +285,7 @@ def assert_sound(full: StateSpace, part: StateSpace, fs: list[Expr]) -> None:
             # A truncated rank bounds the true one; with state-formula arguments it is exact.
             assert np.all(r.rank[proven] >= truth.rank[proven]), f
             args = [f.arg] if isinstance(f, Temporal) else [f.left, f.right]
-            if not any(temporal(a) for a in args):
+            if not any(is_temporal(a) for a in args):
                 assert np.array_equal(r.rank[proven], truth.rank[proven]), f
 
 
