@@ -1,0 +1,311 @@
+"""Helpers of the deployment tests: the ACL router's configuration, logins, and an
+observer that turns the monitor's publications into the mission's violations.
+
+Every session here is on 127.0.0.1 with multicast scouting off.
+"""
+
+from __future__ import annotations
+
+import json
+import socket
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import zenoh
+
+from skinet.files import load_system, read_text
+from skinet.mission import Scenario, parse_scenario, replay
+from skinet.wire import keys
+from skinet.wire.codec import DecodeError, decode, encode
+from skinet.wire.convert import bundle
+from skinet.wire.messages import (
+    CanonicalEvent, LiveState, PredictReply, PredictRequest, StateSpaceReport, UnsafeReport, Verdicts,
+)
+
+REPO = Path(__file__).resolve().parents[2]
+ZENOH_DIR = REPO / "docker" / "zenoh"
+ROUTER_CONFIG = ZENOH_DIR / "router.json5"
+USERS_FILE = ZENOH_DIR / "users.txt"
+UNASSISTED = REPO / "skillsets" / "missions" / "unassisted.toml"
+SYSTEM = "spot_arm"
+
+
+def free_port() -> int:
+    """A TCP port on 127.0.0.1 that was free a moment ago."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def passwords() -> dict[str, str]:
+    """The demo users of ``docker/zenoh/users.txt``: user -> password."""
+    pairs = (line.split(":", 1) for line in USERS_FILE.read_text().splitlines() if ":" in line)
+    return {user: password for user, password in pairs}
+
+
+def acl_router_config(endpoint: str) -> zenoh.Config:
+    """``docker/zenoh/router.json5`` as shipped, listening on ``endpoint``, users from the repository."""
+    config = zenoh.Config.from_file(str(ROUTER_CONFIG))
+    config.insert_json5("transport/auth/usrpwd/dictionary_file", json.dumps(str(USERS_FILE)))
+    config.insert_json5("listen/endpoints", json.dumps([endpoint]))
+    config.insert_json5("scouting/delay", "0")
+    return config
+
+
+def login_config(endpoint: str, user: str | None, password: str | None = None) -> zenoh.Config:
+    """A client configuration for ``endpoint``; ``user`` None: no credentials at all."""
+    config = zenoh.Config()
+    config.insert_json5("mode", '"client"')
+    config.insert_json5("connect/endpoints", json.dumps([endpoint]))
+    config.insert_json5("scouting/multicast/enabled", "false")
+    if user is not None:
+        config.insert_json5("transport/auth/usrpwd/user", json.dumps(user))
+        config.insert_json5("transport/auth/usrpwd/password",
+                            json.dumps(passwords()[user] if password is None else password))
+    return config
+
+
+def login(endpoint: str, user: str | None, password: str | None = None) -> zenoh.Session:
+    return zenoh.open(login_config(endpoint, user, password))
+
+
+def write_login_file(path: Path, user: str) -> Path:
+    """A JSON5 file with ``user``'s credentials, for a service's ``--zenoh-config``."""
+    path.write_text(json.dumps({"transport": {"auth": {"usrpwd": {"user": user, "password": passwords()[user]}}}}))
+    return path
+
+
+class Tokens:
+    """Live liveliness tokens under ``skinet/**`` (services announce themselves there)."""
+
+    def __init__(self, session: zenoh.Session, key_expr: str = "skinet/**"):
+        self._lock = threading.Lock()
+        self.alive: set[str] = set()
+        self.appeared: dict[str, float] = {}  # token -> last appearance (monotonic)
+        self._sub = session.liveliness().declare_subscriber(key_expr, self._on, history=True)
+
+    def _on(self, sample: zenoh.Sample) -> None:
+        with self._lock:
+            if sample.kind == zenoh.SampleKind.PUT:
+                self.alive.add(str(sample.key_expr))
+                self.appeared[str(sample.key_expr)] = time.monotonic()
+            else:
+                self.alive.discard(str(sample.key_expr))
+
+    def of(self, service: str, since: float | None = None) -> set[str]:
+        """Instance ids of ``service`` (``skinet/<system>/alive/<service>/<id>``) alive now,
+        and announced after ``since`` (monotonic) when given."""
+        with self._lock:
+            return {k.split("/")[4] for k in self.alive if k.split("/")[3:4] == [service]
+                    and (since is None or self.appeared[k] >= since)}
+
+    def close(self) -> None:
+        self._sub.undeclare()
+
+
+def wait_until(predicate: Callable[[], bool], timeout: float, what: str, poll: float = 0.05) -> None:
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out after {timeout:.0f} s waiting for {what}")
+        time.sleep(poll)
+
+
+def answering_predictor(session: zenoh.Session, system_file: Path = REPO / "skillsets" / "spot_arm.toml") -> str:
+    """Instance id of the predictor the router picks for a query now (the one serving
+    the monitor: ZENOH.md, the first live instance declared)."""
+    system, _ = load_system(system_file)
+    request = PredictRequest(system=system.name, digest=bundle(system).digest, seq=1, skillsets={}, budget=0.2)
+    for reply in session.get(keys.predict(system.name), payload=encode(request), timeout=5.0):
+        if reply.ok is not None:
+            return decode(reply.ok.payload.to_bytes(), PredictReply).instance
+    raise AssertionError("no predictor answered")
+
+
+# -- the mission's violations ----------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Violation:
+    """A property that became false at one scenario step."""
+
+    step: int  # 1-based index in the scenario (skinet.mission.replay numbering)
+    skillset: str
+    transition: str
+    property: str
+
+
+def expected_violations(scenario_path: Path = UNASSISTED) -> list[Violation]:
+    """What the in-process replay of the scenario gives (no prediction needed for verdicts)."""
+    scenario = parse_scenario(read_text(scenario_path), str(scenario_path))
+    system, _ = load_system(scenario_path.parent / scenario.system)
+    return [Violation(r.index, r.step.skillset, r.step.transition or "", p)
+            for r in replay(system, scenario, predict=False) for p in r.violations]
+
+
+def load_scenario(path: Path = UNASSISTED) -> Scenario:
+    return parse_scenario(read_text(path), str(path))
+
+
+class MissionObserver:
+    """Records the monitor's state, verdicts and unsafe reports of one system.
+
+    A violation is a property that holds in one ``Verdicts`` and not in the next; its
+    event is the ``LiveState`` of the same ``seq`` (``skillset:transition#n``), and its
+    scenario step comes from :func:`align`.
+    """
+
+    def __init__(self, session: zenoh.Session, system: str = SYSTEM):
+        self._lock = threading.Lock()
+        self.states: dict[int, LiveState] = {}
+        self.verdicts: dict[int, Verdicts] = {}
+        self.unsafe: list[tuple[float, UnsafeReport]] = []  # (arrival, report)
+        self.state_space: list[tuple[float, StateSpaceReport]] = []
+        self.arrivals: dict[tuple[str, int], float] = {}  # ("state"|"verdicts", seq) -> arrival
+        self.event_arrivals: dict[tuple[str, int], float] = {}  # (skillset, event seq) -> arrival
+        self.last_arrival = 0.0
+        self._subs = [
+            session.declare_subscriber(keys.events(system, "*"), self._on(CanonicalEvent, self._event)),
+            session.declare_subscriber(keys.state(system), self._on(LiveState, self._state)),
+            session.declare_subscriber(keys.verdicts(system), self._on(Verdicts, self._verdicts)),
+            session.declare_subscriber(keys.unsafe(system), self._on(UnsafeReport, self._unsafe)),
+            session.declare_subscriber(keys.state_space(system), self._on(StateSpaceReport, self._space)),
+        ]
+
+    def _on(self, kind, store):
+        def callback(sample: zenoh.Sample) -> None:
+            try:
+                message = decode(sample.payload.to_bytes(), kind)
+            except DecodeError:
+                return
+            now = time.monotonic()
+            with self._lock:
+                self.last_arrival = now
+                store(now, message)
+        return callback
+
+    def _event(self, now: float, m: CanonicalEvent) -> None:
+        self.event_arrivals.setdefault((m.skillset, m.seq), now)
+
+    def _state(self, now: float, m: LiveState) -> None:
+        self.states[m.seq] = m
+        self.arrivals.setdefault(("state", m.seq), now)
+
+    def _verdicts(self, now: float, m: Verdicts) -> None:
+        self.verdicts[m.seq] = m
+        self.arrivals.setdefault(("verdicts", m.seq), now)
+
+    def _unsafe(self, now: float, m: UnsafeReport) -> None:
+        self.unsafe.append((now, m))
+
+    def _space(self, now: float, m: StateSpaceReport) -> None:
+        self.state_space.append((now, m))
+
+    def count(self) -> int:
+        with self._lock:
+            return len(self.states)
+
+    def verdict_delays(self, since: float = 0.0) -> dict[str, float]:
+        """Seconds from a canonical event to the monitor's verdicts on it, per event, for
+        events that arrived after ``since`` (monotonic)."""
+        with self._lock:
+            out = {}
+            for seq, st in self.states.items():
+                name, _, n = st.event.rpartition("#")
+                skillset = name.partition(":")[0]
+                sent = self.event_arrivals.get((skillset, int(n))) if n.isdigit() else None
+                got = self.arrivals.get(("verdicts", seq))
+                if sent is not None and sent >= since and got is not None:
+                    out[st.event] = got - sent
+            return out
+
+    def fresh_delays(self, since: float = 0.0) -> dict[int, float | None]:
+        """Per state seq published after ``since``: seconds until a fresh (not stale)
+        UnsafeReport for it or a later seq arrived; None if none did."""
+        with self._lock:
+            fresh = [(t, r.seq) for t, r in self.unsafe if not r.prediction_stale]
+            out: dict[int, float | None] = {}
+            for (kind, seq), t in self.arrivals.items():
+                if kind == "state" and t >= since:
+                    later = [ft for ft, fs in fresh if fs >= seq and ft >= t]
+                    out[seq] = min(later) - t if later else None
+            return dict(sorted(out.items()))
+
+    def marking(self, seq: int) -> str:
+        """The live marking of state ``seq``, as canonical JSON."""
+        with self._lock:
+            st = self.states.get(seq)
+        return "" if st is None else json.dumps({k: v.model_dump() for k, v in st.skillsets.items()}, sort_keys=True)
+
+    def fresh(self, start: float = 0.0, end: float = float("inf")) -> list[tuple[float, int]]:
+        """``(arrival, seq)`` of the fresh UnsafeReports that arrived in ``[start, end)``."""
+        with self._lock:
+            return [(t, r.seq) for t, r in self.unsafe if not r.prediction_stale and start <= t < end]
+
+    def states_between(self, start: float, end: float = float("inf")) -> list[int]:
+        with self._lock:
+            return sorted(seq for (kind, seq), t in self.arrivals.items() if kind == "state" and start <= t < end)
+
+    def close(self) -> None:
+        for sub in self._subs:
+            try:
+                sub.undeclare()
+            except zenoh.ZError:
+                pass
+
+    def quiet_for(self, seconds: float) -> bool:
+        with self._lock:
+            return bool(self.states) and time.monotonic() - self.last_arrival >= seconds
+
+    def events(self) -> list[tuple[int, str, str]]:
+        """``(seq, skillset, transition)`` of every state published, in seq order."""
+        with self._lock:
+            states = sorted(self.states.items())
+        out = []
+        for seq, st in states:
+            head = st.event.rsplit("#", 1)[0]
+            skillset, _, transition = head.partition(":")
+            out.append((seq, skillset, transition))
+        return out
+
+    def violations(self, scenario: Scenario) -> list[Violation]:
+        with self._lock:
+            verdicts = sorted(self.verdicts.items())
+        events = self.events()
+        steps = align(scenario, events)
+        by_seq = {seq: (skillset, transition) for seq, skillset, transition in events}
+        out: list[Violation] = []
+        before: dict[str, bool] | None = None
+        for seq, v in verdicts:
+            now = {p.name: p.holds for p in v.properties}
+            if before is not None:
+                for name, ok in now.items():
+                    if before.get(name, True) and not ok:
+                        skillset, transition = by_seq.get(seq, ("?", "?"))
+                        out.append(Violation(steps.get(seq, 0), skillset, transition, name))
+            before = now
+        return out
+
+
+def align(scenario: Scenario, events: list[tuple[int, str, str]]) -> dict[int, int]:
+    """Scenario step (1-based) of each monitor event, by skillset: seq -> step.
+
+    Per skillset, events arrive in the scenario's order, but some have no step of
+    their own (the bridge's first status absorbs what happened before it; invariant
+    failures follow from other steps): each named event is matched with the next
+    step of its skillset playing the same transition, and skipped when there is none.
+    """
+    out: dict[int, int] = {}
+    position: dict[str, int] = {}  # skillset -> index of the last matched step
+    for seq, skillset, transition in events:
+        start = position.get(skillset, 0)
+        for i in range(start, len(scenario.steps)):
+            step = scenario.steps[i]
+            if step.skillset == skillset and step.transition == transition:
+                out[seq] = i + 1
+                position[skillset] = i + 1
+                break
+    return out

@@ -1,0 +1,216 @@
+"""Access control and user/password authentication of ``docker/zenoh/router.json5`` (SPEC §7).
+
+The router is the Python wheel in router mode with the shipped configuration (only
+the users file path and the listening port changed); clients log in with the demo
+users of ``docker/zenoh/users.txt``.  No containers: real sockets on 127.0.0.1.
+"""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+import zenoh
+
+from deploy_support import (
+    REPO, SYSTEM, UNASSISTED, MissionObserver, Tokens, acl_router_config, expected_violations, free_port,
+    load_scenario, login, wait_until, write_login_file,
+)
+from skinet.wire import keys
+
+EVENTS = keys.events(SYSTEM, "spot")
+PREDICT = keys.predict(SYSTEM)
+ROS_STATUS = "spot/spot_skillset_manager/spot_skillset/status"
+STATUS_REQUEST = "spot/spot_skillset_manager/spot_skillset/status_request"
+USERS = ("bridge", "monitor", "predictor", "robot", "observer")
+
+
+@pytest.fixture(scope="module")
+def acl_router() -> Iterator[str]:
+    """The shipped router configuration on a free loopback port; yields the endpoint."""
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    router = zenoh.open(acl_router_config(endpoint))
+    try:
+        yield endpoint
+    finally:
+        router.close()
+
+
+@pytest.fixture(scope="module")
+def sessions(acl_router: str) -> Iterator[dict[str, zenoh.Session]]:
+    """One logged-in client per demo user, and ``reader``, an observer that only listens.
+
+    A session delivers its own publications to its own subscribers without the
+    router, so what the router lets through is seen from a session of its own.
+    """
+    opened = {user: login(acl_router, user) for user in USERS}
+    opened["reader"] = login(acl_router, "observer")
+    try:
+        yield opened
+    finally:
+        for s in opened.values():
+            s.close()
+
+
+class Inbox:
+    """Payloads received by a subscriber, with a wait for one of them."""
+
+    def __init__(self, session: zenoh.Session, key_expr: str):
+        self.payloads: list[tuple[str, str]] = []
+        self._cond = threading.Condition()
+        self._sub = session.declare_subscriber(key_expr, self._on)
+
+    def _on(self, sample: zenoh.Sample) -> None:
+        with self._cond:
+            self.payloads.append((str(sample.key_expr), sample.payload.to_string()))
+            self._cond.notify_all()
+
+    def wait_for(self, payload: str, timeout: float = 5.0) -> None:
+        with self._cond:
+            assert self._cond.wait_for(lambda: any(p == payload for _, p in self.payloads), timeout), \
+                f"'{payload}' never arrived; got {self.payloads}"
+
+    def received(self) -> set[str]:
+        with self._cond:
+            return {p for _, p in self.payloads}
+
+    def close(self) -> None:
+        self._sub.undeclare()
+
+
+def test_only_the_bridge_user_publishes_canonical_events(sessions: dict[str, zenoh.Session]) -> None:
+    events = Inbox(sessions["reader"], keys.events(SYSTEM, "*"))
+    everything = Inbox(sessions["reader"], "**")
+    try:
+        time.sleep(0.3)  # let the subscriptions reach the router
+        for user in USERS:
+            if user != "bridge":
+                sessions[user].put(EVENTS, f"stranger {user}")
+        # Wildcard publications are included in no allow rule either.
+        sessions["robot"].put("**", "robot on **")
+        sessions["robot"].put(keys.events("*", "spot"), "robot on skinet/*/events/spot")
+        sessions["monitor"].put(keys.events("*", "*"), "monitor on skinet/*/events/*")
+        sessions["bridge"].put(EVENTS, "bridge")
+        events.wait_for("bridge")
+        time.sleep(0.3)  # anything wrongly let through would have arrived by now
+        assert events.received() == {"bridge"}
+        assert everything.received() == {"bridge"}
+    finally:
+        events.close()
+        everything.close()
+
+
+def test_each_user_publishes_only_its_own_keys(sessions: dict[str, zenoh.Session]) -> None:
+    allowed = {
+        "bridge": {EVENTS, STATUS_REQUEST},
+        "monitor": {keys.state(SYSTEM), keys.verdicts(SYSTEM), keys.unsafe(SYSTEM), keys.state_space(SYSTEM)},
+        "predictor": set(),
+        "robot": {ROS_STATUS, STATUS_REQUEST},
+        "observer": set(),
+    }
+    tried = set().union(*allowed.values()) | {keys.model(SYSTEM, "d1"), PREDICT, "elsewhere/key"}
+    inbox = Inbox(sessions["reader"], "**")
+    try:
+        time.sleep(0.3)
+        for user in USERS:
+            for key in sorted(tried):
+                sessions[user].put(key, f"{user} {key}")
+        sessions["bridge"].put(EVENTS, "marker")
+        inbox.wait_for("marker")
+        time.sleep(0.3)
+        got = inbox.received() - {"marker"}
+        assert got == {f"{user} {key}" for user, ks in allowed.items() for key in ks}
+    finally:
+        inbox.close()
+
+
+def _replies(session: zenoh.Session) -> list[str]:
+    return sorted(r.ok.payload.to_string() if r.ok is not None else f"error {r.err.payload.to_string()}"
+                  for r in session.get(PREDICT, target=zenoh.QueryTarget.ALL,
+                                       consolidation=zenoh.ConsolidationMode.NONE, timeout=2.0))
+
+
+def test_only_predictors_answer_prediction_queries(sessions: dict[str, zenoh.Session]) -> None:
+    def answer(text: str):
+        def on_query(query: zenoh.Query) -> None:
+            with query:
+                query.reply(PREDICT, text)
+        return on_query
+
+    impostors = [sessions[user].declare_queryable(keys.predict("*"), answer(f"impostor {user}"), complete=True)
+                 for user in USERS if user != "predictor"]
+    impostors.append(sessions["robot"].declare_queryable("**", answer("robot on **"), complete=True))
+    try:
+        time.sleep(0.3)
+        # Impostors alone: their declarations never reached the router, so nothing answers
+        # (and nothing holds the query until its timeout).
+        t0 = time.monotonic()
+        assert _replies(sessions["reader"]) == []
+        assert time.monotonic() - t0 < 1.0
+        genuine = sessions["predictor"].declare_queryable(keys.predict("*"), answer("predictor"), complete=True)
+        try:
+            time.sleep(0.3)
+            assert _replies(sessions["reader"]) == ["predictor"]
+        finally:
+            genuine.undeclare()
+    finally:
+        for q in impostors:
+            q.undeclare()
+
+
+@pytest.mark.parametrize("user, password", [(None, None), ("observer", "not-the-password"), ("nobody", "x")])
+def test_sessions_without_valid_credentials_are_refused(acl_router: str, user: str | None,
+                                                        password: str | None) -> None:
+    with pytest.raises(zenoh.ZError):
+        login(acl_router, user, password)
+
+
+def test_the_services_run_the_mission_through_the_acl_router(acl_router: str, tmp_path: Path) -> None:
+    """Each service logs in as its user; the unassisted mission gives the replay's violations."""
+    observer_session = login(acl_router, "observer")
+    observer = MissionObserver(observer_session)
+    tokens = Tokens(observer_session)
+    procs: list[tuple[subprocess.Popen, Path]] = []
+
+    def start(module: str, user: str, *args: str) -> subprocess.Popen:
+        cfg = write_login_file(tmp_path / f"{user}-{len(procs)}.json5", user)
+        log = tmp_path / f"{module}-{len(procs)}.log"
+        with log.open("wb") as out:
+            p = subprocess.Popen([sys.executable, "-m", module, *args, "--mode", "client", "--connect", acl_router,
+                                  "--no-multicast-scouting", "--zenoh-config", str(cfg)],
+                                 cwd=REPO, stdout=out, stderr=subprocess.STDOUT)
+        procs.append((p, log))
+        return p
+
+    try:
+        start("services.predictor", "predictor")
+        start("services.monitor", "monitor", "skillsets/spot_arm.toml")
+        start("services.bridge_ros2", "bridge", "skillsets/spot_arm.toml")
+        wait_until(lambda: all(tokens.of(s) for s in ("predictor", "monitor", "bridge_ros2")), 30,
+                   f"the services' liveliness tokens (got {sorted(tokens.alive)})")
+        sim = start("services.simulator", "robot", str(UNASSISTED.relative_to(REPO)), "--speed", "20")
+        assert sim.wait(timeout=60) == 0
+        wait_until(lambda: observer.quiet_for(1.0), 20, "the monitor to settle")
+        assert observer.violations(load_scenario()) == expected_violations()
+        # The predictor answered through the ACL: fresh reports were published.
+        assert any(not report.prediction_stale for _, report in observer.unsafe)
+    finally:
+        tokens.close()
+        observer.close()
+        for p, _ in procs:
+            if p.poll() is None:
+                p.send_signal(signal.SIGTERM)
+        for p, log in procs:
+            try:
+                p.wait(timeout=5)
+            except subprocess.TimeoutExpired:
+                p.kill()
+                p.wait()
+            print(f"--- {p.args[2]} (exit {p.returncode}) ---\n{log.read_text(errors='replace')[-3000:]}")
+        observer_session.close()

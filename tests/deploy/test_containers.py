@@ -1,0 +1,303 @@
+"""The compose stack (SPEC §7): router, bridge, monitor, two predictors, simulator.
+
+The image is built with ``docker/build.sh --local-base`` (a Debian base made with
+debootstrap, so no registry is needed; Docker's cache makes later runs quick).  The
+stack runs under a project name of its own with the router published on a free
+port of 127.0.0.1, where an observer logs in from the host as the ``observer`` user.
+The tests share one stack and run in order: mission, predictor replacement,
+off-board network cut, router restart.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+
+import pytest
+import zenoh
+
+from deploy_support import (
+    REPO, MissionObserver, Tokens, answering_predictor, expected_violations, free_port, load_scenario, login_config,
+    wait_until,
+)
+
+pytestmark = pytest.mark.slow
+
+IMAGE = "skinet-live:local"
+BUILD_TIMEOUT = 900
+
+
+def _docker_engine() -> str | None:
+    """None when a Docker engine answers, else why not."""
+    if shutil.which("docker") is None:
+        return "no docker command"
+    try:
+        r = subprocess.run(["docker", "info", "--format", "{{.ServerVersion}}"], capture_output=True, text=True,
+                           timeout=30)
+    except subprocess.TimeoutExpired:
+        return "docker info timed out"
+    return None if r.returncode == 0 else f"docker info failed: {(r.stderr or r.stdout).strip()[:200]}"
+
+
+_NO_ENGINE = _docker_engine()
+if _NO_ENGINE:
+    pytest.skip(f"no Docker engine on this machine ({_NO_ENGINE}); the container tests need one",
+                allow_module_level=True)
+
+
+def _compose_command() -> list[str]:
+    """``docker compose`` (v2 plugin) or ``docker-compose`` (v1, Debian's package)."""
+    if subprocess.run(["docker", "compose", "version"], capture_output=True).returncode == 0:
+        return ["docker", "compose"]
+    if shutil.which("docker-compose"):
+        return ["docker-compose"]
+    pytest.fail("a Docker engine is here but neither `docker compose` nor `docker-compose` is installed")
+
+
+class Stack:
+    """One compose project of ``compose.yaml``, driven through the compose command line."""
+
+    def __init__(self, project: str, env: dict[str, str]):
+        self.project, self.env = project, env
+        self.command = _compose_command() + ["-f", str(REPO / "compose.yaml"), "-p", project]
+
+    def compose(self, *args: str, timeout: float = 120, check: bool = True,
+                **env: str) -> subprocess.CompletedProcess:
+        r = subprocess.run([*self.command, *args], cwd=REPO, env={**self.env, **env}, capture_output=True,
+                           text=True, timeout=timeout)
+        if check and r.returncode != 0:
+            raise AssertionError(f"compose {' '.join(args)} failed ({r.returncode}):\n{r.stdout}\n{r.stderr}")
+        return r
+
+    def start_compose(self, *args: str, **env: str) -> subprocess.Popen:
+        return subprocess.Popen([*self.command, *args], cwd=REPO, env={**self.env, **env},
+                                stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+
+    def containers(self, service: str, running: bool = True) -> list[str]:
+        """Names of the project's containers of ``service`` (compose v1 and v2 alike, by label)."""
+        args = ["docker", "ps", "--format", "{{.Names}}", "--filter", f"label=com.docker.compose.project={self.project}",
+                "--filter", f"label=com.docker.compose.service={service}"]
+        if not running:
+            args.append("--all")
+        return sorted(subprocess.run(args, capture_output=True, text=True, check=True).stdout.split())
+
+    def network(self, name: str) -> str:
+        out = subprocess.run(["docker", "network", "ls", "--format", "{{.Name}}",
+                              "--filter", f"label=com.docker.compose.project={self.project}",
+                              "--filter", f"label=com.docker.compose.network={name}"],
+                             capture_output=True, text=True, check=True).stdout.split()
+        assert len(out) == 1, f"network {name} of {self.project}: {out}"
+        return out[0]
+
+    def run_simulator(self, speed: float) -> subprocess.Popen:
+        """The demo's simulator as a one-off container (plays the unassisted mission once)."""
+        return self.start_compose("run", "-T", "--rm", "--no-deps", "simulator",
+                                  SKINET_SPEED=str(speed), SKINET_START_DELAY="0")
+
+    def logs(self) -> str:
+        r = self.compose("logs", "--no-color", "--tail", "300", check=False, timeout=60)
+        return r.stdout + r.stderr
+
+    def down(self) -> None:
+        self.compose("down", "-t", "2", "--remove-orphans", check=False, timeout=120)
+        left = subprocess.run(["docker", "ps", "-aq", "--filter", f"label=com.docker.compose.project={self.project}"],
+                              capture_output=True, text=True).stdout.split()
+        if left:  # one-off containers of `compose run -d`
+            subprocess.run(["docker", "rm", "-f", *left], capture_output=True)
+            self.compose("down", "-t", "2", check=False, timeout=120)
+
+
+@pytest.fixture(scope="module")
+def image(tmp_path_factory: pytest.TempPathFactory) -> str:
+    """``skinet-live:local`` on the debootstrapped base, rebuilt only where sources changed."""
+    log = tmp_path_factory.mktemp("build") / "build.log"
+    with log.open("w") as out:
+        r = subprocess.run(["bash", str(REPO / "docker" / "build.sh"), "--local-base", "--tag", IMAGE], cwd=REPO,
+                           env={**os.environ, "PYTHON": sys.executable}, stdout=out, stderr=subprocess.STDOUT,
+                           timeout=BUILD_TIMEOUT)
+    if r.returncode != 0:
+        pytest.fail(f"docker/build.sh failed ({r.returncode}); last lines of {log}:\n"
+                    + "\n".join(log.read_text(errors="replace").splitlines()[-40:]))
+    return IMAGE
+
+
+@pytest.fixture(scope="module")
+def stack(image: str, tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Stack, str]]:
+    """The demo profile without its simulator; yields the stack and the router's host endpoint."""
+    port = free_port()
+    env = {**os.environ, "COMPOSE_PROFILES": "demo", "SKINET_IMAGE": image,
+           "SKINET_ROUTER_PORT": f"127.0.0.1:{port}", "SKINET_PREDICTORS": "2", "SKINET_LOG_LEVEL": "INFO"}
+    s = Stack(f"skinet-test-{os.getpid()}", env)
+    try:
+        s.compose("up", "-d", "--no-build", "router", "bridge", "monitor", "predictor", timeout=180)
+        yield s, f"tcp/127.0.0.1:{port}"
+    finally:
+        log = tmp_path_factory.mktemp("compose") / "compose.log"
+        log.write_text(s.logs())
+        print(f"compose logs: {log}")
+        s.down()
+
+
+@pytest.fixture(scope="module")
+def observer(stack: tuple[Stack, str]) -> Iterator[zenoh.Session]:
+    """The host's observer session, once every service has announced itself."""
+    config = login_config(stack[1], "observer")
+    config.insert_json5("connect/timeout_ms", "30000")  # the router may still be starting
+    session = zenoh.open(config)
+    tokens = Tokens(session)
+    try:
+        wait_until(lambda: tokens.of("bridge_ros2") and tokens.of("monitor") and len(tokens.of("predictor")) >= 2,
+                   90, f"the services' liveliness tokens (got {sorted(tokens.alive)})")
+        yield session
+    finally:
+        tokens.close()
+        session.close()
+
+
+def _restart_monitor(s: Stack, observer: zenoh.Session) -> None:
+    """A monitor with an empty prediction cache: the next markings need the predictors.
+
+    (It keeps predictions per marking, so a second run of the mission would otherwise be
+    answered from its cache without any predictor.)
+    """
+    tokens = Tokens(observer)
+    try:
+        (monitor,) = s.containers("monitor")
+        restarted_at = time.monotonic()
+        subprocess.run(["docker", "restart", "-t", "2", monitor], check=True, capture_output=True)
+        wait_until(lambda: tokens.of("monitor", restarted_at), 60, "the restarted monitor")
+    finally:
+        tokens.close()
+
+
+def _container_of(instance: str) -> str:
+    """A predictor's container from its instance id (``<hostname>-<pid>``; the hostname is the
+    container id's prefix)."""
+    hostname = instance.rsplit("-", 1)[0]
+    out = subprocess.run(["docker", "ps", "-q", "--no-trunc", "--filter", f"id={hostname}"], capture_output=True,
+                         text=True, check=True).stdout.split()
+    assert len(out) == 1, f"no single container for instance {instance}: {out}"
+    return out[0]
+
+
+def _finish(sim: subprocess.Popen, timeout: float = 120) -> None:
+    out, _ = sim.communicate(timeout=timeout)
+    assert sim.returncode == 0, f"simulator exited {sim.returncode}:\n{out}"
+
+
+def _settle(obs: MissionObserver) -> None:
+    wait_until(lambda: obs.quiet_for(1.5), 30, "the monitor to settle")
+
+
+def test_unassisted_mission_gives_the_in_process_verdicts(stack: tuple[Stack, str], observer: zenoh.Session) -> None:
+    obs = MissionObserver(observer)
+    try:
+        _finish(stack[0].run_simulator(speed=10))
+        _settle(obs)
+        assert obs.violations(load_scenario()) == expected_violations()
+        assert any(not r.prediction_stale for _, r in obs.unsafe), "no prediction reached the monitor"
+        assert obs.state_space, "no state-space report"
+    finally:
+        obs.close()
+
+
+def test_predictor_replaced_while_events_flow(stack: tuple[Stack, str], observer: zenoh.Session) -> None:
+    s = stack[0]
+    _restart_monitor(s, observer)
+    obs, tokens = MissionObserver(observer), Tokens(observer)
+    try:
+        wait_until(lambda: len(tokens.of("predictor")) >= 2, 30, "two predictors")
+        before = tokens.of("predictor")
+        victim = _container_of(answering_predictor(observer))  # the one serving the monitor
+        sim = s.run_simulator(speed=5)
+        wait_until(lambda: obs.count() >= 10, 60, "events flowing")
+        killed_at = time.monotonic()
+        subprocess.run(["docker", "kill", victim], check=True, capture_output=True)
+        wait_until(lambda: len(tokens.of("predictor")) == len(before) - 1, 15, "the killed predictor's token to go")
+        s.compose("run", "-d", "--no-deps", "predictor")
+        wait_until(lambda: len(tokens.of("predictor")) == len(before), 60, "the new predictor's token")
+        assert tokens.of("predictor") - before, "no new predictor instance"
+        _finish(sim)
+        _settle(obs)
+
+        late = {e: d for e, d in obs.verdict_delays().items() if d > 0.5}
+        assert not late, f"verdicts later than 0.5 s after their event: {late}"
+        after = obs.fresh_delays(since=killed_at)
+        assert len(after) >= 10, f"too few events after the kill: {after}"
+        slow = {seq: d for seq, d in after.items() if d is None or d > 1.0}
+        assert not slow, f"states without a fresh prediction within 1 s after the kill: {slow} (all: {after})"
+    finally:
+        obs.close()
+        tokens.close()
+
+
+def test_offboard_network_cut_leaves_stale_predictions_then_recovers(stack: tuple[Stack, str],
+                                                                   observer: zenoh.Session) -> None:
+    """Markings predicted before the cut stay predicted (the monitor keeps predictions per
+    marking); new ones stay stale until the predictors are back."""
+    s = stack[0]
+    _restart_monitor(s, observer)
+    network = s.network("offboard")
+    predictors = s.containers("predictor")
+    obs = MissionObserver(observer)
+    sim = s.run_simulator(speed=5)
+    cut = False
+    try:
+        wait_until(lambda: obs.count() >= 5, 60, "events flowing")
+        for c in predictors:
+            subprocess.run(["docker", "network", "disconnect", network, c], check=True, capture_output=True)
+        cut, cut_at = True, time.monotonic()
+        wait_until(lambda: obs.count() >= 30, 60, "events during the cut")
+        back_at = time.monotonic()
+        known = {obs.marking(seq) for _, seq in obs.fresh(end=cut_at)}
+        new = [seq for seq in obs.states_between(cut_at + 0.5, back_at) if obs.marking(seq) not in known]
+        assert new, "no new marking during the cut"
+        fresh_new = sorted({seq for _, seq in obs.fresh(cut_at + 0.5, back_at)} & set(new))
+        assert not fresh_new, f"fresh predictions of new markings while the predictors were cut off: {fresh_new}"
+        late = {e: d for e, d in obs.verdict_delays().items() if d > 0.5}
+        assert not late, f"verdicts later than 0.5 s after their event: {late}"
+
+        for c in predictors:
+            subprocess.run(["docker", "network", "connect", network, c], check=True, capture_output=True)
+        cut = False
+        # The predictors' sessions come back (lease expiry, then reconnection) and the
+        # monitor asks again: a marking never predicted before gets its prediction.
+        known = {obs.marking(seq) for _, seq in obs.fresh(end=back_at)}
+        wait_until(lambda: any(obs.marking(seq) not in known for _, seq in obs.fresh(back_at)), 60,
+                   "a fresh prediction of a new marking after reconnecting")
+        _finish(sim)
+        _settle(obs)
+    finally:
+        if cut:
+            for c in predictors:
+                subprocess.run(["docker", "network", "connect", network, c], capture_output=True)
+        if sim.poll() is None:
+            sim.wait(timeout=120)
+        obs.close()
+
+
+def test_router_restart_clients_reconnect(stack: tuple[Stack, str], observer: zenoh.Session) -> None:
+    s = stack[0]
+    tokens = Tokens(observer)
+    try:
+        (router,) = s.containers("router")
+        restarted_at = time.monotonic()
+        subprocess.run(["docker", "restart", "-t", "1", router], check=True, capture_output=True)
+        # Each service announces itself anew through the new router.
+        wait_until(lambda: (tokens.of("bridge_ros2", restarted_at) and tokens.of("monitor", restarted_at)
+                            and len(tokens.of("predictor", restarted_at)) >= 2),
+                   60, f"every service back (got {sorted(tokens.alive)})")
+    finally:
+        tokens.close()
+    obs = MissionObserver(observer)
+    try:
+        _finish(s.run_simulator(speed=10))
+        _settle(obs)
+        assert obs.violations(load_scenario()) == expected_violations()
+        assert any(not r.prediction_stale for _, r in obs.unsafe)
+    finally:
+        obs.close()

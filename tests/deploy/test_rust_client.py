@@ -1,0 +1,102 @@
+"""``examples/rust_client`` against an embedded system behind the ACL router (slow: cargo build).
+
+Monitor and predictor run in this process, each on a client session logged in as
+its user; the test publishes canonical events as the bridge; the Rust client logs
+in as ``observer``, asks the predictor and prints the verdicts of those events.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+import zenoh
+
+from deploy_support import REPO, SYSTEM, acl_router_config, free_port, login, passwords
+from services.monitor import start_monitor
+from services.predictor import start_predictor
+from skinet.files import load_system
+from skinet.wire import keys
+from skinet.wire.codec import encode
+from skinet.wire.messages import CanonicalEvent
+
+pytestmark = pytest.mark.slow
+
+CRATE = REPO / "examples" / "rust_client"
+# Outside the work tree, so that fresh clones on the same machine reuse the build.
+TARGET = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "skinet-live" / "rust_client-target"
+
+if shutil.which("cargo") is None:
+    pytest.skip("cargo is not installed; the Rust example client cannot be built", allow_module_level=True)
+
+
+@pytest.fixture(scope="module")
+def client_binary() -> Path:
+    r = subprocess.run(["cargo", "build", "--release", "--locked", "--manifest-path", str(CRATE / "Cargo.toml")],
+                       env={**os.environ, "CARGO_TARGET_DIR": str(TARGET)}, capture_output=True, text=True,
+                       timeout=1500)
+    assert r.returncode == 0, f"cargo build failed:\n{r.stderr[-4000:]}"
+    return TARGET / "release" / "skinet-client"
+
+
+@pytest.fixture
+def embedded() -> Iterator[tuple[str, zenoh.Session]]:
+    """ACL router, monitor and predictor; yields the endpoint and a bridge session."""
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    router = zenoh.open(acl_router_config(endpoint))
+    sessions = {user: login(endpoint, user) for user in ("monitor", "predictor", "bridge")}
+    system, _ = load_system(REPO / "skillsets" / "spot_arm.toml")
+    predictor = start_predictor(sessions["predictor"], "rust-test")
+    monitor = start_monitor(sessions["monitor"], system)
+    try:
+        yield endpoint, sessions["bridge"]
+    finally:
+        monitor.close()
+        for s in sessions.values():
+            s.close()
+        predictor.close()
+        router.close()
+
+
+def test_rust_client_queries_the_predictor_and_prints_verdicts(client_binary: Path,
+                                                               embedded: tuple[str, zenoh.Session]) -> None:
+    endpoint, bridge = embedded
+    proc = subprocess.Popen([str(client_binary), "--connect", endpoint, "--system", SYSTEM, "--user", "observer",
+                             "--password", passwords()["observer"], "--verdicts", "2", "--timeout", "20"],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    lines: list[str] = []
+    following = threading.Event()
+
+    def read() -> None:
+        for line in proc.stdout:
+            lines.append(line.rstrip())
+            if line.startswith("following "):
+                following.set()
+
+    reader = threading.Thread(target=read, daemon=True)
+    reader.start()
+    try:
+        assert following.wait(30), "the client never subscribed:\n" + "\n".join(lines)
+        time.sleep(0.3)  # its subscription reaches the router
+        for seq, transition in enumerate(("init_power.start", "init_power.success.powered_on")):
+            event = CanonicalEvent(system=SYSTEM, skillset="spot", seq=seq, stamp=time.time(), source="test",
+                                   transition=transition)
+            bridge.put(keys.events(SYSTEM, "spot"), encode(event))
+        assert proc.wait(timeout=30) == 0, "\n".join(lines)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        reader.join(timeout=5)
+    out = "\n".join(lines)
+    print(out)
+    assert lines[0].startswith(f"model {SYSTEM} "), out
+    assert any(line.startswith("prediction by rust-test: ") and " markings, " in line for line in lines), out
+    verdicts = [line for line in lines if line.startswith("verdicts #")]
+    assert len(verdicts) == 2, out
+    assert all("action_guard=holds" in v and "safety_guard=holds" in v for v in verdicts), out
