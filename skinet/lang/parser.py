@@ -248,6 +248,12 @@ class _Builder(Transformer):  # type: ignore[type-arg]
             self._error(_pos(name), f"resource '{name}' has no state declaration")
         if initial is None:
             self._error(_pos(name), f"resource '{name}' has no initial state")
+        if trans is None and state is not None and len(state.value) > 1:
+            self.errors.append(Diagnostic(
+                self.source, _pos(name), "warning",
+                f"resource '{name}' has no transition clause: no effect can change its state"
+                " (write 'transition all' or 'transition { A -> B }')",
+            ))
         states: tuple[Token, ...] = state.value if state else ()
         pairs: tuple[tuple[Token, Token], ...] | None = trans.value if trans else ()
         return Resource(

@@ -375,3 +375,12 @@ def test_validate_returns_warnings_too() -> None:
     found = validate(model)
     assert found == list(model.warnings)
     assert found[0].level == "warning" and found[0].pos == Pos(1, 22)
+
+
+def test_resource_without_transition_clause_warns() -> None:
+    assert warnings("  resource frozen { state { A B } initial A }") == [
+        "f.rl:5:12: warning: resource 'frozen' has no transition clause: no effect can change its state"
+        " (write 'transition all' or 'transition { A -> B }')"
+    ]
+    # a one-state resource cannot change anyway
+    assert warnings("  resource single { state { A } initial A }") == []
