@@ -30,6 +30,7 @@ import zenoh
 
 from services.bridge_ros2.feed import Counters, Feed
 from services.common.cli import default_instance_id
+from services.common.zenoh_config import undeclare
 from skinet.ros.keys import EMPTY_TYPE, KeyStyle, ManagerTopic, manager_topics, rmw_attachment
 from skinet.ros.typestore import default_instance, encode
 from skinet.system import System
@@ -149,21 +150,12 @@ class Bridge:
         if self._stop.is_set():
             return
         self._stop.set()
-        for entity in (self._token, *self._subscribers):
-            _undeclare(entity)
+        undeclare(self._token, *self._subscribers)
         self._queue.put(None)
         self._worker.join(5.0)
         if self._asker is not None:
             self._asker.join(5.0)
-        for entity in (*self._events.values(), *(p for p, _ in self._requests.values())):
-            _undeclare(entity)
-
-
-def _undeclare(entity: Any) -> None:
-    try:
-        entity.undeclare()
-    except zenoh.ZError:
-        pass  # session already closed
+        undeclare(*self._events.values(), *(p for p, _ in self._requests.values()))
 
 
 def start_bridge(session: zenoh.Session, system: System, typemap: Mapping[str, str], **options: Any) -> Bridge:

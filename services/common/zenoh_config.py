@@ -59,3 +59,12 @@ def config_from_args(args: argparse.Namespace) -> zenoh.Config:
         args.zenoh_config,
         not args.no_multicast_scouting,
     )
+
+
+def undeclare(*entities: object) -> None:
+    """Undeclare Zenoh entities, ignoring those whose session is already closed."""
+    for entity in entities:
+        try:
+            entity.undeclare()  # type: ignore[attr-defined]
+        except zenoh.ZError:
+            pass  # session already closed

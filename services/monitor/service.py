@@ -22,6 +22,7 @@ from dataclasses import dataclass
 
 import zenoh
 
+from services.common.zenoh_config import undeclare
 from services.monitor.engine import Counters, Engine, MarkingKey, Step
 from services.monitor.prediction import PredictionClient, PredictorStats
 from skinet.system import System
@@ -118,18 +119,10 @@ class Monitor:
                 return
             self._closed = True  # callbacks still running return at once
             self._changed.notify_all()
-        for entity in (self._sub, self._predictors, self._queryable, self._token):
-            try:
-                entity.undeclare()
-            except zenoh.ZError:
-                pass  # session already closed
+        undeclare(self._sub, self._predictors, self._queryable, self._token)
         self._predict.close()
         with self._lock:
-            for pub in self._pub.values():
-                try:
-                    pub.undeclare()
-                except zenoh.ZError:
-                    pass
+            undeclare(*self._pub.values())
 
     # -- callbacks --------------------------------------------------------------------
 

@@ -27,6 +27,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import zenoh
 
+from services.common.zenoh_config import undeclare
 from skinet.errors import SkinetError
 from skinet.system import System
 from skinet.verify.predict import forecast
@@ -216,11 +217,7 @@ class Predictor:
         if self._closed:
             return
         self._closed = True
-        for entity in (self._token, self._queryable):
-            try:
-                entity.undeclare()
-            except zenoh.ZError:  # session already closed
-                pass
+        undeclare(self._token, self._queryable)
         self._pool.shutdown(wait=True)
         log.info("predictor %s stopped (%s)", self.instance_id, dict(self.counts))
 

@@ -25,6 +25,7 @@ from typing import Any
 
 import zenoh
 
+from services.common.zenoh_config import undeclare
 from services.simulator.driver import StepRun, drive
 from services.simulator.manager import INTERRUPTING, READY, Manager, Message
 from skinet.mission import Scenario
@@ -196,20 +197,11 @@ class Simulator:
         Zenoh thread publishes on it fails ("Already borrowed").
         """
         subscribers, self._subscribers = self._subscribers, []
-        for sub in subscribers:
-            _undeclare(sub)
+        undeclare(*subscribers)
         for node in self.nodes.values():
             with node.lock:
                 publishers, node.publishers = list(node.publishers.values()), {}
-                for pub in publishers:
-                    _undeclare(pub)
-
-
-def _undeclare(entity: Any) -> None:
-    try:
-        entity.undeclare()
-    except zenoh.ZError:
-        pass  # session already closed
+                undeclare(*publishers)
 
 
 __all__ = ["Simulator"]
