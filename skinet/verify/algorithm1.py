@@ -16,6 +16,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Literal, Protocol
 
+from skinet.net.petrinet import Transition
 from skinet.net.semantics import steps
 from skinet.props.evaluate import holds
 from skinet.system import Marking, System
@@ -85,11 +86,10 @@ def analyse(system: System, marking: Mapping[str, int], prediction: Prediction |
     result.violated = [p.name for p in system.properties if not holds(p.expr, marking, nets)]
     worst: dict[tuple[str, str, str], UnsafeTransition] = {}
     recovers: dict[tuple[str, str, str], bool] = {}
-    order: list[tuple[str, str]] = []
+    firable: dict[tuple[str, str], Transition] = {}  # first variant per logical name, in firing order
     for comp in system.components:
         for t, results in steps(comp.net, marking[comp.name]):
-            if (comp.name, t.name) not in order:
-                order.append((comp.name, t.name))
+            firable.setdefault((comp.name, t.name), t)
             for m in results:
                 after = dict(marking)
                 after[comp.name] = m
@@ -107,13 +107,11 @@ def analyse(system: System, marking: Mapping[str, int], prediction: Prediction |
                         worst[key] = UnsafeTransition(
                             comp.name, t.name, t.kind, t.controllable, p.name, constraint, n, witness
                         )
-    kinds = {(c.name, t.name): t for c in system.components for t in c.net.transitions}
-    for ss, tname in order:
+    for (ss, tname), t in firable.items():
         for p in system.properties:
             if (ss, tname, p.name) in worst:
                 result.unsafe.append(worst[(ss, tname, p.name)])
             if recovers.get((ss, tname, p.name)):
-                t = kinds[(ss, tname)]
                 result.recovery.setdefault(p.name, []).append(Recovery(ss, tname, t.kind, t.controllable))
     for p in result.violated:
         result.recovery.setdefault(p, [])
