@@ -5,7 +5,7 @@ PYTHON ?= python3
 VENV ?= .venv
 STAMP := $(VENV)/.installed-stamp
 
-.PHONY: demo test bench clean
+.PHONY: demo test test-deps bench clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -16,7 +16,10 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	$(VENV)/bin/skinet demo
 
-test: $(STAMP)
+test-deps:
+	scripts/install-test-deps.sh
+
+test: $(STAMP) test-deps
 	$(VENV)/bin/python -m pytest -q
 
 bench: $(STAMP)

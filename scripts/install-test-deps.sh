@@ -1,0 +1,25 @@
+#!/usr/bin/env bash
+# Installs the Debian packages the test suite needs (part of `make test`).
+#
+# Each package is installed only when missing; without root (or apt-get) the
+# script prints what is missing and the tests that need it skip with a message.
+# Add a package to PACKAGES with a comment naming the tests that need it.
+set -euo pipefail
+
+PACKAGES=(
+)
+
+missing=()
+for p in "${PACKAGES[@]}"; do
+    dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+[ ${#missing[@]} -eq 0 ] && exit 0
+
+if [ "$(id -u)" -ne 0 ] || ! command -v apt-get >/dev/null 2>&1; then
+    echo "install-test-deps: missing Debian packages (tests needing them will skip): ${missing[*]}" >&2
+    exit 0
+fi
+echo "install-test-deps: installing ${missing[*]}" >&2
+export DEBIAN_FRONTEND=noninteractive
+apt-get update -qq >/dev/null
+apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
