@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import signal
 import sys
 import threading
@@ -13,6 +14,7 @@ import zenoh
 
 from services.common.cli import add_log_arg, setup_logging
 from services.common.zenoh_config import add_zenoh_args, config_from_args
+from services.monitor.check import parse_policy
 from services.monitor.service import start_monitor
 from skinet.errors import SourceError
 from skinet.files import load_system
@@ -30,6 +32,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--query-timeout", type=float, help="predict query timeout, seconds (default: budget + 1)")
     p.add_argument("--no-express", dest="express", action="store_false",
                    help="let Zenoh batch publications (higher burst throughput; default: express)")
+    p.add_argument("--check-policy", default=os.environ.get("SKINET_CHECK_POLICY", "warn"),
+                   help="answers of skinet/<system>/check: warn (warn on every constraint, deny nothing), strict "
+                        "(deny explicit and forced), or KIND=ACTION,... e.g. strict,implicit=deny "
+                        "(default: $SKINET_CHECK_POLICY or warn)")
     add_log_arg(p)
     add_zenoh_args(p)
     return p
@@ -38,6 +44,11 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     setup_logging(args)
+    try:
+        policy = parse_policy(args.check_policy)
+    except ValueError as exc:
+        print(f"error: --check-policy: {exc}", file=sys.stderr)
+        return 2
     try:
         system, warnings = load_system(args.system)
     except SourceError as exc:
@@ -52,7 +63,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     session = zenoh.open(config_from_args(args))
     try:
         monitor = start_monitor(session, system, instance_id=args.instance_id, budget=args.budget,
-                                query_timeout=args.query_timeout, express=args.express)
+                                query_timeout=args.query_timeout, express=args.express,
+                                check_policy=policy)
     except ValueError as exc:  # a bad instance id or system name for a Zenoh key
         session.close()
         print(f"error: {exc}", file=sys.stderr)

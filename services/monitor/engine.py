@@ -23,7 +23,7 @@ import msgpack
 
 from skinet.live import LiveSystem
 from skinet.system import Marking, System
-from skinet.verify.algorithm1 import analyse
+from skinet.verify.algorithm1 import Analysis, analyse
 from skinet.wire.convert import RiskTable, analysis_bodies, statuses
 from skinet.wire.messages import (
     CanonicalEvent, LiveState, UnsafeReport, Verdicts,
@@ -74,6 +74,7 @@ class Frame:
     live: Template
     verdicts: Template
     unsafe: Template
+    analysis: Analysis  # what the command check reads
 
 
 @dataclass(frozen=True)
@@ -182,6 +183,11 @@ class Engine:
             self.predictions.popitem(last=False)
         return key == self.key
 
+    def analysis(self) -> tuple[Analysis, MarkingKey, bool]:
+        """Algorithm 1 at the live marking, the marking's key, and whether its prediction is stale."""
+        key = self.key
+        return self._frame(key).analysis, key, key not in self.predictions
+
     def refresh(self) -> bytes:
         """The UnsafeReport of the current step again, with the current prediction."""
         return self._frame(self.key).unsafe.fill(self._packer, {"seq": self.seq, "stamp": time.time()})
@@ -219,4 +225,5 @@ class Engine:
             Template(UnsafeReport(system=name, seq=0, stamp=0.0, unsafe=unsafe, recovery=recovery,
                                   violated=analysis.violated, literal_count=len(analysis.unsafe),
                                   prediction_stale=pred is None).model_dump(mode="json"), step),
+            analysis,
         )

@@ -2,7 +2,9 @@
 
 Subscribes to ``keys.events(system, "*")``; per event it publishes
 :class:`LiveState`, :class:`Verdicts` and :class:`UnsafeReport` (one step;
-the three share the step's ``seq``).  It answers the model queryable, holds a
+the three share the step's ``seq``).  It answers the model queryable, the command
+check (``skinet/<system>/check``, :mod:`services.monitor.check`) and ``get`` on its
+four result keys (the last publication, for late joiners), holds a
 liveliness token and asks the predictor for the live marking without ever
 waiting for it (:mod:`services.monitor.prediction`); when a prediction for the
 live marking arrives, the UnsafeReport of the same step is published again with
@@ -23,13 +25,16 @@ from dataclasses import dataclass
 import zenoh
 
 from services.common.zenoh_config import undeclare
+from services.monitor.check import Checker, Policy, request_from
 from services.monitor.engine import Counters, Engine, MarkingKey, Step
 from services.monitor.prediction import PredictionClient, PredictorStats
 from skinet.system import System
 from skinet.wire import keys
 from skinet.wire.codec import DecodeError, decode, encode
 from skinet.wire.convert import RiskTable, bundle
-from skinet.wire.messages import CanonicalEvent, LiveState, PredictReply, StateSpaceReport, UnsafeReport, Verdicts
+from skinet.wire.messages import (
+    CanonicalEvent, CheckReply, CheckRequest, LiveState, PredictReply, StateSpaceReport, UnsafeReport, Verdicts,
+)
 
 log = logging.getLogger("skinet.monitor")
 _LOG_FIRST = 10  # log the first occurrences of each problem, then every 1000th
@@ -53,7 +58,8 @@ class Monitor:
 
     def __init__(self, session: zenoh.Session, system: System, *, instance_id: str | None = None,
                  budget: float = 1.0, query_timeout: float | None = None, retry: float = 0.5,
-                 prediction_cache: int = 256, indirect: bool = True, express: bool = True):
+                 prediction_cache: int = 256, indirect: bool = True, express: bool = True,
+                 check_policy: Policy | None = None):
         self.session, self.system = session, system
         self.instance_id = keys.check_chunk(instance_id or uuid.uuid4().hex[:8], "instance id")
         name = keys.check_chunk(system.name, "system name")
@@ -61,6 +67,7 @@ class Monitor:
         self.digest = self.bundle.digest
         self._model_payload = encode(self.bundle)
         self._engine = Engine(system, prediction_cache=prediction_cache)
+        self.checker = Checker(system, check_policy)
         self._lock = threading.Lock()
         self._changed = threading.Condition(self._lock)
         self._version = 0
@@ -76,6 +83,12 @@ class Monitor:
         with self._lock:
             self._publish(self._engine.initial())
         self._queryable = session.declare_queryable(keys.model(name, self.digest), self._on_model_query)
+        self._check = session.declare_queryable(keys.check(name), self._on_check)
+        # Late joiners (dashboards, watch) get the last publications with a get on their keys.
+        self._latest = [session.declare_queryable(key, lambda q, n=name, k=key: self._on_latest(n, k, q))
+                        for name, key in (("state", keys.state(system.name)), ("verdicts", keys.verdicts(system.name)),
+                                          ("unsafe", keys.unsafe(system.name)),
+                                          ("state_space", keys.state_space(system.name)))]
         self._predictors = session.liveliness().declare_subscriber(
             keys.alive("*", "predictor", "*"), self._on_predictor_token)
         self._sub = session.declare_subscriber(
@@ -119,7 +132,7 @@ class Monitor:
                 return
             self._closed = True  # callbacks still running return at once
             self._changed.notify_all()
-        undeclare(self._sub, self._predictors, self._queryable, self._token)
+        undeclare(self._sub, self._predictors, self._queryable, self._check, *self._latest, self._token)
         self._predict.close()
         with self._lock:
             undeclare(*self._pub.values())
@@ -185,6 +198,30 @@ class Monitor:
         with query:
             query.reply(keys.model(self.system.name, self.digest), self._model_payload)
 
+    def check(self, request: CheckRequest) -> CheckReply:
+        """The command check at the live marking (SPEC §7; :mod:`services.monitor.check`)."""
+        with self._lock:
+            analysis, key, stale = self._engine.analysis()
+            return self.checker.answer(request, analysis, key, seq=self._engine.seq, stale=stale)
+
+    def _on_check(self, query: zenoh.Query) -> None:
+        with query:
+            try:
+                payload = query.payload.to_bytes() if query.payload is not None else None
+                request = request_from(self.system.name, payload, str(query.parameters))
+                reply = request if isinstance(request, CheckReply) else self.check(request)
+                query.reply(keys.check(self.system.name), encode(reply))
+            except Exception:  # a bug must not stop the monitor; the client gets an error reply
+                log.exception("error while answering a check query")
+                query.reply_err("internal error in the monitor's check (see its log)")
+
+    def _on_latest(self, name: str, key: str, query: zenoh.Query) -> None:
+        with query:
+            with self._lock:
+                payload = self._last.get(name)
+            if payload is not None:
+                query.reply(key, payload)
+
     def _on_predictor_token(self, sample: zenoh.Sample) -> None:
         if sample.kind == zenoh.SampleKind.PUT:
             with self._lock:
@@ -222,6 +259,8 @@ def start_monitor(session: zenoh.Session, system: System, **options: object) -> 
     is kept, default 256), ``indirect`` (run the event callback in a Python thread
     of its own rather than on Zenoh's, default True), ``express`` (publish without
     batching, default True; False lets Zenoh batch the three messages of a step,
-    which doubles burst throughput, see ``benchmarks/bench_latency.py``).
+    which doubles burst throughput, see ``benchmarks/bench_latency.py``), ``check_policy``
+    (a :class:`~services.monitor.check.Policy` for ``skinet/<system>/check``; default: warn,
+    never deny).
     """
     return Monitor(session, system, **options)  # type: ignore[arg-type]

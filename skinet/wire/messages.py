@@ -149,7 +149,46 @@ class PredictReply(_Message):
     risks: list[Risk] = Field(default_factory=list, description="non-safe one-step successors; others are safe")
 
 
+class CheckRequest(_Message):
+    """Is ``skillset:transition`` safe to fire now?  Asked on ``skinet/<system>/check``."""
+
+    skillset: str
+    transition: str = Field(description="logical transition, e.g. 'go_to_waypoint.start'")
+
+
+class CheckReason(BaseModel):
+    """One property the transition puts at risk (an operator-view unsafe entry, SPEC §5)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    property: str
+    constraint: str = Field(description="explicit, implicit, forced or unknown (any kind the monitor reports)")
+    action: Literal["allow", "warn", "deny"] = Field(description="what the policy does with this constraint kind")
+    controllable: bool
+    steps: int | None = None
+    witness: list[str] = Field(default_factory=list, description="'skillset:transition' names to the violation")
+
+
+class CheckReply(_Message):
+    """The monitor's answer from its live Algorithm 1 state (SPEC §7)."""
+
+    system: str
+    skillset: str
+    transition: str
+    ok: bool = Field(description="False: the request could not be judged (see error and candidates)")
+    decision: Literal["allow", "warn", "deny"] | None = Field(None, description="None when ok is False")
+    reasons: list[CheckReason] = Field(default_factory=list)
+    enabled: bool = Field(False, description="the transition is firable at the live marking")
+    violated: list[str] = Field(default_factory=list, description="properties violated now")
+    recovers: list[str] = Field(default_factory=list, description="violated properties it restores")
+    prediction_stale: bool = False
+    seq: int = Field(0, ge=0, description="the monitor step the answer is about")
+    policy: str = Field("", description="the monitor's policy, e.g. 'explicit=warn,forced=warn,...'")
+    error: str = ""
+    candidates: list[str] = Field(default_factory=list, description="close names, on an unknown name")
+
+
 MESSAGES: dict[str, type[BaseModel]] = {
     m.__name__: m
-    for m in (CanonicalEvent, LiveState, Verdicts, UnsafeReport, StateSpaceReport, ModelBundle, PredictRequest, PredictReply)
+    for m in (CanonicalEvent, LiveState, Verdicts, UnsafeReport, StateSpaceReport, ModelBundle, PredictRequest, PredictReply,
+              CheckRequest, CheckReply)
 }

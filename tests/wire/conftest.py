@@ -9,7 +9,7 @@ from skinet.system import System
 from skinet.verify.predict import forecast
 from skinet.wire.convert import bundle, marking_of, risks, state_space_report, statuses
 from skinet.wire.messages import (
-    CanonicalEvent, LiveState, PredictReply, PredictRequest, PropertyVerdict, RecoveryEntry, SkillsetStatus,
+    CanonicalEvent, CheckReason, CheckReply, CheckRequest, LiveState, PredictReply, PredictRequest, PropertyVerdict, RecoveryEntry, SkillsetStatus,
     UnsafeEntry, UnsafeReport, Verdicts,
 )
 
@@ -48,6 +48,13 @@ def sample_messages(system: System) -> dict[str, BaseModel]:
         "PredictRequest": PredictRequest(system=system.name, digest=b.digest, seq=3, skillsets=skillsets, budget=0.5),
         "PredictReply": PredictReply(system=system.name, digest=b.digest, seq=3, ok=True, instance="p1",
                                      report=report, risks=found),
+        "CheckRequest": CheckRequest(skillset="spot", transition="init_power.start"),
+        "CheckReply": CheckReply(
+            system=system.name, skillset="spot", transition="init_power.start", ok=True, decision="deny",
+            reasons=[CheckReason(property="action_guard", constraint="forced", action="deny", controllable=True,
+                                 steps=2, witness=["spot:init_power.success.powered_on"])],
+            enabled=True, violated=["safety_guard"], recovers=["safety_guard"], prediction_stale=False, seq=8,
+            policy="explicit=deny,implicit=warn,forced=deny,unknown=warn", error="", candidates=["x"]),
     }
 
 

@@ -1,0 +1,98 @@
+"""The command check ``skinet/<system>/check`` (SPEC §7): policy, verdicts at the paper's
+warnings, unknown names, bad payloads, through a real router."""
+
+from __future__ import annotations
+
+import pytest
+import zenoh
+
+from services.monitor.check import Policy, parse_command, parse_policy
+from skinet.wire import keys
+from skinet.wire.codec import decode, encode
+from skinet.wire.messages import CheckReply, CheckRequest
+from tests.services.test_monitor import AG, PAPER_STEPS, SG, Events, Reports
+from tests.services.test_monitor import monitor_factory, session, system  # noqa: F401 (fixtures)
+
+WARN = "explicit=warn,implicit=warn,forced=warn,unknown=warn"
+STRICT = "explicit=deny,implicit=warn,forced=deny,unknown=warn"
+
+
+def ask(session: zenoh.Session, request: CheckRequest | None = None, parameters: str = "",
+        payload: bytes | None = None) -> CheckReply:
+    selector = keys.check("spot_arm") + (f"?{parameters}" if parameters else "")
+    body = payload if payload is not None else (encode(request) if request is not None else None)
+    replies = list(session.get(selector, payload=body, timeout=5.0))
+    assert len(replies) == 1 and replies[0].ok is not None, replies
+    return decode(replies[0].ok.payload.to_bytes(), CheckReply)
+
+
+def check(session: zenoh.Session, command: str) -> CheckReply:
+    return ask(session, parse_command(command))
+
+
+def reasons(reply: CheckReply) -> list[tuple]:
+    return [(r.property, r.constraint, r.action, r.controllable, r.steps, r.witness) for r in reply.reasons]
+
+
+def test_policies() -> None:
+    assert str(Policy()) == WARN == str(parse_policy("warn")) == str(parse_policy(""))
+    assert str(parse_policy("strict")) == STRICT
+    assert str(parse_policy("strict,implicit=deny")) == "explicit=deny,implicit=deny,forced=deny,unknown=warn"
+    assert str(parse_policy("explicit=deny")) == "explicit=deny,implicit=warn,forced=warn,unknown=warn"
+    assert parse_policy("strict").action("forced") == "deny"
+    assert parse_policy("strict").action("some_future_kind") == "warn"
+    with pytest.raises(ValueError, match=r"^unknown check policy 'lenient' \(presets: warn, strict; "):
+        parse_policy("lenient")
+    with pytest.raises(ValueError, match=r"^check policy 'explicit=block': action must be one of allow, warn, deny$"):
+        parse_policy("explicit=block")
+    with pytest.raises(ValueError, match=r"^command 'teleop.start' is not of the form skillset:transition"):
+        parse_command("teleop.start")
+
+
+@pytest.mark.parametrize("policy,decision", [(None, "warn"), ("strict", "deny")])
+def test_paper_warnings_as_check_answers(monitor_factory, session, system, policy, decision) -> None:
+    reports = Reports(session)
+    monitor_factory(system, **({} if policy is None else {"check_policy": parse_policy(policy)}))
+    events = Events(session)
+    for skillset, transition, _, _ in PAPER_STEPS[:6]:  # arm at RD: paper warning 1
+        events.send(skillset, transition)
+    reports.step(6)
+    reply = check(session, "spot:go_to_waypoint.start")
+    assert (reply.ok, reply.decision, reply.enabled, reply.seq) == (True, decision, True, 6)
+    assert reasons(reply) == [(SG, "explicit", decision, True, 0, [])]
+    assert reply.policy == (WARN if policy is None else STRICT) and reply.prediction_stale is True
+    safe = check(session, "spot:sit_down.start")
+    assert (safe.ok, safe.decision, safe.reasons, safe.enabled) == (True, "allow", [], True)
+    idle = check(session, "manipulator:arm_RD_to_HP.success.at_home")  # known, not firable now
+    assert (idle.decision, idle.enabled) == ("allow", False)
+
+    for skillset, transition, _, _ in PAPER_STEPS[6:9]:  # teleop runs: paper warning 2
+        events.send(skillset, transition)
+    reports.step(9)
+    reply = ask(session, parameters="command=manipulator:arm_ready.start")  # the selector form
+    assert (reply.decision, reasons(reply)) == (decision, [(AG, "explicit", decision, True, 0, [])])
+
+    events.send(*PAPER_STEPS[9][:2])  # the warning ignored: action_guard violated
+    reports.step(10)
+    reply = check(session, "spot:teleop.interrupt")
+    assert (reply.decision, reply.violated, reply.recovers, reply.enabled) == ("allow", [AG], [AG], True)
+
+
+def test_unknown_names_and_bad_requests_get_one_line_errors(monitor_factory, session, system) -> None:
+    monitor_factory(system)
+    reply = check(session, "spt:teleop.start")
+    assert (reply.ok, reply.decision, reply.error, reply.candidates) == (False, None, "unknown skillset 'spt'", ["spot"])
+    reply = check(session, "spot:telop.start")
+    assert reply.error == "unknown transition 'telop.start' of skillset 'spot'"
+    assert reply.candidates[0] == "teleop.start" and len(reply.candidates) <= 8
+    reply = ask(session, payload=b"\xc1garbage")
+    assert (reply.ok, reply.error) == (False, "not msgpack: FormatError")
+    reply = ask(session, payload=encode(CheckReply(system="x", skillset="", transition="", ok=False)))
+    assert reply.error.startswith("invalid CheckRequest: ")
+    reply = ask(session)
+    assert reply.error == ("empty check request: send a CheckRequest payload or the parameter "
+                           "command=skillset:transition")
+    reply = ask(session, parameters="command=teleop")
+    assert reply.error.startswith("command 'teleop' is not of the form skillset:transition")
+    # The monitor is still fine.
+    assert check(session, "spot:init_power.start").decision == "allow"
