@@ -7,6 +7,8 @@
 set -euo pipefail
 
 PACKAGES=(
+    chromium          # tests/services/test_dashboard.py: the dashboard in a real browser
+    chromium-driver   # the same, driven by selenium
 )
 
 missing=()

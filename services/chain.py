@@ -10,7 +10,7 @@ the core replay gives, so both can be printed and compared alike.
 from __future__ import annotations
 
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 
 import zenoh
 
@@ -37,13 +37,19 @@ def run_chain(
     predict: bool = True,
     speed: float = 0.0,
     settle: float = 10.0,
+    session: zenoh.Session | None = None,
+    on_record: Callable[[StepRecord], None] | None = None,
 ) -> list[StepRecord]:
     """Drive ``scenario`` through the whole chain and record what the monitor published.
 
     ``speed`` <= 0 plays as fast as the chain settles; ``settle`` bounds the
     wait for each step's effects (and, with ``predict``, for fresh predictions).
+    ``session``: run the services on it (e.g. a client of a router, so that
+    other processes can watch), else on a private peer session; ``on_record`` is
+    called after each step with what the monitor showed then.
     """
-    session = zenoh.open(session_config("peer", multicast_scouting=False))
+    own = session is None
+    session = zenoh.open(session_config("peer", multicast_scouting=False)) if session is None else session
     services: list = []
     try:
         monitor = start_monitor(session, system)
@@ -70,13 +76,16 @@ def run_chain(
             if run.step.transition is not None:
                 before = record.holds
             records.append(record)
+            if on_record is not None:
+                on_record(record)
 
         simulator.drive(scenario, speed=speed, on_step=on_step)
         return records
     finally:
         for service in reversed(services):
             service.close()
-        session.close()
+        if own:
+            session.close()
 
 
 def _record(run: StepRun, view: MonitorView, before: dict[str, bool]) -> StepRecord:

@@ -17,14 +17,20 @@ import sys
 import threading
 import time
 from collections.abc import Callable
-from typing import TextIO
+from typing import TYPE_CHECKING, TextIO
 
 import zenoh
 
-from services.common.zenoh_config import session_config
+from services.common.session import open_session
+from services.common.zenoh_config import login, session_config
 from services.monitor import Monitor, MonitorView, start_monitor
+from services.monitor.check import parse_policy
 from skinet.cli.render import seconds, table
 from skinet.files import load_system
+from skinet.system import System
+
+if TYPE_CHECKING:
+    from services.dashboard.server import Dashboard
 
 CLEAR = "\x1b[H\x1b[J"  # cursor home, clear to end of screen
 
@@ -83,14 +89,18 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     from services.predictor.service import start_predictor
 
     system, _ = load_system(args.system)
-    stop = _stop_on_signals()
-    session = zenoh.open(session_config("peer", args.connect, args.listen, args.zenoh_config,
-                                        not args.no_multicast_scouting))
+    stop = stop_on_signals()
+    session = open_session(session_config("peer", args.connect, args.listen, args.zenoh_config,
+                                          not args.no_multicast_scouting, *login(args)))
     monitor: Monitor | None = None
     predictor = None
+    dashboard = None
     try:
         predictor = start_predictor(session, f"embedded-{os.getpid()}")  # first: the monitor asks at once
-        monitor = start_monitor(session, system, budget=args.budget)
+        monitor = start_monitor(session, system, budget=args.budget, check_policy=parse_policy(args.check_policy))
+        if args.dashboard is not None:
+            dashboard = _start_dashboard(session, system, args.dashboard_host, args.dashboard)
+            print(f"dashboard on {dashboard.url}", file=sys.stderr, flush=True)
         if args.once:
             deadline = time.monotonic() + args.budget + 2.0  # the first prediction, if any comes
             view = monitor.snapshot()
@@ -102,11 +112,29 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
         _follow(monitor, stop, args.duration, out)
         return 0
     finally:
+        if dashboard is not None:
+            dashboard.close()
+            dashboard.observer.close()
         if monitor is not None:
             monitor.close()
         session.close()
         if predictor is not None:
             predictor.close()
+
+
+def _start_dashboard(session: zenoh.Session, system: System, host: str, port: int) -> Dashboard:
+    """The web dashboard on the shared session; raises :class:`PortError` (port in use)."""
+    from services.dashboard.observer import Observer
+    from services.dashboard.server import Dashboard
+
+    observer = Observer(session, system.name, system)
+    dashboard = Dashboard(observer, host, port)
+    try:
+        dashboard.start()
+    except Exception:
+        observer.close()
+        raise
+    return dashboard
 
 
 def _follow(monitor: Monitor, stop: threading.Event, duration: float | None, out: TextIO) -> None:
@@ -129,9 +157,9 @@ def _follow(monitor: Monitor, stop: threading.Event, duration: float | None, out
 
 def router(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     """``skinet router``: a Zenoh router (mode "router" of the Python wheel) until interrupted."""
-    stop = _stop_on_signals()
-    session = zenoh.open(session_config("router", args.connect, args.listen or ["tcp/0.0.0.0:7447"],
-                                        args.zenoh_config, not args.no_multicast_scouting))
+    stop = stop_on_signals()
+    session = open_session(session_config("router", args.connect, args.listen or ["tcp/0.0.0.0:7447"],
+                                          args.zenoh_config, not args.no_multicast_scouting, *login(args)))
     try:
         print(f"zenoh router {session.zid()} listening on {', '.join(args.listen or ['tcp/0.0.0.0:7447'])}",
               file=out, flush=True)
@@ -142,7 +170,7 @@ def router(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     return 0
 
 
-def _stop_on_signals() -> threading.Event:
+def stop_on_signals() -> threading.Event:
     stop = threading.Event()
     handler: Callable[..., None] = lambda *_: stop.set()
     if threading.current_thread() is threading.main_thread():

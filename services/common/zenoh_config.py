@@ -3,7 +3,9 @@
 Environment variables give the defaults so containers need no arguments:
 ``SKINET_ZENOH_MODE`` (peer|client|router), ``SKINET_ZENOH_CONNECT`` and
 ``SKINET_ZENOH_LISTEN`` (comma-separated endpoints such as
-``tcp/127.0.0.1:7447``), ``SKINET_ZENOH_CONFIG`` (a JSON5 file).
+``tcp/127.0.0.1:7447``), ``SKINET_ZENOH_CONFIG`` (a JSON5 file),
+``SKINET_ZENOH_USER`` with ``SKINET_ZENOH_PASSWORD`` or ``SKINET_ZENOH_PASSWORD_FILE``
+(user/password login).
 """
 
 from __future__ import annotations
@@ -13,6 +15,8 @@ import json
 import os
 
 import zenoh
+
+from skinet.errors import SkinetError
 
 
 def add_zenoh_args(parser: argparse.ArgumentParser) -> None:
@@ -26,6 +30,30 @@ def add_zenoh_args(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--no-multicast-scouting", action="store_true",
                    default=os.environ.get("SKINET_ZENOH_NO_SCOUTING", "") not in ("", "0"),
                    help="disable multicast scouting (tests, containers)")
+    add_login_args(g)
+
+
+def add_login_args(g: argparse._ActionsContainer) -> None:
+    """``--user``/``--password``/``--password-file`` (defaults from ``SKINET_ZENOH_*``)."""
+    g.add_argument("--user", default=os.environ.get("SKINET_ZENOH_USER") or None,
+                   help="user/password login to the router (default: $SKINET_ZENOH_USER)")
+    g.add_argument("--password", default=os.environ.get("SKINET_ZENOH_PASSWORD") or None,
+                   help="password of --user (default: $SKINET_ZENOH_PASSWORD)")
+    g.add_argument("--password-file", default=os.environ.get("SKINET_ZENOH_PASSWORD_FILE") or None,
+                   help="read the password from this file (default: $SKINET_ZENOH_PASSWORD_FILE)")
+
+
+def login(args: argparse.Namespace) -> tuple[str | None, str | None]:
+    """(user, password) from the flags of :func:`add_login_args`; :class:`SkinetError` on an unreadable file."""
+    user, password = getattr(args, "user", None), getattr(args, "password", None)
+    path = getattr(args, "password_file", None)
+    if path:
+        try:
+            with open(path, encoding="utf-8") as f:
+                password = f.read().strip()
+        except OSError as exc:
+            raise SkinetError(f"cannot read password file {path}: {exc.strerror}") from None
+    return user, password
 
 
 def _env_list(name: str) -> list[str]:
@@ -38,6 +66,8 @@ def session_config(
     listen: list[str] | None = None,
     config_file: str | None = None,
     multicast_scouting: bool = True,
+    user: str | None = None,
+    password: str | None = None,
 ) -> zenoh.Config:
     """A Zenoh configuration from explicit settings (endpoints in ``tcp/HOST:PORT`` form)."""
     config = zenoh.Config.from_file(config_file) if config_file else zenoh.Config()
@@ -48,6 +78,9 @@ def session_config(
         config.insert_json5("listen/endpoints", json.dumps(listen))
     if not multicast_scouting:
         config.insert_json5("scouting/multicast/enabled", "false")
+    if user:
+        config.insert_json5("transport/auth/usrpwd/user", json.dumps(user))
+        config.insert_json5("transport/auth/usrpwd/password", json.dumps(password or ""))
     return config
 
 
@@ -58,6 +91,7 @@ def config_from_args(args: argparse.Namespace) -> zenoh.Config:
         args.listen if args.listen is not None else _env_list("SKINET_ZENOH_LISTEN"),
         args.zenoh_config,
         not args.no_multicast_scouting,
+        *login(args),
     )
 
 

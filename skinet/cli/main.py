@@ -22,6 +22,7 @@ from skinet.verify.ctl import Kripke, check
 from skinet.verify.explore import explore
 from skinet.verify.predict import Forecast, forecast
 from skinet.cli import demo
+from skinet.cli import operator as operator_cli
 from skinet.cli import record as record_cli
 from skinet.cli import timeline as timeline_cli
 from skinet.cli.render import analysis_text, seconds, table
@@ -43,6 +44,8 @@ examples:
   skinet ctl skillsets/spot_arm.toml "AG not (spot:Busy and manipulator:Busy)"
   skinet run skillsets/spot_arm.toml --listen tcp/127.0.0.1:7447
   skinet router --listen tcp/0.0.0.0:7447
+  skinet run skillsets/spot_arm.toml --dashboard 8080
+  skinet dashboard skillsets/spot_arm.toml --connect tcp/127.0.0.1:7447 --user observer
 
 state files (--state) are JSON: {"spot": {"resources": {"posture": "Standing"},
 "running": ["teleop"]}}; omitted resources are initial, omitted skills idle."""
@@ -108,6 +111,7 @@ def build_parser() -> argparse.ArgumentParser:
     record_cli.add_parser(sub)
     timeline_cli.add_parser(sub)
     add_service_commands(sub)
+    operator_cli.add_parsers(sub)
     return p
 
 

@@ -5,12 +5,16 @@ from __future__ import annotations
 import argparse
 import os
 
+from services.common.zenoh_config import add_login_args
+from skinet.errors import SkinetError
+
 
 def _zenoh_args(c: argparse.ArgumentParser, listen_help: str) -> None:
     c.add_argument("--listen", "-l", action="append", help=listen_help)
     c.add_argument("--connect", "-e", action="append", help="endpoint to connect to (repeatable)")
     c.add_argument("--zenoh-config", default=os.environ.get("SKINET_ZENOH_CONFIG"), help="JSON5 Zenoh configuration file")
     c.add_argument("--no-multicast-scouting", action="store_true", help="disable multicast scouting")
+    add_login_args(c)
 
 
 def add_commands(sub: argparse._SubParsersAction) -> None:
@@ -19,6 +23,12 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     c.add_argument("--once", action="store_true", help="print one view (after the first prediction) and exit")
     c.add_argument("--duration", type=float, help="stop after this many seconds")
     c.add_argument("--budget", type=float, default=1.0, help="prediction budget in seconds (default: 1)")
+    c.add_argument("--dashboard", type=int, metavar="PORT",
+                   help="also serve the live web dashboard on this port (0: a free one; see skinet dashboard)")
+    c.add_argument("--dashboard-host", default="127.0.0.1", help="address of --dashboard (default: 127.0.0.1)")
+    c.add_argument("--check-policy", default=os.environ.get("SKINET_CHECK_POLICY", "warn"),
+                   help="answers of skinet/<system>/check: warn (default), strict (deny explicit and forced) "
+                        "or KIND=ACTION,...")
     _zenoh_args(c, "endpoint on which a bridge in another process can connect, e.g. tcp/127.0.0.1:7447")
     c.set_defaults(func=cmd_run)
 
@@ -29,6 +39,12 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
 
 def cmd_run(args: argparse.Namespace) -> int:
     from services.embedded import run
+    from services.monitor.check import parse_policy
+
+    try:
+        parse_policy(args.check_policy)
+    except ValueError as exc:
+        raise SkinetError(f"--check-policy: {exc}") from None
 
     return run(args)
 

@@ -1,0 +1,85 @@
+"""The dashboard as a command: ``skinet dashboard SYSTEM`` and ``python -m services.dashboard``.
+
+Opens a Zenoh session (read-only observer), serves the page, warns when no
+monitor of the system shows up, and runs until ``stop`` is set.  Errors (port
+in use, no router, refused login, bad system file) are one line, exit 1.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import sys
+import threading
+from pathlib import Path
+
+from services.common.session import open_session
+from services.common.zenoh_config import config_from_args
+from services.dashboard.observer import Observer, monitored_systems
+from services.dashboard.server import Dashboard
+from skinet.errors import SkinetError, SourceError
+from skinet.files import load_system
+from skinet.system import System
+
+
+def add_dashboard_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("system", metavar="SYSTEM",
+                   help="system file (.toml, gives the name and the timeline's lanes) or system name")
+    p.add_argument("--host", default=os.environ.get("SKINET_DASHBOARD_HOST", "127.0.0.1"),
+                   help="address to serve on (default: $SKINET_DASHBOARD_HOST or 127.0.0.1; 0.0.0.0 exposes it)")
+    p.add_argument("--port", "-p", type=int, default=int(os.environ.get("SKINET_DASHBOARD_PORT", "8080")),
+                   help="TCP port (default: $SKINET_DASHBOARD_PORT or 8080; 0 picks a free one)")
+    p.add_argument("--wait", type=float, default=5.0,
+                   help="seconds before warning that no monitor of the system is alive (default: 5)")
+
+
+def resolve_system(spec: str) -> tuple[str, System | None]:
+    """(name, system) from a system file, or (name, None) from a bare name."""
+    if spec.endswith(".toml") or Path(spec).is_file():
+        system, _ = load_system(spec)
+        return system.name, system
+    return spec, None
+
+
+def serve(args: argparse.Namespace, stop: threading.Event, log: logging.Logger) -> int:
+    """Run the dashboard until ``stop``; returns the exit status."""
+    try:
+        name, system = resolve_system(args.system)
+        if not 0 <= args.port <= 65535:
+            raise SkinetError(f"--port {args.port}: not a TCP port (0-65535)")
+        session = open_session(config_from_args(args))
+    except SkinetError as exc:
+        print(str(exc) if isinstance(exc, SourceError) else f"skinet dashboard: error: {exc}", file=sys.stderr)
+        return 1
+    try:
+        observer = Observer(session, name, system)
+    except ValueError as exc:  # a name that cannot be a key chunk
+        session.close()
+        print(f"skinet dashboard: error: {exc}", file=sys.stderr)
+        return 1
+    dashboard = Dashboard(observer, args.host, args.port)
+    try:
+        dashboard.start()
+    except SkinetError as exc:
+        observer.close()
+        session.close()
+        print(f"skinet dashboard: error: {exc}", file=sys.stderr)
+        return 1
+    print(f"skinet dashboard: system {name} on {dashboard.url}", file=sys.stderr, flush=True)
+    try:
+        if not observer.wait_monitor(args.wait) and not stop.is_set():
+            log.warning("%s", no_monitor_message(session, name))
+        stop.wait()
+    finally:
+        dashboard.close()
+        observer.close()
+        session.close()
+    return 0
+
+
+def no_monitor_message(session, name: str) -> str:
+    """One line for a system the observer cannot find, naming the systems it can."""
+    others = monitored_systems(session)
+    seen = f"systems with a monitor: {', '.join(others)}" if others else "no monitor is reachable at all"
+    return f"no monitor of system '{name}' is alive ({seen}); waiting for one"

@@ -1,0 +1,199 @@
+"""What an operator view knows of one running system, from the monitor's messages (SPEC §7).
+
+:class:`Board` is fed the messages an observer receives on ``skinet/<system>/**``
+(no I/O here) and keeps: the last :class:`LiveState`, :class:`Verdicts`,
+:class:`UnsafeReport` and :class:`StateSpaceReport`; the model bundle; the live
+service instances (liveliness tokens); one :class:`StepRecord`-like point per
+monitor step for the timeline (paper Fig. 3/4); and the violations, each with
+the step and event where its property went from holding to failing.
+
+A monitor restart shows as a step counter going back: a new *epoch* starts, the
+timeline keeps the previous points.  Messages older than what is shown (a late
+reply to the start-up query) are ignored.  Every :meth:`Board.feed` returns the
+updates to send to views, as JSON-able dicts ``{"kind": ..., ...}``; applying
+them twice is harmless (points and violations carry their index).  Cost: O(1)
+per message, O(H) memory for H timeline points (bounded).
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from typing import Any
+
+from pydantic import BaseModel
+
+from skinet.errors import SkinetError
+from skinet.system import System
+from skinet.wire.convert import system_from_bundle
+from skinet.wire.messages import (
+    CanonicalEvent, LiveState, ModelBundle, StateSpaceReport, UnsafeReport, Verdicts,
+)
+
+Update = dict[str, Any]
+MAX_PENDING = 8  # verdicts and reports kept while their step's state is on its way
+
+
+class Board:
+    """The operator's picture of system ``system`` (not thread-safe)."""
+
+    def __init__(self, system: str, history: int = 5000, model: System | None = None):
+        self.system = system
+        self.lanes: dict[str, Any] = {} if model is None else lanes(model)
+        self.state: LiveState | None = None
+        self.verdicts: Verdicts | None = None
+        self.unsafe: UnsafeReport | None = None
+        self.state_space: StateSpaceReport | None = None
+        self.state_space_t: float | None = None  # receive time of the last report
+        self.model: ModelBundle | None = None
+        self.alive: dict[str, set[str]] = {}  # service -> instance ids
+        self.epoch = 0
+        self.points: deque[dict[str, Any]] = deque(maxlen=history)
+        self.violations: list[dict[str, Any]] = []
+        self.events = 0  # canonical events seen
+        self._index = 0  # points ever added (their "i")
+        self._last_seq = -1
+        self._holds: dict[str, bool] = {}
+        self._pending: list[tuple[Verdicts | UnsafeReport, bool]] = []
+
+    # -- feeding ------------------------------------------------------------------------
+
+    def feed(self, message: BaseModel, t: float, initial: bool = False) -> list[Update]:
+        """Take one message received at ``t``; ``initial``: a reply to the start-up query."""
+        if isinstance(message, LiveState):
+            return self._state(message, t, initial)
+        if isinstance(message, Verdicts):
+            return self._verdicts(message, initial)
+        if isinstance(message, UnsafeReport):
+            return self._unsafe(message, initial)
+        if isinstance(message, StateSpaceReport):
+            self.state_space, self.state_space_t = message, t
+            return [{"kind": "state_space", "message": _json(message), "t": t}]
+        if isinstance(message, ModelBundle):
+            if self.model is not None and self.model.digest == message.digest:
+                return []
+            self.model = message
+            try:
+                self.lanes = lanes(system_from_bundle(message))
+            except SkinetError:
+                pass  # keep the lanes we had: the page still shows what the messages say
+            return [{"kind": "model", "model": self._model_json()}]
+        if isinstance(message, CanonicalEvent):
+            self.events += 1
+            return []
+        return []
+
+    def token(self, key: str, alive: bool) -> list[Update]:
+        """A liveliness token ``skinet/<system>/alive/<service>/<id>`` appeared or vanished."""
+        parts = key.split("/")
+        if len(parts) != 5:
+            return []
+        service, instance = parts[3], parts[4]
+        ids = self.alive.setdefault(service, set())
+        if alive == (instance in ids):
+            return []
+        (ids.add if alive else ids.discard)(instance)
+        return [{"kind": "alive", "alive": self._alive_json()}]
+
+    def _state(self, msg: LiveState, t: float, initial: bool) -> list[Update]:
+        out: list[Update] = []
+        if self.state is not None and (msg.seq, msg.stamp) == (self.state.seq, self.state.stamp):
+            return []  # the same step again (the start-up query)
+        if msg.seq <= self._last_seq:
+            if initial:
+                return []  # an older copy than what is shown
+            self.epoch += 1
+            self.verdicts = self.unsafe = None
+            self._holds = {}
+            out.append({"kind": "restart", "epoch": self.epoch, "t": t})
+        self._last_seq = msg.seq
+        self.state = msg
+        point = {"i": self._index, "epoch": self.epoch, "seq": msg.seq, "t": msg.stamp, "event": msg.event,
+                 "divergence": msg.divergence,
+                 "skillsets": {k: v.model_dump() for k, v in msg.skillsets.items()},
+                 "holds": dict(self._holds), "unsafe": None, "literal": None}
+        self._index += 1
+        self.points.append(point)
+        out += [{"kind": "state", "message": _json(msg)}, {"kind": "point", "point": point}]
+        waiting, self._pending = self._pending, []
+        for message, was_initial in waiting:  # what arrived before its step's state
+            out += self.feed(message, t, was_initial)
+        return out
+
+    def _mine(self, msg: Verdicts | UnsafeReport, initial: bool) -> bool:
+        """Whether ``msg`` belongs to the shown step; one of a step not shown yet waits for it.
+
+        Verdicts carry their step's stamp; an UnsafeReport may be a later refresh of it."""
+        st = self.state
+        if st is not None and msg.seq == st.seq and (msg.stamp == st.stamp if isinstance(msg, Verdicts)
+                                                      else msg.stamp >= st.stamp):
+            return True
+        if st is None or msg.stamp > st.stamp:
+            self._pending = [*self._pending[-(MAX_PENDING - 1):], (msg, initial)]
+        return False
+
+    def _verdicts(self, msg: Verdicts, initial: bool) -> list[Update]:
+        if not self._mine(msg, initial) or (initial and self.verdicts is not None):
+            return []
+        self.verdicts = msg
+        out: list[Update] = [{"kind": "verdicts", "message": _json(msg)}]
+        now = {v.name: v.holds for v in msg.properties}
+        point = self._point(msg.seq)
+        for name, holds in now.items():
+            if self._holds.get(name, True) and not holds and not initial:
+                v = {"n": len(self.violations), "property": name, "seq": msg.seq, "epoch": self.epoch,
+                     "event": point["event"] if point else "", "t": point["t"] if point else msg.stamp}
+                self.violations.append(v)
+                out.append({"kind": "violation", "violation": v})
+        self._holds = now
+        if point is not None:
+            point["holds"] = dict(now)
+            out.append({"kind": "point", "point": point})
+        return out
+
+    def _unsafe(self, msg: UnsafeReport, initial: bool) -> list[Update]:
+        if not self._mine(msg, initial) or (initial and self.unsafe is not None and self.unsafe.stamp >= msg.stamp):
+            return []
+        self.unsafe = msg
+        out: list[Update] = [{"kind": "unsafe", "message": _json(msg)}]
+        point = self._point(msg.seq)
+        if point is not None:
+            point["unsafe"], point["literal"] = len(msg.unsafe), msg.literal_count
+            point["stale"] = msg.prediction_stale
+            out.append({"kind": "point", "point": point})
+        return out
+
+    def _point(self, seq: int) -> dict[str, Any] | None:
+        for point in reversed(self.points):
+            if point["epoch"] == self.epoch and point["seq"] == seq:
+                return point
+            if point["epoch"] != self.epoch or point["seq"] < seq:
+                return None
+        return None
+
+    # -- reading ------------------------------------------------------------------------
+
+    def _alive_json(self) -> dict[str, list[str]]:
+        return {s: sorted(ids) for s, ids in sorted(self.alive.items()) if ids}
+
+    def _model_json(self) -> dict[str, Any]:
+        return {"digest": None if self.model is None else self.model.digest, "lanes": self.lanes}
+
+    def snapshot(self) -> Update:
+        """Everything a new view needs, as one update."""
+        return {
+            "kind": "snapshot", "system": self.system, "epoch": self.epoch,
+            "state": _json(self.state), "verdicts": _json(self.verdicts), "unsafe": _json(self.unsafe),
+            "state_space": _json(self.state_space), "state_space_t": self.state_space_t,
+            "model": self._model_json(),
+            "alive": self._alive_json(), "points": list(self.points), "violations": list(self.violations),
+        }
+
+
+def lanes(system: System) -> dict[str, Any]:
+    """Per skillset, its resources with their states and its skills: the timeline's lanes."""
+    return {c.name: {"resources": {r.name: list(r.states) for r in c.skillset.resources},
+                     "skills": [k.name for k in c.skillset.skills]} for c in system.components}
+
+
+def _json(message: BaseModel | None) -> dict[str, Any] | None:
+    return None if message is None else message.model_dump(mode="json")

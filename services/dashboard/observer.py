@@ -1,0 +1,161 @@
+"""A read-only Zenoh observer of one system, feeding a :class:`Board` (SPEC §7).
+
+Subscribes to the monitor's four result keys and to the liveliness tokens of the
+system's services and of the predictors; when a monitor appears (at start, or
+after a restart) it fetches the model bundle and the last publications (the
+monitor answers ``get`` on its result keys), so a view opened mid-mission is
+complete at once.  It publishes nothing and declares nothing a read-only ACL
+role refuses.  Listeners get every update, called from Zenoh's threads with the
+observer's lock held: they must not block.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable
+
+import zenoh
+from pydantic import BaseModel
+
+from services.common.zenoh_config import undeclare
+from services.dashboard.board import Board, Update
+from skinet.system import System
+from skinet.wire import keys
+from skinet.wire.codec import DecodeError, decode, encode
+from skinet.wire.messages import CheckReply, ModelBundle, StateSpaceReport, UnsafeReport, Verdicts, LiveState
+
+Listener = Callable[[list[Update]], None]
+RESULTS: tuple[tuple[Callable[[str], str], type[BaseModel]], ...] = (
+    (keys.state, LiveState), (keys.verdicts, Verdicts), (keys.unsafe, UnsafeReport),
+    (keys.state_space, StateSpaceReport),
+)
+QUERY_TIMEOUT = 2.0
+
+
+def monitored_systems(session: zenoh.Session, timeout: float = 1.0) -> list[str]:
+    """Names of the systems whose monitor holds a liveliness token now."""
+    found = set()
+    for reply in session.liveliness().get(keys.alive("*", "monitor", "*"), timeout=timeout):
+        if reply.ok is not None:
+            found.add(str(reply.ok.key_expr).split("/")[1])
+    return sorted(found)
+
+
+class Observer:
+    """Follows ``system`` on ``session`` (which may be shared, e.g. ``skinet run``)."""
+
+    def __init__(self, session: zenoh.Session, system: str, model: System | None = None, history: int = 5000):
+        self.session = session
+        self.name = keys.check_chunk(system, "system name")
+        self.board = Board(self.name, history, model)
+        self.malformed = 0
+        self._lock = threading.Lock()
+        self._listeners: list[Listener] = []
+        self._resync = threading.Event()
+        self._closed = threading.Event()
+        self._monitor_seen = threading.Event()
+        self._subs = [session.declare_subscriber(key(self.name), self._on_sample(kind)) for key, kind in RESULTS]
+        live = session.liveliness()
+        self._tokens = [live.declare_subscriber(k, self._on_token, history=True)
+                        for k in (keys.alive(self.name, "*", "*"), keys.alive(keys.ANY_SYSTEM, "predictor", "*"))]
+        self._thread = threading.Thread(target=self._sync, name="skinet-observer-sync", daemon=True)
+        self._thread.start()
+        self._resync.set()
+
+    # -- public API ---------------------------------------------------------------------
+
+    def listen(self, listener: Listener) -> Update:
+        """Add ``listener`` and return the snapshot it starts from (atomically)."""
+        with self._lock:
+            self._listeners.append(listener)
+            return self.board.snapshot()
+
+    def unlisten(self, listener: Listener) -> None:
+        with self._lock:
+            if listener in self._listeners:
+                self._listeners.remove(listener)
+
+    def snapshot(self) -> Update:
+        with self._lock:
+            return self.board.snapshot()
+
+    def read(self, fn: Callable[[Board], object]) -> object:
+        """``fn(board)`` under the lock (consistent reads for terminal views)."""
+        with self._lock:
+            return fn(self.board)
+
+    def wait_monitor(self, timeout: float) -> bool:
+        """Whether a monitor of the system is (or becomes) alive within ``timeout`` seconds."""
+        return self._monitor_seen.wait(timeout)
+
+    def check(self, command: str, timeout: float = QUERY_TIMEOUT) -> CheckReply:
+        """Ask the monitor's command check; raises :class:`LookupError` when no monitor answers."""
+        from services.monitor.check import parse_command
+
+        request = parse_command(command)
+        for reply in self.session.get(keys.check(self.name), payload=encode(request), timeout=timeout):
+            if reply.ok is not None:
+                return decode(reply.ok.payload.to_bytes(), CheckReply)
+        raise LookupError(f"no monitor of system '{self.name}' answered on {keys.check(self.name)}")
+
+    def close(self) -> None:
+        self._closed.set()
+        self._resync.set()
+        undeclare(*self._subs, *self._tokens)
+        self._thread.join(timeout=QUERY_TIMEOUT + 1)
+
+    # -- Zenoh callbacks ----------------------------------------------------------------
+
+    def _on_sample(self, kind: type[BaseModel]) -> Callable[[zenoh.Sample], None]:
+        def on_sample(sample: zenoh.Sample) -> None:
+            if sample.kind == zenoh.SampleKind.PUT:
+                self._take(sample.payload.to_bytes(), kind, False)
+        return on_sample
+
+    def _take(self, payload: bytes, kind: type[BaseModel], initial: bool) -> None:
+        try:
+            message = decode(payload, kind)
+        except DecodeError:
+            with self._lock:
+                self.malformed += 1
+            return
+        with self._lock:
+            if message.system != self.name:  # type: ignore[attr-defined]
+                self.malformed += 1
+                return
+            self._emit(self.board.feed(message, time.time(), initial))
+
+    def _on_token(self, sample: zenoh.Sample) -> None:
+        key, alive = str(sample.key_expr), sample.kind == zenoh.SampleKind.PUT
+        with self._lock:
+            self._emit(self.board.token(key, alive))
+        if alive and key.split("/")[1:4:2] == [self.name, "monitor"]:
+            self._monitor_seen.set()
+            self._resync.set()
+
+    def _emit(self, updates: list[Update]) -> None:
+        if updates:
+            for listener in list(self._listeners):
+                listener(updates)
+
+    # -- start-up and resynchronisation -------------------------------------------------
+
+    def _sync(self) -> None:
+        """Fetch the model and the last publications whenever a monitor (re)appears."""
+        while True:
+            self._resync.wait()
+            self._resync.clear()
+            if self._closed.is_set():
+                return
+            try:
+                self._fetch(keys.model(self.name), ModelBundle)
+                for key, kind in RESULTS:
+                    self._fetch(key(self.name), kind)
+            except zenoh.ZError:
+                return  # session closed under us
+
+    def _fetch(self, key: str, kind: type[BaseModel]) -> None:
+        for reply in self.session.get(key, timeout=QUERY_TIMEOUT):
+            if reply.ok is not None and not self._closed.is_set():
+                self._take(reply.ok.payload.to_bytes(), kind, True)

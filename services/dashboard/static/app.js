@@ -1,0 +1,358 @@
+// SkiNet Live dashboard: applies the server's updates (Server-Sent Events) and draws the page.
+// Written for this project; no library.  The server sends a snapshot, then updates
+// (see services/dashboard/board.py); EventSource reconnects by itself.
+"use strict";
+
+const view = {
+  system: "", epoch: 0, state: null, verdicts: null, unsafe: null, stateSpace: null, stateSpaceT: null,
+  model: { digest: null, lanes: {} }, alive: {}, points: [], violations: [], restarts: [],
+  connected: false, lastMessage: null,
+};
+const NS = "http://www.w3.org/2000/svg";
+const COLOURS = ["#1f77b4", "#ff7f0e", "#2ca02c", "#9467bd", "#8c564b", "#e377c2", "#17becf", "#bcbd22"];
+const FILLS = ["#dce8f5", "#fde3c4", "#d5eed5", "#eadcf0", "#eee2d6", "#d9eff2", "#f4f1c9"];
+let pending = false;
+
+function el(tag, attrs, ...children) {
+  const node = document.createElement(tag);
+  for (const [k, v] of Object.entries(attrs || {})) {
+    if (v === null || v === undefined) continue;
+    if (k === "class") node.className = v; else node.setAttribute(k, v);
+  }
+  for (const c of children) node.append(c instanceof Node ? c : document.createTextNode(String(c)));
+  return node;
+}
+
+function svg(tag, attrs, text) {
+  const node = document.createElementNS(NS, tag);
+  for (const [k, v] of Object.entries(attrs || {})) node.setAttribute(k, v);
+  if (text !== undefined) node.textContent = text;
+  return node;
+}
+
+function fill(id, ...children) {
+  const node = document.getElementById(id);
+  node.replaceChildren(...children);
+  return node;
+}
+
+function clock(t) {
+  return t ? new Date(t * 1000).toLocaleTimeString([], { hour12: false }) : "-";
+}
+
+function ago(t) {
+  if (!t) return "never";
+  const s = Math.max(0, Date.now() / 1000 - t);
+  return s < 60 ? `${s.toFixed(0)} s ago` : `${(s / 60).toFixed(0)} min ago`;
+}
+
+// -- updates ------------------------------------------------------------------------
+
+function apply(u) {
+  switch (u.kind) {
+    case "snapshot":
+      view.system = u.system; view.epoch = u.epoch; view.state = u.state; view.verdicts = u.verdicts;
+      view.unsafe = u.unsafe; view.stateSpace = u.state_space; view.stateSpaceT = u.state_space_t;
+      view.model = u.model; view.alive = u.alive; view.points = u.points; view.violations = u.violations;
+      view.lastPointAt = Date.now() / 1000;
+      break;
+    case "state": view.state = u.message; break;
+    case "verdicts": view.verdicts = u.message; break;
+    case "unsafe": view.unsafe = u.message; break;
+    case "state_space": view.stateSpace = u.message; view.stateSpaceT = u.t; break;
+    case "model": view.model = u.model; break;
+    case "alive": view.alive = u.alive; break;
+    case "restart": view.epoch = u.epoch; view.verdicts = null; view.unsafe = null; break;
+    case "violation": view.violations[u.violation.n] = u.violation; break;
+    case "point": {
+      const pts = view.points, p = u.point;
+      let k = pts.length - 1;
+      while (k >= 0 && pts[k].i > p.i) k--;
+      if (k >= 0 && pts[k].i === p.i) pts[k] = p; else pts.splice(k + 1, 0, p);
+      if (pts.length > 5000) pts.splice(0, pts.length - 5000);
+      view.lastPointAt = Date.now() / 1000;
+      break;
+    }
+  }
+  view.lastMessage = Date.now() / 1000;
+}
+
+function schedule() {
+  if (!pending) { pending = true; requestAnimationFrame(() => { pending = false; render(); }); }
+}
+
+// -- panels -------------------------------------------------------------------------
+
+function render() {
+  document.body.dataset.seq = view.state ? view.state.seq : -1;
+  document.body.dataset.epoch = view.epoch;
+  document.getElementById("system").textContent = view.system;
+  document.title = `SkiNet Live: ${view.system}`;
+  renderHeader();
+  renderSkillsets();
+  renderProperties();
+  renderUnsafe();
+  renderSpace();
+  renderViolations();
+  renderTimeline();
+}
+
+function renderHeader() {
+  const st = document.getElementById("status");
+  st.dataset.connected = view.connected;
+  st.textContent = view.connected ? "live" : "disconnected, reconnecting\u2026";
+  const services = [["monitor", "monitor"], ["bridge_ros2", "bridge"], ["predictor", "predictors"]].map(([s, label]) => {
+    const ids = view.alive[s] || [];
+    return el("span", { class: "service " + (ids.length ? "up" : "down"), "data-service": s, "data-alive": ids.length,
+      title: ids.join(", ") || "none alive" }, `${label}: ${ids.length ? (s === "predictor" ? ids.length : "up") : "none"}`);
+  });
+  fill("services", ...services);
+  const s = view.state;
+  fill("step", s ? `step ${s.seq} \u00b7 ${s.event || "start"} \u00b7 ${clock(s.stamp)}` : "no monitor message yet");
+  const div = document.getElementById("divergence");
+  div.hidden = !(s && s.divergence);
+  div.textContent = s && s.divergence ? `MODEL DIVERGENCE at step ${s.seq}: ${s.divergence}` : "";
+  const notice = document.getElementById("notice");
+  const noMonitor = !(view.alive.monitor || []).length;
+  notice.hidden = !noMonitor;
+  notice.textContent = noMonitor ? `No monitor of system '${view.system}' is alive on the network: waiting for one`
+    + (view.state ? " (showing the last messages received)." : ".") : "";
+}
+
+function renderSkillsets() {
+  const s = view.state;
+  if (!s) { fill("skillsets", el("p", { class: "muted" }, "waiting for the monitor\u2026")); return; }
+  const cards = Object.entries(s.skillsets).map(([name, ss]) => {
+    const rows = Object.entries(ss.resources).map(([r, v]) => el("tr", {}, el("td", {}, r), el("td", { class: "state" }, v)));
+    const running = ss.running.length
+      ? ss.running.map((k) => el("span", { class: "skill", "data-skill": k }, k))
+      : [el("span", { class: "muted" }, "no skill running")];
+    return el("div", { class: "card", "data-skillset": name }, el("h3", {}, name),
+      el("table", {}, el("tbody", {}, ...rows)), el("div", { class: "running" }, "running: ", ...running));
+  });
+  fill("skillsets", ...cards);
+}
+
+function renderProperties() {
+  const v = view.verdicts, u = view.unsafe;
+  const rows = (v ? v.properties : []).map((p) => {
+    const rec = u ? u.recovery.filter((r) => r.property === p.name)
+      .map((r) => `${r.skillset}:${r.transition}${r.controllable ? "" : " (event)"}`) : [];
+    return el("tr", { "data-property": p.name, "data-holds": p.holds, class: p.holds ? "holds" : "violated" },
+      el("td", {}, p.name), el("td", {}, p.holds ? "holds" : "VIOLATED"),
+      el("td", {}, p.holds ? "" : (rec.join(", ") || "none")));
+  });
+  fill("properties", el("thead", {}, el("tr", {}, el("th", {}, "property"), el("th", {}, "status"), el("th", {}, "recovery"))),
+    el("tbody", {}, ...rows));
+}
+
+function renderUnsafe() {
+  const u = view.unsafe;
+  document.getElementById("unsafe-count").textContent = u ? `(${u.unsafe.length}; literal algorithm ${u.literal_count})` : "";
+  const p = document.getElementById("prediction");
+  p.className = u && !u.prediction_stale ? "fresh" : "stale";
+  p.textContent = !u ? "" : (u.prediction_stale
+    ? "prediction STALE: explicit constraints only (no predictor answer for this marking yet)"
+    : `prediction fresh for step ${u.seq}`) + ` \u00b7 last state-space report ${ago(view.stateSpaceT)}`;
+  if (!u) { fill("unsafe"); return; }
+  if (!u.unsafe.length) { fill("unsafe", el("p", { class: "muted" }, "no unsafe transition at this marking")); return; }
+  const groups = {};
+  for (const e of u.unsafe) (groups[e.skillset] = groups[e.skillset] || []).push(e);
+  const blocks = Object.entries(groups).map(([ss, entries]) => {
+    const rows = entries.map((e) => el("tr", { "data-skillset": e.skillset, "data-transition": e.transition,
+      "data-property": e.property, "data-constraint": e.constraint },
+      el("td", { class: "mono" }, e.transition), el("td", {}, e.property),
+      el("td", {}, el("span", { class: `kind kind-${e.constraint}` }, e.constraint)),
+      el("td", {}, e.controllable ? "command" : "uncontrollable"),
+      el("td", { class: "num" }, e.steps === null ? "-" : e.steps),
+      el("td", { class: "mono witness" }, e.witness.length ? e.witness.join(" \u2192 ") : "")));
+    return el("div", { class: "group", "data-skillset": ss }, el("h3", {}, ss),
+      el("table", {}, el("thead", {}, el("tr", {}, ...["transition", "property", "kind", "control", "steps", "witness"]
+        .map((h) => el("th", {}, h)))), el("tbody", {}, ...rows)));
+  });
+  fill("unsafe", ...blocks);
+}
+
+function renderSpace() {
+  const r = view.stateSpace;
+  const rows = r ? [["time", r.time < 1 ? `${(r.time * 1000).toFixed(2)} ms` : `${r.time.toFixed(2)} s`],
+    ["complete", r.timeout_reached ? "no (budget reached)" : "yes"], ["depth", r.depth],
+    ["markings", r.markings], ["edges", r.edges], ["received", ago(view.stateSpaceT)]] : [["report", "none yet"]];
+  fill("state-space", el("tbody", {}, ...rows.map(([k, v]) => el("tr", { "data-field": k }, el("th", {}, k), el("td", {}, v)))));
+}
+
+function renderViolations() {
+  const vs = view.violations.filter(Boolean);
+  document.getElementById("violation-count").textContent = `(${vs.length})`;
+  const items = vs.map((v) => el("li", { "data-property": v.property, "data-seq": v.seq, "data-event": v.event,
+    "data-epoch": v.epoch }, el("strong", {}, v.property), ` violated at monitor step ${v.seq}`,
+    v.event ? ` by ${v.event}` : "", ` (${clock(v.t)})`));
+  fill("violations", ...(items.length ? items : [el("li", { class: "muted none" }, "none")]));
+}
+
+// -- timeline (paper Fig. 3/4: lanes per resource, skill and property; unsafe count below) --
+
+function lanesOf() {
+  const lanes = view.model && view.model.lanes && Object.keys(view.model.lanes).length ? view.model.lanes : {};
+  if (Object.keys(lanes).length) return lanes;
+  const out = {};
+  for (const p of view.points) {
+    for (const [ss, s] of Object.entries(p.skillsets)) {
+      const o = out[ss] = out[ss] || { resources: {}, skills: [] };
+      for (const [r, v] of Object.entries(s.resources)) {
+        const states = o.resources[r] = o.resources[r] || [];
+        if (!states.includes(v)) states.push(v);
+      }
+      for (const k of s.running) if (!o.skills.includes(k)) o.skills.push(k);
+    }
+  }
+  return out;
+}
+
+function renderTimeline() {
+  const box = document.getElementById("timeline");
+  const pts = view.points;
+  const lanes = lanesOf();
+  const props = view.verdicts ? view.verdicts.properties.map((p) => p.name)
+    : [...new Set(pts.flatMap((p) => Object.keys(p.holds)))];
+  const rows = [];
+  Object.entries(lanes).forEach(([ss, l], n) => {
+    for (const [r, states] of Object.entries(l.resources)) rows.push({ type: "resource", ss, name: r, states, n });
+    for (const k of l.skills) rows.push({ type: "skill", ss, name: k, n });
+  });
+  for (const p of props) rows.push({ type: "property", name: p });
+  const laneH = 20, left = 190, right = 20, top = 52, chartH = 90;
+  const width = Math.max(600, box.parentNode.clientWidth - 4);
+  const height = top + rows.length * laneH + 20 + chartH + 30;
+  box.setAttribute("width", width); box.setAttribute("height", height);
+  box.replaceChildren();
+  if (!pts.length) { box.append(svg("text", { x: 10, y: 20, class: "muted" }, "no step yet")); return; }
+  // The right edge is now, measured on the browser's clock from the last step's arrival (no clock skew).
+  const t0 = pts[0].t, tEnd = pts[pts.length - 1].t + Math.max(0, Date.now() / 1000 - (view.lastPointAt || 0));
+  const span = Math.max(1, tEnd - t0);
+  const x = (t) => left + (width - left - right) * (t - t0) / span;
+  const y = (i) => top + i * laneH;
+  rows.forEach((row, i) => {
+    box.append(svg("text", { x: left - 6, y: y(i) + 14, class: "lane-label", "text-anchor": "end" },
+      row.type === "property" ? `property ${row.name}` : `${row.ss}.${row.name}`));
+    box.append(svg("line", { x1: left, x2: width - right, y1: y(i) + laneH, y2: y(i) + laneH, class: "lane-line" }));
+  });
+  // One shape per run of equal values (a long mission stays a few hundred shapes).
+  const end = (k) => (k + 1 < pts.length ? x(pts[k + 1].t) : x(tEnd));
+  rows.forEach((row, i) => {
+    const value = (p) => {
+      const ss = row.type === "property" ? null : p.skillsets[row.ss];
+      if (row.type === "resource") return ss ? ss.resources[row.name] : undefined;
+      if (row.type === "skill") return ss ? ss.running.includes(row.name) : undefined;
+      return p.holds[row.name];
+    };
+    let k = 0;
+    while (k < pts.length) {
+      const v = value(pts[k]);
+      let j = k;
+      while (j + 1 < pts.length && value(pts[j + 1]) === v && pts[j + 1].epoch === pts[k].epoch) j++;
+      const x0 = x(pts[k].t), w = Math.max(1, end(j) - x0);
+      if (row.type === "resource" && v !== undefined) {
+        const idx = Math.max(0, row.states.indexOf(v));
+        const rect = svg("rect", { x: x0, y: y(i) + 2, width: w, height: laneH - 4, fill: FILLS[idx % FILLS.length] });
+        rect.append(svg("title", {}, `${row.ss}.${row.name} = ${v} (steps ${pts[k].seq}-${pts[j].seq})`));
+        box.append(rect);
+        if (w > 8) box.append(svg("text", { x: x0 + 2, y: y(i) + 14, class: "state-label" }, v));
+      } else if (row.type === "skill" && v === true) {
+        box.append(svg("rect", { x: x0, y: y(i) + 4, width: w, height: laneH - 8, fill: COLOURS[row.n % COLOURS.length],
+          class: "skill-bar" }));
+      } else if (row.type === "property" && v !== undefined) {
+        box.append(svg("rect", { x: x0, y: y(i) + 2, width: w, height: laneH - 4, class: v ? "holds-bar" : "violated-bar" }));
+      }
+      k = j + 1;
+    }
+  });
+  // Unsafe transitions per step (operator view, literal algorithm dashed).
+  const cTop = y(rows.length) + 20, maxU = Math.max(1, ...pts.map((p) => Math.max(p.unsafe || 0, p.literal || 0)));
+  const cy = (n) => cTop + chartH - chartH * n / maxU;
+  box.append(svg("text", { x: left - 6, y: cTop + chartH / 2, class: "lane-label", "text-anchor": "end" }, "unsafe transitions"));
+  box.append(svg("line", { x1: left, x2: width - right, y1: cTop + chartH, y2: cTop + chartH, class: "axis" }));
+  box.append(svg("text", { x: left - 6, y: cTop + 8, class: "tick", "text-anchor": "end" }, String(maxU)));
+  for (const [field, cls] of [["literal", "literal-line"], ["unsafe", "unsafe-line"]]) {
+    let d = "";
+    pts.forEach((p, k) => {
+      if (p[field] === null || p[field] === undefined) return;
+      const x1 = k + 1 < pts.length ? x(pts[k + 1].t) : x(tEnd);
+      d += `${d ? "L" : "M"}${x(p.t).toFixed(1)},${cy(p[field]).toFixed(1)}L${x1.toFixed(1)},${cy(p[field]).toFixed(1)}`;
+    });
+    if (d) box.append(svg("path", { d, class: cls }));
+  }
+  // Events along the top, violations and monitor restarts as vertical lines.
+  for (const p of pts) {
+    if (!p.event) continue;
+    const tick = svg("line", { x1: x(p.t), x2: x(p.t), y1: top - 8, y2: top - 2, class: "event-tick" });
+    tick.append(svg("title", {}, `step ${p.seq}: ${p.event}`));
+    box.append(tick);
+  }
+  view.violations.filter(Boolean).forEach((v, n) => {  // labels on three staggered rows
+    const vx = x(v.t), ly = 12 + (n % 3) * 11;
+    box.append(svg("line", { x1: vx, x2: vx, y1: ly + 2, y2: cTop + chartH, class: "violation-line" }));
+    box.append(svg("text", { x: vx + 3, y: ly, class: "violation-label" }, `${v.property} (step ${v.seq})`));
+  });
+  for (let k = 1; k < pts.length; k++) {
+    if (pts[k].epoch !== pts[k - 1].epoch) {
+      const rx = x(pts[k].t);
+      box.append(svg("line", { x1: rx, x2: rx, y1: top, y2: cTop + chartH, class: "restart-line" }));
+      box.append(svg("text", { x: rx + 3, y: cTop + chartH + 14, class: "tick" }, "monitor restarted"));
+    }
+  }
+  box.append(svg("text", { x: left, y: height - 6, class: "tick" }, clock(t0)));
+  box.append(svg("text", { x: width - right, y: height - 6, class: "tick", "text-anchor": "end" },
+    `${clock(tEnd)} (${span.toFixed(0)} s)`));
+}
+
+// -- command check ------------------------------------------------------------------
+
+async function check(event) {
+  event.preventDefault();
+  const command = document.getElementById("check-command").value.trim();
+  const out = document.getElementById("check-result");
+  out.textContent = "asking the monitor\u2026";
+  try {
+    const r = await (await fetch(`/api/check?command=${encodeURIComponent(command)}`)).json();
+    if (!r.ok) {
+      out.replaceChildren(el("p", { class: "error" }, r.error),
+        r.candidates && r.candidates.length ? el("p", {}, "did you mean: " + r.candidates.join(", ")) : "");
+      return;
+    }
+    const reasons = r.reasons.map((x) => el("li", {}, `${x.property}: ${x.constraint} (${x.action})`,
+      x.steps ? `, within ${x.steps} steps` : "", x.witness.length ? ` via ${x.witness.join(" \u2192 ")}` : ""));
+    out.replaceChildren(el("p", { class: `decision decision-${r.decision}`, "data-decision": r.decision },
+      `${r.skillset}:${r.transition}: ${r.decision.toUpperCase()}`, r.enabled ? "" : " (not firable now)"),
+      el("ul", {}, ...reasons));
+  } catch (e) {
+    out.textContent = `check failed: ${e}`;
+  }
+}
+
+function updateNames() {
+  const lanes = lanesOf(), list = document.getElementById("check-names");
+  const names = [];
+  for (const e of (view.unsafe ? view.unsafe.unsafe : [])) names.push(`${e.skillset}:${e.transition}`);
+  for (const [ss, l] of Object.entries(lanes)) for (const k of l.skills) names.push(`${ss}:${k}.start`);
+  list.replaceChildren(...[...new Set(names)].map((n) => el("option", { value: n })));
+}
+
+// -- connection ---------------------------------------------------------------------
+
+function connect() {
+  const source = new EventSource("/events");
+  source.onopen = () => { view.connected = true; schedule(); };
+  source.onerror = () => { view.connected = false; schedule(); };  // EventSource retries by itself
+  source.onmessage = (m) => {
+    const u = JSON.parse(m.data);
+    apply(u);
+    if (u.kind === "snapshot" || u.kind === "model") updateNames();
+    schedule();
+  };
+}
+
+document.getElementById("check-form").addEventListener("submit", check);
+window.addEventListener("resize", schedule);
+setInterval(schedule, 1000);  // ages and the timeline's right edge move on
+connect();

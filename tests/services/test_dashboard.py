@@ -1,0 +1,293 @@
+"""The live web dashboard in a real browser (SPEC §7; MISSION.md acceptance on the page).
+
+Headless Chromium from Debian's packages (``chromium``, ``chromium-driver``;
+``scripts/install-test-deps.sh`` installs them) driven by selenium.  The
+dashboard runs as its own process (``python -m services.dashboard``), a client
+of a loopback router; the mission is played by the simulated managers through
+the bridge, the monitor and a predictor on another client session.  After each
+step of a run the page must show what the operator would see then.
+Screenshots go to the test's temporary folder (and ``$SKINET_SCREENSHOTS`` when
+set).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import socket
+import time
+import urllib.request
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import pytest
+import zenoh
+
+from services.chain import run_chain
+from services.dashboard.board import Board
+from services.monitor import start_monitor
+from skinet.files import load_system, load_typemap, read_text
+from skinet.mission import StepRecord, parse_scenario
+from skinet.wire.messages import LiveState, PropertyVerdict, UnsafeReport, Verdicts
+from tests.services.conftest import REPO, client_args, free_port, open_client, open_router
+from tests.services.test_monitor import Events
+
+SYSTEM_FILE = REPO / "skillsets" / "spot_arm.toml"
+MISSIONS = REPO / "skillsets" / "missions"
+CHROMIUM, DRIVER = shutil.which("chromium"), shutil.which("chromedriver")
+# MISSION.md in `skinet demo` numbering: (property, step, the step's command).
+VIOLATIONS = [("action_guard", 26, "spot:teleop.start"), ("safety_guard", 33, "spot:go_to_waypoint.start"),
+              ("action_guard", 38, "manipulator:arm_ready.start")]
+WARNINGS = [(29, "spot", "go_to_waypoint.start", "safety_guard"), (37, "manipulator", "arm_ready.start", "action_guard")]
+
+
+# -- fixtures -----------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def browser() -> Iterator[object]:
+    """Headless Chromium; skipped with the reason when Chromium or selenium is missing."""
+    if CHROMIUM is None or DRIVER is None:
+        pytest.skip("Chromium is not installed (Debian packages chromium and chromium-driver; "
+                    "scripts/install-test-deps.sh installs them)")
+    webdriver = pytest.importorskip("selenium.webdriver", reason="selenium is not installed (pip install -e '.[test]')")
+    from selenium.webdriver.chrome.options import Options
+    from selenium.webdriver.chrome.service import Service
+
+    options = Options()
+    options.binary_location = CHROMIUM
+    for flag in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage",
+                 "--window-size=1500,1900", "--no-first-run", "--disable-extensions"):
+        options.add_argument(flag)
+    driver = webdriver.Chrome(service=Service(DRIVER), options=options)
+    driver.set_page_load_timeout(20)
+    try:
+        yield driver
+    finally:
+        driver.quit()
+
+
+def wait_http(url: str, timeout: float = 15.0) -> None:
+    deadline = time.monotonic() + timeout
+    while True:
+        try:
+            with urllib.request.urlopen(url, timeout=1) as r:
+                if r.status == 200:
+                    return
+        except OSError:
+            pass
+        if time.monotonic() > deadline:
+            pytest.fail(f"{url} did not answer within {timeout} s")
+        time.sleep(0.1)
+
+
+@pytest.fixture
+def dashboard(spawn: Callable, router: str) -> Callable[..., str]:
+    """Starts ``python -m services.dashboard`` on a free port; returns its URL."""
+    def start(*extra: str, port: int | None = None) -> str:
+        port = port or free_port()
+        spawn("services.dashboard", str(SYSTEM_FILE), "--port", str(port), "--wait", "1", *client_args(router), *extra)
+        url = f"http://127.0.0.1:{port}/"
+        wait_http(url + "api/snapshot")
+        return url
+    return start
+
+
+def until(driver, predicate: Callable[[object], object], what: str, timeout: float = 10.0) -> object:
+    from selenium.common.exceptions import TimeoutException
+    from selenium.webdriver.support.ui import WebDriverWait
+
+    try:
+        return WebDriverWait(driver, timeout, poll_frequency=0.02).until(predicate)
+    except TimeoutException:
+        pytest.fail(f"the page never showed {what}")
+
+
+def css(driver, selector: str) -> list[dict[str, str]]:
+    """The elements matching ``selector``: their attributes and ``text``, read in one script
+    (the page redraws its panels, so element handles go stale)."""
+    return driver.execute_script(
+        "return [...document.querySelectorAll(arguments[0])].map((e) => Object.assign("
+        "Object.fromEntries([...e.attributes].map((a) => [a.name, a.value])), {text: e.textContent}))", selector)
+
+
+def screenshot(driver, tmp_path: Path, name: str) -> Path:
+    path = tmp_path / name
+    driver.save_screenshot(str(path))
+    if os.environ.get("SKINET_SCREENSHOTS"):
+        folder = Path(os.environ["SKINET_SCREENSHOTS"])
+        folder.mkdir(parents=True, exist_ok=True)
+        shutil.copy(path, folder / name)
+    print(f"screenshot: {path}")
+    return path
+
+
+def play(run: str, router: str, on_record: Callable[[StepRecord], None]) -> list[StepRecord]:
+    """The mission ``run`` through simulator, bridge, monitor and predictor on a client of ``router``."""
+    path = MISSIONS / f"{run}.toml"
+    scenario = parse_scenario(read_text(path), str(path))
+    system, _ = load_system(SYSTEM_FILE)
+    session = open_client(router)
+    try:
+        return run_chain(system, load_typemap(SYSTEM_FILE), scenario, session=session, on_record=on_record)
+    finally:
+        session.close()
+
+
+# -- the paper's mission on the page -----------------------------------------------------
+
+
+def test_unassisted_run_shows_the_three_violations_at_their_steps(browser, dashboard, router, tmp_path) -> None:
+    browser.get(dashboard())
+    until(browser, lambda d: css(d, "#status[data-connected=true]"), "the live status")
+    shown: list[tuple[str, int, str]] = []
+
+    def after(record: StepRecord) -> None:
+        expected = [v for v in VIOLATIONS if v[1] <= record.index]
+        until(browser, lambda d: len(css(d, "#violations li[data-property]")) == len(expected),
+              f"{len(expected)} violation(s) after step {record.index}")
+        if record.violations:
+            items = css(browser, "#violations li[data-property]")
+            prop, event = items[-1]["data-property"], items[-1]["data-event"]
+            shown.append((prop, record.index, event.split("#")[0]))
+            row = css(browser, f"#properties tr[data-property={prop}]")[0]
+            assert row["data-holds"] == "false" and "VIOLATED" in row["text"]
+        if record.index == VIOLATIONS[-1][1] + 2:
+            screenshot(browser, tmp_path, "dashboard-unassisted.png")
+
+    records = play("unassisted", router, after)
+    assert shown == VIOLATIONS
+    assert [(p, r.index) for r in records for p in r.violations] == [(p, i) for p, i, _ in VIOLATIONS]
+    # The timeline shows the three onsets; the step counter is the monitor's last step.
+    labels = [e["text"] for e in css(browser, "#timeline .violation-label")]
+    assert [label.split(" ")[0] for label in labels] == [p for p, _, _ in VIOLATIONS]
+    assert css(browser, "#timeline .skill-bar") and css(browser, "#timeline .violated-bar")
+    assert "fresh" in css(browser, "#prediction")[0]["text"]
+    assert css(browser, "#state-space tr[data-field=markings] td")[0]["text"].isdigit()
+
+
+def test_assisted_run_shows_the_two_warnings_before_the_commands(browser, dashboard, router, tmp_path) -> None:
+    browser.get(dashboard())
+    until(browser, lambda d: css(d, "#status[data-connected=true]"), "the live status")
+    seen: list[tuple[int, str, str, str, str]] = []
+
+    def after(record: StepRecord) -> None:
+        for index, skillset, transition, prop in WARNINGS:
+            if record.index != index:
+                continue
+            selector = (f"#unsafe .group[data-skillset={skillset}] tr[data-transition='{transition}']"
+                        f"[data-property={prop}]")
+            rows = until(browser, lambda d: css(d, selector), f"the warning on {skillset}:{transition} at step {index}")
+            seen.append((index, skillset, transition, prop, rows[0]["data-constraint"]))
+            assert "explicit" in rows[0]["text"] and "command" in rows[0]["text"]
+            if index == WARNINGS[0][0]:
+                screenshot(browser, tmp_path, "dashboard-assisted-warning.png")
+
+    records = play("assisted", router, after)
+    assert seen == [(i, s, t, p, "explicit") for i, s, t, p in WARNINGS]
+    assert [w.property for r in records for w in r.warnings] == [p for *_, p in WARNINGS]
+    assert css(browser, "#violations li.none") and not css(browser, "#violations li[data-property]")
+
+
+# -- reconnection, late joining, bad input ----------------------------------------------------
+
+
+def test_page_follows_monitor_and_router_restarts_and_its_own_server_restart(browser, dashboard, spawn, tmp_path):
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    router = open_router(endpoint)
+    system, _ = load_system(SYSTEM_FILE)
+    session = open_client(endpoint)
+    monitor = start_monitor(session, system)
+    events = Events(session)
+    events.send("spot", "init_power.start")
+    port = free_port()
+    proc = spawn("services.dashboard", str(SYSTEM_FILE), "--port", str(port), *client_args(endpoint))
+    url = f"http://127.0.0.1:{port}/"
+    wait_http(url + "api/snapshot")
+    try:
+        browser.get(url)  # joined late: the monitor's last step is shown at once
+        until(browser, lambda d: css(d, "body")[0]["data-seq"] == "1", "step 1")
+        until(browser, lambda d: css(d, "#services [data-service=monitor][data-alive='1']"), "the monitor alive")
+
+        monitor.close()  # monitor restart: a new epoch starting at step 0
+        until(browser, lambda d: css(d, "#services [data-service=monitor][data-alive='0']"), "the monitor gone")
+        assert "hidden" not in css(browser, "#notice")[0]
+        monitor = start_monitor(session, system)
+        until(browser, lambda d: css(d, "body")[0]["data-epoch"] == "1", "epoch 1")
+        until(browser, lambda d: css(d, "#services [data-service=monitor][data-alive='1']"), "the monitor back")
+
+        router.close()  # router restart: both Zenoh clients reconnect by themselves
+        until(browser, lambda d: css(d, "#services [data-service=monitor][data-alive='0']"), "the link lost", 15)
+        router = open_router(endpoint)
+        until(browser, lambda d: css(d, "#services [data-service=monitor][data-alive='1']"), "the link back", 20)
+        events.send("spot", "init_power.success.powered_on")
+        until(browser, lambda d: "init_power.success.powered_on" in css(d, "#step")[0]["text"], "the next event", 10)
+
+        proc.terminate()  # the dashboard's own restart: EventSource reconnects to a fresh snapshot
+        proc.wait(10)
+        until(browser, lambda d: css(d, "#status[data-connected=false]"), "the lost connection")
+        spawn("services.dashboard", str(SYSTEM_FILE), "--port", str(port), *client_args(endpoint))
+        until(browser, lambda d: css(d, "#status[data-connected=true]"), "the connection back", 20)
+        until(browser, lambda d: "init_power.success.powered_on" in css(d, "#step")[0]["text"], "the last step again")
+        screenshot(browser, tmp_path, "dashboard-restarts.png")
+    finally:
+        monitor.close()
+        session.close()
+        router.close()
+
+
+def test_port_in_use_and_unknown_system_are_one_line_errors(router, tmp_path) -> None:
+    import subprocess
+    import sys
+
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        port = busy.getsockname()[1]
+        out = subprocess.run([sys.executable, "-m", "services.dashboard", str(SYSTEM_FILE), "--port", str(port),
+                              *client_args(router)], cwd=REPO, capture_output=True, text=True, timeout=30)
+    assert out.returncode == 1
+    assert out.stderr.strip() == (f"skinet dashboard: error: cannot listen on 127.0.0.1:{port}: "
+                                  f"the port is in use (choose another with --port)")
+    port = free_port()
+    proc = subprocess.Popen([sys.executable, "-m", "services.dashboard", "no_such_system", "--port", str(port),
+                             "--wait", "0.5", *client_args(router)], cwd=REPO, stderr=subprocess.PIPE, text=True)
+    try:
+        lines = [proc.stderr.readline().strip() for _ in range(2)]
+    finally:
+        proc.terminate()
+        proc.wait(10)
+    assert lines[0] == f"skinet dashboard: system no_such_system on http://127.0.0.1:{port}/"
+    assert lines[1].endswith("no monitor of system 'no_such_system' is alive (no monitor is reachable at all); "
+                             "waiting for one")
+
+
+def test_board_joins_steps_in_any_order_and_counts_violations_once() -> None:
+    board = Board("s")
+
+    def state(seq: int, event: str = "", stamp: float | None = None) -> LiveState:
+        return LiveState(system="s", seq=seq, stamp=100.0 + seq if stamp is None else stamp, skillsets={}, event=event)
+
+    def verdicts(seq: int, ok: bool, stamp: float | None = None) -> Verdicts:
+        return Verdicts(system="s", seq=seq, stamp=100.0 + seq if stamp is None else stamp,
+                        properties=[PropertyVerdict(name="p", holds=ok)])
+
+    board.feed(state(0), 0)
+    board.feed(verdicts(0, True), 0)
+    assert board.feed(verdicts(1, False), 0) == []  # before its state: it waits
+    kinds = [u["kind"] for u in board.feed(state(1, "a:x#0"), 0)]
+    assert kinds == ["state", "point", "verdicts", "violation", "point"]
+    board.feed(UnsafeReport(system="s", seq=1, stamp=101.5, unsafe=[], literal_count=7, prediction_stale=False), 0)
+    assert board.feed(state(1, "a:x#0"), 0, initial=True) == []  # a late copy of what is shown
+    assert board.feed(verdicts(1, False), 0, initial=True) == []
+    board.feed(state(2, "a:y#1"), 0)
+    board.feed(verdicts(2, False), 0)  # still violated: no new onset
+    restart = board.feed(state(0, stamp=200.0), 0)  # a restarted monitor
+    assert restart[0] == {"kind": "restart", "epoch": 1, "t": 0}
+    board.feed(verdicts(0, False, stamp=200.0), 0)  # violated from the start of the new epoch
+    snap = json.loads(json.dumps(board.snapshot()))
+    assert [(v["property"], v["seq"], v["epoch"], v["event"]) for v in snap["violations"]] == [
+        ("p", 1, 0, "a:x#0"), ("p", 0, 1, "")]
+    assert [(p["epoch"], p["seq"], p["holds"], p["literal"]) for p in snap["points"]] == [
+        (0, 0, {"p": True}, None), (0, 1, {"p": False}, 7), (0, 2, {"p": False}, None), (1, 0, {"p": False}, None)]
