@@ -96,3 +96,59 @@ def test_unknown_names_and_bad_requests_get_one_line_errors(monitor_factory, ses
     assert reply.error.startswith("command 'teleop' is not of the form skillset:transition")
     # The monitor is still fine.
     assert check(session, "spot:init_power.start").decision == "allow"
+
+
+def test_example_client_asks_before_every_start(router, session, spot_arm) -> None:
+    """examples/check_client.py against simulated managers, the bridge and a monitor."""
+    import subprocess
+    import sys
+
+    from services.bridge_ros2 import start_bridge
+    from services.monitor import start_monitor
+    from services.simulator import Simulator
+    from tests.services.conftest import REPO, client_args, open_client
+
+    system, typemap = spot_arm
+    services_session = open_client(router)
+    monitor = start_monitor(services_session, system)
+    simulator = Simulator(services_session, system, typemap)
+    bridge = start_bridge(services_session, system, typemap)
+
+    def client(*commands: str) -> subprocess.CompletedProcess:
+        return subprocess.run([sys.executable, "examples/check_client.py", "skillsets/spot_arm.toml", *commands,
+                               *client_args(router)], cwd=REPO, capture_output=True, text=True, timeout=60)
+
+    def running(skillset: str, skill: str) -> bool:
+        import time
+
+        deadline = time.monotonic() + 5
+        while time.monotonic() < deadline:
+            if simulator.skill_status(skillset, skill)[0] and monitor.check(
+                    CheckRequest(skillset=skillset, transition=f"{skill}.interrupt")).enabled:
+                return True
+            time.sleep(0.02)
+        return False
+
+    try:
+        out = client("spot:init_power.start")
+        assert out.returncode == 0 and out.stdout.startswith("spot:init_power.start: sent (id "), out
+        assert running("spot", "init_power")
+        out = client("manipulator:arm_ready.start", "manipulator:arm_redy.start")
+        assert out.returncode == 1
+        lines = out.stdout.splitlines()
+        assert lines[:2] == [
+            "manipulator:arm_ready.start: NOT SENT (warn: action_guard explicit)",
+            "manipulator:arm_redy.start: NOT SENT (check failed: unknown transition 'arm_redy.start' of skillset "
+            "'manipulator')",
+        ]
+        assert lines[2].startswith("  did you mean: arm_ready.start, ") and len(lines) == 3
+        assert not simulator.skill_status("manipulator", "arm_ready")[0]
+        out = client("manipulator:arm_ready.start", "--force")
+        assert out.stdout.startswith("manipulator:arm_ready.start: sent (id ") and \
+            out.stdout.rstrip().endswith("check: warn, action_guard explicit)"), out
+        assert running("manipulator", "arm_ready")
+    finally:
+        bridge.close()
+        simulator.close()
+        monitor.close()
+        services_session.close()
