@@ -2,13 +2,16 @@
 //!
 //! ```text
 //! skinet-client [--connect tcp/127.0.0.1:7447] [--system spot_arm]
-//!               [--user observer --password PASS] [--verdicts N] [--timeout SECONDS]
+//!               [--user observer --password PASS] [--check SKILLSET:TRANSITION]...
+//!               [--verdicts N] [--timeout SECONDS]
 //! ```
 //!
 //! 1. fetches the model digest from the monitor (`skinet/<system>/model/*`),
 //! 2. asks a predictor about the initial marking (`skinet/<system>/predict`,
 //!    a `PredictRequest`) and prints the `PredictReply`,
-//! 3. prints every `Verdicts` published on `skinet/<system>/verdicts`, until N
+//! 3. asks the monitor's command check (`skinet/<system>/check`, a `CheckRequest`)
+//!    about each `--check` command and prints the decision and its reasons,
+//! 4. prints every `Verdicts` published on `skinet/<system>/verdicts`, until N
 //!    were printed (default: forever) or nothing came for the timeout.
 
 use std::collections::BTreeMap;
@@ -79,6 +82,35 @@ struct PropertyVerdict {
     holds: bool,
 }
 
+#[derive(Debug, Serialize)]
+struct CheckRequest {
+    v: u8,
+    skillset: String,
+    transition: String,
+}
+
+#[derive(Debug, Deserialize)]
+struct CheckReason {
+    property: String,
+    constraint: String,
+    action: String,
+    steps: Option<u64>,
+    #[serde(default)]
+    witness: Vec<String>,
+}
+
+#[derive(Debug, Deserialize)]
+struct CheckReply {
+    ok: bool,
+    decision: Option<String>,
+    #[serde(default)]
+    reasons: Vec<CheckReason>,
+    #[serde(default)]
+    error: String,
+    #[serde(default)]
+    candidates: Vec<String>,
+}
+
 #[derive(Debug, Deserialize)]
 struct Verdicts {
     seq: u64,
@@ -91,6 +123,7 @@ struct Args {
     system: String,
     user: Option<String>,
     password: String,
+    checks: Vec<String>,
     verdicts: Option<u64>,
     timeout: Duration,
 }
@@ -101,6 +134,7 @@ fn parse_args() -> Result<Args, String> {
         system: "spot_arm".into(),
         user: None,
         password: String::new(),
+        checks: Vec::new(),
         verdicts: None,
         timeout: Duration::from_secs(3600),
     };
@@ -112,6 +146,7 @@ fn parse_args() -> Result<Args, String> {
             "--system" => args.system = value()?,
             "--user" => args.user = Some(value()?),
             "--password" => args.password = value()?,
+            "--check" => args.checks.push(value()?),
             "--verdicts" => {
                 args.verdicts = Some(value()?.parse().map_err(|e| format!("--verdicts: {e}"))?)
             }
@@ -227,6 +262,51 @@ fn run(args: Args) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
         println!("no predictor answered");
     }
 
+    for command in &args.checks {
+        let (skillset, transition) = command
+            .split_once(':')
+            .ok_or(format!("--check {command}: expected SKILLSET:TRANSITION"))?;
+        let request = CheckRequest {
+            v: SCHEMA_VERSION,
+            skillset: skillset.into(),
+            transition: transition.into(),
+        };
+        let replies = session
+            .get(format!("skinet/{system}/check"))
+            .payload(rmp_serde::to_vec_named(&request)?)
+            .timeout(Duration::from_secs(5))
+            .wait()?;
+        let Ok(reply) = replies.recv() else {
+            println!("check {command}: no monitor answered");
+            continue;
+        };
+        let Ok(sample) = reply.result() else {
+            println!("check {command}: error reply");
+            continue;
+        };
+        let check: CheckReply = rmp_serde::from_slice(&sample.payload().to_bytes())?;
+        if !check.ok {
+            println!(
+                "check {command}: {} (candidates: {})",
+                check.error,
+                check.candidates.join(", ")
+            );
+            continue;
+        }
+        println!("check {command}: {}", check.decision.unwrap_or_default());
+        for r in &check.reasons {
+            let steps = r.steps.map_or("?".to_string(), |s| s.to_string());
+            println!(
+                "  {} {} ({}) in {} steps via [{}]",
+                r.property,
+                r.constraint,
+                r.action,
+                steps,
+                r.witness.join(", ")
+            );
+        }
+    }
+
     let subscriber = session
         .declare_subscriber(format!("skinet/{system}/verdicts"))
         .wait()?;
@@ -259,7 +339,7 @@ fn main() -> ExitCode {
         Ok(args) => args,
         Err(msg) => {
             let usage = "usage: skinet-client [--connect ENDPOINT] [--system NAME] [--user U --password P] \
-                         [--verdicts N] [--timeout SECONDS]";
+                         [--check SKILLSET:TRANSITION]... [--verdicts N] [--timeout SECONDS]";
             if msg.is_empty() {
                 println!("{usage}");
                 return ExitCode::SUCCESS;
