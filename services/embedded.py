@@ -28,6 +28,7 @@ from services.monitor.check import parse_policy
 from skinet.cli.render import seconds, table
 from skinet.files import load_system
 from skinet.system import System
+from skinet.wire.messages import LiveState, StateSpaceReport, UnsafeReport, Verdicts
 
 if TYPE_CHECKING:
     from services.dashboard.server import Dashboard
@@ -35,9 +36,10 @@ if TYPE_CHECKING:
 CLEAR = "\x1b[H\x1b[J"  # cursor home, clear to end of screen
 
 
-def render(view: MonitorView) -> list[str]:
-    """The operator view: skillsets, properties, unsafe transitions, predictor, counters."""
-    st, u, p, c = view.state, view.unsafe, view.predictor, view.counters
+def render(view: MonitorView | Observed) -> list[str]:
+    """The operator view: skillsets, properties, unsafe transitions, predictor, counters
+    (the last two only from the embedded monitor)."""
+    st, u = view.state, view.unsafe
     out = [f"SkiNet Live  system {st.system}  step {st.seq}  last event {st.event or '-'}"]
     if st.divergence:
         out.append(f"  MODEL DIVERGENCE: {st.divergence}")
@@ -67,14 +69,27 @@ def render(view: MonitorView) -> list[str]:
         f"{seconds(space.time)}, {space.markings} markings, {space.edges} edges, depth {space.depth}, "
         f"{'TRUNCATED' if space.timeout_reached else 'complete'}")
     out.append(f"predictor  last exploration: {explored}")
-    out.append(f"  queries sent {p.sent}, answered {p.answered}, timed out {p.timed_out}, unanswered {p.unanswered}, "
-               f"failed {p.failed}, superseded {p.superseded}{', one in flight' if p.in_flight else ''}")
-    out.append(f"events  received {c.received}, applied {c.applied}, malformed {c.malformed}, duplicates "
-               f"{c.duplicates}, out of order {c.out_of_order}, lost {c.lost}, divergences {c.divergences}")
+    if isinstance(view, MonitorView):
+        p, c = view.predictor, view.counters
+        out.append(f"  queries sent {p.sent}, answered {p.answered}, timed out {p.timed_out}, unanswered "
+                   f"{p.unanswered}, failed {p.failed}, superseded {p.superseded}"
+                   f"{', one in flight' if p.in_flight else ''}")
+        out.append(f"events  received {c.received}, applied {c.applied}, malformed {c.malformed}, duplicates "
+                   f"{c.duplicates}, out of order {c.out_of_order}, lost {c.lost}, divergences {c.divergences}")
     return out
 
 
-def summary(view: MonitorView) -> str:
+@dataclasses.dataclass(frozen=True)
+class Observed:
+    """The monitor's last messages as an observer received them (``skinet watch``)."""
+
+    state: LiveState
+    verdicts: Verdicts
+    unsafe: UnsafeReport
+    state_space: StateSpaceReport | None
+
+
+def summary(view: MonitorView | Observed) -> str:
     """One line per change, for logs and pipes."""
     u = view.unsafe
     props = " ".join(f"{v.name}={'ok' if v.holds else 'VIOLATED'}" for v in view.verdicts.properties)

@@ -21,6 +21,30 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     add_zenoh_args(c)
     c.set_defaults(func=cmd_dashboard)
 
+    c = sub.add_parser("watch", help="terminal live view of a running system (any deployment)",
+                       description="Follow a running system's monitor through Zenoh and show the operator view "
+                                   "(skillsets, properties, unsafe transitions, predictions, services, violations): "
+                                   "redrawn on a terminal, one line per step in a pipe.")
+    c.add_argument("system", metavar="SYSTEM_NAME", help="system name, as in skinet/<system>/... keys")
+    c.add_argument("--once", action="store_true", help="print one view (after a fresh prediction) and exit")
+    c.add_argument("--duration", type=float, help="stop after this many seconds")
+    c.add_argument("--wait", type=float, default=5.0,
+                   help="seconds to wait for the system's monitor before giving up (default: 5)")
+    add_zenoh_args(c)
+    c.set_defaults(func=cmd_watch)
+
+    c = sub.add_parser("check", help="ask a running monitor whether a command is safe now (skinet/<system>/check)",
+                       description="Ask the monitor's command check about SKILLSET:TRANSITION at the live "
+                                   "marking: allow, warn or deny (the monitor's policy) with the reasons. "
+                                   "Exit status: 0 allow, 3 warn, 4 deny, 1 error (unknown name, no monitor, "
+                                   "no router).")
+    c.add_argument("system", metavar="SYSTEM_NAME", help="system name, as in skinet/<system>/... keys")
+    c.add_argument("command", metavar="SKILLSET:TRANSITION", help="e.g. spot:go_to_waypoint.start")
+    c.add_argument("--json", action="store_true", help="print the CheckReply as JSON")
+    c.add_argument("--timeout", type=float, default=2.0, help="seconds to wait for the monitor (default: 2)")
+    add_zenoh_args(c)
+    c.set_defaults(func=cmd_check)
+
 
 def cmd_dashboard(args: argparse.Namespace) -> int:
     import logging
@@ -30,3 +54,60 @@ def cmd_dashboard(args: argparse.Namespace) -> int:
 
     logging.basicConfig(level="INFO", format="skinet dashboard: %(message)s")
     return serve(args, stop_on_signals(), logging.getLogger("skinet.dashboard"))
+
+
+def cmd_watch(args: argparse.Namespace) -> int:
+    from services.watch import watch
+
+    return watch(args)
+
+
+EXIT = {"allow": 0, "warn": 3, "deny": 4}
+
+
+def cmd_check(args: argparse.Namespace) -> int:
+    import json
+
+    from services.common.session import open_session
+    from services.common.zenoh_config import config_from_args
+    from services.dashboard.observer import monitored_systems
+    from services.monitor.check import parse_command
+    from skinet.errors import SkinetError
+    from skinet.wire import keys
+    from skinet.wire.codec import DecodeError, decode, encode
+    from skinet.wire.messages import CheckReply
+
+    try:
+        request = parse_command(args.command)
+        key = keys.check(keys.check_chunk(args.system, "system name"))
+    except ValueError as exc:
+        raise SkinetError(str(exc)) from None
+    session = open_session(config_from_args(args))
+    try:
+        replies = [r for r in session.get(key, payload=encode(request), timeout=args.timeout) if r.ok is not None]
+        if not replies:
+            others = monitored_systems(session)
+            raise SkinetError(f"no monitor of system '{args.system}' answered on {key} "
+                              f"({'systems with a monitor: ' + ', '.join(others) if others else 'no monitor is reachable'})")
+        try:
+            reply = decode(replies[0].ok.payload.to_bytes(), CheckReply)
+        except DecodeError as exc:
+            raise SkinetError(f"undecodable answer on {key}: {exc}") from None
+    finally:
+        session.close()
+    if args.json:
+        print(json.dumps(reply.model_dump(mode="json"), indent=2))
+    elif not reply.ok:
+        print(f"{args.command}: error: {reply.error}" + (f" (candidates: {', '.join(reply.candidates)})"
+                                                          if reply.candidates else ""))
+    else:
+        state = "" if reply.enabled else " (not firable now)"
+        print(f"{args.command}: {reply.decision.upper() if reply.decision else '?'} at step {reply.seq}{state}"
+              + (" (prediction stale: explicit constraints only)" if reply.prediction_stale else ""))
+        for r in reply.reasons:
+            steps = "" if not r.steps else f", within {r.steps} steps"
+            via = f" via {' -> '.join(r.witness)}" if r.witness else ""
+            print(f"  {r.property}: {r.constraint} ({r.action}){steps}{via}")
+        for p in reply.recovers:
+            print(f"  restores {p} (violated now)")
+    return EXIT.get(reply.decision or "", 1) if reply.ok else 1

@@ -20,6 +20,7 @@ from typing import TextIO
 import zenoh
 from pydantic import BaseModel
 
+from services.common.session import open_session
 from services.common.zenoh_config import add_zenoh_args, config_from_args
 from skinet.errors import SkinetError, SourceError
 from skinet.wire import keys
@@ -121,10 +122,7 @@ class Recorder:
 
 def cmd_record(args: argparse.Namespace) -> int:
     system = keys.check_chunk(args.system, "system name")
-    try:
-        session = zenoh.open(config_from_args(args))
-    except zenoh.ZError as exc:
-        raise SkinetError(f"cannot open a Zenoh session: {exc}") from None
+    session = open_session(config_from_args(args))  # SessionError says why it failed
     try:
         out = open(args.output, "w", encoding="utf-8")
     except OSError as exc:

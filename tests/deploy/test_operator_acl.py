@@ -1,0 +1,131 @@
+"""Operator views through the shipped ACL router (SPEC §7): ``skinet watch``, ``skinet check``
+and the dashboard log in as the read-only ``observer`` (flags or ``SKINET_ZENOH_*``), the
+monitor serves its check and last results under its own role, and a refused login says so.
+
+No containers: the router is the Python wheel with ``docker/zenoh/router.json5``."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import time
+import urllib.request
+from collections.abc import Iterator
+
+import pytest
+import zenoh
+
+from deploy_support import REPO, SYSTEM, acl_router_config, free_port, login, passwords, wait_until
+from services.monitor import start_monitor
+from skinet.files import load_system
+from skinet.wire import keys
+from skinet.wire.codec import encode
+from skinet.wire.messages import CanonicalEvent
+
+TO_ARM_AT_RD = [("spot", "init_power.start"), ("spot", "init_power.success.powered_on"), ("spot", "stand_up.start"),
+                ("spot", "stand_up.success.standing"), ("manipulator", "arm_ready.start"),
+                ("manipulator", "arm_ready.success.ready")]
+
+
+@pytest.fixture(scope="module")
+def deployment() -> Iterator[str]:
+    """ACL router, a monitor logged in as ``monitor``, events from ``bridge`` up to the arm at RD."""
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    router = zenoh.open(acl_router_config(endpoint))
+    monitor_session, bridge = login(endpoint, "monitor"), login(endpoint, "bridge")
+    monitor = start_monitor(monitor_session, load_system(REPO / "skillsets" / "spot_arm.toml")[0])
+    try:
+        seq: dict[str, int] = {}
+        for skillset, transition in TO_ARM_AT_RD:
+            seq[skillset] = seq.get(skillset, -1) + 1
+            bridge.put(keys.events(SYSTEM, skillset), encode(CanonicalEvent(
+                system=SYSTEM, skillset=skillset, seq=seq[skillset], stamp=time.time(), transition=transition)))
+        wait_until(lambda: monitor.counters.applied == len(TO_ARM_AT_RD), 10, "the events applied")
+        yield endpoint
+    finally:
+        monitor.close()
+        for s in (bridge, monitor_session, router):
+            s.close()
+
+
+def skinet(*args: str, env: dict[str, str] | None = None, timeout: float = 60) -> subprocess.CompletedProcess:
+    clean = {k: v for k, v in os.environ.items() if not k.startswith("SKINET_ZENOH_")}
+    return subprocess.run([sys.executable, "-m", "skinet.cli.main", *args], cwd=REPO, capture_output=True, text=True,
+                          timeout=timeout, env={**clean, **(env or {})})
+
+
+def zenoh_flags(endpoint: str, user: str | None = "observer", password: str | None = None) -> list[str]:
+    flags = ["--mode", "client", "--connect", endpoint, "--no-multicast-scouting"]
+    if user is not None:
+        flags += ["--user", user, "--password", passwords()[user] if password is None else password]
+    return flags
+
+
+def test_check_as_observer(deployment: str) -> None:
+    out = skinet("check", SYSTEM, "spot:go_to_waypoint.start", *zenoh_flags(deployment))
+    assert out.returncode == 3, out  # warn
+    assert out.stdout.splitlines()[:2] == ["spot:go_to_waypoint.start: WARN at step 6 (prediction stale: explicit "
+                                           "constraints only)", "  safety_guard: explicit (warn)"]
+    out = skinet("check", SYSTEM, "spot:sit_down.start", "--json", *zenoh_flags(deployment))
+    assert out.returncode == 0 and json.loads(out.stdout)["decision"] == "allow"
+    out = skinet("check", SYSTEM, "arm:x.start", *zenoh_flags(deployment))
+    assert (out.returncode, out.stdout.strip()) == (1, "arm:x.start: error: unknown skillset 'arm' (candidates: "
+                                                       "manipulator, spot)")
+    out = skinet("check", "other", "spot:x.start", "--timeout", "0.5", *zenoh_flags(deployment))
+    assert (out.returncode, out.stderr.strip()) == (1, "skinet: error: no monitor of system 'other' answered on "
+                                                       "skinet/other/check (systems with a monitor: spot_arm)")
+
+
+def test_watch_logs_in_from_the_environment(deployment: str) -> None:
+    env = {"SKINET_ZENOH_USER": "observer", "SKINET_ZENOH_PASSWORD": passwords()["observer"]}
+    out = skinet("watch", SYSTEM, "--once", "--wait", "3", *zenoh_flags(deployment, None), env=env)
+    assert out.returncode == 0, out
+    lines = out.stdout.splitlines()
+    assert lines[0].startswith("SkiNet Live  system spot_arm  step 6  last event manipulator:arm_ready.success.ready")
+    assert "  manipulator  mutex=Free arm_status=RD; running: -" in lines
+    assert "unsafe transitions (1), prediction STALE (explicit constraints only)" in lines  # no predictor here
+    assert "services  monitor: 1, bridge_ros2: 0, predictor: 0" in lines and lines[-1] == "violations (0)"
+    out = skinet("watch", "nope", "--wait", "1", *zenoh_flags(deployment))
+    assert (out.returncode, out.stderr.strip()) == (1, "skinet: error: no monitor of system 'nope' is alive "
+                                                       "(systems with a monitor: spot_arm)")
+
+
+@pytest.mark.parametrize("command", [["watch", SYSTEM], ["check", SYSTEM, "spot:teleop.start"],
+                                     ["record", SYSTEM, "-o", "/dev/null"], ["dashboard", SYSTEM, "--port", "0"]])
+def test_refused_logins_say_so(deployment: str, command: list[str]) -> None:
+    port = deployment.rsplit(":", 1)[1]
+    out = skinet(*command, *zenoh_flags(deployment, "observer", "wrong"))
+    assert out.returncode == 1
+    assert out.stderr.strip().endswith(
+        f"error: the Zenoh router at tcp/127.0.0.1:{port} refused the session: authentication failed for user "
+        "'observer' (check SKINET_ZENOH_USER and SKINET_ZENOH_PASSWORD, or --user and --password)")
+    out = skinet(*command, *zenoh_flags(deployment, None))
+    assert out.returncode == 1
+    assert out.stderr.strip().endswith(
+        f"error: the Zenoh router at tcp/127.0.0.1:{port} refused the session: it requires a user and password "
+        "(set SKINET_ZENOH_USER and SKINET_ZENOH_PASSWORD, or --user and --password)")
+
+
+def test_dashboard_joins_late_as_observer(deployment: str, tmp_path) -> None:
+    port = free_port()
+    proc = subprocess.Popen([sys.executable, "-m", "services.dashboard", SYSTEM, "--port", str(port),
+                             *zenoh_flags(deployment)], cwd=REPO, stderr=subprocess.PIPE, text=True)
+    try:
+        assert proc.stderr.readline().strip() == f"skinet dashboard: system {SYSTEM} on http://127.0.0.1:{port}/"
+
+        def snapshot() -> dict:
+            with urllib.request.urlopen(f"http://127.0.0.1:{port}/api/snapshot", timeout=2) as r:
+                return json.load(r)
+
+        wait_until(lambda: (snapshot()["unsafe"] or {}).get("seq") == 6, 10, "the monitor's last step")
+        snap = snapshot()
+        assert snap["state"]["skillsets"]["manipulator"]["resources"]["arm_status"] == "RD"
+        assert [(e["transition"], e["property"]) for e in snap["unsafe"]["unsafe"]] == [
+            ("go_to_waypoint.start", "safety_guard")]
+        assert snap["alive"] == {"monitor": snap["alive"]["monitor"]} and len(snap["alive"]["monitor"]) == 1
+        assert snap["model"]["digest"] and set(snap["model"]["lanes"]) == {"spot", "manipulator"}
+    finally:
+        proc.terminate()
+        proc.wait(10)
