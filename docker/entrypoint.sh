@@ -2,7 +2,7 @@
 # Container entry point: `skinet-entrypoint SERVICE [ARGS...]`.
 #
 #   router                      skinet router ARGS
-#   monitor | predictor | simulator | bridge_ros2 (or bridge)
+#   monitor | predictor | simulator | dashboard | bridge_ros2 (or bridge)
 #                               python -m services.SERVICE ARGS
 #   skinet                      the skinet command line
 #   anything else               run as given
@@ -54,6 +54,6 @@ case "$service" in
     router) exec skinet router "$@" ;;
     skinet) exec skinet "$@" ;;
     bridge|bridge_ros2) exec python3 -m services.bridge_ros2 "$@" ;;
-    monitor|predictor|simulator) exec python3 -m "services.$service" "$@" ;;
+    monitor|predictor|simulator|dashboard) exec python3 -m "services.$service" "$@" ;;
     *) exec "$service" "$@" ;;
 esac

@@ -18,6 +18,7 @@ from skinet.cli.main import main
 from skinet.errors import SourceError
 from skinet.files import load_system, read_text
 from skinet.mission import parse_scenario, replay
+from skinet.cli.timeline import load_log
 from skinet.mission_log import records_to_log
 from skinet.plot.timeline import draw, flagged, lanes_of, violations
 from skinet.system import System
@@ -71,7 +72,8 @@ def test_log_line_rejects_what_is_not_a_message() -> None:
 
 
 GOOD_BODY = '{"v":1,"system":"s","seq":0,"stamp":0,"skillsets":{}}'
-TYPES = "CanonicalEvent, LiveState, ModelBundle, PredictReply, PredictRequest, StateSpaceReport, UnsafeReport, Verdicts"
+TYPES = ("CanonicalEvent, CheckReply, CheckRequest, LiveState, ModelBundle, PredictReply, PredictRequest, "
+         "StateSpaceReport, UnsafeReport, Verdicts")
 
 
 @pytest.mark.parametrize("line, error", [
@@ -290,10 +292,11 @@ def _wait_token(session: zenoh.Session, key_expr: str, timeout: float = 10.0) ->
     pytest.fail(f"no liveliness token on {key_expr} within {timeout} s")
 
 
+@pytest.mark.parametrize("name", ["rec.jsonl", "rec.mcap"])
 def test_record_writes_what_is_published(tmp_path: Path, paper_system: System,
-                                         capsys: pytest.CaptureFixture[str]) -> None:
+                                         capsys: pytest.CaptureFixture[str], name: str) -> None:
     endpoint = f"tcp/127.0.0.1:{_free_port()}"
-    out = tmp_path / "rec.jsonl"
+    out = tmp_path / name
     messages = _messages()
     model = bundle(paper_system)
     result: list[int] = []
@@ -328,7 +331,7 @@ def test_record_writes_what_is_published(tmp_path: Path, paper_system: System,
         if session is not None:
             session.close()
     assert not recorder.is_alive() and result == [0]
-    entries = read_log(read_text(out).splitlines(), str(out))
+    entries = load_log(str(out))
     published = [e for e in entries if e.type != "ModelBundle"]
     assert [(e.key, e.message) for e in published] == messages
     assert [e.message for e in entries if e.type == "ModelBundle"] == [model]
@@ -337,3 +340,15 @@ def test_record_writes_what_is_published(tmp_path: Path, paper_system: System,
     err = capsys.readouterr().err
     assert f"skinet record: skipped undecodable payload on {keys.unsafe(SYSTEM)}: not msgpack" in err
     assert err.endswith(f"skinet record: {len(messages) + 1} messages written to {out} (1 undecodable skipped)\n")
+    if name.endswith(".mcap"):  # what Foxglove and other tools read: JSON with JSON schemas, one channel per key
+        from mcap.reader import make_reader
+
+        with out.open("rb") as f:
+            summary = make_reader(f).get_summary()
+        assert summary is not None
+        assert {s.name: s.encoding for s in summary.schemas.values()} == {
+            e.type: "jsonschema" for e in entries}
+        assert {c.topic for c in summary.channels.values()} == {e.key for e in entries}
+        assert {c.message_encoding for c in summary.channels.values()} == {"json"}
+        assert main(["timeline", str(out), "-o", str(tmp_path / "rec.png")]) == 0
+        assert (tmp_path / "rec.png").stat().st_size > 10_000

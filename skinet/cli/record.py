@@ -1,9 +1,10 @@
 """``skinet record``: write what is published under ``skinet/<system>/**`` to a monitor log.
 
-A thin Zenoh shell over :mod:`skinet.wire.log`: every sample is decoded with
-the codec (the key says which message to expect), written as one JSON line
-with its receive time, and flushed; undecodable payloads are counted and
-skipped.  The model bundle is asked for once, so that ``skinet timeline`` knows
+A thin Zenoh shell over :mod:`skinet.wire.log` and :mod:`skinet.wire.mcap_log`:
+every sample is decoded with the codec (the key says which message to expect)
+and written with its receive time, as one flushed JSON line or as an MCAP
+message (JSON with JSON schemas, for Foxglove); undecodable payloads are
+counted and skipped.  The model bundle is asked for once, so that ``skinet timeline`` knows
 every skill and resource of the system.
 """
 
@@ -15,7 +16,7 @@ import sys
 import threading
 import time
 import uuid
-from typing import TextIO
+from typing import BinaryIO, TextIO
 
 import zenoh
 from pydantic import BaseModel
@@ -26,6 +27,7 @@ from skinet.errors import SkinetError, SourceError
 from skinet.wire import keys
 from skinet.wire.codec import DecodeError, decode
 from skinet.wire.log import log_line
+from skinet.wire.mcap_log import McapLogWriter
 from skinet.wire.messages import (
     MESSAGES, CanonicalEvent, LiveState, ModelBundle, StateSpaceReport, UnsafeReport, Verdicts,
 )
@@ -38,10 +40,16 @@ SHOW_SKIPPED = 5  # undecodable payloads reported on standard error, then only c
 MODEL_RETRY = 2.0  # seconds between model queries while none answered
 
 
+
 def add_parser(sub: argparse._SubParsersAction) -> None:
     c = sub.add_parser("record", help="record the monitor's messages of a system into a JSON Lines log")
     c.add_argument("system", metavar="SYSTEM_NAME", help="system name, as in skinet/<system>/... keys")
-    c.add_argument("-o", "--output", required=True, metavar="LOG.jsonl", help="log file to write (overwritten)")
+    c.add_argument("-o", "--output", required=True, metavar="LOG.jsonl|LOG.mcap",
+                   help="log file to write (overwritten)")
+    c.add_argument("--format", choices=["jsonl", "mcap"],
+                   help="JSON Lines, or MCAP with JSON schemas (Foxglove, other robotics tools); default: from "
+                        "the extension of --output (.mcap: mcap, else jsonl). MCAP is finished on Ctrl-C, "
+                        "SIGTERM, --duration or --count")
     c.add_argument("--duration", type=float, help="stop after this many seconds (default: until Ctrl-C)")
     c.add_argument("--count", type=int, help="stop after writing this many messages")
     c.add_argument("--no-model", action="store_true", help="do not query the monitor's model bundle")
@@ -70,11 +78,39 @@ def decode_any(system: str, key: str, payload: bytes) -> BaseModel:
     raise DecodeError("not any known message")
 
 
-class Recorder:
-    """Writes decoded samples to ``out`` (thread-safe); ``done`` is set after ``count`` lines."""
+class JsonlSink:
+    """JSON Lines, one flushed line per message."""
 
-    def __init__(self, out: TextIO, system: str, count: int | None = None):
-        self.out, self.system, self.count = out, system, count
+    def __init__(self, out: TextIO):
+        self.out = out
+
+    def write(self, key: str, message: BaseModel, t: float) -> None:
+        self.out.write(log_line(key, message, t) + "\n")
+        self.out.flush()
+
+    def close(self) -> None:
+        self.out.close()
+
+
+class McapSink:
+    """MCAP with JSON schemas (:mod:`skinet.wire.mcap_log`)."""
+
+    def __init__(self, out: BinaryIO):
+        self.out, self.writer = out, McapLogWriter(out)
+
+    def write(self, key: str, message: BaseModel, t: float) -> None:
+        self.writer.write(key, message, t)
+
+    def close(self) -> None:
+        self.writer.finish()
+        self.out.close()
+
+
+class Recorder:
+    """Writes decoded samples to ``sink`` (thread-safe); ``done`` is set after ``count`` messages."""
+
+    def __init__(self, sink: JsonlSink | McapSink, system: str, count: int | None = None):
+        self.sink, self.system, self.count = sink, system, count
         self.written = 0
         self.skipped = 0
         self.has_model = False
@@ -99,7 +135,6 @@ class Recorder:
                 if self.skipped <= SHOW_SKIPPED:
                     print(f"skinet record: skipped undecodable payload on {key}: {exc}", file=sys.stderr)
             return
-        line = log_line(key, message, t)
         with self._lock:
             if self.done.is_set():
                 return
@@ -107,8 +142,7 @@ class Recorder:
                 if self.has_model:
                     return
                 self.has_model = True
-            self.out.write(line + "\n")
-            self.out.flush()
+            self.sink.write(key, message, t)
             self.written += 1
             if self.count is not None and self.written >= self.count:
                 self.done.set()
@@ -117,18 +151,19 @@ class Recorder:
         """Stop writing (later samples are dropped) and close the log."""
         with self._lock:
             self.done.set()
-            self.out.close()
+            self.sink.close()
 
 
 def cmd_record(args: argparse.Namespace) -> int:
     system = keys.check_chunk(args.system, "system name")
     session = open_session(config_from_args(args))  # SessionError says why it failed
+    mcap = (args.format or ("mcap" if args.output.endswith(".mcap") else "jsonl")) == "mcap"
     try:
-        out = open(args.output, "w", encoding="utf-8")
+        sink = McapSink(open(args.output, "wb")) if mcap else JsonlSink(open(args.output, "w", encoding="utf-8"))
     except OSError as exc:
         session.close()
         raise SourceError.at(args.output, None, f"cannot write file: {exc.strerror}") from None
-    recorder = Recorder(out, system, args.count)
+    recorder = Recorder(sink, system, args.count)
     stop = recorder.done
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGTERM, lambda *_: stop.set())

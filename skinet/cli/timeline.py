@@ -14,12 +14,13 @@ from skinet.errors import SkinetError, SourceError
 from skinet.files import load_system, read_text
 from skinet.system import System
 from skinet.wire.log import Entry, read_log
+from skinet.wire.mcap_log import MAGIC, is_mcap, read_mcap
 from skinet.wire.messages import LiveState
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     c = sub.add_parser("timeline", help="draw a monitor log (skinet record, skinet demo --log) as a timeline picture")
-    c.add_argument("log", metavar="LOG.jsonl", help="monitor log, JSON Lines")
+    c.add_argument("log", metavar="LOG.jsonl|LOG.mcap", help="monitor log, JSON Lines or MCAP (skinet record)")
     c.add_argument("-o", "--output", required=True, metavar="timeline.png",
                    help="picture to write (format from the extension: png, svg, pdf)")
     c.add_argument("--title", help="title (default: system and log name)")
@@ -45,8 +46,20 @@ def save_timeline(entries: Sequence[Entry], title: str, output: str | Path, syst
     return path
 
 
+def load_log(path: str) -> list[Entry]:
+    """A monitor log in either format (MCAP is recognised by its magic bytes)."""
+    try:
+        with open(path, "rb") as f:
+            if is_mcap(f.read(len(MAGIC))):
+                f.seek(0)
+                return read_mcap(f, path, lambda text: print(text, file=sys.stderr))
+    except OSError as exc:
+        raise SourceError.at(path, None, f"cannot read file: {exc.strerror}") from None
+    return read_log(read_text(path).splitlines(), path)
+
+
 def cmd_timeline(args: argparse.Namespace) -> int:
-    entries = read_log(read_text(args.log).splitlines(), args.log)
+    entries = load_log(args.log)
     system = None
     if args.system:
         system, warnings = load_system(args.system)
