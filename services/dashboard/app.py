@@ -15,7 +15,8 @@ import threading
 from pathlib import Path
 
 from services.common.session import open_session
-from services.common.zenoh_config import config_from_args
+from services.common.cli import add_log_arg, setup_logging
+from services.common.zenoh_config import add_zenoh_args, config_from_args
 from services.dashboard.observer import Observer, monitored_systems
 from services.dashboard.server import Dashboard
 from skinet.errors import SkinetError, SourceError
@@ -24,6 +25,7 @@ from skinet.system import System
 
 
 def add_dashboard_args(p: argparse.ArgumentParser) -> None:
+    """The dashboard's arguments, its log level and the Zenoh flags."""
     p.add_argument("system", metavar="SYSTEM",
                    help="system file (.toml, gives the name and the timeline's lanes) or system name")
     p.add_argument("--host", default=os.environ.get("SKINET_DASHBOARD_HOST", "127.0.0.1"),
@@ -32,6 +34,8 @@ def add_dashboard_args(p: argparse.ArgumentParser) -> None:
                    help="TCP port (default: $SKINET_DASHBOARD_PORT or 8080; 0 picks a free one)")
     p.add_argument("--wait", type=float, default=5.0,
                    help="seconds before warning that no monitor of the system is alive (default: 5)")
+    add_log_arg(p)
+    add_zenoh_args(p)
 
 
 def resolve_system(spec: str) -> tuple[str, System | None]:
@@ -42,8 +46,10 @@ def resolve_system(spec: str) -> tuple[str, System | None]:
     return spec, None
 
 
-def serve(args: argparse.Namespace, stop: threading.Event, log: logging.Logger) -> int:
+def serve(args: argparse.Namespace, stop: threading.Event) -> int:
     """Run the dashboard until ``stop``; returns the exit status."""
+    setup_logging(args)
+    log = logging.getLogger("skinet.dashboard")
     try:
         name, system = resolve_system(args.system)
         if not 0 <= args.port <= 65535:

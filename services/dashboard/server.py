@@ -188,7 +188,5 @@ def _bind_error(host: str, port: int, exc: OSError) -> str:
     import errno
 
     if exc.errno == errno.EADDRINUSE:
-        return f"cannot listen on {host}:{port}: the port is in use (choose another with --port)"
-    if exc.errno in (errno.EADDRNOTAVAIL, errno.EAFNOSUPPORT) or isinstance(exc, OSError) and exc.errno is None:
-        return f"cannot listen on {host}:{port}: {exc.strerror or exc}"
+        return f"cannot listen on {host}:{port}: the port is in use (choose another port)"
     return f"cannot listen on {host}:{port}: {exc.strerror or exc}"

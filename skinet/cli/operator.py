@@ -18,7 +18,6 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                                    "commands with kind, steps and witness, predictions, state space, violations "
                                    "and a timeline. Read-only: it observes the monitor's messages on Zenoh.")
     add_dashboard_args(c)
-    add_zenoh_args(c)
     c.set_defaults(func=cmd_dashboard)
 
     c = sub.add_parser("watch", help="terminal live view of a running system (any deployment)",
@@ -47,13 +46,10 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
 
 
 def cmd_dashboard(args: argparse.Namespace) -> int:
-    import logging
-
     from services.dashboard.app import serve
     from services.embedded import stop_on_signals
 
-    logging.basicConfig(level="INFO", format="skinet dashboard: %(message)s")
-    return serve(args, stop_on_signals(), logging.getLogger("skinet.dashboard"))
+    return serve(args, stop_on_signals())
 
 
 def cmd_watch(args: argparse.Namespace) -> int:

@@ -1,38 +1,29 @@
 """The ``dashboard`` service of ``compose.yaml`` (onboard profile): published on the host's
 loopback only, logged in as the read-only ``observer``, showing the containerised monitor
-and asking its command check (SPEC §7).  The image tag is ``$SKINET_TEST_IMAGE``
-(default ``skinet-live:local``), built by ``docker/build.sh --local-base``."""
+and asking its command check (SPEC §7).  The image is test_containers' (``$SKINET_TEST_IMAGE``,
+default ``skinet-live:local``, built by ``docker/build.sh --local-base``)."""
 
 from __future__ import annotations
 
 import json
 import os
 import subprocess
-import sys
 import urllib.request
 from collections.abc import Iterator
 
 import pytest
 
-from deploy_support import REPO, free_port, wait_until
-from test_containers import BUILD_TIMEOUT, Stack
+from deploy_support import free_port, wait_until
+from test_containers import Stack, image  # noqa: F401 (the image fixture)
 
 pytestmark = pytest.mark.slow
-IMAGE = os.environ.get("SKINET_TEST_IMAGE", "skinet-live:local")
 
 
 @pytest.fixture(scope="module")
-def onboard(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Stack, int]]:
+def onboard(image: str, tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Stack, int]]:
     """Router, monitor and dashboard of the onboard profile; yields the stack and the dashboard's host port."""
-    log = tmp_path_factory.mktemp("build") / "build.log"
-    with log.open("w") as out:
-        r = subprocess.run(["bash", str(REPO / "docker" / "build.sh"), "--local-base", "--tag", IMAGE], cwd=REPO,
-                           env={**os.environ, "PYTHON": sys.executable}, stdout=out, stderr=subprocess.STDOUT,
-                           timeout=BUILD_TIMEOUT)
-    if r.returncode != 0:
-        pytest.fail(f"docker/build.sh failed ({r.returncode}); see {log}")
     port = free_port()
-    env = {**os.environ, "COMPOSE_PROFILES": "onboard", "SKINET_IMAGE": IMAGE,
+    env = {**os.environ, "COMPOSE_PROFILES": "onboard", "SKINET_IMAGE": image,
            "SKINET_ROUTER_PORT": f"127.0.0.1:{free_port()}", "SKINET_DASHBOARD_PORT": str(port)}
     s = Stack(f"skinet-dash-{os.getpid()}", env)
     try:

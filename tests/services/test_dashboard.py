@@ -249,7 +249,7 @@ def test_port_in_use_and_unknown_system_are_one_line_errors(router, tmp_path) ->
                               *client_args(router)], cwd=REPO, capture_output=True, text=True, timeout=30)
     assert out.returncode == 1
     assert out.stderr.strip() == (f"skinet dashboard: error: cannot listen on 127.0.0.1:{port}: "
-                                  f"the port is in use (choose another with --port)")
+                                  f"the port is in use (choose another port)")
     port = free_port()
     proc = subprocess.Popen([sys.executable, "-m", "services.dashboard", "no_such_system", "--port", str(port),
                              "--wait", "0.5", *client_args(router)], cwd=REPO, stderr=subprocess.PIPE, text=True)
@@ -291,3 +291,35 @@ def test_board_joins_steps_in_any_order_and_counts_violations_once() -> None:
         ("p", 1, 0, "a:x#0"), ("p", 0, 1, "")]
     assert [(p["epoch"], p["seq"], p["holds"], p["literal"]) for p in snap["points"]] == [
         (0, 0, {"p": True}, None), (0, 1, {"p": False}, 7), (0, 2, {"p": False}, None), (1, 0, {"p": False}, None)]
+
+
+def test_skinet_run_serves_the_dashboard_beside_its_monitor(tmp_path) -> None:
+    import subprocess
+    import sys
+
+    port = free_port()
+    proc = subprocess.Popen([sys.executable, "-m", "skinet.cli.main", "run", str(SYSTEM_FILE), "--duration", "30",
+                             "--no-multicast-scouting", "--dashboard", str(port)], cwd=REPO,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    try:
+        assert proc.stderr.readline().strip() == f"dashboard on http://127.0.0.1:{port}/"
+        deadline = time.monotonic() + 15
+        while True:
+            with urllib.request.urlopen(f"http://127.0.0.1:{port}/api/snapshot", timeout=2) as r:
+                snap = json.load(r)
+            if snap["state_space"] is not None or time.monotonic() > deadline:
+                break
+            time.sleep(0.1)
+        assert snap["state"]["seq"] == 0 and snap["state_space"]["markings"] > 0  # the embedded predictor answered
+        assert len(snap["alive"]["monitor"]) == 1 and len(snap["alive"]["predictor"]) == 1
+        with urllib.request.urlopen(f"http://127.0.0.1:{port}/api/check?command=spot:init_power.start",
+                                    timeout=2) as r:
+            assert json.load(r)["decision"] == "allow"
+        busy = subprocess.run([sys.executable, "-m", "skinet.cli.main", "run", str(SYSTEM_FILE), "--once",
+                               "--no-multicast-scouting", "--dashboard", str(port)], cwd=REPO, capture_output=True,
+                              text=True, timeout=60)
+        assert (busy.returncode, busy.stderr.strip()) == (
+            1, f"skinet: error: cannot listen on 127.0.0.1:{port}: the port is in use (choose another port)")
+    finally:
+        proc.terminate()
+        assert proc.wait(15) == 0
