@@ -94,7 +94,7 @@ def dashboard(spawn: Callable, router: str) -> Callable[..., str]:
     return start
 
 
-def until(driver, predicate: Callable[[object], object], what: str, timeout: float = 10.0) -> object:
+def until(driver, predicate: Callable[[object], object], what: str, timeout: float = 20.0) -> object:
     from selenium.common.exceptions import TimeoutException
     from selenium.webdriver.support.ui import WebDriverWait
 
@@ -181,6 +181,12 @@ def test_assisted_run_shows_the_two_warnings_before_the_commands(browser, dashbo
             rows = until(browser, lambda d: css(d, selector), f"the warning on {skillset}:{transition} at step {index}")
             seen.append((index, skillset, transition, prop, rows[0]["data-constraint"]))
             assert "explicit" in rows[0]["text"] and "command" in rows[0]["text"]
+            # The page's check box asks the monitor about the same command.
+            browser.execute_script("document.getElementById('check-command').value = arguments[0];"
+                                   "document.querySelector('#check-form button').click();", f"{skillset}:{transition}")
+            verdict = until(browser, lambda d: css(d, "#check-result [data-decision]"), "the check's answer")
+            assert verdict[0]["data-decision"] == "warn" and f"{prop}: explicit (warn)" in css(
+                browser, "#check-result")[0]["text"]
             if index == WARNINGS[0][0]:
                 screenshot(browser, tmp_path, "dashboard-assisted-warning.png")
 
@@ -218,17 +224,17 @@ def test_page_follows_monitor_and_router_restarts_and_its_own_server_restart(bro
         until(browser, lambda d: css(d, "#services [data-service=monitor][data-alive='1']"), "the monitor back")
 
         router.close()  # router restart: both Zenoh clients reconnect by themselves
-        until(browser, lambda d: css(d, "#services [data-service=monitor][data-alive='0']"), "the link lost", 15)
+        until(browser, lambda d: css(d, "#services [data-service=monitor][data-alive='0']"), "the link lost", 30)
         router = open_router(endpoint)
-        until(browser, lambda d: css(d, "#services [data-service=monitor][data-alive='1']"), "the link back", 20)
+        until(browser, lambda d: css(d, "#services [data-service=monitor][data-alive='1']"), "the link back", 30)
         events.send("spot", "init_power.success.powered_on")
-        until(browser, lambda d: "init_power.success.powered_on" in css(d, "#step")[0]["text"], "the next event", 10)
+        until(browser, lambda d: "init_power.success.powered_on" in css(d, "#step")[0]["text"], "the next event", 20)
 
         proc.terminate()  # the dashboard's own restart: EventSource reconnects to a fresh snapshot
         proc.wait(10)
         until(browser, lambda d: css(d, "#status[data-connected=false]"), "the lost connection")
         spawn("services.dashboard", str(SYSTEM_FILE), "--port", str(port), *client_args(endpoint))
-        until(browser, lambda d: css(d, "#status[data-connected=true]"), "the connection back", 20)
+        until(browser, lambda d: css(d, "#status[data-connected=true]"), "the connection back", 30)
         until(browser, lambda d: "init_power.success.powered_on" in css(d, "#step")[0]["text"], "the last step again")
         screenshot(browser, tmp_path, "dashboard-restarts.png")
     finally:
