@@ -38,8 +38,8 @@ from itertools import product
 
 import numpy as np
 
-from skinet.net.petrinet import PetriNet
-from skinet.net.semantics import steps
+from skinet.net.petrinet import PetriNet, Transition
+from skinet.net.semantics import stable_successors
 from skinet.props.evaluate import evaluate
 from skinet.props.formula import PlaceAtom, Property
 from skinet.lang.expr import atoms
@@ -97,16 +97,16 @@ def uncontrollable_reach(net: PetriNet, marking: int, events: bool = False) -> R
     if hit is not None:
         cache.move_to_end(key)
         return hit
-    kinds = uncontrollable_kinds(events)
+    transitions = _uncontrollable_transitions(net, events)
     states, dist, path = [marking], [0], [()]
     index = {marking: 0}
     i = 0
     while i < len(states):
         m = states[i]
-        for t, results in steps(net, m):
-            if t.kind not in kinds:
+        for t in transitions:  # every marking here is stable: no invariant can block an outcome
+            if m & t.pre_mask != t.pre_mask:
                 continue
-            for r in sorted(results):
+            for r in sorted(stable_successors(net, m, t)):
                 if r not in index:
                     index[r] = len(states)
                     states.append(r)
@@ -118,6 +118,14 @@ def uncontrollable_reach(net: PetriNet, marking: int, events: bool = False) -> R
     while len(cache) > CACHE_SIZE:
         cache.popitem(last=False)
     return reach
+
+
+def _uncontrollable_transitions(net: PetriNet, events: bool) -> tuple[Transition, ...]:
+    cache: dict[bool, tuple[Transition, ...]] = net.__dict__.setdefault("_unc_transitions", {})
+    if events not in cache:
+        kinds = uncontrollable_kinds(events)
+        cache[events] = tuple(t for t in net.transitions if t.kind in kinds)
+    return cache[events]
 
 
 class ForcedOracle:
