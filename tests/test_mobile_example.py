@@ -194,3 +194,48 @@ def test_demo_tells_forced_warnings_apart(capsys: pytest.CaptureFixture[str]) ->
             "arm pose at Unfolded while base navigate runs; operator refrains") in out
     assert ("   warnings heeded (commands considered, flagged, not issued): 2; base:navigate.start forced for "
             "stowed_drive at step 4; base:navigate.start explicit for stowed_drive at step 8") in out
+
+
+def test_the_issue_arm_forced_for_safety_guard_while_walking() -> None:
+    """Issue 9's case: an arm_ready that takes the mutex at start and moves to RD only on success.
+
+    While arm_ready runs with the arm still at HP, go_to_waypoint.start is explicit for
+    action_guard only; its forced constraint for safety_guard is the paper's 15:42 violation.
+    """
+    from skinet.lang.parser import parse_skillset
+    from skinet.system import build_system
+
+    arm_text = (SKILLSETS / "manipulator.rl").read_text()
+    start = arm_text.index("    skill arm_ready {")
+    end = arm_text.index("    skill arm_joystick {")
+    arm_ready = """    skill arm_ready {
+        precondition {
+            at_home: arm_status == HP
+            free: mutex == Free
+        }
+        start mutex -> Busy
+        interrupt {
+            effect mutex -> Free
+        }
+        success ready {
+            effect {
+                mutex -> Free
+                arm_status -> RD
+            }
+        }
+    }
+
+"""
+    arm_text = arm_text[:start] + arm_ready + arm_text[end:]
+    arm = parse_skillset(arm_text.replace("HP -> Moving", "HP -> Moving\n                HP -> RD"), "manipulator.rl")
+    spot = parse_skillset((SKILLSETS / "spot.rl").read_text(), "spot.rl")
+    system = build_system("spot_arm", [(spot, ""), (arm, "")], (SKILLSETS / "spot_arm.props").read_text())
+    live = LiveSystem(system)
+    for skillset, transition in (("spot", "init_power.start"), ("spot", "init_power.success.powered_on"),
+                                 ("spot", "stand_up.start"), ("spot", "stand_up.success.standing"),
+                                 ("manipulator", "arm_ready.start")):
+        assert live.apply(skillset, transition).divergence is None
+    flags = [(u.property, u.constraint, u.steps, u.witness) for u in analyse(system, live.marking).operator_unsafe()
+             if u.transition == "go_to_waypoint.start"]
+    assert flags == [("action_guard", "explicit", 0, ()),
+                     ("safety_guard", "forced", 1, ("manipulator:arm_ready.success.ready",))]
