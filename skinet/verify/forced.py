@@ -138,27 +138,34 @@ class ForcedOracle:
         self.system = system
         self.events = events
         self._nets = {c.name: c.net for c in system.components}
-        self._atoms: dict[str, dict[str, tuple[PlaceAtom, ...]]] = {}
+        self._atoms: dict[Property, dict[str, tuple[PlaceAtom, ...]]] = {}
         self._memo: OrderedDict[tuple, ForcedVerdict | None] = OrderedDict()
-        for p in system.properties:
+
+    def atoms_of(self, prop: Property) -> dict[str, tuple[PlaceAtom, ...]]:
+        """The atoms of ``prop`` per component it mentions."""
+        if prop not in self._atoms:
             per: dict[str, list[PlaceAtom]] = {}
-            for a in atoms(p.expr):
+            for a in atoms(prop.expr):
                 if isinstance(a, PlaceAtom) and a not in per.setdefault(a.skillset, []):
                     per[a.skillset].append(a)
-            self._atoms[p.name] = {c: tuple(v) for c, v in per.items()}
+            self._atoms[prop] = {c: tuple(v) for c, v in per.items()}
+        return self._atoms[prop]
 
     def verdict(self, prop: Property, marking: Mapping[str, int]) -> ForcedVerdict | None:
         """The shortest uncontrollable way from ``marking`` to a violation of ``prop``, or None."""
-        per = self._atoms[prop.name]
-        key = (prop.name, *(marking[c] for c in per))
+        per = self.atoms_of(prop)
+        key = (prop, *(marking[c] for c in per))
         if key in self._memo:
             self._memo.move_to_end(key)
-            return self._memo[key]
-        found = self._search(prop, per, marking)
-        self._memo[key] = found
-        while len(self._memo) > CACHE_SIZE:
-            self._memo.popitem(last=False)
-        return found
+            found = self._memo[key]
+        else:
+            found = self._memo[key] = self._search(prop, per, marking)
+            while len(self._memo) > CACHE_SIZE:
+                self._memo.popitem(last=False)
+        if found is None:
+            return None
+        # The memo knows only the components the property mentions; the others keep this marking.
+        return ForcedVerdict(found.steps, found.witness, {**marking, **{c: found.reached[c] for c in per}})
 
     def _search(self, prop: Property, per: Mapping[str, tuple[PlaceAtom, ...]],
                 marking: Mapping[str, int]) -> ForcedVerdict | None:
@@ -220,7 +227,7 @@ def forced_mask(
     violating combination of valuations.
     """
     graphs = list(graphs)
-    per = oracle(system, events)._atoms[prop.name]
+    per = oracle(system, events).atoms_of(prop)
     position = {g.name: i for i, g in enumerate(graphs)}
     names = list(per)
     if not names:  # a constant property
