@@ -24,53 +24,41 @@ SKILLSETS = Path(__file__).resolve().parents[1] / "skillsets"
 MISSIONS = SKILLSETS / "missions"
 FORCED_UNFOLD = ("arm:unfold.success.unfolded",)
 
+# What the operator view lists, by situation.
+DRIVING_IS_FORCED = [  # unfold runs, the arm still counts as Folded
+    ("base:navigate.start", "stowed_drive", "forced", 1, FORCED_UNFOLD),
+    ("base:dock_station.start", "stowed_drive", "forced", 1, FORCED_UNFOLD),
+]
+ARM_OUT = [  # the arm is Unfolded or Holding: driving violates at once
+    ("base:navigate.start", "stowed_drive", "explicit", 0, ()),
+    ("base:dock_station.start", "stowed_drive", "explicit", 0, ()),
+]
+ARM_OUT_AND_BUSY = [  # ... and pick or place runs: driving violates both properties
+    ("base:navigate.start", "stowed_drive", "explicit", 0, ()),
+    ("base:navigate.start", "still_grasp", "explicit", 0, ()),
+    ("base:dock_station.start", "stowed_drive", "explicit", 0, ()),
+    ("base:dock_station.start", "still_grasp", "explicit", 0, ()),
+]
+UNFOLDING_IS_FORCED = [("arm:unfold.start", "stowed_drive", "forced", 1, FORCED_UNFOLD)]  # the base drives
+
 MOBILE_UNASSISTED = {
     0: [],  # initial marking
     1: [],  # base:undock.start
     2: [],  # base:undock.success.undocked
-    3: [  # arm:unfold.start
-        ('base:navigate.start', 'stowed_drive', 'forced', 1, ('arm:unfold.success.unfolded',)),
-        ('base:dock_station.start', 'stowed_drive', 'forced', 1, ('arm:unfold.success.unfolded',)),
+    3: DRIVING_IS_FORCED,  # arm:unfold.start
+    4: [  # base:navigate.start (flagged forced, issued anyway): unfold's outcomes now violate at once
+        ("arm:unfold.success.unfolded", "stowed_drive", "explicit", 0, ()),
+        ("arm:unfold.failure.jammed", "stowed_drive", "explicit", 0, ()),
     ],
-    4: [  # base:navigate.start
-        ('arm:unfold.success.unfolded', 'stowed_drive', 'explicit', 0, ()),
-        ('arm:unfold.failure.jammed', 'stowed_drive', 'explicit', 0, ()),
-    ],
-    5: [  # arm:unfold.success.unfolded
-        ('arm:pick.start', 'still_grasp', 'explicit', 0, ()),
-    ],
-    6: [  # base:navigate.success.arrived
-        ('base:navigate.start', 'stowed_drive', 'explicit', 0, ()),
-        ('base:dock_station.start', 'stowed_drive', 'explicit', 0, ()),
-    ],
-    7: [  # arm:pick.start
-        ('base:navigate.start', 'stowed_drive', 'explicit', 0, ()),
-        ('base:navigate.start', 'still_grasp', 'explicit', 0, ()),
-        ('base:dock_station.start', 'stowed_drive', 'explicit', 0, ()),
-        ('base:dock_station.start', 'still_grasp', 'explicit', 0, ()),
-    ],
-    8: [  # arm:pick.success.picked
-        ('base:navigate.start', 'stowed_drive', 'explicit', 0, ()),
-        ('base:dock_station.start', 'stowed_drive', 'explicit', 0, ()),
-    ],
-    9: [  # arm:place.start
-        ('base:navigate.start', 'stowed_drive', 'explicit', 0, ()),
-        ('base:navigate.start', 'still_grasp', 'explicit', 0, ()),
-        ('base:dock_station.start', 'stowed_drive', 'explicit', 0, ()),
-        ('base:dock_station.start', 'still_grasp', 'explicit', 0, ()),
-    ],
-    10: [  # arm:place.success.placed
-        ('base:navigate.start', 'stowed_drive', 'explicit', 0, ()),
-        ('base:dock_station.start', 'stowed_drive', 'explicit', 0, ()),
-    ],
-    11: [  # arm:fold.start
-        ('base:navigate.start', 'stowed_drive', 'explicit', 0, ()),
-        ('base:dock_station.start', 'stowed_drive', 'explicit', 0, ()),
-    ],
+    5: [("arm:pick.start", "still_grasp", "explicit", 0, ())],  # arm:unfold.success.unfolded (violated)
+    6: ARM_OUT,  # base:navigate.success.arrived
+    7: ARM_OUT_AND_BUSY,  # arm:pick.start
+    8: ARM_OUT,  # arm:pick.success.picked
+    9: ARM_OUT_AND_BUSY,  # arm:place.start
+    10: ARM_OUT,  # arm:place.success.placed
+    11: ARM_OUT,  # arm:fold.start
     12: [],  # arm:fold.success.folded
-    13: [  # base:dock_station.start
-        ('arm:unfold.start', 'stowed_drive', 'forced', 1, ('arm:unfold.success.unfolded',)),
-    ],
+    13: UNFOLDING_IS_FORCED,  # base:dock_station.start
     14: [],  # base:dock_station.success.docked
 }
 
@@ -78,56 +66,22 @@ MOBILE_ASSISTED = {
     0: [],  # initial marking
     1: [],  # base:undock.start
     2: [],  # base:undock.success.undocked
-    3: [  # arm:unfold.start
-        ('base:navigate.start', 'stowed_drive', 'forced', 1, ('arm:unfold.success.unfolded',)),
-        ('base:dock_station.start', 'stowed_drive', 'forced', 1, ('arm:unfold.success.unfolded',)),
-    ],
-    4: [  # base:(considers navigate.start)
-        ('base:navigate.start', 'stowed_drive', 'forced', 1, ('arm:unfold.success.unfolded',)),
-        ('base:dock_station.start', 'stowed_drive', 'forced', 1, ('arm:unfold.success.unfolded',)),
-    ],
-    5: [  # arm:unfold.success.unfolded
-        ('base:navigate.start', 'stowed_drive', 'explicit', 0, ()),
-        ('base:dock_station.start', 'stowed_drive', 'explicit', 0, ()),
-    ],
-    6: [  # arm:pick.start
-        ('base:navigate.start', 'stowed_drive', 'explicit', 0, ()),
-        ('base:navigate.start', 'still_grasp', 'explicit', 0, ()),
-        ('base:dock_station.start', 'stowed_drive', 'explicit', 0, ()),
-        ('base:dock_station.start', 'still_grasp', 'explicit', 0, ()),
-    ],
-    7: [  # arm:pick.success.picked
-        ('base:navigate.start', 'stowed_drive', 'explicit', 0, ()),
-        ('base:dock_station.start', 'stowed_drive', 'explicit', 0, ()),
-    ],
-    8: [  # base:(considers navigate.start)
-        ('base:navigate.start', 'stowed_drive', 'explicit', 0, ()),
-        ('base:dock_station.start', 'stowed_drive', 'explicit', 0, ()),
-    ],
-    9: [  # arm:place.start
-        ('base:navigate.start', 'stowed_drive', 'explicit', 0, ()),
-        ('base:navigate.start', 'still_grasp', 'explicit', 0, ()),
-        ('base:dock_station.start', 'stowed_drive', 'explicit', 0, ()),
-        ('base:dock_station.start', 'still_grasp', 'explicit', 0, ()),
-    ],
-    10: [  # arm:place.success.placed
-        ('base:navigate.start', 'stowed_drive', 'explicit', 0, ()),
-        ('base:dock_station.start', 'stowed_drive', 'explicit', 0, ()),
-    ],
-    11: [  # arm:fold.start
-        ('base:navigate.start', 'stowed_drive', 'explicit', 0, ()),
-        ('base:dock_station.start', 'stowed_drive', 'explicit', 0, ()),
-    ],
+    3: DRIVING_IS_FORCED,  # arm:unfold.start
+    4: DRIVING_IS_FORCED,  # considers base:navigate.start
+    5: ARM_OUT,  # arm:unfold.success.unfolded
+    6: ARM_OUT_AND_BUSY,  # arm:pick.start
+    7: ARM_OUT,  # arm:pick.success.picked
+    8: ARM_OUT,  # considers base:navigate.start
+    9: ARM_OUT_AND_BUSY,  # arm:place.start
+    10: ARM_OUT,  # arm:place.success.placed
+    11: ARM_OUT,  # arm:fold.start
     12: [],  # arm:fold.success.folded
-    13: [  # base:navigate.start
-        ('arm:unfold.start', 'stowed_drive', 'forced', 1, ('arm:unfold.success.unfolded',)),
-    ],
+    13: UNFOLDING_IS_FORCED,  # base:navigate.start
     14: [],  # base:navigate.success.arrived
-    15: [  # base:dock_station.start
-        ('arm:unfold.start', 'stowed_drive', 'forced', 1, ('arm:unfold.success.unfolded',)),
-    ],
+    15: UNFOLDING_IS_FORCED,  # base:dock_station.start
     16: [],  # base:dock_station.success.docked
 }
+
 RUNS = {"mobile_unassisted": MOBILE_UNASSISTED, "mobile_assisted": MOBILE_ASSISTED}
 
 
