@@ -25,6 +25,7 @@ from services.common.session import open_session
 from services.common.zenoh_config import login, session_config
 from services.monitor import Monitor, MonitorView, start_monitor
 from services.monitor.check import parse_policy
+from skinet.explain import warning_line
 from skinet.cli.render import seconds, table
 from skinet.files import load_system
 from skinet.system import System
@@ -56,7 +57,7 @@ def render(view: MonitorView | Observed) -> list[str]:
                    for r in u.recovery if r.property == v.name]
             line += f"; recovery: {', '.join(rec) or 'none'}"
         out.append(line)
-    freshness = "STALE (explicit constraints only)" if u.prediction_stale else "fresh"
+    freshness = "STALE (explicit and forced constraints only)" if u.prediction_stale else "fresh"
     out.append(f"unsafe transitions ({len(u.unsafe)}), prediction {freshness}")
     if u.unsafe:
         rows = [[e.skillset, e.transition, e.property, e.constraint,
@@ -64,6 +65,8 @@ def render(view: MonitorView | Observed) -> list[str]:
                  "-" if e.steps is None else e.steps, " -> ".join(e.witness)] for e in u.unsafe]
         out.extend("  " + r for r in table(rows, ["skillset", "transition", "property", "constraint",
                                                   "control", "steps", "witness"]).splitlines())
+        out.append("why")
+        out.extend("  " + warning_line(e) for e in u.unsafe)
     space = view.state_space
     explored = "-" if space is None else (
         f"{seconds(space.time)}, {space.markings} markings, {space.edges} edges, depth {space.depth}, "

@@ -104,7 +104,7 @@ class Checker:
                               candidates=_close(tr, self.transitions[ss]))
         reasons = [
             CheckReason(property=u.property, constraint=u.constraint, action=self.policy.action(u.constraint),
-                        controllable=u.controllable, steps=u.steps, witness=list(u.witness))
+                        controllable=u.controllable, steps=u.steps, witness=list(u.witness), reason=u.reason)
             for u in analysis.operator_unsafe() if u.skillset == ss and u.transition == tr
         ]
         decision = max((r.action for r in reasons), key=_STRENGTH.__getitem__, default="allow")

@@ -99,11 +99,12 @@ def cmd_check(args: argparse.Namespace) -> int:
     else:
         state = "" if reply.enabled else " (not firable now)"
         print(f"{args.command}: {reply.decision.upper() if reply.decision else '?'} at step {reply.seq}{state}"
-              + (" (prediction stale: explicit constraints only)" if reply.prediction_stale else ""))
+              + (" (prediction stale: explicit and forced constraints only)" if reply.prediction_stale else ""))
         for r in reply.reasons:
             steps = "" if not r.steps else f", within {r.steps} steps"
             via = f" via {' -> '.join(r.witness)}" if r.witness else ""
-            print(f"  {r.property}: {r.constraint} ({r.action}){steps}{via}")
+            why = f" — {r.reason}" if r.reason else ""
+            print(f"  {r.property}: {r.constraint} ({r.action}){steps}{via}{why}")
         for p in reply.recovers:
             print(f"  restores {p} (violated now)")
     return EXIT.get(reply.decision or "", 1) if reply.ok else 1

@@ -17,13 +17,14 @@ from collections.abc import Iterator
 import pytest
 import zenoh
 
-from deploy_support import REPO, SYSTEM, acl_router_config, free_port, login, passwords, wait_until
+from deploy_support import REPO, SYSTEM, Tokens, acl_router_config, free_port, login, passwords, wait_until
 from services.monitor import start_monitor
 from skinet.files import load_system
 from skinet.wire import keys
 from skinet.wire.codec import encode
 from skinet.wire.messages import CanonicalEvent
 
+SG_AT_RD = "violates it at once: spot go_to_waypoint runs while manipulator arm_status at RD"  # skinet.explain
 TO_ARM_AT_RD = [("spot", "init_power.start"), ("spot", "init_power.success.powered_on"), ("spot", "stand_up.start"),
                 ("spot", "stand_up.success.standing"), ("manipulator", "arm_ready.start"),
                 ("manipulator", "arm_ready.success.ready")]
@@ -36,7 +37,9 @@ def deployment() -> Iterator[str]:
     router = zenoh.open(acl_router_config(endpoint))
     monitor_session, bridge = login(endpoint, "monitor"), login(endpoint, "bridge")
     monitor = start_monitor(monitor_session, load_system(REPO / "skillsets" / "spot_arm.toml")[0])
-    try:
+    tokens = Tokens(bridge)
+    try:  # the monitor's token is declared last: once seen, its event subscriber is known too
+        wait_until(lambda: bool(tokens.of("monitor")), 10, "the monitor's liveliness token")
         seq: dict[str, int] = {}
         for skillset, transition in TO_ARM_AT_RD:
             seq[skillset] = seq.get(skillset, -1) + 1
@@ -45,6 +48,7 @@ def deployment() -> Iterator[str]:
         wait_until(lambda: monitor.counters.applied == len(TO_ARM_AT_RD), 10, "the events applied")
         yield endpoint
     finally:
+        tokens.close()
         monitor.close()
         for s in (bridge, monitor_session, router):
             s.close()
@@ -67,7 +71,8 @@ def test_check_as_observer(deployment: str) -> None:
     out = skinet("check", SYSTEM, "spot:go_to_waypoint.start", *zenoh_flags(deployment))
     assert out.returncode == 3, out  # warn
     assert out.stdout.splitlines()[:2] == ["spot:go_to_waypoint.start: WARN at step 6 (prediction stale: explicit "
-                                           "constraints only)", "  safety_guard: explicit (warn)"]
+                                           "and forced constraints only)",
+                                           "  safety_guard: explicit (warn) — " + SG_AT_RD]
     out = skinet("check", SYSTEM, "spot:sit_down.start", "--json", *zenoh_flags(deployment))
     assert out.returncode == 0 and json.loads(out.stdout)["decision"] == "allow"
     out = skinet("check", SYSTEM, "arm:x.start", *zenoh_flags(deployment))
@@ -85,7 +90,7 @@ def test_watch_logs_in_from_the_environment(deployment: str) -> None:
     lines = out.stdout.splitlines()
     assert lines[0].startswith("SkiNet Live  system spot_arm  step 6  last event manipulator:arm_ready.success.ready")
     assert "  manipulator  mutex=Free arm_status=RD; running: -" in lines
-    assert "unsafe transitions (1), prediction STALE (explicit constraints only)" in lines  # no predictor here
+    assert "unsafe transitions (1), prediction STALE (explicit and forced constraints only)" in lines  # no predictor here
     assert "services  monitor: 1, bridge_ros2: 0, predictor: 0" in lines and lines[-1] == "violations (0)"
     out = skinet("watch", "nope", "--wait", "1", *zenoh_flags(deployment))
     assert (out.returncode, out.stderr.strip()) == (1, "skinet: error: no monitor of system 'nope' is alive "

@@ -52,7 +52,8 @@ def sample_messages(system: System) -> dict[str, BaseModel]:
         "CheckReply": CheckReply(
             system=system.name, skillset="spot", transition="init_power.start", ok=True, decision="deny",
             reasons=[CheckReason(property="action_guard", constraint="forced", action="deny", controllable=True,
-                                 steps=2, witness=["spot:init_power.success.powered_on"])],
+                                 steps=2, witness=["spot:init_power.success.powered_on"],
+                                 reason="init_power may succeed")],
             enabled=True, violated=["safety_guard"], recovers=["safety_guard"], prediction_stale=False, seq=8,
             policy="explicit=deny,implicit=warn,forced=deny,unknown=warn", error="", candidates=["x"]),
     }

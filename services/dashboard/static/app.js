@@ -152,7 +152,7 @@ function renderUnsafe() {
   const p = document.getElementById("prediction");
   p.className = u && !u.prediction_stale ? "fresh" : "stale";
   p.textContent = !u ? "" : (u.prediction_stale
-    ? "prediction STALE: explicit constraints only (no predictor answer for this marking yet)"
+    ? "prediction STALE: explicit and forced constraints only (no predictor answer for this marking yet)"
     : `prediction fresh for step ${u.seq}`) + ` \u00b7 last state-space report ${ago(view.stateSpaceT)}`;
   if (!u) { fill("unsafe"); return; }
   if (!u.unsafe.length) { fill("unsafe", el("p", { class: "muted" }, "no unsafe transition at this marking")); return; }
@@ -165,9 +165,10 @@ function renderUnsafe() {
       el("td", {}, el("span", { class: `kind kind-${e.constraint}` }, e.constraint)),
       el("td", {}, e.controllable ? "command" : "uncontrollable"),
       el("td", { class: "num" }, e.steps === null ? "-" : e.steps),
-      el("td", { class: "mono witness" }, e.witness.length ? e.witness.join(" \u2192 ") : "")));
+      el("td", { class: "mono witness" }, e.witness.length ? e.witness.join(" \u2192 ") : ""),
+      el("td", { class: "reason" }, e.reason || "")));
     return el("div", { class: "group", "data-skillset": ss }, el("h3", {}, ss),
-      el("table", {}, el("thead", {}, el("tr", {}, ...["transition", "property", "kind", "control", "steps", "witness"]
+      el("table", {}, el("thead", {}, el("tr", {}, ...["transition", "property", "kind", "control", "steps", "witness", "why"]
         .map((h) => el("th", {}, h)))), el("tbody", {}, ...rows)));
   });
   fill("unsafe", ...blocks);
@@ -321,7 +322,8 @@ async function check(event) {
       return;
     }
     const reasons = r.reasons.map((x) => el("li", {}, `${x.property}: ${x.constraint} (${x.action})`,
-      x.steps ? `, within ${x.steps} steps` : "", x.witness.length ? ` via ${x.witness.join(" \u2192 ")}` : ""));
+      x.steps ? `, within ${x.steps} steps` : "", x.witness.length ? ` via ${x.witness.join(" \u2192 ")}` : "",
+      x.reason ? ` \u2014 ${x.reason}` : ""));
     out.replaceChildren(el("p", { class: `decision decision-${r.decision}`, "data-decision": r.decision },
       `${r.skillset}:${r.transition}: ${r.decision.toUpperCase()}`, r.enabled ? "" : " (not firable now)"),
       el("ul", {}, ...reasons));
