@@ -152,3 +152,27 @@ def test_example_client_asks_before_every_start(router, session, spot_arm) -> No
         simulator.close()
         monitor.close()
         services_session.close()
+
+
+@pytest.mark.parametrize("policy,decision", [(None, "warn"), ("strict", "deny")])
+def test_forced_constraint_is_denied_under_the_strict_policy(monitor_factory, session, policy, decision) -> None:
+    """The mobile manipulator (skillsets/mobile_manip.toml): driving off while the arm unfolds is
+    forced for stowed_drive (SPEC §6.3), known at once without any predictor."""
+    from skinet.files import load_system
+    from tests.services.conftest import REPO
+
+    mobile = load_system(REPO / "skillsets" / "mobile_manip.toml")[0]
+    reports = Reports(session, mobile.name)
+    monitor_factory(mobile, **({} if policy is None else {"check_policy": parse_policy(policy)}))
+    events = Events(session, mobile.name)
+    for skillset, transition in (("base", "undock.start"), ("base", "undock.success.undocked"),
+                                 ("arm", "unfold.start")):
+        events.send(skillset, transition)
+    reports.step(3)
+    replies = list(session.get(keys.check(mobile.name), payload=encode(parse_command("base:navigate.start")),
+                               timeout=5.0))
+    reply = decode(replies[0].ok.payload.to_bytes(), CheckReply)
+    assert (reply.ok, reply.decision, reply.enabled, reply.prediction_stale) == (True, decision, True, True)
+    assert [(r.property, r.constraint, r.action, r.steps, r.witness) for r in reply.reasons] == [
+        ("stowed_drive", "forced", decision, 1, ["arm:unfold.success.unfolded"])]
+    assert reply.reasons[0].reason

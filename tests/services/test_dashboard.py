@@ -85,9 +85,9 @@ def wait_http(url: str, timeout: float = 15.0) -> None:
 @pytest.fixture
 def dashboard(spawn: Callable, router: str) -> Callable[..., str]:
     """Starts ``python -m services.dashboard`` on a free port; returns its URL."""
-    def start(*extra: str, port: int | None = None) -> str:
+    def start(*extra: str, port: int | None = None, system: Path = SYSTEM_FILE) -> str:
         port = port or free_port()
-        spawn("services.dashboard", str(SYSTEM_FILE), "--port", str(port), "--wait", "1", *client_args(router), *extra)
+        spawn("services.dashboard", str(system), "--port", str(port), "--wait", "1", *client_args(router), *extra)
         url = f"http://127.0.0.1:{port}/"
         wait_http(url + "api/snapshot")
         return url
@@ -127,10 +127,11 @@ def play(run: str, router: str, on_record: Callable[[StepRecord], None]) -> list
     """The mission ``run`` through simulator, bridge, monitor and predictor on a client of ``router``."""
     path = MISSIONS / f"{run}.toml"
     scenario = parse_scenario(read_text(path), str(path))
-    system, _ = load_system(SYSTEM_FILE)
+    system_file = path.parent / scenario.system
+    system, _ = load_system(system_file)
     session = open_client(router)
     try:
-        return run_chain(system, load_typemap(SYSTEM_FILE), scenario, session=session, on_record=on_record)
+        return run_chain(system, load_typemap(system_file), scenario, session=session, on_record=on_record)
     finally:
         session.close()
 
@@ -194,6 +195,25 @@ def test_assisted_run_shows_the_two_warnings_before_the_commands(browser, dashbo
     assert seen == [(i, s, t, p, "explicit") for i, s, t, p in WARNINGS]
     assert [w.property for r in records for w in r.warnings] == [p for *_, p in WARNINGS]
     assert css(browser, "#violations li.none") and not css(browser, "#violations li[data-property]")
+
+
+def test_forced_warning_is_shown_with_its_kind_and_witness(browser, dashboard, router, tmp_path) -> None:
+    """The mobile manipulator (issue 9's example): driving off while the arm unfolds is forced."""
+    browser.get(dashboard(system=REPO / "skillsets" / "mobile_manip.toml"))
+    until(browser, lambda d: css(d, "#status[data-connected=true]"), "the live status")
+    rows: list[dict[str, str]] = []
+
+    def after(record: StepRecord) -> None:
+        if record.index == 3:  # arm:unfold.start
+            selector = "#unsafe .group[data-skillset=base] tr[data-transition='navigate.start'][data-constraint=forced]"
+            rows.extend(until(browser, lambda d: css(d, selector), "navigate.start flagged forced"))
+            badge = css(browser, f"{selector} .kind")[0]
+            assert (badge["text"], badge["class"]) == ("forced", "kind kind-forced")
+            screenshot(browser, tmp_path, "dashboard-forced.png")
+
+    play("mobile_unassisted", router, after)
+    assert rows and rows[0]["data-property"] == "stowed_drive"
+    assert "arm:unfold.success.unfolded" in rows[0]["text"] and "uncontrollable" not in rows[0]["text"]
 
 
 # -- reconnection, late joining, bad input ----------------------------------------------------
