@@ -20,10 +20,11 @@ from pydantic import BaseModel
 
 from services.common.zenoh_config import undeclare
 from services.dashboard.board import Board, Update
+from services.monitor.check import parse_command
 from skinet.system import System
 from skinet.wire import keys
 from skinet.wire.codec import DecodeError, decode, encode
-from skinet.wire.messages import CheckReply, ModelBundle, StateSpaceReport, UnsafeReport, Verdicts, LiveState
+from skinet.wire.messages import CheckReply, LiveState, ModelBundle, StateSpaceReport, UnsafeReport, Verdicts
 
 Listener = Callable[[list[Update]], None]
 RESULTS: tuple[tuple[Callable[[str], str], type[BaseModel]], ...] = (
@@ -90,9 +91,8 @@ class Observer:
         return self._monitor_seen.wait(timeout)
 
     def check(self, command: str, timeout: float = QUERY_TIMEOUT) -> CheckReply:
-        """Ask the monitor's command check; raises :class:`LookupError` when no monitor answers."""
-        from services.monitor.check import parse_command
-
+        """Ask the monitor's command check; raises :class:`LookupError` when no monitor answers
+        and ``ValueError`` for a command that is not ``skillset:transition``."""
         request = parse_command(command)
         for reply in self.session.get(keys.check(self.name), payload=encode(request), timeout=timeout):
             if reply.ok is not None:

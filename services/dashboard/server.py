@@ -18,6 +18,7 @@ and starts from a snapshot).
 from __future__ import annotations
 
 import asyncio
+import errno
 import json
 import logging
 import threading
@@ -185,8 +186,6 @@ class Dashboard:
 
 
 def _bind_error(host: str, port: int, exc: OSError) -> str:
-    import errno
-
     if exc.errno == errno.EADDRINUSE:
         return f"cannot listen on {host}:{port}: the port is in use (choose another port)"
     return f"cannot listen on {host}:{port}: {exc.strerror or exc}"

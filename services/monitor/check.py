@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 from skinet.net.semantics import steps
 from skinet.system import System
 from skinet.verify.algorithm1 import Analysis
+from skinet.wire.codec import DecodeError, decode
 from skinet.wire.messages import CheckReason, CheckReply, CheckRequest
 
 ACTIONS = ("allow", "warn", "deny")
@@ -130,8 +131,6 @@ def _close(name: str, known: list[str]) -> list[str]:
 def request_from(system: str, payload: bytes | None, parameters: str) -> CheckRequest | CheckReply:
     """The request of a query: a msgpack :class:`CheckRequest` payload, else the selector
     parameter ``command=skillset:transition``; an error reply when neither is usable."""
-    from skinet.wire.codec import DecodeError, decode
-
     def error(text: str) -> CheckReply:
         return CheckReply(system=system, skillset="", transition="", ok=False, error=text)
 
