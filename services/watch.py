@@ -26,8 +26,10 @@ from skinet.errors import SkinetError
 
 
 def view_lines(board: Board) -> list[str]:
-    """The operator view of what ``board`` holds (empty before the monitor's first messages)."""
-    if board.state is None or board.verdicts is None or board.unsafe is None:
+    """The operator view of what ``board`` holds; empty until the three messages of the
+    monitor's last step are all there."""
+    st, v, u = board.state, board.verdicts, board.unsafe
+    if st is None or v is None or u is None or not st.seq == v.seq == u.seq:
         return []
     out = render(Observed(board.state, board.verdicts, board.unsafe, board.state_space))
     alive = board.alive

@@ -134,3 +134,23 @@ def test_dashboard_joins_late_as_observer(deployment: str, tmp_path) -> None:
     finally:
         proc.terminate()
         proc.wait(10)
+
+
+def test_watch_in_a_pipe_prints_one_line_per_step(deployment: str) -> None:
+    """Last in this file: it moves the deployment on (the transfer with the arm at RD)."""
+    proc = subprocess.Popen([sys.executable, "-m", "skinet.cli.main", "watch", SYSTEM, "--duration", "60",
+                             *zenoh_flags(deployment)], cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+    bridge = login(deployment, "bridge")
+    try:
+        first = proc.stdout.readline().strip()
+        assert first.startswith("[6] manipulator:arm_ready.success.ready#1 | action_guard=ok safety_guard=ok | "
+                                "unsafe: spot:go_to_waypoint.start(safety_guard explicit)")
+        bridge.put(keys.events(SYSTEM, "spot"), encode(CanonicalEvent(
+            system=SYSTEM, skillset="spot", seq=4, stamp=time.time(), transition="go_to_waypoint.start")))
+        line = proc.stdout.readline().strip()
+        assert line.startswith("[7] spot:go_to_waypoint.start#4 | action_guard=ok safety_guard=VIOLATED | "), line
+    finally:
+        bridge.close()
+        proc.terminate()
+        assert proc.wait(15) == 0
