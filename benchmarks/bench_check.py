@@ -144,7 +144,7 @@ def through_router(n: int) -> list[list[object]]:
     client = zenoh.open(session_config("client", connect=[endpoint], multicast_scouting=False))
     other = zenoh.open(session_config("client", connect=[endpoint], multicast_scouting=False))
     monitor = subprocess.Popen([sys.executable, "-m", "services.monitor", str(SYSTEM_FILE), "--mode", "client",
-                                "--connect", endpoint, "--no-multicast-scouting", "--log-level", "WARNING"], cwd=ROOT)
+                                "--connect", endpoint, "--no-multicast-scouting", "--log-level", "ERROR"], cwd=ROOT)
     try:
         system = "spot_arm"
         tokens: set[str] = set()
