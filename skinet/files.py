@@ -19,39 +19,56 @@ reads it.
 from __future__ import annotations
 
 import json
+import os
 import re
 import tomllib
 from pathlib import Path
 
 from skinet.errors import Diagnostic, Pos, SourceError
-from skinet.lang.model import Model
+from skinet.lang.larkerrors import MAX_SOURCE_CHARS
+from skinet.lang.model import Model, Skillset
 from skinet.lang.parser import parse_model
 from skinet.ros.typemap import TypeMap, parse_typemap
 from skinet.system import Marking, System, build_system, marking_from_json
 
 
-def read_text(path: str | Path) -> str:
-    """File contents, or a :class:`SourceError` naming the file and the OS reason."""
+def read_text(path: str | Path, limit: int | None = None) -> str:
+    """File contents, or a :class:`SourceError` naming the file and the OS reason.
+
+    A file larger than ``limit`` bytes is refused before it is read, so a huge
+    file costs no memory.
+    """
     try:
-        return Path(path).read_text(encoding="utf-8")
+        with open(path, "rb") as f:
+            if limit is None:
+                return f.read().decode("utf-8")
+            size = os.fstat(f.fileno()).st_size
+            data = f.read(limit + 1) if size <= limit else b""  # a pipe or a growing file is bounded too
+        if size > limit or len(data) > limit:
+            raise SourceError.at(
+                str(path), None, f"file too large: {max(size, len(data))} bytes (the limit is {limit})"
+            )
+        return data.decode("utf-8")
     except (OSError, UnicodeDecodeError) as exc:
         reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
         raise SourceError.at(str(path), None, f"cannot read file: {reason}") from None
 
 
+def read_source(path: str | Path) -> str:
+    """A model, properties, system or state file: at most MAX_SOURCE_CHARS bytes."""
+    return read_text(path, MAX_SOURCE_CHARS)
+
+
 def load_model(path: str | Path) -> Model:
     """Parse and validate a ``.rl`` file."""
-    return parse_model(read_text(path), str(path))
+    return parse_model(read_source(path), str(path))
 
 
 def load_system(path: str | Path) -> tuple[System, list[Diagnostic]]:
     """Load a system file and everything it names; returns the warnings too."""
     path = Path(path)
-    text = read_text(path)
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise _toml_error(str(path), exc) from None
+    text = read_source(path)
+    data = _parse_toml(text, str(path))
     where = str(path)
     system = data.get("system")
     if not isinstance(system, dict) or not isinstance(system.get("name"), str):
@@ -59,61 +76,95 @@ def load_system(path: str | Path) -> tuple[System, list[Diagnostic]]:
     entries = data.get("skillsets")
     if not isinstance(entries, list) or not entries:
         raise SourceError.at(where, None, "missing [[skillsets]] entries (each with 'model' and 'manager')")
-    skillsets = []
+    skillsets: list[tuple[Skillset, str]] = []
     warnings: list[Diagnostic] = []
     sources: dict[str, str] = {}
+    models: dict[Path, Model] = {}
     for n, entry in enumerate(entries, 1):
         if not isinstance(entry, dict) or not isinstance(entry.get("model"), str):
             raise SourceError.at(where, None, f"skillsets entry {n} needs a 'model' path")
         model_path = path.parent / entry["model"]
-        model_text = read_text(model_path)
-        model = parse_model(model_text, str(model_path))
-        warnings.extend(model.warnings)
-        if len(model.skillsets) != 1:
-            raise SourceError.at(str(model_path), None, f"expected exactly one skillset, found {len(model.skillsets)}")
-        skillset = model.skillsets[0]
-        expected = entry.get("name")
-        if expected is not None and expected != skillset.name:
-            raise SourceError.at(where, None, f"skillsets entry {n} names '{expected}' but {entry['model']} declares '{skillset.name}'")
-        sources[model_path.name] = model_text
-        skillsets.append((skillset, str(entry.get("manager", ""))))
+        model = models.get(model_path)
+        if model is None:
+            model_text = read_source(model_path)
+            model = models[model_path] = parse_model(model_text, str(model_path))
+            warnings.extend(model.warnings)
+            sources[model_path.name] = model_text
+        skillsets.extend((ss, str(entry.get("manager", ""))) for ss in _entry_skillsets(entry, n, model, where))
     props_name = system.get("properties")
     props_text, props_source = "", "<no properties>"
     if props_name is not None:
         props_path = path.parent / str(props_name)
-        props_text, props_source = read_text(props_path), str(props_path)
+        props_text, props_source = read_source(props_path), str(props_path)
         sources[props_path.name] = props_text
     return build_system(system["name"], skillsets, props_text, props_source, sources), warnings
+
+
+def _entry_skillsets(entry: dict[str, object], n: int, model: Model, where: str) -> list[Skillset]:
+    """The skillsets a ``[[skillsets]]`` entry takes from its model file.
+
+    ``name`` picks one skillset of the file; without it the entry takes every
+    skillset the file declares (one manager each, so ``manager`` then needs a
+    file of one skillset).
+    """
+    declared = ", ".join(f"'{s.name}'" for s in model.skillsets)
+    expected = entry.get("name")
+    if expected is not None:
+        for ss in model.skillsets:
+            if ss.name == expected:
+                return [ss]
+        raise SourceError.at(where, None, f"skillsets entry {n} names '{expected}' but {entry['model']} declares {declared}")
+    if len(model.skillsets) > 1 and "manager" in entry:
+        raise SourceError.at(
+            where, None,
+            f"skillsets entry {n}: {entry['model']} declares {len(model.skillsets)} skillsets ({declared});"
+            " give one entry per skillset, each with its 'name' and 'manager'",
+        )
+    return list(model.skillsets)
 
 
 def load_typemap(path: str | Path) -> TypeMap:
     """The type map named by ``[system] types`` in a system file (empty when absent)."""
     path = Path(path)
-    try:
-        data = tomllib.loads(read_text(path))
-    except tomllib.TOMLDecodeError as exc:
-        raise _toml_error(str(path), exc) from None
+    data = _parse_toml(read_source(path), str(path))
     name = data.get("system", {}).get("types") if isinstance(data.get("system"), dict) else None
     if name is None:
         return {}
     if not isinstance(name, str):
         raise SourceError.at(str(path), None, "[system] 'types' must be a path string")
     types_path = path.parent / name
-    return parse_typemap(read_text(types_path), str(types_path))
+    return parse_typemap(read_source(types_path), str(types_path))
 
 
 def load_state(path: str | Path, system: System) -> Marking:
     """A combined marking from a JSON state file (see :func:`skinet.system.marking_from_json`)."""
-    text = read_text(path)
+    text = read_source(path)
     try:
         data = json.loads(text)
     except json.JSONDecodeError as exc:
         raise SourceError.at(str(path), Pos(exc.lineno, exc.colno), f"invalid JSON: {exc.msg}") from None
+    except RecursionError:
+        raise SourceError.at(str(path), None, "invalid JSON: nested too deeply") from None
     return marking_from_json(system, data, str(path))
 
 
-def _toml_error(source: str, exc: tomllib.TOMLDecodeError) -> SourceError:
+def _parse_toml(text: str, source: str) -> dict[str, object]:
+    """``tomllib.loads`` with its errors (and its recursion on deep nesting) as SourceError."""
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise _toml_error(source, text, exc) from None
+    except RecursionError:
+        raise SourceError.at(source, None, "invalid TOML: nested too deeply") from None
+
+
+def _toml_error(source: str, text: str, exc: tomllib.TOMLDecodeError) -> SourceError:
+    """The decoder's message at its position; "at end of document" is the last character."""
     match = re.search(r"\(at line (\d+), column (\d+)\)$", str(exc))
     message = re.sub(r"\s*\(at line \d+, column \d+\)$|\s*\(at end of document\)$", "", str(exc))
-    pos = Pos(int(match.group(1)), int(match.group(2))) if match else None
+    if match:
+        pos: Pos | None = Pos(int(match.group(1)), int(match.group(2)))
+    else:
+        stripped = text.rstrip()  # as for syntax errors: just after the last character
+        pos = Pos(stripped.count("\n") + 1, len(stripped.rsplit("\n", 1)[-1]) + 1)
     return SourceError.at(source, pos, f"invalid TOML: {message}")

@@ -116,7 +116,9 @@ def marking_from_json(system: System, data: object, source: str = "<state>") -> 
             raise SourceError.at(source, None, f"state of '{c.name}': 'resources' must be an object and 'running' a list")
         places: set[str] = set()
         declared = {r.name: r for r in c.skillset.resources}
-        for rname in resources:
+        for rname, state in resources.items():
+            if not isinstance(state, str):
+                raise SourceError.at(source, None, f"state of resource '{c.name}:{rname}' must be a string, not {_json_kind(state)}")
             if rname not in declared:
                 raise SourceError.at(source, None, f"unknown resource '{rname}' of '{c.name}' (resources: {', '.join(declared)})")
         for r in c.skillset.resources:
@@ -126,9 +128,24 @@ def marking_from_json(system: System, data: object, source: str = "<state>") -> 
             places.add(resource_place(r.name, state))
         skills = {k.name for k in c.skillset.skills}
         for k in running:
+            if not isinstance(k, str):
+                raise SourceError.at(source, None, f"'running' of '{c.name}' must list skill names, not {_json_kind(k)}")
             if k not in skills:
                 raise SourceError.at(source, None, f"unknown skill '{k}' of '{c.name}' (skills: {', '.join(sorted(skills))})")
         for k in c.skillset.skills:
             places.add(running_place(k.name) if k.name in running else idle_place(k.name))
         marking[c.name] = c.net.marking_of(places)
     return marking
+
+
+def _json_kind(value: object) -> str:
+    """How JSON calls the type of ``value`` (for error messages)."""
+    if isinstance(value, dict):
+        return "an object"
+    if isinstance(value, list):
+        return "a list"
+    if isinstance(value, bool):
+        return "a boolean"
+    if value is None:
+        return "null"
+    return "a number" if isinstance(value, (int, float)) else "a string"

@@ -33,7 +33,7 @@ from skinet.lang.model import (
     TypeDecl,
     Variable,
 )
-from skinet.lang.larkerrors import syntax_diagnostic
+from skinet.lang.larkerrors import check_nesting, check_size, syntax_diagnostic
 from skinet.lang.validate import sort_diagnostics, validate
 
 __all__ = ["parse_model", "parse_skillset"]
@@ -42,6 +42,9 @@ _GRAMMAR_PATH = Path(__file__).with_name("skillset.lark")
 
 # Seconds per unit of a progress period (SPEC §2: `1 sec`, `100 ms`, bare `1.0`).
 _UNIT_DIVISOR = {"sec": 1.0, "s": 1.0, "ms": 1000.0}
+
+# Tree nodes that nest an expression one level deeper (see check_nesting).
+_OPERATORS = frozenset({"not_", "and_", "or_", "implies"})
 
 
 
@@ -63,10 +66,12 @@ def parse_model(text: str, source: str = "<string>") -> Model:
     Raises :class:`SourceError` carrying every error, sorted by position; on success
     the returned model's ``warnings`` hold the validation warnings.
     """
+    check_size(text, source)
     try:
         tree = _parser().parse(text)
     except UnexpectedInput as exc:
         raise SourceError([syntax_diagnostic(_parser(), exc, text, source)]) from None
+    check_nesting(tree, _OPERATORS, source)
     builder = _Builder(source)
     try:
         model: Model = builder.transform(tree)
@@ -110,6 +115,14 @@ class _Item(NamedTuple):
     kind: str
     value: Any
     pos: Pos | None = None
+
+
+class _Named(NamedTuple):
+    """A postcondition with its name (``""`` when unnamed)."""
+
+    name: str
+    expr: Expr
+    pos: Pos | None
 
 
 class _PartialMode(NamedTuple):
@@ -181,8 +194,39 @@ class _Builder(Transformer):  # type: ignore[type-arg]
     def guard_clause(self, c: list[Any]) -> _Item:
         return _Item("guard", c[1], _pos(c[0]))
 
+    def named_postcondition(self, c: list[Any]) -> _Named:
+        return _Named(str(c[0]), c[1], _pos(c[0]))
+
     def postcondition_clause(self, c: list[Any]) -> _Item:
-        return _Item("postcondition", c[1], _pos(c[0]))
+        """Unnamed (``postcondition e``) or named postconditions, as a tuple of _Named."""
+        if len(c) > 1 and not isinstance(c[1], _Named):
+            return _Item("postcondition", (_Named("", c[1], _pos(c[0])),), _pos(c[0]))
+        return _Item("postcondition", tuple(c[1:]), _pos(c[0]))
+
+    def _postcondition(self, items: list[_Item], where: str) -> Expr | None:
+        """The conjunction of every postcondition of an interrupt or mode.
+
+        Named postconditions may repeat (rl_model), an unnamed one may not
+        (robot_language); names are unique per interrupt or mode.
+        """
+        parts: list[Expr] = []
+        seen: dict[str, Pos | None] = {}
+        for item in items:
+            if item.kind != "postcondition":
+                continue
+            for named in item.value:
+                if named.name in seen:
+                    what = f" '{named.name}'" if named.name else ""
+                    self._error(named.pos if named.name else item.pos, f"duplicate postcondition{what} in {where}")
+                    continue
+                seen[named.name] = named.pos
+                parts.append(named.expr)
+        if not parts:
+            return None
+        post = parts[0]
+        for part in parts[1:]:
+            post = And(post, part, getattr(post, "pos", None))
+        return post
 
     # ---- file level -----------------------------------------------------------
 
@@ -209,6 +253,7 @@ class _Builder(Transformer):  # type: ignore[type-arg]
             events=self._concat(items, "events"),
             skills=self._concat(items, "skills"),
             data=self._concat(items, "data"),
+            parameters=self._concat(items, "parameter"),
             type_params=params,
             source=self.source,
             pos=_pos(name),
@@ -216,6 +261,13 @@ class _Builder(Transformer):  # type: ignore[type-arg]
 
     def data_section(self, c: list[Variable]) -> _Item:
         return _Item("data", tuple(c))
+
+    def data_field(self, c: list[Any]) -> Variable:
+        period: float | None = c[2].value if len(c) > 2 else None
+        return Variable(str(c[0]), str(c[1]), _pos(c[0]), _pos(c[1]), period)
+
+    def parameter_section(self, c: list[Variable]) -> _Item:
+        return _Item("parameter", tuple(c))
 
     # ---- resources ------------------------------------------------------------
 
@@ -347,11 +399,10 @@ class _Builder(Transformer):  # type: ignore[type-arg]
         keyword: Token = c[0]
         items: list[_Item] = c[1:]
         interrupting = self._single(items, "interrupting", "interrupt")
-        post = self._single(items, "postcondition", "interrupt")
         interrupt = Interrupt(
             interrupting=bool(interrupting.value) if interrupting else False,
             effects=self._concat(items, "effect"),
-            postcondition=post.value if post else None,
+            postcondition=self._postcondition(items, "interrupt"),
             declared=True,
             pos=_pos(keyword),
         )
@@ -359,8 +410,7 @@ class _Builder(Transformer):  # type: ignore[type-arg]
 
     def _mode_body(self, items: list[_Item], name: str, pos: Pos | None) -> _PartialMode:
         where = f"mode '{name}'" if name else "unnamed mode"
-        post = self._single(items, "postcondition", where)
-        return _PartialMode(name, self._concat(items, "effect"), post.value if post else None, pos)
+        return _PartialMode(name, self._concat(items, "effect"), self._postcondition(items, where), pos)
 
     def mode(self, c: list[Any]) -> _PartialMode:
         return self._mode_body(c[1:], str(c[0]), _pos(c[0]))
@@ -390,6 +440,7 @@ class _Builder(Transformer):  # type: ignore[type-arg]
         interrupt = self._single(items, "interrupt", where)
         return Skill(
             name=str(name),
+            parameters=self._concat(items, "parameter"),
             inputs=self._concat(items, "input"),
             outputs=self._concat(items, "output"),
             preconditions=self._concat(items, "precondition"),

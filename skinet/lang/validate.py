@@ -1,10 +1,14 @@
 """Static checks of a parsed skillset model (SPEC §2, "Validation").
 
 Errors: unknown resource or state in an expression or effect, duplicate names,
-undeclared initial state, transitions from or to undeclared states.
+undeclared initial state, transitions from or to undeclared states, an
+expression whose disjunctive normal form (one transition per clause, SPEC §3)
+exceeds :data:`MAX_CLAUSES`.
 Warnings: duplicate transition pairs or type declarations, undeclared types of
-data, inputs, outputs and progress fields (real files have them, see
-``corpus/EXPECTED.md``).  Each diagnostic points at the offending name.
+data, parameters, inputs, outputs and progress fields (real files have them, see
+``corpus/EXPECTED.md``), an unsatisfiable postcondition (SPEC §3).  Each
+diagnostic points at the offending name.  Cost: linear in the model, plus the
+DNF of each expression (bounded by MAX_CLAUSES).
 """
 
 from __future__ import annotations
@@ -12,10 +16,15 @@ from __future__ import annotations
 from collections.abc import Iterable
 
 from skinet.errors import Diagnostic, Pos
-from skinet.lang.expr import Expr, StateAtom, atoms
+from skinet.lang.dnf import TooManyClauses, dnf
+from skinet.lang.expr import And, Const, Expr, Not, StateAtom, atoms
 from skinet.lang.model import Effect, Model, Resource, Skill, Skillset, Variable
 
-__all__ = ["validate", "sort_diagnostics"]
+__all__ = ["validate", "sort_diagnostics", "MAX_CLAUSES"]
+
+# Most clauses one guard, precondition set or postcondition may have in DNF: each
+# clause is at least one transition, and real models have a handful.
+MAX_CLAUSES = 1024
 
 
 def sort_diagnostics(diagnostics: Iterable[Diagnostic]) -> list[Diagnostic]:
@@ -45,6 +54,7 @@ class _Checker:
         self.source = source
         self.diagnostics: list[Diagnostic] = []
         self.resources: dict[str, Resource] = {}
+        self.states: dict[str, tuple[str, ...]] = {}
 
     def error(self, pos: Pos | None, message: str) -> None:
         self.diagnostics.append(Diagnostic(self.source, pos, "error", message))
@@ -85,6 +95,10 @@ class _Checker:
         self.resources = {}
         for r in ss.resources:
             self.resources.setdefault(r.name, r)
+        self.states = {name: r.states for name, r in self.resources.items()}
+
+        self.unique(((p.name, p.pos) for p in ss.parameters), "parameter")
+        self.check_types(ss.parameters, known_types, "parameter", "")
 
         self.unique(((d.name, d.pos) for d in ss.data), "data")
         self.check_types(ss.data, known_types, "data", "")
@@ -95,8 +109,8 @@ class _Checker:
 
         self.unique(((e.name, e.pos) for e in ss.events), "event")
         for e in ss.events:
-            if e.guard is not None:
-                self.check_expr(e.guard, f"guard of event '{e.name}'")
+            if e.guard is not None and self.check_expr(e.guard, f"guard of event '{e.name}'"):
+                self.clauses(e.guard, f"guard of event '{e.name}'", e.pos)
             self.check_effects(e.effects, f"event '{e.name}'", f"effect of event '{e.name}'")
 
         self.unique(((s.name, s.pos) for s in ss.skills), "skill")
@@ -143,21 +157,28 @@ class _Checker:
     def check_skill(self, s: Skill, known_types: set[str]) -> None:
         of = f" of skill '{s.name}'"
         scope = f" in skill '{s.name}'"
+        self.unique(((v.name, v.pos) for v in s.parameters), "parameter", scope)
+        self.check_types(s.parameters, known_types, "parameter", of)
         self.unique(((v.name, v.pos) for v in s.inputs), "input", scope)
         self.unique(((v.name, v.pos) for v in s.outputs), "output", scope)
         self.check_types(s.inputs, known_types, "input", of)
         self.check_types(s.outputs, known_types, "output", of)
 
         self.unique(((p.name, p.pos) for p in s.preconditions), "precondition", scope)
-        for p in s.preconditions:
-            self.check_expr(p.expr, f"precondition '{p.name}'{of}")
+        valid = [self.check_expr(p.expr, f"precondition '{p.name}'{of}") for p in s.preconditions]
+        if s.preconditions and all(valid):
+            conjunction: Expr = Const(True)
+            for p in s.preconditions:
+                conjunction = And(conjunction, p.expr)
+            self.clauses(conjunction, f"preconditions{of}", s.preconditions[0].pos)
 
         self.check_effects(s.start, f"start{of}", f"start{of}")
 
         self.unique(((i.name, i.pos) for i in s.invariants), "invariant", scope)
         for i in s.invariants:
             owner = f"invariant '{i.name}'{of}"
-            self.check_expr(i.guard, f"guard of {owner}")
+            if self.check_expr(i.guard, f"guard of {owner}"):
+                self.clauses(Not(i.guard), f"guard of {owner}", i.pos)
             self.check_effects(i.effects, owner, f"effect of {owner}")
 
         if s.progress is not None:
@@ -168,7 +189,7 @@ class _Checker:
         owner = f"interrupt{of}"
         self.check_effects(s.interrupt.effects, owner, f"effect of {owner}")
         if s.interrupt.postcondition is not None:
-            self.check_expr(s.interrupt.postcondition, f"postcondition of {owner}")
+            self.check_postcondition(s.interrupt.postcondition, owner, s.interrupt.pos)
 
         # Named modes share one namespace; an unnamed one is unique per kind
         # (its transition is k.success or k.failure).
@@ -179,7 +200,7 @@ class _Checker:
             owner = (f"{m.kind} '{m.name}'" if m.name else f"unnamed {m.kind}") + of
             self.check_effects(m.effects, owner, f"effect of {owner}")
             if m.postcondition is not None:
-                self.check_expr(m.postcondition, f"postcondition of {owner}")
+                self.check_postcondition(m.postcondition, owner, m.pos)
 
     # ---- expressions and effects ------------------------------------------------
 
@@ -192,7 +213,9 @@ class _Checker:
                 f" (states: {states}) in {where}",
             )
 
-    def check_expr(self, expr: Expr, where: str) -> None:
+    def check_expr(self, expr: Expr, where: str) -> bool:
+        """Report unknown resources and states; True when there was none."""
+        before = len(self.diagnostics)
         for atom in atoms(expr):
             if not isinstance(atom, StateAtom):
                 continue
@@ -201,6 +224,28 @@ class _Checker:
                 self.error(atom.pos, f"unknown resource '{atom.resource}' in {where}")
             else:
                 self.check_state(resource, atom.state, atom.state_pos, where)
+        return len(self.diagnostics) == before
+
+    def clauses(self, expr: Expr, where: str, pos: Pos | None) -> list[dict[str, str]] | None:
+        """The DNF of a valid ``expr``, or None (and an error) when it is too large."""
+        try:
+            return dnf(expr, self.states, MAX_CLAUSES)
+        except TooManyClauses:
+            self.error(
+                getattr(expr, "pos", None) or pos,
+                f"{where} is too complex: more than {MAX_CLAUSES} clauses in disjunctive normal form"
+                " (each clause becomes a transition)",
+            )
+            return None
+
+    def check_postcondition(self, expr: Expr, owner: str, pos: Pos | None) -> None:
+        """Errors of a postcondition, and a warning when nothing can satisfy it (SPEC §3)."""
+        where = f"postcondition of {owner}"
+        if self.check_expr(expr, where) and self.clauses(expr, where, pos) == []:
+            self.warning(
+                getattr(expr, "pos", None) or pos,
+                f"{where} is unsatisfiable: it moves no resource when the skill stops",
+            )
 
     def check_effects(self, effects: Iterable[Effect], owner: str, where: str) -> None:
         for e in effects:
