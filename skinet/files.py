@@ -29,7 +29,7 @@ from skinet.lang.larkerrors import MAX_SOURCE_CHARS
 from skinet.lang.model import Model, Skillset
 from skinet.lang.parser import parse_model
 from skinet.ros.typemap import TypeMap, parse_typemap
-from skinet.system import Marking, System, build_system, marking_from_json
+from skinet.system import Marking, System, build_system, marking_from_json, marking_problems
 
 
 def read_text(path: str | Path, limit: int | None = None) -> str:
@@ -136,8 +136,12 @@ def load_typemap(path: str | Path) -> TypeMap:
     return parse_typemap(read_source(types_path), str(types_path))
 
 
-def load_state(path: str | Path, system: System) -> Marking:
-    """A combined marking from a JSON state file (see :func:`skinet.system.marking_from_json`)."""
+def load_state(path: str | Path, system: System, what_if: bool = False) -> Marking:
+    """A combined marking from a JSON state file (see :func:`skinet.system.marking_from_json`).
+
+    A marking the live system cannot be in (see :func:`skinet.system.marking_problems`)
+    is refused unless ``what_if``.
+    """
     text = read_source(path)
     try:
         data = json.loads(text)
@@ -145,7 +149,14 @@ def load_state(path: str | Path, system: System) -> Marking:
         raise SourceError.at(str(path), Pos(exc.lineno, exc.colno), f"invalid JSON: {exc.msg}") from None
     except RecursionError:
         raise SourceError.at(str(path), None, "invalid JSON: nested too deeply") from None
-    return marking_from_json(system, data, str(path))
+    marking = marking_from_json(system, data, str(path))
+    problems = [] if what_if else marking_problems(system, marking)
+    if problems:
+        raise SourceError.at(
+            str(path), None,
+            "impossible state: " + "; ".join(problems) + " (use --what-if to analyse it anyway)",
+        )
+    return marking
 
 
 def _parse_toml(text: str, source: str) -> dict[str, object]:

@@ -13,6 +13,7 @@ from skinet.errors import SourceError
 from skinet.lang.model import Skillset
 from skinet.net.build import build_net, idle_place, resource_place, running_place
 from skinet.net.petrinet import PetriNet
+from skinet.net.semantics import invariants_enabled
 from skinet.props.formula import Property
 from skinet.props.parser import parse_properties
 
@@ -77,6 +78,30 @@ def build_system(
         components.append(Component(ss, build_net(ss), build_net(ss, eventless=True), manager))
     props = parse_properties(properties_text, {s.name: s for s, _ in skillsets}, properties_source)
     return System(name, tuple(components), tuple(props), dict(sources or {}))
+
+
+def marking_problems(system: System, marking: Mapping[str, int]) -> list[str]:
+    """Why ``marking`` cannot be a state of the live system; empty when it can.
+
+    Two reasons (SPEC §3): a component marking is *transient* (an invariant is
+    violated, and the manager never publishes such a state), or no sequence of
+    transitions, events included, reaches it from the initial marking.
+    Components share no place, so a combined marking is reachable exactly when
+    each component's marking is reachable in its own full net.  Cost: one
+    breadth-first search of each component's stable markings (memoised per net).
+    """
+    from skinet.verify.component import explore_component  # skinet.verify imports this module
+
+    problems: list[str] = []
+    for c in system.components:
+        m = marking[c.name]
+        violated = invariants_enabled(c.net, m)
+        if violated:
+            names = ", ".join(sorted({t.name for t in violated}))
+            problems.append(f"'{c.name}' is not stable: invariant violated ({names}); the manager never publishes such a state")
+        elif m not in explore_component(c.name, c.net, [c.net.initial]).index:
+            problems.append(f"'{c.name}' is not reachable: no sequence of transitions (events included) leads there from its initial marking")
+    return problems
 
 
 def marking_to_json(system: System, marking: Mapping[str, int]) -> dict[str, dict]:
