@@ -64,6 +64,17 @@ def test_one_model_file_with_two_skillsets_errors(tmp_path: Path) -> None:
     assert error(load_system, twice) == f"{tmp_path / 'two.rl'}:1:10: error: skillset 'alpha' appears twice in system 't'"
 
 
+def test_two_skillset_file_travels_to_the_predictor(tmp_path: Path) -> None:
+    from skinet.wire.convert import bundle, system_from_bundle
+
+    write(tmp_path, "two.rl", TWO)
+    path = write(tmp_path, "s.toml", '[system]\nname = "w"\n[[skillsets]]\nmodel = "two.rl"\n')
+    system, _ = load_system(path)
+    rebuilt = system_from_bundle(bundle(system))
+    assert [c.name for c in rebuilt.components] == ["alpha", "beta"]
+    assert bundle(rebuilt).digest == bundle(system).digest
+
+
 def test_explore_accepts_a_two_skillset_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     write(tmp_path, "two.rl", TWO)
     system = write(tmp_path, "s.toml", '[system]\nname = "w"\n[[skillsets]]\nmodel = "two.rl"\n')

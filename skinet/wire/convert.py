@@ -10,12 +10,14 @@ from __future__ import annotations
 import hashlib
 import json
 from pathlib import PurePath
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Iterator, Mapping
 
 from skinet.net.semantics import steps
 from skinet.props.evaluate import holds
 from skinet.system import Marking, System, build_system, marking_from_json, marking_to_json
-from skinet.lang.parser import parse_skillset
+from skinet.errors import SourceError
+from skinet.lang.model import Skillset
+from skinet.lang.parser import parse_model
 from skinet.verify.algorithm1 import Analysis, PredictionVerdict
 from skinet.verify.predict import Forecast
 from skinet.wire.messages import (
@@ -47,8 +49,19 @@ def bundle(system: System) -> ModelBundle:
 
 
 def system_from_bundle(b: ModelBundle) -> System:
-    """Rebuild a system from a bundle (raises SourceError on bad sources)."""
-    skillsets = [(parse_skillset(text, name), manager) for name, text, manager in b.skillsets]
+    """Rebuild a system from a bundle (raises SourceError on bad sources).
+
+    A file declaring several skillsets appears once per skillset, in order.
+    """
+    skillsets = []
+    parsed: dict[str, Iterator[Skillset]] = {}
+    for name, text, manager in b.skillsets:
+        if name not in parsed:
+            parsed[name] = iter(parse_model(text, name).skillsets)
+        ss = next(parsed[name], None)
+        if ss is None:
+            raise SourceError.at(name, None, "model bundle lists more skillsets than this file declares")
+        skillsets.append((ss, manager))
     sources = {name: text for name, text, _ in b.skillsets} | {b.properties_name: b.properties}
     return build_system(b.system, skillsets, b.properties, b.properties_name, sources)
 
