@@ -27,7 +27,7 @@ from pathlib import Path
 from skinet.errors import Diagnostic, Pos, SourceError
 from skinet.lang.larkerrors import MAX_SOURCE_CHARS
 from skinet.lang.model import Model, Skillset
-from skinet.lang.parser import parse_model
+from skinet.lang.parser import link, parse_unit
 from skinet.ros.typemap import TypeMap, parse_typemap
 from skinet.system import Marking, System, build_system, marking_from_json, marking_problems
 
@@ -60,8 +60,37 @@ def read_source(path: str | Path) -> str:
 
 
 def load_model(path: str | Path) -> Model:
-    """Parse and validate a ``.rl`` file."""
-    return parse_model(read_source(path), str(path))
+    """Parse and validate a ``.rl`` file, with the files it includes."""
+    return _load_linked(Path(path))[0]
+
+
+def _load_linked(path: Path) -> tuple[Model, dict[str, str]]:
+    """A model file linked with every file it includes, and each file's text by source.
+
+    ``include "name"`` is relative to the including file; each file is read once
+    (so include cycles end).
+    """
+    text = read_source(path)
+    units = [parse_unit(text, str(path))]
+    texts = {str(path): text}
+    seen = {path.resolve()}
+    i = 0
+    while i < len(units):
+        including = Path(units[i][0].source)
+        i += 1
+        for name, pos in units[i - 1][0].includes:
+            target = including.parent / name
+            if target.resolve() in seen:
+                continue
+            seen.add(target.resolve())
+            try:
+                included = read_source(target)
+            except SourceError as exc:
+                reason = exc.diagnostics[0].message
+                raise SourceError.at(str(including), pos, f"cannot include '{name}': {reason}") from None
+            units.append(parse_unit(included, str(target), library=True))
+            texts[str(target)] = included
+    return link(units), texts
 
 
 def load_system(path: str | Path) -> tuple[System, list[Diagnostic]]:
@@ -79,18 +108,18 @@ def load_system(path: str | Path) -> tuple[System, list[Diagnostic]]:
     skillsets: list[tuple[Skillset, str]] = []
     warnings: list[Diagnostic] = []
     sources: dict[str, str] = {}
-    models: dict[Path, Model] = {}
+    models: dict[Path, tuple[Model, dict[str, str]]] = {}
     for n, entry in enumerate(entries, 1):
         if not isinstance(entry, dict) or not isinstance(entry.get("model"), str):
             raise SourceError.at(where, None, f"skillsets entry {n} needs a 'model' path")
         model_path = path.parent / entry["model"]
-        model = models.get(model_path)
-        if model is None:
-            model_text = read_source(model_path)
-            model = models[model_path] = parse_model(model_text, str(model_path))
-            warnings.extend(model.warnings)
-            sources[model_path.name] = model_text
-        skillsets.extend((ss, str(entry.get("manager", ""))) for ss in _entry_skillsets(entry, n, model, where))
+        if model_path not in models:
+            models[model_path] = _load_linked(model_path)
+            warnings.extend(models[model_path][0].warnings)
+        model, texts = models[model_path]
+        for ss in _entry_skillsets(entry, n, model, where):
+            skillsets.append((ss, str(entry.get("manager", ""))))
+            sources[Path(ss.source).name] = texts[ss.source]
     props_name = system.get("properties")
     props_text, props_source = "", "<no properties>"
     if props_name is not None:

@@ -10,7 +10,7 @@ import pytest
 
 from skinet.cli.main import main
 from skinet.errors import SourceError
-from skinet.files import load_state, load_system, load_typemap
+from skinet.files import load_model, load_state, load_system, load_typemap
 from skinet.system import marking_problems
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -193,3 +193,43 @@ def test_what_if_option(tmp_path: Path, capsys: pytest.CaptureFixture[str], comm
     captured = capsys.readouterr()
     json.loads(captured.out)  # the JSON stays clean; the note goes to standard error
     assert f"what-if analysis: {NOT_REACHABLE}\n" in captured.err
+
+
+# ---- include (rl_model, Nov. 2023 to Feb. 2024) ----------------------------------------------
+
+
+def test_include(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    (tmp_path / "lib").mkdir()
+    write(tmp_path, "lib/types.rl", "type Pose\ntype { Float }\n")
+    write(tmp_path, "lib/arm.rl", 'include "types.rl"\nskillset arm { data pose: Pose\n'
+          "  resource r { state { A B } initial A transition all } skill k { input f: Float start r -> B } }\n")
+    main_rl = write(tmp_path, "robot.rl", 'include "lib/arm.rl"\ninclude "lib/types.rl"\n'
+                    "skillset base { data p: Pose resource q { state { X } initial X } }\n")
+    model = load_model(main_rl)
+    assert [s.name for s in model.skillsets] == ["base", "arm"] and model.warnings == ()
+    assert [s.source for s in model.skillsets] == [str(main_rl), str(tmp_path / "lib/arm.rl")]
+    system = write(tmp_path, "s.toml", '[system]\nname = "r"\n[[skillsets]]\nmodel = "robot.rl"\n')
+    loaded, _ = load_system(system)
+    assert list(loaded.sources) == ["robot.rl", "arm.rl"]
+    assert main(["parse", str(main_rl)]) == 0
+    assert "skillset arm (" in capsys.readouterr().out
+
+
+def test_include_errors(tmp_path: Path) -> None:
+    missing = write(tmp_path, "m.rl", 'type T\ninclude "nowhere.rl"\nskillset s {}\n')
+    assert error(load_model, missing) == f"{missing}:2:9: error: cannot include 'nowhere.rl': cannot read file: No such file or directory"
+    write(tmp_path, "bad.rl", "skillset s { data x: Undeclared\n  oops }\n")
+    including = write(tmp_path, "i.rl", 'include "bad.rl"\n')
+    assert error(load_model, including) == (
+        f"{tmp_path / 'bad.rl'}:2:3: error: unexpected 'oops',"
+        " expected one of: 'data', 'event', 'period', 'resource', 'skill', '}'"
+    )
+    write(tmp_path, "dup.rl", "skillset s {}\n")
+    twice = write(tmp_path, "t.rl", 'include "dup.rl"\nskillset s {}\n')
+    assert error(load_model, twice) == f"{tmp_path / 'dup.rl'}:1:10: error: duplicate skillset 's' (first declared at {twice}:2:10)"
+
+
+def test_include_cycle(tmp_path: Path) -> None:
+    write(tmp_path, "a.rl", 'include "b.rl"\nskillset a {}\n')
+    write(tmp_path, "b.rl", 'include "a.rl"\nskillset b {}\n')
+    assert [s.name for s in load_model(tmp_path / "a.rl").skillsets] == ["a", "b"]

@@ -14,10 +14,10 @@ from skinet.errors import Diagnostic, Pos, SourceError
 
 _MAX_EXPECTED = 10
 _DISPLAY = {"$END": "end of input", "NAME": "identifier", "NUMBER": "number", "_NL": "end of line"}
-# Accepted but not suggested: `parameter` sections only exist in old ONERA dialects
-# (robot_language 2022, rl_model 2023), and listing them would push the keywords
+# Accepted but not suggested: `parameter` sections and `include` only exist in old
+# ONERA dialects (robot_language 2022, rl_model 2023), and listing them would push the keywords
 # every file uses past the cap of an expected list.
-_UNSUGGESTED = frozenset({"PARAMETER"})
+_UNSUGGESTED = frozenset({"PARAMETER", "INCLUDE"})
 
 
 # Deepest nesting of operators accepted in one expression.  The expression walkers

@@ -173,9 +173,14 @@ class Skillset:
 
 @dataclass(frozen=True)
 class Model:
-    """Everything one ``.rl`` file declares, plus the warnings validation gave."""
+    """Everything one ``.rl`` file declares, plus the warnings validation gave.
+
+    ``includes`` are the ``include "file"`` lines, with their positions; the core
+    does no I/O, :func:`skinet.files.load_model` resolves them.
+    """
 
     source: str
     types: tuple[TypeDecl, ...]
     skillsets: tuple[Skillset, ...]
     warnings: tuple[Diagnostic, ...] = ()
+    includes: tuple[tuple[str, Pos | None], ...] = ()

@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 from functools import lru_cache
 from pathlib import Path
+from collections.abc import Sequence
 from typing import Any, NamedTuple
 
 from lark import Lark, Token, Transformer, UnexpectedInput
@@ -36,7 +37,7 @@ from skinet.lang.model import (
 from skinet.lang.larkerrors import check_nesting, check_size, syntax_diagnostic
 from skinet.lang.validate import sort_diagnostics, validate
 
-__all__ = ["parse_model", "parse_skillset"]
+__all__ = ["parse_model", "parse_skillset", "parse_unit", "link"]
 
 _GRAMMAR_PATH = Path(__file__).with_name("skillset.lark")
 
@@ -48,11 +49,15 @@ _OPERATORS = frozenset({"not_", "and_", "or_", "implies"})
 
 
 
-@lru_cache(maxsize=1)
-def _parser() -> Lark:
-    """The grammar, loaded once (LALR, contextual lexer, positions propagated)."""
+@lru_cache(maxsize=2)
+def _parser(start: str = "start") -> Lark:
+    """The grammar, loaded once per start rule (LALR, contextual lexer, positions propagated).
+
+    ``start`` is a file given to a command, ``library`` a file it includes.
+    """
     return Lark(
         _GRAMMAR_PATH.read_text(encoding="utf-8"),
+        start=start,
         parser="lalr",
         lexer="contextual",
         propagate_positions=True,
@@ -64,13 +69,27 @@ def parse_model(text: str, source: str = "<string>") -> Model:
     """Parse and validate a whole ``.rl`` file (SPEC §2).
 
     Raises :class:`SourceError` carrying every error, sorted by position; on success
-    the returned model's ``warnings`` hold the validation warnings.
+    the returned model's ``warnings`` hold the validation warnings.  ``include``
+    lines are recorded, not followed (see :func:`skinet.files.load_model`).
+    """
+    return link([parse_unit(text, source)])
+
+
+Unit = tuple[Model, list[Diagnostic]]
+
+
+def parse_unit(text: str, source: str, library: bool = False) -> Unit:
+    """The syntax and structure of one file, not yet validated (see :func:`link`).
+
+    A ``library`` (a file named by an ``include``) may declare no skillset.
+    Raises :class:`SourceError` on a syntax error.  Cost: linear in the text.
     """
     check_size(text, source)
+    parser = _parser("library" if library else "start")
     try:
-        tree = _parser().parse(text)
+        tree = parser.parse(text)
     except UnexpectedInput as exc:
-        raise SourceError([syntax_diagnostic(_parser(), exc, text, source)]) from None
+        raise SourceError([syntax_diagnostic(parser, exc, text, source)]) from None
     check_nesting(tree, _OPERATORS, source)
     builder = _Builder(source)
     try:
@@ -79,7 +98,30 @@ def parse_model(text: str, source: str = "<string>") -> Model:
         if isinstance(exc.orig_exc, SourceError):
             raise exc.orig_exc from None
         raise
-    diagnostics = builder.errors + validate(model)
+    return model, builder.errors
+
+
+def link(units: Sequence[Unit]) -> Model:
+    """Validate files together as one model: the first one and those it includes.
+
+    Every skillset sees the types of every file.  Raises :class:`SourceError`
+    carrying every error; the model's ``warnings`` hold the rest.
+    """
+    main = units[0][0]
+    types = tuple(t for model, _ in units for t in model.types)
+    diagnostics: list[Diagnostic] = []
+    first: dict[str, Skillset] = {}
+    for model, found in units:
+        own = tuple(dataclasses.replace(s, types=types) for s in model.skillsets)
+        diagnostics += found + validate(dataclasses.replace(model, skillsets=own))
+        for s in own:
+            if s.name in first and first[s.name].source != s.source:
+                at = first[s.name]
+                where = f"{at.source}:{at.pos.line}:{at.pos.column}" if at.pos else at.source
+                diagnostics.append(Diagnostic(s.source, s.pos, "error", f"duplicate skillset '{s.name}' (first declared at {where})"))
+            first.setdefault(s.name, s)
+    skillsets = tuple(dataclasses.replace(s, types=types) for model, _ in units for s in model.skillsets)
+    model = Model(source=main.source, types=types, skillsets=skillsets, includes=main.includes)
     errors = [d for d in diagnostics if d.level == "error"]
     if errors:
         raise SourceError(sort_diagnostics(errors))
@@ -235,7 +277,13 @@ class _Builder(Transformer):  # type: ignore[type-arg]
         skillsets = tuple(
             dataclasses.replace(s, types=types) for s in c if isinstance(s, Skillset)
         )
-        return Model(source=self.source, types=types, skillsets=skillsets)
+        includes = tuple(x.value for x in c if isinstance(x, _Item) and x.kind == "include")
+        return Model(source=self.source, types=types, skillsets=skillsets, includes=includes)
+
+    library = start
+
+    def include(self, c: list[Token]) -> _Item:
+        return _Item("include", (str(c[0])[1:-1], _pos(c[0])))
 
     def type_section(self, c: list[Token]) -> list[TypeDecl]:
         return [TypeDecl(str(t), _pos(t)) for t in c]
