@@ -3,7 +3,8 @@
 Errors: unknown resource or state in an expression or effect, duplicate names,
 undeclared initial state, transitions from or to undeclared states, an
 expression whose disjunctive normal form (one transition per clause, SPEC §3)
-exceeds :data:`MAX_CLAUSES`.
+exceeds :data:`MAX_CLAUSES`, an element whose transition variants exceed
+:data:`MAX_VARIANTS`.
 Warnings: duplicate transition pairs or type declarations, undeclared types of
 data, parameters, inputs, outputs and progress fields (real files have them, see
 ``corpus/EXPECTED.md``), an unsatisfiable postcondition (SPEC §3).  Each
@@ -20,11 +21,15 @@ from skinet.lang.dnf import TooManyClauses, dnf
 from skinet.lang.expr import And, Const, Expr, Not, StateAtom, atoms
 from skinet.lang.model import Effect, Model, Resource, Skill, Skillset, Variable
 
-__all__ = ["validate", "sort_diagnostics", "MAX_CLAUSES"]
+__all__ = ["validate", "sort_diagnostics", "MAX_CLAUSES", "MAX_VARIANTS"]
 
 # Most clauses one guard, precondition set or postcondition may have in DNF: each
 # clause is at least one transition, and real models have a handful.
 MAX_CLAUSES = 1024
+# Most transition variants one event, start, invariant, interrupt or mode may give
+# (one per guard clause, postcondition clause and combination of the source states
+# of the resources it moves, SPEC §3); the corpus needs at most a few dozen.
+MAX_VARIANTS = 4096
 
 
 def sort_diagnostics(diagnostics: Iterable[Diagnostic]) -> list[Diagnostic]:
@@ -109,9 +114,11 @@ class _Checker:
 
         self.unique(((e.name, e.pos) for e in ss.events), "event")
         for e in ss.events:
+            guard: list[dict[str, str]] | None = [{}]
             if e.guard is not None and self.check_expr(e.guard, f"guard of event '{e.name}'"):
-                self.clauses(e.guard, f"guard of event '{e.name}'", e.pos)
-            self.check_effects(e.effects, f"event '{e.name}'", f"effect of event '{e.name}'")
+                guard = self.clauses(e.guard, f"guard of event '{e.name}'", e.pos)
+            if self.check_effects(e.effects, f"event '{e.name}'", f"effect of event '{e.name}'"):
+                self.variants(f"event '{e.name}'", e.pos, guard, e.effects, None)
 
         self.unique(((s.name, s.pos) for s in ss.skills), "skill")
         for s in ss.skills:
@@ -166,20 +173,24 @@ class _Checker:
 
         self.unique(((p.name, p.pos) for p in s.preconditions), "precondition", scope)
         valid = [self.check_expr(p.expr, f"precondition '{p.name}'{of}") for p in s.preconditions]
+        guard: list[dict[str, str]] | None = [{}]
         if s.preconditions and all(valid):
             conjunction: Expr = Const(True)
             for p in s.preconditions:
                 conjunction = And(conjunction, p.expr)
-            self.clauses(conjunction, f"preconditions{of}", s.preconditions[0].pos)
+            guard = self.clauses(conjunction, f"preconditions{of}", s.preconditions[0].pos)
 
-        self.check_effects(s.start, f"start{of}", f"start{of}")
+        if self.check_effects(s.start, f"start{of}", f"start{of}"):
+            self.variants(f"start{of}", s.pos, guard, s.start, None)
 
         self.unique(((i.name, i.pos) for i in s.invariants), "invariant", scope)
         for i in s.invariants:
             owner = f"invariant '{i.name}'{of}"
+            violated: list[dict[str, str]] | None = None
             if self.check_expr(i.guard, f"guard of {owner}"):
-                self.clauses(Not(i.guard), f"guard of {owner}", i.pos)
-            self.check_effects(i.effects, owner, f"effect of {owner}")
+                violated = self.clauses(Not(i.guard), f"guard of {owner}", i.pos)
+            if self.check_effects(i.effects, owner, f"effect of {owner}"):
+                self.variants(owner, i.pos, violated, i.effects, None)
 
         if s.progress is not None:
             fields = s.progress.fields
@@ -187,9 +198,9 @@ class _Checker:
             self.check_types(fields, known_types, "progress field", of)
 
         owner = f"interrupt{of}"
-        self.check_effects(s.interrupt.effects, owner, f"effect of {owner}")
-        if s.interrupt.postcondition is not None:
-            self.check_postcondition(s.interrupt.postcondition, owner, s.interrupt.pos)
+        if self.check_effects(s.interrupt.effects, owner, f"effect of {owner}"):
+            post = self.check_postcondition(s.interrupt.postcondition, owner, s.interrupt.pos)
+            self.variants(owner, s.interrupt.pos or s.pos, [{}], s.interrupt.effects, post)
 
         # Named modes share one namespace; an unnamed one is unique per kind
         # (its transition is k.success or k.failure).
@@ -198,9 +209,9 @@ class _Checker:
             self.unique((("", m.pos) for m in s.modes if not m.name and m.kind == kind), kind, scope)
         for m in s.modes:
             owner = (f"{m.kind} '{m.name}'" if m.name else f"unnamed {m.kind}") + of
-            self.check_effects(m.effects, owner, f"effect of {owner}")
-            if m.postcondition is not None:
-                self.check_postcondition(m.postcondition, owner, m.pos)
+            if self.check_effects(m.effects, owner, f"effect of {owner}"):
+                post = self.check_postcondition(m.postcondition, owner, m.pos)
+                self.variants(owner, m.pos, [{}], m.effects, post)
 
     # ---- expressions and effects ------------------------------------------------
 
@@ -238,19 +249,64 @@ class _Checker:
             )
             return None
 
-    def check_postcondition(self, expr: Expr, owner: str, pos: Pos | None) -> None:
-        """Errors of a postcondition, and a warning when nothing can satisfy it (SPEC §3)."""
+    def check_postcondition(self, expr: Expr | None, owner: str, pos: Pos | None) -> list[dict[str, str]] | None:
+        """Errors of a postcondition, and a warning when nothing can satisfy it (SPEC §3).
+
+        Returns its clauses (``None`` when there is no postcondition or it is invalid).
+        """
+        if expr is None:
+            return None
         where = f"postcondition of {owner}"
-        if self.check_expr(expr, where) and self.clauses(expr, where, pos) == []:
+        if not self.check_expr(expr, where):
+            return None
+        clauses = self.clauses(expr, where, pos)
+        if clauses == []:
             self.warning(
                 getattr(expr, "pos", None) or pos,
                 f"{where} is unsatisfiable: it moves no resource when the skill stops",
             )
+        return clauses
 
-    def check_effects(self, effects: Iterable[Effect], owner: str, where: str) -> None:
+    def variants(
+        self,
+        owner: str,
+        pos: Pos | None,
+        guard: list[dict[str, str]] | None,
+        effects: Iterable[Effect],
+        post: list[dict[str, str]] | None,
+    ) -> None:
+        """An error when ``owner`` would give more than MAX_VARIANTS transitions (SPEC §3).
+
+        Each guard clause and postcondition clause gives one variant per
+        combination of source states of the resources moved and not fixed by
+        the guard clause.  Cost: O(MAX_VARIANTS) at most (the count stops early).
+        """
+        if guard is None:  # invalid or too complex: already reported
+            return
+        moved_by_effects = {e.resource for e in effects}
+        count = 0
+        for clause in guard:
+            for post_clause in post or [{}]:
+                n = 1
+                for r in moved_by_effects | set(post_clause):
+                    if r not in clause:
+                        n *= len(self.states[r])
+                count += n
+                if count > MAX_VARIANTS:
+                    self.error(
+                        pos,
+                        f"{owner} is too large: more than {MAX_VARIANTS} transition variants"
+                        " (one per guard clause and combination of source states of the resources it moves)",
+                    )
+                    return
+
+    def check_effects(self, effects: Iterable[Effect], owner: str, where: str) -> bool:
+        """Report effects on unknown resources or states; True when there was none."""
+        before = len(self.diagnostics)
         for e in effects:
             resource = self.resources.get(e.resource)
             if resource is None:
                 self.error(e.pos, f"effect on undeclared resource '{e.resource}' in {owner}")
             else:
                 self.check_state(resource, e.state, e.state_pos, where)
+        return len(self.diagnostics) == before

@@ -246,3 +246,17 @@ def test_unterminated_comment_costs_linear_memory() -> None:
     finally:
         tracemalloc.stop()
     assert peak < 20 * len(text)
+
+
+def test_too_many_variants() -> None:
+    # 2 KB that would give 8^5 = 32768 transitions: refused before the net is built.
+    states = "{ A B C D E F G H }"
+    resources = "".join(f"  resource x{i} {{ state {states} initial A transition all }}\n" for i in range(5))
+    effects = " ".join(f"x{i} -> B" for i in range(5))
+    assert errors(f"skillset s {{\n{resources}  event e {{ effect {{ {effects} }} }}\n}}") == [
+        "f.rl:7:9: error: event 'e' is too large: more than 4096 transition variants"
+        " (one per guard clause and combination of source states of the resources it moves)"
+    ]
+    four = " ".join(f"x{i} -> B" for i in range(4))
+    ss = parse_model(f"skillset s {{\n{resources}  event e {{ effect {{ {four} }} }}\n}}").skillsets[0]
+    assert len(build_net(ss).transitions) == 8**4
