@@ -215,15 +215,44 @@ def test_deep_parentheses_parse() -> None:
     assert parse_model(HEAD + f"  event e {{ guard {guard} }}\n}}").skillsets[0].events[0].guard == StateAtom("r", "A")
 
 
-def test_too_many_clauses() -> None:
-    resources = "".join(f"  resource x{i} {{ state {{ A B }} initial A transition all }}\n" for i in range(11))
-    guard = " and ".join(f"(x{i} == A or x{i} == B)" for i in range(11))
-    assert errors(f"skillset s {{\n{resources}  event e {{ guard {guard} }}\n}}") == [
-        "f.rl:13:20: error: guard of event 'e' is too complex: more than 1024 clauses in"
-        " disjunctive normal form (each clause becomes a transition)"
-    ]
-    ten = " and ".join(f"(x{i} == A or x{i} == B)" for i in range(10))
-    assert parse_model(f"skillset s {{\n{resources}  event e {{ guard {ten} }}\n}}").skillsets
+def wide(resources: int, states: str, event: str) -> str:
+    """A skillset of ``resources`` resources x0, x1... and one event ``e`` with body ``event``."""
+    lines = "".join(f"  resource x{i} {{ state {{ {states} }} initial A transition all }}\n" for i in range(resources))
+    return f"skillset s {{\n{lines}  event e {{ {event} }}\n}}"
+
+
+def guard(n: int) -> str:
+    return "guard " + " and ".join(f"(x{i} == A or x{i} == B)" for i in range(n))
+
+
+def effects(n: int) -> str:
+    return "effect { " + " ".join(f"x{i} -> B" for i in range(n)) + " }"
+
+
+EIGHT = "A B C D E F G H"
+
+
+@pytest.mark.parametrize(
+    "refused, accepted, message",
+    [
+        # 2^11 clauses; 2^10 is accepted.
+        (wide(11, "A B", guard(11)), wide(11, "A B", guard(10)),
+         "f.rl:13:20: error: guard of event 'e' is too complex: more than 1024 clauses in"
+         " disjunctive normal form (each clause becomes a transition)"),
+        # 2 KB that would give 8^5 = 32768 transitions; 8^4 is accepted.
+        (wide(5, EIGHT, effects(5)), wide(5, EIGHT, effects(4)),
+         "f.rl:7:9: error: event 'e' is too large: more than 4096 transition variants"
+         " (one per guard clause and combination of source states of the resources it moves)"),
+    ],
+)
+def test_bounds_of_one_element(refused: str, accepted: str, message: str) -> None:
+    assert errors(refused) == [message]
+    assert parse_model(accepted).skillsets
+
+
+def test_largest_element_accepted() -> None:
+    ss = parse_model(wide(5, EIGHT, effects(4))).skillsets[0]
+    assert len(build_net(ss).transitions) == 8**4
 
 
 # ---- big inputs ------------------------------------------------------------------------
@@ -246,17 +275,3 @@ def test_unterminated_comment_costs_linear_memory() -> None:
     finally:
         tracemalloc.stop()
     assert peak < 20 * len(text)
-
-
-def test_too_many_variants() -> None:
-    # 2 KB that would give 8^5 = 32768 transitions: refused before the net is built.
-    states = "{ A B C D E F G H }"
-    resources = "".join(f"  resource x{i} {{ state {states} initial A transition all }}\n" for i in range(5))
-    effects = " ".join(f"x{i} -> B" for i in range(5))
-    assert errors(f"skillset s {{\n{resources}  event e {{ effect {{ {effects} }} }}\n}}") == [
-        "f.rl:7:9: error: event 'e' is too large: more than 4096 transition variants"
-        " (one per guard clause and combination of source states of the resources it moves)"
-    ]
-    four = " ".join(f"x{i} -> B" for i in range(4))
-    ss = parse_model(f"skillset s {{\n{resources}  event e {{ effect {{ {four} }} }}\n}}").skillsets[0]
-    assert len(build_net(ss).transitions) == 8**4
