@@ -43,6 +43,7 @@ if str(REPO) not in sys.path:  # run as a script
 from skinet.cli.main import main as skinet_main  # noqa: E402
 from skinet.errors import SkinetError  # noqa: E402
 from skinet.files import load_state, load_system  # noqa: E402
+from skinet.lang.larkerrors import MAX_FORMULA_CHARS, MAX_SOURCE_CHARS  # noqa: E402
 from skinet.lang.parser import parse_model  # noqa: E402
 from skinet.net.build import build_net  # noqa: E402
 from skinet.net.export import FORMATS  # noqa: E402
@@ -277,7 +278,9 @@ def run_one(kind: str, text: str, workdir: Path) -> str | None:
     return None
 
 
-def campaign(count: int, seed: int, timeout: float, out: Path | None = None) -> dict[str, Tally]:
+def campaign(
+    count: int, seed: int, timeout: float, out: Path | None = None, progress: bool = False
+) -> dict[str, Tally]:
     rng = random.Random(seed)
     tallies = {k: Tally() for k in KINDS}
     paper()  # explored once, outside the timed inputs
@@ -289,6 +292,8 @@ def campaign(count: int, seed: int, timeout: float, out: Path | None = None) -> 
     with tempfile.TemporaryDirectory(prefix="skinet-fuzz-") as tmp:
         workdir = Path(tmp)
         for n in range(count):
+            if progress and n and n % 1000 == 0:
+                print(f"  {n} inputs...", file=sys.stderr, flush=True)
             kind = KINDS[n % len(KINDS)]
             text = generate(kind, rng)
             tally = tallies[kind]
@@ -335,6 +340,51 @@ def _refused(kind: str, text: str, workdir: Path) -> bool:
     return False
 
 
+BIG = 10 * 2**20  # 10 MiB
+
+
+def big_inputs(workdir: Path) -> list[str]:
+    """The largest accepted inputs, and 10 MiB inputs of each kind as files and texts:
+    time and peak memory (tracemalloc)."""
+    import tracemalloc
+
+    system, _ = paper()
+    skillsets = {c.name: c.skillset for c in system.components}
+    event = "event e%d { guard (r == A or r != B) and not r == B effect r -> A }\n"
+    events = "".join(event % i for i in range((MAX_SOURCE_CHARS - 100) // len(event % 99999)))
+    bodies: dict[str, tuple[str, Callable[[str], object]]] = {
+        "rl at the size limit": ("skillset s { resource r { state { A B } initial A transition all }\n" + events + "}",
+                                 lambda t: parse_model(t)),
+        "formula at its limit": ("(" * MAX_FORMULA_CHARS, lambda t: parse_formula(t, skillsets)),
+        "rl, unterminated /*": ("skillset s { /*" + "x" * BIG, lambda t: parse_model(t)),
+        "rl, 'not' x 2.6 M": ("skillset s { event e { guard " + "not " * (BIG // 4), lambda t: parse_model(t)),
+        "property": ("p = " + "(" * BIG, lambda t: parse_properties(t, skillsets)),
+        "formula": ("AG " * (BIG // 3), lambda t: parse_formula(t, skillsets)),
+        "state file": ("[" * BIG, lambda t: load_state(_write(workdir / "big.json", t), system)),
+        "system file": ("a = " + "[" * BIG, lambda t: load_system(_write(workdir / "big.toml", t))),
+    }
+    rows = []
+    for name, (text, parse) in bodies.items():
+        tracemalloc.start()
+        t0 = time.perf_counter()
+        try:
+            parse(text)
+            outcome = "parsed"
+        except SkinetError as exc:
+            outcome = str(exc).split(": error: ")[-1][:60]
+        elapsed = time.perf_counter() - t0
+        peak = tracemalloc.get_traced_memory()[1]
+        tracemalloc.stop()
+        rows.append(f"  {name:22} {len(text) / 2**20:5.1f} MiB  {elapsed:6.2f} s  peak {peak / 2**20:6.1f} MiB"
+                    f" ({peak / len(text):4.1f} x)  {outcome}")
+    return rows
+
+
+def _write(path: Path, text: str) -> Path:
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
 def report(tallies: dict[str, Tally], elapsed: float) -> str:
     rows = [f"{'kind':8} {'tried':>7} {'refused':>8} {'accepted':>9} {'uncaught':>9} {'hangs':>6} {'slowest':>9}"]
     total = Tally()
@@ -363,8 +413,11 @@ def cli(argv: list[str] | None = None) -> int:
     if args.keep:
         args.keep.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    tallies = campaign(args.count, args.seed, args.timeout, args.keep)
+    tallies = campaign(args.count, args.seed, args.timeout, args.keep, progress=True)
     print(report(tallies, time.perf_counter() - t0))
+    print("Big inputs (peak traced memory beyond the input itself; budget for 10 MiB: 20 x):")
+    with tempfile.TemporaryDirectory(prefix="skinet-fuzz-") as tmp:
+        print("\n".join(big_inputs(Path(tmp))))
     for t in tallies.values():
         for failure in t.uncaught[:3]:
             print(failure, file=sys.stderr)

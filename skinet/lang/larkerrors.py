@@ -30,14 +30,14 @@ MAX_NESTING = 100
 # about 10 KB.  Parsing costs up to about 550 bytes of memory and 30 us per input
 # character (lark), so any accepted text parses within about 150 MB and 10 s.
 MAX_SOURCE_CHARS = 2**18
+# Largest properties file or CTL formula (64 KiB); real ones are under 1 KB.
+MAX_FORMULA_CHARS = 2**16
 
 
-def check_size(text: str, source: str) -> None:
-    """Refuse a text longer than :data:`MAX_SOURCE_CHARS` before parsing it."""
-    if len(text) > MAX_SOURCE_CHARS:
-        raise SourceError.at(
-            source, None, f"input too large: {len(text)} characters (the limit is {MAX_SOURCE_CHARS})"
-        )
+def check_size(text: str, source: str, limit: int = MAX_SOURCE_CHARS) -> None:
+    """Refuse a text longer than ``limit`` characters before parsing it."""
+    if len(text) > limit:
+        raise SourceError.at(source, None, f"input too large: {len(text)} characters (the limit is {limit})")
 
 
 def check_nesting(tree: Tree, operators: frozenset[str], source: str) -> None:

@@ -37,7 +37,7 @@ def test_nested_until() -> None:
 
 
 def test_formula_size_limit() -> None:
-    assert formula_error("(" * 300_000) == "<formula>: error: input too large: 300000 characters (the limit is 262144)"
+    assert formula_error("(" * 70_000) == "<formula>: error: input too large: 70000 characters (the limit is 65536)"
 
 
 def test_deep_parentheses() -> None:
