@@ -16,6 +16,7 @@ from skinet.net.petrinet import PetriNet
 from skinet.net.semantics import invariants_enabled
 from skinet.props.formula import Property
 from skinet.props.parser import parse_properties
+from skinet.verify.component import explore_component
 
 Marking = dict[str, int]
 
@@ -90,8 +91,6 @@ def marking_problems(system: System, marking: Mapping[str, int]) -> list[str]:
     each component's marking is reachable in its own full net.  Cost: one
     breadth-first search of each component's stable markings (memoised per net).
     """
-    from skinet.verify.component import explore_component  # skinet.verify imports this module
-
     problems: list[str] = []
     for c in system.components:
         m = marking[c.name]
