@@ -22,12 +22,14 @@ import json
 import os
 import re
 import tomllib
+from dataclasses import replace
 from pathlib import Path
 
 from skinet.errors import Diagnostic, Pos, SourceError
 from skinet.lang.larkerrors import MAX_SOURCE_CHARS
 from skinet.lang.model import Model, Skillset
 from skinet.lang.parser import link, parse_unit
+from skinet.options import parse_prediction
 from skinet.ros.typemap import TypeMap, parse_typemap
 from skinet.system import Marking, System, build_system, marking_from_json, marking_problems
 
@@ -126,7 +128,9 @@ def load_system(path: str | Path) -> tuple[System, list[Diagnostic]]:
         props_path = path.parent / str(props_name)
         props_text, props_source = read_source(props_path), str(props_path)
         sources[props_path.name] = props_text
-    return build_system(system["name"], skillsets, props_text, props_source, sources), warnings
+    built = build_system(system["name"], skillsets, props_text, props_source, sources)
+    options = parse_prediction(data.get("prediction"), [p.name for p in built.properties], where, text)
+    return replace(built, prediction=options), warnings
 
 
 def _entry_skillsets(entry: dict[str, object], n: int, model: Model, where: str) -> list[Skillset]:
