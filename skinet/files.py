@@ -20,8 +20,6 @@ from __future__ import annotations
 
 import json
 import os
-import re
-import tomllib
 from dataclasses import replace
 from pathlib import Path
 
@@ -31,6 +29,7 @@ from skinet.lang.model import Model, Skillset
 from skinet.lang.parser import link, parse_unit
 from skinet.options import parse_prediction
 from skinet.ros.typemap import TypeMap, parse_typemap
+from skinet.tomltext import parse_toml
 from skinet.system import Marking, System, build_system, marking_from_json, marking_problems
 
 
@@ -99,7 +98,7 @@ def load_system(path: str | Path) -> tuple[System, list[Diagnostic]]:
     """Load a system file and everything it names; returns the warnings too."""
     path = Path(path)
     text = read_source(path)
-    data = _parse_toml(text, str(path))
+    data = parse_toml(text, str(path))
     where = str(path)
     system = data.get("system")
     if not isinstance(system, dict) or not isinstance(system.get("name"), str):
@@ -159,7 +158,7 @@ def _entry_skillsets(entry: dict[str, object], n: int, model: Model, where: str)
 def load_typemap(path: str | Path) -> TypeMap:
     """The type map named by ``[system] types`` in a system file (empty when absent)."""
     path = Path(path)
-    data = _parse_toml(read_source(path), str(path))
+    data = parse_toml(read_source(path), str(path))
     name = data.get("system", {}).get("types") if isinstance(data.get("system"), dict) else None
     if name is None:
         return {}
@@ -191,24 +190,3 @@ def load_state(path: str | Path, system: System, what_if: bool = False) -> Marki
         )
     return marking
 
-
-def _parse_toml(text: str, source: str) -> dict[str, object]:
-    """``tomllib.loads`` with its errors (and its recursion on deep nesting) as SourceError."""
-    try:
-        return tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise _toml_error(source, text, exc) from None
-    except RecursionError:
-        raise SourceError.at(source, None, "invalid TOML: nested too deeply") from None
-
-
-def _toml_error(source: str, text: str, exc: tomllib.TOMLDecodeError) -> SourceError:
-    """The decoder's message at its position; "at end of document" is the last character."""
-    match = re.search(r"\(at line (\d+), column (\d+)\)$", str(exc))
-    message = re.sub(r"\s*\(at line \d+, column \d+\)$|\s*\(at end of document\)$", "", str(exc))
-    if match:
-        pos: Pos | None = Pos(int(match.group(1)), int(match.group(2)))
-    else:
-        stripped = text.rstrip()  # as for syntax errors: just after the last character
-        pos = Pos(stripped.count("\n") + 1, len(stripped.rsplit("\n", 1)[-1]) + 1)
-    return SourceError.at(source, pos, f"invalid TOML: {message}")

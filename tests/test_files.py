@@ -233,3 +233,10 @@ def test_include_cycle(tmp_path: Path) -> None:
     write(tmp_path, "a.rl", 'include "b.rl"\nskillset a {}\n')
     write(tmp_path, "b.rl", 'include "a.rl"\nskillset b {}\n')
     assert [s.name for s in load_model(tmp_path / "a.rl").skillsets] == ["a", "b"]
+
+
+def test_scenario_toml_errors() -> None:
+    from skinet.mission import parse_scenario
+
+    assert error(parse_scenario, "[scenario]\nname = ", "s.toml") == "s.toml:2:7: error: invalid TOML: Invalid value"
+    assert error(parse_scenario, "a = " + "[" * 3000, "s.toml") == "s.toml: error: invalid TOML: nested too deeply"
