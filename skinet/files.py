@@ -50,7 +50,7 @@ def read_text(path: str | Path, limit: int | None = None) -> str:
                 str(path), None, f"file too large: {max(size, len(data))} bytes (the limit is {limit})"
             )
         return data.decode("utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
+    except (OSError, UnicodeDecodeError, ValueError) as exc:  # ValueError: a NUL in the path
         reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
         raise SourceError.at(str(path), None, f"cannot read file: {reason}") from None
 
@@ -81,13 +81,13 @@ def _load_linked(path: Path) -> tuple[Model, dict[str, str]]:
         i += 1
         for name, pos in units[i - 1][0].includes:
             target = including.parent / name
-            if target.resolve() in seen:
-                continue
-            seen.add(target.resolve())
             try:
+                if target.resolve() in seen:
+                    continue
+                seen.add(target.resolve())
                 included = read_source(target)
-            except SourceError as exc:
-                reason = exc.diagnostics[0].message
+            except (SourceError, OSError, RuntimeError, ValueError) as exc:  # RuntimeError: a symlink loop
+                reason = exc.diagnostics[0].message if isinstance(exc, SourceError) else f"cannot read file: {exc}"
                 raise SourceError.at(str(including), pos, f"cannot include '{name}': {reason}") from None
             units.append(parse_unit(included, str(target), library=True))
             texts[str(target)] = included

@@ -68,7 +68,8 @@ TOKENS = (
     "[", "]", "E[", "A(", " U ", "AG", "EF", "AX", "spot:Busy", "manipulator:HP", "spot:i_teleop",
     "r == A", "x", "é", "\u0000", "\ufeff", "9" * 30, "-1", "1e999", "null", "[]", "{}",
     "not " * 120, "(" * 600, ")" * 600, "a == b and " * 150, "true or " * 150, "AG " * 150,
-    "/*" + "x" * 200, "[" * 2000, "{a=" * 400, "running", "resources",
+    "/*" + "x" * 200, "[" * 2000, "{a=" * 400, "running", "resources", "\\u0000", "../", "/dev/zero",
+    'include "spot.rl"', 'include "nowhere.rl"',
 )
 
 

@@ -240,3 +240,10 @@ def test_scenario_toml_errors() -> None:
 
     assert error(parse_scenario, "[scenario]\nname = ", "s.toml") == "s.toml:2:7: error: invalid TOML: Invalid value"
     assert error(parse_scenario, "a = " + "[" * 3000, "s.toml") == "s.toml: error: invalid TOML: nested too deeply"
+
+
+def test_nul_in_a_path(tmp_path: Path) -> None:
+    toml = write(tmp_path, "s.toml", '[system]\nname = "x"\n[[skillsets]]\nmodel = "a\\u0000b.rl"\n')
+    assert error(load_system, toml) == f"{tmp_path / 'a'}\x00b.rl: error: cannot read file: embedded null byte"
+    rl = write(tmp_path, "i.rl", 'include "a\x00b.rl"\nskillset s {}\n')
+    assert error(load_model, rl) == f"{rl}:1:9: error: cannot include 'a\x00b.rl': cannot read file: embedded null byte"
