@@ -198,8 +198,9 @@ class _Checker:
             self.check_types(fields, known_types, "progress field", of)
 
         owner = f"interrupt{of}"
-        if self.check_effects(s.interrupt.effects, owner, f"effect of {owner}"):
-            post = self.check_postcondition(s.interrupt.postcondition, owner, s.interrupt.pos)
+        effects_ok = self.check_effects(s.interrupt.effects, owner, f"effect of {owner}")
+        post = self.check_postcondition(s.interrupt.postcondition, owner, s.interrupt.pos)
+        if effects_ok:
             self.variants(owner, s.interrupt.pos or s.pos, [{}], s.interrupt.effects, post)
 
         # Named modes share one namespace; an unnamed one is unique per kind
@@ -209,8 +210,9 @@ class _Checker:
             self.unique((("", m.pos) for m in s.modes if not m.name and m.kind == kind), kind, scope)
         for m in s.modes:
             owner = (f"{m.kind} '{m.name}'" if m.name else f"unnamed {m.kind}") + of
-            if self.check_effects(m.effects, owner, f"effect of {owner}"):
-                post = self.check_postcondition(m.postcondition, owner, m.pos)
+            effects_ok = self.check_effects(m.effects, owner, f"effect of {owner}")
+            post = self.check_postcondition(m.postcondition, owner, m.pos)
+            if effects_ok:
                 self.variants(owner, m.pos, [{}], m.effects, post)
 
     # ---- expressions and effects ------------------------------------------------

@@ -275,3 +275,10 @@ def test_unterminated_comment_costs_linear_memory() -> None:
     finally:
         tracemalloc.stop()
     assert peak < 20 * len(text)
+
+
+def test_bad_effect_and_bad_postcondition_are_both_reported() -> None:
+    assert errors(HEAD + "  skill k { success ok { effect q -> A postcondition z == A } }\n}") == [
+        "f.rl:4:33: error: effect on undeclared resource 'q' in success 'ok' of skill 'k'",
+        "f.rl:4:54: error: unknown resource 'z' in postcondition of success 'ok' of skill 'k'",
+    ]
