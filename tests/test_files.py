@@ -73,6 +73,16 @@ def test_two_skillset_file_travels_to_the_predictor(tmp_path: Path) -> None:
     rebuilt = system_from_bundle(bundle(system))
     assert [c.name for c in rebuilt.components] == ["alpha", "beta"]
     assert bundle(rebuilt).digest == bundle(system).digest
+    # Picked by name, in another order, or only one of the two.
+    for picked in (["beta", "alpha"], ["beta"]):
+        entries = "".join(f'[[skillsets]]\nmodel = "two.rl"\nname = "{n}"\nmanager = "/{n}"\n' for n in picked)
+        path = write(tmp_path, "p.toml", '[system]\nname = "p"\n' + entries)
+        system, _ = load_system(path)
+        b = bundle(system)
+        assert [e[0] for e in b.skillsets] == [f"two.rl#{n}" for n in picked]
+        rebuilt = system_from_bundle(b)
+        assert [(c.name, c.manager) for c in rebuilt.components] == [(n, f"/{n}") for n in picked]
+        assert bundle(rebuilt).digest == b.digest
 
 
 def test_explore_accepts_a_two_skillset_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
