@@ -20,7 +20,6 @@ from __future__ import annotations
 import asyncio
 import errno
 import json
-import logging
 import threading
 from pathlib import Path
 from typing import Any
@@ -35,7 +34,6 @@ STATIC = Path(__file__).parent / "static"
 ASSETS = {"app.js": "text/javascript", "style.css": "text/css"}
 QUEUE_LIMIT = 10_000  # pending updates per client before it is dropped
 KEEPALIVE = 15.0  # seconds between comment lines on an idle stream
-log = logging.getLogger("skinet.dashboard")
 
 
 class PortError(SkinetError):

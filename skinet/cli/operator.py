@@ -5,7 +5,6 @@ server are imported when a command runs."""
 from __future__ import annotations
 
 import argparse
-import threading
 
 from services.common.zenoh_config import add_zenoh_args
 

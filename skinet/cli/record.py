@@ -23,7 +23,7 @@ from pydantic import BaseModel
 
 from services.common.session import open_session
 from services.common.zenoh_config import add_zenoh_args, config_from_args
-from skinet.errors import SkinetError, SourceError
+from skinet.errors import SourceError
 from skinet.wire import keys
 from skinet.wire.codec import DecodeError, decode
 from skinet.wire.log import log_line

@@ -22,7 +22,6 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
-import zenoh
 
 from services.chain import run_chain
 from services.dashboard.board import Board
