@@ -109,7 +109,7 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     system, _ = load_system(args.system)
     stop = stop_on_signals()
     session = open_session(session_config("peer", args.connect, args.listen, args.zenoh_config,
-                                          not args.no_multicast_scouting, *login(args)))
+                                          not args.no_multicast_scouting, **login(args)))
     monitor: Monitor | None = None
     predictor = None
     dashboard = None
@@ -177,7 +177,7 @@ def router(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     """``skinet router``: a Zenoh router (mode "router" of the Python wheel) until interrupted."""
     stop = stop_on_signals()
     session = open_session(session_config("router", args.connect, args.listen or ["tcp/0.0.0.0:7447"],
-                                          args.zenoh_config, not args.no_multicast_scouting, *login(args)))
+                                          args.zenoh_config, not args.no_multicast_scouting, **login(args)))
     try:
         print(f"zenoh router {session.zid()} listening on {', '.join(args.listen or ['tcp/0.0.0.0:7447'])}",
               file=out, flush=True)

@@ -43,8 +43,9 @@ def add_login_args(g: argparse._ActionsContainer) -> None:
                    help="read the password from this file (default: $SKINET_ZENOH_PASSWORD_FILE)")
 
 
-def login(args: argparse.Namespace) -> tuple[str | None, str | None]:
-    """(user, password) from the flags of :func:`add_login_args`; :class:`SkinetError` on an unreadable file."""
+def login(args: argparse.Namespace) -> dict[str, str | None]:
+    """``user`` and ``password`` keywords of :func:`session_config` from the flags of
+    :func:`add_login_args`; :class:`SkinetError` on an unreadable password file."""
     user, password = getattr(args, "user", None), getattr(args, "password", None)
     path = getattr(args, "password_file", None)
     if path:
@@ -53,7 +54,7 @@ def login(args: argparse.Namespace) -> tuple[str | None, str | None]:
                 password = f.read().strip()
         except OSError as exc:
             raise SkinetError(f"cannot read password file {path}: {exc.strerror}") from None
-    return user, password
+    return {"user": user, "password": password}
 
 
 def _env_list(name: str) -> list[str]:
@@ -91,7 +92,7 @@ def config_from_args(args: argparse.Namespace) -> zenoh.Config:
         args.listen if args.listen is not None else _env_list("SKINET_ZENOH_LISTEN"),
         args.zenoh_config,
         not args.no_multicast_scouting,
-        *login(args),
+        **login(args),
     )
 
 
