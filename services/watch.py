@@ -49,8 +49,10 @@ def _look(board: Board) -> tuple[list[str], str, tuple, bool]:
         return [], "", (), False
     line = summary(Observed(board.state, board.verdicts, board.unsafe, board.state_space))  # type: ignore[arg-type]
     key = (board.epoch, board.state.seq, board.unsafe.stamp,  # type: ignore[union-attr]
+           board.state_space and board.state_space.stamp,
            tuple(sorted((s, len(ids)) for s, ids in board.alive.items())), len(board.violations))
-    return lines, line, key, not board.unsafe.prediction_stale  # type: ignore[union-attr]
+    fresh = not board.unsafe.prediction_stale and board.state_space is not None  # type: ignore[union-attr]
+    return lines, line, key, fresh
 
 
 def watch(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
