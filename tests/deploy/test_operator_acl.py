@@ -136,6 +136,30 @@ def test_dashboard_joins_late_as_observer(deployment: str, tmp_path) -> None:
         proc.wait(10)
 
 
+def test_watch_on_a_terminal_redraws_the_view(deployment: str) -> None:
+    import pty
+
+    leader, follower = pty.openpty()
+    proc = subprocess.Popen([sys.executable, "-m", "skinet.cli.main", "watch", SYSTEM, "--duration", "3",
+                             *zenoh_flags(deployment)], cwd=REPO, stdout=follower, stderr=follower)
+    os.close(follower)
+    out = b""
+    while True:
+        try:
+            chunk = os.read(leader, 65536)
+        except OSError:  # the terminal closed with the process
+            break
+        if not chunk:
+            break
+        out += chunk
+    os.close(leader)
+    assert proc.wait(15) == 0
+    text = out.decode()
+    assert text.startswith("\x1b[H\x1b[JSkiNet Live  system spot_arm  step 6  last event "
+                           "manipulator:arm_ready.success.ready#1"), text[:200]
+    assert "services  monitor: 1, bridge_ros2: 0, predictor: 0" in text
+
+
 def test_watch_in_a_pipe_prints_one_line_per_step(deployment: str) -> None:
     """Last in this file: it moves the deployment on (the transfer with the arm at RD)."""
     proc = subprocess.Popen([sys.executable, "-m", "skinet.cli.main", "watch", SYSTEM, "--duration", "60",
