@@ -53,8 +53,10 @@ def replay_bag(
                 if delay > 0:
                     time.sleep(delay)
             skillset, topic = routes[conn.topic]
-            for ev in feed.feed(skillset, topic, bytes(raw)):
+            for ev in feed.feed(skillset, topic, bytes(raw)) + feed.expire():
                 emit(ev)
+    for ev in feed.flush():
+        emit(ev)
     return feed
 
 

@@ -56,7 +56,7 @@ class Bridge:
         self.style = style
         self.instance_id = keys.check_chunk(instance_id or default_instance_id(), "instance id")
         self.feed = Feed(system, typemap, source or default_source(self.instance_id), extra_types)
-        self._queue: queue.SimpleQueue[tuple[str, ManagerTopic, bytes] | None] = queue.SimpleQueue()
+        self._queue: queue.SimpleQueue[tuple[str, ManagerTopic, bytes] | tuple[()] | None] = queue.SimpleQueue()
         self._fed = threading.Condition()
         self._stop = threading.Event()
         self._subscribers: list[Any] = []
@@ -102,12 +102,16 @@ class Bridge:
 
     def _run(self) -> None:
         while True:
-            item = self._queue.get()
+            deadline = self.feed.deadline()
+            try:
+                item = self._queue.get(timeout=None if deadline is None else max(0.0, deadline - time.monotonic()))
+            except queue.Empty:
+                item = ()  # a held status is due
             if item is None:
                 return
             try:
                 with self._fed:
-                    events = self.feed.feed(*item)
+                    events = self.feed.feed(*item) if len(item) == 3 else self.feed.expire()
                 for ev in events:
                     self._events[ev.skillset].put(wire_encode(ev))
             except Exception:  # a bug must not stop the bridge (SPEC §7)

@@ -18,9 +18,10 @@ import zenoh
 from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import StoragePlugin, Writer
 
-from services.bridge_ros2 import replay_bag, start_bridge
+from services.bridge_ros2 import Feed, replay_bag, start_bridge
 from services.common.zenoh_config import session_config
 from services.simulator import Simulator
+from services.simulator.manager import Manager
 from skinet.live import LiveSystem
 from skinet.mission import parse_scenario
 from skinet.ros.keys import (
@@ -28,6 +29,7 @@ from skinet.ros.keys import (
     topic_fqn,
 )
 from skinet.ros.typestore import build_typestore
+from skinet.ros.typestore import encode as cdr
 from skinet.wire import keys
 from skinet.wire.codec import decode
 from skinet.wire.messages import CanonicalEvent
@@ -302,6 +304,72 @@ def test_rosbag_replay_equals_live(client_factory, spot_arm, tmp_path: Path, plu
     again: list[CanonicalEvent] = []
     replay_bag(bag, system, typemap, again.append, source=SOURCE, realtime=True)
     assert time.monotonic() - started >= span * 0.9 and again == replayed
+
+
+def overtaken(samples: list[tuple[str, str, bytes]], routes: dict) -> list[tuple[str, str, bytes]]:
+    """``samples`` with every status moved before the responses of its skillset just before it."""
+    out: list[tuple[str, str, bytes]] = []
+    floor: dict[str, int] = {}  # a status never overtakes an earlier status's responses
+    for sample in samples:
+        ss, fqn, _ = sample
+        i = len(out)
+        if routes[fqn][1].kind == "status":
+            while i > floor.get(ss, 0) and out[i - 1][0] == ss and \
+                    routes[out[i - 1][1]][1].kind in ("skill_response", "event_response"):
+                i -= 1
+            floor[ss] = len(out) + 1
+        out.insert(i, sample)
+    return out
+
+
+def test_statuses_that_overtake_their_responses(client_factory, spot_arm):
+    """Through a gateway each topic has its own route: a status may come before its responses."""
+    system, typemap = spot_arm
+    events, recorder = run_chain(client_factory, spot_arm)
+    routes = Feed(system, typemap, SOURCE).by_fqn()
+    samples = [(ss, fqn, data) for _, ss, fqn, _, data in recorder.samples if fqn in routes]
+    swapped = overtaken(samples, routes)
+    assert sum(a != b for a, b in zip(samples, swapped)) >= 10  # 7 responses overtaken, and their statuses
+
+    def replay(order: list[tuple[str, str, bytes]], hold: float) -> tuple[list[CanonicalEvent], Feed]:
+        feed = Feed(system, typemap, SOURCE, hold=hold)
+        got = [ev for ss, fqn, data in order for ev in feed.feed(ss, routes[fqn][1], data)]
+        return got + feed.flush(), feed
+
+    got, feed = replay(swapped, hold=60.0)  # only the awaited response (or a newer status) releases one
+    for ss, expected in EXPECTED.items():
+        assert [view(e) for e in got if e.skillset == ss] == expected
+    assert feed.counters.unexplained == 2  # the initial statuses
+    # Without holding them, those statuses lose their transition names.
+    unheld, feed = replay(swapped, hold=0.0)
+    assert feed.counters.unexplained > 2 and [view(e) for e in unheld if e.skillset == "spot"] != EXPECTED["spot"]
+
+
+def test_a_held_status_is_released_after_the_hold_time(spot_arm):
+    """A response that never comes delays its status by ``hold`` seconds, no more."""
+    system, typemap = spot_arm
+    now = [0.0]
+    feed = Feed(system, typemap, SOURCE, hold=0.5, clock=lambda: now[0])
+    comp = system.component("spot")
+    store = feed.managers["spot"].store
+    manager = Manager(comp.skillset, store, info=comp.manager)
+    topics = {t.topic: t for t in manager_topics(comp.skillset)}
+
+    def put(messages) -> list[CanonicalEvent]:
+        return [ev for m in messages if m.topic in {t.topic for t in feed.managers["spot"].topics}
+                for ev in feed.feed("spot", topics[m.topic], cdr(store, m.typename, m.msg))]
+
+    assert [e.info for e in put(manager.status_request())] == ["initial status"]
+    assert [e.transition for e in put(manager.skill_request("init_power", "a", None))] == ["init_power.start"]
+    out = manager.terminate("init_power", "success", "powered_on")
+    response, status = out[-2], out[-1]
+    assert put([status]) == [] and feed.deadline() == 0.5  # held: its response is missing
+    now[0] = 0.4
+    assert feed.expire() == []
+    now[0] = 0.5
+    late = feed.expire()
+    assert [(e.transition, e.status.resources["power_status"]) for e in late] == [(None, "PowerOn")]
+    assert feed.deadline() is None and put([response]) == []  # too late: a note only
 
 
 def test_bridge_learns_the_current_status_at_start_up(client_factory, spot_arm):
