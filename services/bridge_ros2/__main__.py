@@ -42,6 +42,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         help="zenoh-bridge-ros2dds namespace prefixing the keys")
     parser.add_argument("--domain", type=int, default=int(os.environ.get("ROS_DOMAIN_ID", "0")),
                         help="ROS domain id in rmw_zenoh keys (default: $ROS_DOMAIN_ID or 0)")
+    parser.add_argument("--ros-distro", default=os.environ.get("ROS_DISTRO", "jazzy"),
+                        help="ROS 2 distribution of rmw_zenoh (default: $ROS_DISTRO or jazzy); on humble the keys "
+                             "carry TypeHashNotSupported instead of a RIHS01 type hash")
     add_instance_arg(parser)
     parser.add_argument("--source", default=None, help="source name in the events (default: bridge_ros2/INSTANCE)")
     parser.add_argument("--replay", metavar="BAG", help="replay a rosbag2 file (directory or .db3/.mcap) and exit")
@@ -70,7 +73,7 @@ def main(argv: list[str] | None = None) -> int:
             signal.signal(sig, lambda *_: stop.set())
         try:
             bridge = start_bridge(session, system, typemap, source=source, instance_id=args.instance,
-                                  style=KeyStyle(args.rmw_zenoh, args.namespace, args.domain))
+                                  style=KeyStyle(args.rmw_zenoh, args.namespace, args.domain, args.ros_distro == "humble"))
         except (SkinetError, ValueError) as exc:
             print(str(exc), file=sys.stderr)
             return 2
@@ -78,8 +81,8 @@ def main(argv: list[str] | None = None) -> int:
             pass
         bridge.close()
         c = bridge.counters
-        log.info("stopped: %d messages, %d events (%d unnamed), %d malformed",
-                 c.messages, c.events, c.unexplained, c.malformed)
+        log.info("stopped: %d messages, %d events (%d unnamed), %d malformed, %d statuses not matching the model, "
+                 "%d manager restarts", c.messages, c.events, c.unexplained, c.malformed, c.mismatched, c.restarts)
         return 0
     finally:
         session.close()

@@ -38,6 +38,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         "zenoh-bridge-ros2dds keys")
     parser.add_argument("--namespace", default="", help="zenoh-bridge-ros2dds namespace prefix of the keys")
     parser.add_argument("--domain", type=int, default=0, help="ROS domain id in rmw_zenoh keys (default: 0)")
+    parser.add_argument("--ros-distro", default=os.environ.get("ROS_DISTRO", "jazzy"),
+                        help="ROS 2 distribution of rmw_zenoh (default: $ROS_DISTRO or jazzy); on humble the keys "
+                             "carry TypeHashNotSupported instead of a RIHS01 type hash")
     add_log_arg(parser)
     add_zenoh_args(parser)
     return parser.parse_args(argv)
@@ -66,7 +69,7 @@ def main(argv: list[str] | None = None) -> int:
     session = zenoh.open(config_from_args(args))
     try:
         sim = Simulator(session, system, typemap,
-                        style=KeyStyle(args.rmw_zenoh, args.namespace, args.domain))
+                        style=KeyStyle(args.rmw_zenoh, args.namespace, args.domain, args.ros_distro == "humble"))
         time.sleep(max(0.0, args.start_delay))
         try:
             sim.drive(scenario, args.speed, on_step=lambda run: print(_line(run), flush=True))

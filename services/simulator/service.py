@@ -25,11 +25,12 @@ from typing import Any
 
 import zenoh
 
+from services.common.ros_liveliness import declare_node
 from services.common.zenoh_config import undeclare
 from services.simulator.driver import StepRun, drive
 from services.simulator.manager import INTERRUPTING, READY, Manager, Message
 from skinet.mission import Scenario
-from skinet.ros.keys import KeyStyle, ManagerTopic, manager_topics, rmw_attachment
+from skinet.ros.keys import KeyStyle, ManagerTopic, manager_topics, rmw_attachment, topic_fqn
 from skinet.ros.typestore import Typestore, build_typestore, decode, encode
 from skinet.system import Component, System
 
@@ -53,6 +54,7 @@ class _Node:
     sequence: int = 0
     statuses: int = 0  # SkillsetStatus messages published
     handled: dict[str, int] = field(default_factory=dict)  # node-relative input topic -> inputs handled
+    tokens: list[Any] = field(default_factory=list)  # rmw_zenoh liveliness tokens of the node
 
 
 class Simulator:
@@ -71,6 +73,7 @@ class Simulator:
         self.session = session
         self.system = system
         self.style = style
+        self._clock = clock
         self._cond = threading.Condition()
         self._subscribers: list[Any] = []
         self.nodes: dict[str, _Node] = {}
@@ -103,6 +106,16 @@ class Simulator:
 
         self._subscribers.append(self.session.declare_subscriber(
             self.style.all_topics(comp.manager, comp.skillset), on_sample))
+        self._declare_node(node)
+
+    def _declare_node(self, node: _Node) -> None:
+        """rmw_zenoh: the node's liveliness tokens, as rmw_zenoh declares them (graph discovery)."""
+        if not self.style.rmw_zenoh:
+            return
+        entities = [("MP" if t.kind in OUTPUTS else "MS", topic_fqn(node.component.manager, t.topic), t.typename,
+                     self.style.type_hash(node.store, t.typename))
+                    for t in node.topics.values() if t.kind in OUTPUTS or t.kind in INPUTS]
+        _, node.tokens = declare_node(self.session, self.style.domain, node.component.manager, entities)
 
     def _send(self, node: _Node, topic: str, payload: bytes) -> None:
         """Publish one CDR message of ``node`` on its node-relative ``topic``."""
@@ -198,6 +211,20 @@ class Simulator:
         """Play ``scenario``: operator requests and skill outcomes at ``t / speed`` (see :func:`drive`)."""
         return drive(self, scenario, speed, on_step)
 
+    def restart(self, skillset: str) -> None:
+        """The manager of ``skillset`` restarts: initial state, new GID and sequence numbers, new tokens.
+
+        Like a restarted node, it publishes nothing until asked (``status_request``)
+        or until something changes.
+        """
+        node = self.nodes[skillset]
+        with node.lock:
+            m = node.manager
+            node.manager = Manager(m.skillset, node.store, info=m.info, clock=self._clock)
+            node.gid, node.sequence = os.urandom(16), 0
+            undeclare(*node.tokens)
+            self._declare_node(node)
+
     def close(self) -> None:
         """Undeclare everything (the session stays open: it may be shared).
 
@@ -209,7 +236,7 @@ class Simulator:
         for node in self.nodes.values():
             with node.lock:
                 publishers, node.publishers = list(node.publishers.values()), {}
-                undeclare(*publishers)
+                undeclare(*publishers, *node.tokens)
 
 
 __all__ = ["Simulator"]
