@@ -332,7 +332,9 @@ def test_the_bridge_and_the_managers_are_in_the_ros_graph(client_factory, watch,
     sim = Simulator(client_factory(), system, typemap, style=style)
     bridge = start_bridge(client_factory(), system, typemap, style=style, source=SOURCE, instance_id="lab-1")
     try:
-        alive = graph.wait(lambda a: sum("/NN/" in k for k in a) == 3)
+        total = len(bridge.graph) + sum(len(node.tokens) for node in sim.nodes.values())
+        alive = graph.wait(lambda a: len(a) == total)
+        assert sum("/NN/" in k for k in alive) == 3
         entities = [parse_liveliness_token(k) for k in alive]
         assert sorted(e.node_fqn for e in entities if e.kind == "NN") == [
             "/kinova/manipulator_skillset_manager", "/skinet_bridge_lab_1", "/spot/spot_skillset_manager"]
