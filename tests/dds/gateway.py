@@ -35,13 +35,15 @@ class Gateway:
     """One plugin process; ``endpoint`` is its Zenoh listener; :meth:`close` stops it."""
 
     def __init__(self, binary: Path, workdir: Path, *, domain: int, distro: str, namespace: str = "/",
-                 endpoint: str | None = None):
-        self.endpoint = endpoint or f"tcp/127.0.0.1:{free_port()}"
+                 connect: str | None = None):
+        self.endpoint = f"tcp/127.0.0.1:{free_port()}"
         self.domain = domain
-        config = workdir / f"ros2dds-{domain}-{distro}.json5"
+        config = workdir / f"ros2dds-{domain}-{distro}-{self.endpoint.rsplit(':', 1)[1]}.json5"
+        links = f'connect: {{ endpoints: ["{connect}"] }},' if connect else ""
         config.write_text(f"""{{
   mode: "router",
   listen: {{ endpoints: ["{self.endpoint}"] }},
+  {links}
   scouting: {{ multicast: {{ enabled: false }}, gossip: {{ enabled: false }} }},
   plugins: {{ ros2dds: {{ domain: {domain}, namespace: "{namespace}" }} }},
 }}

@@ -12,14 +12,17 @@ namespace.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 import zenoh
 
-from gateway import Gateway, free_domain
+from event_watch import Events
+from gateway import Gateway, free_domain, free_port
 from native_build import native_binary
+from services.bridge_ros2 import start_bridge
 from services.chain import run_chain
 from services.common.zenoh_config import session_config
 from services.simulator.dds import DdsSimulator
@@ -84,13 +87,74 @@ def test_unassisted_mission_through_dds_and_the_plugin(gateway_factory, unassist
         # The bridge's status_request crossed the plugin: the managers answered it (initial statuses).
         requests = {name: sim.handled(name, status_request_topic(node.component.skillset))
                     for name, node in sim.nodes.items()}
+        # Every operator request put on Zenoh was decoded by the DDS managers (CycloneDDS, then rosbags).
+        decoded = sum(n for node in sim.nodes.values() for topic, n in node.handled.items()
+                      if "/skill/" in topic or topic.endswith("event_request"))
     finally:
         sim.close()
         session.close()
     assert all(n >= 1 for n in requests.values()), requests
+    assert decoded == sum(1 for s in scenario.steps if s.transition and
+                          (s.transition.endswith((".start", ".interrupt")) or "." not in s.transition))
     assert [(r.index, r.step.transition, r.violations) for r in records if r.violations] == [
         (26, "teleop.start", ["action_guard"]),
         (33, "go_to_waypoint.start", ["safety_guard"]),
         (38, "arm_ready.start", ["action_guard"]),
     ]
     assert comparable(records) == comparable(replay(system, scenario))
+
+
+def test_bridge_started_before_the_plugin_gets_the_initial_statuses(gateway_factory, unassisted, tmp_path: Path):
+    """The bridge (on a router of its own) and the DDS managers are up; the plugin comes last and links
+    them: its route tokens tell the bridge to ask (its retry is a minute away), the statuses cross."""
+    system, typemap, _ = unassisted
+    domain = free_domain()
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    router = zenoh.open(session_config("router", listen=[endpoint], multicast_scouting=False))
+    session = client(endpoint)
+    events = Events(session, system.name)
+    sim = DdsSimulator(session, system, typemap, domain=domain, distro="jazzy")
+    bridge = start_bridge(session, system, typemap, source="bridge_ros2/dds", retry=60.0)
+    try:
+        time.sleep(1.5)  # the bridge's first requests went nowhere
+        assert events.items == []
+        started = time.monotonic()
+        gateway_factory(domain=domain, distro="jazzy", connect=endpoint)
+        got = events.wait(lambda items: len(items) == 2, timeout=20)
+        assert time.monotonic() - started < 15
+        assert sorted((e.skillset, e.transition, e.info) for e in got) == [
+            ("manipulator", None, "initial status"), ("spot", None, "initial status")]
+    finally:
+        bridge.close()
+        sim.close()
+        session.close()
+        router.close()
+
+
+def test_a_dds_manager_restarting_mid_mission(gateway_factory, unassisted):
+    """The DDS participant goes and a new one comes (the robot's managers restarted): the plugin
+    retires and re-creates its routes, the bridge asks the new managers and reports the divergence."""
+    system, typemap, scenario = unassisted
+    domain = free_domain()
+    gateway = gateway_factory(domain=domain, distro="jazzy")
+    session = client(gateway.endpoint)
+    events = Events(session, system.name)
+    sim = DdsSimulator(session, system, typemap, domain=domain, distro="jazzy")
+    bridge = start_bridge(session, system, typemap, source="bridge_ros2/dds")
+    try:
+        events.wait(lambda items: len(items) == 2, timeout=20)
+        first = scenario.__class__(scenario.name, scenario.system, scenario.steps[:2])  # spot powered on
+        assert all(run.ok for run in sim.drive(first, speed=0))
+        events.wait(lambda items: len(items) == 4)
+        sim.close()
+        sim = DdsSimulator(session, system, typemap, domain=domain, distro="jazzy")
+        got = events.wait(lambda items: len(items) == 6, timeout=20)
+    finally:
+        bridge.close()
+        sim.close()
+        session.close()
+    spot = [e for e in got[4:] if e.skillset == "spot"]
+    assert [(e.seq, e.transition, e.info) for e in spot] == [
+        (3, None, "manager restarted (the manager (or its gateway) came back); state now differs: "
+                  "power_status PowerOn -> PowerOff")]
+    assert bridge.counters.restarts == 2  # both managers came back (one participant)

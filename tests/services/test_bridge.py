@@ -21,6 +21,7 @@ from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore, get_types_from_msg
 
+from event_watch import Events
 from services.bridge_ros2 import Feed, replay_bag, start_bridge
 from services.common.zenoh_config import session_config
 from services.simulator import Simulator
@@ -35,7 +36,6 @@ from skinet.ros.interfaces import generate_messages, package_name
 from skinet.ros.typestore import build_typestore, default_instance
 from skinet.ros.typestore import encode as cdr
 from skinet.wire import keys
-from skinet.wire.codec import decode
 from skinet.wire.messages import CanonicalEvent
 
 REPO = Path(__file__).resolve().parents[2]
@@ -89,29 +89,6 @@ def test_one_subscription_covers_every_topic(spot_arm, style: KeyStyle):
 
 
 # -- live chain -----------------------------------------------------------------------------
-
-
-class Events:
-    """Canonical events of a system, in arrival order."""
-
-    def __init__(self, session: zenoh.Session, system: str):
-        self.items: list[CanonicalEvent] = []
-        self._cond = threading.Condition()
-        self._sub = session.declare_subscriber(keys.events(system, "*"), self._on_sample)
-
-    def _on_sample(self, sample: zenoh.Sample) -> None:
-        with self._cond:
-            self.items.append(decode(sample.payload.to_bytes(), CanonicalEvent))
-            self._cond.notify_all()
-
-    def wait(self, predicate: Callable[[list[CanonicalEvent]], bool], timeout: float = 5.0) -> list[CanonicalEvent]:
-        with self._cond:
-            assert self._cond.wait_for(lambda: predicate(self.items), timeout), self.items
-            return list(self.items)
-
-    def of(self, skillset: str) -> list[CanonicalEvent]:
-        with self._cond:
-            return [e for e in self.items if e.skillset == skillset]
 
 
 class Recorder:
