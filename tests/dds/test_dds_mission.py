@@ -29,7 +29,8 @@ from services.simulator.dds import DdsSimulator
 from skinet.files import load_system, load_typemap, read_text
 from skinet.mission import StepRecord, parse_scenario, replay
 from skinet.ros.interfaces import status_request_topic
-from skinet.ros.keys import KeyStyle
+from skinet.ros.keys import KeyStyle, manager_topics
+from skinet.ros.typestore import build_typestore, decode as decode_cdr, encode as cdr
 
 pytestmark = pytest.mark.slow
 
@@ -81,6 +82,10 @@ def test_unassisted_mission_through_dds_and_the_plugin(gateway_factory, unassist
     gateway = gateway_factory(domain=domain, distro=distro, namespace=namespace or "/")
     style = KeyStyle(namespace=namespace)
     session = client(gateway.endpoint)
+    status_key = style.key(system.component("spot").manager, next(
+        t for t in manager_topics(system.component("spot").skillset) if t.kind == "status"))
+    payloads: list[bytes] = []
+    recorder = session.declare_subscriber(status_key, lambda s: payloads.append(s.payload.to_bytes()))
     sim = DdsSimulator(session, system, typemap, domain=domain, distro=distro, style=style)
     try:
         records = run_chain(system, typemap, scenario, session=session, simulator=sim, style=style, settle=20)
@@ -91,8 +96,17 @@ def test_unassisted_mission_through_dds_and_the_plugin(gateway_factory, unassist
         decoded = sum(n for node in sim.nodes.values() for topic, n in node.handled.items()
                       if "/skill/" in topic or topic.endswith("event_request"))
     finally:
+        recorder.undeclare()
         sim.close()
         session.close()
+    # What the plugin puts on Zenoh is the DDS sample as is: XCDR1 little endian, rosbags' bytes plus padding.
+    store = build_typestore(system.component("spot").skillset, typemap)
+    typename = "spot_skillset_interfaces/msg/SkillsetStatus"
+    assert len(payloads) >= 20
+    for payload in payloads:
+        ours = cdr(store, typename, decode_cdr(store, typename, payload))
+        assert payload[:4] == b"\x00\x01\x00\x00" and payload[:len(ours)] == ours
+        assert len(payload) - len(ours) in range(4) and not any(payload[len(ours):])
     assert all(n >= 1 for n in requests.values()), requests
     assert decoded == sum(1 for s in scenario.steps if s.transition and
                           (s.transition.endswith((".start", ".interrupt")) or "." not in s.transition))
