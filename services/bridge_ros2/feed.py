@@ -245,9 +245,9 @@ class Feed:
         return events
 
     def has_status(self, skillset: str) -> bool:
-        """Whether a status of ``skillset`` was received."""
+        """Whether a status of ``skillset`` was received (since its manager restarted, if it did)."""
         m = self.managers[skillset]
-        return m.deriver.last is not None or m.held is not None
+        return (m.deriver.last is not None or m.held is not None) and not m.restart
 
 
 def _differences(before: derive.Status, now: derive.Status) -> str:

@@ -6,8 +6,16 @@ Subscribes to each manager's ``status``, ``event_request``, ``event_response`` a
 :class:`~skinet.wire.messages.CanonicalEvent` on ``keys.events(system, skillset)``
 with ``CongestionControl.BLOCK`` (ZENOH.md).
 
-The manager's status is volatile (corpus README): at start-up the bridge sends
-``status_request`` and repeats it every second until each manager has answered.
+The manager's status is volatile (corpus README): the bridge sends
+``status_request`` at start-up and repeats it every second until each manager has
+answered.  It also asks as soon as a manager can hear it: liveliness tokens announce
+the manager's ``status_request`` subscription (``rmw_zenoh``: the node's own token,
+whose type hash also gives the key on Humble; ``zenoh-bridge-ros2dds``: the token of
+the gateway's route).  A token that comes back, a status from a new publisher GID or
+with its sequence number going back (``rmw_zenoh`` attachments), or skill ids reset
+to '' mean the manager restarted: the bridge asks again and the next status is a new
+initial status whose ``info`` says how it differs from the last one (SPEC §7).  With
+``rmw_zenoh`` the bridge declares its own node, subscription and publisher tokens.
 
 One subscriber per manager covers all its topics (``.../<skillset>_skillset/**``):
 separate subscribers per key would run their callbacks on different threads and
@@ -178,7 +186,7 @@ class Bridge:
                 return
             if hash_:
                 self._hashes[name] = hash_
-            back = name not in self._present and self.feed.has_status(name)
+            back = name not in self._present and self.feed.managers[name].deriver.last is not None
             self._present[name] = key
         if back:
             with self._fed:
