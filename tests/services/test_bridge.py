@@ -478,6 +478,26 @@ def test_bridge_learns_the_current_status_at_start_up(client_factory, spot_arm):
     sim.close()
 
 
+def test_rmw_zenoh_attachments_reveal_a_restarted_status_publisher(spot_arm):
+    """A status from a new publisher GID, or with its sequence number going back, starts afresh."""
+    system, typemap = spot_arm
+    feed = Feed(system, typemap, SOURCE)
+    comp = system.component("spot")
+    store = feed.managers["spot"].store
+    topic = next(t for t in feed.managers["spot"].topics if t.kind == "status")
+    manager = Manager(comp.skillset, store, info=comp.manager)
+    status = manager.status()
+    payload = cdr(store, status.typename, status.msg)
+    gid, other = bytes(range(16)), bytes(range(1, 17))
+    infos = [[e.info for e in feed.feed("spot", topic, payload, rmw_attachment(seq, 0, g))]
+             for seq, g in ((1, gid), (2, gid), (3, gid), (2, gid), (3, gid), (1, other))]
+    assert infos == [
+        ["initial status"], [], [],
+        ["manager restarted (status sequence number went back); same state as before"], [],
+        ["manager restarted (new status publisher); same state as before"]]
+    assert feed.counters.restarts == 2
+
+
 def test_a_bridge_started_before_the_managers_asks_them_when_they_appear(client_factory, spot_arm):
     """No retry needed: the managers' liveliness tokens tell the bridge when to ask (rmw_zenoh)."""
     system, typemap = spot_arm
