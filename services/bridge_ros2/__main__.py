@@ -73,7 +73,8 @@ def main(argv: list[str] | None = None) -> int:
             signal.signal(sig, lambda *_: stop.set())
         try:
             bridge = start_bridge(session, system, typemap, source=source, instance_id=args.instance,
-                                  style=KeyStyle(args.rmw_zenoh, args.namespace, args.domain, args.ros_distro == "humble"))
+                                  style=KeyStyle(args.rmw_zenoh, args.namespace, args.domain,
+                                                 args.ros_distro == "humble"))
         except (SkinetError, ValueError) as exc:
             print(str(exc), file=sys.stderr)
             return 2

@@ -121,7 +121,7 @@ class Feed:
         self._check_model(m, msg)
         events = self._check_publisher(m, attachment) + self._check_ids(m, status)
         events += self._release(m) if m.held is not None else []  # a newer status: the held one goes first
-        awaits = m.deriver.awaits(status)
+        awaits = None if m.restart else m.deriver.awaits(status)  # a new initial status needs nothing
         if awaits is not None and self.hold > 0:
             m.held = _Held(status, self.clock(), awaits)
             return events

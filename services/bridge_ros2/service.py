@@ -42,8 +42,8 @@ from services.common.cli import default_instance_id
 from services.common.zenoh_config import undeclare
 from services.common.ros_liveliness import declare_node
 from skinet.ros.keys import (
-    EMPTY_TYPE, EntityKind, KeyStyle, ManagerTopic, liveliness_key_expr, manager_topics, parse_liveliness_token,
-    rmw_attachment, rmw_zenoh_key, topic_fqn,
+    EMPTY_TYPE, EntityKind, KeyStyle, ManagerTopic, RosEntity, liveliness_key_expr, manager_topics,
+    parse_liveliness_token, rmw_attachment, rmw_zenoh_key, topic_fqn,
 )
 from skinet.ros.typestore import default_instance, encode
 from skinet.system import System
@@ -99,6 +99,7 @@ class Bridge:
             own.append(("MP", topic_fqn(manager, req.topic), req.typename, style.type_hash(m.store, req.typename)))
         self._token = session.liveliness().declare_token(keys.alive(system.name, "bridge_ros2", self.instance_id))
         self._ros_tokens: list[Any] = []
+        self.graph: list[RosEntity] = []  # rmw_zenoh: the bridge's node and topics as ROS tools see them
         if style.rmw_zenoh:
             node = "/skinet_bridge_" + re.sub(r"[^A-Za-z0-9_]", "_", self.instance_id)
             self.graph, self._ros_tokens = declare_node(session, style.domain, node, own)

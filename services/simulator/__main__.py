@@ -69,7 +69,8 @@ def main(argv: list[str] | None = None) -> int:
     session = zenoh.open(config_from_args(args))
     try:
         sim = Simulator(session, system, typemap,
-                        style=KeyStyle(args.rmw_zenoh, args.namespace, args.domain, args.ros_distro == "humble"))
+                        style=KeyStyle(args.rmw_zenoh, args.namespace, args.domain,
+                                       args.ros_distro == "humble"))
         time.sleep(max(0.0, args.start_delay))
         try:
             sim.drive(scenario, args.speed, on_step=lambda run: print(_line(run), flush=True))

@@ -253,7 +253,8 @@ def parse_rmw_attachment(data: bytes) -> tuple[int, int, bytes]:
 
 
 __all__ = [
-    "ATTACHMENT_SIZE", "DEFAULT_QOS", "EMPTY_TYPE", "EntityKind", "KeyStyle", "LIVELINESS_PREFIX", "ManagerTopic", "NO_TYPE_HASH",
+    "ATTACHMENT_SIZE", "DEFAULT_QOS", "EMPTY_TYPE", "EntityKind", "KeyStyle", "LIVELINESS_PREFIX", "ManagerTopic",
+    "NO_TYPE_HASH",
     "RosEntity", "TopicKind", "bridge_key", "dds_type_name", "liveliness_key_expr", "manager_topics", "node_entity",
     "parse_liveliness_token", "parse_rmw_attachment", "rmw_attachment", "rmw_zenoh_key", "topic_entity", "topic_fqn",
     "type_hash",
