@@ -48,7 +48,13 @@ from skinet.system import System
 log = logging.getLogger("skinet.simulator")
 
 # rmw_dds_common/msg/Gid: char[24] up to Humble, uint8[16] from Iron on.
-GID_SIZES = {"humble": 24, "iron": 16, "jazzy": 16, "rolling": 16}
+OLD_GIDS = ("foxy", "galactic", "humble")
+
+
+def gid_size(distro: str) -> int:
+    """Bytes of a GID in ``ros_discovery_info`` for a ROS 2 distribution (lower case name)."""
+    return 24 if distro in OLD_GIDS else 16
+
 DISCOVERY_TOPIC = "ros_discovery_info"
 _BASE = {
     "bool": bool, "byte": types.uint8, "char": types.uint8, "octet": types.uint8, "string": str,
@@ -100,9 +106,9 @@ def idl_types(store: Typestore, typenames: Iterable[str]) -> dict[str, type[IdlS
     return out
 
 
-def discovery_types(gid_size: int) -> tuple[type[IdlStruct], type[IdlStruct], type[IdlStruct]]:
-    """``rmw_dds_common`` ``Gid``, ``NodeEntitiesInfo`` and ``ParticipantEntitiesInfo`` with GIDs of ``gid_size``."""
-    gid = make_idl_struct("Gid", "rmw_dds_common.msg.dds_.Gid_", {"data": types.array[types.uint8, gid_size]})
+def discovery_types(size: int) -> tuple[type[IdlStruct], type[IdlStruct], type[IdlStruct]]:
+    """``rmw_dds_common`` ``Gid``, ``NodeEntitiesInfo`` and ``ParticipantEntitiesInfo`` with GIDs of ``size`` bytes."""
+    gid = make_idl_struct("Gid", "rmw_dds_common.msg.dds_.Gid_", {"data": types.array[types.uint8, size]})
     node = make_idl_struct("NodeEntitiesInfo", "rmw_dds_common.msg.dds_.NodeEntitiesInfo_", {
         "node_namespace": types.bounded_str[256], "node_name": types.bounded_str[256],
         "reader_gid_seq": types.sequence[gid], "writer_gid_seq": types.sequence[gid]})
@@ -116,17 +122,16 @@ class DdsSimulator(Simulator):
 
     ``session`` and ``style`` are those of the operator (:meth:`drive`): a Zenoh
     session reaching the gateway and the keys the gateway uses.  ``distro`` sets the
-    ``ros_discovery_info`` format (``humble``: 24-byte GIDs; ``iron``, ``jazzy``,
-    ``rolling``: 16 bytes and type hashes in USER_DATA).  ``config`` is CycloneDDS
+    ``ros_discovery_info`` format (``humble`` and older: 24-byte GIDs; ``iron``,
+    ``jazzy`` and later: 16 bytes and type hashes in USER_DATA).  ``config`` is CycloneDDS
     XML (default: :func:`loopback_config`).
     """
 
     def __init__(self, session: zenoh.Session, system: System, typemap: Mapping[str, str], *, domain: int = 0,
                  distro: str = "jazzy", config: str | None = None, style: KeyStyle = KeyStyle(),
                  **options: Any):
-        if distro not in GID_SIZES:
-            raise ValueError(f"unknown ROS distribution '{distro}' (known: {', '.join(GID_SIZES)})")
         self.distro = distro
+        self.gid_size = gid_size(distro)
         self._domain = Domain(domain, config if config is not None else loopback_config())
         self.participant = DomainParticipant(domain)
         self._entities: list[Any] = []  # readers and writers, kept alive
@@ -138,12 +143,12 @@ class DdsSimulator(Simulator):
     def _qos(self, store: Typestore, typename: str) -> Qos:
         policies = [Policy.Reliability.Reliable(max_blocking_time=10**8), Policy.Durability.Volatile,
                     Policy.History.KeepLast(10), Policy.DataRepresentation(use_cdrv0_representation=True)]
-        if GID_SIZES[self.distro] == 16:
+        if self.gid_size == 16:
             policies.append(Policy.Userdata(f"typehash={type_hash(store, typename)};".encode()))
         return Qos(*policies)
 
     def _gid(self, entity: Any) -> bytes:
-        return entity.get_guid().bytes.ljust(GID_SIZES[self.distro], b"\0")
+        return entity.get_guid().bytes.ljust(self.gid_size, b"\0")
 
     def _open(self, node: _Node) -> None:
         manager = node.component.manager
@@ -180,7 +185,7 @@ class DdsSimulator(Simulator):
 
     def _publish_discovery(self) -> DataWriter:
         """``ros_discovery_info`` as rmw publishes it: this participant's nodes and their entities."""
-        gid_cls, node_cls, info_cls = discovery_types(GID_SIZES[self.distro])
+        gid_cls, node_cls, info_cls = discovery_types(self.gid_size)
         topic = Topic(self.participant, DISCOVERY_TOPIC, info_cls,
                       qos=Qos(Policy.DataRepresentation(use_cdrv0_representation=True)))
         writer = DataWriter(self.participant, topic, qos=Qos(
@@ -207,4 +212,4 @@ class DdsSimulator(Simulator):
             self._domain.__del__()
 
 
-__all__ = ["DdsSimulator", "GID_SIZES", "discovery_types", "idl_types", "loopback_config"]
+__all__ = ["DdsSimulator", "gid_size", "discovery_types", "idl_types", "loopback_config"]

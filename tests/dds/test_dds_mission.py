@@ -12,6 +12,8 @@ namespace.
 
 from __future__ import annotations
 
+import subprocess
+import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -172,3 +174,40 @@ def test_a_dds_manager_restarting_mid_mission(gateway_factory, unassisted):
         (3, None, "manager restarted (the manager (or its gateway) came back); state now differs: "
                   "power_status PowerOn -> PowerOff")]
     assert bridge.counters.restarts == 2  # both managers came back (one participant)
+
+
+def test_command_line_simulator_on_dds_behind_the_plugin(gateway_factory, unassisted, tmp_path: Path):
+    """``python -m services.simulator --dds`` and ``python -m services.bridge_ros2`` as separate processes."""
+    system, typemap, scenario = unassisted
+    domain = free_domain()
+    gateway = gateway_factory(domain=domain, distro="humble", namespace="/lab")
+    zargs = ["--mode", "client", "--connect", gateway.endpoint, "--no-multicast-scouting"]
+    session = client(gateway.endpoint)
+    events = Events(session, system.name)
+    logs = {name: (tmp_path / f"{name}.log").open("w+") for name in ("bridge", "simulator")}
+    bridge = subprocess.Popen([sys.executable, "-m", "services.bridge_ros2", str(REPO / "skillsets" / "spot_arm.toml"),
+                               "--namespace", "/lab", "--instance", "cli", *zargs],
+                              cwd=REPO, stdout=logs["bridge"], stderr=subprocess.STDOUT)
+    try:
+        sim = subprocess.run([sys.executable, "-m", "services.simulator", str(MISSIONS / "unassisted.toml"), "--dds",
+                              "--domain", str(domain), "--ros-distro", "humble", "--namespace", "/lab",
+                              "--speed", "0", "--start-delay", "3", "--linger", "1", *zargs],
+                             cwd=REPO, capture_output=True, text=True, timeout=120)
+        assert sim.returncode == 0, sim.stdout + sim.stderr
+        steps = [line for line in sim.stdout.splitlines() if line.startswith("step ")]
+        assert len(steps) == len(scenario.steps)
+        played = [(s.skillset, s.transition) for s, line in zip(scenario.steps, steps)
+                  if s.transition and not line.endswith("(no effect)")]
+        got = events.wait(lambda items: sum(e.transition is not None for e in items) >= len(played), timeout=20)
+        for name in ("spot", "manipulator"):
+            assert [e.transition for e in got if e.skillset == name and e.transition] == \
+                [t for ss, t in played if ss == name]
+        assert {e.source for e in got} == {"bridge_ros2/cli"}
+    finally:
+        bridge.terminate()
+        bridge.wait(10)
+        session.close()
+        for name, log in logs.items():
+            log.seek(0)
+            print(f"--- {name} ---\n{log.read()}")
+            log.close()
