@@ -90,3 +90,16 @@ def test_rust_client_queries_the_predictor_and_prints_verdicts(client_binary: Pa
     verdicts = [line for line in lines if line.startswith("verdicts #")]
     assert len(verdicts) == 2, out
     assert all("action_guard=holds" in v and "safety_guard=holds" in v for v in verdicts), out
+
+
+def test_rust_client_asks_the_command_check(client_binary: Path, embedded: tuple[str, zenoh.Session]) -> None:
+    endpoint, _ = embedded
+    out = subprocess.run([str(client_binary), "--connect", endpoint, "--system", SYSTEM, "--user", "observer",
+                          "--password", passwords()["observer"], "--check", "spot:init_power.start",
+                          "--check", "spot:telop.start", "--verdicts", "0"],
+                         capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0, out
+    lines = out.stdout.splitlines()
+    assert "check spot:init_power.start: allow" in lines, out.stdout
+    assert any(line.startswith("check spot:telop.start: unknown transition 'telop.start' of skillset 'spot' "
+                               "(candidates: teleop.start") for line in lines), out.stdout
