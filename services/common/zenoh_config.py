@@ -68,3 +68,8 @@ def undeclare(*entities: object) -> None:
             entity.undeclare()  # type: ignore[attr-defined]
         except zenoh.ZError:
             pass  # session already closed
+
+
+def zenoh_error(exc: Exception) -> str:
+    """A Zenoh error in one line, without the Rust source location."""
+    return str(exc).split("  at ")[0].strip()

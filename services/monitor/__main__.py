@@ -12,7 +12,7 @@ from collections.abc import Sequence
 import zenoh
 
 from services.common.cli import add_log_arg, setup_logging
-from services.common.zenoh_config import add_zenoh_args, config_from_args
+from services.common.zenoh_config import add_zenoh_args, config_from_args, zenoh_error
 from services.monitor.service import start_monitor
 from skinet.errors import SourceError
 from skinet.files import load_system
@@ -49,7 +49,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
-    session = zenoh.open(config_from_args(args))
+    try:
+        session = zenoh.open(config_from_args(args))
+    except zenoh.ZError as exc:  # e.g. no router at the --connect endpoint
+        print(f"error: cannot open the Zenoh session: {zenoh_error(exc)}", file=sys.stderr)
+        return 1
     try:
         monitor = start_monitor(session, system, instance_id=args.instance_id, budget=args.budget,
                                 query_timeout=args.query_timeout, express=args.express)

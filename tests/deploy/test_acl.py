@@ -130,20 +130,25 @@ def test_each_user_publishes_only_its_own_keys(sessions: dict[str, zenoh.Session
         inbox.close()
 
 
-def _replies(session: zenoh.Session) -> list[str]:
+def _replies(session: zenoh.Session, key: str = PREDICT) -> list[str]:
     return sorted(r.ok.payload.to_string() if r.ok is not None else f"error {r.err.payload.to_string()}"
-                  for r in session.get(PREDICT, target=zenoh.QueryTarget.ALL,
+                  for r in session.get(key, target=zenoh.QueryTarget.ALL,
                                        consolidation=zenoh.ConsolidationMode.NONE, timeout=2.0))
 
 
-def test_only_predictors_answer_prediction_queries(sessions: dict[str, zenoh.Session]) -> None:
+@pytest.mark.parametrize("declared, queried", [
+    (keys.predict("*"), PREDICT),  # the shared key
+    (keys.predict_instance("*", "p1"), keys.predict_instance(SYSTEM, "p1")),  # an instance's own key
+])
+def test_only_predictors_answer_prediction_queries(sessions: dict[str, zenoh.Session], declared: str,
+                                                   queried: str) -> None:
     def answer(text: str):
         def on_query(query: zenoh.Query) -> None:
             with query:
-                query.reply(PREDICT, text)
+                query.reply(queried, text)
         return on_query
 
-    impostors = [sessions[user].declare_queryable(keys.predict("*"), answer(f"impostor {user}"), complete=True)
+    impostors = [sessions[user].declare_queryable(declared, answer(f"impostor {user}"), complete=True)
                  for user in USERS if user != "predictor"]
     impostors.append(sessions["robot"].declare_queryable("**", answer("robot on **"), complete=True))
     try:
@@ -151,12 +156,12 @@ def test_only_predictors_answer_prediction_queries(sessions: dict[str, zenoh.Ses
         # Impostors alone: their declarations never reached the router, so nothing answers
         # (and nothing holds the query until its timeout).
         t0 = time.monotonic()
-        assert _replies(sessions["reader"]) == []
+        assert _replies(sessions["reader"], queried) == []
         assert time.monotonic() - t0 < 1.0
-        genuine = sessions["predictor"].declare_queryable(keys.predict("*"), answer("predictor"), complete=True)
+        genuine = sessions["predictor"].declare_queryable(declared, answer("predictor"), complete=True)
         try:
             time.sleep(0.3)
-            assert _replies(sessions["reader"]) == ["predictor"]
+            assert _replies(sessions["reader"], queried) == ["predictor"]
         finally:
             genuine.undeclare()
     finally:
