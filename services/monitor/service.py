@@ -89,6 +89,7 @@ class Monitor:
             keys.events(name, "*"), zenoh.handlers.Callback(self._on_event, indirect=indirect))
         # Declared last: whoever sees the token also sees the declarations above.
         self._token = session.liveliness().declare_token(keys.alive(name, "monitor", self.instance_id))
+        self._twins = session.liveliness().declare_subscriber(keys.alive(name, "monitor", "*"), self._on_monitor_token)
         self._predict.want(self._engine.key, self._engine.marking())
 
     # -- public API -----------------------------------------------------------------
@@ -126,7 +127,7 @@ class Monitor:
                 return
             self._closed = True  # callbacks still running return at once
             self._changed.notify_all()
-        undeclare(self._sub, self._predictors, self._queryable, self._token)
+        undeclare(self._sub, self._predictors, self._twins, self._queryable, self._token)
         self._predict.close()
         with self._lock:
             undeclare(*self._pub.values())
@@ -201,6 +202,13 @@ class Monitor:
                 key, marking = self._engine.key, self._engine.marking()
             if stale:
                 self._predict.want(key, marking)
+
+    def _on_monitor_token(self, sample: zenoh.Sample) -> None:
+        """A monitor of the same system name appeared later (a link between robots came up)."""
+        other = str(sample.key_expr).rsplit("/", 1)[-1]
+        if sample.kind == zenoh.SampleKind.PUT and other != self.instance_id:
+            log.error("another monitor (%s) of system '%s' is now reachable: two robots with the same system "
+                      "name? give each its own ([system] name in its .toml)", other, self.system.name)
 
     # -- helpers (call with the lock held) --------------------------------------------
 
