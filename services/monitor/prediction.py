@@ -6,7 +6,8 @@ and returns.  Markings wanted while a query is in flight are folded: only the
 latest is sent when the query completes, unless that query just answered it.
 After a query that nobody answered, the next one waits ``retry`` seconds unless
 a predictor's liveliness token appears (:meth:`instance`), so a monitor without
-predictor does not flood the network.
+predictor does not flood the network; while instances are known, the same marking
+is asked again after that delay (a cold instance may have missed the timeout).
 
 Load spreading and failover (SPEC §7): the predictors' liveliness tokens name
 the instances (:class:`~services.monitor.pool.Pool`); each query goes to one
@@ -205,6 +206,8 @@ class PredictionClient:
             if not (q.timed_out or q.failed):  # those are counted per reply
                 self.stats.unanswered += 1
             self._not_before = time.monotonic() + self.retry
+            if self._wanted is None and self.pool:  # instances are up (maybe cold, busy): ask again
+                self._wanted = (q.key, q.marking)
         elif self._wanted is not None and self._wanted[0] == q.key:
             self._wanted = None  # wanted again while in flight, and now answered
         # An attempt still open ends by itself: answered, or its get times out at the
