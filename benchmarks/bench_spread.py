@@ -37,7 +37,7 @@ import time
 from pathlib import Path
 
 from bench_latency import free_port, spawn, wait_token
-from common import ROOT, table
+from common import table, terminate
 
 import zenoh  # noqa: E402
 
@@ -49,22 +49,12 @@ from skinet.wire import keys  # noqa: E402
 from skinet.wire.codec import encode  # noqa: E402
 from skinet.wire.convert import bundle, marking_of  # noqa: E402
 from skinet.wire.messages import SkillsetStatus  # noqa: E402
+from tests.services.test_monitor import _heavy_system  # noqa: E402  (the system files)
 
 
 def fleet_system(folder: Path, pairs: int) -> tuple[System, Marking]:
     """``pairs`` Spots and arms (renamed copies of the paper's skillsets), arms moving."""
-    spot = (ROOT / "skillsets" / "spot.rl").read_text()
-    arm = (ROOT / "skillsets" / "manipulator.rl").read_text()
-    lines = ['[system]\nname = "fleet"\nproperties = "fleet.props"\n']
-    props = []
-    for i in range(1, pairs + 1):
-        (folder / f"spot{i}.rl").write_text(spot.replace("skillset spot {", f"skillset spot{i} {{"))
-        (folder / f"arm{i}.rl").write_text(arm.replace("skillset manipulator {", f"skillset arm{i} {{"))
-        lines += [f'[[skillsets]]\nmodel = "spot{i}.rl"\n', f'[[skillsets]]\nmodel = "arm{i}.rl"\n']
-        props.append(f"guard{i} = not (spot{i}:Busy and arm{i}:Busy)\n")
-    (folder / "fleet.props").write_text("".join(props))
-    (folder / "fleet.toml").write_text("".join(lines))
-    system = load_system(folder / "fleet.toml")[0]
+    system = load_system(_heavy_system(folder, pairs))[0]
     moving = {f"arm{i}": SkillsetStatus(resources={"mutex": "Busy", "arm_status": "Away"}, running=["arm_ready"])
               for i in range(1, pairs + 1)}
     return system, marking_of(system, moving)
@@ -178,13 +168,7 @@ def main() -> None:
         served.undeclare()
         watcher.close()
     finally:
-        for p in procs:
-            if p.poll() is None:
-                p.send_signal(signal.SIGTERM)
-                try:
-                    p.wait(5)
-                except subprocess.TimeoutExpired:
-                    p.kill()
+        terminate(procs)
     print(f"{args.clients} clients, one new marking each every {1000 * args.period:.0f} ms, {args.seconds:.0f} s "
           f"per row; system {system.name} ({args.pairs} Spot+arm pairs); {os.cpu_count()} CPUs, shared")
     print(table(["pool", "answered", "per s", "share", "failed", "p50 ms", "p99 ms", "load avg"], rows))

@@ -7,9 +7,7 @@ users of ``docker/zenoh/users.txt``.  No containers: real sockets on 127.0.0.1.
 
 from __future__ import annotations
 
-import signal
 import subprocess
-import sys
 import threading
 import time
 from collections.abc import Iterator
@@ -19,8 +17,8 @@ import pytest
 import zenoh
 
 from deploy_support import (
-    REPO, SYSTEM, UNASSISTED, MissionObserver, Tokens, acl_router_config, expected_violations, free_port,
-    load_scenario, login, wait_until, write_login_file,
+    REPO, SYSTEM, UNASSISTED, MissionObserver, Services, Tokens, acl_router_config, expected_violations, free_port,
+    load_scenario, login, wait_until,
 )
 from skinet.wire import keys
 
@@ -181,17 +179,10 @@ def test_the_services_run_the_mission_through_the_acl_router(acl_router: str, tm
     observer_session = login(acl_router, "observer")
     observer = MissionObserver(observer_session)
     tokens = Tokens(observer_session)
-    procs: list[tuple[subprocess.Popen, Path]] = []
+    services = Services(tmp_path)
 
     def start(module: str, user: str, *args: str) -> subprocess.Popen:
-        cfg = write_login_file(tmp_path / f"{user}-{len(procs)}.json5", user)
-        log = tmp_path / f"{module}-{len(procs)}.log"
-        with log.open("wb") as out:
-            p = subprocess.Popen([sys.executable, "-m", module, *args, "--mode", "client", "--connect", acl_router,
-                                  "--no-multicast-scouting", "--zenoh-config", str(cfg)],
-                                 cwd=REPO, stdout=out, stderr=subprocess.STDOUT)
-        procs.append((p, log))
-        return p
+        return services.start(module, user, acl_router, *args)
 
     try:
         start("services.predictor", "predictor")
@@ -208,14 +199,5 @@ def test_the_services_run_the_mission_through_the_acl_router(acl_router: str, tm
     finally:
         tokens.close()
         observer.close()
-        for p, _ in procs:
-            if p.poll() is None:
-                p.send_signal(signal.SIGTERM)
-        for p, log in procs:
-            try:
-                p.wait(timeout=5)
-            except subprocess.TimeoutExpired:
-                p.kill()
-                p.wait()
-            print(f"--- {p.args[2]} (exit {p.returncode}) ---\n{log.read_text(errors='replace')[-3000:]}")
+        services.close()
         observer_session.close()

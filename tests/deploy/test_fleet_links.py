@@ -13,9 +13,7 @@ from __future__ import annotations
 
 import json
 import shutil
-import signal
 import subprocess
-import sys
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
@@ -23,7 +21,7 @@ import pytest
 import zenoh
 
 from deploy_support import (
-    REPO, USERS_FILE, ZENOH_DIR, Tokens, acl_router_config, free_port, login, passwords, wait_until, write_login_file,
+    REPO, USERS_FILE, ZENOH_DIR, Services, Tokens, acl_router_config, free_port, login, passwords, wait_until,
 )
 from skinet.wire import keys
 from skinet.wire.codec import decode, encode
@@ -51,43 +49,23 @@ def hub_config(listen: str, robots: list[str]) -> zenoh.Config:
     return config
 
 
-class Fleet:
+class Fleet(Services):
     """Routers (in this process) and service processes (logged in as their users)."""
 
     def __init__(self, tmp_path: Path):
-        self.tmp = tmp_path
+        super().__init__(tmp_path)
         self.robots = {r: f"tcp/127.0.0.1:{free_port()}" for r in ("robot1", "robot2")}
         self.hub = f"tcp/127.0.0.1:{free_port()}"
         self.skillsets = fleet_skillsets(tmp_path / "skillsets", "robot1", "robot2")
         self.routers = [zenoh.open(acl_router_config(e)) for e in self.robots.values()]
         self.routers.append(zenoh.open(hub_config(self.hub, list(self.robots.values()))))
-        self.procs: list[tuple[subprocess.Popen, Path]] = []
-
-    def start(self, module: str, user: str, router: str, *args: str) -> subprocess.Popen:
-        cfg = write_login_file(self.tmp / f"{user}-{len(self.procs)}.json5", user)
-        log = self.tmp / f"{module}-{len(self.procs)}.log"
-        with log.open("wb") as out:
-            p = subprocess.Popen([sys.executable, "-m", module, *args, "--mode", "client", "--connect", router,
-                                  "--no-multicast-scouting", "--zenoh-config", str(cfg)],
-                                 cwd=REPO, stdout=out, stderr=subprocess.STDOUT)
-        self.procs.append((p, log))
-        return p
 
     def monitor(self, robot: str, system: str | None = None) -> subprocess.Popen:
         return self.start("services.monitor", "monitor", self.robots[robot],
                           str(self.skillsets / f"{system or robot}.toml"), "--id", f"{robot}-monitor")
 
     def close(self) -> None:
-        for p, _ in self.procs:
-            if p.poll() is None:
-                p.send_signal(signal.SIGTERM)
-        for p, log in self.procs:
-            try:
-                p.wait(timeout=5)
-            except subprocess.TimeoutExpired:
-                p.kill()
-                p.wait()
-            print(f"--- {' '.join(p.args[2:4])} (exit {p.returncode}) ---\n{log.read_text(errors='replace')}")
+        super().close()
         for r in reversed(self.routers):
             r.close()
 
@@ -137,8 +115,7 @@ def test_two_robots_share_the_offboard_pool_and_a_twin_name_is_refused(fleet: Fl
         # A third monitor on robot2 under robot1's name sees robot1's monitor through the hub.
         twin = fleet.monitor("robot2", system="robot1")
         assert twin.wait(timeout=30) == 2
-        log = fleet.procs[-1][1].read_text().splitlines()
-        assert log == ["error: system 'robot1' is already monitored by robot1-monitor on this Zenoh network: "
+        assert fleet.log(twin).splitlines() == ["error: system 'robot1' is already monitored by robot1-monitor on this Zenoh network: "
                        "give each robot its own system name ([system] name in its .toml)"]
     finally:
         for t in tokens.values():
