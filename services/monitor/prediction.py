@@ -244,9 +244,13 @@ class PredictionClient:
                                  skillsets=statuses(self.system, q.marking), budget=budget)
         key = keys.predict(self.system.name) if instance is None else keys.predict_instance(self.system.name, instance)
         handler = zenoh.handlers.Callback(_bind(self._on_reply, q, a), _bind(self._on_done, q, a))
+        # DROP on an instance key: a query stuck behind a dead link must not block the
+        # router's other traffic (the monitor's verdicts); a lost query is a silent
+        # instance, asked again elsewhere after ``stall``.
+        congestion = zenoh.CongestionControl.BLOCK if instance is None else zenoh.CongestionControl.DROP
         try:
             self.session.get(key, handler, payload=encode(request), timeout=max(remaining, 0.001), express=True,
-                             cancellation_token=a.cancel, congestion_control=zenoh.CongestionControl.BLOCK,
+                             cancellation_token=a.cancel, congestion_control=congestion,
                              consolidation=zenoh.ConsolidationMode.NONE)
         except Exception as exc:  # session closed under us
             log.warning("predict query failed: %s", exc)
