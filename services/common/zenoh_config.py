@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 
 import zenoh
 
@@ -71,5 +72,5 @@ def undeclare(*entities: object) -> None:
 
 
 def zenoh_error(exc: Exception) -> str:
-    """A Zenoh error in one line, without the Rust source location."""
-    return str(exc).split("  at ")[0].strip()
+    """A Zenoh error in one line, without the Rust source location (`` at .../x.rs:12.``)."""
+    return re.sub(r"\s+at \S+\.rs:\d+\.?$", "", " ".join(str(exc).split()))

@@ -3,9 +3,10 @@
 Two robots, each a compose project of the ``onboard`` profile (router, bridge,
 monitor) on its own Docker networks, with a system file of its own name; one
 compose project of the ``fleet`` profile (the hub router and two pool predictors)
-on a third network, which each robot's router joins under the alias the hub
-connects to (``docker network connect --alias robotN``).  Cutting a link is
-``docker network disconnect`` of that robot's router.  Events come from the host,
+on a third.  The links are a fourth network, which the hub and each robot's router
+join, the routers under the alias the hub connects to (``docker network connect
+--alias robotN``).  Cutting a link is ``docker network disconnect`` of that
+robot's router.  Events come from the host,
 logged in as ``bridge`` on the robot's published port; an observer per robot reads
 its reports.  Links are plain TCP with user/password (TLS: docs/deployment.md).
 """
@@ -23,10 +24,10 @@ import zenoh
 
 from deploy_support import Tokens, free_port, login_config, wait_until
 from skinet.wire import keys
-from skinet.wire.codec import decode, encode
-from skinet.wire.messages import CanonicalEvent, UnsafeReport, Verdicts
+from skinet.wire.codec import decode
+from skinet.wire.messages import UnsafeReport, Verdicts
 from test_containers import Stack, image  # noqa: F401  (the image fixture; skips without Docker)
-from test_fleet_links import fleet_skillsets
+from test_fleet_links import Events, fleet_skillsets
 
 pytestmark = pytest.mark.slow
 ROBOTS = ("robot1", "robot2")
@@ -39,7 +40,6 @@ class Robot:
 
     def __init__(self, name: str, stack: Stack, port: int):
         self.name, self.stack, self.endpoint = name, stack, f"tcp/127.0.0.1:{port}"
-        self.seq: dict[str, int] = {}
         self.items: list[tuple[float, object]] = []
         self.session: zenoh.Session | None = None
 
@@ -50,6 +50,7 @@ class Robot:
         bridge = login_config(self.endpoint, "bridge")
         bridge.insert_json5("connect/timeout_ms", "60000")
         self.bridge = zenoh.open(bridge)
+        self.events = Events(self.bridge, self.name)
         self.tokens = Tokens(self.session)
         self._subs = [self.session.declare_subscriber(keys.unsafe(self.name), self._on(UnsafeReport)),
                       self.session.declare_subscriber(keys.verdicts(self.name), self._on(Verdicts))]
@@ -58,12 +59,7 @@ class Robot:
         return lambda s: self.items.append((time.monotonic(), decode(s.payload.to_bytes(), kind)))
 
     def send(self, skillset: str, transition: str) -> float:
-        seq = self.seq[skillset] = self.seq.get(skillset, -1) + 1
-        ev = CanonicalEvent(system=self.name, skillset=skillset, seq=seq, stamp=time.time(), source="fleet-test",
-                            transition=transition)
-        sent = time.monotonic()
-        self.bridge.put(keys.events(self.name, skillset), encode(ev), congestion_control=zenoh.CongestionControl.BLOCK)
-        return sent
+        return self.events.send(skillset, transition)
 
     def report(self, seq: int, fresh: bool | None = None) -> tuple[float, UnsafeReport] | None:
         for t, m in list(self.items):
@@ -100,6 +96,7 @@ def fleet(image: str, tmp_path_factory: pytest.TempPathFactory) -> Iterator[tupl
         path.chmod(0o755 if path.is_dir() else 0o644)
     env = {**os.environ, "SKINET_IMAGE": image, "SKINET_SKILLSETS": str(skills), "SKINET_LOG_LEVEL": "INFO"}
     tag = f"skinet-i15-{os.getpid()}"
+    net = f"{tag}-links"
     hub = Stack(f"{tag}-hub", {**env, "COMPOSE_PROFILES": "fleet", "SKINET_HUB_PORT": f"127.0.0.1:{free_port()}",
                                "SKINET_PREDICTORS": "2",
                                "SKINET_FLEET_ROBOTS": "tcp/robot1:7447,tcp/robot2:7447,tcp/robot3:7447"})
@@ -114,7 +111,12 @@ def fleet(image: str, tmp_path_factory: pytest.TempPathFactory) -> Iterator[tupl
         for name in ROBOTS:
             robots[name].stack.compose("up", "-d", "--no-build", timeout=180)
         hub.compose("up", "-d", "--no-build", timeout=180)
-        net = hub.network("fleet")
+        # The robots' links: a network of their own, `--internal` so that it never becomes
+        # a container's default gateway (that would move the routers' published ports,
+        # and with them this host's sessions, to the network the test cuts).
+        _docker("network", "create", "--internal", net)
+        (hub_router,) = hub.containers("hub")
+        _docker("network", "connect", net, hub_router)
         for name in ROBOTS:
             _docker("network", "connect", "--alias", name, net, robots[name].router())
             robots[name].connect()
@@ -125,6 +127,7 @@ def fleet(image: str, tmp_path_factory: pytest.TempPathFactory) -> Iterator[tupl
         for s in (*(r.stack for r in robots.values()), hub):
             print(f"--- logs of {s.project} ---\n{s.logs()}")
             s.down()
+        subprocess.run(["docker", "network", "rm", net], capture_output=True, timeout=60)
 
 
 def test_robots_share_the_pool_and_a_cut_link_affects_only_its_robot(fleet) -> None:
@@ -133,12 +136,12 @@ def test_robots_share_the_pool_and_a_cut_link_affects_only_its_robot(fleet) -> N
     for r in (r1, r2):
         wait_until(lambda r=r: len(r.tokens.of("predictor")) == 2 and r.tokens.of("monitor"), 120,
                    f"{r.name}: its monitor and the pool's two predictors")
-        wait_until(lambda r=r: r.report(0, fresh=True) is not None, 60, f"{r.name}: a fresh prediction")
-    # Both robots step; both predictions come from the pool.
+    # Both robots step; both predictions come from the pool (the first ones of step 0 may
+    # have been published before the observers subscribed).
     for r in (r1, r2):
         r.send("spot", "init_power.start")
     for r in (r1, r2):
-        wait_until(lambda r=r: r.report(1, fresh=True) is not None, 15, f"{r.name}: fresh step 1")
+        wait_until(lambda r=r: r.report(1, fresh=True) is not None, 60, f"{r.name}: fresh step 1")
 
     _docker("network", "disconnect", net, r1.router())
     cut = time.monotonic()
@@ -211,6 +214,6 @@ def test_monitor_with_a_wrong_router_endpoint_exits_with_one_line(image: str) ->
                         "-e", "SKINET_ZENOH_CONNECT_TIMEOUT=2", image, "monitor", "skillsets/spot_arm.toml"],
                        capture_output=True, text=True, timeout=60)
     assert r.returncode == 1 and r.stdout == "", (r.stdout, r.stderr)
-    assert r.stderr.splitlines() == [
-        "error: cannot open the Zenoh session: Unable to connect to any of [Single(tcp/127.0.0.1:9)]!"]
+    assert r.stderr.splitlines() == [  # after SKINET_ZENOH_CONNECT_TIMEOUT
+        "error: cannot open the Zenoh session: Unable to connect to any of [Single(tcp/127.0.0.1:9)]. Timeout!"]
     assert time.monotonic() - t0 < 30
