@@ -241,7 +241,8 @@ class PredictionClient:
             q.attempt = a
             self._cancels.add(a.cancel)
         request = PredictRequest(system=self.system.name, digest=self.digest, seq=q.n,
-                                 skillsets=statuses(self.system, q.marking), budget=budget)
+                                 skillsets=statuses(self.system, q.marking), budget=budget,
+                                 af=self.system.prediction.af_modes([p.name for p in self.system.properties]))
         key = keys.predict(self.system.name) if instance is None else keys.predict_instance(self.system.name, instance)
         handler = zenoh.handlers.Callback(_bind(self._on_reply, q, a), _bind(self._on_done, q, a))
         # DROP on an instance key: a query stuck behind a dead link must not block the
