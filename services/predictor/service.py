@@ -103,8 +103,7 @@ class Predictor:
                 return
             reason = "busy: too many pending requests"
             if self._slots.acquire(blocking=False):
-                own = key.count("/") == 3
-                if own:
+                if key.count("/") == 3:  # the instance key: "working" replies until the answer
                     self._working_on(query)
                 try:
                     self._pool.submit(self._serve, query, request)
