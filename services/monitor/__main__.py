@@ -28,6 +28,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--id", dest="instance_id", help="instance id in the liveliness token (default: random)")
     p.add_argument("--budget", type=float, default=1.0, help="predictor exploration budget, seconds (default: 1)")
     p.add_argument("--query-timeout", type=float, help="predict query timeout, seconds (default: budget + 1)")
+    p.add_argument("--stall", type=float, default=0.5,
+                   help="seconds without a 'working' reply after which a predictor instance counts as frozen "
+                        "and the query goes to another one (default: 0.5; instances reply every 0.1 s)")
     p.add_argument("--no-express", dest="express", action="store_false",
                    help="let Zenoh batch publications (higher burst throughput; default: express)")
     add_log_arg(p)
@@ -56,7 +59,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 1
     try:
         monitor = start_monitor(session, system, instance_id=args.instance_id, budget=args.budget,
-                                query_timeout=args.query_timeout, express=args.express)
+                                query_timeout=args.query_timeout, stall=args.stall, express=args.express)
     except ValueError as exc:  # a bad instance id or system name for a Zenoh key
         session.close()
         print(f"error: {exc}", file=sys.stderr)
