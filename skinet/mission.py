@@ -65,12 +65,38 @@ def parse_scenario(text: str, source: str = "<scenario>") -> Scenario:
             raise SourceError.at(source, None, f"step {n}: needs a 'skillset' string")
         if (s.get("transition") is None) == (s.get("consider") is None):
             raise SourceError.at(source, None, f"step {n}: give exactly one of 'transition' or 'consider'")
-        t = float(s.get("t", last))
+        if not isinstance(s.get("transition", s.get("consider")), str):
+            raise SourceError.at(source, None, f"step {n}: 'transition' or 'consider' must be a string")
+        t = s.get("t", last)
+        if isinstance(t, bool) or not isinstance(t, (int, float)) or t != t:
+            raise SourceError.at(source, None, f"step {n}: 't' must be a number of seconds, got {t!r}")
+        t = float(t)
         if t < last:
             raise SourceError.at(source, None, f"step {n}: time {t} goes backwards (previous step at {last})")
         last = t
         steps.append(Step(t, s["skillset"], s.get("transition"), s.get("consider"), str(s.get("note", ""))))
     return Scenario(head["name"], head["system"], tuple(steps))
+
+
+def check_scenario(scenario: Scenario, system: System, source: str = "<scenario>") -> None:
+    """Every step names a skillset of ``system`` and one of its transitions; else one error naming the step.
+
+    (A transition that is not enabled when its step comes is not an error: the
+    live monitor reports it as a model divergence.)
+    """
+    components = {c.name: c for c in system.components}
+    for n, step in enumerate(scenario.steps, 1):
+        comp = components.get(step.skillset)
+        if comp is None:
+            raise SourceError.at(source, None, f"step {n}: unknown skillset '{step.skillset}' "
+                                               f"(skillsets of {system.name}: {', '.join(components)})")
+        name = step.transition if step.transition is not None else step.consider
+        known = list(dict.fromkeys(t.name for t in comp.net.transitions))
+        if name not in known:
+            field = "transition" if step.transition is not None else "consider"
+            hint = [k for k in known if k.split(".")[0] == name.split(".")[0]] or known
+            raise SourceError.at(source, None, f"step {n}: unknown {field} '{name}' of skillset '{step.skillset}' "
+                                               f"(for example: {', '.join(hint[:6])})")
 
 
 def replay(system: System, scenario: Scenario, predict: bool = True, budget: float = 5.0) -> list[StepRecord]:
@@ -94,4 +120,4 @@ def replay(system: System, scenario: Scenario, predict: bool = True, budget: flo
     return records
 
 
-__all__ = ["Scenario", "Step", "StepRecord", "parse_scenario", "replay"]
+__all__ = ["Scenario", "Step", "StepRecord", "check_scenario", "parse_scenario", "replay"]

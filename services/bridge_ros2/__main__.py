@@ -18,10 +18,11 @@ import zenoh
 
 from services.bridge_ros2.replay import replay_bag
 from services.bridge_ros2.service import default_source, start_bridge
-from services.common.cli import add_instance_arg, add_log_arg, setup_logging
-from services.common.zenoh_config import add_zenoh_args, config_from_args
+from services.common.cli import add_instance_arg, add_log_arg, one_line_errors, setup_logging
+from services.common.zenoh_config import add_zenoh_args, config_from_args, open_session
+from skinet.cli.options import ArgumentParser, count, load_live_system
 from skinet.errors import SkinetError
-from skinet.files import load_system, load_typemap
+from skinet.files import load_typemap
 from skinet.ros.keys import KeyStyle
 from skinet.wire import keys
 from skinet.wire.codec import encode
@@ -30,7 +31,7 @@ log = logging.getLogger("skinet.bridge_ros2")
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(
+    parser = ArgumentParser(
         prog="python -m services.bridge_ros2",
         description="Turn what skillset managers publish (ROS 2 topics on Zenoh, or a rosbag2 file) into "
                     "canonical events on skinet/<system>/events/<skillset>.",
@@ -40,7 +41,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         help="topics as rmw_zenoh carries them (default: zenoh-bridge-ros2dds keys)")
     parser.add_argument("--namespace", default=os.environ.get("SKINET_ROS_NAMESPACE", ""),
                         help="zenoh-bridge-ros2dds namespace prefixing the keys")
-    parser.add_argument("--domain", type=int, default=int(os.environ.get("ROS_DOMAIN_ID", "0")),
+    parser.add_argument("--domain", type=count(0, 232, env="ROS_DOMAIN_ID"), default=os.environ.get("ROS_DOMAIN_ID", "0"),
                         help="ROS domain id in rmw_zenoh keys (default: $ROS_DOMAIN_ID or 0)")
     add_instance_arg(parser)
     parser.add_argument("--source", default=None, help="source name in the events (default: bridge_ros2/INSTANCE)")
@@ -51,17 +52,14 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     return parser.parse_args(argv)
 
 
+@one_line_errors("python -m services.bridge_ros2")
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     setup_logging(args)
-    try:
-        system, _ = load_system(args.system)
-        typemap = load_typemap(args.system)
-    except SkinetError as exc:
-        print(str(exc), file=sys.stderr)
-        return 2
+    system, _ = load_live_system(args.system)
+    typemap = load_typemap(args.system)
     source = args.source or default_source(args.instance)
-    session = zenoh.open(config_from_args(args))
+    session = open_session(config_from_args(args))
     try:
         if args.replay:
             return _replay(session, system, typemap, args, source)

@@ -7,8 +7,9 @@ import re
 from pathlib import Path
 
 from skinet.errors import SourceError
-from skinet.files import load_system, load_typemap, read_text
-from skinet.mission import Scenario, StepRecord, parse_scenario, replay
+from skinet.cli.options import load_live_system
+from skinet.files import load_typemap, read_text
+from skinet.mission import Scenario, StepRecord, check_scenario, parse_scenario, replay
 from skinet.mission_log import records_to_log
 from skinet.system import System
 from skinet.wire.log import log_line
@@ -39,9 +40,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def cmd_demo(args: argparse.Namespace) -> int:
     paths = [Path(p) for p in args.scenarios] or default_scenarios()
-    for path in paths:
+    runs = []
+    for path in paths:  # every file checked before the first run starts
         scenario = parse_scenario(read_text(path), str(path))
-        system, _ = load_system(path.parent / scenario.system)
+        system, _ = load_live_system(path.parent / scenario.system)
+        check_scenario(scenario, system, str(path))
+        runs.append((path, scenario, system))
+    for path, scenario, system in runs:
         if args.core:
             records = replay(system, scenario, predict=not args.no_predict)
             how = "core replay"
