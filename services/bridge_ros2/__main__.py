@@ -13,6 +13,7 @@ import os
 import signal
 import sys
 import threading
+from pathlib import Path
 
 import zenoh
 
@@ -20,8 +21,8 @@ from services.bridge_ros2.replay import replay_bag
 from services.bridge_ros2.service import default_source, start_bridge
 from services.common.cli import add_instance_arg, add_log_arg, one_line_errors, setup_logging
 from services.common.zenoh_config import add_zenoh_args, config_from_args, open_session
-from skinet.cli.options import ArgumentParser, count, load_live_system
-from skinet.errors import SkinetError
+from skinet.cli.options import ArgumentParser, count, key_prefix, load_live_system
+from skinet.errors import SkinetError, SourceError
 from skinet.files import load_typemap
 from skinet.ros.keys import KeyStyle
 from skinet.wire import keys
@@ -30,7 +31,7 @@ from skinet.wire.codec import encode
 log = logging.getLogger("skinet.bridge_ros2")
 
 
-def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+def build_parser() -> ArgumentParser:
     parser = ArgumentParser(
         prog="python -m services.bridge_ros2",
         description="Turn what skillset managers publish (ROS 2 topics on Zenoh, or a rosbag2 file) into "
@@ -39,7 +40,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("system", help="system TOML file ([system] types names the type map)")
     parser.add_argument("--rmw-zenoh", action="store_true",
                         help="topics as rmw_zenoh carries them (default: zenoh-bridge-ros2dds keys)")
-    parser.add_argument("--namespace", default=os.environ.get("SKINET_ROS_NAMESPACE", ""),
+    parser.add_argument("--namespace", type=key_prefix("namespace", env="SKINET_ROS_NAMESPACE"), default=os.environ.get("SKINET_ROS_NAMESPACE", ""),
                         help="zenoh-bridge-ros2dds namespace prefixing the keys")
     parser.add_argument("--domain", type=count(0, 232, env="ROS_DOMAIN_ID"), default=os.environ.get("ROS_DOMAIN_ID", "0"),
                         help="ROS domain id in rmw_zenoh keys (default: $ROS_DOMAIN_ID or 0)")
@@ -49,15 +50,17 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--realtime", action="store_true", help="with --replay: keep the recorded timing")
     add_log_arg(parser)
     add_zenoh_args(parser)
-    return parser.parse_args(argv)
+    return parser
 
 
 @one_line_errors("python -m services.bridge_ros2")
 def main(argv: list[str] | None = None) -> int:
-    args = parse_args(argv)
+    args = build_parser().parse_args(argv)
     setup_logging(args)
     system, _ = load_live_system(args.system)
     typemap = load_typemap(args.system)
+    if args.replay and not Path(args.replay).exists():
+        raise SourceError.at(args.replay, None, "cannot read file: No such file or directory")
     source = args.source or default_source(args.instance)
     session = open_session(config_from_args(args))
     try:
@@ -90,12 +93,10 @@ def _replay(session: zenoh.Session, system, typemap, args: argparse.Namespace, s
     try:
         feed = replay_bag(args.replay, system, typemap, lambda ev: publishers[ev.skillset].put(encode(ev)),
                           source=source, realtime=args.realtime)
-    except SkinetError as exc:
-        print(str(exc), file=sys.stderr)
-        return 2
+    except SkinetError:
+        raise
     except Exception as exc:  # rosbags reader errors: not a bag, missing file, unknown storage
-        print(f"{args.replay}: cannot replay: {exc}", file=sys.stderr)
-        return 2
+        raise SourceError.at(args.replay, None, f"cannot replay: {exc}") from None
     c = feed.counters
     log.info("replayed %s: %d messages, %d events (%d unnamed), %d malformed",
              args.replay, c.messages, c.events, c.unexplained, c.malformed)

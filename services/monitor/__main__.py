@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import argparse
 import logging
 import signal
 import sys
@@ -15,7 +14,7 @@ from services.monitor.service import start_monitor
 from skinet.cli.options import ArgumentParser, key_name, load_live_system, seconds
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser() -> ArgumentParser:
     p = ArgumentParser(
         prog="python -m services.monitor",
         description="SkiNet Live monitor: follows the live marking of a system from its canonical "

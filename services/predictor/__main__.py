@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import argparse
 import logging
 import signal
 import sys
@@ -16,7 +15,7 @@ from skinet.cli.options import ArgumentParser, count, seconds
 log = logging.getLogger("skinet.predictor")
 
 
-def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+def build_parser() -> ArgumentParser:
     parser = ArgumentParser(
         prog="python -m services.predictor",
         description="Answer SkiNet prediction requests on skinet/*/predict (stateless; run as many as you like).",
@@ -32,12 +31,12 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         help="cap on a request's budget, seconds (default: 10)")
     add_log_arg(parser)
     add_zenoh_args(parser)
-    return parser.parse_args(argv)
+    return parser
 
 
 @one_line_errors("python -m services.predictor")
 def main(argv: list[str] | None = None) -> int:
-    args = parse_args(argv)
+    args = build_parser().parse_args(argv)
     setup_logging(args)
     config = config_from_args(args)
     stop = threading.Event()

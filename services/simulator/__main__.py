@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import argparse
 import os
 import signal
 import sys
@@ -14,13 +13,13 @@ from services.common.cli import add_log_arg, one_line_errors, setup_logging
 from services.common.zenoh_config import add_zenoh_args, config_from_args, open_session
 from services.simulator.driver import StepRun
 from services.simulator.service import Simulator
-from skinet.cli.options import ArgumentParser, count, load_live_system, number, seconds
+from skinet.cli.options import ArgumentParser, count, key_prefix, load_live_system, number, seconds
 from skinet.files import load_typemap, read_text
 from skinet.mission import check_scenario, parse_scenario
 from skinet.ros.keys import KeyStyle
 
 
-def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+def build_parser() -> ArgumentParser:
     parser = ArgumentParser(
         prog="python -m services.simulator",
         description="Simulate the skillset managers of a scenario's system on Zenoh (ROS 2 topic keys, CDR) "
@@ -35,11 +34,11 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         help="seconds to keep serving after the last step (default: 1)")
     parser.add_argument("--rmw-zenoh", action="store_true", help="rmw_zenoh keys and attachments instead of "
                         "zenoh-bridge-ros2dds keys")
-    parser.add_argument("--namespace", default="", help="zenoh-bridge-ros2dds namespace prefix of the keys")
+    parser.add_argument("--namespace", type=key_prefix("namespace"), default="", help="zenoh-bridge-ros2dds namespace prefix of the keys")
     parser.add_argument("--domain", type=count(0, 232), default=0, help="ROS domain id in rmw_zenoh keys (default: 0)")
     add_log_arg(parser)
     add_zenoh_args(parser)
-    return parser.parse_args(argv)
+    return parser
 
 
 def _line(run: StepRun) -> str:
@@ -51,7 +50,7 @@ def _line(run: StepRun) -> str:
 
 @one_line_errors("python -m services.simulator")
 def main(argv: list[str] | None = None) -> int:
-    args = parse_args(argv)
+    args = build_parser().parse_args(argv)
     setup_logging(args)
     path = Path(args.scenario)
     scenario = parse_scenario(read_text(path), str(path))

@@ -40,6 +40,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def cmd_demo(args: argparse.Namespace) -> int:
     paths = [Path(p) for p in args.scenarios] or default_scenarios()
+    for folder in {args.log, args.timeline} - {None}:  # before the runs, not after the first one
+        try:
+            Path(folder).mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise SourceError.at(folder, None, f"cannot create folder: {exc.strerror}") from None
     runs = []
     for path in paths:  # every file checked before the first run starts
         scenario = parse_scenario(read_text(path), str(path))

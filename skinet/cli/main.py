@@ -257,7 +257,9 @@ def cmd_explore(args: argparse.Namespace) -> int:
 def cmd_ctl(args: argparse.Namespace) -> int:
     system, marking = _load(args)
     skillsets = {c.name: c.skillset for c in system.components}
-    formulas = [parse_formula(text, skillsets) for text in args.formulas]  # every syntax error before exploring
+    several = len(args.formulas) > 1
+    formulas = [parse_formula(text, skillsets, f"<formula {n}>" if several else "<formula>")  # before exploring
+                for n, text in enumerate(args.formulas, 1)]
     space = explore(system, marking, budget=args.budget, max_depth=args.max_depth, event_seeds=not args.no_seeds)
     kripke = Kripke(space)
     start = space.code(marking)

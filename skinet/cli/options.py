@@ -80,6 +80,21 @@ def key_name(what: str) -> Callable[[str], str]:
     return convert
 
 
+def key_prefix(what: str, env: str | None = None) -> Callable[[str], str]:
+    """Empty, or ``/``-separated Zenoh key chunks (a ROS namespace such as ``/robot1``)."""
+    def convert(text: str) -> str:
+        try:
+            for chunk in text.strip("/").split("/") if text.strip("/") else ():
+                check_chunk(chunk, what)
+        except ValueError:
+            origin = f" (from ${env})" if env and os.environ.get(env) == text else ""
+            raise argparse.ArgumentTypeError(f"{what} '{text}'{origin} cannot be used in a Zenoh key "
+                                             "(/-separated names of letters, digits, _ - .)")
+        return text
+
+    return convert
+
+
 _NAME_LINE = re.compile(r'^\s*name\s*=\s*(["\'])')
 
 

@@ -216,7 +216,7 @@ def test_ctl_several_formulas_share_one_exploration(capsys: pytest.CaptureFixtur
                                 "", "formula: AG not spot:i_go_to_waypoint", "satisfied by 0 of 63 markings",
                                 "at the start marking: fails"]
     code, _, err = run(capsys, "ctl", SYSTEM, "EF spot:Busy", "AG (spot:Busy")
-    assert code == 1 and err.startswith("<formula>:1:14: error: unexpected end of input")
+    assert code == 1 and err.startswith("<formula 2>:1:14: error: unexpected end of input")
 
 
 def test_ctl_syntax_error(capsys: pytest.CaptureFixture[str]) -> None:
