@@ -12,7 +12,6 @@ a few run as real processes too, to show the entry points themselves.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import signal
 import socket
@@ -377,3 +376,17 @@ def test_an_unexpected_exception_is_one_line(capsys: pytest.CaptureFixture[str],
     with pytest.raises(RuntimeError, match="boom"):
         skinet_main.main(["parse", SPOT])
 
+
+
+def test_missing_corpus_is_named(tmp_path: Path) -> None:
+    """Without ../shared beside the repository, the test run stops with one line saying what is missing."""
+    tests = tmp_path / "repo" / "tests"
+    tests.mkdir(parents=True)
+    (tests / "conftest.py").write_text((ROOT / "tests" / "conftest.py").read_text())
+    (tests / "test_nothing.py").write_text("def test_nothing():\n    pass\n")
+    r = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", str(tests)],
+                       capture_output=True, text=True, timeout=120, cwd=tests.parent)
+    assert r.returncode == 4
+    assert (f"ERROR: the test corpus is missing: {tmp_path / 'shared' / 'corpus'} does not exist. The tests read "
+            "real skillset files") in r.stderr
+    assert "Traceback" not in r.stderr + r.stdout and "FileNotFoundError" not in r.stderr + r.stdout
