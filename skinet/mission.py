@@ -78,6 +78,21 @@ def parse_scenario(text: str, source: str = "<scenario>") -> Scenario:
     return Scenario(head["name"], head["system"], tuple(steps))
 
 
+def step_numbers(scenario: Scenario) -> list[int]:
+    """The step number of each scenario entry, as the live monitor counts steps.
+
+    Transitions are steps 1, 2, ...; a considered command is weighed at the
+    marking before the next step, so it takes that step's number (``skinet run``
+    beside the simulator and ``skinet demo`` then show the same numbers).
+    """
+    numbers, done = [], 0
+    for step in scenario.steps:
+        if step.transition is not None:
+            done += 1
+        numbers.append(done if step.transition is not None else done + 1)
+    return numbers
+
+
 def check_scenario(scenario: Scenario, system: System, source: str = "<scenario>") -> None:
     """Every step names a skillset of ``system`` and one of its transitions; else one error naming the step.
 
@@ -105,7 +120,7 @@ def replay(system: System, scenario: Scenario, predict: bool = True, budget: flo
     nets = system.nets
     before = {p.name: holds(p.expr, live.marking, nets) for p in system.properties}
     records = []
-    for i, step in enumerate(scenario.steps, 1):
+    for i, step in zip(step_numbers(scenario), scenario.steps):
         if step.consider is not None:
             analysis = analyse(system, live.marking, forecast(system, live.marking, budget=budget) if predict else None)
             flagged = [u for u in analysis.operator_unsafe() if u.skillset == step.skillset and u.transition == step.consider]
@@ -120,4 +135,4 @@ def replay(system: System, scenario: Scenario, predict: bool = True, budget: flo
     return records
 
 
-__all__ = ["Scenario", "Step", "StepRecord", "check_scenario", "parse_scenario", "replay"]
+__all__ = ["Scenario", "Step", "StepRecord", "check_scenario", "parse_scenario", "replay", "step_numbers"]

@@ -184,7 +184,7 @@ def test_assisted_run_shows_the_paper_warnings() -> None:
         return any(a <= t < b for a, b in spans.get(lane, []))
 
     assert during("spot.go_to_waypoint", 58.0)  # considered at step 29 (t = 58 s)
-    assert during("manipulator.arm_ready", 74.0)  # considered at step 37 (t = 74 s)
+    assert during("manipulator.arm_ready", 74.0)  # considered before step 36 (t = 74 s)
     assert not during("spot.go_to_waypoint", 10.0)  # trap 1's transfer is safe
 
 

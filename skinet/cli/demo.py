@@ -60,7 +60,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
             records = run_chain(system, load_typemap(path.parent / scenario.system), scenario, predict=not args.no_predict)
             how = "simulated managers -> CDR -> bridge -> monitor -> predictor, embedded Zenoh session"
-        print(f"== {scenario.name} run ({path}): {len(records)} steps, system {system.name}")
+        steps = sum(r.step.transition is not None for r in records)  # considered commands are no steps
+        print(f"== {scenario.name} run ({path}): {steps} steps, system {system.name}")
         print(f"   chain: {how}")
         for r in records:
             if args.all_steps or r.violations or r.warnings or r.divergence or r.step.consider:

@@ -230,7 +230,7 @@ def test_demo_reproduces_the_paper(capsys: pytest.CaptureFixture[str]) -> None:
     assert code == 0
     assert "   violations: 3; action_guard at step 26; safety_guard at step 33; action_guard at step 38" in out
     assert ("   warnings before risky commands: 2; spot:go_to_waypoint.start unsafe for safety_guard (explicit) at step 29;"
-            " manipulator:arm_ready.start unsafe for action_guard (explicit) at step 37") in out
+            " manipulator:arm_ready.start unsafe for action_guard (explicit) at step 36") in out
     assert "   violations: 0" in out
 
 
