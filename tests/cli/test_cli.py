@@ -115,10 +115,14 @@ def test_unsafe_violated_now_lists_recovery(capsys: pytest.CaptureFixture[str], 
 
 
 
+# safety_guard violated: Spot walks while the arm is at RD.
+WALKING_ARM_AT_RD = {"spot": {"resources": {"power_status": "PowerOn", "posture": "Standing", "control_mode": "Busy"},
+                              "running": ["go_to_waypoint"]},
+                     "manipulator": {"resources": {"arm_status": "RD"}}}
+
+
 def test_literal_list_keeps_violated_properties(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
-    s = state(tmp_path, {"spot": {"resources": {"power_status": "PowerOn", "posture": "Standing",
-                                                "control_mode": "Busy"}, "running": ["go_to_waypoint"]},
-                         "manipulator": {"resources": {"arm_status": "RD"}}})
+    s = state(tmp_path, WALKING_ARM_AT_RD)
     _, operator, _ = run(capsys, "unsafe", SYSTEM, "--state", s, "--json")
     _, both, _ = run(capsys, "unsafe", SYSTEM, "--state", s, "--literal", "--json")
     shown = lambda items: [(u["property"], u["transition"]) for u in items]  # noqa: E731
@@ -135,9 +139,7 @@ def test_literal_list_keeps_violated_properties(capsys: pytest.CaptureFixture[st
 
 
 def test_literal_text_keeps_the_operator_view(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
-    s = state(tmp_path, {"spot": {"resources": {"power_status": "PowerOn", "posture": "Standing",
-                                                "control_mode": "Busy"}, "running": ["go_to_waypoint"]},
-                         "manipulator": {"resources": {"arm_status": "RD"}}})
+    s = state(tmp_path, WALKING_ARM_AT_RD)
     _, operator, _ = run(capsys, "unsafe", SYSTEM, "--state", s, "--no-predict")
     _, both, _ = run(capsys, "unsafe", SYSTEM, "--state", s, "--no-predict", "--literal")
     view = operator.splitlines()[:-1]  # without the "prediction: off" line
