@@ -54,7 +54,7 @@ def one_line_errors(prog: str) -> Callable[[Callable[[Sequence[str] | None], int
                 return main(argv)
             except SourceError as exc:
                 print(str(exc), file=sys.stderr)
-            except (SkinetError, ValueError) as exc:  # ValueError: a name that cannot be a Zenoh key
+            except (SkinetError, ValueError) as exc:  # ValueError: a name that is no Zenoh key, a step the simulator cannot drive
                 print(f"{prog}: error: {exc}", file=sys.stderr)
             except KeyboardInterrupt:
                 return 130
