@@ -7,6 +7,7 @@
 set -euo pipefail
 
 PACKAGES=(
+    debootstrap  # tests/deploy/test_containers.py: docker/base-image.sh makes the base image without a registry
 )
 
 missing=()
