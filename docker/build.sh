@@ -44,11 +44,12 @@ if ! "$python" -c 'import sys; sys.exit(sys.version_info[:2] != (3, 11))'; then
     fi
 fi
 
-# Everything the image is made of: the files the build context and the project
-# wheel take, this script, the base image and the build arguments.
+# Everything the image is made of: the files of the build context and of the
+# project wheel (not README.md: only the wheel's description), this script, the
+# base image and the build arguments.
 inputs() {
     {
-        find Dockerfile .dockerignore pyproject.toml README.md skinet services skillsets docker/zenoh \
+        find Dockerfile .dockerignore pyproject.toml skinet services skillsets docker/zenoh \
             docker/entrypoint.sh docker/build.sh -type f ! -path '*/__pycache__/*' ! -name '*.pyc' -print0 \
             | LC_ALL=C sort -z | xargs -0 sha256sum
         echo "base=${base:-default} $( [ -n "$base" ] && docker image inspect --format '{{.Id}}' "$base" 2>/dev/null)"
