@@ -8,6 +8,7 @@ import os
 import sys
 import time
 from collections.abc import Sequence
+from dataclasses import replace
 from pathlib import Path
 
 from skinet import __version__
@@ -33,7 +34,9 @@ DESCRIPTION = """\
 SkiNet Live: predictive runtime verification of skill-based robots.
 Turns ONERA robot-language skillsets (.rl) into Petri nets, checks safety
 properties and reports the commands and events that would violate them now
-(explicit constraints) or inevitably later (implicit constraints)."""
+(explicit constraints), inevitably later (implicit constraints: AF not phi,
+fair by default) or through skill outcomes no command can prevent (forced
+constraints)."""
 
 EPILOG = """\
 examples:
@@ -131,16 +134,25 @@ def _system_args(c: argparse.ArgumentParser) -> None:
     c.add_argument("--max-depth", type=count(0), help="expand at most this many breadth-first layers")
     c.add_argument("--no-seeds", action="store_true", help="do not seed exploration with firable events")
     c.add_argument("--json", action="store_true", help="machine-readable result")
+    c.add_argument("--af", choices=["fair", "literal"],
+                   help="AF for implicit constraints, all properties (default: the system file's [prediction] "
+                        "table, else fair: only paths on which running skills end count; literal: the paper's)")
+    c.add_argument("--events-uncontrollable", action="store_true", default=None,
+                   help="count events as uncontrollable steps for forced constraints (default: off)")
+    c.add_argument("--no-forced", dest="forced", action="store_false", default=None,
+                   help="do not report forced constraints (skill outcomes alone lead to a violation)")
 
 
 def _load(args: argparse.Namespace) -> tuple[System, dict[str, int]]:
     system, warnings = load_live_system(args.system)
     print_warnings(warnings)
+    system = replace(system, prediction=system.prediction.override(
+        af=args.af, forced=args.forced, events_uncontrollable=args.events_uncontrollable))
     marking = load_state(args.state, system) if args.state else system.initial_marking()
     return system, marking
 
 
-def _forecast(args: argparse.Namespace, system: System, marking: dict[str, int]) -> Forecast:
+def _forecast(args: argparse.Namespace, system: System, marking: dict[str, int], full: bool = False) -> Forecast:
     show = getattr(args, "progress", False) or (sys.stderr.isatty() and not args.json)
     last = [0.0]
 
@@ -150,7 +162,8 @@ def _forecast(args: argparse.Namespace, system: System, marking: dict[str, int])
             print(f"\r  layer {depth}: {markings} markings, {seconds(elapsed)}", end="", file=sys.stderr, flush=True)
 
     result = forecast(
-        system, marking, budget=args.budget, max_depth=args.max_depth, event_seeds=not args.no_seeds, progress=progress
+        system, marking, budget=args.budget, max_depth=args.max_depth, event_seeds=not args.no_seeds, progress=progress,
+        full=full,
     )
     if last[0] > 0:
         print(file=sys.stderr)
@@ -215,6 +228,7 @@ def cmd_unsafe(args: argparse.Namespace) -> int:
             "marking": marking_to_json(system, marking),
             "violated": result.violated,
             "unsafe": [u.__dict__ | {"witness": list(u.witness)} for u in result.operator_unsafe()],
+            "options": {p.name: system.prediction.of(p.name).__dict__ for p in system.properties},
             "recovery": {p: [r.__dict__ for r in rs] for p, rs in result.recovery.items()},
             **({"literal": [u.__dict__ | {"witness": list(u.witness)} for u in result.unsafe]} if args.literal else {}),
             "prediction": None if prediction is None else prediction.report(),
@@ -232,7 +246,7 @@ def cmd_unsafe(args: argparse.Namespace) -> int:
 
 def cmd_explore(args: argparse.Namespace) -> int:
     system, marking = _load(args)
-    result = _forecast(args, system, marking)
+    result = _forecast(args, system, marking, full=True)
     report = result.report()
     if args.json:
         _emit({"system": system.name, **report})
@@ -248,9 +262,15 @@ def cmd_explore(args: argparse.Namespace) -> int:
         ["frontier", report["frontier"]],
     ]
     print("\n".join("  " + line for line in table(rows, ["", ""]).splitlines()[1:]))
-    props = [[n, c["violating"], c["dangerous"], c["undecided"]] for n, c in report["properties"].items()]
+    props = [
+        [n, c["violating"], c["implicit_fair"], c["implicit_literal"], c["forced"],
+         f"{c['undecided_fair']} / {c['undecided_literal']}", report["af"][n]]
+        for n, c in report["properties"].items()
+    ]
     if props:
-        print(table(props, ["property", "violating", "dangerous (mu1)", "undecided"]))
+        print(table(props, ["property", "violating", "implicit (fair)", "implicit (literal)", "forced",
+                            "undecided (fair / literal)", "operator AF"]))
+        print("implicit and forced count markings where the property still holds; mu1 = violating + implicit")
     return 0
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 
+from skinet.explain import warning_line
 from skinet.system import System, marking_to_json
 from skinet.verify.algorithm1 import Analysis, UnsafeTransition
 
@@ -55,6 +56,8 @@ def _unsafe_lines(title: str, unsafe: Sequence[UnsafeTransition]) -> list[str]:
     if unsafe:
         header = ["skillset", "transition", "property", "constraint", "control", "steps", "witness"]
         out.extend("  " + line for line in table([unsafe_row(u) for u in unsafe], header).splitlines())
+        out.append("why:")
+        out.extend("  " + warning_line(u) for u in unsafe)
     return out
 
 

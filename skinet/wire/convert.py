@@ -12,14 +12,16 @@ import json
 from pathlib import PurePath
 from collections.abc import Iterable, Mapping
 
+from skinet.errors import SkinetError
 from skinet.net.semantics import steps
+from skinet.options import PredictionOptions, PropertyOptions
 from skinet.props.evaluate import holds
 from skinet.system import Marking, System, build_system, marking_from_json, marking_to_json
 from skinet.lang.parser import parse_skillset
 from skinet.verify.algorithm1 import Analysis, PredictionVerdict
 from skinet.verify.predict import Forecast
 from skinet.wire.messages import (
-    ModelBundle, PropertyVerdict, RecoveryEntry, Risk, SkillsetStatus, StateSpaceReport, UnsafeEntry,
+    ModelBundle, PredictRequest, PropertyVerdict, RecoveryEntry, Risk, SkillsetStatus, StateSpaceReport, UnsafeEntry,
 )
 
 
@@ -53,6 +55,15 @@ def system_from_bundle(b: ModelBundle) -> System:
     return build_system(b.system, skillsets, b.properties, b.properties_name, sources)
 
 
+def request_options(system: System, request: PredictRequest) -> PredictionOptions:
+    """The prediction options a request asks for (unknown property names are errors)."""
+    unknown = sorted(set(request.af) - {p.name for p in system.properties})
+    if unknown:
+        names = ", ".join(p.name for p in system.properties) or "none"
+        raise SkinetError(f"request names unknown property '{unknown[0]}' (properties: {names})")
+    return PredictionOptions(overrides={p: PropertyOptions(af=mode) for p, mode in request.af.items()})
+
+
 def risks(system: System, marking: Mapping[str, int], forecast: Forecast) -> list[Risk]:
     """Non-safe verdicts of every marking one step from ``marking`` (explicit ones excluded)."""
     nets = system.nets
@@ -71,7 +82,7 @@ def risks(system: System, marking: Mapping[str, int], forecast: Forecast) -> lis
                     v = forecast.verdict(p.name, after)
                     if v.status != "safe":
                         out.append(Risk(skillsets=statuses(system, after), property=p.name, status=v.status,
-                                        steps=v.steps, witness=list(v.witness)))
+                                        af=forecast.risks[p.name].af, steps=v.steps, witness=list(v.witness)))
     return out
 
 
@@ -103,7 +114,8 @@ def analysis_bodies(
     props = [PropertyVerdict(name=p.name, holds=p.name not in analysis.violated) for p in system.properties]
     unsafe = [
         UnsafeEntry(skillset=u.skillset, transition=u.transition, kind=u.kind, controllable=u.controllable,
-                    property=u.property, constraint=u.constraint, steps=u.steps, witness=list(u.witness))
+                    property=u.property, constraint=u.constraint, steps=u.steps, witness=list(u.witness),
+                    reason=u.reason)
         for u in analysis.operator_unsafe()
     ]
     recovery = [

@@ -111,6 +111,8 @@ def _cases() -> list[Case]:
         for bad in ("-1", "1.5"):
             usage("skinet", "--max-depth", (cmd, SYSTEM, "--max-depth", bad, *extra),
                   f"argument --max-depth: expected an integer >= 0, got '{bad}'")
+        usage("skinet", "--af", (cmd, SYSTEM, "--af", "strict", *extra),
+              "argument --af: invalid choice: 'strict' (choose from 'fair', 'literal')")
     add("skinet", "formulas", ("ctl", SYSTEM, "EF spot:Busy", "EF spot:Bussy"), 1,
         "<formula 2>:1:4: error: unknown name 'spot:Bussy' (candidates: spot:Busy)")
 
