@@ -40,7 +40,7 @@ def save_timeline(entries: Sequence[Entry], title: str, output: str | Path, syst
             path.parent.mkdir(parents=True, exist_ok=True)
         figure.savefig(path, dpi=dpi)
     except (OSError, ValueError) as exc:
-        reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
+        reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else " ".join(str(exc).split())
         raise SourceError.at(str(path), None, f"cannot write picture: {reason}") from None
     return path
 
@@ -51,7 +51,8 @@ def cmd_timeline(args: argparse.Namespace) -> int:
     if args.system:
         system, warnings = load_live_system(args.system)
         print_warnings(warnings)
-    title = args.title if args.title is not None else _default_title(entries, args.log)
+    # "$" would start matplotlib's mathtext (and a syntax error there): titles are shown as written.
+    title = args.title.replace("$", r"\$") if args.title is not None else _default_title(entries, args.log)
     try:
         path = save_timeline(entries, title, args.output, system, args.dpi)
     except SkinetError as exc:

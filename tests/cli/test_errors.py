@@ -45,7 +45,7 @@ PROGRAMS: dict[str, tuple[Callable[..., int], Callable[[], argparse.ArgumentPars
 
 # Options where every value is acceptable (nothing to refuse).
 FREE_TEXT = {
-    ("skinet timeline", "--title"): "any text is a title",
+    ("skinet timeline", "--title"): "any text is a title (test_any_title_is_drawn)",
     ("python -m services.bridge_ros2", "--source"): "any text names the source inside the events' payload",
 }
 
@@ -378,6 +378,12 @@ def test_an_unexpected_exception_is_one_line(capsys: pytest.CaptureFixture[str],
     with pytest.raises(RuntimeError, match="boom"):
         skinet_main.main(["parse", SPOT])
 
+
+
+def test_any_title_is_drawn(files: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A title with "$" (matplotlib's mathtext) is drawn as written, not parsed."""
+    code = skinet_main.main(["timeline", str(files / "run.jsonl"), "-o", str(files / "t.png"), "--title", "$\\frac{$"])
+    assert (code, capsys.readouterr().err) == (0, "")
 
 
 def test_missing_corpus_is_named(tmp_path: Path) -> None:
