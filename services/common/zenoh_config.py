@@ -12,7 +12,6 @@ import argparse
 import json
 import os
 import re
-from pathlib import Path
 
 import zenoh
 
@@ -48,33 +47,27 @@ def check_endpoint(endpoint: str, option: str) -> str:
     return endpoint
 
 
+def _clean(text: str) -> str:
+    """One line, without Rust source places and a final full stop."""
+    return " ".join(_RUST_PLACE.sub("", text.replace('\\"', '"')).split()).rstrip(".")
+
+
 def zenoh_reason(exc: BaseException) -> str:
-    """The human part of a ZError: its message without Rust source places."""
-    text = str(exc)
-    m = _JSON_MESSAGE.search(text)
-    if m is not None:
-        text = m["msg"].replace('\\"', '"')
-    return _RUST_PLACE.sub("", text).strip().rstrip(".")
-
-
-def _config_error(path: str, exc: zenoh.ZError) -> SourceError:
-    text = str(exc)
-    m = _JSON_MESSAGE.search(text) or _JSON5_SYNTAX.search(text)
-    if m is None:
-        return SourceError.at(path, None, f"invalid Zenoh configuration: {zenoh_reason(exc)}")
-    message = _RUST_PLACE.sub("", m["msg"].replace('\\"', '"')).strip().rstrip(".")
-    return SourceError.at(path, Pos(int(m["line"]), int(m["col"])), f"invalid Zenoh configuration: {message}")
+    """The human part of a ZError, on one line."""
+    m = _JSON_MESSAGE.search(str(exc))
+    return _clean(str(exc) if m is None else m["msg"])
 
 
 def load_config_file(path: str) -> zenoh.Config:
     """A JSON5 Zenoh configuration file; errors name the file (and line:column when Zenoh gives one)."""
-    read_text(path)  # a missing or unreadable file: the usual "cannot read file" error
-    if Path(path).is_dir():
-        raise SourceError.at(path, None, "cannot read file: is a directory")
+    read_text(path)  # a missing or unreadable file (or a folder): the usual "cannot read file" error
     try:
         return zenoh.Config.from_file(path)
     except zenoh.ZError as exc:
-        raise _config_error(path, exc) from None
+        m = _JSON_MESSAGE.search(str(exc)) or _JSON5_SYNTAX.search(str(exc))
+        pos = None if m is None else Pos(int(m["line"]), int(m["col"]))
+        reason = zenoh_reason(exc) if m is None else _clean(m["msg"])
+        raise SourceError.at(path, pos, f"invalid Zenoh configuration: {reason}") from None
 
 
 def open_session(config: zenoh.Config) -> zenoh.Session:
