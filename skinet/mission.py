@@ -9,7 +9,6 @@ The simulator of issue 5 plays the same files through the whole chain.
 
 from __future__ import annotations
 
-import tomllib
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import TypeVar
@@ -18,6 +17,7 @@ from skinet.errors import SourceError
 from skinet.live import LiveSystem
 from skinet.props.evaluate import holds
 from skinet.system import System
+from skinet.tomltext import parse_toml
 from skinet.verify.algorithm1 import Analysis, UnsafeTransition, analyse
 from skinet.verify.predict import forecast
 
@@ -58,10 +58,7 @@ class StepRecord:
 
 def parse_scenario(text: str, source: str = "<scenario>") -> Scenario:
     """Parse a scenario file; errors name the file and the step number."""
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise SourceError.at(source, None, f"invalid TOML: {exc}") from None
+    data = parse_toml(text, source)
     head = data.get("scenario", {})
     if not isinstance(head.get("name"), str) or not isinstance(head.get("system"), str):
         raise SourceError.at(source, None, "missing [scenario] table with 'name' and 'system' strings")

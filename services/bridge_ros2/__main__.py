@@ -21,7 +21,7 @@ from services.bridge_ros2.replay import replay_bag
 from services.bridge_ros2.service import default_source, start_bridge
 from services.common.cli import add_instance_arg, add_log_arg, one_line_errors, setup_logging
 from services.common.zenoh_config import add_zenoh_args, config_from_args, open_session
-from skinet.cli.options import ArgumentParser, count, key_prefix, load_live_system
+from skinet.cli.options import ArgumentParser, count, key_prefix, load_live_system, seconds
 from skinet.errors import SkinetError, SourceError
 from skinet.files import load_typemap
 from skinet.ros.keys import KeyStyle
@@ -44,10 +44,16 @@ def build_parser() -> ArgumentParser:
                         help="zenoh-bridge-ros2dds namespace prefixing the keys")
     parser.add_argument("--domain", type=count(0, 232, env="ROS_DOMAIN_ID"), default=os.environ.get("ROS_DOMAIN_ID", "0"),
                         help="ROS domain id in rmw_zenoh keys (default: $ROS_DOMAIN_ID or 0)")
+    parser.add_argument("--ros-distro", default=os.environ.get("ROS_DISTRO", "jazzy"),
+                        help="ROS 2 distribution of rmw_zenoh (default: $ROS_DISTRO or jazzy); on humble the keys "
+                             "carry TypeHashNotSupported instead of a RIHS01 type hash")
     add_instance_arg(parser)
     parser.add_argument("--source", default=None, help="source name in the events (default: bridge_ros2/INSTANCE)")
     parser.add_argument("--replay", metavar="BAG", help="replay a rosbag2 file (directory or .db3/.mcap) and exit")
     parser.add_argument("--realtime", action="store_true", help="with --replay: keep the recorded timing")
+    parser.add_argument("--hold", type=seconds(zero=True), default=0.5,
+                        help="seconds a status may wait for a response it overtook (each topic has its own route "
+                             "through a gateway); 0 derives every status at once (default: 0.5)")
     add_log_arg(parser)
     add_zenoh_args(parser)
     return parser
@@ -69,14 +75,15 @@ def main(argv: list[str] | None = None) -> int:
         stop = threading.Event()
         for sig in (signal.SIGINT, signal.SIGTERM):
             signal.signal(sig, lambda *_: stop.set())
-        bridge = start_bridge(session, system, typemap, source=source, instance_id=args.instance,
-                              style=KeyStyle(args.rmw_zenoh, args.namespace, args.domain))  # errors: one line
+        bridge = start_bridge(session, system, typemap, source=source, instance_id=args.instance, hold=args.hold,
+                              style=KeyStyle(args.rmw_zenoh, args.namespace, args.domain,
+                                             args.ros_distro == "humble"))  # errors: one line
         while not stop.wait(0.5):
             pass
         bridge.close()
         c = bridge.counters
-        log.info("stopped: %d messages, %d events (%d unnamed), %d malformed",
-                 c.messages, c.events, c.unexplained, c.malformed)
+        log.info("stopped: %d messages, %d events (%d unnamed), %d malformed, %d statuses not matching the model, "
+                 "%d manager restarts", c.messages, c.events, c.unexplained, c.malformed, c.mismatched, c.restarts)
         return 0
     finally:
         session.close()
@@ -88,7 +95,7 @@ def _replay(session: zenoh.Session, system, typemap, args: argparse.Namespace, s
                   for c in system.components}
     try:
         feed = replay_bag(args.replay, system, typemap, lambda ev: publishers[ev.skillset].put(encode(ev)),
-                          source=source, realtime=args.realtime)
+                          source=source, realtime=args.realtime, hold=args.hold)
     except SkinetError:
         raise
     except Exception as exc:  # rosbags reader errors: not a bag, missing file, unknown storage

@@ -17,7 +17,7 @@ from skinet.files import load_model, load_state
 from skinet.net.build import build_net
 from skinet.net.export import FORMATS
 from skinet.props.parser import parse_formula
-from skinet.system import System, marking_to_json
+from skinet.system import System, marking_problems, marking_to_json
 from skinet.verify.algorithm1 import analyse
 from skinet.verify.ctl import Kripke, check
 from skinet.verify.explore import explore
@@ -130,6 +130,10 @@ def build_parser() -> argparse.ArgumentParser:
 def _system_args(c: argparse.ArgumentParser) -> None:
     c.add_argument("system", help="system file (.toml), e.g. skillsets/spot_arm.toml")
     c.add_argument("--state", help="start marking as JSON (default: initial marking)")
+    c.add_argument(
+        "--what-if", action="store_true",
+        help="accept a --state the robot cannot be in (an invariant violated, or unreachable) for what-if analysis",
+    )
     c.add_argument("--budget", type=duration(), default=10.0, help="exploration time budget in seconds (default: 10)")
     c.add_argument("--max-depth", type=count(0), help="expand at most this many breadth-first layers")
     c.add_argument("--no-seeds", action="store_true", help="do not seed exploration with firable events")
@@ -148,7 +152,9 @@ def _load(args: argparse.Namespace) -> tuple[System, dict[str, int]]:
     print_warnings(warnings)
     system = replace(system, prediction=system.prediction.override(
         af=args.af, forced=args.forced, events_uncontrollable=args.events_uncontrollable))
-    marking = load_state(args.state, system) if args.state else system.initial_marking()
+    marking = load_state(args.state, system, args.what_if) if args.state else system.initial_marking()
+    for problem in marking_problems(system, marking) if args.what_if else ():
+        print(f"what-if analysis: {problem}", file=sys.stderr if args.json else sys.stdout)
     return system, marking
 
 
