@@ -218,6 +218,7 @@ def _cases() -> list[Case]:
     usage(mon, "--id", (SYSTEM, "--id", "a b"), f"argument --id: instance id 'a b' {not_a_key}")
     usage(mon, "--budget", (SYSTEM, "--budget", "-1"), "argument --budget: " + seconds.format("-1"))
     usage(mon, "--query-timeout", (SYSTEM, "--query-timeout", "0"), "argument --query-timeout: " + seconds.format("0"))
+    usage(mon, "--stall", (SYSTEM, "--stall", "-2"), "argument --stall: " + seconds.format("-2"))
     usage(pred, "--instance", ("--instance", "a/b"), f"argument --instance: instance id 'a/b' {not_a_key}")
     usage(pred, "--instance", (), f"argument --instance: instance id 'a b' {not_a_key}", SKINET_INSTANCE="a b")
     for option in ("--workers", "--max-pending", "--cache"):
