@@ -31,8 +31,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import zenoh  # noqa: E402
 
-from services.common.session import open_session  # noqa: E402
-from services.common.zenoh_config import add_zenoh_args, config_from_args  # noqa: E402
+from services.common.zenoh_config import add_zenoh_args, config_from_args, open_session  # noqa: E402
 from skinet.errors import SkinetError  # noqa: E402
 from skinet.files import load_system, load_typemap  # noqa: E402
 from skinet.ros.interfaces import skill_topic  # noqa: E402

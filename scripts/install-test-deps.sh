@@ -7,6 +7,7 @@
 set -euo pipefail
 
 PACKAGES=(
+    debootstrap  # tests/deploy/test_containers.py: docker/base-image.sh makes the base image without a registry
     cmake          # cargo workspace: cyclors builds CycloneDDS (tests/dds, tests/deploy/test_rust_client.py)
     libclang-dev   # cargo workspace: cyclors generates its CycloneDDS bindings with bindgen (same tests)
     chromium          # tests/services/test_dashboard.py: the dashboard in a real browser

@@ -19,19 +19,17 @@ import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING, TextIO
 
-import zenoh
-
-from services.common.session import open_session
-from services.common.zenoh_config import login, session_config
+from services.common.zenoh_config import login, open_session, session_config
 from services.monitor import Monitor, MonitorView, start_monitor
-from services.monitor.check import parse_policy
+from skinet.cli.options import load_live_system
 from skinet.explain import warning_line
 from skinet.cli.render import seconds, table
-from skinet.files import load_system
 from skinet.system import System
 from skinet.wire.messages import LiveState, StateSpaceReport, UnsafeReport, Verdicts
 
 if TYPE_CHECKING:
+    import zenoh
+
     from services.dashboard.server import Dashboard
 
 CLEAR = "\x1b[H\x1b[J"  # cursor home, clear to end of screen
@@ -72,11 +70,13 @@ def render(view: MonitorView | Observed) -> list[str]:
         f"{seconds(space.time)}, {space.markings} markings, {space.edges} edges, depth {space.depth}, "
         f"{'TRUNCATED' if space.timeout_reached else 'complete'}")
     out.append(f"predictor  last exploration: {explored}")
-    if isinstance(view, MonitorView):
+    if isinstance(view, MonitorView):  # the embedded monitor's own counters
         p, c = view.predictor, view.counters
         out.append(f"  queries sent {p.sent}, answered {p.answered}, timed out {p.timed_out}, unanswered "
-                   f"{p.unanswered}, failed {p.failed}, superseded {p.superseded}"
+                   f"{p.unanswered}, failed {p.failed}, superseded {p.superseded}, retried {p.retried}"
                    f"{', one in flight' if p.in_flight else ''}")
+        if p.answers:
+            out.append("  answers per instance: " + ", ".join(f"{name} {n}" for name, n in sorted(p.answers.items())))
         out.append(f"events  received {c.received}, applied {c.applied}, malformed {c.malformed}, duplicates "
                    f"{c.duplicates}, out of order {c.out_of_order}, lost {c.lost}, divergences {c.divergences}")
     return out
@@ -106,16 +106,17 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     """``skinet run``: see the module docstring; returns the exit status."""
     from services.predictor.service import start_predictor
 
-    system, _ = load_system(args.system)
+    system, _ = load_live_system(args.system)
+    config = session_config("peer", args.connect, args.listen, args.zenoh_config, not args.no_multicast_scouting,
+                            **login(args))
     stop = stop_on_signals()
-    session = open_session(session_config("peer", args.connect, args.listen, args.zenoh_config,
-                                          not args.no_multicast_scouting, **login(args)))
+    session = open_session(config)
     monitor: Monitor | None = None
     predictor = None
     dashboard = None
     try:
         predictor = start_predictor(session, f"embedded-{os.getpid()}")  # first: the monitor asks at once
-        monitor = start_monitor(session, system, budget=args.budget, check_policy=parse_policy(args.check_policy))
+        monitor = start_monitor(session, system, budget=args.budget, check_policy=args.check_policy)
         if args.dashboard is not None:
             dashboard = _start_dashboard(session, system, args.dashboard_host, args.dashboard)
             print(f"dashboard on {dashboard.url}", file=sys.stderr, flush=True)
@@ -175,9 +176,10 @@ def _follow(monitor: Monitor, stop: threading.Event, duration: float | None, out
 
 def router(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     """``skinet router``: a Zenoh router (mode "router" of the Python wheel) until interrupted."""
+    config = session_config("router", args.connect, args.listen or ["tcp/0.0.0.0:7447"], args.zenoh_config,
+                            not args.no_multicast_scouting, **login(args))
     stop = stop_on_signals()
-    session = open_session(session_config("router", args.connect, args.listen or ["tcp/0.0.0.0:7447"],
-                                          args.zenoh_config, not args.no_multicast_scouting, **login(args)))
+    session = open_session(config)
     try:
         print(f"zenoh router {session.zid()} listening on {', '.join(args.listen or ['tcp/0.0.0.0:7447'])}",
               file=out, flush=True)

@@ -16,8 +16,7 @@ import threading
 import time
 from typing import TextIO
 
-from services.common.session import open_session
-from services.common.zenoh_config import config_from_args
+from services.common.zenoh_config import config_from_args, open_session
 from services.dashboard.board import Board
 from services.dashboard.observer import Observer
 from services.dashboard.app import no_monitor_message

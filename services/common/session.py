@@ -1,10 +1,11 @@
-"""Opening a Zenoh session with an error that says why it failed (SPEC §7).
+"""Why a Zenoh client could not open its session: a refused login (SPEC §7).
 
 Zenoh reports every failed client connection as ``Unable to connect to any of
 [...]``, whether nothing listens there or the router refused the login.  When
-opening fails, :func:`open_session` probes the endpoints with a plain TCP
+opening fails, :func:`login_refused` probes the endpoints with a plain TCP
 connection: a router that accepts TCP but refused the session is, in practice,
-refusing the credentials (or their absence), and the error says so.
+refusing the credentials (or their absence).  Used by
+:func:`services.common.zenoh_config.open_session`.
 """
 
 from __future__ import annotations
@@ -15,21 +16,7 @@ import socket
 
 import zenoh
 
-from skinet.errors import SkinetError
-
 PROBE_TIMEOUT = 1.0
-
-
-class SessionError(SkinetError):
-    """A Zenoh session could not be opened; the message is one line."""
-
-
-def open_session(config: zenoh.Config) -> zenoh.Session:
-    """``zenoh.open(config)``, raising :class:`SessionError` with the likely cause."""
-    try:
-        return zenoh.open(config)
-    except zenoh.ZError as exc:
-        raise SessionError(diagnose(config, str(exc))) from None
 
 
 def _get(config: zenoh.Config, path: str) -> object:
@@ -39,26 +26,24 @@ def _get(config: zenoh.Config, path: str) -> object:
         return None
 
 
-def diagnose(config: zenoh.Config, error: str) -> str:
-    """One line explaining ``error`` (Zenoh's message) for a session of ``config``."""
+def login_refused(config: zenoh.Config) -> str | None:
+    """The reason when a router at one of ``config``'s endpoints accepts TCP (so it refused the
+    login), else None (nothing answers there)."""
     user = _get(config, "transport/auth/usrpwd/user")
     endpoints = [e for e in (_get(config, "connect/endpoints") or []) if isinstance(e, str)]
     reached = [e for e in endpoints if _tcp_open(e)]
-    if reached:
-        login = (f"authentication failed for user '{user}' (check SKINET_ZENOH_USER and SKINET_ZENOH_PASSWORD, "
-                 f"or --user and --password)" if user else
-                 "it requires a user and password (set SKINET_ZENOH_USER and SKINET_ZENOH_PASSWORD, "
-                 "or --user and --password)")
-        return f"the Zenoh router at {', '.join(reached)} refused the session: {login}"
-    first = error.split("  at ")[0].strip()  # drop Zenoh's source location
-    if endpoints:
-        return f"cannot open a Zenoh session: no router answers at {', '.join(endpoints)} ({first})"
-    return f"cannot open a Zenoh session: {first}"
+    if not reached:
+        return None
+    login = (f"authentication failed for user '{user}' (check SKINET_ZENOH_USER and SKINET_ZENOH_PASSWORD, "
+             f"or --user and --password)" if user else
+             "it requires a user and password (set SKINET_ZENOH_USER and SKINET_ZENOH_PASSWORD, "
+             "or --user and --password)")
+    return f"the router at {', '.join(reached)} refused the login: {login}"
 
 
 def _tcp_open(endpoint: str) -> bool:
     """Whether ``tcp/HOST:PORT`` (or ``tls/``) accepts a TCP connection now."""
-    m = re.fullmatch(r"(?:tcp|tls)/\[?([^\]]+?)\]?:(\d+)(?:#.*)?", endpoint)
+    m = re.fullmatch(r"(?:tcp|tls)/\[?([^\]]+?)\]?:(\d+)(?:[?#].*)?", endpoint)
     if m is None:
         return False
     try:

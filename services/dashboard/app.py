@@ -14,9 +14,8 @@ import sys
 import threading
 from pathlib import Path
 
-from services.common.session import open_session
 from services.common.cli import add_log_arg, setup_logging
-from services.common.zenoh_config import add_zenoh_args, config_from_args
+from services.common.zenoh_config import add_zenoh_args, config_from_args, open_session
 from services.dashboard.observer import Observer, monitored_systems
 from services.dashboard.server import Dashboard
 from skinet.errors import SkinetError, SourceError

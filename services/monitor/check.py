@@ -17,7 +17,9 @@ A kind the policy does not name (a newer monitor's) is warned about.
 
 from __future__ import annotations
 
+import argparse
 import difflib
+import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
@@ -71,6 +73,20 @@ def parse_policy(text: str) -> Policy:
             raise ValueError(f"check policy '{part}': missing constraint kind")
         actions[kind] = action
     return Policy(actions)
+
+
+def add_policy_arg(parser: argparse.ArgumentParser) -> None:
+    """``--check-policy`` (default ``$SKINET_CHECK_POLICY`` or ``warn``), parsed into a :class:`Policy`."""
+    def policy(text: str) -> Policy:
+        try:
+            return parse_policy(text)
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+
+    parser.add_argument("--check-policy", type=policy, default=os.environ.get("SKINET_CHECK_POLICY", "warn"),
+                        help="answers of skinet/<system>/check: warn (warn on every constraint, deny nothing), "
+                             "strict (deny explicit and forced), or KIND=ACTION,... e.g. strict,implicit=deny "
+                             "(default: $SKINET_CHECK_POLICY or warn)")
 
 
 def parse_command(text: str) -> CheckRequest:

@@ -63,8 +63,7 @@ EXIT = {"allow": 0, "warn": 3, "deny": 4}
 def cmd_check(args: argparse.Namespace) -> int:
     import json
 
-    from services.common.session import open_session
-    from services.common.zenoh_config import config_from_args
+    from services.common.zenoh_config import config_from_args, open_session
     from services.dashboard.observer import monitored_systems
     from services.monitor.check import parse_command
     from skinet.errors import SkinetError

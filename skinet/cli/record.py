@@ -21,8 +21,8 @@ from typing import BinaryIO, TextIO
 import zenoh
 from pydantic import BaseModel
 
-from services.common.session import open_session
-from services.common.zenoh_config import add_zenoh_args, config_from_args
+from services.common.zenoh_config import add_zenoh_args, config_from_args, open_session
+from skinet.cli.options import count, key_name, seconds
 from skinet.errors import SourceError
 from skinet.wire import keys
 from skinet.wire.codec import DecodeError, decode
@@ -40,18 +40,18 @@ SHOW_SKIPPED = 5  # undecodable payloads reported on standard error, then only c
 MODEL_RETRY = 2.0  # seconds between model queries while none answered
 
 
-
 def add_parser(sub: argparse._SubParsersAction) -> None:
     c = sub.add_parser("record", help="record the monitor's messages of a system into a JSON Lines log")
-    c.add_argument("system", metavar="SYSTEM_NAME", help="system name, as in skinet/<system>/... keys")
+    c.add_argument("system", metavar="SYSTEM_NAME", type=key_name("system name"),
+                   help="system name, as in skinet/<system>/... keys")
     c.add_argument("-o", "--output", required=True, metavar="LOG.jsonl|LOG.mcap",
                    help="log file to write (overwritten)")
     c.add_argument("--format", choices=["jsonl", "mcap"],
                    help="JSON Lines, or MCAP with JSON schemas (Foxglove, other robotics tools); default: from "
                         "the extension of --output (.mcap: mcap, else jsonl). MCAP is finished on Ctrl-C, "
                         "SIGTERM, --duration or --count")
-    c.add_argument("--duration", type=float, help="stop after this many seconds (default: until Ctrl-C)")
-    c.add_argument("--count", type=int, help="stop after writing this many messages")
+    c.add_argument("--duration", type=seconds(), help="stop after this many seconds (default: until Ctrl-C)")
+    c.add_argument("--count", type=count(), help="stop after writing this many messages")
     c.add_argument("--no-model", action="store_true", help="do not query the monitor's model bundle")
     add_zenoh_args(c)
     c.set_defaults(func=cmd_record)
@@ -155,8 +155,8 @@ class Recorder:
 
 
 def cmd_record(args: argparse.Namespace) -> int:
-    system = keys.check_chunk(args.system, "system name")
-    session = open_session(config_from_args(args))  # SessionError says why it failed
+    system = args.system
+    session = open_session(config_from_args(args))
     mcap = (args.format or ("mcap" if args.output.endswith(".mcap") else "jsonl")) == "mcap"
     try:
         sink = McapSink(open(args.output, "wb")) if mcap else JsonlSink(open(args.output, "w", encoding="utf-8"))

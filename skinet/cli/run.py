@@ -6,7 +6,8 @@ import argparse
 import os
 
 from services.common.zenoh_config import add_login_args
-from skinet.errors import SkinetError
+from services.monitor.check import add_policy_arg
+from skinet.cli.options import count, seconds
 
 
 def _zenoh_args(c: argparse.ArgumentParser, listen_help: str) -> None:
@@ -21,14 +22,12 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     c = sub.add_parser("run", help="monitor and predictor in one process with a live operator view (SPEC §7)")
     c.add_argument("system", help="system file (.toml), e.g. skillsets/spot_arm.toml")
     c.add_argument("--once", action="store_true", help="print one view (after the first prediction) and exit")
-    c.add_argument("--duration", type=float, help="stop after this many seconds")
-    c.add_argument("--budget", type=float, default=1.0, help="prediction budget in seconds (default: 1)")
-    c.add_argument("--dashboard", type=int, metavar="PORT",
+    c.add_argument("--duration", type=seconds(), help="stop after this many seconds")
+    c.add_argument("--budget", type=seconds(), default=1.0, help="prediction budget in seconds (default: 1)")
+    c.add_argument("--dashboard", type=count(0, 65535), metavar="PORT",
                    help="also serve the live web dashboard on this port (0: a free one; see skinet dashboard)")
     c.add_argument("--dashboard-host", default="127.0.0.1", help="address of --dashboard (default: 127.0.0.1)")
-    c.add_argument("--check-policy", default=os.environ.get("SKINET_CHECK_POLICY", "warn"),
-                   help="answers of skinet/<system>/check: warn (default), strict (deny explicit and forced) "
-                        "or KIND=ACTION,...")
+    add_policy_arg(c)
     _zenoh_args(c, "endpoint on which a bridge in another process can connect, e.g. tcp/127.0.0.1:7447")
     c.set_defaults(func=cmd_run)
 
@@ -39,12 +38,6 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
 
 def cmd_run(args: argparse.Namespace) -> int:
     from services.embedded import run
-    from services.monitor.check import parse_policy
-
-    try:
-        parse_policy(args.check_policy)
-    except ValueError as exc:
-        raise SkinetError(f"--check-policy: {exc}") from None
 
     return run(args)
 

@@ -104,12 +104,14 @@ def test_refused_logins_say_so(deployment: str, command: list[str]) -> None:
     out = skinet(*command, *zenoh_flags(deployment, "observer", "wrong"))
     assert out.returncode == 1
     assert out.stderr.strip().endswith(
-        f"error: the Zenoh router at tcp/127.0.0.1:{port} refused the session: authentication failed for user "
+        f"error: cannot open the Zenoh session: the router at tcp/127.0.0.1:{port} refused the login: "
+        "authentication failed for user "
         "'observer' (check SKINET_ZENOH_USER and SKINET_ZENOH_PASSWORD, or --user and --password)")
     out = skinet(*command, *zenoh_flags(deployment, None))
     assert out.returncode == 1
     assert out.stderr.strip().endswith(
-        f"error: the Zenoh router at tcp/127.0.0.1:{port} refused the session: it requires a user and password "
+        f"error: cannot open the Zenoh session: the router at tcp/127.0.0.1:{port} refused the login: "
+        "it requires a user and password "
         "(set SKINET_ZENOH_USER and SKINET_ZENOH_PASSWORD, or --user and --password)")
 
 
