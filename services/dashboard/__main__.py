@@ -6,10 +6,12 @@ import argparse
 import sys
 from collections.abc import Sequence
 
+from services.common.cli import one_line_errors
 from services.dashboard.app import add_dashboard_args, serve
 from services.embedded import stop_on_signals
 
 
+@one_line_errors("python -m services.dashboard")
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         prog="python -m services.dashboard",

@@ -2,7 +2,8 @@
 
 Opens a Zenoh session (read-only observer), serves the page, warns when no
 monitor of the system shows up, and runs until ``stop`` is set.  Errors (port
-in use, no router, refused login, bad system file) are one line, exit 1.
+in use, no router, refused login, bad system file) are raised as one-line
+:class:`~skinet.errors.SkinetError` for the caller's handler.
 """
 
 from __future__ import annotations
@@ -18,9 +19,10 @@ from services.common.cli import add_log_arg, setup_logging
 from services.common.zenoh_config import add_zenoh_args, config_from_args, open_session
 from services.dashboard.observer import Observer, monitored_systems
 from services.dashboard.server import Dashboard
-from skinet.errors import SkinetError, SourceError
-from skinet.files import load_system
+from skinet.cli.options import count, load_live_system, seconds
+from skinet.errors import SkinetError
 from skinet.system import System
+from skinet.wire import keys
 
 
 def add_dashboard_args(p: argparse.ArgumentParser) -> None:
@@ -29,48 +31,42 @@ def add_dashboard_args(p: argparse.ArgumentParser) -> None:
                    help="system file (.toml, gives the name and the timeline's lanes) or system name")
     p.add_argument("--host", default=os.environ.get("SKINET_DASHBOARD_HOST", "127.0.0.1"),
                    help="address to serve on (default: $SKINET_DASHBOARD_HOST or 127.0.0.1; 0.0.0.0 exposes it)")
-    p.add_argument("--port", "-p", type=int, default=int(os.environ.get("SKINET_DASHBOARD_PORT", "8080")),
+    p.add_argument("--port", "-p", type=count(0, 65535, env="SKINET_DASHBOARD_PORT"),
+                   default=os.environ.get("SKINET_DASHBOARD_PORT", "8080"),
                    help="TCP port (default: $SKINET_DASHBOARD_PORT or 8080; 0 picks a free one)")
-    p.add_argument("--wait", type=float, default=5.0,
+    p.add_argument("--wait", type=seconds(zero=True), default=5.0,
                    help="seconds before warning that no monitor of the system is alive (default: 5)")
     add_log_arg(p)
     add_zenoh_args(p)
 
 
 def resolve_system(spec: str) -> tuple[str, System | None]:
-    """(name, system) from a system file, or (name, None) from a bare name."""
+    """(name, system) from a system file, or (name, None) from a bare name (:class:`SkinetError`
+    when it cannot be a Zenoh key chunk)."""
     if spec.endswith(".toml") or Path(spec).is_file():
-        system, _ = load_system(spec)
+        system, _ = load_live_system(spec)
         return system.name, system
-    return spec, None
+    try:
+        return keys.check_chunk(spec, "system name"), None
+    except ValueError as exc:
+        raise SkinetError(str(exc)) from None
 
 
 def serve(args: argparse.Namespace, stop: threading.Event) -> int:
-    """Run the dashboard until ``stop``; returns the exit status."""
+    """Run the dashboard until ``stop``; returns the exit status.  Raises :class:`SkinetError`
+    (one line: a bad system file or name, no router, a refused login, a port in use)."""
     setup_logging(args)
     log = logging.getLogger("skinet.dashboard")
-    try:
-        name, system = resolve_system(args.system)
-        if not 0 <= args.port <= 65535:
-            raise SkinetError(f"--port {args.port}: not a TCP port (0-65535)")
-        session = open_session(config_from_args(args))
-    except SkinetError as exc:
-        print(str(exc) if isinstance(exc, SourceError) else f"skinet dashboard: error: {exc}", file=sys.stderr)
-        return 1
-    try:
-        observer = Observer(session, name, system)
-    except ValueError as exc:  # a name that cannot be a key chunk
-        session.close()
-        print(f"skinet dashboard: error: {exc}", file=sys.stderr)
-        return 1
+    name, system = resolve_system(args.system)
+    session = open_session(config_from_args(args))
+    observer = Observer(session, name, system)
     dashboard = Dashboard(observer, args.host, args.port)
     try:
         dashboard.start()
-    except SkinetError as exc:
+    except SkinetError:
         observer.close()
         session.close()
-        print(f"skinet dashboard: error: {exc}", file=sys.stderr)
-        return 1
+        raise
     print(f"skinet dashboard: system {name} on {dashboard.url}", file=sys.stderr, flush=True)
     try:
         if not observer.wait_monitor(args.wait) and not stop.is_set():

@@ -7,6 +7,7 @@ from __future__ import annotations
 import argparse
 
 from services.common.zenoh_config import add_zenoh_args
+from skinet.cli.options import key_name, seconds
 
 
 def add_parsers(sub: argparse._SubParsersAction) -> None:
@@ -23,10 +24,11 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                        description="Follow a running system's monitor through Zenoh and show the operator view "
                                    "(skillsets, properties, unsafe transitions, predictions, services, violations): "
                                    "redrawn on a terminal, one line per step in a pipe.")
-    c.add_argument("system", metavar="SYSTEM_NAME", help="system name, as in skinet/<system>/... keys")
+    c.add_argument("system", metavar="SYSTEM_NAME", type=key_name("system name"),
+                   help="system name, as in skinet/<system>/... keys")
     c.add_argument("--once", action="store_true", help="print one view (after a fresh prediction) and exit")
-    c.add_argument("--duration", type=float, help="stop after this many seconds")
-    c.add_argument("--wait", type=float, default=5.0,
+    c.add_argument("--duration", type=seconds(), help="stop after this many seconds")
+    c.add_argument("--wait", type=seconds(), default=5.0,
                    help="seconds to wait for the system's monitor before giving up (default: 5)")
     add_zenoh_args(c)
     c.set_defaults(func=cmd_watch)
@@ -36,10 +38,11 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                                    "marking: allow, warn or deny (the monitor's policy) with the reasons. "
                                    "Exit status: 0 allow, 3 warn, 4 deny, 1 error (unknown name, no monitor, "
                                    "no router).")
-    c.add_argument("system", metavar="SYSTEM_NAME", help="system name, as in skinet/<system>/... keys")
+    c.add_argument("system", metavar="SYSTEM_NAME", type=key_name("system name"),
+                   help="system name, as in skinet/<system>/... keys")
     c.add_argument("command", metavar="SKILLSET:TRANSITION", help="e.g. spot:go_to_waypoint.start")
     c.add_argument("--json", action="store_true", help="print the CheckReply as JSON")
-    c.add_argument("--timeout", type=float, default=2.0, help="seconds to wait for the monitor (default: 2)")
+    c.add_argument("--timeout", type=seconds(), default=2.0, help="seconds to wait for the monitor (default: 2)")
     add_zenoh_args(c)
     c.set_defaults(func=cmd_check)
 
@@ -73,9 +76,9 @@ def cmd_check(args: argparse.Namespace) -> int:
 
     try:
         request = parse_command(args.command)
-        key = keys.check(keys.check_chunk(args.system, "system name"))
     except ValueError as exc:
         raise SkinetError(str(exc)) from None
+    key = keys.check(args.system)
     session = open_session(config_from_args(args))
     try:
         replies = [r for r in session.get(key, payload=encode(request), timeout=args.timeout) if r.ok is not None]

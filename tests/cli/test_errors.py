@@ -49,6 +49,11 @@ FREE_TEXT = {
     ("python -m services.bridge_ros2", "--source"): "any text names the source inside the events' payload",
     ("python -m services.bridge_ros2", "--ros-distro"): "only humble changes the keys; any other name is a later one",
     ("python -m services.simulator", "--ros-distro"): "only humble changes the keys; any other name is a later one",
+    **{(program, option): "any user name and password is sent; the router judges them (tests/deploy/test_operator_acl.py)"
+       for program in ("skinet record", "skinet run", "skinet router", "skinet watch", "skinet check",
+                       "skinet dashboard", "python -m services.monitor", "python -m services.predictor",
+                       "python -m services.bridge_ros2", "python -m services.simulator")
+       for option in ("--user", "--password")},
 }
 
 
@@ -136,7 +141,9 @@ def _cases() -> list[Case]:
     # skinet record, run, router, and every service: the Zenoh options
     zenoh_programs = {
         "skinet": (("record", "spot_arm", "-o", "{tmp}/rec.jsonl", "--duration", "1"),
-                   ("run", SYSTEM, "--once"), ("router",)),
+                   ("run", SYSTEM, "--once"), ("router",), ("watch", "spot_arm", "--wait", "0.5"),
+                   ("check", "spot_arm", "spot:teleop.start", "--timeout", "0.5"),
+                   ("dashboard", "spot_arm", "--port", "0", "--wait", "0")),
         "python -m services.monitor": ((SYSTEM,),),
         "python -m services.predictor": ((),),
         "python -m services.bridge_ros2": ((SYSTEM,),),
@@ -160,6 +167,8 @@ def _cases() -> list[Case]:
                 prefix + "--connect 'tcp/127.0.0.1': the address must be HOST:PORT, e.g. tcp/127.0.0.1:7447")
             add(program, "--zenoh-config", (*base, "--zenoh-config", "{tmp}/missing.json5"), 1,
                 "{tmp}/missing.json5: error: cannot read file: No such file or directory")
+            add(program, "--password-file", (*base, "--no-multicast-scouting", "--password-file", "{tmp}/missing.pw"),
+                1, prefix + "cannot read password file {tmp}/missing.pw: No such file or directory")
             add(program, "--zenoh-config", (*base, "--zenoh-config", "{tmp}/bad.json5"), 1,
                 "{tmp}/bad.json5:2:3: error: invalid Zenoh configuration: unknown field `mood`, expected one of "
                 "`id`, `metadata`, `mode`, `region_name`, `gateway`, `connect`, `listen`, `open`, `scouting`, "
@@ -193,6 +202,39 @@ def _cases() -> list[Case]:
     usage("skinet", "--duration", ("run", SYSTEM, "--duration", "-1"), "argument --duration: " + seconds.format("-1"))
     usage("skinet", "--budget", ("run", SYSTEM, "--budget", "0"), "argument --budget: " + seconds.format("0"))
 
+    usage("skinet", "--dashboard", ("run", SYSTEM, "--dashboard", "-1"),
+          "argument --dashboard: expected an integer from 0 to 65535, got '-1'")
+    add("skinet", "--dashboard-host", ("run", SYSTEM, "--once", "--no-multicast-scouting", "--dashboard", "0",
+                                       "--dashboard-host", "999.0.0.1"), 1,
+        "skinet: error: cannot listen on 999.0.0.1:0: Name or service not known")
+    policy = ("argument --check-policy: unknown check policy 'lax' (presets: warn, strict; or KIND=ACTION with ACTION "
+              "one of allow, warn, deny)")
+    usage("skinet", "--check-policy", ("run", SYSTEM, "--check-policy", "lax"), policy)
+    usage("skinet", "--format", ("record", "spot_arm", "-o", "{tmp}/rec.csv", "--format", "csv"),
+          "argument --format: invalid choice: 'csv' (choose from 'jsonl', 'mcap')")
+
+    # skinet watch, check, dashboard (operator views)
+    for cmd, rest in (("watch", ()), ("check", ("spot:teleop.start",))):
+        usage("skinet", "system", (cmd, "a/b", *rest),
+              "argument SYSTEM_NAME: system name 'a/b' cannot be used in a Zenoh key (letters, digits, _ - . only)")
+    usage("skinet", "--duration", ("watch", "spot_arm", "--duration", "0"), "argument --duration: " + seconds.format("0"))
+    usage("skinet", "--wait", ("watch", "spot_arm", "--wait", "-1"), "argument --wait: " + seconds.format("-1"))
+    add("skinet", "command", ("check", "spot_arm", "teleop"), 1,
+        "skinet: error: command 'teleop' is not of the form skillset:transition (e.g. spot:teleop.start)")
+    usage("skinet", "--timeout", ("check", "spot_arm", "x:y", "--timeout", "soon"),
+          "argument --timeout: " + seconds.format("soon"))
+    add("skinet", "system", ("dashboard", "a/b"), 1,
+        "skinet: error: system name 'a/b' cannot be used in a Zenoh key (letters, digits, _ - . only)")
+    add("skinet", "system", ("dashboard", "{tmp}/missing.toml"), 1, missing)
+    usage("skinet", "--port", ("dashboard", "spot_arm", "--port", "70000"),
+          "argument --port/-p: expected an integer from 0 to 65535, got '70000'")
+    usage("skinet", "--wait", ("dashboard", "spot_arm", "--wait", "-1"),
+          "argument --wait: expected a number of seconds >= 0, got '-1'")
+    add("skinet", "--host", ("dashboard", "spot_arm", "--no-multicast-scouting", "--port", "0", "--host", "999.0.0.1"),
+        1, "skinet: error: cannot listen on 999.0.0.1:0: Name or service not known")
+    usage("skinet", "--log-level", ("dashboard", "spot_arm", "--log-level", "LOUD"),
+          "argument --log-level: expected one of DEBUG, INFO, WARNING, ERROR, CRITICAL, got 'LOUD'")
+
     # skinet timeline
     add("skinet", "log", ("timeline", "{tmp}/missing.jsonl", "-o", "{tmp}/t.png"), 1,
         "{tmp}/missing.jsonl: error: cannot read file: No such file or directory")
@@ -219,6 +261,7 @@ def _cases() -> list[Case]:
     usage(mon, "--budget", (SYSTEM, "--budget", "-1"), "argument --budget: " + seconds.format("-1"))
     usage(mon, "--query-timeout", (SYSTEM, "--query-timeout", "0"), "argument --query-timeout: " + seconds.format("0"))
     usage(mon, "--stall", (SYSTEM, "--stall", "-2"), "argument --stall: " + seconds.format("-2"))
+    usage(mon, "--check-policy", (SYSTEM, "--check-policy", "lax"), policy)
     usage(pred, "--instance", ("--instance", "a/b"), f"argument --instance: instance id 'a/b' {not_a_key}")
     usage(pred, "--instance", (), f"argument --instance: instance id 'a b' {not_a_key}", SKINET_INSTANCE="a b")
     for option in ("--workers", "--max-pending", "--cache"):
