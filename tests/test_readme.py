@@ -21,6 +21,7 @@ from pathlib import Path
 import pytest
 
 import services.bridge_ros2.__main__ as bridge_main
+import services.dashboard.__main__ as dashboard_main
 import services.monitor.__main__ as monitor_main
 import services.predictor.__main__ as predictor_main
 import services.simulator.__main__ as simulator_main
@@ -108,7 +109,8 @@ def test_matcher() -> None:
 # -- the command tables -------------------------------------------------------------------------
 
 SERVICES = {"services.monitor": monitor_main, "services.predictor": predictor_main,
-            "services.bridge_ros2": bridge_main, "services.simulator": simulator_main}
+            "services.bridge_ros2": bridge_main, "services.simulator": simulator_main,
+            "services.dashboard": dashboard_main}
 
 
 def _help(usage: str) -> str:
@@ -131,7 +133,7 @@ TABLE = _table_commands(README)
 def test_the_tables_name_every_command() -> None:
     named = {u.split()[1] if u.startswith("skinet") else u.split()[2] for u in TABLE}
     assert named == {"demo", "run", "router", "record", "timeline", "parse", "net", "unsafe", "explore", "ctl",
-                     *SERVICES}
+                     "dashboard", "watch", "check", *SERVICES}
 
 
 @pytest.mark.parametrize("usage", TABLE, ids=[u.split(" [")[0] for u in TABLE])

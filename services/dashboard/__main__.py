@@ -11,15 +11,19 @@ from services.dashboard.app import add_dashboard_args, serve
 from services.embedded import stop_on_signals
 
 
-@one_line_errors("python -m services.dashboard")
-def main(argv: Sequence[str] | None = None) -> int:
+def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="python -m services.dashboard",
         description="SkiNet Live dashboard: a web page showing a running system live (skillsets, properties, "
                     "unsafe commands with their kind, steps and witness, predictions, violations, timeline), "
                     "fed by a read-only Zenoh observer.")
     add_dashboard_args(parser)
-    return serve(parser.parse_args(argv), stop_on_signals())
+    return parser
+
+
+@one_line_errors("python -m services.dashboard")
+def main(argv: Sequence[str] | None = None) -> int:
+    return serve(build_parser().parse_args(argv), stop_on_signals())
 
 
 if __name__ == "__main__":
