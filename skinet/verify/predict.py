@@ -19,7 +19,7 @@ from skinet.props.formula import Temporal
 from skinet.system import System
 from skinet.verify.algorithm1 import PredictionVerdict
 from skinet.verify.ctl import Kripke, Result, check
-from skinet.verify.explore import StateSpace, explore
+from skinet.verify.explore import DEFAULT_MEMORY_LIMIT, Deadline, StateSpace, explore
 
 
 @dataclass
@@ -77,8 +77,9 @@ class Forecast:
         stored = self.kripke.stored
         return {
             "elapsed": s.elapsed,
-            "complete": s.complete,
+            "complete": s.complete and self.kripke.truncated_by is None,
             "timeout_reached": not s.complete,
+            "truncated_by": self.kripke.truncated_by,
             "depth": s.expanded_depth,
             "markings": s.markings,
             "edges": s.edges,
@@ -95,10 +96,18 @@ def forecast(
     budget: float | None = None,
     max_depth: int | None = None,
     event_seeds: bool = True,
+    memory_limit: int | None = DEFAULT_MEMORY_LIMIT,
     progress: Callable[[int, int, float], None] | None = None,
 ) -> Forecast:
-    """Explore from ``marking`` and compute mu1 for every property of ``system``."""
-    space = explore(system, marking, budget=budget, max_depth=max_depth, event_seeds=event_seeds, progress=progress)
+    """Explore from ``marking`` and compute mu1 for every property of ``system``.
+
+    ``budget`` (seconds) bounds the whole answer, fixpoints and witnesses
+    included; ``memory_limit`` (bytes, whole process) bounds the markings stored.
+    """
+    deadline = Deadline.after(budget)
+    space = explore(system, marking, budget=budget, max_depth=max_depth, event_seeds=event_seeds,
+                    memory_limit=memory_limit, properties=len(system.properties), progress=progress,
+                    deadline=deadline)
     kripke = Kripke(space)
     risks = {}
     for p in system.properties:
