@@ -23,6 +23,7 @@ import zenoh
 
 from services.common.zenoh_config import session_config
 from services.monitor import Monitor, MonitorView, start_monitor
+from skinet.cli.memory import memory_limit
 from skinet.cli.render import seconds, table
 from skinet.files import load_system
 
@@ -89,7 +90,8 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     monitor: Monitor | None = None
     predictor = None
     try:
-        predictor = start_predictor(session, f"embedded-{os.getpid()}")  # first: the monitor asks at once
+        predictor = start_predictor(session, f"embedded-{os.getpid()}",  # first: the monitor asks at once
+                                    memory_limit=memory_limit(args))
         monitor = start_monitor(session, system, budget=args.budget)
         if args.once:
             deadline = time.monotonic() + args.budget + 2.0  # the first prediction, if any comes

@@ -27,7 +27,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("system", help="system file (.toml), e.g. skillsets/spot_arm.toml")
     p.add_argument("--id", dest="instance_id", help="instance id in the liveliness token (default: random)")
     p.add_argument("--budget", type=float, default=1.0, help="predictor exploration budget, seconds (default: 1)")
-    p.add_argument("--query-timeout", type=float, help="predict query timeout, seconds (default: budget + 1)")
+    p.add_argument("--query-timeout", type=float, help="predict query timeout, seconds (default: 1.25 x budget + 3: the predictor answers within its budget, the first query also waits for the model bundle)")
     p.add_argument("--no-express", dest="express", action="store_false",
                    help="let Zenoh batch publications (higher burst throughput; default: express)")
     add_log_arg(p)

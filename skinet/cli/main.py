@@ -19,11 +19,12 @@ from skinet.props.parser import parse_formula
 from skinet.system import System, marking_to_json
 from skinet.verify.algorithm1 import analyse
 from skinet.verify.ctl import Kripke, check
-from skinet.verify.explore import explore
+from skinet.verify.explore import Deadline, explore
 from skinet.verify.predict import Forecast, forecast
 from skinet.cli import demo
 from skinet.cli import record as record_cli
 from skinet.cli import timeline as timeline_cli
+from skinet.cli.memory import add_memory_arg, memory_limit
 from skinet.cli.render import analysis_text, seconds, table
 from skinet.cli.run import add_commands as add_service_commands
 
@@ -116,6 +117,7 @@ def _system_args(c: argparse.ArgumentParser) -> None:
     c.add_argument("--state", help="start marking as JSON (default: initial marking)")
     c.add_argument("--budget", type=float, default=10.0, help="exploration time budget in seconds (default: 10)")
     c.add_argument("--max-depth", type=int, help="expand at most this many breadth-first layers")
+    add_memory_arg(c)
     c.add_argument("--no-seeds", action="store_true", help="do not seed exploration with firable events")
     c.add_argument("--json", action="store_true", help="machine-readable result")
 
@@ -138,7 +140,8 @@ def _forecast(args: argparse.Namespace, system: System, marking: dict[str, int])
             print(f"\r  layer {depth}: {markings} markings, {seconds(elapsed)}", end="", file=sys.stderr, flush=True)
 
     result = forecast(
-        system, marking, budget=args.budget, max_depth=args.max_depth, event_seeds=not args.no_seeds, progress=progress
+        system, marking, budget=args.budget, max_depth=args.max_depth, event_seeds=not args.no_seeds,
+        memory_limit=memory_limit(args), progress=progress,
     )
     if last[0] > 0:
         print(file=sys.stderr)
@@ -212,7 +215,8 @@ def cmd_unsafe(args: argparse.Namespace) -> int:
     print(analysis_text(system, result, args.literal))
     if prediction is not None:
         r = prediction.report()
-        state = "complete" if r["complete"] else f"TRUNCATED at depth {r['depth']} (unknown constraints possible)"
+        state = "complete" if r["complete"] else (
+            f"TRUNCATED by {r['truncated_by']} at depth {r['depth']} (unknown constraints possible)")
         print(f"prediction: {state}, {r['markings']} markings in {seconds(r['elapsed'])}")
     else:
         print("prediction: off (explicit constraints only)")
@@ -228,7 +232,7 @@ def cmd_explore(args: argparse.Namespace) -> int:
         return 0
     print(f"explored {system.name} ({'with' if not args.no_seeds else 'without'} event seeds)")
     rows = [
-        ["complete", "yes" if report["complete"] else "no (time budget or depth limit reached)"],
+        ["complete", "yes" if report["complete"] else f"no (truncated by {report['truncated_by']})"],
         ["elapsed", seconds(report["elapsed"])],
         ["depth", report["depth"]],
         ["markings", report["markings"]],
@@ -246,7 +250,9 @@ def cmd_explore(args: argparse.Namespace) -> int:
 def cmd_ctl(args: argparse.Namespace) -> int:
     system, marking = _load(args)
     formula = parse_formula(args.formula, {c.name: c.skillset for c in system.components})
-    space = explore(system, marking, budget=args.budget, max_depth=args.max_depth, event_seeds=not args.no_seeds)
+    deadline = Deadline.after(args.budget)
+    space = explore(system, marking, max_depth=args.max_depth, event_seeds=not args.no_seeds,
+                    memory_limit=memory_limit(args), properties=1, deadline=deadline)
     kripke = Kripke(space)
     t0 = time.perf_counter()
     result = check(kripke, formula)
@@ -263,14 +269,15 @@ def cmd_ctl(args: argparse.Namespace) -> int:
     if args.json:
         _emit({
             "formula": to_text(formula), "markings": space.markings, "satisfying": holds,
-            "undecided": maybe, "start": verdict, "complete": space.complete, "elapsed": elapsed,
+            "undecided": maybe, "start": verdict, "complete": kripke.truncated_by is None,
+            "truncated_by": kripke.truncated_by, "elapsed": elapsed,
         })
         return 0
     print(f"formula: {args.formula}")
     print(f"satisfied by {holds} of {space.markings} markings" + (f" ({maybe} undecided)" if maybe else ""))
     print(f"at the start marking: {verdict}")
-    if not space.complete:
-        print(f"exploration truncated at depth {space.expanded_depth}: answers are three-valued")
+    if kripke.truncated_by is not None:
+        print(f"truncated by {kripke.truncated_by} at depth {space.expanded_depth}: answers are three-valued")
     return 0
 
 

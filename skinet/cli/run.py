@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 import os
 
+from skinet.cli.memory import add_memory_arg
+
 
 def _zenoh_args(c: argparse.ArgumentParser, listen_help: str) -> None:
     c.add_argument("--listen", "-l", action="append", help=listen_help)
@@ -19,6 +21,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     c.add_argument("--once", action="store_true", help="print one view (after the first prediction) and exit")
     c.add_argument("--duration", type=float, help="stop after this many seconds")
     c.add_argument("--budget", type=float, default=1.0, help="prediction budget in seconds (default: 1)")
+    add_memory_arg(c)
     _zenoh_args(c, "endpoint on which a bridge in another process can connect, e.g. tcp/127.0.0.1:7447")
     c.set_defaults(func=cmd_run)
 

@@ -307,9 +307,8 @@ def check(kripke: Kripke, formula: Expr) -> Result:
 
 def _pair(kripke: Kripke, a: Result, b: Result, op) -> Result:
     """``op(f, g, upper)`` on the lower then the upper operands (once when exact and not cut)."""
-    cut = kripke.cut
     lo, rank = op(a.lower, b.lower, False)
-    if kripke.exact and a.lower is a.upper and b.lower is b.upper and kripke.cut == cut:
+    if kripke.exact and a.lower is a.upper and b.lower is b.upper and not kripke.cut:
         return Result(lo, lo, rank)
     hi, _ = op(a.upper, b.upper, True)
     return Result(lo, hi, rank)

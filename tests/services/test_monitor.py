@@ -318,7 +318,7 @@ def test_silent_predictor_times_out_without_blocking(monitor_factory, session, s
 
 
 def _heavy_system(folder: Path) -> Path:
-    """Four Spots and four arms: exploring it outlasts any small budget (SPEC §6)."""
+    """Four Spots and four arms: the predictor uses the whole budget on it (SPEC §6.1)."""
     spot = (REPO / "skillsets" / "spot.rl").read_text()
     arm = (REPO / "skillsets" / "manipulator.rl").read_text()
     lines = ['[system]\nname = "fleet"\nproperties = "fleet.props"\n']
@@ -341,7 +341,7 @@ def test_predictor_killed_mid_query_then_restarted(router, monitor_factory, sess
     first = spawn([*args, "doomed"], tmp_path / "doomed.log")
     try:
         watch.wait(lambda alive: any(a.endswith("/doomed") for a in alive))
-        monitor = monitor_factory(fleet, budget=0.2, query_timeout=30.0, retry=30.0)
+        monitor = monitor_factory(fleet, budget=5.0, query_timeout=30.0, retry=30.0)  # killed within the budget
         wait_until(lambda: monitor.predictor_stats.in_flight, 5, "query sent")
         wait_until(lambda: "fetched model" in (tmp_path / "doomed.log").read_text(), 5, "exploration started")
         assert monitor.predictor_stats.answered == 0, "exploration finished before the kill"
