@@ -20,6 +20,7 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -54,7 +55,16 @@ class Kripke:
         self.exact = s.complete  # no frontier: lower and upper coincide
         self.rev = [g.csr(reverse=True) for g in s.components]
         bound = 1 + sum(int(g.csr()[2].max(initial=0)) for g in s.components)
-        dtype = np.int8 if bound <= np.iinfo(np.int8).max else np.int16 if bound <= np.iinfo(np.int16).max else np.int32
+        self.degree_dtype = next(t for t in (np.int8, np.int16, np.int32) if bound <= np.iinfo(t).max)
+        outdeg, loop = self._local_degrees()
+        dead = (outdeg == 0) & ~loop & self.expanded
+        del outdeg, loop
+        self.deadlock = dead if dead.any() else np.broadcast_to(np.False_, (s.size,))
+
+    def _local_degrees(self) -> tuple[np.ndarray, np.ndarray]:
+        """Out-degree without self-loops and self-loop flag, from the components' graphs."""
+        s = self.space
+        dtype = self.degree_dtype
         if s.codes is None:
             outdeg = np.zeros(s.shape, dtype=dtype)
             loop = np.zeros(s.shape, dtype=bool)
@@ -63,25 +73,33 @@ class Kripke:
                 view[i] = s.shape[i]
                 outdeg += g.csr()[2].astype(dtype).reshape(view)
                 loop |= g.loop.reshape(view)
-            outdeg, loop = outdeg.reshape(-1), loop.reshape(-1)
-        else:
-            outdeg = np.zeros(s.size, dtype=dtype)
-            loop = np.zeros(s.size, dtype=bool)
-            for lo in range(0, s.size, CHUNK):
-                codes = s.codes[lo:lo + CHUNK]
-                for i, g in enumerate(s.components):
-                    digit = (codes // s.strides[i]) % s.shape[i]
-                    outdeg[lo:lo + CHUNK] += g.csr()[2].astype(dtype)[digit]
-                    loop[lo:lo + CHUNK] |= g.loop[digit]
-        dead = (outdeg == 0) & ~loop & self.expanded
-        if dead.any():
-            self.deadlock = dead
-            loop |= dead  # deadlocks are sinks: their only successor is themselves
-        else:
-            self.deadlock = np.broadcast_to(np.False_, (s.size,))
-        del dead
+            return outdeg.reshape(-1), loop.reshape(-1)
+        outdeg = np.zeros(s.size, dtype=dtype)
+        loop = np.zeros(s.size, dtype=bool)
+        for lo in range(0, s.size, CHUNK):
+            codes = s.codes[lo:lo + CHUNK]
+            for i, g in enumerate(s.components):
+                digit = (codes // s.strides[i]) % s.shape[i]
+                outdeg[lo:lo + CHUNK] += g.csr()[2].astype(dtype)[digit]
+                loop[lo:lo + CHUNK] |= g.loop[digit]
+        return outdeg, loop
+
+    @cached_property
+    def loop(self) -> np.ndarray:
+        """A step back to itself (deadlocks included: they are sinks)."""
+        return self._local_degrees()[1] | self.deadlock
+
+    @cached_property
+    def outdeg(self) -> np.ndarray:
+        """Successors, self-loop included."""
+        return self.fresh_outdeg()
+
+    def fresh_outdeg(self) -> np.ndarray:
+        """A new :attr:`outdeg` array (the counting fixpoints consume one each; not kept)."""
+        outdeg, loop = self._local_degrees()
+        loop |= self.deadlock
         outdeg += loop
-        self.loop, self.outdeg = loop, outdeg
+        return outdeg
 
     @property
     def truncated_by(self) -> str | None:
@@ -92,6 +110,17 @@ class Kripke:
             self.cut = True
             return True
         return False
+
+    def _initial(self, g: np.ndarray, extra: np.ndarray | None) -> Iterator[np.ndarray]:
+        """Indices of ``(g & stored) | extra``, block by block (no copy of the whole set)."""
+        step = CHUNK * 32
+        for lo in range(0, self.space.size, step):
+            block = g[lo:lo + step] & self.stored[lo:lo + step]
+            if extra is not None:
+                block |= extra[lo:lo + step]
+            idx = np.flatnonzero(block)
+            if idx.size:
+                yield idx + lo
 
     def _all(self) -> np.ndarray:
         return np.array(self.stored, dtype=bool)
@@ -146,7 +175,7 @@ class Kripke:
         ok = f & self.stored & (self.expanded | frontier_value)
         if frontier_value:
             sat |= ok & self.frontier
-        layers = _nonzero_chunks(sat.copy())
+        layers = self._initial(g, ok & self.frontier if frontier_value else None)
         while True:
             found = []
             for layer in layers:
@@ -170,15 +199,15 @@ class Kripke:
         start as one byte and widen when the levels need it; unreached markings
         hold the dtype's maximum.
         """
+        remaining = self.fresh_outdeg()
         rank = np.full(self.space.size, np.iinfo(np.uint8).max, dtype=np.uint8) if ranks else None
         sat = g & self.stored
         if rank is not None:
             rank[sat] = 0
         ok = self.expanded if f is self.stored else f & self.expanded
-        remaining = self.outdeg.copy()
         if frontier_value:
             sat |= self.frontier & f
-        layers = _nonzero_chunks(sat.copy())
+        layers = self._initial(g, self.frontier & f if frontier_value else None)
         level = 0
         while True:
             level += 1
@@ -206,7 +235,7 @@ class Kripke:
         sat = f & self.stored
         if not frontier_value:
             sat &= self.expanded
-        inside = (self.loop & sat).astype(self.outdeg.dtype)  # successors inside sat
+        inside = (self.loop & sat).astype(self.degree_dtype)  # successors inside sat
         for idx in _nonzero_chunks(sat):
             for p in self.predecessor_chunks(idx):
                 np.add.at(inside, p, 1)
