@@ -21,11 +21,13 @@ from __future__ import annotations
 import json
 import re
 import tomllib
+from dataclasses import replace
 from pathlib import Path
 
 from skinet.errors import Diagnostic, Pos, SourceError
 from skinet.lang.model import Model
 from skinet.lang.parser import parse_model
+from skinet.options import parse_prediction
 from skinet.ros.typemap import TypeMap, parse_typemap
 from skinet.system import Marking, System, build_system, marking_from_json
 
@@ -83,7 +85,9 @@ def load_system(path: str | Path) -> tuple[System, list[Diagnostic]]:
         props_path = path.parent / str(props_name)
         props_text, props_source = read_text(props_path), str(props_path)
         sources[props_path.name] = props_text
-    return build_system(system["name"], skillsets, props_text, props_source, sources), warnings
+    built = build_system(system["name"], skillsets, props_text, props_source, sources)
+    options = parse_prediction(data.get("prediction"), [p.name for p in built.properties], where, text)
+    return replace(built, prediction=options), warnings
 
 
 def load_typemap(path: str | Path) -> TypeMap:

@@ -13,6 +13,7 @@ from skinet.errors import SourceError
 from skinet.lang.model import Skillset
 from skinet.net.build import build_net, idle_place, resource_place, running_place
 from skinet.net.petrinet import PetriNet
+from skinet.options import PredictionOptions
 from skinet.props.formula import Property
 from skinet.props.parser import parse_properties
 
@@ -39,6 +40,7 @@ class System:
     components: tuple[Component, ...]
     properties: tuple[Property, ...]
     sources: Mapping[str, str] = field(default_factory=dict)  # file name -> text, for digests
+    prediction: PredictionOptions = PredictionOptions()  # the system file's [prediction] table
 
     def component(self, name: str) -> Component:
         for c in self.components:
@@ -66,6 +68,7 @@ def build_system(
     properties_text: str,
     properties_source: str = "<properties>",
     sources: Mapping[str, str] | None = None,
+    prediction: PredictionOptions | None = None,
 ) -> System:
     """Assemble a system from parsed skillsets (each with its manager node) and properties text."""
     seen: set[str] = set()
@@ -76,7 +79,7 @@ def build_system(
         seen.add(ss.name)
         components.append(Component(ss, build_net(ss), build_net(ss, eventless=True), manager))
     props = parse_properties(properties_text, {s.name: s for s, _ in skillsets}, properties_source)
-    return System(name, tuple(components), tuple(props), dict(sources or {}))
+    return System(name, tuple(components), tuple(props), dict(sources or {}), prediction or PredictionOptions())
 
 
 def marking_to_json(system: System, marking: Mapping[str, int]) -> dict[str, dict]:

@@ -27,7 +27,10 @@ import numpy as np
 from skinet.lang.expr import And, Const, Expr, Implies, Not, Or
 from skinet.props.evaluate import evaluate
 from skinet.props.formula import PlaceAtom, Temporal, Until, is_temporal
-from skinet.verify.explore import CHUNK, StateSpace, expand_codes, unique_codes
+from skinet.verify.explore import CHUNK, StateSpace, expand_codes, expand_edges, unique_codes
+
+
+UNREACHED = np.iinfo(np.int32).max  # distance or rank of a marking from which the target is not known reachable
 
 
 @dataclass
@@ -143,6 +146,25 @@ class Kripke:
     def predecessors(self, idx: np.ndarray) -> np.ndarray:
         """Expanded non-loop predecessors of ``idx`` (one entry per edge)."""
         return np.concatenate([np.empty(0, dtype=np.int64), *self.predecessor_chunks(idx)])
+
+    def edges(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(sources, targets)`` indices of every non-loop edge leaving an expanded marking (computed once).
+
+        About 32 bytes per edge with the sorted copies its users make; the
+        exploration plans for it (``explore(..., edges=True)``).
+        """
+        cache = self.__dict__.get("_edges")
+        if cache is None:
+            s = self.space
+            fwd = [g.csr() for g in s.components]
+            idx = np.flatnonzero(self.expanded)
+            src, dst = [np.empty(0, dtype=np.int64)], [np.empty(0, dtype=np.int64)]
+            for lo in range(0, idx.size, CHUNK):
+                a, b = expand_edges(s.code_of(idx[lo:lo + CHUNK]), s.strides, s.shape, fwd)
+                src.append(s.index(a))
+                dst.append(s.index(b))
+            cache = self.__dict__["_edges"] = (np.concatenate(src), np.concatenate(dst))
+        return cache
 
     def _ex(self, z: np.ndarray, frontier_value: bool, over: bool) -> np.ndarray:
         out = self.loop & z

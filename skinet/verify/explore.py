@@ -49,6 +49,7 @@ SPARSE_BYTES, BOX_BYTES, PROPERTY_BYTES = 24, 4, 5
 SECONDS_PER_MARKING = 1e-7
 FIXPOINT_FACTOR = 1.5  # Kripke structure and atoms, in units of the enumeration's cost
 PROBE = 1 << 17  # markings enumerated before the rate is measured
+EDGE_BYTES = 32  # an edge list held for fair AF: sources, targets and their sorted copies
 
 TruncatedBy = str  # "budget" | "memory" | "depth"
 
@@ -249,6 +250,7 @@ def explore(
     max_depth: int | None = None,
     memory_limit: int | None = DEFAULT_MEMORY_LIMIT,
     properties: int = 0,
+    edges: bool = False,
     progress: Callable[[int, int, float], None] | None = None,
     deadline: Deadline | None = None,
 ) -> StateSpace:
@@ -262,7 +264,7 @@ def explore(
     marking = dict(marking or system.initial_marking())
     graphs = component_graphs(system, marking, event_seeds)
     return explore_graphs(graphs, max_depth=max_depth, memory_limit=memory_limit, properties=properties,
-                          progress=progress, started=t0, deadline=deadline)
+                          edges=edges, progress=progress, started=t0, deadline=deadline)
 
 
 def explore_graphs(
@@ -272,6 +274,7 @@ def explore_graphs(
     max_depth: int | None = None,
     memory_limit: int | None = DEFAULT_MEMORY_LIMIT,
     properties: int = 0,
+    edges: bool = False,
     progress: Callable[[int, int, float], None] | None = None,
     started: float | None = None,
     deadline: Deadline | None = None,
@@ -281,7 +284,8 @@ def explore_graphs(
     Sources are every combination of the components' roots and, for each
     component's seed, the roots with that one component moved to the seed.
     Expands at most ``max_depth`` layers; stops earlier where the stored
-    markings (with ``properties`` mu1 results on top) would not fit
+    markings (with ``properties`` mu1 results on top, and the edge list when
+    ``edges``: fair AF decomposes the explored graph) would not fit
     ``memory_limit`` bytes (whole process) or the time budget (``budget``
     seconds from ``started``, or ``deadline``).  ``progress(depth, markings,
     elapsed)`` is called as markings are stored.
@@ -302,6 +306,12 @@ def explore_graphs(
         return float(cumulative[min(e + 1, last)])
 
     per_box, per_marking = BOX_BYTES + PROPERTY_BYTES * properties, SPARSE_BYTES + PROPERTY_BYTES * properties
+    units = FIXPOINT_FACTOR + properties  # time per stored marking, in units of the enumeration's
+    per_edges = 0.0  # bytes per stored marking for its edge list
+    if edges:
+        degree = sum(float(g.csr()[2].mean()) if g.size else 0.0 for g in graphs) + 1
+        per_edges = EDGE_BYTES * degree
+        units += degree
     room = None if memory_limit is None else memory_limit - resident_bytes()
     rate = SECONDS_PER_MARKING
     for attempt in range(3):
@@ -311,11 +321,12 @@ def explore_graphs(
         if box >= MAX_CODE:
             reasons.append((-2, "memory"))
         if room is not None:
-            fits = [e for e in range(-1, last + 1) if min(box * per_box, stored_count(e) * per_marking) <= room]
+            fits = [e for e in range(-1, last + 1)
+                    if min(box * per_box, stored_count(e) * per_marking) + stored_count(e) * per_edges <= room]
             reasons.append((max(fits) if fits else -2, "memory"))
         if deadline.at is not None:
             left = deadline.left()
-            fits = [e for e in range(-1, last + 1) if stored_count(e) * rate * (FIXPOINT_FACTOR + properties) <= left]
+            fits = [e for e in range(-1, last + 1) if stored_count(e) * rate * units <= left]
             reasons.append((max(fits) if fits and left > 0 else -1, "budget"))
         expanded_depth, truncated_by = last, None
         for e, why in reasons:
@@ -335,7 +346,7 @@ def explore_graphs(
             break
         probe = PROBE if attempt < 2 and deadline.at is not None else None
         space = _store(graphs, strides, box, box_mode, limit, expanded_depth, complete, n_stored, layers,
-                       truncated_by, deadline, probe, properties, progress, t0)
+                       truncated_by, deadline, probe, units, progress, t0)
         if isinstance(space, StateSpace):
             break
         rate = space  # measured seconds per stored marking: plan again
@@ -348,7 +359,7 @@ def explore_graphs(
 def _store(
     graphs: list[ComponentGraph], strides: tuple[int, ...], box: int, box_mode: bool, limit: int,
     expanded_depth: int, complete: bool, n_stored: int, layers: list[int], truncated_by: TruncatedBy | None,
-    deadline: Deadline, probe: int | None, properties: int,
+    deadline: Deadline, probe: int | None, units: float,
     progress: Callable[[int, int, float], None] | None, t0: float,
 ) -> StateSpace | float:
     """Enumerate and store the markings of depth ``<= limit``.
@@ -379,7 +390,7 @@ def _store(
             progress(limit, done, time.perf_counter() - t0)
         if probe is not None and done >= min(probe, n_stored):
             rate = (time.perf_counter() - started) / done
-            if rate * (n_stored - done) + rate * n_stored * (FIXPOINT_FACTOR + properties - 1) > deadline.left():
+            if rate * (n_stored - done) + rate * n_stored * (units - 1) > deadline.left():
                 return rate
             probe = None
         if done < n_stored and deadline.expired():
@@ -543,15 +554,24 @@ def expand_codes(
     csr: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]],
 ) -> np.ndarray:
     """Every non-loop neighbour code of ``codes`` along each component (with repeats)."""
-    parts = []
+    return expand_edges(codes, strides, shape, csr, sources=False)[1]
+
+
+def expand_edges(
+    codes: np.ndarray, strides: Sequence[int], shape: Sequence[int],
+    csr: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]], sources: bool = True,
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(sources, targets)`` of every non-loop edge leaving ``codes`` (sources empty unless asked)."""
+    src, dst = [], []
     for i, (ptr, targets, deg) in enumerate(csr):
         digit = (codes // strides[i]) % shape[i]
         cnt = deg[digit]
         total = int(cnt.sum())
         if total == 0:
             continue
-        base = np.repeat(codes - digit * strides[i], cnt)
+        if sources:
+            src.append(np.repeat(codes, cnt))
         first = np.repeat(ptr[digit] - np.cumsum(cnt) + cnt, cnt)
-        pos = first + np.arange(total)
-        parts.append(base + targets[pos] * strides[i])
-    return np.concatenate(parts) if parts else np.empty(0, dtype=np.int64)
+        dst.append(np.repeat(codes - digit * strides[i], cnt) + targets[first + np.arange(total)] * strides[i])
+    empty = np.empty(0, dtype=np.int64)
+    return (np.concatenate(src) if src else empty), (np.concatenate(dst) if dst else empty)
