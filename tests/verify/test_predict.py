@@ -258,7 +258,7 @@ def test_ovens_have_implicit_constraints() -> None:
 
 
 def test_unknown_marking_is_undecided() -> None:
-    fc = literal_forecast(paper())
+    fc = literal_forecast(paper(), compositional=False)
     marking = dict(paper().initial_marking())
     marking["spot"] = 0  # no token anywhere: never reached
     assert fc.verdict("action_guard", marking).status == "undecided"
