@@ -7,6 +7,8 @@
 set -euo pipefail
 
 PACKAGES=(
+    spin  # tests/net/test_promela.py: Spin's stored-state count equals ours; benchmarks/bench_spin.py
+    gcc   # compiles Spin's pan.c verifier (same tests)
 )
 
 missing=()

@@ -15,6 +15,7 @@ from skinet.files import load_model, load_state, load_system
 from skinet.lang.expr import to_text
 from skinet.net.build import build_net
 from skinet.net.export import FORMATS
+from skinet.net.petrinet import PetriNet
 from skinet.props.parser import parse_formula
 from skinet.system import System, marking_to_json
 from skinet.verify.algorithm1 import analyse
@@ -82,8 +83,8 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--json", action="store_true", help="machine-readable summary")
     c.set_defaults(func=cmd_parse)
 
-    c = sub.add_parser("net", help="print the Petri net of a skillset (SPEC §3)")
-    c.add_argument("file", help="skillset model (.rl)")
+    c = sub.add_parser("net", help="print the Petri net of a skillset or of a system's union (SPEC §3)")
+    c.add_argument("file", help="skillset model (.rl), or system file (.toml) for the union of its skillsets")
     c.add_argument("--eventless", action="store_true", help="the eventless net SkN^e (no event transitions)")
     c.add_argument("--format", choices=sorted(FORMATS), default="json", help="output format (default: json)")
     c.add_argument("-o", "--output", help="write to this file instead of standard output")
@@ -179,6 +180,22 @@ def cmd_parse(args: argparse.Namespace) -> int:
 
 
 def cmd_net(args: argparse.Namespace) -> int:
+    if args.file.endswith(".toml"):  # a system file: the union of its skillsets' nets
+        system, warnings = load_system(args.file)
+        for w in warnings:
+            print(str(w), file=sys.stderr)
+        nets = [c.eventless if args.eventless else c.net for c in system.components]
+        if len(nets) > 1:
+            from skinet.net.union import union
+
+            nets = [union(nets, system.name)]
+    else:
+        nets = _model_nets(args)
+    _write_net(args, nets[0])
+    return 0
+
+
+def _model_nets(args: argparse.Namespace) -> list[PetriNet]:
     model = load_model(args.file)
     for w in model.warnings:
         print(str(w), file=sys.stderr)
@@ -187,7 +204,11 @@ def cmd_net(args: argparse.Namespace) -> int:
         from skinet.net.union import union
 
         nets = [union(nets, Path(args.file).stem)]
-    text = FORMATS[args.format](nets[0])
+    return nets
+
+
+def _write_net(args: argparse.Namespace, net: PetriNet) -> None:
+    text = FORMATS[args.format](net)
     if args.output:
         try:
             Path(args.output).write_text(text)
@@ -195,7 +216,6 @@ def cmd_net(args: argparse.Namespace) -> int:
             raise SourceError.at(args.output, None, f"cannot write file: {exc.strerror}") from None
     else:
         sys.stdout.write(text if text.endswith("\n") else text + "\n")
-    return 0
 
 
 def cmd_unsafe(args: argparse.Namespace) -> int:
