@@ -22,9 +22,7 @@ from skinet.verify.algorithm1 import analyse
 from skinet.verify.ctl import Kripke, check
 from skinet.verify.explore import Deadline, explore
 from skinet.verify.predict import Forecast, forecast
-from skinet.cli import demo
-from skinet.cli import record as record_cli
-from skinet.cli import timeline as timeline_cli
+import importlib
 from skinet.cli.memory import add_memory_arg, memory_limit
 from skinet.cli.render import analysis_text, seconds, table
 from skinet.cli.run import add_commands as add_service_commands
@@ -51,8 +49,10 @@ state files (--state) are JSON: {"spot": {"resources": {"posture": "Standing"},
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    args_list = list(sys.argv[1:] if argv is None else argv)
+    command = next((a for a in args_list if not a.startswith("-")), None)
+    parser = build_parser(command)
+    args = parser.parse_args(args_list)
     if not getattr(args, "command", None):
         parser.print_help()
         return 2
@@ -71,7 +71,16 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 0
 
 
-def build_parser() -> argparse.ArgumentParser:
+# Commands whose modules are imported only when used: start-up of the others stays short.
+LAZY_COMMANDS = {
+    "demo": ("skinet.cli.demo", "replay the paper's unassisted and assisted runs (the main job)"),
+    "record": ("skinet.cli.record", "record the monitor's messages of a system into a JSON Lines log"),
+    "timeline": ("skinet.cli.timeline", "draw a monitor log (skinet record, skinet demo --log) as a timeline picture"),
+}
+
+
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The parser; with ``command``, the other lazy commands are registered without importing them."""
     p = argparse.ArgumentParser(
         prog="skinet", description=DESCRIPTION, epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter
     )
@@ -106,9 +115,11 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("formula", help='e.g. "AG not (spot:Busy and manipulator:Busy)"')
     c.set_defaults(func=cmd_ctl)
 
-    demo.add_parser(sub)
-    record_cli.add_parser(sub)
-    timeline_cli.add_parser(sub)
+    for name, (module, summary) in LAZY_COMMANDS.items():
+        if command in (None, name):
+            importlib.import_module(module).add_parser(sub)
+        else:  # listed in --help without importing its module (pydantic, zenoh, plotting)
+            sub.add_parser(name, help=summary)
     add_service_commands(sub)
     return p
 

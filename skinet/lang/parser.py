@@ -54,6 +54,7 @@ def _parser() -> Lark:
         lexer="contextual",
         propagate_positions=True,
         maybe_placeholders=False,
+        cache=True,  # LALR tables cached in the temp directory: start-up of every command
     )
 
 
