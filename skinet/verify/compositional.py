@@ -70,7 +70,8 @@ class CompositionalOracle:
         self.max_states = max_states
         self._memo: OrderedDict[tuple, PredictionVerdict] = OrderedDict()
         self._inside_memo: OrderedDict[tuple, tuple] = OrderedDict()  # per property and M-marking
-        self._own: dict[tuple[str, int], Abilities] = {}  # per component and local marking
+        self._own: dict[tuple[str, int], tuple[Abilities, int]] = {}  # per component and local marking
+        self._graphs: dict[str, list[ComponentGraph]] = {}
         self._idle = {c.name: [1 << c.eventless.place_index(idle_place(k.name)) for k in c.skillset.skills]
                       for c in system.components}
         self._mentioned = {p.name: sorted({a.skillset for a in atoms(p.expr) if isinstance(a, PlaceAtom)},
@@ -90,15 +91,32 @@ class CompositionalOracle:
                 self._memo.popitem(last=False)
         return found
 
-    def _graph(self, name: str, m: int) -> ComponentGraph:
-        return explore_component(name, self.system.component(name).eventless, [m])
+    def remember(self, graphs: Sequence[ComponentGraph]) -> None:
+        """Component graphs already explored (the live marking's): their states need no new search."""
+        for g in graphs:
+            known = self._graphs.setdefault(g.name, [])
+            if all(g is not k for k in known):
+                known.insert(0, g)
+                del known[4:]
+
+    def _graph(self, name: str, m: int) -> tuple[ComponentGraph, int]:
+        """A graph holding local marking ``m`` (everything reachable from it) and its index there."""
+        for g in self._graphs.get(name, ()):
+            if m in g.index:
+                return g, g.index[m]
+        g = explore_component(name, self.system.component(name).eventless, [m])
+        self.remember([g])
+        return g, g.index[m]
 
     def _decide(self, prop: Property, marking: Mapping[str, int], af: str, deadline: Deadline) -> PredictionVerdict:
         names = self._mentioned[prop.name]
         key = (prop.name, *(marking[n] for n in names))
         found = self._inside_memo.get(key)
         if found is None:
-            found = self._inside(prop, names, [self._graph(n, marking[n]) for n in names], deadline)
+            if deadline.expired():
+                return PredictionVerdict("undecided")
+            where = [self._graph(n, marking[n]) for n in names]
+            found = self._inside(prop, names, [g for g, _ in where], [i for _, i in where], deadline)
             if found is None:
                 return PredictionVerdict("undecided")
             self._inside_memo[key] = found
@@ -108,12 +126,18 @@ class CompositionalOracle:
         if dist is not None and dist == 0:
             return PredictionVerdict("dangerous", 0, ())
         groups = [inside]
-        others = [self._graph(c.name, marking[c.name]) for c in self.system.components if c.name not in names]
-        for g in others:
-            own = self._own.get((g.name, marking[g.name]))
+        longest = 0
+        for c in self.system.components:
+            if c.name in names:
+                continue
+            own = self._own.get((c.name, marking[c.name]))
             if own is None:
-                own = self._own[(g.name, marking[g.name])] = _abilities(g, self._idle[g.name])
-            groups.append(own)
+                if deadline.expired():
+                    return PredictionVerdict("undecided")
+                own = self._own[(c.name, marking[c.name])] = _abilities(*self._graph(c.name, marking[c.name]),
+                                                                        self._idle[c.name])
+            groups.append(own[0])
+            longest += own[1]
         if af == "literal":
             forever = any(a.cycle for a in groups) or all(a.dead for a in groups)
         else:
@@ -122,10 +146,11 @@ class CompositionalOracle:
         if forever:
             return PredictionVerdict("safe")
         if af == "literal":  # steps: the bound, as the global fixpoint's rank (no cycle anywhere)
-            dist = 1 + inside.longest + sum(_longest(g.size, g.succ) for g in others)
+            dist = 1 + inside.longest + longest
         return PredictionVerdict("dangerous", dist, witness)
 
-    def _inside(self, prop: Property, names: Sequence[str], graphs: Sequence[ComponentGraph], deadline: Deadline):
+    def _inside(self, prop: Property, names: Sequence[str], graphs: Sequence[ComponentGraph], starts: Sequence[int],
+                deadline: Deadline):
         """The M-product inside phi from the start: its abilities, and the fewest steps out of phi."""
         shape = tuple(g.size for g in graphs)
         if int(np.prod(shape, dtype=np.float64)) > self.max_states:
@@ -144,7 +169,7 @@ class CompositionalOracle:
         def phi(state: tuple[int, ...]) -> bool:
             return bool(table[state])
 
-        start = tuple(0 for _ in graphs)  # each graph's root is its index 0
+        start = tuple(starts)
         if not phi(start):
             return Abilities(False, False, False, False, False, 0), 0, ()
         index = {start: 0}
@@ -222,14 +247,25 @@ def _longest(n: int, succ: Sequence[Sequence[int]]) -> int:
     return max(best)
 
 
-def _abilities(g: ComponentGraph, idle_bits: Sequence[int]) -> Abilities:
-    """Abilities of one component on its own graph (every state is reachable from its root)."""
-    dead = np.array([not s and not lp for s, lp in zip(g.succ, g.loop)], dtype=bool)
-    return _abilities_of(
-        g.size, g.succ, np.asarray(g.loop, dtype=bool), dead,
-        [[all(m & bit for bit in idle_bits)] for m in g.states],
-        [[bool(m & bit) for bit in idle_bits] for m in g.states],
+def _abilities(g: ComponentGraph, start: int, idle_bits: Sequence[int]) -> tuple[Abilities, int]:
+    """Abilities of one component from local state ``start``, and its longest path when acyclic."""
+    index = {start: 0}
+    nodes = [start]
+    for a in nodes:  # grows while iterating: breadth-first reachability
+        for b in g.succ[a]:
+            if b not in index:
+                index[b] = len(nodes)
+                nodes.append(b)
+    succ = [[index[b] for b in g.succ[a]] for a in nodes]
+    loop = g.loop[nodes]
+    dead = np.array([not s and not lp for s, lp in zip(succ, loop)], dtype=bool)
+    states = [g.states[a] for a in nodes]
+    found = _abilities_of(
+        len(nodes), succ, np.asarray(loop, dtype=bool), dead,
+        [[all(m & bit for bit in idle_bits)] for m in states],
+        [[bool(m & bit) for bit in idle_bits] for m in states],
     )
+    return found, (0 if found.cycle else _longest(len(nodes), succ))
 
 
 def _abilities_of(n: int, succ: Sequence[Sequence[int]], loop: np.ndarray, dead: np.ndarray,

@@ -184,6 +184,7 @@ def forecast(
             risk.forced = forced_mask(system, space.components, space.local, p, opts.events_uncontrollable)
         risks[p.name] = risk
     oracle = compositional_oracle(system)
+    oracle.remember(space.components)
     props = {p.name: p for p in system.properties}
 
     def fallback(prop: str, marking: Mapping[str, int]) -> PredictionVerdict:
