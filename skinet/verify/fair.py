@@ -76,11 +76,10 @@ def fair_scc_markings(kripke: Kripke, inside: np.ndarray, fairness: Sequence[np.
     ``None`` when the deadline has expired (the decomposition is one call: it
     is not started late).
     """
-    from scipy.sparse import csr_matrix
-    from scipy.sparse.csgraph import connected_components
-
     if kripke._expired():
         return None
+    from scipy.sparse import csr_matrix
+    from scipy.sparse.csgraph import connected_components
 
     g = _graph(kripke)
     out = np.zeros(kripke.space.size, dtype=bool)
