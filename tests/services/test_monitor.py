@@ -258,6 +258,23 @@ def test_prediction_in_process(router, monitor_factory, session, system):
         psession.close()
 
 
+def test_big_system_answered_within_the_budget_never_a_timeout(router, monitor_factory, session, tmp_path):
+    """4 + 4 skillsets (SPEC §6.1): the predictor answers within its budget; the derived query timeout holds."""
+    fleet = load_system(_heavy_system(tmp_path))[0]
+    psession = open_client(router)
+    predictor = start_predictor(psession, "big")
+    try:
+        monitor = monitor_factory(fleet, budget=1.0)  # default query timeout: derived from the budget
+        wait_until(lambda: monitor.predictor_stats.answered >= 1, 20, "first prediction")
+        stats = monitor.predictor_stats
+        assert stats.timed_out == 0 and stats.failed == 0 and stats.last_instance == "big"
+        assert stats.last_complete is False  # truncated, yet answered
+        assert not monitor.snapshot().unsafe.prediction_stale
+    finally:
+        predictor.close()
+        psession.close()
+
+
 def test_prediction_from_predictor_process(router, monitor_factory, session, system, tmp_path):
     reports = Reports(session)
     watch = LivelinessWatch(session, keys.alive("*", "predictor", "*"))
