@@ -20,9 +20,10 @@ from services.monitor.service import MonitorView, start_monitor
 from services.predictor.service import start_predictor
 from services.simulator import Simulator
 from services.simulator.driver import StepRun
-from skinet.mission import Scenario, StepRecord
+from skinet.mission import Scenario, StepRecord, flags_on
 from skinet.system import System
 from skinet.verify.algorithm1 import UnsafeTransition
+from skinet.wire.messages import UnsafeEntry
 
 
 class ChainError(RuntimeError):
@@ -57,18 +58,22 @@ def run_chain(
         _wait(lambda: monitor.counters.applied >= len(system.components), settle, "initial statuses")
         records: list[StepRecord] = []
         before = {p.name: True for p in system.properties}
+        if predict:
+            _wait(lambda: not monitor.snapshot().unsafe.prediction_stale, settle, "initial prediction")
+        shown = [unsafe_transition(u) for u in monitor.snapshot().unsafe.unsafe]  # what the operator sees
 
         def on_step(run: StepRun) -> None:
-            nonlocal before
+            nonlocal before, shown
             if not bridge.wait_statuses(simulator.statuses_published()):
                 raise ChainError(f"step {run.index}: the bridge did not receive every status")
             _wait(lambda: monitor.counters.applied >= bridge.counters.events, settle, f"step {run.index} applied")
             if predict:
                 _wait(lambda: not monitor.snapshot().unsafe.prediction_stale, settle, f"step {run.index} prediction")
             view = monitor.snapshot()
-            record = _record(run, view, before)
+            record = _record(run, view, before, shown)
             if run.step.transition is not None:
                 before = record.holds
+                shown = [unsafe_transition(u) for u in view.unsafe.unsafe]
             records.append(record)
 
         simulator.drive(scenario, speed=speed, on_step=on_step)
@@ -79,18 +84,23 @@ def run_chain(
         session.close()
 
 
-def _record(run: StepRun, view: MonitorView, before: dict[str, bool]) -> StepRecord:
+def unsafe_transition(u: UnsafeEntry) -> UnsafeTransition:
+    return UnsafeTransition(u.skillset, u.transition, u.kind, u.controllable, u.property, u.constraint, u.steps,
+                            tuple(u.witness), u.reason)
+
+
+def _record(run: StepRun, view: MonitorView, before: dict[str, bool], shown: list[UnsafeTransition]) -> StepRecord:
     holds = {v.name: v.holds for v in view.verdicts.properties}
     unsafe = view.unsafe.unsafe
-    warnings: list[UnsafeTransition] = []
     if run.step.consider is not None:
-        warnings = [
-            UnsafeTransition(u.skillset, u.transition, u.kind, u.controllable, u.property, u.constraint, u.steps, tuple(u.witness))
-            for u in unsafe if u.skillset == run.step.skillset and u.transition == run.step.consider
-        ]
-        return StepRecord(run.index, run.step, dict(before), [], warnings, len(unsafe))
+        warnings = flags_on(shown, run.step.skillset, run.step.consider)
+        return StepRecord(run.index, run.step, dict(before), [], warnings, len(shown))
     violations = [p for p, ok in holds.items() if before.get(p, True) and not ok]
-    return StepRecord(run.index, run.step, holds, violations, [], len(unsafe), view.state.divergence)
+    recovery: dict[str, list[str]] = {p: [] for p in view.unsafe.violated}
+    for r in view.unsafe.recovery:
+        recovery.setdefault(r.property, []).append(f"{r.skillset}:{r.transition}")
+    return StepRecord(run.index, run.step, holds, violations, [], len(unsafe), view.state.divergence,
+                      flags_on(shown, run.step.skillset, run.step.transition or ""), recovery)
 
 
 def _wait(condition, timeout: float, what: str) -> None:

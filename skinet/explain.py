@@ -145,4 +145,13 @@ def implicit_reason(af: str, steps: int | None, witness: Sequence[str]) -> str:
     return f"every continuation in which running skills end violates it{earliest}{example}"
 
 
+def warning_line(u: object) -> str:
+    """``base:navigate.start: forced for stowed_drive — unfold may succeed (1 step) and ...``.
+
+    ``u`` is an :class:`~skinet.verify.algorithm1.UnsafeTransition` or a wire ``UnsafeEntry``.
+    """
+    head = f"{u.skillset}:{u.transition}: {u.constraint} for {u.property}"  # type: ignore[attr-defined]
+    return f"{head} — {u.reason}" if u.reason else head  # type: ignore[attr-defined]
+
+
 UNKNOWN_REASON = "the prediction could not decide (exploration truncated or budget spent)"

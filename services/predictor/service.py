@@ -34,7 +34,7 @@ from skinet.verify.explore import DEFAULT_MEMORY_LIMIT
 from skinet.verify.predict import forecast
 from skinet.wire import keys
 from skinet.wire.codec import DecodeError, decode, encode
-from skinet.wire.convert import bundle, marking_of, risks, state_space_report, system_from_bundle
+from skinet.wire.convert import bundle, marking_of, request_options, risks, state_space_report, system_from_bundle
 from skinet.wire.messages import ModelBundle, PredictReply, PredictRequest
 
 log = logging.getLogger("skinet.predictor")
@@ -144,7 +144,8 @@ class Predictor:
         try:
             system = self._system(request.system, request.digest)
             marking = marking_of(system, request.skillsets, "request")
-            fc = forecast(system, marking, budget=min(request.budget, self.max_budget), memory_limit=self.memory_limit)
+            fc = forecast(system, marking, budget=min(request.budget, self.max_budget),
+                          options=request_options(system, request), memory_limit=self.memory_limit)
             return PredictReply(
                 system=request.system, digest=request.digest, seq=request.seq, ok=True, instance=self.instance_id,
                 report=state_space_report(system, fc, time.time()), risks=risks(system, marking, fc),

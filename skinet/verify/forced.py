@@ -38,8 +38,8 @@ from itertools import product
 
 import numpy as np
 
-from skinet.net.petrinet import PetriNet
-from skinet.net.semantics import steps
+from skinet.net.petrinet import PetriNet, Transition
+from skinet.net.semantics import stable_successors
 from skinet.props.evaluate import evaluate
 from skinet.props.formula import PlaceAtom, Property
 from skinet.lang.expr import atoms
@@ -97,16 +97,16 @@ def uncontrollable_reach(net: PetriNet, marking: int, events: bool = False) -> R
     if hit is not None:
         cache.move_to_end(key)
         return hit
-    kinds = uncontrollable_kinds(events)
+    transitions = _uncontrollable_transitions(net, events)
     states, dist, path = [marking], [0], [()]
     index = {marking: 0}
     i = 0
     while i < len(states):
         m = states[i]
-        for t, results in steps(net, m):
-            if t.kind not in kinds:
+        for t in transitions:  # every marking here is stable: no invariant can block an outcome
+            if m & t.pre_mask != t.pre_mask:
                 continue
-            for r in sorted(results):
+            for r in sorted(stable_successors(net, m, t)):
                 if r not in index:
                     index[r] = len(states)
                     states.append(r)
@@ -120,6 +120,14 @@ def uncontrollable_reach(net: PetriNet, marking: int, events: bool = False) -> R
     return reach
 
 
+def _uncontrollable_transitions(net: PetriNet, events: bool) -> tuple[Transition, ...]:
+    cache: dict[bool, tuple[Transition, ...]] = net.__dict__.setdefault("_unc_transitions", {})
+    if events not in cache:
+        kinds = uncontrollable_kinds(events)
+        cache[events] = tuple(t for t in net.transitions if t.kind in kinds)
+    return cache[events]
+
+
 class ForcedOracle:
     """forced(phi) for every property of one system, memoised per relevant marking.
 
@@ -130,27 +138,34 @@ class ForcedOracle:
         self.system = system
         self.events = events
         self._nets = {c.name: c.net for c in system.components}
-        self._atoms: dict[str, dict[str, tuple[PlaceAtom, ...]]] = {}
+        self._atoms: dict[Property, dict[str, tuple[PlaceAtom, ...]]] = {}
         self._memo: OrderedDict[tuple, ForcedVerdict | None] = OrderedDict()
-        for p in system.properties:
+
+    def atoms_of(self, prop: Property) -> dict[str, tuple[PlaceAtom, ...]]:
+        """The atoms of ``prop`` per component it mentions."""
+        if prop not in self._atoms:
             per: dict[str, list[PlaceAtom]] = {}
-            for a in atoms(p.expr):
+            for a in atoms(prop.expr):
                 if isinstance(a, PlaceAtom) and a not in per.setdefault(a.skillset, []):
                     per[a.skillset].append(a)
-            self._atoms[p.name] = {c: tuple(v) for c, v in per.items()}
+            self._atoms[prop] = {c: tuple(v) for c, v in per.items()}
+        return self._atoms[prop]
 
     def verdict(self, prop: Property, marking: Mapping[str, int]) -> ForcedVerdict | None:
         """The shortest uncontrollable way from ``marking`` to a violation of ``prop``, or None."""
-        per = self._atoms[prop.name]
-        key = (prop.name, *(marking[c] for c in per))
+        per = self.atoms_of(prop)
+        key = (prop, *(marking[c] for c in per))
         if key in self._memo:
             self._memo.move_to_end(key)
-            return self._memo[key]
-        found = self._search(prop, per, marking)
-        self._memo[key] = found
-        while len(self._memo) > CACHE_SIZE:
-            self._memo.popitem(last=False)
-        return found
+            found = self._memo[key]
+        else:
+            found = self._memo[key] = self._search(prop, per, marking)
+            while len(self._memo) > CACHE_SIZE:
+                self._memo.popitem(last=False)
+        if found is None:
+            return None
+        # The memo knows only the components the property mentions; the others keep this marking.
+        return ForcedVerdict(found.steps, found.witness, {**marking, **{c: found.reached[c] for c in per}})
 
     def _search(self, prop: Property, per: Mapping[str, tuple[PlaceAtom, ...]],
                 marking: Mapping[str, int]) -> ForcedVerdict | None:
@@ -212,7 +227,7 @@ def forced_mask(
     violating combination of valuations.
     """
     graphs = list(graphs)
-    per = oracle(system, events)._atoms[prop.name]
+    per = oracle(system, events).atoms_of(prop)
     position = {g.name: i for i, g in enumerate(graphs)}
     names = list(per)
     if not names:  # a constant property
