@@ -32,13 +32,14 @@ fewest steps to a violation (moves of ``M`` only).  Cost: linear in the
 from __future__ import annotations
 
 from collections import OrderedDict, deque
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
 
 from skinet.lang.expr import atoms
 from skinet.net.build import idle_place
+from skinet.net.semantics import steps
 from skinet.props.evaluate import evaluate
 from skinet.props.formula import PlaceAtom, Property
 from skinet.system import System
@@ -289,6 +290,14 @@ def _abilities_of(n: int, succ: Sequence[Sequence[int]], loop: np.ndarray, dead:
         cycle=bool(cyclic.any()), fair_cycle=bool(fair.any()), park=bool(parked.any()),
         dead=bool(dead.any()), fair_dead=bool((dead & parked).any()),
     )
+
+
+def one_step(system: System, marking: Mapping[str, int]) -> Iterator[dict[str, int]]:
+    """Every marking one step (transition and cascade, events included) leads to from ``marking``."""
+    for comp in system.components:
+        for _, results in steps(comp.net, marking[comp.name]):
+            for m in results:
+                yield {**marking, comp.name: m}
 
 
 def compositional_oracle(system: System) -> CompositionalOracle:

@@ -23,13 +23,12 @@ import numpy as np
 
 from skinet.lang.expr import Not
 from skinet.options import PredictionOptions
-from skinet.net.semantics import steps
 from skinet.props.formula import Temporal
 from skinet.system import System
 from skinet.verify.algorithm1 import PredictionVerdict
 from skinet.verify.ctl import UNREACHED, Kripke, Result, check
 from skinet.verify.explore import DEFAULT_MEMORY_LIMIT, Deadline, StateSpace, explore
-from skinet.verify.compositional import compositional_oracle
+from skinet.verify.compositional import compositional_oracle, one_step
 from skinet.verify.fair import distance_to, fair_af, skill_fairness
 from skinet.verify.forced import forced_mask
 
@@ -197,11 +196,8 @@ def forecast(
 
     if compositional and kripke.truncated_by is not None:
         # Algorithm 1 asks about the one-step successors: decide them now, within the budget.
-        live = dict(marking or system.initial_marking())
-        for comp in system.components:
-            for _, results in steps(comp.net, live[comp.name]):
-                for m in results:
-                    for name in props:
-                        fallback(name, {**live, comp.name: m})
+        for after in one_step(system, dict(marking or system.initial_marking())):
+            for name in props:
+                fallback(name, after)
 
     return Forecast(space, kripke, risks, fallback if compositional else None)

@@ -13,7 +13,7 @@ from skinet.lang.parser import parse_skillset
 from skinet.net.semantics import steps
 from skinet.options import PredictionOptions, PropertyOptions
 from skinet.system import System, build_system
-from skinet.verify.compositional import CompositionalOracle
+from skinet.verify.compositional import CompositionalOracle, one_step
 from skinet.verify.explore import Deadline
 from skinet.verify.predict import forecast
 
@@ -67,22 +67,15 @@ def test_equals_global_fixpoints(name: str, af: str) -> None:
 def test_successors_of_a_huge_system_are_decided() -> None:
     """Four Spots and four arms (about 7.7e12 markings with seeds): every successor decided.
 
-    Timed in benchmarks/bench_successors.py; here only a loose bound (2 shared cores).
+    Timed in benchmarks/bench_big.py (b); here only a loose bound (2 shared cores).
     """
     system = copies(CORPUS, "spot_manipulator.props", 4, 4)
     oracle = CompositionalOracle(system)
     start = system.initial_marking()
     started = time.perf_counter()
     deadline = Deadline.after(10.0)
-    verdicts = []
-    for comp in system.components:
-        for _, results in steps(comp.net, start[comp.name]):
-            for m in results:
-                after = dict(start)
-                after[comp.name] = m
-                for p in system.properties:
-                    for af in ("literal", "fair"):
-                        verdicts.append(oracle.verdict(p, after, af, deadline).status)
+    verdicts = [oracle.verdict(p, after, af, deadline).status
+                for after in one_step(system, start) for p in system.properties for af in ("literal", "fair")]
     assert time.perf_counter() - started < 10.0
     assert verdicts and "undecided" not in verdicts
 

@@ -9,7 +9,6 @@ one refutes.
 from __future__ import annotations
 
 import json
-import re
 import subprocess
 import sys
 import time
@@ -20,33 +19,22 @@ import numpy as np
 import pytest
 
 from skinet.lang.expr import Not
-from skinet.lang.parser import parse_skillset
 from skinet.props.formula import Temporal
 from skinet.props.parser import parse_formula
-from skinet.system import System, build_system
+from skinet.system import System
 from skinet.verify.algorithm1 import analyse
 from skinet.verify.ctl import Kripke, Result, check
 from skinet.verify.explore import Deadline, explore, layer_counts, resident_bytes
 from skinet.verify.predict import forecast
+from tests.verify.test_compositional import copies as corpus_copies
 
 ROOT = Path(__file__).resolve().parents[2]
 CORPUS = ROOT.parent / "shared" / "corpus"
 
 
 def copies(n_spot: int, n_arm: int) -> System:
-    """``n_spot`` copies of the corpus Spot and ``n_arm`` of its arm, one guard per pair."""
-    if not CORPUS.exists():
-        pytest.skip(f"{CORPUS} not found")
-    spot, arm = (CORPUS / "spot.rl").read_text(), (CORPUS / "manipulator.rl").read_text()
-    skillsets = []
-    for k in range(1, n_spot + 1):
-        name = "spot" if k == 1 else f"spot{k}"
-        skillsets.append(parse_skillset(re.sub(r"skillset\s+spot\b", f"skillset {name}", spot, count=1), name))
-    for k in range(1, n_arm + 1):
-        name = "manipulator" if k == 1 else f"manipulator{k}"
-        skillsets.append(parse_skillset(re.sub(r"skillset\s+manipulator\b", f"skillset {name}", arm, count=1), name))
-    props = (CORPUS / "spot_manipulator.props").read_text()
-    return build_system(f"{n_spot}spot+{n_arm}arm", [(s, "") for s in skillsets], props)
+    """``n_spot`` copies of the corpus Spot and ``n_arm`` of its arm."""
+    return corpus_copies(CORPUS, "spot_manipulator.props", n_spot, n_arm)
 
 
 @cache
@@ -177,8 +165,8 @@ def test_formerly_refused_systems_are_answered(n_spot: int, n_arm: int, seeds: b
 
 MEMORY_SCRIPT = """
 import json, resource, sys
-sys.path.insert(0, {tests!r})
-from test_limits import copies
+sys.path.insert(0, {root!r})
+from tests.verify.test_limits import copies
 from skinet.verify.predict import forecast
 fc = forecast(copies(3, 3), event_seeds=False, memory_limit={limit})
 print(json.dumps({{"peak": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024, **fc.report()}}))
@@ -189,7 +177,7 @@ print(json.dumps({{"peak": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 
 def test_memory_limit_bounds_the_peak(limit_mib: int) -> None:
     """3 + 3 without seeds is a full box of 122 023 936 markings: a fresh process stays under the limit."""
     copies(1, 1)  # skips without the corpus
-    script = MEMORY_SCRIPT.format(tests=str(Path(__file__).parent), limit=limit_mib << 20)
+    script = MEMORY_SCRIPT.format(root=str(ROOT), limit=limit_mib << 20)
     out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=600, check=True)
     report = json.loads(out.stdout)
     assert report["truncated_by"] == "memory" and not report["complete"]
