@@ -62,7 +62,6 @@ def _parser(start: str = "start") -> Lark:
         lexer="contextual",
         propagate_positions=True,
         maybe_placeholders=False,
-        cache=True,  # LALR tables cached in the temp directory: start-up of every command
     )
 
 

@@ -26,8 +26,7 @@ from skinet.props.formula import PlaceAtom, Property, Temporal, Until, is_tempor
 @cache
 def _lark(start: str) -> Lark:
     grammar = (Path(__file__).with_name("formula.lark")).read_text()
-    return Lark(grammar, start=start, parser="lalr", propagate_positions=True, maybe_placeholders=False,
-                cache=True)  # LALR tables cached in the temp directory
+    return Lark(grammar, start=start, parser="lalr", propagate_positions=True, maybe_placeholders=False)
 
 
 def atom_candidates(skillset: Skillset) -> dict[str, list[str]]:

@@ -85,7 +85,10 @@ class CompositionalOracle:
         if key in self._memo:
             self._memo.move_to_end(key)
             return self._memo[key]
-        found = self._decide(prop, marking, af, deadline or Deadline())
+        try:
+            found = self._decide(prop, marking, af, deadline or Deadline())
+        except KeyError:  # a transient marking: not a state of the stable graph
+            found = PredictionVerdict("undecided")
         if found.status != "undecided":
             self._memo[key] = found
             while len(self._memo) > CACHE_SIZE:
@@ -101,7 +104,10 @@ class CompositionalOracle:
                 del known[4:]
 
     def _graph(self, name: str, m: int) -> tuple[ComponentGraph, int]:
-        """A graph holding local marking ``m`` (everything reachable from it) and its index there."""
+        """A graph holding local marking ``m`` (everything reachable from it) and its index there.
+
+        Raises :class:`KeyError` for a transient ``m`` (stable markings only).
+        """
         for g in self._graphs.get(name, ()):
             if m in g.index:
                 return g, g.index[m]
