@@ -150,7 +150,7 @@ class Kripke:
     def edges(self) -> tuple[np.ndarray, np.ndarray]:
         """``(sources, targets)`` indices of every non-loop edge leaving an expanded marking (computed once).
 
-        About 32 bytes per edge with the sorted copies its users make; the
+        Up to about 80 bytes per edge with the copies its users make; the
         exploration plans for it (``explore(..., edges=True)``).
         """
         cache = self.__dict__.get("_edges")

@@ -49,7 +49,7 @@ SPARSE_BYTES, BOX_BYTES, PROPERTY_BYTES = 20, 3.2, 2.5
 SECONDS_PER_MARKING = 1e-7
 FIXPOINT_FACTOR = 1.5  # Kripke structure and atoms, in units of the enumeration's cost
 PROBE = 1 << 17  # markings enumerated before the rate is measured
-EDGE_BYTES = 32  # an edge list held for fair AF: sources, targets and their sorted copies
+EDGE_BYTES = 80  # an edge list held for fair AF: sources, targets, their sorted copies, the SCC matrix
 
 TruncatedBy = str  # "budget" | "memory" | "depth"
 

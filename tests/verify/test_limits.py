@@ -182,7 +182,7 @@ def test_memory_limit_bounds_the_peak(limit_mib: int) -> None:
     report = json.loads(out.stdout)
     assert report["truncated_by"] == "memory" and not report["complete"]
     assert report["peak"] <= limit_mib << 20, report
-    assert report["markings"] > 100_000
+    assert report["markings"] > 100 * limit_mib  # not a trivial answer either
 
 
 def test_result_arrays_are_shared_when_exact() -> None:
