@@ -6,7 +6,8 @@ non-invariant transition and then its invariant cascade, all inside one
 invariants (a nondeterministic ``do``) and the states between two steps are
 exactly our stable markings.  A transition is blocked while a transition of
 higher priority is enabled (the net's priority pairs, ignoring priorities
-among the higher ones, as :func:`skinet.net.semantics.enabled`).  Exported
+among the higher ones, as :func:`skinet.net.semantics.enabled`); the pairs
+"invariants first" need no guard, since a step starts at a stable marking.  Exported
 from the eventless union, the model's reachable states are the stable
 markings :func:`skinet.verify.explore.explore` finds without event seeds;
 ``tests/net/test_promela.py`` checks Spin's count against ours.
@@ -48,6 +49,8 @@ def to_promela(net: PetriNet) -> str:
         lines.append(f"#define en{j} ({_enabled(t)})  /* {_comment(t.id)} */")
     blocked: dict[int, set[int]] = {}
     for high, low in net.priority:
+        if all(net.transitions[h].kind == "invariant" for h in high):
+            continue  # steps start at stable markings only, where no invariant is enabled
         for j in low:
             blocked.setdefault(j, set()).update(high)
     invariants = [j for j, t in enumerate(net.transitions) if t.kind == "invariant"]
