@@ -43,7 +43,7 @@ DEFAULT_MEMORY_LIMIT = 1 << 30
 MAX_CODE = 1 << 62  # codes are int64
 # Planning estimates (bytes): per stored marking in sparse mode, per box element in
 # box mode, and per property on top of both; measured by benchmarks/bench_memory.py.
-SPARSE_BYTES, BOX_BYTES, PROPERTY_BYTES = 20, 3.2, 2.5
+SPARSE_BYTES, BOX_BYTES, PROPERTY_BYTES = 32, 3.2, 2.5
 # Seconds per stored marking and per property (exploration + fixpoints), for planning
 # the depth that fits the time budget; per-chunk deadline checks make it safe.
 SECONDS_PER_MARKING = 1e-7

@@ -167,17 +167,22 @@ MEMORY_SCRIPT = """
 import json, resource, sys
 sys.path.insert(0, {root!r})
 from tests.verify.test_limits import copies
+from skinet.options import PredictionOptions, PropertyOptions
+from skinet.verify.explore import resident_bytes
 from skinet.verify.predict import forecast
-fc = forecast(copies(3, 3), event_seeds=False, memory_limit={limit})
-print(json.dumps({{"peak": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024, **fc.report()}}))
+start = resident_bytes()
+fc = forecast(copies(3, 3), event_seeds=False, memory_limit={limit},
+              options=PredictionOptions(PropertyOptions(af={af!r})))
+print(json.dumps({{"peak": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024, "start": start, **fc.report()}}))
 """
 
 
+@pytest.mark.parametrize("af", ["literal", "fair"])
 @pytest.mark.parametrize("limit_mib", [200, 400])
-def test_memory_limit_bounds_the_peak(limit_mib: int) -> None:
+def test_memory_limit_bounds_the_peak(limit_mib: int, af: str) -> None:
     """3 + 3 without seeds is a full box of 122 023 936 markings: a fresh process stays under the limit."""
     copies(1, 1)  # skips without the corpus
-    script = MEMORY_SCRIPT.format(root=str(ROOT), limit=limit_mib << 20)
+    script = MEMORY_SCRIPT.format(root=str(ROOT), limit=limit_mib << 20, af=af)
     out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=600, check=True)
     report = json.loads(out.stdout)
     assert report["truncated_by"] == "memory" and not report["complete"]
