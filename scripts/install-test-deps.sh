@@ -7,7 +7,9 @@
 set -euo pipefail
 
 PACKAGES=(
-    spin  # tests/net/test_promela.py: Spin's stored-state count equals ours; benchmarks/bench_spin.py
+    cmake          # cargo workspace: cyclors builds CycloneDDS (tests/dds, tests/deploy/test_rust_client.py)
+    libclang-dev   # cargo workspace: cyclors generates its CycloneDDS bindings with bindgen (same tests)
+    spin  # tests/net/test_promela.py: Spin's stored-state count equals ours; benchmarks/bench_big.py
     gcc   # compiles Spin's pan.c verifier (same tests)
 )
 

@@ -66,7 +66,10 @@ def render(view: MonitorView) -> list[str]:
         f"{'TRUNCATED' if space.timeout_reached else 'complete'}")
     out.append(f"predictor  last exploration: {explored}")
     out.append(f"  queries sent {p.sent}, answered {p.answered}, timed out {p.timed_out}, unanswered {p.unanswered}, "
-               f"failed {p.failed}, superseded {p.superseded}{', one in flight' if p.in_flight else ''}")
+               f"failed {p.failed}, superseded {p.superseded}, retried {p.retried}"
+               f"{', one in flight' if p.in_flight else ''}")
+    if p.answers:
+        out.append("  answers per instance: " + ", ".join(f"{name} {n}" for name, n in sorted(p.answers.items())))
     out.append(f"events  received {c.received}, applied {c.applied}, malformed {c.malformed}, duplicates "
                f"{c.duplicates}, out of order {c.out_of_order}, lost {c.lost}, divergences {c.divergences}")
     return out

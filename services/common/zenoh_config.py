@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 
 import zenoh
 
@@ -68,3 +69,8 @@ def undeclare(*entities: object) -> None:
             entity.undeclare()  # type: ignore[attr-defined]
         except zenoh.ZError:
             pass  # session already closed
+
+
+def zenoh_error(exc: Exception) -> str:
+    """A Zenoh error in one line, without the Rust source location (`` at .../x.rs:12.``)."""
+    return re.sub(r"\s+at \S+\.rs:\d+\.?$", "", " ".join(str(exc).split()))

@@ -12,7 +12,7 @@ from collections.abc import Sequence
 import zenoh
 
 from services.common.cli import add_log_arg, setup_logging
-from services.common.zenoh_config import add_zenoh_args, config_from_args
+from services.common.zenoh_config import add_zenoh_args, config_from_args, zenoh_error
 from services.monitor.service import start_monitor
 from skinet.errors import SourceError
 from skinet.files import load_system
@@ -27,7 +27,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("system", help="system file (.toml), e.g. skillsets/spot_arm.toml")
     p.add_argument("--id", dest="instance_id", help="instance id in the liveliness token (default: random)")
     p.add_argument("--budget", type=float, default=1.0, help="predictor exploration budget, seconds (default: 1)")
-    p.add_argument("--query-timeout", type=float, help="predict query timeout, seconds (default: 1.25 x budget + 3: the predictor answers within its budget, the first query also waits for the model bundle)")
+    p.add_argument("--query-timeout", type=float,
+                   help="predict query timeout, seconds (default: 1.25 x budget + 3: the predictor answers within "
+                        "its budget, the first query also waits for the model bundle)")
+    p.add_argument("--stall", type=float, default=0.5,
+                   help="seconds without a 'working' reply after which a predictor instance counts as frozen "
+                        "and the query goes to another one (default: 0.5; instances reply every 0.1 s)")
     p.add_argument("--no-express", dest="express", action="store_false",
                    help="let Zenoh batch publications (higher burst throughput; default: express)")
     add_log_arg(p)
@@ -49,10 +54,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
-    session = zenoh.open(config_from_args(args))
+    try:
+        session = zenoh.open(config_from_args(args))
+    except zenoh.ZError as exc:  # e.g. no router at the --connect endpoint
+        print(f"error: cannot open the Zenoh session: {zenoh_error(exc)}", file=sys.stderr)
+        return 1
     try:
         monitor = start_monitor(session, system, instance_id=args.instance_id, budget=args.budget,
-                                query_timeout=args.query_timeout, express=args.express)
+                                query_timeout=args.query_timeout, stall=args.stall, express=args.express)
     except ValueError as exc:  # a bad instance id or system name for a Zenoh key
         session.close()
         print(f"error: {exc}", file=sys.stderr)

@@ -11,7 +11,7 @@ import threading
 import zenoh
 
 from services.common.cli import add_instance_arg, add_log_arg, setup_logging
-from services.common.zenoh_config import add_zenoh_args, config_from_args
+from services.common.zenoh_config import add_zenoh_args, config_from_args, zenoh_error
 from services.predictor.service import start_predictor
 from skinet.cli.memory import memory_size
 from skinet.verify.explore import DEFAULT_MEMORY_LIMIT
@@ -56,7 +56,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         session = zenoh.open(config_from_args(args))
     except zenoh.ZError as exc:  # e.g. no router at the --connect endpoint yet
-        log.error("cannot open the Zenoh session: %s", str(exc).split("  at ")[0])
+        log.error("cannot open the Zenoh session: %s", zenoh_error(exc))
         return 1
     predictor = start_predictor(session, args.instance, workers=args.workers, max_pending=args.max_pending,
                                 cache_size=args.cache, fetch_timeout=args.fetch_timeout, max_budget=args.max_budget,

@@ -15,6 +15,13 @@ request (cheap) and hands valid ones to a bounded worker pool; when the pool is 
 it answers ``busy`` at once rather than holding the caller's ``get`` open.  Workers
 finish every query with ``with query:`` so the caller's ``get`` returns as soon as
 the reply is sent (ZENOH.md).
+
+Load spreading (SPEC §7): besides the shared key every instance answers on its own
+key ``skinet/<system>/predict/<id>``, found through its liveliness token.  There it
+first replies an empty payload when it admits a request, then another every
+:data:`HEARTBEAT` seconds until the answer: a client that hears nothing for a few
+heartbeats knows the instance froze and asks another one, long before the query
+timeout or the liveliness lease.
 """
 
 from __future__ import annotations
@@ -38,6 +45,7 @@ from skinet.wire.convert import bundle, marking_of, request_options, risks, stat
 from skinet.wire.messages import ModelBundle, PredictReply, PredictRequest
 
 log = logging.getLogger("skinet.predictor")
+HEARTBEAT = 0.1  # seconds between "working" replies on the instance key (schemas/README.md)
 
 
 class FetchError(Exception):
@@ -77,9 +85,14 @@ class Predictor:
         self._slots = threading.BoundedSemaphore(max_pending)  # queued + running requests
         self._pool = ThreadPoolExecutor(workers, thread_name_prefix=f"predictor-{instance_id}")
         self._closed = False
+        self._working: set[zenoh.Query] = set()  # admitted on the instance key, not answered yet
+        self._heartbeat = threading.Thread(target=self._beat, name=f"predictor-{instance_id}-heartbeat", daemon=True)
+        self._heartbeat.start()
         self._queryable = session.declare_queryable(keys.predict("*"), self._on_query, complete=True)
+        self._own = session.declare_queryable(keys.predict_instance("*", instance_id), self._on_query, complete=True)
         self._token = session.liveliness().declare_token(keys.alive(keys.ANY_SYSTEM, "predictor", instance_id))
-        log.info("predictor %s serving %s", instance_id, keys.predict("*"))
+        log.info("predictor %s serving %s and %s", instance_id, keys.predict("*"),
+                 keys.predict_instance("*", instance_id))
 
     # -- Zenoh thread -----------------------------------------------------------------
 
@@ -94,11 +107,14 @@ class Predictor:
                 return
             reason = "busy: too many pending requests"
             if self._slots.acquire(blocking=False):
+                if key.count("/") == 3:  # the instance key: "working" replies until the answer
+                    self._working_on(query)
                 try:
                     self._pool.submit(self._serve, query, request)
                     return
                 except RuntimeError:  # close() shut the pool down while this query was arriving
                     self._slots.release()
+                    self._done_with(query)
                     reason = "predictor shutting down"
             with query:
                 self._reply(query, self._failure(request.system, request.digest, request.seq, reason), "busy")
@@ -111,7 +127,7 @@ class Predictor:
 
     def _decode(self, query: zenoh.Query, key: str) -> PredictRequest | PredictReply:
         """The request, or the failure reply to send for it."""
-        system = key.split("/")[1] if key.count("/") == 2 and "*" not in key else keys.ANY_SYSTEM
+        system = key.split("/")[1] if key.count("/") in (2, 3) and "*" not in key else keys.ANY_SYSTEM
         if query.payload is None:
             return self._failure(system, "", 0, "empty payload")
         try:
@@ -123,7 +139,7 @@ class Predictor:
             keys.check_chunk(request.digest, "digest")
         except ValueError as exc:
             return self._failure(system, "", request.seq, str(exc))
-        if not zenoh.KeyExpr(key).intersects(zenoh.KeyExpr(keys.predict(request.system))):
+        if not zenoh.KeyExpr(key).intersects(zenoh.KeyExpr(self._reply_key(key, request.system))):
             mismatch = f"system '{request.system}' does not match key '{key}'"
             return self._failure(system, request.digest, request.seq, mismatch)
         return request
@@ -133,11 +149,40 @@ class Predictor:
     def _serve(self, query: zenoh.Query, request: PredictRequest) -> None:
         with query:
             try:
-                self._reply(query, self.answer(request))
+                reply = self.answer(request)
+                self._done_with(query)
+                self._reply(query, reply)
             except Exception:
                 log.exception("predictor %s: request %s failed", self.instance_id, request.seq)
             finally:
+                self._done_with(query)
                 self._slots.release()
+
+    # -- heartbeats on the instance key --------------------------------------------------
+
+    def _working_on(self, query: zenoh.Query) -> None:
+        """Admitted: say so at once, then every HEARTBEAT seconds until :meth:`_done_with`."""
+        with self._lock:
+            self._working.add(query)
+            self._say_working(query)
+
+    def _done_with(self, query: zenoh.Query) -> None:
+        with self._lock:
+            self._working.discard(query)
+
+    def _beat(self) -> None:
+        while not self._closed:
+            time.sleep(HEARTBEAT)
+            with self._lock:  # held while replying: _done_with waits, so no reply after the answer
+                for query in self._working:
+                    self._say_working(query)
+
+    @staticmethod
+    def _say_working(query: zenoh.Query) -> None:
+        try:
+            query.reply(query.key_expr, b"", express=True, congestion_control=zenoh.CongestionControl.DROP)
+        except zenoh.ZError:
+            pass  # the caller gave up (timeout, cancelled)
 
     def answer(self, request: PredictRequest) -> PredictReply:
         """Compute the reply to one request (SPEC §6); failures become ``ok=False``."""
@@ -208,10 +253,19 @@ class Predictor:
         if not reply.ok:
             log.warning("predictor %s: %s request %s/%s: %s",
                         self.instance_id, kind, reply.system, reply.seq, reply.error)
+        key = self._reply_key(str(query.key_expr), reply.system)
+        # On the instance key the client retries a lost answer: DROP, so that a reply to a
+        # robot behind a dead link never blocks the replies to the others (schemas/README.md).
+        congestion = zenoh.CongestionControl.DROP if key.count("/") == 3 else zenoh.CongestionControl.BLOCK
         try:
-            query.reply(keys.predict(reply.system), encode(reply), express=True)
+            query.reply(key, encode(reply), express=True, congestion_control=congestion)
         except zenoh.ZError as exc:  # the session closed under us, or a key the query does not accept
             log.warning("predictor %s: cannot reply to %s: %s", self.instance_id, query.key_expr, exc)
+
+    def _reply_key(self, query_key: str, system: str) -> str:
+        """Replies go to the key that was queried: the shared one or this instance's."""
+        own = query_key.count("/") == 3
+        return keys.predict_instance(system, self.instance_id) if own else keys.predict(system)
 
     def close(self) -> None:
         """Stop serving: withdraw the token and the queryable, then answer the queued work.
@@ -222,7 +276,7 @@ class Predictor:
         if self._closed:
             return
         self._closed = True
-        undeclare(self._token, self._queryable)
+        undeclare(self._token, self._queryable, self._own)
         self._pool.shutdown(wait=True)
         log.info("predictor %s stopped (%s)", self.instance_id, dict(self.counts))
 

@@ -27,7 +27,7 @@ from deploy_support import (
 
 pytestmark = pytest.mark.slow
 
-IMAGE = "skinet-live:local"
+IMAGE = os.environ.get("SKINET_TEST_IMAGE", "skinet-live:local")  # own tag per worktree
 BUILD_TIMEOUT = 900
 
 

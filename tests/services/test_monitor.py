@@ -334,13 +334,13 @@ def test_silent_predictor_times_out_without_blocking(monitor_factory, session, s
 # -- (d) predictor killed mid-query and restarted -----------------------------------------
 
 
-def _heavy_system(folder: Path) -> Path:
-    """Four Spots and four arms: the predictor uses the whole budget on it (SPEC §6.1)."""
+def _heavy_system(folder: Path, pairs: int = 4) -> Path:
+    """Four Spots and four arms (three: fewer); the predictor uses the whole budget on it (SPEC §6.1)."""
     spot = (REPO / "skillsets" / "spot.rl").read_text()
     arm = (REPO / "skillsets" / "manipulator.rl").read_text()
     lines = ['[system]\nname = "fleet"\nproperties = "fleet.props"\n']
     props = []
-    for i in range(1, 5):
+    for i in range(1, pairs + 1):
         (folder / f"spot{i}.rl").write_text(spot.replace("skillset spot {", f"skillset spot{i} {{"))
         (folder / f"arm{i}.rl").write_text(arm.replace("skillset manipulator {", f"skillset arm{i} {{"))
         lines += [f'[[skillsets]]\nmodel = "spot{i}.rl"\n', f'[[skillsets]]\nmodel = "arm{i}.rl"\n']
