@@ -48,7 +48,8 @@ def test_model_shape(tmp_path: Path) -> None:
     assert text.count("bit p") == sum(len(c.eventless.places) for c in system.components)
     invariants = sum(1 for c in system.components for t in c.eventless.transitions if t.kind == "invariant")
     steps = sum(1 for c in system.components for t in c.eventless.transitions if t.kind != "invariant")
-    assert text.count(":: atomic {") == steps and text.count("    :: en") == invariants
+    assert text.count("        :: en") == steps and text.count("\n    :: en") == invariants
+    assert text.count("cascade()") == 2  # defined once, called once
     assert "!(en" not in text  # invariants first: steps start at stable markings, no guard needed
     assert main(["net", str(ROOT / "skillsets" / "spot_arm.toml"), "--eventless", "--format", "promela",
                  "-o", str(tmp_path / "m.pml")]) == 0

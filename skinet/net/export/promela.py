@@ -60,13 +60,14 @@ def to_promela(net: PetriNet) -> str:
     lines += ["    :: else -> break", "    od", "}", "", "active proctype skillsets() {"]
     if not is_stable(net, net.initial):  # Spin then also stores this transient marking
         lines.append("    atomic { cascade() };")
-    lines.append("    do")
+    # One atomic step: choose a firable transition, fire it, then the cascade (written once).
+    lines += ["    do", "    :: atomic {", "        if"]
     for j, t in enumerate(net.transitions):
         if t.kind == "invariant":
             continue
         guard = f"en{j}"
         if blocked.get(j):
             guard += " && !(" + " || ".join(f"en{h}" for h in sorted(blocked[j])) + ")"
-        lines.append(f"    :: atomic {{ {guard} -> {_fire(t)}; cascade() }}  /* {_comment(t.id)} */")
-    lines += ["    od", "}"]
+        lines.append(f"        :: {guard} -> {_fire(t)}  /* {_comment(t.id)} */")
+    lines += ["        fi;", "        cascade()", "    }", "    od", "}"]
     return "\n".join(lines) + "\n"
