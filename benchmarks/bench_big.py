@@ -97,7 +97,7 @@ def spin(n_spot: int, n_arm: int, deadline: float) -> dict:
     compiled = time.perf_counter() - t0
     t0 = time.perf_counter()
     try:
-        out = subprocess.run(["./pan", "-E", "-m1000000000"], cwd=work, capture_output=True, text=True,
+        out = subprocess.run(["./pan", "-E", "-m10000000"], cwd=work, capture_output=True, text=True,
                              timeout=deadline).stdout
         finished = True
     except subprocess.TimeoutExpired as exc:
