@@ -26,7 +26,6 @@ import argparse
 import json
 import os
 import re
-import resource
 import shutil
 import subprocess
 import sys
@@ -43,7 +42,7 @@ def one(kind: str) -> dict:
     """Run in a fresh process: one measurement, as JSON."""
     from skinet.options import PredictionOptions, PropertyOptions
     from skinet.verify.algorithm1 import analyse
-    from skinet.verify.explore import explore
+    from skinet.verify.explore import explore, peak_resident_bytes
     from skinet.verify.predict import forecast
 
     literal = PredictionOptions(PropertyOptions(af="literal"))
@@ -71,7 +70,7 @@ def one(kind: str) -> dict:
         space = explore(system, event_seeds=False, memory_limit=None)
         out = {"markings": space.markings}
     out.update(wall=time.perf_counter() - w, cpu=time.process_time() - c,
-               peak=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024)
+               peak=peak_resident_bytes())
     return out
 
 

@@ -164,16 +164,16 @@ def test_formerly_refused_systems_are_answered(n_spot: int, n_arm: int, seeds: b
 
 
 MEMORY_SCRIPT = """
-import json, resource, sys
+import json, sys
 sys.path.insert(0, {root!r})
 from tests.verify.test_limits import copies
 from skinet.options import PredictionOptions, PropertyOptions
-from skinet.verify.explore import resident_bytes
+from skinet.verify.explore import peak_resident_bytes, resident_bytes
 from skinet.verify.predict import forecast
 start = resident_bytes()
 fc = forecast(copies(3, 3), event_seeds=False, memory_limit={limit},
               options=PredictionOptions(PropertyOptions(af={af!r})))
-print(json.dumps({{"peak": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024, "start": start, **fc.report()}}))
+print(json.dumps({{"peak": peak_resident_bytes(), "start": start, **fc.report()}}))
 """
 
 
