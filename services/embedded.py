@@ -19,14 +19,12 @@ import time
 from collections.abc import Callable
 from typing import TextIO
 
-import zenoh
-
-from services.common.zenoh_config import session_config
+from services.common.zenoh_config import open_session, session_config
 from services.monitor import Monitor, MonitorView, start_monitor
 from skinet.cli.memory import memory_limit
+from skinet.cli.options import load_live_system
 from skinet.explain import warning_line
 from skinet.cli.render import seconds, table
-from skinet.files import load_system
 
 CLEAR = "\x1b[H\x1b[J"  # cursor home, clear to end of screen
 
@@ -89,10 +87,10 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     """``skinet run``: see the module docstring; returns the exit status."""
     from services.predictor.service import start_predictor
 
-    system, _ = load_system(args.system)
+    system, _ = load_live_system(args.system)
+    config = session_config("peer", args.connect, args.listen, args.zenoh_config, not args.no_multicast_scouting)
     stop = _stop_on_signals()
-    session = zenoh.open(session_config("peer", args.connect, args.listen, args.zenoh_config,
-                                        not args.no_multicast_scouting))
+    session = open_session(config)
     monitor: Monitor | None = None
     predictor = None
     try:
@@ -137,9 +135,10 @@ def _follow(monitor: Monitor, stop: threading.Event, duration: float | None, out
 
 def router(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     """``skinet router``: a Zenoh router (mode "router" of the Python wheel) until interrupted."""
+    config = session_config("router", args.connect, args.listen or ["tcp/0.0.0.0:7447"], args.zenoh_config,
+                            not args.no_multicast_scouting)
     stop = _stop_on_signals()
-    session = zenoh.open(session_config("router", args.connect, args.listen or ["tcp/0.0.0.0:7447"],
-                                        args.zenoh_config, not args.no_multicast_scouting))
+    session = open_session(config)
     try:
         print(f"zenoh router {session.zid()} listening on {', '.join(args.listen or ['tcp/0.0.0.0:7447'])}",
               file=out, flush=True)

@@ -159,6 +159,8 @@ class Monitor:
                 if not fresh:
                     return
                 step = engine.apply(ev)
+                if step is None:  # a status confirming the live marking
+                    return
                 self._publish(step)
                 if step.divergence:
                     self._warn(c.divergences, "divergence at %s#%d: %s", ev.skillset, ev.seq, step.divergence)

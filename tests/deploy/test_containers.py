@@ -27,8 +27,8 @@ from deploy_support import (
 
 pytestmark = pytest.mark.slow
 
-IMAGE = os.environ.get("SKINET_TEST_IMAGE", "skinet-live:local")  # own tag per worktree
-BUILD_TIMEOUT = 900
+IMAGE = os.environ.get("SKINET_TEST_IMAGE", "skinet-live:local")  # own tag per checkout under test
+BUILD_TIMEOUT = 2400  # a first build (debootstrap, wheels, image) took 20 min on a loaded 2-core machine
 
 
 def _docker_engine() -> str | None:
