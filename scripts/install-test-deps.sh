@@ -10,6 +10,8 @@ PACKAGES=(
     debootstrap  # tests/deploy/test_containers.py: docker/base-image.sh makes the base image without a registry
     cmake          # cargo workspace: cyclors builds CycloneDDS (tests/dds, tests/deploy/test_rust_client.py)
     libclang-dev   # cargo workspace: cyclors generates its CycloneDDS bindings with bindgen (same tests)
+    spin  # tests/net/test_promela.py: Spin's stored-state count equals ours; benchmarks/bench_big.py
+    gcc   # compiles Spin's pan.c verifier (same tests)
     chromium          # tests/services/test_dashboard.py: the dashboard in a real browser
     chromium-driver   # the same, driven by selenium
 )

@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING, TextIO
 
 from services.common.zenoh_config import login, open_session, session_config
 from services.monitor import Monitor, MonitorView, start_monitor
+from skinet.cli.memory import memory_limit
 from skinet.cli.options import load_live_system
 from skinet.explain import warning_line
 from skinet.cli.render import seconds, table
@@ -115,7 +116,8 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     predictor = None
     dashboard = None
     try:
-        predictor = start_predictor(session, f"embedded-{os.getpid()}")  # first: the monitor asks at once
+        predictor = start_predictor(session, f"embedded-{os.getpid()}",  # first: the monitor asks at once
+                                    memory_limit=memory_limit(args))
         monitor = start_monitor(session, system, budget=args.budget, check_policy=args.check_policy)
         if args.dashboard is not None:
             dashboard = _start_dashboard(session, system, args.dashboard_host, args.dashboard)

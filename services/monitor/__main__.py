@@ -24,7 +24,9 @@ def build_parser() -> ArgumentParser:
     p.add_argument("system", help="system file (.toml), e.g. skillsets/spot_arm.toml")
     p.add_argument("--id", dest="instance_id", type=key_name("instance id"), help="instance id in the liveliness token (default: random)")
     p.add_argument("--budget", type=seconds(), default=1.0, help="predictor exploration budget, seconds (default: 1)")
-    p.add_argument("--query-timeout", type=seconds(), help="predict query timeout, seconds (default: budget + 1)")
+    p.add_argument("--query-timeout", type=seconds(),
+                   help="predict query timeout, seconds (default: 1.25 x budget + 3: the predictor answers within "
+                        "its budget, the first query also waits for the model bundle)")
     p.add_argument("--stall", type=seconds(), default=0.5,
                    help="seconds without a 'working' reply after which a predictor instance counts as frozen "
                         "and the query goes to another one (default: 0.5; instances reply every 0.1 s)")

@@ -281,8 +281,8 @@ def start_monitor(session: zenoh.Session, system: System, **options: object) -> 
     """Start a monitor of ``system`` on ``session`` (which may be shared, SPEC §7).
 
     Options: ``instance_id``, ``budget`` (predictor exploration seconds, default 1),
-    ``query_timeout`` (default budget + 1 s), ``retry`` (seconds between queries
-    nobody answers, default 0.5), ``stall`` (seconds of silence after which a
+    ``query_timeout`` (default 1.25 x budget + 3 s, see :func:`prediction.query_timeout`),
+    ``retry`` (seconds between queries nobody answers, default 0.5), ``stall`` (seconds of silence after which a
     predictor instance counts as frozen and another one is asked, default 0.5), ``prediction_cache`` (markings whose prediction
     is kept, default 256), ``indirect`` (run the event callback in a Python thread
     of its own rather than on Zenoh's, default True), ``express`` (publish without

@@ -10,7 +10,9 @@ import threading
 from services.common.cli import add_instance_arg, add_log_arg, one_line_errors, setup_logging
 from services.common.zenoh_config import add_zenoh_args, config_from_args, open_session
 from services.predictor.service import start_predictor
+from skinet.cli.memory import memory_size
 from skinet.cli.options import ArgumentParser, count, seconds
+from skinet.verify.explore import DEFAULT_MEMORY_LIMIT
 
 log = logging.getLogger("skinet.predictor")
 
@@ -29,6 +31,9 @@ def build_parser() -> ArgumentParser:
                         help="seconds to wait for a model bundle (default: 2)")
     parser.add_argument("--max-budget", type=seconds(), default=10.0,
                         help="cap on a request's budget, seconds (default: 10)")
+    parser.add_argument("--memory-limit", type=memory_size, default=DEFAULT_MEMORY_LIMIT, metavar="SIZE",
+                        help="peak memory of the process, shared by the workers, e.g. 2GiB (default: 1GiB); "
+                             "beyond it answers are truncated, never refused")
     add_log_arg(parser)
     add_zenoh_args(parser)
     return parser
@@ -44,7 +49,8 @@ def main(argv: list[str] | None = None) -> int:
         signal.signal(sig, lambda *_: stop.set())
     session = open_session(config)  # fails e.g. with no router at the --connect endpoint yet
     predictor = start_predictor(session, args.instance, workers=args.workers, max_pending=args.max_pending,
-                                cache_size=args.cache, fetch_timeout=args.fetch_timeout, max_budget=args.max_budget)
+                                cache_size=args.cache, fetch_timeout=args.fetch_timeout, max_budget=args.max_budget,
+                                memory_limit=args.memory_limit)
     while not stop.wait(0.2):
         pass
     # Withdraw the queryable and answer what was admitted, then retire the whole

@@ -37,6 +37,7 @@ import zenoh
 from services.common.zenoh_config import undeclare
 from skinet.errors import SkinetError
 from skinet.system import System
+from skinet.verify.explore import DEFAULT_MEMORY_LIMIT
 from skinet.verify.predict import forecast
 from skinet.wire import keys
 from skinet.wire.codec import DecodeError, decode, encode
@@ -68,11 +69,14 @@ class Predictor:
         cache_size: int = 4,
         fetch_timeout: float = 2.0,
         max_budget: float = 10.0,
+        memory_limit: int = DEFAULT_MEMORY_LIMIT,
     ):
         self.session = session
         self.instance_id = keys.check_chunk(instance_id, "instance id")
         self.fetch_timeout = fetch_timeout
         self.max_budget = max_budget
+        # Each worker may hold one forecast: the process limit is shared between them.
+        self.memory_limit = memory_limit // max(1, workers)
         self.cache_size = cache_size
         self.counts: Counter[str] = Counter()  # ok, failed, busy, fetched
         self._cache: OrderedDict[str, System] = OrderedDict()
@@ -185,7 +189,8 @@ class Predictor:
         try:
             system = self._system(request.system, request.digest)
             marking = marking_of(system, request.skillsets, "request")
-            fc = forecast(system, marking, budget=min(request.budget, self.max_budget), options=request_options(system, request))
+            fc = forecast(system, marking, budget=min(request.budget, self.max_budget),
+                          options=request_options(system, request), memory_limit=self.memory_limit)
             return PredictReply(
                 system=request.system, digest=request.digest, seq=request.seq, ok=True, instance=self.instance_id,
                 report=state_space_report(system, fc, time.time()), risks=risks(system, marking, fc),
@@ -285,6 +290,7 @@ def start_predictor(
     cache_size: int = 4,
     fetch_timeout: float = 2.0,
     max_budget: float = 10.0,
+    memory_limit: int = DEFAULT_MEMORY_LIMIT,
 ) -> Predictor:
     """Serve predictions on ``session`` (shared or own); returns a handle with ``.close()``.
 
@@ -294,6 +300,8 @@ def start_predictor(
         cache_size: systems kept (least recently used dropped first).
         fetch_timeout: seconds to wait for a model bundle.
         max_budget: cap on a request's exploration budget, seconds.
+        memory_limit: peak memory of the process, bytes, shared by the workers (SPEC §6.1).
     """
     return Predictor(session, instance_id, workers=workers, max_pending=max_pending,
-                     cache_size=cache_size, fetch_timeout=fetch_timeout, max_budget=max_budget)
+                     cache_size=cache_size, fetch_timeout=fetch_timeout, max_budget=max_budget,
+                     memory_limit=memory_limit)

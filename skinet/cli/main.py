@@ -20,7 +20,7 @@ from skinet.props.parser import parse_formula
 from skinet.system import System, marking_problems, marking_to_json
 from skinet.verify.algorithm1 import analyse
 from skinet.verify.ctl import Kripke, check
-from skinet.verify.explore import explore
+from skinet.verify.explore import Deadline, explore
 from skinet.verify.predict import Forecast, forecast
 from skinet.cli import demo
 from skinet.cli import operator as operator_cli
@@ -28,6 +28,7 @@ from skinet.cli import record as record_cli
 from skinet.cli import timeline as timeline_cli
 from skinet.cli.options import ArgumentParser, count, load_live_system, print_warnings
 from skinet.cli.options import seconds as duration
+from skinet.cli.memory import add_memory_arg, memory_limit
 from skinet.cli.render import analysis_text, seconds, table
 from skinet.cli.run import add_commands as add_service_commands
 
@@ -98,8 +99,8 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--json", action="store_true", help="machine-readable summary")
     c.set_defaults(func=cmd_parse)
 
-    c = sub.add_parser("net", help="print the Petri net of a skillset (SPEC §3)")
-    c.add_argument("file", help="skillset model (.rl)")
+    c = sub.add_parser("net", help="print the Petri net of a skillset or of a system's union (SPEC §3)")
+    c.add_argument("file", help="skillset model (.rl), or system file (.toml) for the union of its skillsets")
     c.add_argument("--eventless", action="store_true", help="the eventless net SkN^e (no event transitions)")
     c.add_argument("--format", choices=sorted(FORMATS), default="json", help="output format (default: json)")
     c.add_argument("-o", "--output", help="write to this file instead of standard output")
@@ -140,6 +141,7 @@ def _system_args(c: argparse.ArgumentParser) -> None:
     )
     c.add_argument("--budget", type=duration(), default=10.0, help="exploration time budget in seconds (default: 10)")
     c.add_argument("--max-depth", type=count(0), help="expand at most this many breadth-first layers")
+    add_memory_arg(c)
     c.add_argument("--no-seeds", action="store_true", help="do not seed exploration with firable events")
     c.add_argument("--json", action="store_true", help="machine-readable result")
     c.add_argument("--af", choices=["fair", "literal"],
@@ -173,7 +175,7 @@ def _forecast(args: argparse.Namespace, system: System, marking: dict[str, int],
 
     result = forecast(
         system, marking, budget=args.budget, max_depth=args.max_depth, event_seeds=not args.no_seeds, progress=progress,
-        full=full,
+        full=full, memory_limit=memory_limit(args),
     )
     if last[0] > 0:
         print(file=sys.stderr)
@@ -210,14 +212,19 @@ def cmd_parse(args: argparse.Namespace) -> int:
 
 
 def cmd_net(args: argparse.Namespace) -> int:
-    model = load_model(args.file)
-    print_warnings(model.warnings)
-    nets = [build_net(s, eventless=args.eventless) for s in model.skillsets]
-    if len(nets) > 1:
-        from skinet.net.union import union
+    from skinet.net.union import union
 
-        nets = [union(nets, Path(args.file).stem)]
-    text = FORMATS[args.format](nets[0])
+    if args.file.endswith(".toml"):  # a system file: the union of its skillsets' nets
+        system, warnings = load_live_system(args.file)
+        print_warnings(warnings)
+        nets = [c.eventless if args.eventless else c.net for c in system.components]
+        name = system.name
+    else:
+        model = load_model(args.file)
+        print_warnings(model.warnings)
+        nets = [build_net(s, eventless=args.eventless) for s in model.skillsets]
+        name = Path(args.file).stem
+    text = FORMATS[args.format](nets[0] if len(nets) == 1 else union(nets, name))
     if args.output:
         try:
             Path(args.output).write_text(text)
@@ -247,7 +254,8 @@ def cmd_unsafe(args: argparse.Namespace) -> int:
     print(analysis_text(system, result, args.literal))
     if prediction is not None:
         r = prediction.report()
-        state = "complete" if r["complete"] else f"TRUNCATED at depth {r['depth']} (unknown constraints possible)"
+        state = "complete" if r["complete"] else (
+            f"TRUNCATED by {r['truncated_by']} at depth {r['depth']} (unknown constraints possible)")
         print(f"prediction: {state}, {r['markings']} markings in {seconds(r['elapsed'])}")
     else:
         print("prediction: off (explicit constraints only)")
@@ -263,7 +271,7 @@ def cmd_explore(args: argparse.Namespace) -> int:
         return 0
     print(f"explored {system.name} ({'with' if not args.no_seeds else 'without'} event seeds)")
     rows = [
-        ["complete", "yes" if report["complete"] else "no (time budget or depth limit reached)"],
+        ["complete", "yes" if report["complete"] else f"no (truncated by {report['truncated_by']})"],
         ["elapsed", seconds(report["elapsed"])],
         ["depth", report["depth"]],
         ["markings", report["markings"]],
@@ -290,7 +298,8 @@ def cmd_ctl(args: argparse.Namespace) -> int:
     several = len(args.formulas) > 1
     formulas = [parse_formula(text, skillsets, f"<formula {n}>" if several else "<formula>")  # before exploring
                 for n, text in enumerate(args.formulas, 1)]
-    space = explore(system, marking, budget=args.budget, max_depth=args.max_depth, event_seeds=not args.no_seeds)
+    space = explore(system, marking, max_depth=args.max_depth, event_seeds=not args.no_seeds,
+                    memory_limit=memory_limit(args), properties=len(formulas), deadline=Deadline.after(args.budget))
     kripke = Kripke(space)
     start = space.code(marking)
     results = []
@@ -306,8 +315,8 @@ def cmd_ctl(args: argparse.Namespace) -> int:
             verdict = "undecided"
         results.append({
             "formula": text, "markings": space.markings, "satisfying": int(result.lower.sum()),
-            "undecided": int((result.upper & ~result.lower).sum()), "start": verdict, "complete": space.complete,
-            "elapsed": elapsed,
+            "undecided": int((result.upper & ~result.lower).sum()), "start": verdict, "complete": kripke.truncated_by is None,
+            "truncated_by": kripke.truncated_by, "elapsed": elapsed,
         })
     if args.json:
         _emit(results)
@@ -319,8 +328,8 @@ def cmd_ctl(args: argparse.Namespace) -> int:
         print(f"satisfied by {r['satisfying']} of {r['markings']} markings"
               + (f" ({r['undecided']} undecided)" if r["undecided"] else ""))
         print(f"at the start marking: {r['start']}")
-    if not space.complete:
-        print(f"exploration truncated at depth {space.expanded_depth}: answers are three-valued")
+    if kripke.truncated_by is not None:
+        print(f"truncated by {kripke.truncated_by} at depth {space.expanded_depth}: answers are three-valued")
     return 0
 
 

@@ -7,6 +7,7 @@ import os
 
 from services.common.zenoh_config import add_login_args
 from services.monitor.check import add_policy_arg
+from skinet.cli.memory import add_memory_arg
 from skinet.cli.options import count, seconds
 
 
@@ -28,6 +29,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
                    help="also serve the live web dashboard on this port (0: a free one; see skinet dashboard)")
     c.add_argument("--dashboard-host", default="127.0.0.1", help="address of --dashboard (default: 127.0.0.1)")
     add_policy_arg(c)
+    add_memory_arg(c)
     _zenoh_args(c, "endpoint on which a bridge in another process can connect, e.g. tcp/127.0.0.1:7447")
     c.set_defaults(func=cmd_run)
 

@@ -101,7 +101,7 @@ def _cases() -> list[Case]:
     add("skinet", "file", ("net", "{tmp}/missing.rl"), 1,
         "{tmp}/missing.rl: error: cannot read file: No such file or directory")
     usage("skinet", "--format", ("net", SPOT, "--format", "svg"),
-          "argument --format: invalid choice: 'svg' (choose from 'dot', 'json', 'pnml', 'tina')")
+          "argument --format: invalid choice: 'svg' (choose from 'dot', 'json', 'pnml', 'promela', 'tina')")
     add("skinet", "-o", ("net", SPOT, "-o", "{tmp}/no/such/net.json"), 1,
         "{tmp}/no/such/net.json: error: cannot write file: No such file or directory")
 
@@ -120,6 +120,9 @@ def _cases() -> list[Case]:
                   f"argument --max-depth: expected an integer >= 0, got '{bad}'")
         usage("skinet", "--af", (cmd, SYSTEM, "--af", "strict", *extra),
               "argument --af: invalid choice: 'strict' (choose from 'fair', 'literal')")
+        for bad in ("0", "lots", "1 parsec"):
+            usage("skinet", "--memory-limit", (cmd, SYSTEM, "--memory-limit", bad, *extra),
+                  f"argument --memory-limit: not a size: '{bad}' (e.g. 1GiB, 512MiB, 2GB)")
     add("skinet", "formulas", ("ctl", SYSTEM, "EF spot:Busy", "EF spot:Bussy"), 1,
         "<formula 2>:1:4: error: unknown name 'spot:Bussy' (candidates: spot:Busy)")
 
@@ -201,6 +204,8 @@ def _cases() -> list[Case]:
     add("skinet", "system", ("run", "{tmp}/badname.toml"), 1, bad_name)
     usage("skinet", "--duration", ("run", SYSTEM, "--duration", "-1"), "argument --duration: " + seconds.format("-1"))
     usage("skinet", "--budget", ("run", SYSTEM, "--budget", "0"), "argument --budget: " + seconds.format("0"))
+    usage("skinet", "--memory-limit", ("run", SYSTEM, "--memory-limit", "tiny"),
+          "argument --memory-limit: not a size: 'tiny' (e.g. 1GiB, 512MiB, 2GB)")
 
     usage("skinet", "--dashboard", ("run", SYSTEM, "--dashboard", "-1"),
           "argument --dashboard: expected an integer from 0 to 65535, got '-1'")
@@ -268,6 +273,8 @@ def _cases() -> list[Case]:
         usage(pred, option, (option, "0"), f"argument {option}: expected an integer >= 1, got '0'")
     for option in ("--fetch-timeout", "--max-budget"):
         usage(pred, option, (option, "-2"), f"argument {option}: " + seconds.format("-2"))
+    usage(pred, "--memory-limit", ("--memory-limit", "1 GiBi"),
+          "argument --memory-limit: not a size: '1 GiBi' (e.g. 1GiB, 512MiB, 2GB)")
     usage(br, "--instance", (SYSTEM, "--instance", "*"), f"argument --instance: instance id '*' {not_a_key}")
     for program, base in ((br, (SYSTEM,)), (sim, (SCENARIO,))):
         usage(program, "--namespace", (*base, "--namespace", "robot/*"),
