@@ -116,12 +116,12 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     predictor = None
     dashboard = None
     try:
-        predictor = start_predictor(session, f"embedded-{os.getpid()}",  # first: the monitor asks at once
-                                    memory_limit=memory_limit(args))
-        monitor = start_monitor(session, system, budget=args.budget, check_policy=args.check_policy)
-        if args.dashboard is not None:
+        if args.dashboard is not None:  # first: a port in use stops the run before anything starts
             dashboard = _start_dashboard(session, system, args.dashboard_host, args.dashboard)
             print(f"dashboard on {dashboard.url}", file=sys.stderr, flush=True)
+        predictor = start_predictor(session, f"embedded-{os.getpid()}",  # before the monitor: it asks at once
+                                    memory_limit=memory_limit(args))
+        monitor = start_monitor(session, system, budget=args.budget, check_policy=args.check_policy)
         if args.once:
             deadline = time.monotonic() + args.budget + 2.0  # the first prediction, if any comes
             view = monitor.snapshot()
