@@ -180,7 +180,7 @@ class Predictor:
     @staticmethod
     def _say_working(query: zenoh.Query) -> None:
         try:
-            query.reply(query.key_expr, b"", express=True, congestion_control=zenoh.CongestionControl.DROP)
+            query.reply(query.key_expr, b"", express=True)
         except zenoh.ZError:
             pass  # the caller gave up (timeout, cancelled)
 
@@ -254,11 +254,10 @@ class Predictor:
             log.warning("predictor %s: %s request %s/%s: %s",
                         self.instance_id, kind, reply.system, reply.seq, reply.error)
         key = self._reply_key(str(query.key_expr), reply.system)
-        # On the instance key the client retries a lost answer: DROP, so that a reply to a
-        # robot behind a dead link never blocks the replies to the others (schemas/README.md).
-        congestion = zenoh.CongestionControl.DROP if key.count("/") == 3 else zenoh.CongestionControl.BLOCK
+        # A reply travels with its query's congestion control (Zenoh 1.10 ignores one given
+        # here): the monitor asks instance keys with DROP (schemas/README.md).
         try:
-            query.reply(key, encode(reply), express=True, congestion_control=congestion)
+            query.reply(key, encode(reply), express=True)
         except zenoh.ZError as exc:  # the session closed under us, or a key the query does not accept
             log.warning("predictor %s: cannot reply to %s: %s", self.instance_id, query.key_expr, exc)
 
