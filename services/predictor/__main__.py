@@ -24,7 +24,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         description="Answer SkiNet prediction requests on skinet/*/predict (stateless; run as many as you like).",
     )
     add_instance_arg(parser)
-    parser.add_argument("--workers", type=int, default=2, help="threads computing forecasts (default: 2)")
+    parser.add_argument("--workers", type=int, default=2,
+                        help="worker processes computing forecasts (default: 2)")
     parser.add_argument("--max-pending", type=int, default=8,
                         help="requests queued or running before 'busy' (default: 8)")
     parser.add_argument("--cache", type=int, default=4, help="systems kept in the LRU cache (default: 4)")
@@ -32,6 +33,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         help="seconds to wait for a model bundle (default: 2)")
     parser.add_argument("--max-budget", type=float, default=10.0,
                         help="cap on a request's budget, seconds (default: 10)")
+    parser.add_argument("--memory-mb", type=int, default=1024,
+                        help="address-space limit of each worker process, MB (default: 1024)")
+    parser.add_argument("--grace", type=float, default=1.0,
+                        help="seconds past a request's budget before its worker is killed (default: 1)")
     add_log_arg(parser)
     add_zenoh_args(parser)
     return parser.parse_args(argv)
@@ -54,7 +59,8 @@ def main(argv: list[str] | None = None) -> int:
         log.error("cannot open the Zenoh session: %s", str(exc).split("  at ")[0])
         return 1
     predictor = start_predictor(session, args.instance, workers=args.workers, max_pending=args.max_pending,
-                                cache_size=args.cache, fetch_timeout=args.fetch_timeout, max_budget=args.max_budget)
+                                cache_size=args.cache, fetch_timeout=args.fetch_timeout, max_budget=args.max_budget,
+                                memory_mb=args.memory_mb, grace=args.grace)
     while not stop.wait(0.2):
         pass
     # Withdraw the queryable and answer what was admitted, then retire the whole

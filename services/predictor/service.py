@@ -3,37 +3,37 @@
 A :class:`~skinet.wire.messages.PredictRequest` arrives on ``skinet/<system>/predict``
 with the live marking and the digest of the monitor's model.  An instance that does
 not know the digest fetches the :class:`~skinet.wire.messages.ModelBundle` from
-``skinet/<system>/model/<digest>``, rebuilds the system and keeps it in a small LRU
-cache; then it explores from the marking within the request's budget and replies
-with the state-space report and the non-safe one-step successors.  Every failure is
-answered with ``ok=False`` and a one-line ``error`` (SPEC §7: bad input never crashes
-a service).
+``skinet/<system>/model/<digest>``, checks that the bundle hashes to the digest
+before anything is built (a sha256 of its text) and keeps the bundle in a small LRU
+cache.  Building the nets, exploring from the marking and computing the replies'
+risks happen in worker processes (:mod:`services.sandbox`) under the
+request's budget and a memory limit, so a hostile model costs an instance at most
+its limits.  Every failure is answered with ``ok=False`` and a one-line ``error``
+(SPEC §7: bad input never crashes a service).
 
 Threading: Zenoh runs query callbacks on its own threads, and a ``get`` issued from
 inside one (the model fetch) may deadlock.  The callback therefore only decodes the
-request (cheap) and hands valid ones to a bounded worker pool; when the pool is full
-it answers ``busy`` at once rather than holding the caller's ``get`` open.  Workers
-finish every query with ``with query:`` so the caller's ``get`` returns as soon as
-the reply is sent (ZENOH.md).
+request (cheap) and hands valid ones to a bounded pool of threads, one per worker
+process; when the pool is full it answers ``busy`` at once rather than holding the
+caller's ``get`` open.  Threads finish every query with ``with query:`` so the
+caller's ``get`` returns as soon as the reply is sent (ZENOH.md).
 """
 
 from __future__ import annotations
 
 import logging
+import queue
 import threading
-import time
 from collections import Counter, OrderedDict
 from concurrent.futures import ThreadPoolExecutor
 
 import zenoh
 
 from services.common.zenoh_config import undeclare
-from skinet.errors import SkinetError
-from skinet.system import System
-from skinet.verify.predict import forecast
+from services.sandbox import Worker, WorkerError
 from skinet.wire import keys
 from skinet.wire.codec import DecodeError, decode, encode
-from skinet.wire.convert import bundle, marking_of, risks, state_space_report, system_from_bundle
+from skinet.wire.convert import bundle_digest
 from skinet.wire.messages import ModelBundle, PredictReply, PredictRequest
 
 log = logging.getLogger("skinet.predictor")
@@ -60,17 +60,28 @@ class Predictor:
         cache_size: int = 4,
         fetch_timeout: float = 2.0,
         max_budget: float = 10.0,
+        memory_mb: int = 1024,
+        grace: float = 1.0,
+        max_bundle: int = 1 << 20,
     ):
         self.session = session
         self.instance_id = keys.check_chunk(instance_id, "instance id")
         self.fetch_timeout = fetch_timeout
         self.max_budget = max_budget
         self.cache_size = cache_size
-        self.counts: Counter[str] = Counter()  # ok, failed, busy, fetched
-        self._cache: OrderedDict[str, System] = OrderedDict()
+        self.grace = grace
+        self.max_bundle = max_bundle
+        self.counts: Counter[str] = Counter()  # ok, failed, busy, fetched, killed
+        self._cache: OrderedDict[str, bytes] = OrderedDict()  # digest -> checked bundle
         self._lock = threading.Lock()  # cache and counts (callbacks and workers)
         self._fetch_lock = threading.Lock()  # one fetch at a time; waiters then hit the cache
         self._slots = threading.BoundedSemaphore(max_pending)  # queued + running requests
+        self._workers: list[Worker] = [Worker(self.instance_id, memory_mb=memory_mb, cache_size=cache_size)
+                                       for _ in range(workers)]
+        self._idle: queue.SimpleQueue[Worker] = queue.SimpleQueue()
+        for w in self._workers:
+            w.wait_ready()  # announce nothing before the workers can answer
+            self._idle.put(w)
         self._pool = ThreadPoolExecutor(workers, thread_name_prefix=f"predictor-{instance_id}")
         self._closed = False
         self._queryable = session.declare_queryable(keys.predict("*"), self._on_query, complete=True)
@@ -129,30 +140,34 @@ class Predictor:
     def _serve(self, query: zenoh.Query, request: PredictRequest) -> None:
         with query:
             try:
-                self._reply(query, self.answer(request))
+                kind, payload = self.answer(request)
+                self._send(query, request.system, payload, kind)
             except Exception:
                 log.exception("predictor %s: request %s failed", self.instance_id, request.seq)
             finally:
                 self._slots.release()
 
-    def answer(self, request: PredictRequest) -> PredictReply:
-        """Compute the reply to one request (SPEC §6); failures become ``ok=False``."""
+    def answer(self, request: PredictRequest) -> tuple[str, bytes]:
+        """``("ok", encoded reply)`` or ``("failed", encoded failure)`` for one request (SPEC §6)."""
         try:
-            system = self._system(request.system, request.digest)
-            marking = marking_of(system, request.skillsets, "request")
-            fc = forecast(system, marking, budget=min(request.budget, self.max_budget))
-            return PredictReply(
-                system=request.system, digest=request.digest, seq=request.seq, ok=True, instance=self.instance_id,
-                report=state_space_report(system, fc, time.time()), risks=risks(system, marking, fc),
-            )
-        except (FetchError, SkinetError) as exc:
-            return self._failure(request.system, request.digest, request.seq, str(exc))
-        except Exception as exc:  # a bug or a pathological model: answer, log, keep serving
-            log.exception("predictor %s: unexpected error", self.instance_id)
-            return self._failure(request.system, request.digest, request.seq, f"{type(exc).__name__}: {exc}")
+            model = self._bundle(request.system, request.digest)
+            worker = self._idle.get()
+            try:
+                payload = worker.run(request.digest, model, encode(request), min(request.budget, self.max_budget),
+                                     self.grace)
+            finally:
+                self._idle.put(worker)
+            return "ok", payload
+        except (FetchError, WorkerError) as exc:
+            if isinstance(exc, WorkerError) and "worker" in str(exc):
+                with self._lock:
+                    self.counts["killed"] += 1
+            failure = self._failure(request.system, request.digest, request.seq, str(exc))
+            self._warn(failure, "failed")
+            return "failed", encode(failure)
 
-    def _system(self, name: str, digest: str) -> System:
-        """The system of ``digest``, from the cache or fetched from its monitor."""
+    def _bundle(self, name: str, digest: str) -> bytes:
+        """The checked bundle of ``digest``, from the cache or fetched from its monitor."""
         with self._lock:
             if digest in self._cache:
                 self._cache.move_to_end(digest)
@@ -161,32 +176,40 @@ class Predictor:
             with self._lock:
                 if digest in self._cache:
                     return self._cache[digest]
-            system = self._fetch(name, digest)
+            model = self._fetch(name, digest)
             with self._lock:
-                self._cache[digest] = system
+                self._cache[digest] = model
                 while len(self._cache) > self.cache_size:
                     self._cache.popitem(last=False)
                 self.counts["fetched"] += 1
-            return system
+            return model
 
-    def _fetch(self, name: str, digest: str) -> System:
-        """Query ``skinet/<system>/model/<digest>``; the first bundle that hashes to ``digest`` wins."""
+    def _fetch(self, name: str, digest: str) -> bytes:
+        """Query ``skinet/<system>/model/<digest>``; the first bundle that hashes to ``digest`` wins.
+
+        The hash is checked on the bundle's text before anything is parsed or built.
+        """
         key = keys.model(name, digest)  # both checked by _decode
         problems: list[str] = []
         for reply in self.session.get(key, timeout=self.fetch_timeout):
             if reply.ok is None:
                 problems.append(f"error reply: {reply.err.payload.to_string()}")
                 continue
+            payload = reply.ok.payload.to_bytes()
+            if len(payload) > self.max_bundle:
+                problems.append(f"bundle of {len(payload)} bytes exceeds the limit of {self.max_bundle}")
+                continue
             try:
-                system = system_from_bundle(decode(reply.ok.payload.to_bytes(), ModelBundle))
-            except (DecodeError, SkinetError) as exc:
+                model = decode(payload, ModelBundle)
+            except DecodeError as exc:
                 problems.append(str(exc))
                 continue
-            got = bundle(system).digest
-            if got == digest:
+            got = bundle_digest(model)
+            if got == digest and model.system == name:
                 log.info("predictor %s: fetched model %s", self.instance_id, key)
-                return system
-            problems.append(f"bundle hashes to {got}")
+                return payload
+            problems.append(f"bundle hashes to {got}" if model.system == name else
+                            f"bundle of system '{model.system}'")
         reasons = "; ".join(dict.fromkeys(problems))  # a frozen server can yield 'Timeout' twice
         raise FetchError(f"cannot fetch model {key}: {reasons or 'no reply'}")
 
@@ -198,26 +221,35 @@ class Predictor:
 
     def _reply(self, query: zenoh.Query, reply: PredictReply, failure: str = "failed") -> None:
         kind = "ok" if reply.ok else failure
-        with self._lock:
-            self.counts[kind] += 1
+        self._warn(reply, kind)
+        self._send(query, reply.system, encode(reply), kind)
+
+    def _warn(self, reply: PredictReply, kind: str) -> None:
         if not reply.ok:
             log.warning("predictor %s: %s request %s/%s: %s",
                         self.instance_id, kind, reply.system, reply.seq, reply.error)
+
+    def _send(self, query: zenoh.Query, system: str, payload: bytes, kind: str) -> None:
+        with self._lock:
+            self.counts[kind] += 1
         try:
-            query.reply(keys.predict(reply.system), encode(reply), express=True)
+            query.reply(keys.predict(system), payload, express=True)
         except zenoh.ZError as exc:  # the session closed under us, or a key the query does not accept
             log.warning("predictor %s: cannot reply to %s: %s", self.instance_id, query.key_expr, exc)
 
     def close(self) -> None:
-        """Stop serving: withdraw the token and the queryable, then answer the queued work.
+        """Stop serving: withdraw the token and the queryable, kill the worker processes.
 
-        The session stays open (it may be shared); a standalone instance closes it
-        afterwards, so no admitted query is lost.
+        Queued and running requests are answered with a one-line failure at once
+        (a hostile job must not delay a shutdown).  The session stays open (it may
+        be shared); a standalone instance closes it afterwards.
         """
         if self._closed:
             return
         self._closed = True
         undeclare(self._token, self._queryable)
+        for w in self._workers:
+            w.close()
         self._pool.shutdown(wait=True)
         log.info("predictor %s stopped (%s)", self.instance_id, dict(self.counts))
 
@@ -231,15 +263,20 @@ def start_predictor(
     cache_size: int = 4,
     fetch_timeout: float = 2.0,
     max_budget: float = 10.0,
+    memory_mb: int = 1024,
+    grace: float = 1.0,
 ) -> Predictor:
     """Serve predictions on ``session`` (shared or own); returns a handle with ``.close()``.
 
     Args:
-        workers: threads computing forecasts.
+        workers: worker processes computing forecasts (one thread each here).
         max_pending: requests queued or running before answering ``busy``.
         cache_size: systems kept (least recently used dropped first).
         fetch_timeout: seconds to wait for a model bundle.
         max_budget: cap on a request's exploration budget, seconds.
+        memory_mb: address-space limit of each worker process, MB.
+        grace: seconds past a request's budget before its worker is killed.
     """
     return Predictor(session, instance_id, workers=workers, max_pending=max_pending,
-                     cache_size=cache_size, fetch_timeout=fetch_timeout, max_budget=max_budget)
+                     cache_size=cache_size, fetch_timeout=fetch_timeout, max_budget=max_budget,
+                     memory_mb=memory_mb, grace=grace)

@@ -337,7 +337,10 @@ def test_predictor_killed_mid_query_then_restarted(router, monitor_factory, sess
     fleet = load_system(_heavy_system(tmp_path))[0]
     reports = Reports(session, "fleet")
     watch = LivelinessWatch(session, keys.alive("*", "predictor", "*"))
-    args = ["services.predictor", *client_args(router), "--instance"]
+    # A long grace: this test is about a predictor dying, not about the worker killed at
+    # budget + grace (tests/services/test_hostile.py), and exploring this system may
+    # outlast a small budget.
+    args = ["services.predictor", *client_args(router), "--grace", "60", "--instance"]
     first = spawn([*args, "doomed"], tmp_path / "doomed.log")
     try:
         watch.wait(lambda alive: any(a.endswith("/doomed") for a in alive))
