@@ -8,6 +8,9 @@ with ``CongestionControl.BLOCK`` (ZENOH.md).
 
 The manager's status is volatile (corpus README): at start-up the bridge sends
 ``status_request`` and repeats it every second until each manager has answered.
+A monitor that missed events asks ``keys.resync(system, skillset)``: the bridge
+answers with the skillset's last status (numbered as its last event) and asks
+the manager for a fresh one.
 
 One subscriber per manager covers all its topics (``.../<skillset>_skillset/**``):
 separate subscribers per key would run their callbacks on different threads and
@@ -75,6 +78,7 @@ class Bridge:
             pub = session.declare_publisher(style.key(manager, req, m.store),
                                             congestion_control=zenoh.CongestionControl.BLOCK)
             self._requests[name] = (pub, encode(m.store, EMPTY_TYPE, default_instance(m.store, EMPTY_TYPE)))
+        self._resync = session.declare_queryable(keys.resync(system.name, "*"), self._on_resync)
         self._token = session.liveliness().declare_token(keys.alive(system.name, "bridge_ros2", self.instance_id))
         self._worker = threading.Thread(target=self._run, name="bridge_ros2", daemon=True)
         self._worker.start()
@@ -115,6 +119,17 @@ class Bridge:
             with self._fed:
                 self._fed.notify_all()
 
+    def _on_resync(self, query: zenoh.Query) -> None:
+        with query:
+            skillset = str(query.key_expr).rsplit("/", 1)[-1]
+            if skillset not in self.feed.managers:
+                return
+            with self._fed:
+                ev = self.feed.last_status(skillset)
+            if ev is not None:
+                query.reply(keys.resync(self.system.name, skillset), wire_encode(ev))
+            self.request_status(skillset)
+
     def wait_statuses(self, counts: Mapping[str, int], timeout: float = 5.0) -> bool:
         """Wait until ``counts[skillset]`` statuses of each skillset were handled and their events published.
 
@@ -150,7 +165,7 @@ class Bridge:
         if self._stop.is_set():
             return
         self._stop.set()
-        undeclare(self._token, *self._subscribers)
+        undeclare(self._token, self._resync, *self._subscribers)
         self._queue.put(None)
         self._worker.join(5.0)
         if self._asker is not None:

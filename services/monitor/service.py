@@ -33,6 +33,7 @@ from skinet.wire.messages import CanonicalEvent, LiveState, PredictReply, StateS
 
 log = logging.getLogger("skinet.monitor")
 _LOG_FIRST = 10  # log the first occurrences of each problem, then every 1000th
+MAX_EVENT = 64 << 10  # bytes; a canonical event is a few hundred
 
 
 @dataclass(frozen=True)
@@ -53,7 +54,8 @@ class Monitor:
 
     def __init__(self, session: zenoh.Session, system: System, *, instance_id: str | None = None,
                  budget: float = 1.0, query_timeout: float | None = None, retry: float = 0.5,
-                 prediction_cache: int = 256, indirect: bool = True, express: bool = True):
+                 prediction_cache: int = 256, indirect: bool = True, express: bool = True,
+                 resync_timeout: float = 2.0):
         self.session, self.system = session, system
         self.instance_id = keys.check_chunk(instance_id or uuid.uuid4().hex[:8], "instance id")
         name = keys.check_chunk(system.name, "system name")
@@ -67,6 +69,8 @@ class Monitor:
         self._closed = False
         self._last: dict[str, bytes] = {}
         self._waiters = 0  # threads in wait_change: notify only when someone listens
+        self._resyncing: set[str] = set()  # skillsets with a resync query in flight
+        self.resync_timeout = resync_timeout
         opts = dict(congestion_control=zenoh.CongestionControl.BLOCK, express=express)
         self._pub = {k: session.declare_publisher(key, **opts) for k, key in (
             ("state", keys.state(name)), ("verdicts", keys.verdicts(name)),
@@ -128,6 +132,8 @@ class Monitor:
 
     def _on_event(self, sample: zenoh.Sample) -> None:
         try:
+            if len(sample.payload) > MAX_EVENT:
+                raise DecodeError(f"event payload of {len(sample.payload)} bytes (limit {MAX_EVENT})")
             ev = decode(sample.payload.to_bytes(), CanonicalEvent)
             if ev.system != self.system.name:
                 raise DecodeError(f"event of system '{ev.system}' on {sample.key_expr}")
@@ -144,22 +150,64 @@ class Monitor:
                     return
                 engine = self._engine
                 engine.counters.received += 1
-                fresh, problem = engine.check_seq(ev)
+                fresh, problem, resync = engine.check_seq(ev)
                 c = engine.counters
                 if problem:
-                    self._warn(c.duplicates + c.out_of_order + c.lost, "%s", problem)
-                if not fresh:
-                    return
-                step = engine.apply(ev)
-                self._publish(step)
-                if step.divergence:
-                    self._warn(c.divergences, "divergence at %s#%d: %s", ev.skillset, ev.seq, step.divergence)
-                if engine.prediction(step.key) is None:
-                    self._predict.want(step.key, engine.marking())
+                    self._warn(c.duplicates + c.out_of_order + c.lost + c.jumps + c.restarts, "%s", problem)
+                if fresh:
+                    self._step(ev)
+            if resync:
+                self._ask_resync(ev.skillset)
         except Exception:  # a bug must not stop the monitor
             with self._lock:
                 self._engine.counters.errors += 1
             log.exception("error while handling an event")
+
+    def _ask_resync(self, skillset: str) -> None:
+        """Ask the bridge for ``skillset``'s last status (one query in flight per skillset)."""
+        with self._lock:
+            if skillset in self._resyncing or self._closed:
+                return
+            self._resyncing.add(skillset)
+        done = lambda: self._resync_done(skillset)  # noqa: E731
+        try:
+            self.session.get(keys.resync(self.system.name, skillset),
+                             zenoh.handlers.Callback(self._on_resync, done), timeout=self.resync_timeout)
+        except zenoh.ZError as exc:  # session closed under us
+            log.warning("cannot ask for a resync of %s: %s", skillset, exc)
+            done()
+
+    def _resync_done(self, skillset: str) -> None:
+        with self._lock:
+            self._resyncing.discard(skillset)
+
+    def _on_resync(self, reply: zenoh.Reply) -> None:
+        try:
+            if reply.ok is None:
+                return
+            ev = decode(reply.ok.payload.to_bytes(), CanonicalEvent)
+            if ev.system != self.system.name:
+                return
+            with self._lock:
+                if self._closed or not self._engine.resync(ev):
+                    return
+                self._engine.counters.resyncs += 1
+                log.info("resync of %s from '%s' at #%d", ev.skillset, ev.source, ev.seq)
+                self._step(ev)
+        except DecodeError as exc:
+            log.warning("bad resync reply: %s", exc)
+        except Exception:
+            log.exception("error while applying a resync")
+
+    def _step(self, ev: CanonicalEvent) -> None:
+        """Apply a checked event and publish its step (lock held)."""
+        engine = self._engine
+        step = engine.apply(ev)
+        self._publish(step)
+        if step.divergence:
+            self._warn(engine.counters.divergences, "divergence at %s#%d: %s", ev.skillset, ev.seq, step.divergence)
+        if engine.prediction(step.key) is None:
+            self._predict.want(step.key, engine.marking())
 
     def _on_prediction(self, key: MarkingKey, reply: PredictReply) -> None:
         try:

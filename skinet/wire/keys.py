@@ -10,6 +10,7 @@ key                                       publisher           payload
 ``skinet/<system>/state_space``           monitor             :class:`StateSpaceReport`
 ``skinet/<system>/predict``               predictor (query)   :class:`PredictRequest` -> :class:`PredictReply`
 ``skinet/<system>/model/<digest>``        monitor (query)     -> :class:`ModelBundle`
+``skinet/<system>/resync/<skillset>``     bridge_ros2 (query) -> :class:`CanonicalEvent` (last status)
 ``skinet/<system>/alive/<service>/<id>``  every instance      liveliness token
 ========================================  ==================  ==========================
 
@@ -59,6 +60,10 @@ def predict(system: str = "*") -> str:
 
 def model(system: str, digest: str = "*") -> str:
     return f"{ROOT}/{system}/model/{digest}"
+
+
+def resync(system: str, skillset: str = "*") -> str:
+    return f"{ROOT}/{system}/resync/{skillset}"
 
 
 def alive(system: str, service: str = "*", instance: str = "*") -> str:
