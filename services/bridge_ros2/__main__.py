@@ -19,6 +19,7 @@ import zenoh
 from services.bridge_ros2.replay import replay_bag
 from services.bridge_ros2.service import default_source, start_bridge
 from services.common.cli import add_instance_arg, add_log_arg, setup_logging
+from services.common.events import event_publisher
 from services.common.zenoh_config import add_zenoh_args, config_from_args
 from skinet.errors import SkinetError
 from skinet.files import load_system, load_typemap
@@ -86,9 +87,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _replay(session: zenoh.Session, system, typemap, args: argparse.Namespace, source: str) -> int:
-    publishers = {c.name: session.declare_publisher(keys.events(system.name, c.name),
-                                                     congestion_control=zenoh.CongestionControl.BLOCK)
-                  for c in system.components}
+    publishers = {c.name: event_publisher(session, keys.events(system.name, c.name)) for c in system.components}
     try:
         feed = replay_bag(args.replay, system, typemap, lambda ev: publishers[ev.skillset].put(encode(ev)),
                           source=source, realtime=args.realtime)

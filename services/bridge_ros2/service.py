@@ -4,7 +4,8 @@ Subscribes to each manager's ``status``, ``event_request``, ``event_response`` a
 ``skill/<k>/response`` on the keys of :mod:`skinet.ros.keys` (as
 ``zenoh-bridge-ros2dds`` or ``rmw_zenoh`` carry them) and publishes the derived
 :class:`~skinet.wire.messages.CanonicalEvent` on ``keys.events(system, skillset)``
-with ``CongestionControl.BLOCK`` (ZENOH.md).
+with ``CongestionControl.BLOCK`` (ZENOH.md) and a cache from which a monitor
+recovers what it missed during an outage (:mod:`services.common.events`).
 
 The manager's status is volatile (corpus README): at start-up the bridge sends
 ``status_request`` and repeats it every second until each manager has answered.
@@ -33,6 +34,7 @@ import zenoh
 
 from services.bridge_ros2.feed import Counters, Feed
 from services.common.cli import default_instance_id
+from services.common.events import event_publisher
 from services.common.zenoh_config import undeclare
 from skinet.ros.keys import EMPTY_TYPE, KeyStyle, ManagerTopic, manager_topics, rmw_attachment
 from skinet.ros.typestore import default_instance, encode
@@ -69,8 +71,7 @@ class Bridge:
         self._gid = os.urandom(16)  # rmw_zenoh attachments of the status requests
         for name, m in self.feed.managers.items():
             manager = m.component.manager
-            self._events[name] = session.declare_publisher(
-                keys.events(system.name, name), congestion_control=zenoh.CongestionControl.BLOCK)
+            self._events[name] = event_publisher(session, keys.events(system.name, name))
             watched = {t.topic: t for t in m.topics}
             self._subscribers.append(session.declare_subscriber(
                 style.all_topics(manager, m.component.skillset), self._callback(name, manager, watched)))

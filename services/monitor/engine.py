@@ -45,6 +45,7 @@ class Counters:
     jumps: int = 0  # seq far ahead of the last (forged, or a long outage): resynced
     restarts: int = 0  # a stream begun anew: new epoch, or seq far behind (a wrap)
     resyncs: int = 0  # status resyncs applied
+    unrecovered: int = 0  # events an outage took that the bridge's cache could not give back (also in lost)
     divergences: int = 0  # events the model could not explain (SPEC §7)
     errors: int = 0  # unexpected exceptions while handling a payload (bugs)
 

@@ -1,6 +1,7 @@
 """The monitor service: the fast path of SPEC §1 as a Zenoh shell around :class:`Engine`.
 
-Subscribes to ``keys.events(system, "*")``; per event it publishes
+Subscribes to ``keys.events(system, "*")``, recovering what an outage took from
+the bridge's cache (:mod:`services.common.events`); per event it publishes
 :class:`LiveState`, :class:`Verdicts` and :class:`UnsafeReport` (one step;
 the three share the step's ``seq``).  It answers the model queryable, holds a
 liveliness token and asks the predictor for the live marking without ever
@@ -8,7 +9,9 @@ waiting for it (:mod:`services.monitor.prediction`); when a prediction for the
 live marking arrives, the UnsafeReport of the same step is published again with
 ``prediction_stale=False`` together with the :class:`StateSpaceReport`.
 Predictions are kept per marking (``prediction_cache``): a marking seen again is
-fresh at once and not queried again.  Bad payloads are counted and logged,
+fresh at once and not queried again.  A gap, a jump, a restarted bridge or events
+that could not be recovered make it ask the bridge for the skillset's last status
+(``keys.resync``) and apply it (see :meth:`Engine.check_seq`).  Bad payloads are counted and logged,
 never raised (SPEC §7).
 """
 
@@ -22,6 +25,7 @@ from dataclasses import dataclass
 
 import zenoh
 
+from services.common.events import event_subscriber
 from services.common.zenoh_config import undeclare
 from services.monitor.engine import Counters, Engine, MarkingKey, Step
 from services.monitor.prediction import PredictionClient, PredictorStats
@@ -82,8 +86,8 @@ class Monitor:
         self._queryable = session.declare_queryable(keys.model(name, self.digest), self._on_model_query)
         self._predictors = session.liveliness().declare_subscriber(
             keys.alive("*", "predictor", "*"), self._on_predictor_token)
-        self._sub = session.declare_subscriber(
-            keys.events(name, "*"), zenoh.handlers.Callback(self._on_event, indirect=indirect))
+        self._sub, self._misses = event_subscriber(
+            session, keys.events(name, "*"), zenoh.handlers.Callback(self._on_event, indirect=indirect), self._on_miss)
         # Declared last: whoever sees the token also sees the declarations above.
         self._token = session.liveliness().declare_token(keys.alive(name, "monitor", self.instance_id))
         self._predict.want(self._engine.key, self._engine.marking())
@@ -123,7 +127,7 @@ class Monitor:
                 return
             self._closed = True  # callbacks still running return at once
             self._changed.notify_all()
-        undeclare(self._sub, self._predictors, self._queryable, self._token)
+        undeclare(self._misses, self._sub, self._predictors, self._queryable, self._token)
         self._predict.close()
         with self._lock:
             undeclare(*self._pub.values())
@@ -162,6 +166,14 @@ class Monitor:
             with self._lock:
                 self._engine.counters.errors += 1
             log.exception("error while handling an event")
+
+    def _on_miss(self, count: int) -> None:
+        """Events an outage took that no cache could give back: counted, then every skillset resynced."""
+        with self._lock:  # the next event shows the gap: check_seq counts it in lost and names it
+            self._engine.counters.unrecovered += count
+            self._warn(self._engine.counters.unrecovered, "%d events missed and not recoverable: resync", count)
+        for c in self.system.components:
+            self._ask_resync(c.name)
 
     def _ask_resync(self, skillset: str) -> None:
         """Ask the bridge for ``skillset``'s last status (one query in flight per skillset)."""
