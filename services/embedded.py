@@ -1,7 +1,8 @@
 """Embedded default (SPEC §7): monitor and predictor on one peer session, with a live view.
 
 ``skinet run SYSTEM.toml`` opens one Zenoh ``peer`` session (no router; ZENOH.md:
-share one session in a process), starts the monitor and a predictor on it, and
+share one session in a process; loopback only and no multicast scouting unless
+asked), starts the monitor and a predictor on it, and
 shows the operator view: redrawn in place on a terminal, one line per change
 otherwise.  ``--listen`` lets a bridge in another process connect.  ``skinet
 router`` runs a Zenoh router from the Python wheel.
@@ -11,12 +12,14 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 import os
 import signal
 import sys
 import threading
 import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import TextIO
 
 import zenoh
@@ -85,7 +88,7 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     system, _ = load_system(args.system)
     stop = _stop_on_signals()
     session = zenoh.open(session_config("peer", args.connect, args.listen, args.zenoh_config,
-                                        not args.no_multicast_scouting))
+                                        args.multicast_scouting))
     monitor: Monitor | None = None
     predictor = None
     try:
@@ -128,13 +131,38 @@ def _follow(monitor: Monitor, stop: threading.Event, duration: float | None, out
 
 
 def router(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
-    """``skinet router``: a Zenoh router (mode "router" of the Python wheel) until interrupted."""
+    """``skinet router``: a Zenoh router (mode "router" of the Python wheel) until interrupted.
+
+    Secure by default (issue 14): loopback only unless ``--listen`` says otherwise,
+    and user/password authentication: the ``dictionary_file`` of the configuration,
+    or ``users.txt`` in the secrets folder; missing users get random passwords at
+    first start (:func:`~services.common.security.ensure_users`).  A ``tls/``
+    endpoint without certificates in the configuration gets a CA and certificates
+    made in ``<secrets>/tls``, with mutual TLS.
+    """
+    from services.common.security import ensure_tls, ensure_users, tls_listen_config
+
     stop = _stop_on_signals()
-    session = zenoh.open(session_config("router", args.connect, args.listen or ["tcp/0.0.0.0:7447"],
-                                        args.zenoh_config, not args.no_multicast_scouting))
+    config = session_config("router", args.connect, args.listen, args.zenoh_config, args.multicast_scouting)
+    folder = Path(args.secrets or Path.home() / ".config" / "skinet" / "secrets")
+    notes = []
+    if not args.no_auth:
+        table = json.loads(config.get_json("transport/auth/usrpwd/dictionary_file") or "null")
+        if table:
+            folder = Path(table).parent
+        ensure_users(folder)
+        config.insert_json5("transport/auth/usrpwd/dictionary_file", json.dumps(str(folder / "users.txt")))
+        notes.append(f"users and passwords in {folder}")
+    endpoints = json.loads(config.get_json("listen/endpoints"))
+    if any(str(e).startswith("tls/") for e in endpoints) and \
+            json.loads(config.get_json("transport/link/tls/listen_certificate") or "null") is None:
+        ensure_tls(folder / "tls", ["router"])
+        config.insert_json5("transport/link/tls", json.dumps(tls_listen_config(folder / "tls", "router")))
+        notes.append(f"TLS certificates in {folder / 'tls'}")
+    session = zenoh.open(config)
     try:
-        print(f"zenoh router {session.zid()} listening on {', '.join(args.listen or ['tcp/0.0.0.0:7447'])}",
-              file=out, flush=True)
+        print(f"zenoh router {session.zid()} listening on {', '.join(endpoints)}"
+              + "".join(f"; {n}" for n in notes), file=out, flush=True)
         while not stop.wait(0.5):
             pass
     finally:

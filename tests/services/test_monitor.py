@@ -480,7 +480,7 @@ def test_skinet_run_listens_for_a_bridge_and_logs_changes(tmp_path):
 
 def test_skinet_router_links_clients():
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    proc = subprocess.Popen([sys.executable, "-m", "skinet.cli.main", "router", "--listen", endpoint,
+    proc = subprocess.Popen([sys.executable, "-m", "skinet.cli.main", "router", "--listen", endpoint, "--no-auth",
                              "--no-multicast-scouting"], cwd=REPO, stdout=subprocess.PIPE, text=True,
                             start_new_session=True)
     try:
