@@ -24,6 +24,7 @@ from __future__ import annotations
 import logging
 import queue
 import threading
+import time
 from collections import Counter, OrderedDict
 from concurrent.futures import ThreadPoolExecutor
 
@@ -40,7 +41,11 @@ log = logging.getLogger("skinet.predictor")
 
 
 class FetchError(Exception):
-    """The model of a digest could not be obtained."""
+    """The model of a digest could not be obtained; ``unknown``: nobody serves it."""
+
+    def __init__(self, message: str, unknown: bool = False):
+        super().__init__(message)
+        self.unknown = unknown
 
 
 def _one_line(text: str) -> str:
@@ -73,6 +78,8 @@ class Predictor:
         self.max_bundle = max_bundle
         self.counts: Counter[str] = Counter()  # ok, failed, busy, fetched, killed
         self._cache: OrderedDict[str, bytes] = OrderedDict()  # digest -> checked bundle
+        self._failed: OrderedDict[str, tuple[float, str]] = OrderedDict()  # digest -> (when, why) of a failed fetch
+        self.retry_fetch = 5.0  # seconds before fetching again a digest nobody served
         self._lock = threading.Lock()  # cache and counts (callbacks and workers)
         self._fetch_lock = threading.Lock()  # one fetch at a time; waiters then hit the cache
         self._slots = threading.BoundedSemaphore(max_pending)  # queued + running requests
@@ -176,7 +183,18 @@ class Predictor:
             with self._lock:
                 if digest in self._cache:
                     return self._cache[digest]
-            model = self._fetch(name, digest)
+                failed = self._failed.get(digest)
+                if failed is not None and time.monotonic() - failed[0] < self.retry_fetch:
+                    raise FetchError(failed[1])  # a flood of unknown digests costs one fetch each per period
+            try:
+                model = self._fetch(name, digest)
+            except FetchError as exc:
+                if exc.unknown:  # not a slow or broken server, which may recover at once
+                    with self._lock:
+                        self._failed[digest] = (time.monotonic(), str(exc))
+                        while len(self._failed) > 256:
+                            self._failed.popitem(last=False)
+                raise
             with self._lock:
                 self._cache[digest] = model
                 while len(self._cache) > self.cache_size:
@@ -211,7 +229,7 @@ class Predictor:
             problems.append(f"bundle hashes to {got}" if model.system == name else
                             f"bundle of system '{model.system}'")
         reasons = "; ".join(dict.fromkeys(problems))  # a frozen server can yield 'Timeout' twice
-        raise FetchError(f"cannot fetch model {key}: {reasons or 'no reply'}")
+        raise FetchError(f"cannot fetch model {key}: {reasons or 'no reply'}", unknown=not problems)
 
     # -- replies ----------------------------------------------------------------------
 
