@@ -13,24 +13,20 @@ from __future__ import annotations
 
 import resource
 import signal
-import subprocess
-import sys
 import threading
 import time
-from collections.abc import Iterator
 from pathlib import Path
 
-import pytest
 import zenoh
 
-from services.common.zenoh_config import session_config
 from services.monitor import start_monitor
 from services.predictor import start_predictor
 from skinet.files import load_system
 from skinet.wire import keys
 from skinet.wire.codec import decode, encode
 from skinet.wire.messages import CanonicalEvent, LiveState, PredictReply
-from tests.services.conftest import LivelinessWatch, free_port, open_client
+from tests.services.conftest import LivelinessWatch, free_port, open_client, start_skinet
+from tests.services.test_predictor import peer  # noqa: F401  (one session for monitor, predictor and attacker)
 from tests.services.hostile import Attacker, hostile_bundle
 
 REPO = Path(__file__).resolve().parents[2]
@@ -47,16 +43,6 @@ def rss_kb() -> int:
         if line.startswith("VmRSS:"):
             return int(line.split()[1])
     raise AssertionError("no VmRSS")
-
-
-@pytest.fixture
-def peer() -> Iterator[zenoh.Session]:
-    """One session for monitor, predictor and attacker, as ``skinet run`` shares one."""
-    config = session_config("peer", listen=["tcp/127.0.0.1:0"], multicast_scouting=False)
-    config.insert_json5("scouting/delay", "0")
-    session = zenoh.open(config)
-    yield session
-    session.close()
 
 
 def the_reply(replies: list[zenoh.Reply]) -> PredictReply:
@@ -141,9 +127,7 @@ def test_memory_limit_kills_the_worker_not_the_instance(peer: zenoh.Session) -> 
 
 def test_skinet_run_under_attack_stops_on_sigterm() -> None:
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    proc = subprocess.Popen([sys.executable, "-m", "skinet.cli.main", "run", str(SYSTEM_FILE), "--listen", endpoint,
-                             "--no-multicast-scouting", "--duration", "60"], cwd=REPO, stdout=subprocess.PIPE,
-                            stderr=subprocess.STDOUT, text=True, start_new_session=True)
+    proc = start_skinet("run", str(SYSTEM_FILE), "--listen", endpoint, "--duration", "60")
     session = None
     try:
         assert proc.stdout is not None and proc.stdout.readline().startswith("[0] start")

@@ -10,7 +10,6 @@ get back and resyncs.
 
 from __future__ import annotations
 
-import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path

@@ -15,7 +15,6 @@ import signal
 import subprocess
 import sys
 import time
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -25,7 +24,7 @@ from services.common.security import (
     USERS, ensure_tls, ensure_users, load_ca, make_ca, make_certificate, tls_connect_config,
 )
 from services.common.zenoh_config import session_config
-from tests.services.conftest import free_port
+from tests.services.conftest import free_port, start_skinet
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -56,9 +55,7 @@ class Router:
     """``skinet router`` in its own process, with its first output line."""
 
     def __init__(self, *args: str):
-        self.proc = subprocess.Popen([sys.executable, "-m", "skinet.cli.main", "router", *args], cwd=REPO,
-                                     stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                                     start_new_session=True)
+        self.proc = start_skinet("router", *args)
         assert self.proc.stdout is not None
         self.line = self.proc.stdout.readline()
 
