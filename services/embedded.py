@@ -67,7 +67,8 @@ def render(view: MonitorView) -> list[str]:
     out.append(f"  queries sent {p.sent}, answered {p.answered}, timed out {p.timed_out}, unanswered {p.unanswered}, "
                f"failed {p.failed}, superseded {p.superseded}{', one in flight' if p.in_flight else ''}")
     out.append(f"events  received {c.received}, applied {c.applied}, malformed {c.malformed}, duplicates "
-               f"{c.duplicates}, out of order {c.out_of_order}, lost {c.lost}, divergences {c.divergences}")
+               f"{c.duplicates}, out of order {c.out_of_order}, lost {c.lost}, divergences {c.divergences}"
+               + (f", resyncs {c.resyncs}" if c.resyncs else ""))
     return out
 
 
@@ -138,9 +139,10 @@ def router(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     or ``users.txt`` in the secrets folder; missing users get random passwords at
     first start (:func:`~services.common.security.ensure_users`).  A ``tls/``
     endpoint without certificates in the configuration gets a CA and certificates
-    made in ``<secrets>/tls``, with mutual TLS.
+    (the router's, and one per user for clients) made in ``<secrets>/tls``, with
+    mutual TLS; ``$SKINET_TLS_HOSTNAMES`` lists the names clients reach it by.
     """
-    from services.common.security import ensure_tls, ensure_users, tls_listen_config
+    from services.common.security import USERS, ensure_tls, ensure_users, tls_listen_config
 
     stop = _stop_on_signals()
     config = session_config("router", args.connect, args.listen, args.zenoh_config, args.multicast_scouting)
@@ -156,7 +158,8 @@ def router(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     endpoints = json.loads(config.get_json("listen/endpoints"))
     if any(str(e).startswith("tls/") for e in endpoints) and \
             json.loads(config.get_json("transport/link/tls/listen_certificate") or "null") is None:
-        ensure_tls(folder / "tls", ["router"])
+        hostnames = [h.strip() for h in os.environ.get("SKINET_TLS_HOSTNAMES", "").split(",") if h.strip()]
+        ensure_tls(folder / "tls", ["router", *USERS], hostnames)
         config.insert_json5("transport/link/tls", json.dumps(tls_listen_config(folder / "tls", "router")))
         notes.append(f"TLS certificates in {folder / 'tls'}")
     session = zenoh.open(config)

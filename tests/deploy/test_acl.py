@@ -23,6 +23,7 @@ from deploy_support import (
     load_scenario, login, wait_until, write_login_file,
 )
 from skinet.wire import keys
+from tests.services.test_outage import Outage, run
 
 EVENTS = keys.events(SYSTEM, "spot")
 PREDICT = keys.predict(SYSTEM)
@@ -219,3 +220,14 @@ def test_the_services_run_the_mission_through_the_acl_router(acl_router: str, tm
                 p.wait()
             print(f"--- {p.args[2]} (exit {p.returncode}) ---\n{log.read_text(errors='replace')[-3000:]}")
         observer_session.close()
+
+
+def test_events_survive_a_router_restart_through_the_acl() -> None:
+    """The shipped ACL lets zenoh.ext's recovery through (its `@adv` keys, the cache's replies)."""
+    outage = Outage(lambda endpoint: zenoh.open(acl_router_config(endpoint)), login)
+    try:
+        counters, _ = run(outage, cache=4096, seconds=3.0)
+    finally:
+        outage.close()
+    assert (counters.received, counters.applied, counters.lost, counters.unrecovered, counters.out_of_order,
+            counters.duplicates) == (200, 200, 0, 0, 0, 0)

@@ -11,7 +11,7 @@ get back and resyncs.
 from __future__ import annotations
 
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
@@ -31,11 +31,17 @@ SYSTEM = load_system(REPO / "skillsets" / "spot_arm.toml")[0]
 
 
 class Outage:
-    """A router on a fixed port that can be closed and reopened."""
+    """A router on a fixed port that can be closed and reopened; ``login(user)`` opens a
+    client session of it (users matter with access control)."""
 
-    def __init__(self) -> None:
+    def __init__(self, router: Callable[[str], zenoh.Session] = open_router,
+                 login: Callable[[str, str], zenoh.Session] = lambda endpoint, user: open_client(endpoint)) -> None:
         self.endpoint = f"tcp/127.0.0.1:{free_port()}"
-        self.router: zenoh.Session | None = open_router(self.endpoint)
+        self._open, self._login = router, login
+        self.router: zenoh.Session | None = router(self.endpoint)
+
+    def login(self, user: str) -> zenoh.Session:
+        return self._login(self.endpoint, user)
 
     def down(self) -> None:
         assert self.router is not None
@@ -43,7 +49,7 @@ class Outage:
         self.router = None
 
     def up(self) -> None:
-        self.router = open_router(self.endpoint)
+        self.router = self._open(self.endpoint)
 
     def close(self) -> None:
         if self.router is not None:
@@ -59,7 +65,7 @@ def outage() -> Iterator[Outage]:
 
 def run(outage: Outage, cache: int, seconds: float, total: int = 200, rate: float = 40.0) -> tuple:
     """Publish ``total`` status events at ``rate``/s, with the router down ``seconds`` from the 40th."""
-    pub_s, mon_s, obs_s = open_client(outage.endpoint), open_client(outage.endpoint), open_client(outage.endpoint)
+    pub_s, mon_s, obs_s = outage.login("bridge"), outage.login("monitor"), outage.login("observer")
     states: list[str] = []
     sub = obs_s.declare_subscriber(keys.state("spot_arm"), lambda s: states.append(
         decode(s.payload.to_bytes(), LiveState).event))
