@@ -9,13 +9,16 @@
 #
 # Zenoh settings come from the SKINET_ZENOH_* variables that every service reads.
 # SKINET_ZENOH_USER with SKINET_ZENOH_PASSWORD (or SKINET_ZENOH_PASSWORD_FILE, for
-# Docker secrets) adds user/password authentication to the session's configuration
-# (on top of SKINET_ZENOH_CONFIG when that is set).  Clients also wait for their
-# router instead of failing when it is not up yet.
+# Docker secrets; default $SKINET_SECRETS/<user>.password, which the router makes
+# at first start) adds user/password authentication to the session's configuration
+# (on top of SKINET_ZENOH_CONFIG when that is set).  A tls/ endpoint in
+# SKINET_ZENOH_CONNECT adds the CA and the user's certificate from
+# $SKINET_SECRETS/tls/.  Clients wait for these files and for their router
+# instead of failing when they are not there yet.
 set -eu
 
 if [ $# -eq 0 ] || [ "$1" = "--help" ] || [ "$1" = "-h" ]; then
-    sed -n '2,14p' "$0" | sed 's/^# \{0,1\}//'
+    sed -n '2,17p' "$0" | sed 's/^# \{0,1\}//'
     exit 0
 fi
 
@@ -27,20 +30,36 @@ if [ "$service" != "router" ] && [ "$service" != "skinet" ]; then
     # SKINET_ZENOH_CONFIG is kept, and passwords need no shell quoting.
     generated="${TMPDIR:-/tmp}/skinet-zenoh-$$.json"
     python3 - "$generated" <<'PY'
-import json, os, sys
+import json, os, sys, time
+from pathlib import Path
 import zenoh
+from services.common.security import tls_connect_config
+
+def wait_for(path):
+    deadline = time.monotonic() + 120
+    while not path.exists():
+        if time.monotonic() > deadline:
+            sys.exit(f"skinet-entrypoint: {path} never appeared (does the router run with the same secrets?)")
+        time.sleep(0.5)
+    return path
 
 base = os.environ.get("SKINET_ZENOH_CONFIG")
 config = zenoh.Config.from_file(base) if base else zenoh.Config()
+secrets = Path(os.environ.get("SKINET_SECRETS", "/var/lib/skinet/secrets"))
 user = os.environ.get("SKINET_ZENOH_USER", "")
 password = os.environ.get("SKINET_ZENOH_PASSWORD", "")
 password_file = os.environ.get("SKINET_ZENOH_PASSWORD_FILE", "")
+if user and not password and not password_file:
+    password_file = str(secrets / f"{user}.password")
 if password_file:
-    with open(password_file, encoding="utf-8") as f:
-        password = f.read().strip()
+    password = wait_for(Path(password_file)).read_text(encoding="utf-8").strip()
 if user:
     config.insert_json5("transport/auth/usrpwd/user", json.dumps(user))
     config.insert_json5("transport/auth/usrpwd/password", json.dumps(password))
+connect = os.environ.get("SKINET_ZENOH_CONNECT", "")
+if user and any(e.strip().startswith("tls/") for e in connect.split(",")):
+    wait_for(secrets / "tls" / f"{user}.key")
+    config.insert_json5("transport/link/tls", json.dumps(tls_connect_config(secrets / "tls", user)))
 if os.environ.get("SKINET_ZENOH_MODE", "client") == "client":
     config.insert_json5("connect/timeout_ms", "-1")  # wait for the router, retrying
 fd = os.open(sys.argv[1], os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
