@@ -105,17 +105,22 @@ def load_ca(folder: Path) -> tuple[x509.Certificate, ec.EllipticCurvePrivateKey]
 
 
 def make_certificate(folder: Path, name: str, ca: tuple[x509.Certificate, ec.EllipticCurvePrivateKey], *,
-                     days: int = 825, expired: bool = False) -> Path:
+                     days: int = 825, expired: bool = False, hostnames: Iterable[str] = ()) -> Path:
     """``folder/<name>.pem`` (leaf then CA) and ``folder/<name>.key`` for server and client use.
 
-    The certificate names ``name``, ``localhost`` and ``127.0.0.1``; ``expired`` makes
-    one that expired yesterday (tests).
+    The certificate names ``name``, ``hostnames``, ``localhost`` and ``127.0.0.1``;
+    ``expired`` makes one that expired yesterday (tests).
     """
     ca_cert, ca_key = ca
     key = _key()
     now = datetime.datetime.now(datetime.timezone.utc)
     start, end = (now - 10 * DAY, now - DAY) if expired else (now - DAY, now + days * DAY)
-    sans = [x509.DNSName(name), x509.DNSName("localhost"), x509.IPAddress(ipaddress.ip_address("127.0.0.1"))]
+    sans: list[x509.GeneralName] = []
+    for host in dict.fromkeys([name, *hostnames, "localhost", "127.0.0.1"]):
+        try:
+            sans.append(x509.IPAddress(ipaddress.ip_address(host)))
+        except ValueError:
+            sans.append(x509.DNSName(host))
     cert = (x509.CertificateBuilder()
             .subject_name(x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, name)]))
             .issuer_name(ca_cert.subject).public_key(key.public_key()).serial_number(x509.random_serial_number())
@@ -132,12 +137,13 @@ def make_certificate(folder: Path, name: str, ca: tuple[x509.Certificate, ec.Ell
     return folder / f"{name}.pem"
 
 
-def ensure_tls(folder: Path, names: Iterable[str]) -> None:
-    """A CA in ``folder`` (made if missing) and a certificate for each name that has none."""
+def ensure_tls(folder: Path, names: Iterable[str], hostnames: Iterable[str] = ()) -> None:
+    """A CA in ``folder`` (made if missing) and a certificate for each name that has none;
+    ``hostnames`` (addresses clients use, e.g. ``robot.example``) go into every new one."""
     ca = load_ca(folder) if (folder / "ca.pem").exists() and (folder / "ca.key").exists() else make_ca(folder)
     for name in names:
         if not (folder / f"{name}.pem").exists() or not (folder / f"{name}.key").exists():
-            make_certificate(folder, name, ca)
+            make_certificate(folder, name, ca, hostnames=hostnames)
 
 
 def tls_listen_config(folder: Path, name: str) -> dict:
