@@ -1,18 +1,17 @@
 """A hostile model against an embedded ``skinet run`` (issue 14; SPEC §6, §7).
 
 Monitor and predictor share one peer session, as in ``skinet run``.  An attacker on
-the same session serves the consistent 1.5 KB bundle of
-``tests/services/hostile.py`` (ten resources, ten skills, 3^10 DNF clauses per
-guard) and asks for predictions of it with ``budget=0.1``, again and again, while
+the same session serves the consistent 1.9 KB bundle of
+``tests/services/hostile.py`` (ten resources, ten skills, 2^10 DNF clauses per
+guard, seconds to build) and asks for predictions of it with ``budget=0.1``, again and again, while
 events of the paper's mission are sent to the monitor one at a time, every 5 ms,
 and the latency event -> Verdicts is measured.  Phases, in one run:
 
 - *quiet*: no attack (the baseline);
 - *isolated*: the attack against our predictor (worker processes with a memory
   limit, killed at budget + grace);
-- *in-process peer*: what building even a much smaller hostile model (three
-  states per resource: 2^10 clauses, 60 MB) does to the monitor when it runs on a
-  thread of the monitor's process, as the predictor did before.
+- *in-process peer*: what building the same model does to the monitor when it
+  runs on a thread of the monitor's process, as the predictor did before.
 
 Printed: verdict p50/p99/max per phase, the predictor's peak memory (its process,
 which here also holds the monitor, and its largest worker) against the limit, and
@@ -122,12 +121,12 @@ def main() -> None:
         attacker.close()
         rows.append(row("isolated (our predictor)", isolated))
 
-        small = hostile_bundle(states=3)
+        small = hostile_bundle()
         building = threading.Thread(target=lambda: system_from_bundle(small))
         building.start()
         inproc = feed.latencies(session, 3.0)  # about the build's length
         building.join()
-        rows.append(row("in-process peer (3-state model, 60 MB)", inproc))
+        rows.append(row("in-process peer (the same model built on a thread)", inproc))
     finally:
         monitor.close()
         predictor.close()

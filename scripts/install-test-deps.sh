@@ -7,6 +7,8 @@
 set -euo pipefail
 
 PACKAGES=(
+    cmake          # cargo workspace: cyclors builds CycloneDDS (tests/dds, tests/deploy/test_rust_client.py)
+    libclang-dev   # cargo workspace: cyclors generates its CycloneDDS bindings with bindgen (same tests)
 )
 
 missing=()

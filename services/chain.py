@@ -20,9 +20,11 @@ from services.monitor.service import MonitorView, start_monitor
 from services.predictor.service import start_predictor
 from services.simulator import Simulator
 from services.simulator.driver import StepRun
-from skinet.mission import Scenario, StepRecord
+from skinet.mission import Scenario, StepRecord, flags_on
+from skinet.ros.keys import KeyStyle
 from skinet.system import System
 from skinet.verify.algorithm1 import UnsafeTransition
+from skinet.wire.messages import UnsafeEntry
 
 
 class ChainError(RuntimeError):
@@ -37,38 +39,60 @@ def run_chain(
     predict: bool = True,
     speed: float = 0.0,
     settle: float = 10.0,
+    session: zenoh.Session | None = None,
+    simulator: Simulator | None = None,
+    style: KeyStyle = KeyStyle(),
 ) -> list[StepRecord]:
     """Drive ``scenario`` through the whole chain and record what the monitor published.
 
     ``speed`` <= 0 plays as fast as the chain settles; ``settle`` bounds the
     wait for each step's effects (and, with ``predict``, for fresh predictions).
+    By default everything shares one new peer session with simulated managers on
+    Zenoh; a caller may give the ``session`` for the services and its own
+    ``simulator`` (for instance managers on DDS behind a gateway whose keys are
+    ``style``), which it then closes itself.
     """
-    session = zenoh.open(session_config("peer", multicast_scouting=False))
+    own = session is None
+    if session is None:
+        session = zenoh.open(session_config("peer", multicast_scouting=False))
     services: list = []
     try:
         monitor = start_monitor(session, system)
         services.append(monitor)
         if predict:
             services.append(start_predictor(session, "embedded"))
-        simulator = Simulator(session, system, typemap)
-        services.append(simulator)
-        bridge = start_bridge(session, system, typemap)
+        external = simulator is not None
+        if simulator is None:
+            simulator = Simulator(session, system, typemap)
+            services.append(simulator)
+        bridge = start_bridge(session, system, typemap, style=style)
         services.append(bridge)
         _wait(lambda: monitor.counters.applied >= len(system.components), settle, "initial statuses")
+        lost = {name: 0 for name in simulator.nodes}
+        if external:
+            # Behind a gateway, statuses answering the first requests are lost until its
+            # routes exist (volatile QoS); count them once the answers to the retries are in.
+            time.sleep(0.5)
+            lost = {name: n - bridge.feed.statuses[name] for name, n in simulator.statuses_published().items()}
         records: list[StepRecord] = []
         before = {p.name: True for p in system.properties}
+        if predict:
+            _wait(lambda: not monitor.snapshot().unsafe.prediction_stale, settle, "initial prediction")
+        shown = [unsafe_transition(u) for u in monitor.snapshot().unsafe.unsafe]  # what the operator sees
 
         def on_step(run: StepRun) -> None:
-            nonlocal before
-            if not bridge.wait_statuses(simulator.statuses_published()):
+            nonlocal before, shown
+            expected = {name: n - lost[name] for name, n in simulator.statuses_published().items()}
+            if not bridge.wait_statuses(expected):
                 raise ChainError(f"step {run.index}: the bridge did not receive every status")
             _wait(lambda: monitor.counters.applied >= bridge.counters.events, settle, f"step {run.index} applied")
             if predict:
                 _wait(lambda: not monitor.snapshot().unsafe.prediction_stale, settle, f"step {run.index} prediction")
             view = monitor.snapshot()
-            record = _record(run, view, before)
+            record = _record(run, view, before, shown)
             if run.step.transition is not None:
                 before = record.holds
+                shown = [unsafe_transition(u) for u in view.unsafe.unsafe]
             records.append(record)
 
         simulator.drive(scenario, speed=speed, on_step=on_step)
@@ -76,21 +100,27 @@ def run_chain(
     finally:
         for service in reversed(services):
             service.close()
-        session.close()
+        if own:
+            session.close()
 
 
-def _record(run: StepRun, view: MonitorView, before: dict[str, bool]) -> StepRecord:
+def unsafe_transition(u: UnsafeEntry) -> UnsafeTransition:
+    return UnsafeTransition(u.skillset, u.transition, u.kind, u.controllable, u.property, u.constraint, u.steps,
+                            tuple(u.witness), u.reason)
+
+
+def _record(run: StepRun, view: MonitorView, before: dict[str, bool], shown: list[UnsafeTransition]) -> StepRecord:
     holds = {v.name: v.holds for v in view.verdicts.properties}
     unsafe = view.unsafe.unsafe
-    warnings: list[UnsafeTransition] = []
     if run.step.consider is not None:
-        warnings = [
-            UnsafeTransition(u.skillset, u.transition, u.kind, u.controllable, u.property, u.constraint, u.steps, tuple(u.witness))
-            for u in unsafe if u.skillset == run.step.skillset and u.transition == run.step.consider
-        ]
-        return StepRecord(run.index, run.step, dict(before), [], warnings, len(unsafe))
+        warnings = flags_on(shown, run.step.skillset, run.step.consider)
+        return StepRecord(run.index, run.step, dict(before), [], warnings, len(shown))
     violations = [p for p, ok in holds.items() if before.get(p, True) and not ok]
-    return StepRecord(run.index, run.step, holds, violations, [], len(unsafe), view.state.divergence)
+    recovery: dict[str, list[str]] = {p: [] for p in view.unsafe.violated}
+    for r in view.unsafe.recovery:
+        recovery.setdefault(r.property, []).append(f"{r.skillset}:{r.transition}")
+    return StepRecord(run.index, run.step, holds, violations, [], len(unsafe), view.state.divergence,
+                      flags_on(shown, run.step.skillset, run.step.transition or ""), recovery)
 
 
 def _wait(condition, timeout: float, what: str) -> None:

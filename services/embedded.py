@@ -26,6 +26,7 @@ import zenoh
 
 from services.common.zenoh_config import session_config
 from services.monitor import Monitor, MonitorView, start_monitor
+from skinet.explain import warning_line
 from skinet.cli.render import seconds, table
 from skinet.files import load_system
 
@@ -51,7 +52,7 @@ def render(view: MonitorView) -> list[str]:
                    for r in u.recovery if r.property == v.name]
             line += f"; recovery: {', '.join(rec) or 'none'}"
         out.append(line)
-    freshness = "STALE (explicit constraints only)" if u.prediction_stale else "fresh"
+    freshness = "STALE (explicit and forced constraints only)" if u.prediction_stale else "fresh"
     out.append(f"unsafe transitions ({len(u.unsafe)}), prediction {freshness}")
     if u.unsafe:
         rows = [[e.skillset, e.transition, e.property, e.constraint,
@@ -59,6 +60,8 @@ def render(view: MonitorView) -> list[str]:
                  "-" if e.steps is None else e.steps, " -> ".join(e.witness)] for e in u.unsafe]
         out.extend("  " + r for r in table(rows, ["skillset", "transition", "property", "constraint",
                                                   "control", "steps", "witness"]).splitlines())
+        out.append("why")
+        out.extend("  " + warning_line(e) for e in u.unsafe)
     space = view.state_space
     explored = "-" if space is None else (
         f"{seconds(space.time)}, {space.markings} markings, {space.edges} edges, depth {space.depth}, "

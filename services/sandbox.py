@@ -50,7 +50,7 @@ class WorkerError(Exception):
 class Worker:
     """One child process computing forecasts under a memory limit and per-job deadlines."""
 
-    def __init__(self, instance_id: str, *, memory_mb: int = 1024, cache_size: int = 4, nice: int = 5,
+    def __init__(self, instance_id: str, *, memory_mb: int = 2048, cache_size: int = 4, nice: int = 5,
                  startup_timeout: float = 30.0):
         self.instance_id, self.memory_mb, self.cache_size, self.nice = instance_id, memory_mb, cache_size, nice
         self.startup_timeout = startup_timeout
@@ -179,7 +179,9 @@ def _serve(instance: str, cache_size: int, nice: int) -> None:
     from skinet.verify.predict import forecast
     from skinet.wire.codec import DecodeError, decode, encode
     from skinet.wire.convert import bundle as bundle_of
-    from skinet.wire.convert import bundle_digest, marking_of, risks, state_space_report, system_from_bundle
+    from skinet.wire.convert import (
+        bundle_digest, marking_of, request_options, risks, state_space_report, system_from_bundle,
+    )
     from skinet.wire.messages import ModelBundle, PredictReply, PredictRequest
 
     cache: OrderedDict[str, System] = OrderedDict()
@@ -200,7 +202,7 @@ def _serve(instance: str, cache_size: int, nice: int) -> None:
             cache.move_to_end(digest)
             marking = marking_of(system, request.skillsets, "request")
             left = max(0.0, budget - (time.perf_counter() - started))  # building counts against the budget
-            fc = forecast(system, marking, budget=left)
+            fc = forecast(system, marking, budget=left, options=request_options(system, request))
             reply = PredictReply(system=request.system, digest=digest, seq=request.seq, ok=True, instance=instance,
                                  report=state_space_report(system, fc, time.time()), risks=risks(system, marking, fc))
             return [True, "", encode(reply)]
@@ -211,7 +213,8 @@ def _serve(instance: str, cache_size: int, nice: int) -> None:
         except Exception as exc:  # a bug or a pathological model: report it, keep serving
             return [False, f"{type(exc).__name__}: {exc}", b""]
 
-    warm = ModelBundle(system="w", digest="", skillsets=[("w.rl", WARM_UP, "/w")], properties="")
+    warm = ModelBundle(system="w", digest="", skillsets=[("w.rl", WARM_UP, "/w")],
+                       properties="p = not (w:b and w:i_k)\n", properties_name="w.props")
     warm_digest = bundle_digest(warm)
     ok, error, _ = job(warm_digest, encode(warm), encode(PredictRequest(
         system="w", digest=warm_digest, seq=0, skillsets={}, budget=1.0)), 1.0)
@@ -243,7 +246,7 @@ def main(argv: list[str] | None = None) -> int:
                                      description="A predictor's worker process (started by the predictor; "
                                                  "reads jobs on stdin, answers on stdout).")
     parser.add_argument("--instance", required=True, help="predictor instance id, copied into replies")
-    parser.add_argument("--memory-mb", type=int, default=1024, help="address-space limit, MB (default: 1024)")
+    parser.add_argument("--memory-mb", type=int, default=2048, help="address-space limit, MB (default: 2048)")
     parser.add_argument("--cache", type=int, default=4, help="systems kept (default: 4)")
     parser.add_argument("--nice", type=int, default=5, help="added niceness (default: 5)")
     args = parser.parse_args(argv)

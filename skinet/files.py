@@ -19,39 +19,86 @@ reads it.
 from __future__ import annotations
 
 import json
-import re
-import tomllib
+import os
+from dataclasses import replace
 from pathlib import Path
 
 from skinet.errors import Diagnostic, Pos, SourceError
-from skinet.lang.model import Model
-from skinet.lang.parser import parse_model
+from skinet.lang.larkerrors import MAX_SOURCE_CHARS
+from skinet.lang.model import Model, Skillset
+from skinet.lang.parser import link, parse_unit
+from skinet.options import parse_prediction
 from skinet.ros.typemap import TypeMap, parse_typemap
-from skinet.system import Marking, System, build_system, marking_from_json
+from skinet.tomltext import parse_toml
+from skinet.system import Marking, System, build_system, marking_from_json, marking_problems
 
 
-def read_text(path: str | Path) -> str:
-    """File contents, or a :class:`SourceError` naming the file and the OS reason."""
+def read_text(path: str | Path, limit: int | None = None) -> str:
+    """File contents, or a :class:`SourceError` naming the file and the OS reason.
+
+    A file larger than ``limit`` bytes is refused before it is read, so a huge
+    file costs no memory.
+    """
     try:
-        return Path(path).read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
+        with open(path, "rb") as f:
+            if limit is None:
+                return f.read().decode("utf-8")
+            size = os.fstat(f.fileno()).st_size
+            data = f.read(limit + 1) if size <= limit else b""  # a pipe or a growing file is bounded too
+        if size > limit or len(data) > limit:
+            raise SourceError.at(
+                str(path), None, f"file too large: {max(size, len(data))} bytes (the limit is {limit})"
+            )
+        return data.decode("utf-8")
+    except (OSError, UnicodeDecodeError, ValueError) as exc:  # ValueError: a NUL in the path
         reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
         raise SourceError.at(str(path), None, f"cannot read file: {reason}") from None
 
 
+def read_source(path: str | Path) -> str:
+    """A model, properties, system or state file: at most MAX_SOURCE_CHARS bytes."""
+    return read_text(path, MAX_SOURCE_CHARS)
+
+
 def load_model(path: str | Path) -> Model:
-    """Parse and validate a ``.rl`` file."""
-    return parse_model(read_text(path), str(path))
+    """Parse and validate a ``.rl`` file, with the files it includes."""
+    return _load_linked(Path(path))[0]
+
+
+def _load_linked(path: Path) -> tuple[Model, dict[str, str]]:
+    """A model file linked with every file it includes, and each file's text by source.
+
+    ``include "name"`` is relative to the including file; each file is read once
+    (so include cycles end).
+    """
+    text = read_source(path)
+    units = [parse_unit(text, str(path))]
+    texts = {str(path): text}
+    seen = {path.resolve()}
+    i = 0
+    while i < len(units):
+        including = Path(units[i][0].source)
+        i += 1
+        for name, pos in units[i - 1][0].includes:
+            target = including.parent / name
+            try:
+                if target.resolve() in seen:
+                    continue
+                seen.add(target.resolve())
+                included = read_source(target)
+            except (SourceError, OSError, RuntimeError, ValueError) as exc:  # RuntimeError: a symlink loop
+                reason = exc.diagnostics[0].message if isinstance(exc, SourceError) else f"cannot read file: {exc}"
+                raise SourceError.at(str(including), pos, f"cannot include '{name}': {reason}") from None
+            units.append(parse_unit(included, str(target), library=True))
+            texts[str(target)] = included
+    return link(units), texts
 
 
 def load_system(path: str | Path) -> tuple[System, list[Diagnostic]]:
     """Load a system file and everything it names; returns the warnings too."""
     path = Path(path)
-    text = read_text(path)
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise _toml_error(str(path), exc) from None
+    text = read_source(path)
+    data = parse_toml(text, str(path))
     where = str(path)
     system = data.get("system")
     if not isinstance(system, dict) or not isinstance(system.get("name"), str):
@@ -59,61 +106,87 @@ def load_system(path: str | Path) -> tuple[System, list[Diagnostic]]:
     entries = data.get("skillsets")
     if not isinstance(entries, list) or not entries:
         raise SourceError.at(where, None, "missing [[skillsets]] entries (each with 'model' and 'manager')")
-    skillsets = []
+    skillsets: list[tuple[Skillset, str]] = []
     warnings: list[Diagnostic] = []
     sources: dict[str, str] = {}
+    models: dict[Path, tuple[Model, dict[str, str]]] = {}
     for n, entry in enumerate(entries, 1):
         if not isinstance(entry, dict) or not isinstance(entry.get("model"), str):
             raise SourceError.at(where, None, f"skillsets entry {n} needs a 'model' path")
         model_path = path.parent / entry["model"]
-        model_text = read_text(model_path)
-        model = parse_model(model_text, str(model_path))
-        warnings.extend(model.warnings)
-        if len(model.skillsets) != 1:
-            raise SourceError.at(str(model_path), None, f"expected exactly one skillset, found {len(model.skillsets)}")
-        skillset = model.skillsets[0]
-        expected = entry.get("name")
-        if expected is not None and expected != skillset.name:
-            raise SourceError.at(where, None, f"skillsets entry {n} names '{expected}' but {entry['model']} declares '{skillset.name}'")
-        sources[model_path.name] = model_text
-        skillsets.append((skillset, str(entry.get("manager", ""))))
+        if model_path not in models:
+            models[model_path] = _load_linked(model_path)
+            warnings.extend(models[model_path][0].warnings)
+        model, texts = models[model_path]
+        for ss in _entry_skillsets(entry, n, model, where):
+            skillsets.append((ss, str(entry.get("manager", ""))))
+            sources[Path(ss.source).name] = texts[ss.source]
     props_name = system.get("properties")
     props_text, props_source = "", "<no properties>"
     if props_name is not None:
         props_path = path.parent / str(props_name)
-        props_text, props_source = read_text(props_path), str(props_path)
+        props_text, props_source = read_source(props_path), str(props_path)
         sources[props_path.name] = props_text
-    return build_system(system["name"], skillsets, props_text, props_source, sources), warnings
+    built = build_system(system["name"], skillsets, props_text, props_source, sources)
+    options = parse_prediction(data.get("prediction"), [p.name for p in built.properties], where, text)
+    return replace(built, prediction=options), warnings
+
+
+def _entry_skillsets(entry: dict[str, object], n: int, model: Model, where: str) -> list[Skillset]:
+    """The skillsets a ``[[skillsets]]`` entry takes from its model file.
+
+    ``name`` picks one skillset of the file; without it the entry takes every
+    skillset the file declares (one manager each, so ``manager`` then needs a
+    file of one skillset).
+    """
+    declared = ", ".join(f"'{s.name}'" for s in model.skillsets)
+    expected = entry.get("name")
+    if expected is not None:
+        for ss in model.skillsets:
+            if ss.name == expected:
+                return [ss]
+        raise SourceError.at(where, None, f"skillsets entry {n} names '{expected}' but {entry['model']} declares {declared}")
+    if len(model.skillsets) > 1 and "manager" in entry:
+        raise SourceError.at(
+            where, None,
+            f"skillsets entry {n}: {entry['model']} declares {len(model.skillsets)} skillsets ({declared});"
+            " give one entry per skillset, each with its 'name' and 'manager'",
+        )
+    return list(model.skillsets)
 
 
 def load_typemap(path: str | Path) -> TypeMap:
     """The type map named by ``[system] types`` in a system file (empty when absent)."""
     path = Path(path)
-    try:
-        data = tomllib.loads(read_text(path))
-    except tomllib.TOMLDecodeError as exc:
-        raise _toml_error(str(path), exc) from None
+    data = parse_toml(read_source(path), str(path))
     name = data.get("system", {}).get("types") if isinstance(data.get("system"), dict) else None
     if name is None:
         return {}
     if not isinstance(name, str):
         raise SourceError.at(str(path), None, "[system] 'types' must be a path string")
     types_path = path.parent / name
-    return parse_typemap(read_text(types_path), str(types_path))
+    return parse_typemap(read_source(types_path), str(types_path))
 
 
-def load_state(path: str | Path, system: System) -> Marking:
-    """A combined marking from a JSON state file (see :func:`skinet.system.marking_from_json`)."""
-    text = read_text(path)
+def load_state(path: str | Path, system: System, what_if: bool = False) -> Marking:
+    """A combined marking from a JSON state file (see :func:`skinet.system.marking_from_json`).
+
+    A marking the live system cannot be in (see :func:`skinet.system.marking_problems`)
+    is refused unless ``what_if``.
+    """
+    text = read_source(path)
     try:
         data = json.loads(text)
     except json.JSONDecodeError as exc:
         raise SourceError.at(str(path), Pos(exc.lineno, exc.colno), f"invalid JSON: {exc.msg}") from None
-    return marking_from_json(system, data, str(path))
+    except RecursionError:
+        raise SourceError.at(str(path), None, "invalid JSON: nested too deeply") from None
+    marking = marking_from_json(system, data, str(path))
+    problems = [] if what_if else marking_problems(system, marking)
+    if problems:
+        raise SourceError.at(
+            str(path), None,
+            "impossible state: " + "; ".join(problems) + " (use --what-if to analyse it anyway)",
+        )
+    return marking
 
-
-def _toml_error(source: str, exc: tomllib.TOMLDecodeError) -> SourceError:
-    match = re.search(r"\(at line (\d+), column (\d+)\)$", str(exc))
-    message = re.sub(r"\s*\(at line \d+, column \d+\)$|\s*\(at end of document\)$", "", str(exc))
-    pos = Pos(int(match.group(1)), int(match.group(2))) if match else None
-    return SourceError.at(source, pos, f"invalid TOML: {message}")

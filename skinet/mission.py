@@ -9,15 +9,20 @@ The simulator of issue 5 plays the same files through the whole chain.
 
 from __future__ import annotations
 
-import tomllib
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
+from typing import TypeVar
 
 from skinet.errors import SourceError
 from skinet.live import LiveSystem
 from skinet.props.evaluate import holds
 from skinet.system import System
-from skinet.verify.algorithm1 import UnsafeTransition, analyse
+from skinet.tomltext import parse_toml
+from skinet.verify.algorithm1 import Analysis, UnsafeTransition, analyse
 from skinet.verify.predict import forecast
+
+
+T = TypeVar("T")
 
 
 @dataclass(frozen=True)
@@ -47,14 +52,13 @@ class StepRecord:
     warnings: list[UnsafeTransition] = field(default_factory=list)  # flags on the considered command
     unsafe_count: int = 0  # operator-view unsafe transitions after the step
     divergence: str | None = None
+    flagged: list[UnsafeTransition] = field(default_factory=list)  # flags the issued command had when issued
+    recovery: dict[str, list[str]] = field(default_factory=dict)  # violated property -> recovery transitions
 
 
 def parse_scenario(text: str, source: str = "<scenario>") -> Scenario:
     """Parse a scenario file; errors name the file and the step number."""
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise SourceError.at(source, None, f"invalid TOML: {exc}") from None
+    data = parse_toml(text, source)
     head = data.get("scenario", {})
     if not isinstance(head.get("name"), str) or not isinstance(head.get("system"), str):
         raise SourceError.at(source, None, "missing [scenario] table with 'name' and 'system' strings")
@@ -77,21 +81,51 @@ def replay(system: System, scenario: Scenario, predict: bool = True, budget: flo
     """Play ``scenario`` on the live nets, running Algorithm 1 after every step."""
     live = LiveSystem(system)
     nets = system.nets
+
+    def analysis() -> Analysis:
+        return analyse(system, live.marking, forecast(system, live.marking, budget=budget) if predict else None)
+
     before = {p.name: holds(p.expr, live.marking, nets) for p in system.properties}
+    current = analysis()
     records = []
     for i, step in enumerate(scenario.steps, 1):
         if step.consider is not None:
-            analysis = analyse(system, live.marking, forecast(system, live.marking, budget=budget) if predict else None)
-            flagged = [u for u in analysis.operator_unsafe() if u.skillset == step.skillset and u.transition == step.consider]
-            records.append(StepRecord(i, step, dict(before), [], flagged, len(analysis.operator_unsafe())))
+            flags = flags_on(current.operator_unsafe(), step.skillset, step.consider)
+            records.append(StepRecord(i, step, dict(before), [], flags, len(current.operator_unsafe())))
             continue
+        issued = flags_on(current.operator_unsafe(), step.skillset, step.transition or "")
         outcome = live.apply(step.skillset, step.transition)
         now = {p.name: holds(p.expr, live.marking, nets) for p in system.properties}
         newly = [p for p, ok in now.items() if before[p] and not ok]
-        analysis = analyse(system, live.marking, forecast(system, live.marking, budget=budget) if predict else None)
-        records.append(StepRecord(i, step, now, newly, [], len(analysis.operator_unsafe()), outcome.divergence))
+        current = analysis()
+        recovery = {p: [f"{r.skillset}:{r.transition}" for r in rs] for p, rs in current.recovery.items()}
+        records.append(StepRecord(i, step, now, newly, [], len(current.operator_unsafe()), outcome.divergence,
+                                  issued, recovery))
         before = now
     return records
 
 
-__all__ = ["Scenario", "Step", "StepRecord", "parse_scenario", "replay"]
+def flags_on(unsafe: Iterable[T], skillset: str, transition: str) -> list[T]:
+    """The entries of ``unsafe`` about ``skillset:transition``."""
+    return [u for u in unsafe if u.skillset == skillset and u.transition == transition]  # type: ignore[attr-defined]
+
+
+def flagged_before(records: Sequence[StepRecord], index: int, prop: str) -> tuple[int, UnsafeTransition] | None:
+    """The first flag for ``prop`` of the unbroken run of flagged steps that ends in step ``index``.
+
+    Preferably an operator command (controllable): the outcome that violated the
+    property may itself be flagged only because the command before it was.
+    """
+    run: list[tuple[int, UnsafeTransition]] = []
+    for r in reversed(records[:index]):
+        if r.step.transition is None:
+            continue
+        flags = [u for u in r.flagged if u.property == prop]
+        if not flags:
+            break
+        run.append((r.index, flags[0]))
+    commands = [f for f in run if f[1].controllable]
+    return (commands or run or [None])[-1]
+
+
+__all__ = ["Scenario", "Step", "StepRecord", "flagged_before", "flags_on", "parse_scenario", "replay"]

@@ -13,8 +13,11 @@ from skinet.errors import SourceError
 from skinet.lang.model import Skillset
 from skinet.net.build import build_net, idle_place, resource_place, running_place
 from skinet.net.petrinet import PetriNet
+from skinet.net.semantics import invariants_enabled
+from skinet.options import PredictionOptions
 from skinet.props.formula import Property
 from skinet.props.parser import parse_properties
+from skinet.verify.component import explore_component
 
 Marking = dict[str, int]
 
@@ -39,6 +42,7 @@ class System:
     components: tuple[Component, ...]
     properties: tuple[Property, ...]
     sources: Mapping[str, str] = field(default_factory=dict)  # file name -> text, for digests
+    prediction: PredictionOptions = PredictionOptions()  # the system file's [prediction] table
 
     def component(self, name: str) -> Component:
         for c in self.components:
@@ -66,6 +70,7 @@ def build_system(
     properties_text: str,
     properties_source: str = "<properties>",
     sources: Mapping[str, str] | None = None,
+    prediction: PredictionOptions | None = None,
 ) -> System:
     """Assemble a system from parsed skillsets (each with its manager node) and properties text."""
     seen: set[str] = set()
@@ -76,7 +81,29 @@ def build_system(
         seen.add(ss.name)
         components.append(Component(ss, build_net(ss), build_net(ss, eventless=True), manager))
     props = parse_properties(properties_text, {s.name: s for s, _ in skillsets}, properties_source)
-    return System(name, tuple(components), tuple(props), dict(sources or {}))
+    return System(name, tuple(components), tuple(props), dict(sources or {}), prediction or PredictionOptions())
+
+
+def marking_problems(system: System, marking: Mapping[str, int]) -> list[str]:
+    """Why ``marking`` cannot be a state of the live system; empty when it can.
+
+    Two reasons (SPEC §3): a component marking is *transient* (an invariant is
+    violated, and the manager never publishes such a state), or no sequence of
+    transitions, events included, reaches it from the initial marking.
+    Components share no place, so a combined marking is reachable exactly when
+    each component's marking is reachable in its own full net.  Cost: one
+    breadth-first search of each component's stable markings (memoised per net).
+    """
+    problems: list[str] = []
+    for c in system.components:
+        m = marking[c.name]
+        violated = invariants_enabled(c.net, m)
+        if violated:
+            names = ", ".join(sorted({t.name for t in violated}))
+            problems.append(f"'{c.name}' is not stable: invariant violated ({names}); the manager never publishes such a state")
+        elif m not in explore_component(c.name, c.net, [c.net.initial]).index:
+            problems.append(f"'{c.name}' is not reachable: no sequence of transitions (events included) leads there from its initial marking")
+    return problems
 
 
 def marking_to_json(system: System, marking: Mapping[str, int]) -> dict[str, dict]:
@@ -116,7 +143,9 @@ def marking_from_json(system: System, data: object, source: str = "<state>") -> 
             raise SourceError.at(source, None, f"state of '{c.name}': 'resources' must be an object and 'running' a list")
         places: set[str] = set()
         declared = {r.name: r for r in c.skillset.resources}
-        for rname in resources:
+        for rname, state in resources.items():
+            if not isinstance(state, str):
+                raise SourceError.at(source, None, f"state of resource '{c.name}:{rname}' must be a string, not {_json_kind(state)}")
             if rname not in declared:
                 raise SourceError.at(source, None, f"unknown resource '{rname}' of '{c.name}' (resources: {', '.join(declared)})")
         for r in c.skillset.resources:
@@ -126,9 +155,24 @@ def marking_from_json(system: System, data: object, source: str = "<state>") -> 
             places.add(resource_place(r.name, state))
         skills = {k.name for k in c.skillset.skills}
         for k in running:
+            if not isinstance(k, str):
+                raise SourceError.at(source, None, f"'running' of '{c.name}' must list skill names, not {_json_kind(k)}")
             if k not in skills:
                 raise SourceError.at(source, None, f"unknown skill '{k}' of '{c.name}' (skills: {', '.join(sorted(skills))})")
         for k in c.skillset.skills:
             places.add(running_place(k.name) if k.name in running else idle_place(k.name))
         marking[c.name] = c.net.marking_of(places)
     return marking
+
+
+def _json_kind(value: object) -> str:
+    """How JSON calls the type of ``value`` (for error messages)."""
+    if isinstance(value, dict):
+        return "an object"
+    if isinstance(value, list):
+        return "a list"
+    if isinstance(value, bool):
+        return "a boolean"
+    if value is None:
+        return "null"
+    return "a number" if isinstance(value, (int, float)) else "a string"

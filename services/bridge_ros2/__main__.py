@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import math
 import os
 import signal
 import sys
@@ -43,13 +44,22 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         help="zenoh-bridge-ros2dds namespace prefixing the keys")
     parser.add_argument("--domain", type=int, default=int(os.environ.get("ROS_DOMAIN_ID", "0")),
                         help="ROS domain id in rmw_zenoh keys (default: $ROS_DOMAIN_ID or 0)")
+    parser.add_argument("--ros-distro", default=os.environ.get("ROS_DISTRO", "jazzy"),
+                        help="ROS 2 distribution of rmw_zenoh (default: $ROS_DISTRO or jazzy); on humble the keys "
+                             "carry TypeHashNotSupported instead of a RIHS01 type hash")
     add_instance_arg(parser)
     parser.add_argument("--source", default=None, help="source name in the events (default: bridge_ros2/INSTANCE)")
     parser.add_argument("--replay", metavar="BAG", help="replay a rosbag2 file (directory or .db3/.mcap) and exit")
     parser.add_argument("--realtime", action="store_true", help="with --replay: keep the recorded timing")
+    parser.add_argument("--hold", type=float, default=0.5,
+                        help="seconds a status may wait for a response it overtook (each topic has its own route "
+                             "through a gateway); 0 derives every status at once (default: 0.5)")
     add_log_arg(parser)
     add_zenoh_args(parser)
-    return parser.parse_args(argv)
+    args = parser.parse_args(argv)
+    if not (math.isfinite(args.hold) and args.hold >= 0):
+        parser.error(f"--hold must be a finite number of seconds, 0 or more, not {args.hold}")
+    return args
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -70,8 +80,9 @@ def main(argv: list[str] | None = None) -> int:
         for sig in (signal.SIGINT, signal.SIGTERM):
             signal.signal(sig, lambda *_: stop.set())
         try:
-            bridge = start_bridge(session, system, typemap, source=source, instance_id=args.instance,
-                                  style=KeyStyle(args.rmw_zenoh, args.namespace, args.domain))
+            bridge = start_bridge(session, system, typemap, source=source, instance_id=args.instance, hold=args.hold,
+                                  style=KeyStyle(args.rmw_zenoh, args.namespace, args.domain,
+                                                 args.ros_distro == "humble"))
         except (SkinetError, ValueError) as exc:
             print(str(exc), file=sys.stderr)
             return 2
@@ -79,8 +90,8 @@ def main(argv: list[str] | None = None) -> int:
             pass
         bridge.close()
         c = bridge.counters
-        log.info("stopped: %d messages, %d events (%d unnamed), %d malformed",
-                 c.messages, c.events, c.unexplained, c.malformed)
+        log.info("stopped: %d messages, %d events (%d unnamed), %d malformed, %d statuses not matching the model, "
+                 "%d manager restarts", c.messages, c.events, c.unexplained, c.malformed, c.mismatched, c.restarts)
         return 0
     finally:
         session.close()
@@ -90,7 +101,7 @@ def _replay(session: zenoh.Session, system, typemap, args: argparse.Namespace, s
     publishers = {c.name: event_publisher(session, keys.events(system.name, c.name)) for c in system.components}
     try:
         feed = replay_bag(args.replay, system, typemap, lambda ev: publishers[ev.skillset].put(encode(ev)),
-                          source=source, realtime=args.realtime)
+                          source=source, realtime=args.realtime, hold=args.hold)
     except SkinetError as exc:
         print(str(exc), file=sys.stderr)
         return 2

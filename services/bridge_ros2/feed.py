@@ -5,18 +5,19 @@ skillset's :class:`~skinet.ros.derive.Deriver` and numbers the resulting
 :class:`~skinet.wire.messages.CanonicalEvent` per skillset (0, 1, 2, ...) within
 an epoch, the feed's start time in milliseconds, so that a monitor recognises a
 restarted bridge (issue 14).  A payload that does not decode is logged and dropped
-(SPEC §7).
+(SPEC §7).  A status that overtook one of its responses waits for it (bounded).
 """
 
 from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Mapping
-from dataclasses import dataclass
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field, replace
 
 from skinet.ros import derive
-from skinet.ros.keys import ManagerTopic, manager_topics, topic_fqn
+from skinet.ros.interfaces import status_field
+from skinet.ros.keys import ManagerTopic, manager_topics, parse_rmw_attachment, topic_fqn
 from skinet.ros.typestore import Typestore, build_typestore, decode, to_plain
 from skinet.system import Component, System
 from skinet.wire.messages import CanonicalEvent
@@ -32,6 +33,17 @@ class Counters:
     malformed: int = 0  # payloads that did not decode
     events: int = 0  # canonical events produced
     unexplained: int = 0  # canonical events without a transition name
+    restarts: int = 0  # managers that came back (new process, or their gateway reconnected)
+    mismatched: int = 0  # statuses naming skills or resources the model lacks
+
+
+@dataclass
+class _Held:
+    """A status waiting for the responses it overtook."""
+
+    status: derive.Status
+    since: float  # clock time it arrived
+    awaits: str  # what it waits for (for the log)
 
 
 @dataclass
@@ -41,18 +53,31 @@ class _Manager:
     deriver: derive.Deriver
     topics: list[ManagerTopic]  # the watched ones
     seq: int = 0
+    held: _Held | None = None
+    restart: str = ""  # why the next status starts afresh (the manager restarted)
+    publisher: tuple[bytes, int] | None = None  # rmw_zenoh: GID and sequence number of the last status
+    reported: set[str] = field(default_factory=set)  # kinds of bad input already logged
 
 
 class Feed:
-    """Derivation state of every skillset of ``system`` (not thread-safe)."""
+    """Derivation state of every skillset of ``system`` (not thread-safe).
+
+    A status that overtook a response it needs (:meth:`Deriver.awaits`) is held
+    until that response comes, a newer status comes, or ``hold`` seconds of
+    ``clock`` pass (:meth:`expire`, called by the bridge when :meth:`deadline` is
+    due); a status that needs nothing is derived at once.
+    """
 
     def __init__(self, system: System, typemap: Mapping[str, str], source: str,
-                 extra_types: Mapping[str, str] | None = None, epoch: int | None = None):
+                 extra_types: Mapping[str, str] | None = None, *, hold: float = 0.5,
+                 clock: Callable[[], float] = time.monotonic, epoch: int | None = None):
         self.system = system
         self.source = source
+        self.hold = hold
+        self.clock = clock
         self.epoch = time.time_ns() // 1_000_000 if epoch is None else epoch
         self.counters = Counters()
-        self.statuses: dict[str, int] = {c.name: 0 for c in system.components}  # statuses fed per skillset
+        self.statuses: dict[str, int] = {c.name: 0 for c in system.components}  # statuses derived per skillset
         self.managers: dict[str, _Manager] = {}
         for c in system.components:
             store = build_typestore(c.skillset, typemap, extra_types)
@@ -64,16 +89,21 @@ class Feed:
         return {topic_fqn(m.component.manager, t.topic): (name, t)
                 for name, m in self.managers.items() for t in m.topics}
 
-    def feed(self, skillset: str, topic: ManagerTopic, payload: bytes) -> list[CanonicalEvent]:
-        """Canonical events caused by one CDR message of ``skillset``'s manager."""
+    def feed(self, skillset: str, topic: ManagerTopic, payload: bytes,
+             attachment: bytes | None = None) -> list[CanonicalEvent]:
+        """Canonical events caused by one CDR message of ``skillset``'s manager.
+
+        ``attachment``: the ``rmw_zenoh`` attachment of the sample, if any; a status
+        from a new publisher GID, or with a sequence number going back, comes from a
+        restarted manager.
+        """
         m = self.managers[skillset]
         self.counters.messages += 1
-        self.statuses[skillset] += topic.kind == "status"
         ss = m.component.skillset
         try:
             msg = to_plain(decode(m.store, topic.typename, payload))
             if topic.kind == "status":
-                out = m.deriver.on_status(derive.status_from_plain(ss, msg))
+                status = derive.status_from_plain(ss, msg)
             elif topic.kind == "skill_response":
                 out = m.deriver.on_skill_response(derive.skill_response_from_plain(ss, topic.skill or "", msg))
             elif topic.kind == "event_response":
@@ -82,14 +112,135 @@ class Feed:
                 out = m.deriver.on_event_request(derive.event_request_from_plain(msg))
         except Exception as exc:  # rosbags raises several types on bad CDR; views raise KeyError
             self.counters.malformed += 1
-            log.warning("%s: malformed %s dropped: %s", skillset, topic.topic, exc)
+            self._report(m, f"malformed {topic.topic} dropped ({type(exc).__name__}: {exc})",
+                         f"malformed {topic.topic} {type(exc).__name__}")
             return []
+        if topic.kind != "status":
+            events = self._emit(m, out)
+            if m.held is not None and m.deriver.awaits(m.held.status) is None:
+                events += self._release(m)
+            return events
+        self._check_model(m, msg)
+        events = self._check_publisher(m, attachment) + self._check_ids(m, status)
+        events += self._release(m) if m.held is not None else []  # a newer status: the held one goes first
+        awaits = None if m.restart else m.deriver.awaits(status)  # a new initial status needs nothing
+        if awaits is not None and self.hold > 0:
+            m.held = _Held(status, self.clock(), awaits)
+            return events
+        return events + self._status(m, status)
+
+    def deadline(self) -> float | None:
+        """Clock time when the first held status must be released (``None``: none held)."""
+        return min((m.held.since + self.hold for m in self.managers.values() if m.held), default=None)
+
+    def expire(self, now: float | None = None) -> list[CanonicalEvent]:
+        """Derive the statuses held for ``hold`` seconds or more, without what they wait for."""
+        now = self.clock() if now is None else now
+        events: list[CanonicalEvent] = []
+        for name, m in self.managers.items():
+            if m.held is not None and now >= m.held.since + self.hold:
+                log.warning("%s: status derived without %s (not received within %.2f s)", name, m.held.awaits,
+                            self.hold)
+                events += self._release(m)
+        return events
+
+    def flush(self) -> list[CanonicalEvent]:
+        """Derive every held status now (end of a replay)."""
+        return [ev for m in self.managers.values() if m.held is not None for ev in self._release(m)]
+
+    def _release(self, m: _Manager) -> list[CanonicalEvent]:
+        assert m.held is not None
+        status, m.held = m.held.status, None
+        return self._status(m, status)
+
+    def restarted(self, skillset: str, why: str) -> list[CanonicalEvent]:
+        """``skillset``'s manager restarted: its next status is a new initial status (SPEC §7).
+
+        Returns the events of a status still held from before.  The monitor then
+        follows the new status, and reports a divergence when no transition of the
+        model leads to it.
+        """
+        m = self.managers[skillset]
+        events = self._release(m) if m.held is not None else []
+        if not m.restart:
+            self.counters.restarts += 1
+            log.warning("%s: manager %s restarted (%s); its next status starts afresh", skillset,
+                        m.component.manager, why)
+        m.restart = why
+        m.publisher = None
+        return events
+
+    def _check_publisher(self, m: _Manager, attachment: bytes | None) -> list[CanonicalEvent]:
+        if attachment is None:
+            return []
+        try:
+            sequence, _, gid = parse_rmw_attachment(attachment)
+        except ValueError:
+            return []
+        events = []
+        if m.publisher is not None and m.deriver.last is not None and \
+                (gid != m.publisher[0] or sequence <= m.publisher[1]):
+            why = "new status publisher" if gid != m.publisher[0] else "status sequence number went back"
+            events = self.restarted(m.component.name, why)
+        m.publisher = (gid, sequence)
+        return events
+
+    def _check_model(self, m: _Manager, msg: Mapping) -> None:
+        """Count a status naming resources, states or skills the model lacks; report each kind once."""
+        ss = m.component.skillset
+        states = {r.name: r.states for r in ss.resources}
+        problems = []
+        for r in msg.get("resources", []):
+            name, state = str(r.get("name", "")), str(r.get("state", ""))
+            if name not in states:
+                problems.append(f"resource '{name}' is not in the model")
+            elif state not in states[name]:
+                problems.append(f"resource '{name}' in state '{state}', not one of the model's")
+        for k in ss.skills:
+            named = str(msg.get(status_field(k), {}).get("name", ""))
+            if named and named != k.name:
+                problems.append(f"field {status_field(k)} names skill '{named}', not '{k.name}'")
+        if problems:
+            self.counters.mismatched += 1
+        for problem in problems:
+            self._report(m, f"status does not match the model: {problem}", problem)
+
+    def _report(self, m: _Manager, message: str, kind: str) -> None:
+        """Log ``message`` the first time a problem of ``kind`` shows up for this manager."""
+        if kind not in m.reported:
+            m.reported.add(kind)
+            log.warning("%s: %s (reported once; see the bridge's counters)", m.component.name, message)
+
+    def _check_ids(self, m: _Manager, status: derive.Status) -> list[CanonicalEvent]:
+        """A manager never forgets an execution id: ids back to '' mean it restarted."""
+        last = m.held.status if m.held is not None else m.deriver.last
+        if last is None or m.restart:
+            return []
+        reset = [k for k, v in status.skills.items() if v.id == "" and last.skills[k].id != ""]
+        return self.restarted(m.component.name, f"skill ids reset: {', '.join(reset)}") if reset else []
+
+    def _status(self, m: _Manager, status: derive.Status) -> list[CanonicalEvent]:
+        self.statuses[m.component.name] += 1
+        if not m.restart:
+            return self._emit(m, m.deriver.on_status(status))
+        last, m.deriver = m.deriver.last, derive.Deriver(m.component.skillset, m.component.net)
+        out = m.deriver.on_status(status)
+        diverged = _differences(last, status) if last is not None else "nothing known before"
+        info = f"manager restarted ({m.restart}); state now differs: {diverged}" if diverged else \
+            f"manager restarted ({m.restart}); same state as before"
+        log.warning("%s: %s", m.component.name, info)
+        out.events = [replace(d, info=info) for d in out.events]
+        m.restart = ""
+        return self._emit(m, out)
+
+    def _emit(self, m: _Manager, out: derive.Output) -> list[CanonicalEvent]:
         for note in out.notes:
             log.info("%s", note)
         events = []
         for d in out.events:
-            events.append(CanonicalEvent(system=self.system.name, skillset=skillset, seq=m.seq, stamp=d.stamp,
-                                         source=self.source, epoch=self.epoch, transition=d.transition,
+            events.append(CanonicalEvent(system=self.system.name, skillset=m.component.name, seq=m.seq,
+                                         stamp=d.stamp, source=self.source, epoch=self.epoch,
+                                         transition=d.transition,
                                          status=d.status, info=d.info))
             m.seq += 1
             self.counters.unexplained += d.transition is None
@@ -107,8 +258,19 @@ class Feed:
                               source=self.source, epoch=self.epoch, status=last.wire(), info="resync")
 
     def has_status(self, skillset: str) -> bool:
-        """Whether a status of ``skillset`` was received."""
-        return self.managers[skillset].deriver.last is not None
+        """Whether a status of ``skillset`` was received (since its manager restarted, if it did)."""
+        m = self.managers[skillset]
+        return (m.deriver.last is not None or m.held is not None) and not m.restart
+
+
+def _differences(before: derive.Status, now: derive.Status) -> str:
+    """What changed between two statuses, for a divergence report: resources, then running skills."""
+    out = [f"{r} {before.resources.get(r, '?')} -> {s}" for r, s in now.resources.items()
+           if before.resources.get(r) != s]
+    stopped = [k for k in before.running() if k not in now.running()]
+    started = [k for k in now.running() if k not in before.running()]
+    out += [f"{k} no longer running" for k in stopped] + [f"{k} running" for k in started]
+    return ", ".join(out)
 
 
 __all__ = ["Counters", "Feed"]

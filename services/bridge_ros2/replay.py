@@ -32,12 +32,13 @@ def replay_bag(
     source: str = "bridge_ros2/replay",
     realtime: bool = False,
     extra_types: Mapping[str, str] | None = None,
+    hold: float = 0.5,
 ) -> Feed:
     """Feed every manager message of the bag at ``path`` to a new :class:`Feed`; returns it.
 
     Raises ``rosbags`` errors (``ReaderError`` and friends) when the bag cannot be read.
     """
-    feed = Feed(system, typemap, source, extra_types)
+    feed = Feed(system, typemap, source, extra_types, hold=hold)
     routes = feed.by_fqn()
     with AnyReader([Path(path)]) as reader:
         connections = [c for c in reader.connections if c.topic in routes]
@@ -53,8 +54,10 @@ def replay_bag(
                 if delay > 0:
                     time.sleep(delay)
             skillset, topic = routes[conn.topic]
-            for ev in feed.feed(skillset, topic, bytes(raw)):
+            for ev in feed.feed(skillset, topic, bytes(raw)) + feed.expire():
                 emit(ev)
+    for ev in feed.flush():
+        emit(ev)
     return feed
 
 

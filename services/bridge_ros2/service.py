@@ -7,8 +7,16 @@ Subscribes to each manager's ``status``, ``event_request``, ``event_response`` a
 with ``CongestionControl.BLOCK`` (ZENOH.md) and a cache from which a monitor
 recovers what it missed during an outage (:mod:`services.common.events`).
 
-The manager's status is volatile (corpus README): at start-up the bridge sends
-``status_request`` and repeats it every second until each manager has answered.
+The manager's status is volatile (corpus README): the bridge sends
+``status_request`` at start-up and repeats it every second until each manager has
+answered.  It also asks as soon as a manager can hear it: liveliness tokens announce
+the manager's ``status_request`` subscription (``rmw_zenoh``: the node's own token,
+whose type hash also gives the key on Humble; ``zenoh-bridge-ros2dds``: the token of
+the gateway's route).  A token that comes back, a status from a new publisher GID or
+with its sequence number going back (``rmw_zenoh`` attachments), or skill ids reset
+to '' mean the manager restarted: the bridge asks again and the next status is a new
+initial status whose ``info`` says how it differs from the last one (SPEC §7).  With
+``rmw_zenoh`` the bridge declares its own node, subscription and publisher tokens.
 A monitor that missed events asks ``keys.resync(system, skillset)``: the bridge
 answers with the skillset's last status (numbered as its last event) and asks
 the manager for a fresh one.
@@ -25,6 +33,7 @@ from __future__ import annotations
 import logging
 import os
 import queue
+import re
 import threading
 import time
 from collections.abc import Callable, Mapping
@@ -36,13 +45,19 @@ from services.bridge_ros2.feed import Counters, Feed
 from services.common.cli import default_instance_id
 from services.common.events import event_publisher
 from services.common.zenoh_config import undeclare
-from skinet.ros.keys import EMPTY_TYPE, KeyStyle, ManagerTopic, manager_topics, rmw_attachment
+from services.common.ros_liveliness import declare_node
+from skinet.ros.keys import (
+    EMPTY_TYPE, EntityKind, KeyStyle, ManagerTopic, RosEntity, liveliness_key_expr, manager_topics,
+    parse_liveliness_token, rmw_attachment, rmw_zenoh_key, topic_fqn,
+)
 from skinet.ros.typestore import default_instance, encode
 from skinet.system import System
 from skinet.wire import keys
 from skinet.wire.codec import encode as wire_encode
 
 log = logging.getLogger("skinet.bridge_ros2")
+
+PLUGIN_TOKENS = "@/*/@ros2_lv/MS/**"  # zenoh-bridge-ros2dds: one token per route to a DDS subscription
 
 
 def default_source(instance: str | None = None) -> str:
@@ -55,20 +70,26 @@ class Bridge:
 
     def __init__(self, session: zenoh.Session, system: System, typemap: Mapping[str, str], *,
                  style: KeyStyle = KeyStyle(), instance_id: str | None = None, source: str | None = None,
-                 request_status: bool = True, retry: float = 0.5, extra_types: Mapping[str, str] | None = None):
+                 request_status: bool = True, retry: float = 0.5, extra_types: Mapping[str, str] | None = None,
+                 hold: float = 0.5):
         self.session = session
         self.system = system
         self.style = style
         self.instance_id = keys.check_chunk(instance_id or default_instance_id(), "instance id")
-        self.feed = Feed(system, typemap, source or default_source(self.instance_id), extra_types)
-        self._queue: queue.SimpleQueue[tuple[str, ManagerTopic, bytes] | None] = queue.SimpleQueue()
+        self.feed = Feed(system, typemap, source or default_source(self.instance_id), extra_types, hold=hold)
+        self._queue: queue.SimpleQueue[tuple[str, ManagerTopic, bytes, bytes | None] | tuple[()] | None] = \
+            queue.SimpleQueue()
         self._fed = threading.Condition()
         self._stop = threading.Event()
+        self._lock = threading.Lock()  # request sequence numbers, learned type hashes, live tokens
         self._subscribers: list[Any] = []
         self._events: dict[str, Any] = {}
-        self._requests: dict[str, tuple[Any, bytes]] = {}
+        self._requests: dict[str, tuple[str, ManagerTopic, bytes]] = {}  # skillset -> (manager, topic, CDR)
+        self._hashes: dict[str, str] = {}  # skillset -> status_request type hash learned from the manager's token
+        self._present: dict[str, str] = {}  # skillset -> token of its manager's status_request subscription
         self._sequence = 0
         self._gid = os.urandom(16)  # rmw_zenoh attachments of the status requests
+        own: list[tuple[EntityKind, str, str, str]] = []  # rmw_zenoh graph entities of the bridge
         for name, m in self.feed.managers.items():
             manager = m.component.manager
             self._events[name] = event_publisher(session, keys.events(system.name, name))
@@ -76,13 +97,23 @@ class Bridge:
             self._subscribers.append(session.declare_subscriber(
                 style.all_topics(manager, m.component.skillset), self._callback(name, manager, watched)))
             req = next(t for t in manager_topics(m.component.skillset) if t.kind == "status_request")
-            pub = session.declare_publisher(style.key(manager, req, m.store),
-                                            congestion_control=zenoh.CongestionControl.BLOCK)
-            self._requests[name] = (pub, encode(m.store, EMPTY_TYPE, default_instance(m.store, EMPTY_TYPE)))
+            self._requests[name] = (manager, req, encode(m.store, EMPTY_TYPE, default_instance(m.store, EMPTY_TYPE)))
+            own += [("MS", topic_fqn(manager, t.topic), t.typename, style.type_hash(m.store, t.typename))
+                    for t in m.topics]
+            own.append(("MP", topic_fqn(manager, req.topic), req.typename, style.type_hash(m.store, req.typename)))
         self._resync = session.declare_queryable(keys.resync(system.name, "*"), self._on_resync)
         self._token = session.liveliness().declare_token(keys.alive(system.name, "bridge_ros2", self.instance_id))
+        self._ros_tokens: list[Any] = []
+        self.graph: list[RosEntity] = []  # rmw_zenoh: the bridge's node and topics as ROS tools see them
+        if style.rmw_zenoh:
+            node = "/skinet_bridge_" + re.sub(r"[^A-Za-z0-9_]", "_", self.instance_id)
+            self.graph, self._ros_tokens = declare_node(session, style.domain, node, own)
         self._worker = threading.Thread(target=self._run, name="bridge_ros2", daemon=True)
         self._worker.start()
+        # Managers (or the gateway's routes to them) announce themselves by liveliness tokens:
+        # ask a manager for its status as soon as it can hear us, and again when it comes back.
+        self._subscribers.append(session.liveliness().declare_subscriber(
+            liveliness_key_expr(style.domain) if style.rmw_zenoh else PLUGIN_TOKENS, self._on_token, history=True))
         self._asker = None
         if request_status:
             self._asker = threading.Thread(target=self._ask_status, args=(retry,), name="bridge_ros2-status",
@@ -101,22 +132,27 @@ class Bridge:
         def on_sample(sample: zenoh.Sample) -> None:
             topic = watched.get(self.style.topic(manager, str(sample.key_expr)) or "")
             if topic is not None:
-                self._queue.put((skillset, topic, sample.payload.to_bytes()))
+                attachment = sample.attachment.to_bytes() if sample.attachment is not None else None
+                self._queue.put((skillset, topic, sample.payload.to_bytes(), attachment))
 
         return on_sample
 
     def _run(self) -> None:
         while True:
-            item = self._queue.get()
+            deadline = self.feed.deadline()
+            try:
+                item = self._queue.get(timeout=None if deadline is None else max(0.0, deadline - time.monotonic()))
+            except queue.Empty:
+                item = ()  # a held status is due
             if item is None:
                 return
             try:
                 with self._fed:
-                    events = self.feed.feed(*item)
+                    events = self.feed.feed(*item) if item else self.feed.expire()
                 for ev in events:
                     self._events[ev.skillset].put(wire_encode(ev))
             except Exception:  # a bug must not stop the bridge (SPEC §7)
-                log.exception("failed to handle a message of %s", item[0])
+                log.exception("failed to handle a message of %s", item[0] if item else "a held status")
             with self._fed:
                 self._fed.notify_all()
 
@@ -131,6 +167,74 @@ class Bridge:
                 query.reply(keys.resync(self.system.name, skillset), wire_encode(ev))
             self.request_status(skillset)
 
+    # -- status requests ------------------------------------------------------------------
+
+    def _manager_of_token(self, key: str) -> tuple[str, str] | None:
+        """(skillset, type hash) when ``key`` is the token of a manager's status_request subscription."""
+        if self.style.rmw_zenoh:
+            entity = parse_liveliness_token(key)
+            if entity is None or entity.kind != "MS":  # the bridge subscribes to no status_request
+                return None
+            for name, (manager, req, _) in self._requests.items():
+                if entity.topic == topic_fqn(manager, req.topic):
+                    return name, entity.type_hash
+            return None
+        parts = key.split("/")  # @/<zid>/@ros2_lv/MS/<key with / as §>/<type>/<qos>
+        if len(parts) < 5 or parts[3] != "MS":
+            return None
+        route = parts[4].replace("§", "/")
+        for name, (manager, req, _) in self._requests.items():
+            if route == self.style.key(manager, req):
+                return name, ""
+        return None
+
+    def _on_token(self, sample: zenoh.Sample) -> None:
+        key = str(sample.key_expr)
+        found = self._manager_of_token(key)
+        if found is None:
+            return
+        name, hash_ = found
+        with self._lock:
+            if sample.kind != zenoh.SampleKind.PUT:
+                if self._present.get(name) == key:
+                    del self._present[name]
+                    log.warning("%s: manager %s left (its status_request subscription is gone)", name,
+                                self._requests[name][0])
+                return
+            if hash_:
+                self._hashes[name] = hash_
+            back = name not in self._present and self.feed.managers[name].deriver.last is not None
+            self._present[name] = key
+        if back:
+            with self._fed:
+                self.feed.restarted(name, "the manager (or its gateway) came back")
+        self.request_status(name)
+
+    def request_status(self, skillset: str) -> None:
+        """Ask ``skillset``'s manager to publish its status."""
+        manager, topic, payload = self._requests[skillset]
+        attachment = None
+        with self._lock:
+            if self.style.rmw_zenoh:
+                self._sequence += 1
+                attachment = rmw_attachment(self._sequence, time.time_ns(), self._gid)
+                key = rmw_zenoh_key(manager, topic.topic, topic.typename,
+                                    self._hashes.get(skillset) or self.style.type_hash(
+                                        self.feed.managers[skillset].store, topic.typename), self.style.domain)
+            else:
+                key = self.style.key(manager, topic)
+        self.session.put(key, payload, attachment=attachment, congestion_control=zenoh.CongestionControl.BLOCK)
+
+    def _ask_status(self, retry: float) -> None:
+        """Ask every manager whose status is unknown, every ``retry`` seconds up to every second."""
+        delay = retry
+        while not self._stop.is_set():
+            missing = [n for n in self.feed.managers if not self.feed.has_status(n)]
+            for name in missing:
+                self.request_status(name)
+            delay = min(delay * 2, 1.0) if missing else retry
+            self._stop.wait(delay)
+
     def wait_statuses(self, counts: Mapping[str, int], timeout: float = 5.0) -> bool:
         """Wait until ``counts[skillset]`` statuses of each skillset were handled and their events published.
 
@@ -141,37 +245,17 @@ class Bridge:
             return self._fed.wait_for(
                 lambda: all(self.feed.statuses.get(k, 0) >= n for k, n in counts.items()), timeout)
 
-    def request_status(self, skillset: str) -> None:
-        """Ask ``skillset``'s manager to publish its status."""
-        pub, payload = self._requests[skillset]
-        attachment = None
-        if self.style.rmw_zenoh:
-            self._sequence += 1
-            attachment = rmw_attachment(self._sequence, time.time_ns(), self._gid)
-        pub.put(payload, attachment=attachment)
-
-    def _ask_status(self, retry: float) -> None:
-        delay = retry
-        while not self._stop.is_set():
-            missing = [n for n in self.feed.managers if not self.feed.has_status(n)]
-            if not missing:
-                return
-            for name in missing:
-                self.request_status(name)
-            self._stop.wait(delay)
-            delay = min(delay * 2, 1.0)
-
     def close(self) -> None:
         """Stop asking, let the worker finish what is queued, undeclare everything."""
         if self._stop.is_set():
             return
         self._stop.set()
-        undeclare(self._token, self._resync, *self._subscribers)
+        undeclare(self._token, self._resync, *self._ros_tokens, *self._subscribers)
         self._queue.put(None)
         self._worker.join(5.0)
         if self._asker is not None:
             self._asker.join(5.0)
-        undeclare(*self._events.values(), *(p for p, _ in self._requests.values()))
+        undeclare(*self._events.values())
 
 
 def start_bridge(session: zenoh.Session, system: System, typemap: Mapping[str, str], **options: Any) -> Bridge:

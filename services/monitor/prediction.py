@@ -120,7 +120,8 @@ class PredictionClient:
                 self.stats.in_flight = True
             n += 1
             request = PredictRequest(system=self.system.name, digest=self.digest, seq=n,
-                                     skillsets=statuses(self.system, marking), budget=self.budget)
+                                     skillsets=statuses(self.system, marking), budget=self.budget,
+                                     af=self.system.prediction.af_modes([p.name for p in self.system.properties]))
             handler = zenoh.handlers.Callback(_bind(self._on_reply, n, key), _bind(self._on_done, n, key))
             try:
                 self.session.get(keys.predict(self.system.name), handler, payload=encode(request),

@@ -33,8 +33,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         help="seconds to wait for a model bundle (default: 2)")
     parser.add_argument("--max-budget", type=float, default=10.0,
                         help="cap on a request's budget, seconds (default: 10)")
-    parser.add_argument("--memory-mb", type=int, default=1024,
-                        help="address-space limit of each worker process, MB (default: 1024)")
+    parser.add_argument("--memory-mb", type=int, default=2048,
+                        help="address-space limit of each worker process, MB (default: 2048)")
     parser.add_argument("--grace", type=float, default=1.0,
                         help="seconds past a request's budget before its worker is killed (default: 1)")
     add_log_arg(parser)

@@ -65,7 +65,7 @@ class Predictor:
         cache_size: int = 4,
         fetch_timeout: float = 2.0,
         max_budget: float = 10.0,
-        memory_mb: int = 1024,
+        memory_mb: int = 2048,
         grace: float = 1.0,
         max_bundle: int = 1 << 20,
     ):
@@ -281,7 +281,7 @@ def start_predictor(
     cache_size: int = 4,
     fetch_timeout: float = 2.0,
     max_budget: float = 10.0,
-    memory_mb: int = 1024,
+    memory_mb: int = 2048,
     grace: float = 1.0,
 ) -> Predictor:
     """Serve predictions on ``session`` (shared or own); returns a handle with ``.close()``.

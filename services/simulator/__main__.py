@@ -38,9 +38,20 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         "zenoh-bridge-ros2dds keys")
     parser.add_argument("--namespace", default="", help="zenoh-bridge-ros2dds namespace prefix of the keys")
     parser.add_argument("--domain", type=int, default=0, help="ROS domain id in rmw_zenoh keys (default: 0)")
+    parser.add_argument("--ros-distro", default=os.environ.get("ROS_DISTRO", "jazzy"),
+                        help="ROS 2 distribution of rmw_zenoh (default: $ROS_DISTRO or jazzy); on humble the keys "
+                             "carry TypeHashNotSupported instead of a RIHS01 type hash")
+    parser.add_argument("--dds", action="store_true",
+                        help="serve the managers as ROS 2 nodes on DDS domain --domain (CycloneDDS, "
+                             "ros_discovery_info of --ros-distro) for a zenoh-bridge-ros2dds to route; the scenario's "
+                             "requests still go through Zenoh. Needs the cyclonedds package; $CYCLONEDDS_URI "
+                             "configures DDS (default: unicast discovery on 127.0.0.1)")
     add_log_arg(parser)
     add_zenoh_args(parser)
-    return parser.parse_args(argv)
+    args = parser.parse_args(argv)
+    if args.dds and args.rmw_zenoh:
+        parser.error("--dds and --rmw-zenoh exclude each other")
+    return args
 
 
 def _line(run: StepRun) -> str:
@@ -65,8 +76,17 @@ def main(argv: list[str] | None = None) -> int:
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
     session = zenoh.open(config_from_args(args))
     try:
-        sim = Simulator(session, system, typemap,
-                        style=KeyStyle(args.rmw_zenoh, args.namespace, args.domain))
+        style = KeyStyle(args.rmw_zenoh, args.namespace, args.domain, args.ros_distro == "humble")
+        if args.dds:
+            try:
+                from services.simulator.dds import DdsSimulator  # optional dependency: cyclonedds
+            except ImportError as exc:
+                print(f"error: --dds needs the cyclonedds package ({exc})", file=sys.stderr)
+                return 2
+            sim = DdsSimulator(session, system, typemap, domain=args.domain, distro=args.ros_distro,
+                               config=os.environ.get("CYCLONEDDS_URI"), style=style)
+        else:
+            sim = Simulator(session, system, typemap, style=style)
         time.sleep(max(0.0, args.start_delay))
         try:
             sim.drive(scenario, args.speed, on_step=lambda run: print(_line(run), flush=True))

@@ -25,11 +25,12 @@ from typing import Any
 
 import zenoh
 
+from services.common.ros_liveliness import declare_node
 from services.common.zenoh_config import undeclare
 from services.simulator.driver import StepRun, drive
 from services.simulator.manager import INTERRUPTING, READY, Manager, Message
 from skinet.mission import Scenario
-from skinet.ros.keys import KeyStyle, ManagerTopic, manager_topics, rmw_attachment
+from skinet.ros.keys import KeyStyle, ManagerTopic, manager_topics, rmw_attachment, topic_fqn
 from skinet.ros.typestore import Typestore, build_typestore, decode, encode
 from skinet.system import Component, System
 
@@ -53,6 +54,7 @@ class _Node:
     sequence: int = 0
     statuses: int = 0  # SkillsetStatus messages published
     handled: dict[str, int] = field(default_factory=dict)  # node-relative input topic -> inputs handled
+    tokens: list[Any] = field(default_factory=list)  # rmw_zenoh liveliness tokens of the node
 
 
 class Simulator:
@@ -71,6 +73,7 @@ class Simulator:
         self.session = session
         self.system = system
         self.style = style
+        self._clock = clock
         self._cond = threading.Condition()
         self._subscribers: list[Any] = []
         self.nodes: dict[str, _Node] = {}
@@ -79,34 +82,57 @@ class Simulator:
             manager = Manager(comp.skillset, store, info=comp.manager or f"{comp.name}_skillset_manager", clock=clock)
             topics = {t.topic: t for t in manager_topics(comp.skillset)}
             node = _Node(comp, store, manager, topics, {}, threading.Lock(), os.urandom(16))
-            for t in topics.values():
-                if t.kind in OUTPUTS:
-                    key = style.key(comp.manager, t, store)
-                    node.publishers[t.topic] = session.declare_publisher(
-                        key, congestion_control=zenoh.CongestionControl.BLOCK)
-            # One subscriber for all inputs keeps their order (see services.bridge_ros2.service).
-            inputs = {t.topic: t for t in topics.values() if t.kind in INPUTS}
-            self._subscribers.append(session.declare_subscriber(
-                style.all_topics(comp.manager, comp.skillset), self._handler(node, inputs)))
+            self._open(node)
             self.nodes[comp.name] = node
             log.info("simulated manager %s of skillset %s", comp.manager, comp.name)
 
-    # -- Zenoh side -----------------------------------------------------------------------
+    # -- transport (Zenoh here; services.simulator.dds overrides these for DDS) -------------
 
-    def _handler(self, node: _Node, inputs: dict[str, ManagerTopic]) -> Callable[[zenoh.Sample], None]:
+    def _open(self, node: _Node) -> None:
+        """Declare the node's output publishers and one subscriber for its inputs."""
+        comp = node.component
+        for t in node.topics.values():
+            if t.kind in OUTPUTS:
+                key = self.style.key(comp.manager, t, node.store)
+                node.publishers[t.topic] = self.session.declare_publisher(
+                    key, congestion_control=zenoh.CongestionControl.BLOCK)
+        # One subscriber for all inputs keeps their order (see services.bridge_ros2.service).
+        inputs = {t.topic: t for t in node.topics.values() if t.kind in INPUTS}
+
         def on_sample(sample: zenoh.Sample) -> None:
-            topic = inputs.get(self.style.topic(node.component.manager, str(sample.key_expr)) or "")
-            if topic is None:
-                return  # one of the manager's own outputs
-            try:
-                msg = decode(node.store, topic.typename, sample.payload.to_bytes())
-                self._handle(node, topic, msg)
-            except Exception as exc:  # bad CDR (rosbags raises several types); never crash (SPEC §7)
-                log.warning("%s: %s ignored: %s", node.component.name, topic.topic, exc)
-            finally:
-                self._count(node, topic.topic)
+            topic = inputs.get(self.style.topic(comp.manager, str(sample.key_expr)) or "")
+            if topic is not None:  # else one of the manager's own outputs
+                self._receive(node, topic, sample.payload.to_bytes())
 
-        return on_sample
+        self._subscribers.append(self.session.declare_subscriber(
+            self.style.all_topics(comp.manager, comp.skillset), on_sample))
+        self._declare_node(node)
+
+    def _declare_node(self, node: _Node) -> None:
+        """rmw_zenoh: the node's liveliness tokens, as rmw_zenoh declares them (graph discovery)."""
+        if not self.style.rmw_zenoh:
+            return
+        entities = [("MP" if t.kind in OUTPUTS else "MS", topic_fqn(node.component.manager, t.topic), t.typename,
+                     self.style.type_hash(node.store, t.typename))
+                    for t in node.topics.values() if t.kind in OUTPUTS or t.kind in INPUTS]
+        _, node.tokens = declare_node(self.session, self.style.domain, node.component.manager, entities)
+
+    def _send(self, node: _Node, topic: str, payload: bytes) -> None:
+        """Publish one CDR message of ``node`` on its node-relative ``topic``."""
+        attachment = None
+        if self.style.rmw_zenoh:
+            node.sequence += 1
+            attachment = rmw_attachment(node.sequence, time.time_ns(), node.gid)
+        node.publishers[topic].put(payload, attachment=attachment)
+
+    def _receive(self, node: _Node, topic: ManagerTopic, payload: bytes) -> None:
+        """Handle one CDR input of ``node`` (from any transport) and count it."""
+        try:
+            self._handle(node, topic, decode(node.store, topic.typename, payload))
+        except Exception as exc:  # bad CDR (rosbags raises several types); never crash (SPEC §7)
+            log.warning("%s: %s ignored: %s", node.component.name, topic.topic, exc)
+        finally:
+            self._count(node, topic.topic)
 
     def _handle(self, node: _Node, topic: ManagerTopic, msg: Any) -> None:
         m = node.manager
@@ -130,12 +156,7 @@ class Simulator:
         if not node.publishers:
             return  # closed
         for message in messages:
-            payload = encode(node.store, message.typename, message.msg)
-            attachment = None
-            if self.style.rmw_zenoh:
-                node.sequence += 1
-                attachment = rmw_attachment(node.sequence, time.time_ns(), node.gid)
-            node.publishers[message.topic].put(payload, attachment=attachment)
+            self._send(node, message.topic, encode(node.store, message.typename, message.msg))
             node.statuses += message.topic == node.manager.status_topic
 
     def _count(self, node: _Node, topic: str) -> None:
@@ -190,6 +211,20 @@ class Simulator:
         """Play ``scenario``: operator requests and skill outcomes at ``t / speed`` (see :func:`drive`)."""
         return drive(self, scenario, speed, on_step)
 
+    def restart(self, skillset: str) -> None:
+        """The manager of ``skillset`` restarts: initial state, new GID and sequence numbers, new tokens.
+
+        Like a restarted node, it publishes nothing until asked (``status_request``)
+        or until something changes.
+        """
+        node = self.nodes[skillset]
+        with node.lock:
+            m = node.manager
+            node.manager = Manager(m.skillset, node.store, info=m.info, clock=self._clock)
+            node.gid, node.sequence = os.urandom(16), 0
+            undeclare(*node.tokens)
+            self._declare_node(node)
+
     def close(self) -> None:
         """Undeclare everything (the session stays open: it may be shared).
 
@@ -201,7 +236,7 @@ class Simulator:
         for node in self.nodes.values():
             with node.lock:
                 publishers, node.publishers = list(node.publishers.values()), {}
-                undeclare(*publishers)
+                undeclare(*publishers, *node.tokens)
 
 
 __all__ = ["Simulator"]

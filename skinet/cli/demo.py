@@ -8,12 +8,13 @@ from pathlib import Path
 
 from skinet.errors import SourceError
 from skinet.files import load_system, load_typemap, read_text
-from skinet.mission import Scenario, StepRecord, parse_scenario, replay
+from skinet.explain import plural, warning_line
+from skinet.mission import Scenario, StepRecord, flagged_before, parse_scenario, replay
 from skinet.mission_log import records_to_log
 from skinet.system import System
 from skinet.wire.log import log_line
 
-MISSIONS = ("unassisted.toml", "assisted.toml")
+MISSIONS = ("unassisted.toml", "assisted.toml", "mobile_unassisted.toml", "mobile_assisted.toml")
 
 
 def default_scenarios() -> list[Path]:
@@ -53,13 +54,9 @@ def cmd_demo(args: argparse.Namespace) -> int:
         print(f"== {scenario.name} run ({path}): {len(records)} steps, system {system.name}")
         print(f"   chain: {how}")
         for r in records:
-            if args.all_steps or r.violations or r.warnings or r.divergence or r.step.consider:
+            if args.all_steps or r.violations or r.warnings or r.flagged or r.divergence or r.step.consider:
                 print(_line(r))
-        violations = [(p, r.index) for r in records for p in r.violations]
-        warnings = [(w, r.index) for r in records for w in r.warnings]
-        print(f"   violations: {len(violations)}" + "".join(f"; {p} at step {i}" for p, i in violations))
-        print(f"   warnings before risky commands: {len(warnings)}"
-              + "".join(f"; {w.skillset}:{w.transition} unsafe for {w.property} ({w.constraint}) at step {i}" for w, i in warnings))
+        print(_summary(records))
         if args.log or args.timeline:
             _write_run(args, system, scenario, records)
         print()
@@ -86,16 +83,40 @@ def _write_run(args: argparse.Namespace, system: System, scenario: Scenario, rec
         print(f"   timeline: {path}")
 
 
+def _summary(records: list[StepRecord]) -> str:
+    """What was violated, whether SkiNet had flagged the command that led there, and which warnings were heeded."""
+    lines = []
+    violations = [(p, r.index) for r in records for p in r.violations]
+    lines.append(f"   violations: {len(violations)}" + "".join(f"; {p} at step {i}" for p, i in violations))
+    for p, i in violations:
+        found = flagged_before(records, i, p)
+        if found is None:
+            lines.append(f"     {p} at step {i}: SkiNet had not flagged any command issued before it")
+        else:
+            j, u = found
+            ahead = "the command itself" if j == i else f"{plural(i - j)} ahead"
+            lines.append(f"     {p} at step {i}: SkiNet flagged {u.skillset}:{u.transition} when it was issued at "
+                         f"step {j} ({u.constraint}, {ahead}); the operator went ahead")
+    heeded = [(w, r.index) for r in records for w in r.warnings]
+    lines.append(f"   warnings heeded (commands considered, flagged, not issued): {len(heeded)}"
+                 + "".join(f"; {w.skillset}:{w.transition} {w.constraint} for {w.property} at step {i}"
+                           for w, i in heeded))
+    return "\n".join(lines)
+
+
 def _line(r: StepRecord) -> str:
     s = r.step
     what = f"{s.skillset}:{s.transition}" if s.transition else f"(considers {s.skillset}:{s.consider})"
     status = " ".join(f"{p}={'ok' if ok else 'VIOLATED'}" for p, ok in r.holds.items())
     line = f"  step {r.index:>3}  t={s.t:>6.1f}s  {what:<42} {status}  unsafe={r.unsafe_count}"
+    for u in r.flagged:
+        line += f"\n             SkiNet had flagged it: {warning_line(u)}"
     for p in r.violations:
         line += f"\n             !! {p} violated"
+    for p, names in r.recovery.items():
+        line += f"\n             {p} is violated now; recovery: {', '.join(names) or 'none'}"
     for w in r.warnings:
-        steps = "" if w.steps in (None, 0) else f", within {w.steps} steps"
-        line += f"\n             SkiNet: {w.skillset}:{w.transition} is unsafe for {w.property} ({w.constraint}{steps}); operator refrains"
+        line += f"\n             SkiNet: {warning_line(w)}; operator refrains"
     if r.divergence:
         line += f"\n             model divergence: {r.divergence}"
     if s.note:

@@ -7,6 +7,7 @@ import json
 import sys
 import time
 from collections.abc import Sequence
+from dataclasses import replace
 from pathlib import Path
 
 from skinet import __version__
@@ -16,7 +17,7 @@ from skinet.lang.expr import to_text
 from skinet.net.build import build_net
 from skinet.net.export import FORMATS
 from skinet.props.parser import parse_formula
-from skinet.system import System, marking_to_json
+from skinet.system import System, marking_problems, marking_to_json
 from skinet.verify.algorithm1 import analyse
 from skinet.verify.ctl import Kripke, check
 from skinet.verify.explore import explore
@@ -31,7 +32,9 @@ DESCRIPTION = """\
 SkiNet Live: predictive runtime verification of skill-based robots.
 Turns ONERA robot-language skillsets (.rl) into Petri nets, checks safety
 properties and reports the commands and events that would violate them now
-(explicit constraints) or inevitably later (implicit constraints)."""
+(explicit constraints), inevitably later (implicit constraints: AF not phi,
+fair by default) or through skill outcomes no command can prevent (forced
+constraints)."""
 
 EPILOG = """\
 examples:
@@ -114,21 +117,36 @@ def build_parser() -> argparse.ArgumentParser:
 def _system_args(c: argparse.ArgumentParser) -> None:
     c.add_argument("system", help="system file (.toml), e.g. skillsets/spot_arm.toml")
     c.add_argument("--state", help="start marking as JSON (default: initial marking)")
+    c.add_argument(
+        "--what-if", action="store_true",
+        help="accept a --state the robot cannot be in (an invariant violated, or unreachable) for what-if analysis",
+    )
     c.add_argument("--budget", type=float, default=10.0, help="exploration time budget in seconds (default: 10)")
     c.add_argument("--max-depth", type=int, help="expand at most this many breadth-first layers")
     c.add_argument("--no-seeds", action="store_true", help="do not seed exploration with firable events")
     c.add_argument("--json", action="store_true", help="machine-readable result")
+    c.add_argument("--af", choices=["fair", "literal"],
+                   help="AF for implicit constraints, all properties (default: the system file's [prediction] "
+                        "table, else fair: only paths on which running skills end count; literal: the paper's)")
+    c.add_argument("--events-uncontrollable", action="store_true", default=None,
+                   help="count events as uncontrollable steps for forced constraints (default: off)")
+    c.add_argument("--no-forced", dest="forced", action="store_false", default=None,
+                   help="do not report forced constraints (skill outcomes alone lead to a violation)")
 
 
 def _load(args: argparse.Namespace) -> tuple[System, dict[str, int]]:
     system, warnings = load_system(args.system)
     for w in warnings:
         print(str(w), file=sys.stderr)
-    marking = load_state(args.state, system) if args.state else system.initial_marking()
+    system = replace(system, prediction=system.prediction.override(
+        af=args.af, forced=args.forced, events_uncontrollable=args.events_uncontrollable))
+    marking = load_state(args.state, system, args.what_if) if args.state else system.initial_marking()
+    for problem in marking_problems(system, marking) if args.what_if else ():
+        print(f"what-if analysis: {problem}", file=sys.stderr if args.json else sys.stdout)
     return system, marking
 
 
-def _forecast(args: argparse.Namespace, system: System, marking: dict[str, int]) -> Forecast:
+def _forecast(args: argparse.Namespace, system: System, marking: dict[str, int], full: bool = False) -> Forecast:
     show = getattr(args, "progress", False) or (sys.stderr.isatty() and not args.json)
     last = [0.0]
 
@@ -138,7 +156,8 @@ def _forecast(args: argparse.Namespace, system: System, marking: dict[str, int])
             print(f"\r  layer {depth}: {markings} markings, {seconds(elapsed)}", end="", file=sys.stderr, flush=True)
 
     result = forecast(
-        system, marking, budget=args.budget, max_depth=args.max_depth, event_seeds=not args.no_seeds, progress=progress
+        system, marking, budget=args.budget, max_depth=args.max_depth, event_seeds=not args.no_seeds, progress=progress,
+        full=full,
     )
     if last[0] > 0:
         print(file=sys.stderr)
@@ -205,6 +224,7 @@ def cmd_unsafe(args: argparse.Namespace) -> int:
             "marking": marking_to_json(system, marking),
             "violated": result.violated,
             "unsafe": [u.__dict__ | {"witness": list(u.witness)} for u in (result.unsafe if args.literal else result.operator_unsafe())],
+            "options": {p.name: system.prediction.of(p.name).__dict__ for p in system.properties},
             "recovery": {p: [r.__dict__ for r in rs] for p, rs in result.recovery.items()},
             "prediction": None if prediction is None else prediction.report(),
         })
@@ -221,7 +241,7 @@ def cmd_unsafe(args: argparse.Namespace) -> int:
 
 def cmd_explore(args: argparse.Namespace) -> int:
     system, marking = _load(args)
-    result = _forecast(args, system, marking)
+    result = _forecast(args, system, marking, full=True)
     report = result.report()
     if args.json:
         _emit({"system": system.name, **report})
@@ -237,9 +257,15 @@ def cmd_explore(args: argparse.Namespace) -> int:
         ["frontier", report["frontier"]],
     ]
     print("\n".join("  " + line for line in table(rows, ["", ""]).splitlines()[1:]))
-    props = [[n, c["violating"], c["dangerous"], c["undecided"]] for n, c in report["properties"].items()]
+    props = [
+        [n, c["violating"], c["implicit_fair"], c["implicit_literal"], c["forced"],
+         f"{c['undecided_fair']} / {c['undecided_literal']}", report["af"][n]]
+        for n, c in report["properties"].items()
+    ]
     if props:
-        print(table(props, ["property", "violating", "dangerous (mu1)", "undecided"]))
+        print(table(props, ["property", "violating", "implicit (fair)", "implicit (literal)", "forced",
+                            "undecided (fair / literal)", "operator AF"]))
+        print("implicit and forced count markings where the property still holds; mu1 = violating + implicit")
     return 0
 
 

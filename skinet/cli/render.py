@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 
+from skinet.explain import warning_line
 from skinet.system import System, marking_to_json
 from skinet.verify.algorithm1 import Analysis, UnsafeTransition
 
@@ -46,6 +47,8 @@ def analysis_text(system: System, analysis: Analysis, literal: bool) -> str:
     if unsafe:
         header = ["skillset", "transition", "property", "constraint", "control", "steps", "witness"]
         out.extend("  " + line for line in table([unsafe_row(u) for u in unsafe], header).splitlines())
+        out.append("why:")
+        out.extend("  " + warning_line(u) for u in unsafe)
     if not literal:
         for prop, recovery in analysis.recovery.items():
             names = ", ".join(f"{r.skillset}:{r.transition}" for r in recovery) or "none"

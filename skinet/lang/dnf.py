@@ -10,23 +10,30 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 
+from skinet.errors import SkinetError
 from skinet.lang.expr import And, Const, Expr, Implies, Not, Or, StateAtom
 
 Clause = dict[str, str]
 
 
-def dnf(expr: Expr | None, states: Mapping[str, Sequence[str]]) -> list[Clause]:
+class TooManyClauses(SkinetError):
+    """A disjunctive normal form exceeded the clause limit it was computed with."""
+
+
+def dnf(expr: Expr | None, states: Mapping[str, Sequence[str]], limit: int | None = None) -> list[Clause]:
     """Clauses of ``expr``; ``None`` (no guard) is ``true``, i.e. ``[{}]``.
 
     ``states`` maps each resource name to its states (needed to expand ``!=``).
     The result is empty exactly when ``expr`` is unsatisfiable.  Worst case
-    exponential in the number of ``or`` under ``and``, as DNF must be.
+    exponential in the number of ``or`` under ``and``, as DNF must be; with a
+    ``limit``, raises :class:`TooManyClauses` as soon as an intermediate result
+    holds more clauses, so the cost is at most O(size x limit^2).
     """
     if expr is None:
         return [{}]
     out: list[Clause] = []
     seen: set[frozenset[tuple[str, str]]] = set()
-    for clause in _dnf(expr, True, states):
+    for clause in _dnf(expr, True, states, limit):
         key = frozenset(clause.items())
         if key not in seen:
             seen.add(key)
@@ -34,7 +41,7 @@ def dnf(expr: Expr | None, states: Mapping[str, Sequence[str]]) -> list[Clause]:
     return out
 
 
-def _dnf(expr: Expr, positive: bool, states: Mapping[str, Sequence[str]]) -> list[Clause]:
+def _dnf(expr: Expr, positive: bool, states: Mapping[str, Sequence[str]], limit: int | None) -> list[Clause]:
     if isinstance(expr, Const):
         return [{}] if expr.value == positive else []
     if isinstance(expr, StateAtom):
@@ -42,16 +49,20 @@ def _dnf(expr: Expr, positive: bool, states: Mapping[str, Sequence[str]]) -> lis
             return [{expr.resource: expr.state}]
         return [{expr.resource: s} for s in states[expr.resource] if s != expr.state]
     if isinstance(expr, Not):
-        return _dnf(expr.arg, not positive, states)
+        return _dnf(expr.arg, not positive, states, limit)
     if isinstance(expr, Implies):
-        return _dnf(Or(Not(expr.left), expr.right), positive, states)
+        return _dnf(Or(Not(expr.left), expr.right), positive, states, limit)
     if isinstance(expr, (And, Or)):
         conjunctive = isinstance(expr, And) == positive
-        left = _dnf(expr.left, positive, states)
-        right = _dnf(expr.right, positive, states)
+        left = _dnf(expr.left, positive, states, limit)
+        right = _dnf(expr.right, positive, states, limit)
         if not conjunctive:
-            return left + right
-        return [c for a in left for b in right if (c := _merge(a, b)) is not None]
+            out = left + right
+        else:
+            out = [c for a in left for b in right if (c := _merge(a, b)) is not None]
+        if limit is not None and len(out) > limit:
+            raise TooManyClauses(f"more than {limit} clauses")
+        return out
     raise TypeError(f"not a skillset expression: {expr!r}")
 
 

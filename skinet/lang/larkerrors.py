@@ -7,13 +7,59 @@ from __future__ import annotations
 
 from typing import Any
 
-from lark import Lark, Token
+from lark import Lark, Token, Tree
 from lark.exceptions import UnexpectedCharacters, UnexpectedInput, UnexpectedToken
 
 from skinet.errors import Diagnostic, Pos, SourceError
 
 _MAX_EXPECTED = 10
 _DISPLAY = {"$END": "end of input", "NAME": "identifier", "NUMBER": "number", "_NL": "end of line"}
+# Accepted but not suggested: `parameter` sections and `include` only exist in old
+# ONERA dialects (robot_language 2022, rl_model 2023), and listing them would push the keywords
+# every file uses past the cap of an expected list.
+_UNSUGGESTED = frozenset({"PARAMETER", "INCLUDE"})
+
+
+# Deepest nesting of operators accepted in one expression.  The expression walkers
+# of the core (DNF, evaluation, CTL, rendering) recurse once or twice per level,
+# so this keeps every one of them far below Python's recursion limit of 1000.
+# Real guards and properties nest fewer than ten operators.
+MAX_NESTING = 100
+
+# Largest source text accepted, in characters (256 KiB).  Real skillset files are
+# about 10 KB.  Parsing costs up to about 550 bytes of memory and 30 us per input
+# character (lark), so any accepted text parses within about 150 MB and 10 s.
+MAX_SOURCE_CHARS = 2**18
+# Largest properties file or CTL formula (64 KiB); real ones are under 1 KB.
+MAX_FORMULA_CHARS = 2**16
+
+
+def check_size(text: str, source: str, limit: int = MAX_SOURCE_CHARS) -> None:
+    """Refuse a text longer than ``limit`` characters before parsing it."""
+    if len(text) > limit:
+        raise SourceError.at(source, None, f"input too large: {len(text)} characters (the limit is {limit})")
+
+
+def check_nesting(tree: Tree, operators: frozenset[str], source: str) -> None:
+    """Refuse an expression nesting more than :data:`MAX_NESTING` operators.
+
+    Iterative (the tree may be arbitrarily deep); cost linear in the tree size.
+    ``operators`` are the names of the tree nodes that count as one level.
+    """
+    stack: list[tuple[Tree, int]] = [(tree, 0)]
+    while stack:
+        node, depth = stack.pop()
+        if node.data in operators:
+            depth += 1
+            if depth > MAX_NESTING:
+                meta = node.meta
+                pos = Pos(meta.line, meta.column) if not meta.empty else None
+                raise SourceError.at(
+                    source, pos,
+                    f"expression nested too deeply (more than {MAX_NESTING} levels of operators);"
+                    " split it into several named parts",
+                )
+        stack.extend((child, depth) for child in node.children if isinstance(child, Tree))
 
 
 def syntax_error(parser: Lark, exc: UnexpectedInput, text: str, source: str) -> SourceError:
@@ -84,7 +130,7 @@ def _terminal_display(parser: Lark, name: str) -> str | None:
     """Readable form of a terminal (``'{'``, ``identifier``); None for ignored ones."""
     if name in _DISPLAY:
         return _DISPLAY[name]
-    if name in parser.ignore_tokens:
+    if name in parser.ignore_tokens or name in _UNSUGGESTED:
         return None
     for term in parser.terminals:
         if term.name == name:

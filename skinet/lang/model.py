@@ -21,12 +21,16 @@ class TypeDecl:
 
 @dataclass(frozen=True)
 class Variable:
-    """A typed field: data, skill input/output, progress message field."""
+    """A typed field: data, parameter, skill input/output, progress message field.
+
+    ``period_seconds`` is a data field's publication period, when declared.
+    """
 
     name: str
     type: str
     pos: Pos | None = None
     type_pos: Pos | None = None
+    period_seconds: float | None = None
 
 
 @dataclass(frozen=True)
@@ -118,6 +122,7 @@ class Mode:
 @dataclass(frozen=True)
 class Skill:
     name: str
+    parameters: tuple[Variable, ...] = ()
     inputs: tuple[Variable, ...] = ()
     outputs: tuple[Variable, ...] = ()
     preconditions: tuple[Precondition, ...] = ()
@@ -141,6 +146,7 @@ class Skillset:
     events: tuple[Event, ...] = ()
     skills: tuple[Skill, ...] = ()
     data: tuple[Variable, ...] = ()
+    parameters: tuple[Variable, ...] = ()
     type_params: tuple[str, ...] = ()
     types: tuple[TypeDecl, ...] = ()
     source: str = "<string>"
@@ -167,9 +173,14 @@ class Skillset:
 
 @dataclass(frozen=True)
 class Model:
-    """Everything one ``.rl`` file declares, plus the warnings validation gave."""
+    """Everything one ``.rl`` file declares, plus the warnings validation gave.
+
+    ``includes`` are the ``include "file"`` lines, with their positions; the core
+    does no I/O, :func:`skinet.files.load_model` resolves them.
+    """
 
     source: str
     types: tuple[TypeDecl, ...]
     skillsets: tuple[Skillset, ...]
     warnings: tuple[Diagnostic, ...] = ()
+    includes: tuple[tuple[str, Pos | None], ...] = ()

@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 from functools import lru_cache
 from pathlib import Path
+from collections.abc import Sequence
 from typing import Any, NamedTuple
 
 from lark import Lark, Token, Transformer, UnexpectedInput
@@ -33,23 +34,30 @@ from skinet.lang.model import (
     TypeDecl,
     Variable,
 )
-from skinet.lang.larkerrors import syntax_diagnostic
+from skinet.lang.larkerrors import check_nesting, check_size, syntax_diagnostic
 from skinet.lang.validate import sort_diagnostics, validate
 
-__all__ = ["parse_model", "parse_skillset"]
+__all__ = ["parse_model", "parse_skillset", "parse_unit", "link"]
 
 _GRAMMAR_PATH = Path(__file__).with_name("skillset.lark")
 
 # Seconds per unit of a progress period (SPEC §2: `1 sec`, `100 ms`, bare `1.0`).
 _UNIT_DIVISOR = {"sec": 1.0, "s": 1.0, "ms": 1000.0}
 
+# Tree nodes that nest an expression one level deeper (see check_nesting).
+_OPERATORS = frozenset({"not_", "and_", "or_", "implies"})
 
 
-@lru_cache(maxsize=1)
-def _parser() -> Lark:
-    """The grammar, loaded once (LALR, contextual lexer, positions propagated)."""
+
+@lru_cache(maxsize=2)
+def _parser(start: str = "start") -> Lark:
+    """The grammar, loaded once per start rule (LALR, contextual lexer, positions propagated).
+
+    ``start`` is a file given to a command, ``library`` a file it includes.
+    """
     return Lark(
         _GRAMMAR_PATH.read_text(encoding="utf-8"),
+        start=start,
         parser="lalr",
         lexer="contextual",
         propagate_positions=True,
@@ -61,12 +69,28 @@ def parse_model(text: str, source: str = "<string>") -> Model:
     """Parse and validate a whole ``.rl`` file (SPEC §2).
 
     Raises :class:`SourceError` carrying every error, sorted by position; on success
-    the returned model's ``warnings`` hold the validation warnings.
+    the returned model's ``warnings`` hold the validation warnings.  ``include``
+    lines are recorded, not followed (see :func:`skinet.files.load_model`).
     """
+    return link([parse_unit(text, source)])
+
+
+Unit = tuple[Model, list[Diagnostic]]
+
+
+def parse_unit(text: str, source: str, library: bool = False) -> Unit:
+    """The syntax and structure of one file, not yet validated (see :func:`link`).
+
+    A ``library`` (a file named by an ``include``) may declare no skillset.
+    Raises :class:`SourceError` on a syntax error.  Cost: linear in the text.
+    """
+    check_size(text, source)
+    parser = _parser("library" if library else "start")
     try:
-        tree = _parser().parse(text)
+        tree = parser.parse(text)
     except UnexpectedInput as exc:
-        raise SourceError([syntax_diagnostic(_parser(), exc, text, source)]) from None
+        raise SourceError([syntax_diagnostic(parser, exc, text, source)]) from None
+    check_nesting(tree, _OPERATORS, source)
     builder = _Builder(source)
     try:
         model: Model = builder.transform(tree)
@@ -74,7 +98,30 @@ def parse_model(text: str, source: str = "<string>") -> Model:
         if isinstance(exc.orig_exc, SourceError):
             raise exc.orig_exc from None
         raise
-    diagnostics = builder.errors + validate(model)
+    return model, builder.errors
+
+
+def link(units: Sequence[Unit]) -> Model:
+    """Validate files together as one model: the first one and those it includes.
+
+    Every skillset sees the types of every file.  Raises :class:`SourceError`
+    carrying every error; the model's ``warnings`` hold the rest.
+    """
+    main = units[0][0]
+    types = tuple(t for model, _ in units for t in model.types)
+    diagnostics: list[Diagnostic] = []
+    first: dict[str, Skillset] = {}
+    for model, found in units:
+        own = tuple(dataclasses.replace(s, types=types) for s in model.skillsets)
+        diagnostics += found + validate(dataclasses.replace(model, skillsets=own))
+        for s in own:
+            if s.name in first and first[s.name].source != s.source:
+                at = first[s.name]
+                where = f"{at.source}:{at.pos.line}:{at.pos.column}" if at.pos else at.source
+                diagnostics.append(Diagnostic(s.source, s.pos, "error", f"duplicate skillset '{s.name}' (first declared at {where})"))
+            first.setdefault(s.name, s)
+    skillsets = tuple(dataclasses.replace(s, types=types) for model, _ in units for s in model.skillsets)
+    model = Model(source=main.source, types=types, skillsets=skillsets, includes=main.includes)
     errors = [d for d in diagnostics if d.level == "error"]
     if errors:
         raise SourceError(sort_diagnostics(errors))
@@ -110,6 +157,14 @@ class _Item(NamedTuple):
     kind: str
     value: Any
     pos: Pos | None = None
+
+
+class _Named(NamedTuple):
+    """A postcondition with its name (``""`` when unnamed)."""
+
+    name: str
+    expr: Expr
+    pos: Pos | None
 
 
 class _PartialMode(NamedTuple):
@@ -181,8 +236,39 @@ class _Builder(Transformer):  # type: ignore[type-arg]
     def guard_clause(self, c: list[Any]) -> _Item:
         return _Item("guard", c[1], _pos(c[0]))
 
+    def named_postcondition(self, c: list[Any]) -> _Named:
+        return _Named(str(c[0]), c[1], _pos(c[0]))
+
     def postcondition_clause(self, c: list[Any]) -> _Item:
-        return _Item("postcondition", c[1], _pos(c[0]))
+        """Unnamed (``postcondition e``) or named postconditions, as a tuple of _Named."""
+        if len(c) > 1 and not isinstance(c[1], _Named):
+            return _Item("postcondition", (_Named("", c[1], _pos(c[0])),), _pos(c[0]))
+        return _Item("postcondition", tuple(c[1:]), _pos(c[0]))
+
+    def _postcondition(self, items: list[_Item], where: str) -> Expr | None:
+        """The conjunction of every postcondition of an interrupt or mode.
+
+        Named postconditions may repeat (rl_model), an unnamed one may not
+        (robot_language); names are unique per interrupt or mode.
+        """
+        parts: list[Expr] = []
+        seen: dict[str, Pos | None] = {}
+        for item in items:
+            if item.kind != "postcondition":
+                continue
+            for named in item.value:
+                if named.name in seen:
+                    what = f" '{named.name}'" if named.name else ""
+                    self._error(named.pos if named.name else item.pos, f"duplicate postcondition{what} in {where}")
+                    continue
+                seen[named.name] = named.pos
+                parts.append(named.expr)
+        if not parts:
+            return None
+        post = parts[0]
+        for part in parts[1:]:
+            post = And(post, part, getattr(post, "pos", None))
+        return post
 
     # ---- file level -----------------------------------------------------------
 
@@ -191,7 +277,13 @@ class _Builder(Transformer):  # type: ignore[type-arg]
         skillsets = tuple(
             dataclasses.replace(s, types=types) for s in c if isinstance(s, Skillset)
         )
-        return Model(source=self.source, types=types, skillsets=skillsets)
+        includes = tuple(x.value for x in c if isinstance(x, _Item) and x.kind == "include")
+        return Model(source=self.source, types=types, skillsets=skillsets, includes=includes)
+
+    library = start
+
+    def include(self, c: list[Token]) -> _Item:
+        return _Item("include", (str(c[0])[1:-1], _pos(c[0])))
 
     def type_section(self, c: list[Token]) -> list[TypeDecl]:
         return [TypeDecl(str(t), _pos(t)) for t in c]
@@ -209,6 +301,7 @@ class _Builder(Transformer):  # type: ignore[type-arg]
             events=self._concat(items, "events"),
             skills=self._concat(items, "skills"),
             data=self._concat(items, "data"),
+            parameters=self._concat(items, "parameter"),
             type_params=params,
             source=self.source,
             pos=_pos(name),
@@ -216,6 +309,13 @@ class _Builder(Transformer):  # type: ignore[type-arg]
 
     def data_section(self, c: list[Variable]) -> _Item:
         return _Item("data", tuple(c))
+
+    def data_field(self, c: list[Any]) -> Variable:
+        period: float | None = c[2].value if len(c) > 2 else None
+        return Variable(str(c[0]), str(c[1]), _pos(c[0]), _pos(c[1]), period)
+
+    def parameter_section(self, c: list[Variable]) -> _Item:
+        return _Item("parameter", tuple(c))
 
     # ---- resources ------------------------------------------------------------
 
@@ -347,11 +447,10 @@ class _Builder(Transformer):  # type: ignore[type-arg]
         keyword: Token = c[0]
         items: list[_Item] = c[1:]
         interrupting = self._single(items, "interrupting", "interrupt")
-        post = self._single(items, "postcondition", "interrupt")
         interrupt = Interrupt(
             interrupting=bool(interrupting.value) if interrupting else False,
             effects=self._concat(items, "effect"),
-            postcondition=post.value if post else None,
+            postcondition=self._postcondition(items, "interrupt"),
             declared=True,
             pos=_pos(keyword),
         )
@@ -359,8 +458,7 @@ class _Builder(Transformer):  # type: ignore[type-arg]
 
     def _mode_body(self, items: list[_Item], name: str, pos: Pos | None) -> _PartialMode:
         where = f"mode '{name}'" if name else "unnamed mode"
-        post = self._single(items, "postcondition", where)
-        return _PartialMode(name, self._concat(items, "effect"), post.value if post else None, pos)
+        return _PartialMode(name, self._concat(items, "effect"), self._postcondition(items, where), pos)
 
     def mode(self, c: list[Any]) -> _PartialMode:
         return self._mode_body(c[1:], str(c[0]), _pos(c[0]))
@@ -390,6 +488,7 @@ class _Builder(Transformer):  # type: ignore[type-arg]
         interrupt = self._single(items, "interrupt", where)
         return Skill(
             name=str(name),
+            parameters=self._concat(items, "parameter"),
             inputs=self._concat(items, "input"),
             outputs=self._concat(items, "output"),
             preconditions=self._concat(items, "precondition"),

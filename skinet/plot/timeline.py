@@ -30,6 +30,14 @@ from skinet.wire.messages import CanonicalEvent, LiveState, ModelBundle, UnsafeR
 SKILLSET_COLOURS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#9467bd", "#8c564b", "#e377c2", "#17becf", "#bcbd22")
 STATE_FILLS = ("#eef3fa", "#fdf0e1", "#eaf6ea", "#f6ecf7", "#f5efe9", "#eef7f8")
 HOLDS, VIOLATED, FLAGGED = "#dff0d8", "#d62728", "#e8a0a0"
+# How a lane is hatched while one of its commands is flagged, per constraint kind (SPEC §5), least severe first.
+FLAG_STYLES = {
+    "unknown": ("#aaaaaa", "...."),
+    "forced": ("#ff7f0e", "\\\\\\\\"),
+    "implicit": ("#9467bd", "xxxx"),
+    "explicit": (FLAGGED, "////"),
+}
+PREDICTED = "#ff7f0e"
 MARKERS = {"command": ">", "outcome": "o", "interrupt": "s", "invariant": "X", "event": "D", "status": "|"}
 LANE_HEIGHT_IN = 0.34  # figure inches per lane
 
@@ -241,25 +249,30 @@ def violations(entries: Sequence[Entry]) -> list[tuple[float, str]]:
     return out
 
 
-def flagged(entries: Sequence[Entry], end: float) -> dict[str, list[tuple[float, float]]]:
-    """Per skill lane (``skillset.skill``), the times its commands are flagged unsafe (operator view)."""
+def flagged(entries: Sequence[Entry], end: float,
+            kinds: Sequence[str] = tuple(FLAG_STYLES)) -> dict[str, list[tuple[float, float]]]:
+    """Per skill lane (``skillset.skill``), the times its commands are flagged unsafe (operator view).
+
+    Only flags whose constraint is in ``kinds`` count (default: every kind).
+    """
     reports = [e for e in sorted(entries, key=lambda e: e.t) if isinstance(e.message, UnsafeReport)]
     times = [e.t for e in reports] + [end]
     spans: dict[str, list[tuple[float, float]]] = {}
     for (a, b), e in zip(zip(times[:-1], times[1:]), reports):
         assert isinstance(e.message, UnsafeReport)
         for lane in {f"{u.skillset}.{u.transition.split('.', 1)[0]}" for u in e.message.unsafe
-                     if u.controllable and "." in u.transition}:
+                     if u.controllable and "." in u.transition and u.constraint in kinds}:
             spans.setdefault(lane, []).append((a, b))
     return {lane: _merge(runs) for lane, runs in spans.items()}
 
 
 def _flagged(ax: Axes, entries: Sequence[Entry], t0: float, end: float, y: dict[str, int]) -> None:
-    """Hatch a skill's lane while one of its commands is flagged unsafe."""
-    for label, runs in flagged(entries, end + t0).items():
-        if label in y:
-            ax.broken_barh([(a - t0, b - a) for a, b in runs], (y[label] - 0.45, 0.9), facecolors="none",
-                           edgecolors=FLAGGED, hatch="////", linewidth=0, zorder=1.5)
+    """Hatch a skill's lane while one of its commands is flagged unsafe, one hatch per constraint kind."""
+    for kind, (colour, hatch) in FLAG_STYLES.items():
+        for label, runs in flagged(entries, end + t0, (kind,)).items():
+            if label in y:
+                ax.broken_barh([(a - t0, b - a) for a, b in runs], (y[label] - 0.45, 0.9), facecolors="none",
+                               edgecolors=colour, hatch=hatch, linewidth=0, zorder=1.5)
 
 
 def _unsafe(ax: Axes, entries: Sequence[Entry], t0: float, end: float) -> None:
@@ -274,6 +287,10 @@ def _unsafe(ax: Axes, entries: Sequence[Entry], t0: float, end: float) -> None:
             label="literal Algorithm 1 count")
     ax.step(xs, ops + ops[-1:], where="post", color="#d62728", linewidth=1.8, label="operator view (properties that hold now)")
     ax.fill_between(xs, ops + ops[-1:], step="post", color="#d62728", alpha=0.12)
+    ahead = [sum(u.constraint in ("implicit", "forced") for u in e.message.unsafe) for e in reports]  # type: ignore[union-attr]
+    if any(ahead):
+        ax.step(xs, ahead + ahead[-1:], where="post", color=PREDICTED, linewidth=1.6, zorder=4,
+                label="predicted ahead (implicit or forced)")
     top = max(max(lit), max(ops), 1)
     ax.set_ylim(0, top * 1.35 + 0.5)
     ax.set_ylabel("unsafe\ntransitions", fontsize=9)
@@ -285,7 +302,8 @@ def _legend(lanes: Lanes, colour: dict[str, str]) -> list:
     items: list = [Patch(facecolor=colour[ss], edgecolor="black", linewidth=0.4, label=f"{ss} skill running")
                    for ss in lanes.skillsets]
     items.append(Line2D([], [], color="#555555", linewidth=1.4, label="resource state"))
-    items.append(Patch(facecolor="none", edgecolor=FLAGGED, hatch="////", linewidth=0, label="command flagged unsafe"))
+    for kind, (edge, hatch) in reversed(FLAG_STYLES.items()):
+        items.append(Patch(facecolor="none", edgecolor=edge, hatch=hatch, linewidth=0, label=f"command flagged {kind}"))
     items.append(Patch(facecolor=HOLDS, label="property holds"))
     items.append(Patch(facecolor=VIOLATED, label="property VIOLATED"))
     for kind in ("command", "outcome", "interrupt", "invariant", "event"):

@@ -17,7 +17,7 @@ from lark.exceptions import UnexpectedInput, VisitError
 
 from skinet.errors import Pos, SourceError
 from skinet.lang.expr import And, Const, Implies, Not, Or
-from skinet.lang.larkerrors import syntax_error
+from skinet.lang.larkerrors import MAX_FORMULA_CHARS, check_nesting, check_size, syntax_error
 from skinet.lang.model import Skillset
 from skinet.net.build import idle_place, resource_place, running_place
 from skinet.props.formula import PlaceAtom, Property, Temporal, Until, is_temporal
@@ -117,11 +117,17 @@ class _Build(Transformer):
         return [p for p in c if isinstance(p, Property)]
 
 
+# Tree nodes that nest a formula one level deeper (see check_nesting).
+_OPERATORS = frozenset({"not_", "and_", "or_", "implies", "temporal", "until"})
+
+
 def _parse(text: str, start: str, skillsets: Mapping[str, Skillset], source: str):
+    check_size(text, source, MAX_FORMULA_CHARS)
     try:
         tree: Tree = _lark(start).parse(text)
     except UnexpectedInput as exc:
         raise syntax_error(_lark(start), exc, text, source) from None
+    check_nesting(tree, _OPERATORS, source)
     try:
         return _Build(skillsets, source, text).transform(tree)
     except VisitError as exc:

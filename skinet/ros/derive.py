@@ -178,6 +178,7 @@ class Deriver:
         self._requests: OrderedDict[str, str] = OrderedDict()  # event request id -> name
         self._handled: OrderedDict[tuple[str, str], None] = OrderedDict()  # (skill, id) stops already published
         self._handled_events: OrderedDict[str, None] = OrderedDict()  # event response ids seen
+        self._rejected: OrderedDict[tuple[str, str], None] = OrderedDict()  # (skill, id) of rejected starts
         self._late_events = 0  # unexplained resource changes a late event response may still explain
         self._event_names = tuple(e.name for e in skillset.events)
 
@@ -209,6 +210,9 @@ class Deriver:
     def on_skill_response(self, r: SkillResponse) -> Output:
         code = RESULT_NAMES.get(r.result, str(r.result))
         where = f"{self.skillset.name}: {r.skill}"
+        if r.result not in TERMINAL:
+            self._rejected[(r.skill, r.id)] = None
+            _trim(self._rejected)
         if r.result == RESULTS["ALREADY_RUNNING"]:
             return Output(notes=[f"{where}: start rejected, ALREADY_RUNNING (running id '{r.id}')"])
         if r.result == RESULTS["PRECONDITION_FAILURE"]:
@@ -221,6 +225,36 @@ class Deriver:
         self._responses.append(r)
         del self._responses[:-MAX_PENDING]
         return Output()
+
+    def awaits(self, st: Status) -> str | None:
+        """The response that ``st`` needs and that has not come yet (``None``: ``st`` can be named now).
+
+        A manager publishes its responses before its status, but each topic crosses a
+        gateway on its own route, so the status may overtake them; the bridge holds
+        such a status until they come (or for a bounded time).  Cost: one pass over
+        the skills.
+        """
+        prev = self.last
+        if prev is None:
+            return None
+        responses = {(r.skill, r.id): r for r in self._responses}
+        pending = responses.keys() | self._rejected.keys()
+        triggered = cascade = False  # a change of its own; an invariant failure (needs a trigger)
+        for k, now in st.skills.items():
+            before = prev.skills.get(k, SkillView(READY, ""))
+            was, running = before.state != READY, now.state != READY
+            if was and (not running or now.id != before.id):
+                if (k, before.id) not in responses:
+                    return f"the response of {k} '{before.id}'"
+                failed = responses[(k, before.id)].result == RESULTS["INVARIANT_FAILURE"]
+                triggered, cascade = triggered or not failed, cascade or failed
+            if not running and not was and now.id != before.id and (k, now.id) not in pending:
+                return f"the response of {k} '{now.id}'"
+            triggered = triggered or (running and (not was or now.id != before.id)) or \
+                (not running and not was and now.id != before.id)
+        if not triggered and (cascade or prev.resources != st.resources) and not self._events:
+            return "an event response"
+        return None
 
     def on_status(self, st: Status) -> Output:
         prev, self.last = self.last, st

@@ -8,7 +8,9 @@ node-relative topic.  Two ways of getting ROS 2 traffic onto Zenoh:
   bridge's optional ``namespace``; the payload is the CDR sample as is.
 - ``rmw_zenoh``: key = ``<domain>/<FQN without leading slash>/<DDS type name>/<type
   hash>``; every sample carries a 33-byte attachment (sequence number, source
-  timestamp, GID).
+  timestamp, GID); every node, publisher and subscription declares a liveliness
+  token under ``@ros2_lv/<domain>/`` (:class:`RosEntity`).  On Humble the type hash
+  is ``TypeHashNotSupported`` (ros2/rmw_zenoh#388).
 
 Pure functions; the type hash comes from ``rosbags`` (``Typestore.hash_rihs01``).
 """
@@ -107,17 +109,26 @@ def rmw_zenoh_key(manager: str, topic: str, typename: str, hash_: str = "*", dom
 
 @dataclass(frozen=True)
 class KeyStyle:
-    """How topics map to keys: ``zenoh-bridge-ros2dds`` (default) or ``rmw_zenoh``."""
+    """How topics map to keys: ``zenoh-bridge-ros2dds`` (default) or ``rmw_zenoh``.
+
+    ``humble``: ``rmw_zenoh`` on Humble, whose keys and tokens carry
+    ``TypeHashNotSupported`` instead of a RIHS01 hash (ros2/rmw_zenoh#388).
+    """
 
     rmw_zenoh: bool = False
     namespace: str = ""  # zenoh-bridge-ros2dds namespace
     domain: int = 0  # ROS domain id (rmw_zenoh)
+    humble: bool = False
+
+    def type_hash(self, store: Typestore, typename: str) -> str:
+        """The type hash ``rmw_zenoh`` puts in keys and tokens for ``typename``."""
+        return NO_TYPE_HASH if self.humble else type_hash(store, typename)
 
     def key(self, manager: str, topic: ManagerTopic, store: Typestore | None = None) -> str:
         """Publication key (with the exact type hash when ``store`` is given) or subscription key."""
         if not self.rmw_zenoh:
             return bridge_key(manager, topic.topic, self.namespace)
-        hash_ = type_hash(store, topic.typename) if store is not None else "*"
+        hash_ = self.type_hash(store, topic.typename) if store is not None else "*"
         return rmw_zenoh_key(manager, topic.topic, topic.typename, hash_, self.domain)
 
     def _node(self, manager: str) -> str:
@@ -150,6 +161,82 @@ class KeyStyle:
         return rest
 
 
+# -- rmw_zenoh liveliness tokens (graph discovery: ``ros2 node list``, ``ros2 topic info``) ----------
+
+LIVELINESS_PREFIX = "@ros2_lv"
+NO_TYPE_HASH = "TypeHashNotSupported"  # rmw_zenoh on Humble
+DEFAULT_QOS = "::,:,:,:,,"  # reliable, volatile, keep last 10: every field at rmw's default is left empty
+EntityKind = Literal["NN", "MP", "MS", "SS", "SC"]  # node, publisher, subscription, service, client
+
+
+@dataclass(frozen=True)
+class RosEntity:
+    """One ``rmw_zenoh`` liveliness token, parsed (names demangled, ``/`` restored)."""
+
+    domain: int
+    zid: str  # the Zenoh session id, hexadecimal
+    node_id: int
+    entity_id: int
+    kind: EntityKind
+    enclave: str
+    namespace: str  # ``/`` for none
+    node: str
+    topic: str = ""  # fully qualified; empty for a node
+    dds_type: str = ""  # ``std_msgs::msg::dds_::Empty_``
+    type_hash: str = ""  # ``RIHS01_...`` or ``TypeHashNotSupported``
+    qos: str = ""
+
+    def token(self) -> str:
+        """The token's key: ``@ros2_lv/<domain>/<zid>/<node id>/<entity id>/<kind>/<enclave>/<namespace>/<node>``
+        then, for a topic, ``/<topic>/<dds type>/<type hash>/<qos>`` (``/`` in names written ``%``)."""
+        parts = [LIVELINESS_PREFIX, str(self.domain), self.zid, str(self.node_id), str(self.entity_id), self.kind,
+                 _mangle(self.enclave), _mangle(self.namespace), self.node]
+        if self.topic:
+            parts += [_mangle(self.topic), self.dds_type, self.type_hash, self.qos]
+        return "/".join(parts)
+
+    @property
+    def node_fqn(self) -> str:
+        return f"{self.namespace.rstrip('/')}/{self.node}"
+
+
+def _mangle(name: str) -> str:
+    return name.replace("/", "%")
+
+
+def node_entity(domain: int, zid: str, node_id: int, fqn: str, enclave: str = "/") -> RosEntity:
+    """The node token of the node with fully qualified name ``fqn`` (``/spot/spot_skillset_manager``)."""
+    namespace, _, node = topic_fqn(fqn, "x")[:-2].rpartition("/")
+    return RosEntity(domain, zid, node_id, node_id, "NN", enclave, namespace or "/", node)
+
+
+def topic_entity(node: RosEntity, entity_id: int, kind: EntityKind, topic: str, typename: str, type_hash_: str,
+                 qos: str = DEFAULT_QOS) -> RosEntity:
+    """The token of a publisher (``MP``) or subscription (``MS``) of ``node`` on the FQN ``topic``."""
+    return RosEntity(node.domain, node.zid, node.node_id, entity_id, kind, node.enclave, node.namespace, node.node,
+                     topic, dds_type_name(typename), type_hash_, qos)
+
+
+def parse_liveliness_token(key: str) -> RosEntity | None:
+    """The entity of an ``rmw_zenoh`` token key; ``None`` when ``key`` is not one."""
+    parts = key.split("/")
+    if len(parts) not in (9, 13) or parts[0] != LIVELINESS_PREFIX or parts[5] not in ("NN", "MP", "MS", "SS", "SC"):
+        return None
+    try:
+        domain, node_id, entity_id = int(parts[1]), int(parts[3]), int(parts[4])
+    except ValueError:
+        return None
+    names = [p.replace("%", "/") for p in parts[6:9]]
+    topic = parts[9:] if len(parts) == 13 else ["", "", "", ""]
+    return RosEntity(domain, parts[2], node_id, entity_id, parts[5], *names,  # type: ignore[arg-type]
+                     topic[0].replace("%", "/"), topic[1], topic[2], topic[3])
+
+
+def liveliness_key_expr(domain: int) -> str:
+    """Every ``rmw_zenoh`` token of ``domain`` (subscribe with history to see those already declared)."""
+    return f"{LIVELINESS_PREFIX}/{domain}/**"
+
+
 def rmw_attachment(sequence: int, timestamp_ns: int, gid: bytes) -> bytes:
     """The 33-byte ``rmw_zenoh`` attachment: int64 sequence, int64 timestamp, GID length byte + GID."""
     if len(gid) != GID_SIZE:
@@ -166,6 +253,9 @@ def parse_rmw_attachment(data: bytes) -> tuple[int, int, bytes]:
 
 
 __all__ = [
-    "ATTACHMENT_SIZE", "EMPTY_TYPE", "KeyStyle", "ManagerTopic", "TopicKind", "bridge_key", "dds_type_name",
-    "manager_topics", "parse_rmw_attachment", "rmw_attachment", "rmw_zenoh_key", "topic_fqn", "type_hash",
+    "ATTACHMENT_SIZE", "DEFAULT_QOS", "EMPTY_TYPE", "EntityKind", "KeyStyle", "LIVELINESS_PREFIX", "ManagerTopic",
+    "NO_TYPE_HASH",
+    "RosEntity", "TopicKind", "bridge_key", "dds_type_name", "liveliness_key_expr", "manager_topics", "node_entity",
+    "parse_liveliness_token", "parse_rmw_attachment", "rmw_attachment", "rmw_zenoh_key", "topic_entity", "topic_fqn",
+    "type_hash",
 ]

@@ -25,6 +25,8 @@ def parse_typemap(text: str, source: str = "<typemap>") -> TypeMap:
         doc = json.loads(text)
     except json.JSONDecodeError as e:
         raise SourceError.at(source, Pos(e.lineno, e.colno), f"malformed JSON: {e.msg}") from None
+    except RecursionError:
+        raise SourceError.at(source, None, "malformed JSON: nested too deeply") from None
     if not isinstance(doc, dict):
         raise SourceError.at(source, None, 'a type map must be a JSON object with a "type" list')
     if "type" not in doc:

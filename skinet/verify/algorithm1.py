@@ -1,13 +1,18 @@
-"""Algorithm 1 with implicit constraints (SPEC §5; seed paper, Algorithm 1).
+"""Algorithm 1 with implicit and forced constraints (SPEC §5; seed paper, Algorithm 1).
 
 For each skillset, each transition firable at the live marking is fired (with
 its invariant cascade); a property it violates at once is an *explicit*
-constraint, one whose result lies in mu1 = Sat(AF not phi) an *implicit*
-constraint, and one whose result the predictor could not decide (truncated
-exploration) is *unknown*, never reported as safe.
+constraint, one whose result lies in mu1 = Sat(AF not phi) (fair or literal,
+from the predictor) an *implicit* constraint, one whose result is forced
+(:mod:`skinet.verify.forced`: skill outcomes alone can lead to a violation) a
+*forced* constraint, and one whose result the predictor could not decide
+(truncated exploration) is *unknown*, never reported as safe.  Rank: explicit >
+implicit > forced > unknown.  Forced constraints are computed here, at every
+call, so they never wait for a predictor.
 
 Cost: O(T x R x P) formula evaluations for T firable transitions, R results
-per cascade and P properties; cascades are tiny in practice.
+per cascade and P properties, plus one memoised forced query per result and
+property (see :mod:`skinet.verify.forced`); cascades are tiny in practice.
 """
 
 from __future__ import annotations
@@ -16,13 +21,18 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Literal, Protocol
 
+from skinet import explain
 from skinet.net.petrinet import Transition
 from skinet.net.semantics import steps
+from skinet.options import PredictionOptions, PropertyOptions
 from skinet.props.evaluate import holds
+from skinet.props.formula import Property
 from skinet.system import Marking, System
+from skinet.verify.forced import oracle as forced_oracle
 
-Constraint = Literal["explicit", "implicit", "unknown"]
-_RANK: dict[str, int] = {"explicit": 3, "implicit": 2, "unknown": 1}
+Constraint = Literal["explicit", "implicit", "forced", "unknown"]
+CONSTRAINTS: tuple[str, ...] = ("explicit", "implicit", "forced", "unknown")  # worst first
+_RANK: dict[str, int] = {"explicit": 4, "implicit": 3, "forced": 2, "unknown": 1}
 
 
 @dataclass(frozen=True)
@@ -48,8 +58,9 @@ class UnsafeTransition:
     controllable: bool
     property: str
     constraint: Constraint
-    steps: int | None = None  # 0 for explicit; bound for implicit
-    witness: tuple[str, ...] = ()
+    steps: int | None = None  # 0 for explicit; steps to the violation for implicit and forced
+    witness: tuple[str, ...] = ()  # "skillset:transition" per step
+    reason: str = field(default="", compare=False)  # the operator's sentence (skinet.explain)
 
 
 @dataclass(frozen=True)
@@ -74,13 +85,19 @@ class Analysis:
         return [u for u in self.unsafe if u.property not in self.violated]
 
 
-def analyse(system: System, marking: Mapping[str, int], prediction: Prediction | None = None) -> Analysis:
+def analyse(
+    system: System, marking: Mapping[str, int], prediction: Prediction | None = None,
+    options: PredictionOptions | None = None,
+) -> Analysis:
     """Run Algorithm 1 at ``marking`` (a stable combined marking).
 
-    ``prediction`` is mu1; ``None`` means mu1 is empty (explicit constraints only).
+    ``prediction`` is mu1; ``None`` means mu1 is empty (no implicit constraint).
+    ``options`` (default: the system's) say per property whether forced
+    constraints are computed and whether events count as uncontrollable.
     Variants of one logical transition and the several results of a cascade are
-    merged, keeping the worst constraint (explicit > implicit > unknown).
+    merged, keeping the worst constraint (explicit > implicit > forced > unknown).
     """
+    options = options or system.prediction
     nets = system.nets
     result = Analysis(dict(marking))
     result.violated = [p.name for p in system.properties if not holds(p.expr, marking, nets)]
@@ -95,17 +112,19 @@ def analyse(system: System, marking: Mapping[str, int], prediction: Prediction |
                 after[comp.name] = m
                 for p in system.properties:
                     key = (comp.name, t.name, p.name)
-                    found = _judge(p.name, holds(p.expr, after, nets), after, prediction)
+                    found = _judge(system, p, comp.name, holds(p.expr, after, nets), after, prediction,
+                                   options.of(p.name))
                     if p.name in result.violated:
                         # Every result must restore the property for a recovery.
                         recovers[key] = recovers.get(key, True) and found is None
                     if found is None:
                         continue
-                    constraint, n, witness = found
+                    constraint, n, witness, reason = found
                     old = worst.get(key)
-                    if old is None or _RANK[constraint] > _RANK[old.constraint]:
+                    if old is None or _RANK[constraint] > _RANK[old.constraint] or (
+                            constraint == old.constraint and n is not None and old.steps is not None and n < old.steps):
                         worst[key] = UnsafeTransition(
-                            comp.name, t.name, t.kind, t.controllable, p.name, constraint, n, witness
+                            comp.name, t.name, t.kind, t.controllable, p.name, constraint, n, witness, reason
                         )
     for (ss, tname), t in firable.items():
         for p in system.properties:
@@ -119,15 +138,18 @@ def analyse(system: System, marking: Mapping[str, int], prediction: Prediction |
 
 
 def _judge(
-    prop: str, safe: bool, after: Mapping[str, int], prediction: Prediction | None
-) -> tuple[Constraint, int | None, tuple[str, ...]] | None:
+    system: System, prop: Property, moved: str, safe: bool, after: Mapping[str, int],
+    prediction: Prediction | None, opts: PropertyOptions,
+) -> tuple[Constraint, int | None, tuple[str, ...], str] | None:
     if not safe:
-        return "explicit", 0, ()
-    if prediction is None:
-        return None
-    v = prediction.verdict(prop, after)
-    if v.status == "dangerous":
-        return "implicit", v.steps, v.witness
-    if v.status == "undecided":
-        return "unknown", None, ()
+        return "explicit", 0, (), explain.explicit_reason(system, prop, after, moved)
+    v = prediction.verdict(prop.name, after) if prediction is not None else None
+    if v is not None and v.status == "dangerous":
+        return "implicit", v.steps, v.witness, explain.implicit_reason(opts.af, v.steps, v.witness)
+    if opts.forced:
+        f = forced_oracle(system, opts.events_uncontrollable).verdict(prop, after)
+        if f is not None:
+            return "forced", f.steps, f.witness, explain.forced_reason(system, prop, f.witness, f.reached)
+    if v is not None and v.status == "undecided":
+        return "unknown", None, (), explain.UNKNOWN_REASON
     return None

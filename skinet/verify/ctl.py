@@ -23,7 +23,7 @@ import numpy as np
 from skinet.lang.expr import And, Const, Expr, Implies, Not, Or
 from skinet.props.evaluate import evaluate
 from skinet.props.formula import PlaceAtom, Temporal, Until, is_temporal
-from skinet.verify.explore import CHUNK, StateSpace, expand_codes, unique_codes
+from skinet.verify.explore import CHUNK, StateSpace, expand_codes, expand_edges, unique_codes
 
 UNREACHED = np.iinfo(np.int32).max
 
@@ -70,6 +70,19 @@ class Kripke:
     def predecessors(self, codes: np.ndarray) -> np.ndarray:
         """Expanded non-loop predecessors of ``codes`` (one entry per edge)."""
         return np.concatenate([np.empty(0, dtype=np.int64), *self.predecessor_chunks(codes)])
+
+    def edges(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(sources, targets)`` of every non-loop edge leaving an expanded marking (computed once)."""
+        cache = self.__dict__.get("_edges")
+        if cache is None:
+            s = self.space
+            fwd = [g.csr() for g in s.components]
+            codes = np.flatnonzero(self.expanded)
+            parts = [expand_edges(codes[lo:lo + CHUNK], s.strides, s.shape, fwd) for lo in range(0, codes.size, CHUNK)]
+            cache = (np.concatenate([np.empty(0, dtype=np.int64), *(p[0] for p in parts)]),
+                     np.concatenate([np.empty(0, dtype=np.int64), *(p[1] for p in parts)]))
+            self.__dict__["_edges"] = cache
+        return cache
 
     def ex(self, z: np.ndarray, frontier_value: bool) -> np.ndarray:
         """EX z: some successor satisfies z."""

@@ -234,18 +234,27 @@ def expand_codes(
     csr: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]],
 ) -> np.ndarray:
     """Every non-loop neighbour code of ``codes`` along each component (with repeats)."""
-    parts = []
+    return expand_edges(codes, strides, shape, csr, sources=False)[1]
+
+
+def expand_edges(
+    codes: np.ndarray, strides: Sequence[int], shape: Sequence[int],
+    csr: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]], sources: bool = True,
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(sources, targets)`` of every non-loop edge leaving ``codes`` (sources empty unless asked)."""
+    src, dst = [], []
     for i, (ptr, targets, deg) in enumerate(csr):
         digit = (codes // strides[i]) % shape[i]
         cnt = deg[digit]
         total = int(cnt.sum())
         if total == 0:
             continue
-        base = np.repeat(codes - digit * strides[i], cnt)
+        if sources:
+            src.append(np.repeat(codes, cnt))
         first = np.repeat(ptr[digit] - np.cumsum(cnt) + cnt, cnt)
-        pos = first + np.arange(total)
-        parts.append(base + targets[pos] * strides[i])
-    return np.concatenate(parts) if parts else np.empty(0, dtype=np.int64)
+        dst.append(np.repeat(codes - digit * strides[i], cnt) + targets[first + np.arange(total)] * strides[i])
+    empty = np.empty(0, dtype=np.int64)
+    return (np.concatenate(src) if src else empty), (np.concatenate(dst) if dst else empty)
 
 
 def _expand(layer, strides, shape, fwd, loops) -> tuple[np.ndarray, int]:

@@ -1,10 +1,17 @@
-"""mu1 = Sat(AF not phi) per property, with step bounds and witnesses (SPEC §6).
+"""mu1 = Sat(AF not phi) per property, with steps and witnesses (SPEC §6.2).
 
-A marking in mu1 inevitably violates phi: on every path, within ``rank``
-steps.  The witness follows, from the marking, successors of strictly smaller
-rank down to a violating marking.  On a truncated exploration the answer is
-three-valued: *dangerous* (proven in mu1), *safe* (a path inside the explored
-part avoids the violation forever) or *undecided*.
+A marking in mu1 inevitably violates phi.  Each property is predicted with
+*fair* AF (:mod:`skinet.verify.fair`: only paths on which running skills end
+count; the default) or *literal* AF (the paper's, every path; ``rank`` is then
+the bound on steps), as the system's prediction options say.  The witness
+follows, from the marking, successors of strictly smaller rank down to a
+violating marking.  On a truncated exploration the answer is three-valued:
+*dangerous* (proven in mu1), *safe* (a path inside the explored part avoids the
+violation forever) or *undecided*.
+
+Cost: exploration (:mod:`skinet.verify.explore`), then per property one
+counting fixpoint (literal) or one SCC decomposition and backward search per
+bound (fair), all linear in the explored markings and edges.
 """
 
 from __future__ import annotations
@@ -15,30 +22,55 @@ from dataclasses import dataclass
 import numpy as np
 
 from skinet.lang.expr import Not
+from skinet.options import PredictionOptions
 from skinet.props.formula import Temporal
 from skinet.system import System
 from skinet.verify.algorithm1 import PredictionVerdict
-from skinet.verify.ctl import Kripke, Result, check
+from skinet.verify.ctl import UNREACHED, Kripke, Result, check
 from skinet.verify.explore import StateSpace, explore
+from skinet.verify.fair import distance_to, fair_af, skill_fairness
+from skinet.verify.forced import forced_mask
 
 
 @dataclass
 class PropertyRisk:
-    """mu1 of one property over the explored markings."""
+    """mu1 of one property over the explored markings.
+
+    ``af`` names the AF the operator view uses (``mu1``); the other one and the
+    forced set are filled only when a full report was asked for.
+    """
 
     name: str
     violating: np.ndarray  # phi fails here
-    mu1: Result  # AF not phi, with ranks
+    af: str  # "fair" or "literal"
+    fair: Result | None = None  # fair AF not phi, rank = fewest steps
+    literal: Result | None = None  # literal AF not phi, rank = bound on steps
+    forced: np.ndarray | None = None  # forced(phi) (SPEC §6.3)
+
+    @property
+    def mu1(self) -> Result:
+        chosen = self.fair if self.af == "fair" else self.literal
+        assert chosen is not None
+        return chosen
 
     def counts(self, stored: np.ndarray) -> dict[str, int]:
+        """Marking counts; implicit and forced ones exclude the violating markings."""
+        violating = int(np.count_nonzero(self.violating & stored))
         dangerous = int(np.count_nonzero(self.mu1.lower))
         undecided = int(np.count_nonzero(self.mu1.upper & ~self.mu1.lower))
-        return {
-            "violating": int(np.count_nonzero(self.violating & stored)),
+        out = {
+            "violating": violating,
             "dangerous": dangerous,
             "undecided": undecided,
             "safe": int(np.count_nonzero(stored)) - dangerous - undecided,
         }
+        for mode, result in (("fair", self.fair), ("literal", self.literal)):
+            if result is not None:
+                out[f"implicit_{mode}"] = int(np.count_nonzero(result.lower)) - violating
+                out[f"undecided_{mode}"] = int(np.count_nonzero(result.upper & ~result.lower))
+        if self.forced is not None:
+            out["forced"] = int(np.count_nonzero(self.forced & stored)) - violating
+        return out
 
 
 @dataclass
@@ -56,14 +88,27 @@ class Forecast:
             return PredictionVerdict("undecided")
         risk = self.risks[prop]
         if risk.mu1.lower[code]:
-            return PredictionVerdict("dangerous", int(risk.mu1.rank[code]), self.witness(prop, code))
+            rank = int(self.ranks(prop)[code])
+            if rank == UNREACHED:  # fair AF: no violation reachable inside the explored part
+                return PredictionVerdict("dangerous")
+            return PredictionVerdict("dangerous", rank, self.witness(prop, code))
         if not risk.mu1.upper[code]:
             return PredictionVerdict("safe")
         return PredictionVerdict("undecided")
 
+    def ranks(self, prop: str) -> np.ndarray:
+        """Steps to a violation of ``prop`` per marking: the bound (literal AF) or the fewest (fair AF).
+
+        Fair ranks are computed on first use: most answers never need them.
+        """
+        mu1 = self.risks[prop].mu1
+        if mu1.rank is None:
+            mu1.rank = distance_to(self.kripke, self.risks[prop].violating)
+        return mu1.rank
+
     def witness(self, prop: str, code: int) -> tuple[str, ...]:
         """Transitions along one path from ``code`` to a violation of ``prop``."""
-        rank = self.risks[prop].mu1.rank
+        rank = self.ranks(prop)
         path: list[str] = []
         while rank[code] > 0:
             nxt, label = min(self.space.successors(code), key=lambda s: rank[s[0]])
@@ -85,6 +130,7 @@ class Forecast:
             "deadlocks": int(np.count_nonzero(self.kripke.deadlock)),
             "frontier": int(np.count_nonzero(self.kripke.frontier)),
             "properties": {name: r.counts(stored) for name, r in self.risks.items()},
+            "af": {name: r.af for name, r in self.risks.items()},
         }
 
 
@@ -96,12 +142,29 @@ def forecast(
     max_depth: int | None = None,
     event_seeds: bool = True,
     progress: Callable[[int, int, float], None] | None = None,
+    options: PredictionOptions | None = None,
+    full: bool = False,
 ) -> Forecast:
-    """Explore from ``marking`` and compute mu1 for every property of ``system``."""
+    """Explore from ``marking`` and compute mu1 for every property of ``system``.
+
+    ``options`` (default: the system's) choose fair or literal AF per property;
+    ``full`` also computes the other AF and the forced set, for reports.
+    """
+    options = options or system.prediction
     space = explore(system, marking, budget=budget, max_depth=max_depth, event_seeds=event_seeds, progress=progress)
     kripke = Kripke(space)
+    fairness: list[np.ndarray] | None = None
     risks = {}
     for p in system.properties:
-        violating = ~check(kripke, p.expr).upper & kripke.stored
-        risks[p.name] = PropertyRisk(p.name, violating, check(kripke, Temporal("AF", Not(p.expr))))
+        opts = options.of(p.name)
+        violated = check(kripke, Not(p.expr))
+        risk = PropertyRisk(p.name, violated.lower, opts.af)
+        if full or opts.af == "literal":
+            risk.literal = check(kripke, Temporal("AF", Not(p.expr)))
+        if full or opts.af == "fair":
+            fairness = skill_fairness(kripke, system) if fairness is None else fairness
+            risk.fair = fair_af(kripke, violated, fairness)
+        if full:
+            risk.forced = forced_mask(system, space.components, space.local, p, opts.events_uncontrollable)
+        risks[p.name] = risk
     return Forecast(space, kripke, risks)

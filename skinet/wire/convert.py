@@ -11,15 +11,18 @@ import hashlib
 import json
 from pathlib import PurePath
 from collections.abc import Iterable, Mapping
+from functools import lru_cache
 
+from skinet.errors import SkinetError, SourceError
 from skinet.net.semantics import steps
+from skinet.options import PredictionOptions, PropertyOptions
 from skinet.props.evaluate import holds
 from skinet.system import Marking, System, build_system, marking_from_json, marking_to_json
-from skinet.lang.parser import parse_skillset
+from skinet.lang.parser import parse_model, parse_skillset
 from skinet.verify.algorithm1 import Analysis, PredictionVerdict
 from skinet.verify.predict import Forecast
 from skinet.wire.messages import (
-    ModelBundle, PropertyVerdict, RecoveryEntry, Risk, SkillsetStatus, StateSpaceReport, UnsafeEntry,
+    ModelBundle, PredictRequest, PropertyVerdict, RecoveryEntry, Risk, SkillsetStatus, StateSpaceReport, UnsafeEntry,
 )
 
 
@@ -33,13 +36,20 @@ def marking_of(system: System, skillsets: Mapping[str, SkillsetStatus], source: 
 
 
 def bundle(system: System) -> ModelBundle:
-    """Every source of ``system`` with its content digest (sha256 of canonical JSON)."""
+    """Every source of ``system`` with its content digest (sha256 of canonical JSON).
+
+    An entry is named by its file, plus ``#skillset`` when the file declares
+    several skillsets (so the predictor takes the right one).
+    """
     entries = []
+    files = set()
     for c in system.components:
-        name = PurePath(c.skillset.source).name
-        entries.append((name, system.sources.get(name, ""), c.manager))
-    models = {e[0] for e in entries}
-    props_name = next((n for n in system.sources if n not in models), "properties")
+        file = PurePath(c.skillset.source).name
+        text = system.sources.get(file, "")
+        files.add(file)
+        name = f"{file}#{c.name}" if _declares_several(text) else file
+        entries.append((name, text, c.manager))
+    props_name = next((n for n in system.sources if n not in files), "properties")
     props = system.sources.get(props_name, "")
     digest = _digest(system.name, entries, props_name, props)
     return ModelBundle(system=system.name, digest=digest, skillsets=entries, properties=props, properties_name=props_name)
@@ -55,11 +65,37 @@ def _digest(name: str, entries: list[tuple[str, str, str]], props_name: str, pro
     return hashlib.sha256(canonical.encode()).hexdigest()[:32]
 
 
+@lru_cache(maxsize=64)
+def _declares_several(text: str) -> bool:
+    try:
+        return len(parse_model(text).skillsets) > 1
+    except SourceError:
+        return False
+
+
 def system_from_bundle(b: ModelBundle) -> System:
     """Rebuild a system from a bundle (raises SourceError on bad sources)."""
-    skillsets = [(parse_skillset(text, name), manager) for name, text, manager in b.skillsets]
-    sources = {name: text for name, text, _ in b.skillsets} | {b.properties_name: b.properties}
+    skillsets = []
+    for name, text, manager in b.skillsets:
+        file, _, wanted = name.partition("#")
+        if not wanted:
+            skillsets.append((parse_skillset(text, file), manager))
+            continue
+        declared = [s for s in parse_model(text, file).skillsets if s.name == wanted]
+        if not declared:
+            raise SourceError.at(file, None, f"model bundle names skillset '{wanted}', which this file does not declare")
+        skillsets.append((declared[0], manager))
+    sources = {name.partition("#")[0]: text for name, text, _ in b.skillsets} | {b.properties_name: b.properties}
     return build_system(b.system, skillsets, b.properties, b.properties_name, sources)
+
+
+def request_options(system: System, request: PredictRequest) -> PredictionOptions:
+    """The prediction options a request asks for (unknown property names are errors)."""
+    unknown = sorted(set(request.af) - {p.name for p in system.properties})
+    if unknown:
+        names = ", ".join(p.name for p in system.properties) or "none"
+        raise SkinetError(f"request names unknown property '{unknown[0]}' (properties: {names})")
+    return PredictionOptions(overrides={p: PropertyOptions(af=mode) for p, mode in request.af.items()})
 
 
 def risks(system: System, marking: Mapping[str, int], forecast: Forecast) -> list[Risk]:
@@ -80,7 +116,7 @@ def risks(system: System, marking: Mapping[str, int], forecast: Forecast) -> lis
                     v = forecast.verdict(p.name, after)
                     if v.status != "safe":
                         out.append(Risk(skillsets=statuses(system, after), property=p.name, status=v.status,
-                                        steps=v.steps, witness=list(v.witness)))
+                                        af=forecast.risks[p.name].af, steps=v.steps, witness=list(v.witness)))
     return out
 
 
@@ -112,7 +148,8 @@ def analysis_bodies(
     props = [PropertyVerdict(name=p.name, holds=p.name not in analysis.violated) for p in system.properties]
     unsafe = [
         UnsafeEntry(skillset=u.skillset, transition=u.transition, kind=u.kind, controllable=u.controllable,
-                    property=u.property, constraint=u.constraint, steps=u.steps, witness=list(u.witness))
+                    property=u.property, constraint=u.constraint, steps=u.steps, witness=list(u.witness),
+                    reason=u.reason)
         for u in analysis.operator_unsafe()
     ]
     recovery = [

@@ -67,15 +67,21 @@ class Verdicts(_Message):
 
 
 class UnsafeEntry(BaseModel):
+    """One unsafe transition of Algorithm 1 (SPEC §5), the worst kind over its variants."""
+
     model_config = ConfigDict(extra="forbid", frozen=True)
     skillset: str
     transition: str
-    kind: str
+    kind: str = Field(description="transition kind: event, start, invariant, interrupt, success, failure")
     controllable: bool
     property: str
-    constraint: Literal["explicit", "implicit", "unknown"]
-    steps: int | None = None
-    witness: list[str] = Field(default_factory=list)
+    constraint: Literal["explicit", "implicit", "forced", "unknown"] = Field(
+        description="explicit > implicit > forced > unknown: violated at once, inevitably (AF), "
+                    "reachable by skill outcomes alone, undecided")
+    steps: int | None = Field(None, description="steps to the violation: 0 explicit; the bound (literal AF) or "
+                                                "the fewest (fair AF, forced)")
+    witness: list[str] = Field(default_factory=list, description="'skillset:transition' per step to the violation")
+    reason: str = Field("", description="why, in the operator's words")
 
 
 class RecoveryEntry(BaseModel):
@@ -127,6 +133,8 @@ class PredictRequest(_Message):
     seq: int = Field(ge=0, description="monitor query counter")
     skillsets: dict[str, SkillsetStatus] = Field(description="the live marking")
     budget: float = Field(1.0, gt=0, description="exploration time budget, seconds")
+    af: dict[str, Literal["fair", "literal"]] = Field(
+        default_factory=dict, description="AF per property (SPEC §6.2); properties not listed use fair AF")
 
 
 class Risk(BaseModel):
@@ -136,6 +144,7 @@ class Risk(BaseModel):
     skillsets: dict[str, SkillsetStatus]
     property: str
     status: Literal["dangerous", "undecided"]
+    af: Literal["fair", "literal"] = Field("fair", description="the AF that decided it (SPEC §6.2)")
     steps: int | None = None
     witness: list[str] = Field(default_factory=list)
 

@@ -89,6 +89,7 @@ def test_unsafe_paper_warning_safety_guard(capsys: pytest.CaptureFixture[str], t
     assert data["unsafe"] == [{
         "skillset": "spot", "transition": "go_to_waypoint.start", "kind": "start", "controllable": True,
         "property": "safety_guard", "constraint": "explicit", "steps": 0, "witness": [],
+        "reason": "violates it at once: spot go_to_waypoint runs while manipulator arm_status at RD",
     }]
     assert data["prediction"]["complete"] is True
 
@@ -168,8 +169,13 @@ def test_explore_report(capsys: pytest.CaptureFixture[str]) -> None:
     data = json.loads(out)
     assert code == 0
     assert (data["complete"], data["markings"], data["edges"], data["deadlocks"]) == (True, 63, 220, 0)
-    assert data["properties"]["action_guard"] == {"violating": 24, "dangerous": 24, "undecided": 0, "safe": 39}
-    assert data["properties"]["safety_guard"] == {"violating": 6, "dangerous": 6, "undecided": 0, "safe": 57}
+    assert data["properties"]["action_guard"] == {
+        "violating": 24, "dangerous": 24, "undecided": 0, "safe": 39, "implicit_fair": 0, "undecided_fair": 0,
+        "implicit_literal": 0, "undecided_literal": 0, "forced": 0}
+    assert data["af"] == {"action_guard": "fair", "safety_guard": "fair"}
+    assert data["properties"]["safety_guard"] == {
+        "violating": 6, "dangerous": 6, "undecided": 0, "safe": 57, "implicit_fair": 0, "undecided_fair": 0,
+        "implicit_literal": 0, "undecided_literal": 0, "forced": 0}
 
 
 def test_explore_truncated(capsys: pytest.CaptureFixture[str]) -> None:
@@ -198,9 +204,30 @@ def test_demo_reproduces_the_paper(capsys: pytest.CaptureFixture[str]) -> None:
     code, out, _ = run(capsys, "demo")
     assert code == 0
     assert "   violations: 3; action_guard at step 26; safety_guard at step 33; action_guard at step 38" in out
-    assert ("   warnings before risky commands: 2; spot:go_to_waypoint.start unsafe for safety_guard (explicit) at step 29;"
-            " manipulator:arm_ready.start unsafe for action_guard (explicit) at step 37") in out
+    assert ("     safety_guard at step 33: SkiNet flagged spot:go_to_waypoint.start when it was issued at step 33 "
+            "(explicit, the command itself); the operator went ahead") in out
+    assert ("   warnings heeded (commands considered, flagged, not issued): 2; spot:go_to_waypoint.start explicit for "
+            "safety_guard at step 29; manipulator:arm_ready.start explicit for action_guard at step 37") in out
     assert "   violations: 0" in out
+    assert "   violations: 1; stowed_drive at step 5" in out  # the mobile manipulator after the paper's runs
+
+
+def test_prediction_options_from_the_command_line(capsys: pytest.CaptureFixture[str]) -> None:
+    state = str(ROOT / "skillsets" / "states" / "unfolding.json")
+    system = str(ROOT / "skillsets" / "mobile_manip.toml")
+    code, out, _ = run(capsys, "unsafe", system, "--state", state)
+    assert code == 0
+    assert ("  base:navigate.start: forced for stowed_drive — unfold may succeed (1 step) and leave arm pose at "
+            "Unfolded while base navigate runs") in out.splitlines()
+    code, out, _ = run(capsys, "unsafe", system, "--state", state, "--no-forced")
+    assert code == 0 and "unsafe transitions (0):" in out
+    code, out, _ = run(capsys, "unsafe", system, "--state", state, "--af", "literal", "--json")
+    data = json.loads(out)
+    assert {o["af"] for o in data["options"].values()} == {"literal"}
+    assert [(u["transition"], u["constraint"], u["steps"], u["witness"]) for u in data["unsafe"]] == [
+        ("navigate.start", "forced", 1, ["arm:unfold.success.unfolded"]),
+        ("dock_station.start", "forced", 1, ["arm:unfold.success.unfolded"]),
+    ]
 
 
 def test_help_explains(capsys: pytest.CaptureFixture[str]) -> None:

@@ -1,5 +1,7 @@
 """``examples/rust_client`` against an embedded system behind the ACL router (slow: cargo build).
 
+The client is built with the repository's cargo workspace (:mod:`native_build`).
+
 Monitor and predictor run in this process, each on a client session logged in as
 its user; the test publishes canonical events as the bridge; the Rust client logs
 in as ``observer``, asks the predictor and prints the verdicts of those events.
@@ -7,8 +9,6 @@ in as ``observer``, asks the predictor and prints the verdicts of those events.
 
 from __future__ import annotations
 
-import os
-import shutil
 import subprocess
 import threading
 import time
@@ -19,6 +19,7 @@ import pytest
 import zenoh
 
 from deploy_support import REPO, SYSTEM, acl_router_config, free_port, login, passwords
+from native_build import native_binary
 from services.monitor import start_monitor
 from services.predictor import start_predictor
 from skinet.files import load_system
@@ -28,21 +29,10 @@ from skinet.wire.messages import CanonicalEvent
 
 pytestmark = pytest.mark.slow
 
-CRATE = REPO / "examples" / "rust_client"
-# Outside the work tree, so that fresh clones on the same machine reuse the build.
-TARGET = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "skinet-live" / "rust_client-target"
-
-if shutil.which("cargo") is None:
-    pytest.skip("cargo is not installed; the Rust example client cannot be built", allow_module_level=True)
-
 
 @pytest.fixture(scope="module")
 def client_binary() -> Path:
-    r = subprocess.run(["cargo", "build", "--release", "--locked", "--manifest-path", str(CRATE / "Cargo.toml")],
-                       env={**os.environ, "CARGO_TARGET_DIR": str(TARGET)}, capture_output=True, text=True,
-                       timeout=1500)
-    assert r.returncode == 0, f"cargo build failed:\n{r.stderr[-4000:]}"
-    return TARGET / "release" / "skinet-client"
+    return native_binary("skinet-client")  # the workspace's debug build, shared with tests/dds
 
 
 @pytest.fixture

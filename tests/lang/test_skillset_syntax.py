@@ -35,7 +35,7 @@ def syntax_error(text: str) -> str:
             "skillset s { event e { guard r == A and } }",
             "1:41: error: unexpected '}', expected one of: '(', 'false', 'not', 'true', identifier",
         ),
-        ("skillset s { data { x: y: T } }", "1:25: error: unexpected ':', expected one of: '}', identifier"),
+        ("skillset s { data { x: y: T } }", "1:25: error: unexpected ':', expected one of: 'period', '}', identifier"),
         ("type { A }\ntype B C\nskillset s {}", "2:8: error: unexpected 'C', expected one of: 'skillset', 'type'"),
         ("skillset s { skill k { progress { period fast } } }", "1:42: error: unexpected 'fast', expected number"),
         (

@@ -1,10 +1,11 @@
-"""A hostile model bundle (issue 14): a 1.5 KB skillset whose guards expand exponentially.
+"""A hostile model bundle (issue 14): a 1.9 KB skillset whose nets are costly to build.
 
-Ten resources of four states and ten skills whose precondition is ``a!=x and
-b!=x and ...``: each ``!=`` expands to three states (SPEC §3, DNF), so each
-precondition has 3^10 = 59 049 clauses and the net about 590 000 transitions,
-gigabytes to build, before any exploration.  Consistent (its digest is right), so
-a predictor can only bound what it costs, not refuse it.
+Ten resources of three states and ten skills whose precondition is ``a!=z and
+b!=z and ...``: each ``!=`` expands to two states (SPEC §3, DNF), so each
+precondition has 2^10 = 1024 clauses, the most the parser accepts, and the net
+about 10 000 transitions, seconds to build before any exploration; with more
+skills (``skills=80``) it takes gigabytes.  Consistent (its digest is right), so a
+predictor can only bound what it costs, not refuse it.
 """
 
 from __future__ import annotations
@@ -19,13 +20,13 @@ from skinet.wire.messages import ModelBundle, PredictRequest
 SYSTEM = "h"
 
 
-def hostile_rl(resources: int = 10, skills: int = 10, states: int = 4) -> str:
+def hostile_rl(resources: int = 10, skills: int = 10, states: int = 3) -> str:
     names = "abcdefghijklmnopqrstuvwxyz"[:resources]
     kinds = " ".join("xyzwvu"[:states])
     res = " ".join(f"{n}{{state{{{kinds}}}initial x}}" for n in names)
-    guard = " and ".join(f"{n}!=x" for n in names)
-    body = " ".join(f"skill k{i}{{precondition{{p:{guard}}}}}"
-                    for i in range(skills))
+    guard = " and ".join(f"{n}!={kinds[-1]}" for n in names)
+    body = " ".join(f"skill k{i}{{precondition{{p:{guard}}}start{{{names[i % resources]}->y}}"
+                    f"success s{{effect {names[i % resources]}->x}}}}" for i in range(skills))
     return f"skillset h{{resource{{{res}}}{body}}}"
 
 

@@ -8,6 +8,8 @@ command-line programs.
 
 from __future__ import annotations
 
+import copy
+import logging
 import threading
 import time
 from collections.abc import Callable
@@ -17,19 +19,23 @@ import pytest
 import zenoh
 from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.typesys import Stores, get_typestore, get_types_from_msg
 
-from services.bridge_ros2 import replay_bag, start_bridge
+from event_watch import Events
+from services.bridge_ros2 import Feed, replay_bag, start_bridge
 from services.common.zenoh_config import session_config
 from services.simulator import Simulator
+from services.simulator.manager import Manager
 from skinet.live import LiveSystem
 from skinet.mission import parse_scenario
 from skinet.ros.keys import (
-    KeyStyle, bridge_key, dds_type_name, manager_topics, parse_rmw_attachment, rmw_attachment, rmw_zenoh_key,
-    topic_fqn,
+    EMPTY_TYPE, KeyStyle, bridge_key, dds_type_name, manager_topics, node_entity, parse_liveliness_token,
+    parse_rmw_attachment, rmw_attachment, rmw_zenoh_key, topic_entity, topic_fqn,
 )
-from skinet.ros.typestore import build_typestore
+from skinet.ros.interfaces import generate_messages, package_name
+from skinet.ros.typestore import build_typestore, default_instance
+from skinet.ros.typestore import encode as cdr
 from skinet.wire import keys
-from skinet.wire.codec import decode
 from skinet.wire.messages import CanonicalEvent
 
 REPO = Path(__file__).resolve().parents[2]
@@ -83,29 +89,6 @@ def test_one_subscription_covers_every_topic(spot_arm, style: KeyStyle):
 
 
 # -- live chain -----------------------------------------------------------------------------
-
-
-class Events:
-    """Canonical events of a system, in arrival order."""
-
-    def __init__(self, session: zenoh.Session, system: str):
-        self.items: list[CanonicalEvent] = []
-        self._cond = threading.Condition()
-        self._sub = session.declare_subscriber(keys.events(system, "*"), self._on_sample)
-
-    def _on_sample(self, sample: zenoh.Sample) -> None:
-        with self._cond:
-            self.items.append(decode(sample.payload.to_bytes(), CanonicalEvent))
-            self._cond.notify_all()
-
-    def wait(self, predicate: Callable[[list[CanonicalEvent]], bool], timeout: float = 5.0) -> list[CanonicalEvent]:
-        with self._cond:
-            assert self._cond.wait_for(lambda: predicate(self.items), timeout), self.items
-            return list(self.items)
-
-    def of(self, skillset: str) -> list[CanonicalEvent]:
-        with self._cond:
-            return [e for e in self.items if e.skillset == skillset]
 
 
 class Recorder:
@@ -224,7 +207,8 @@ def view(ev: CanonicalEvent) -> tuple:
     return ev.transition, ev.status.resources if ev.status else None, ev.status.running if ev.status else None, ev.info
 
 
-def run_chain(sessions: Callable[[], zenoh.Session], spot_arm, style: KeyStyle = KeyStyle()) -> tuple[Events, Recorder]:
+def run_chain(sessions: Callable[[], zenoh.Session], spot_arm, style: KeyStyle = KeyStyle(),
+              bridge_style: KeyStyle | None = None) -> tuple[Events, Recorder]:
     """Simulator, bridge and a watcher on three sessions from ``sessions``; the CHAIN scenario played."""
     system, typemap = spot_arm
     sim_session, bridge_session, watcher = sessions(), sessions(), sessions()
@@ -232,7 +216,7 @@ def run_chain(sessions: Callable[[], zenoh.Session], spot_arm, style: KeyStyle =
     recorder = Recorder(watcher, system, style)
     sim = Simulator(sim_session, system, typemap, style=style)
     time.sleep(0.3)  # the watcher's subscriptions reach the router
-    bridge = start_bridge(bridge_session, system, typemap, style=style, source=SOURCE)
+    bridge = start_bridge(bridge_session, system, typemap, style=bridge_style or style, source=SOURCE)
     events.wait(lambda items: len(items) >= 2)  # each manager answered the bridge's status_request
     runs = sim.drive(parse_scenario(CHAIN, "chain.toml"), speed=0)
     assert [r.ok for r in runs] == [True, True, True, True, True, False, False, True, True, True, True, True,
@@ -280,6 +264,108 @@ def test_rmw_zenoh_chain(client_factory, spot_arm):
     assert recorder.samples and all(fqn.startswith(("/spot/", "/kinova/")) for _, _, fqn, _, _ in recorder.samples)
 
 
+def test_rmw_zenoh_humble_managers_with_a_bridge_expecting_type_hashes(client_factory, spot_arm):
+    """Humble managers use TypeHashNotSupported keys (ros2/rmw_zenoh#388): the bridge takes the
+    status_request key from their liveliness tokens, so its request reaches them anyway."""
+    events, _ = run_chain(client_factory, spot_arm, KeyStyle(rmw_zenoh=True, domain=2, humble=True),
+                          bridge_style=KeyStyle(rmw_zenoh=True, domain=2))
+    check_chain(events, spot_arm)
+
+
+EMPTY = "std_msgs::msg::dds_::Empty_"
+STATUS = "spot_skillset_interfaces::msg::dds_::SkillsetStatus_"
+
+
+@pytest.mark.parametrize("humble", [True, False], ids=["humble", "jazzy"])
+def test_rmw_zenoh_keys_and_tokens_of_both_distros(spot_arm, humble: bool):
+    system, typemap = spot_arm
+    comp = system.component("spot")
+    store = build_typestore(comp.skillset, typemap)
+    style = KeyStyle(rmw_zenoh=True, domain=5, humble=humble)
+    request = next(t for t in manager_topics(comp.skillset) if t.kind == "status_request")
+    hash_ = "TypeHashNotSupported" if humble else store.hash_rihs01("std_msgs/msg/Empty")
+    assert style.key(comp.manager, request, store) == \
+        f"5/spot/spot_skillset_manager/spot_skillset/status_request/{EMPTY}/{hash_}"
+    node = node_entity(5, "a1b2c3", 3, "/spot/spot_skillset_manager")
+    assert node.token() == "@ros2_lv/5/a1b2c3/3/3/NN/%/%spot/spot_skillset_manager"
+    sub = topic_entity(node, 7, "MS", "/spot/spot_skillset_manager/spot_skillset/status_request", EMPTY_TYPE,
+                       style.type_hash(store, EMPTY_TYPE))
+    assert sub.token() == ("@ros2_lv/5/a1b2c3/3/7/MS/%/%spot/spot_skillset_manager/"
+                           f"%spot%spot_skillset_manager%spot_skillset%status_request/{EMPTY}/{hash_}/::,:,:,:,,")
+    assert parse_liveliness_token(sub.token()) == sub and parse_liveliness_token(node.token()) == node
+    assert sub.node_fqn == "/spot/spot_skillset_manager"
+    top = node_entity(0, "ff", 1, "/talker")
+    assert top.token() == "@ros2_lv/0/ff/1/1/NN/%/%/talker" and parse_liveliness_token(top.token()).namespace == "/"
+    for bad in ("@ros2_lv/0/ff/x/1/NN/%/%/talker", "@ros2_lv/0/ff/1/1/XX/%/%/talker", "0/chatter/a/b"):
+        assert parse_liveliness_token(bad) is None
+
+
+@pytest.mark.parametrize("humble", [True, False], ids=["humble", "jazzy"])
+def test_the_bridge_and_the_managers_are_in_the_ros_graph(client_factory, watch, spot_arm, humble: bool):
+    """Tokens as rmw_zenoh declares them: ``ros2 node list`` / ``ros2 topic info`` see the bridge."""
+    system, typemap = spot_arm
+    style = KeyStyle(rmw_zenoh=True, domain=4, humble=humble)
+    graph = watch(client_factory(), "@ros2_lv/4/**")
+    sim = Simulator(client_factory(), system, typemap, style=style)
+    bridge = start_bridge(client_factory(), system, typemap, style=style, source=SOURCE, instance_id="lab-1")
+    try:
+        total = len(bridge.graph) + sum(len(node.tokens) for node in sim.nodes.values())
+        alive = graph.wait(lambda a: len(a) == total)
+        assert sum("/NN/" in k for k in alive) == 3
+        entities = [parse_liveliness_token(k) for k in alive]
+        assert sorted(e.node_fqn for e in entities if e.kind == "NN") == [
+            "/kinova/manipulator_skillset_manager", "/skinet_bridge_lab_1", "/spot/spot_skillset_manager"]
+        mine = [e for e in entities if e.node == "skinet_bridge_lab_1"]
+        status = "/spot/spot_skillset_manager/spot_skillset/status"
+        hash_ = "TypeHashNotSupported" if humble else \
+            build_typestore(system.component("spot").skillset, typemap).hash_rihs01(
+                "spot_skillset_interfaces/msg/SkillsetStatus")
+        assert [(e.kind, e.dds_type, e.type_hash) for e in mine if e.topic == status] == [("MS", STATUS, hash_)]
+        assert [e.kind for e in mine if e.topic.endswith("/status_request")] == ["MP", "MP"]
+        assert {e.zid for e in mine} == {str(bridge.session.zid())} and len({e.entity_id for e in mine}) == len(mine)
+        manager = [e for e in entities if e.node == "spot_skillset_manager" and e.topic == status]
+        assert [(e.kind, e.type_hash) for e in manager] == [("MP", hash_)]
+    finally:
+        bridge.close()
+        sim.close()
+    graph.wait(lambda a: not any("skinet_bridge" in k for k in a))
+
+
+@pytest.mark.parametrize("style", [KeyStyle(), KeyStyle(rmw_zenoh=True, domain=6)], ids=["ros2dds", "rmw_zenoh"])
+def test_a_restarted_manager_is_asked_again_and_reported(client_factory, spot_arm, style: KeyStyle):
+    """Mid-mission restart: the bridge notices it (rmw_zenoh: liveliness and the publisher's GID;
+    any path: skill ids reset), asks for the status again, and the event says why."""
+    system, typemap = spot_arm
+    events = Events(client_factory(), system.name)
+    sim = Simulator(client_factory(), system, typemap, style=style)
+    time.sleep(0.3)
+    bridge = start_bridge(client_factory(), system, typemap, style=style, source=SOURCE)
+    try:
+        events.wait(lambda items: len(items) == 2)
+        sim.drive(parse_scenario(CHAIN, "chain.toml").__class__("c", "s", parse_scenario(CHAIN, "c").steps[:3]),
+                  speed=0)
+        events.wait(lambda items: len(items) == 5)  # spot: init_power.start, .success, stand_up.start
+        sim.restart("spot")
+        if not style.rmw_zenoh:  # no token tells the bridge: the next status gives it away (ids reset)
+            assert sim.nodes["spot"].manager.skill_request("init_power", "again")  # the manager's own change
+            bridge.request_status("spot")
+        got = events.wait(lambda items: len(items) == 6)
+        last = got[-1]
+        assert (last.skillset, last.seq, last.transition, last.status.resources, last.status.running) == \
+            ("spot", 4, None, {"power_status": "PowerOff", "posture": "Sitting", "control_mode": "Busy"} if not
+             style.rmw_zenoh else {"power_status": "PowerOff", "posture": "Sitting", "control_mode": "Idle"},
+             ["init_power"] if not style.rmw_zenoh else [])
+        why = "skill ids reset: stand_up" if not style.rmw_zenoh else "the manager (or its gateway) came back"
+        diverged = "power_status PowerOn -> PowerOff, stand_up no longer running, init_power running" if not \
+            style.rmw_zenoh else \
+            "power_status PowerOn -> PowerOff, control_mode Busy -> Idle, stand_up no longer running"
+        assert last.info == f"manager restarted ({why}); state now differs: {diverged}"
+        assert bridge.counters.restarts == 1
+    finally:
+        bridge.close()
+        sim.close()
+
+
 @pytest.mark.parametrize("plugin", [StoragePlugin.SQLITE3, StoragePlugin.MCAP], ids=["sqlite3", "mcap"])
 def test_rosbag_replay_equals_live(client_factory, spot_arm, tmp_path: Path, plugin: StoragePlugin):
     system, typemap = spot_arm
@@ -308,6 +394,72 @@ def test_rosbag_replay_equals_live(client_factory, spot_arm, tmp_path: Path, plu
     assert [e.model_copy(update={"epoch": 0}) for e in again] == [e.model_copy(update={"epoch": 0}) for e in replayed]
 
 
+def overtaken(samples: list[tuple[str, str, bytes]], routes: dict) -> list[tuple[str, str, bytes]]:
+    """``samples`` with every status moved before the responses of its skillset just before it."""
+    out: list[tuple[str, str, bytes]] = []
+    floor: dict[str, int] = {}  # a status never overtakes an earlier status's responses
+    for sample in samples:
+        ss, fqn, _ = sample
+        i = len(out)
+        if routes[fqn][1].kind == "status":
+            while i > floor.get(ss, 0) and out[i - 1][0] == ss and \
+                    routes[out[i - 1][1]][1].kind in ("skill_response", "event_response"):
+                i -= 1
+            floor[ss] = len(out) + 1
+        out.insert(i, sample)
+    return out
+
+
+def test_statuses_that_overtake_their_responses(client_factory, spot_arm):
+    """Through a gateway each topic has its own route: a status may come before its responses."""
+    system, typemap = spot_arm
+    events, recorder = run_chain(client_factory, spot_arm)
+    routes = Feed(system, typemap, SOURCE).by_fqn()
+    samples = [(ss, fqn, data) for _, ss, fqn, _, data in recorder.samples if fqn in routes]
+    swapped = overtaken(samples, routes)
+    assert sum(a != b for a, b in zip(samples, swapped)) >= 10  # 7 responses overtaken, and their statuses
+
+    def replay(order: list[tuple[str, str, bytes]], hold: float) -> tuple[list[CanonicalEvent], Feed]:
+        feed = Feed(system, typemap, SOURCE, hold=hold)
+        got = [ev for ss, fqn, data in order for ev in feed.feed(ss, routes[fqn][1], data)]
+        return got + feed.flush(), feed
+
+    got, feed = replay(swapped, hold=60.0)  # only the awaited response (or a newer status) releases one
+    for ss, expected in EXPECTED.items():
+        assert [view(e) for e in got if e.skillset == ss] == expected
+    assert feed.counters.unexplained == 2  # the initial statuses
+    # Without holding them, those statuses lose their transition names.
+    unheld, feed = replay(swapped, hold=0.0)
+    assert feed.counters.unexplained > 2 and [view(e) for e in unheld if e.skillset == "spot"] != EXPECTED["spot"]
+
+
+def test_a_held_status_is_released_after_the_hold_time(spot_arm):
+    """A response that never comes delays its status by ``hold`` seconds, no more."""
+    system, typemap = spot_arm
+    now = [0.0]
+    feed = Feed(system, typemap, SOURCE, hold=0.5, clock=lambda: now[0])
+    comp = system.component("spot")
+    store = feed.managers["spot"].store
+    manager = Manager(comp.skillset, store, info=comp.manager)
+    topics = {t.topic: t for t in manager_topics(comp.skillset)}
+
+    def put(messages) -> list[CanonicalEvent]:
+        return [ev for m in messages if m.topic in {t.topic for t in feed.managers["spot"].topics}
+                for ev in feed.feed("spot", topics[m.topic], cdr(store, m.typename, m.msg))]
+
+    assert [e.info for e in put(manager.status_request())] == ["initial status"]
+    assert [e.transition for e in put(manager.skill_request("init_power", "a", None))] == ["init_power.start"]
+    out = manager.terminate("init_power", "success", "powered_on")
+    response, status = out[-2], out[-1]
+    assert put([status]) == [] and feed.deadline() == 0.5  # held: its response is missing
+    now[0] = 0.4
+    assert feed.expire() == []
+    now[0] = 0.5
+    late = feed.expire()
+    assert [(e.transition, e.status.resources["power_status"]) for e in late] == [(None, "PowerOn")]
+    assert feed.deadline() is None and put([response]) == []  # too late: a note only
+
+
 def test_bridge_learns_the_current_status_at_start_up(client_factory, spot_arm):
     """The status QoS is volatile: a late bridge must ask the manager (status_request)."""
     system, typemap = spot_arm
@@ -328,6 +480,92 @@ def test_bridge_learns_the_current_status_at_start_up(client_factory, spot_arm):
     assert view(events.of("spot")[-1])[0] == "stand_up.success.standing" and events.of("spot")[-1].seq == 1
     bridge.close()
     sim.close()
+
+
+def test_rmw_zenoh_attachments_reveal_a_restarted_status_publisher(spot_arm):
+    """A status from a new publisher GID, or with its sequence number going back, starts afresh."""
+    system, typemap = spot_arm
+    feed = Feed(system, typemap, SOURCE)
+    comp = system.component("spot")
+    store = feed.managers["spot"].store
+    topic = next(t for t in feed.managers["spot"].topics if t.kind == "status")
+    manager = Manager(comp.skillset, store, info=comp.manager)
+    status = manager.status()
+    payload = cdr(store, status.typename, status.msg)
+    gid, other = bytes(range(16)), bytes(range(1, 17))
+    infos = [[e.info for e in feed.feed("spot", topic, payload, rmw_attachment(seq, 0, g))]
+             for seq, g in ((1, gid), (2, gid), (3, gid), (2, gid), (3, gid), (1, other))]
+    assert infos == [
+        ["initial status"], [], [],
+        ["manager restarted (status sequence number went back); same state as before"], [],
+        ["manager restarted (new status publisher); same state as before"]]
+    assert feed.counters.restarts == 2
+
+
+def test_a_bridge_started_before_the_managers_asks_them_when_they_appear(client_factory, spot_arm):
+    """No retry needed: the managers' liveliness tokens tell the bridge when to ask (rmw_zenoh)."""
+    system, typemap = spot_arm
+    style = KeyStyle(rmw_zenoh=True, domain=7, humble=True)
+    events = Events(client_factory(), system.name)
+    bridge = start_bridge(client_factory(), system, typemap, style=style, source=SOURCE, retry=60.0)
+    time.sleep(1.0)  # the bridge's first requests went nowhere; its next retry is a minute away
+    started = time.monotonic()
+    sim = Simulator(client_factory(), system, typemap, style=style)
+    try:
+        got = events.wait(lambda items: len(items) == 2)
+        assert time.monotonic() - started < 3.0
+        assert sorted((e.skillset, e.info) for e in got) == [("manipulator", "initial status"),
+                                                              ("spot", "initial status")]
+        assert bridge.counters.restarts == 0
+    finally:
+        bridge.close()
+        sim.close()
+
+
+def status_of_another_version(skillset, typemap, drop: str, add: str) -> bytes:
+    """CDR of the skillset's status as another version of its model would define it."""
+    pkg = package_name(skillset)
+    store, types = get_typestore(Stores.ROS2_HUMBLE), {}
+    for name, text in generate_messages(skillset, typemap).items():
+        if name == "SkillsetStatus":
+            lines = [line for line in text.splitlines() if not drop or drop not in line]
+            text = "\n".join(lines + ([f"{pkg}/{add}"] if add else []))
+        types.update(get_types_from_msg(text, f"{pkg}/msg/{name}"))
+    store.register(types)
+    typename = f"{pkg}/msg/SkillsetStatus"
+    return cdr(store, typename, default_instance(store, typename, info="/spot/spot_skillset_manager"))
+
+
+def test_statuses_and_payloads_that_do_not_match_the_model(client_factory, spot_arm, caplog):
+    """Counted every time, logged once per kind, never a crash; later statuses still handled."""
+    system, typemap = spot_arm
+    comp = system.component("spot")
+    store = build_typestore(comp.skillset, typemap)
+    manager = Manager(comp.skillset, store, info=comp.manager)
+    status = manager.status()
+    odd = copy.deepcopy(status.msg)
+    odd.resources[0].state = "Levitating"
+    odd.resources.append(odd.resources[1].__class__(name="battery", state="Low"))
+    odd.skill_teleop.name = "fly"
+    feed = Feed(system, typemap, SOURCE, hold=0)
+    topic = next(t for t in feed.managers["spot"].topics if t.kind == "status")
+    caplog.set_level(logging.WARNING, logger="skinet.bridge_ros2")
+    good = cdr(store, status.typename, status.msg)
+    assert [e.info for e in feed.feed("spot", topic, good)] == ["initial status"]
+    for i in range(3):
+        events = feed.feed("spot", topic, cdr(store, status.typename, odd))
+        assert [(e.transition, e.status.resources["battery"]) for e in events] == ([(None, "Low")] if i == 0 else [])
+    for drop, add in (("skill_teleop", ""), ("", "SkillTeleopStatus skill_fly")):  # older and newer versions
+        for _ in range(2):
+            assert feed.feed("spot", topic, status_of_another_version(comp.skillset, typemap, drop, add)) == []
+    assert feed.counters.mismatched == 3 and feed.counters.malformed == 4
+    warnings = [r.getMessage() for r in caplog.records]
+    assert sum("state 'Levitating'" in w for w in warnings) == 1
+    assert sum("'battery' is not in the model" in w for w in warnings) == 1
+    assert sum("names skill 'fly', not 'teleop'" in w for w in warnings) == 1
+    assert sum("malformed spot_skillset/status dropped (SerdeError" in w for w in warnings) == 1  # rosbags checks sizes
+    assert [e.status.resources for e in feed.feed("spot", topic, good)] == [
+        {"power_status": "PowerOff", "posture": "Sitting", "control_mode": "Idle"}]  # back to normal
 
 
 def test_garbage_on_manager_keys_is_dropped(client_factory, spot_arm):

@@ -25,11 +25,11 @@ def both(name: str) -> tuple[list[StepRecord], list[StepRecord]]:
 
 
 def comparable(records: list[StepRecord]) -> list[tuple]:
-    return [
-        (r.index, r.holds, r.violations, [(w.skillset, w.transition, w.property, w.constraint) for w in r.warnings],
-         r.unsafe_count, r.divergence)
-        for r in records
-    ]
+    def flags(us: list) -> list[tuple]:
+        return [(u.skillset, u.transition, u.property, u.constraint, u.steps, u.witness, u.reason) for u in us]
+
+    return [(r.index, r.holds, r.violations, flags(r.warnings), flags(r.flagged), r.recovery, r.unsafe_count,
+             r.divergence) for r in records]
 
 
 def test_unassisted_run_through_the_chain() -> None:
@@ -58,6 +58,18 @@ def test_demo_command_runs_the_chain(capsys: pytest.CaptureFixture[str]) -> None
 
     assert main(["demo", "--all-steps"]) == 0
     out = capsys.readouterr().out
-    assert out.count("chain: simulated managers -> CDR -> bridge -> monitor -> predictor") == 2
+    assert out.count("chain: simulated managers -> CDR -> bridge -> monitor -> predictor") == 4
     assert "   violations: 3; action_guard at step 26; safety_guard at step 33; action_guard at step 38" in out
     assert "model divergence" not in out
+
+
+def test_mobile_runs_through_the_chain() -> None:
+    """The forced warning comes from the monitor itself, through the whole chain, as in the core replay."""
+    chain, core = both("mobile_unassisted")
+    assert [(r.index, r.violations) for r in chain if r.violations] == [(5, ["stowed_drive"])]
+    assert [(u.transition, u.constraint, u.steps, u.witness) for u in chain[3].flagged] == [
+        ("navigate.start", "forced", 1, ("arm:unfold.success.unfolded",))]
+    assert comparable(chain) == comparable(core)
+    chain, core = both("mobile_assisted")
+    assert not any(r.violations for r in chain)
+    assert comparable(chain) == comparable(core)

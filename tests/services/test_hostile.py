@@ -1,8 +1,8 @@
 """A hostile model costs a predictor at most its limits (issue 14; SPEC §6, §7).
 
-The attack: any peer answers ``skinet/h/model/<digest>`` with a consistent 1.5 KB
-bundle whose nets take gigabytes to build (:mod:`tests.services.hostile`) and asks
-for a prediction with ``budget=0.1``.  Without limits, an embedded ``skinet run``
+The attack: any peer answers ``skinet/h/model/<digest>`` with a consistent 1.9 KB
+bundle whose nets take seconds to build, or gigabytes with more skills
+(:mod:`tests.services.hostile`), and asks for a prediction with ``budget=0.1``.  Without limits, an embedded ``skinet run``
 grew by gigabytes, its monitor's verdicts slowed by seconds and SIGTERM did not stop
 it.  Here the predictor answers within the budget plus its grace, its own memory
 does not grow, the monitor on the same session keeps publishing every step, and
@@ -106,7 +106,7 @@ def test_hostile_bundle_costs_at_most_the_limits_and_the_monitor_keeps_up(peer: 
 def test_memory_limit_kills_the_worker_not_the_instance(peer: zenoh.Session) -> None:
     limit = 300
     predictor = start_predictor(peer, "small", memory_mb=limit, grace=GRACE, max_budget=120)
-    attacker = Attacker(peer)
+    attacker = Attacker(peer, hostile_bundle(skills=80))  # about 10 KB, gigabytes to build
     try:
         before = rss_kb()
         reply = the_reply(attacker.ask(budget=120.0, timeout=150))

@@ -339,8 +339,8 @@ def test_predictor_killed_mid_query_then_restarted(router, monitor_factory, sess
     watch = LivelinessWatch(session, keys.alive("*", "predictor", "*"))
     # A long grace: this test is about a predictor dying, not about the worker killed at
     # budget + grace (tests/services/test_hostile.py), and exploring this system may
-    # outlast a small budget.
-    args = ["services.predictor", *client_args(router), "--grace", "60", "--instance"]
+    # outlast a small budget and take over a gigabyte.
+    args = ["services.predictor", *client_args(router), "--grace", "60", "--memory-mb", "4096", "--instance"]
     first = spawn([*args, "doomed"], tmp_path / "doomed.log")
     try:
         watch.wait(lambda alive: any(a.endswith("/doomed") for a in alive))

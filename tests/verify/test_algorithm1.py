@@ -260,8 +260,10 @@ def test_mu1_equals_violation_from_the_initial_marking(paper_system: System) -> 
     report = f.report()
     assert (report["complete"], report["markings"], report["deadlocks"]) == (True, 63, 0)
     assert report["properties"] == {
-        "action_guard": {"violating": 24, "dangerous": 24, "undecided": 0, "safe": 39},
-        "safety_guard": {"violating": 6, "dangerous": 6, "undecided": 0, "safe": 57},
+        "action_guard": {"violating": 24, "dangerous": 24, "undecided": 0, "safe": 39,
+                         "implicit_fair": 0, "undecided_fair": 0},
+        "safety_guard": {"violating": 6, "dangerous": 6, "undecided": 0, "safe": 57,
+                         "implicit_fair": 0, "undecided_fair": 0},
     }
     for risk in f.risks.values():
         assert ((risk.mu1.lower & f.kripke.stored) == risk.violating).all()

@@ -19,7 +19,15 @@ from skinet.props.parser import parse_formula
 from skinet.system import System, build_system
 from skinet.verify.component import forget_component_graphs
 from skinet.verify.ctl import Kripke, check
+from skinet.options import PredictionOptions, PropertyOptions
 from skinet.verify.predict import Forecast, forecast
+
+LITERAL = PredictionOptions(PropertyOptions(af="literal"))
+
+
+def literal_forecast(system: System, marking: dict[str, int] | None = None, **kwargs) -> Forecast:
+    """mu1 with the paper's literal AF (these tests check it against brute force)."""
+    return forecast(system, marking, options=LITERAL, **kwargs)
 
 ROOT = Path(__file__).resolve().parents[2]
 CORPUS = ROOT.parent / "shared" / "corpus"
@@ -169,20 +177,22 @@ def codes(fc: Forecast, ref: Explicit) -> dict[Combined, int]:
 
 
 def test_corpus_pair_mu1() -> None:
-    report = forecast(corpus_pair()).report()
+    report = literal_forecast(corpus_pair()).report()
     assert (report["complete"], report["markings"], report["edges"], report["deadlocks"]) == (True, 1628, 7638, 0)
     assert report["properties"] == {
-        "action_guard": {"violating": 500, "dangerous": 500, "undecided": 0, "safe": 1128},
-        "safety_guard": {"violating": 36, "dangerous": 36, "undecided": 0, "safe": 1592},
+        "action_guard": {"violating": 500, "dangerous": 500, "undecided": 0, "safe": 1128,
+                         "implicit_literal": 0, "undecided_literal": 0},
+        "safety_guard": {"violating": 36, "dangerous": 36, "undecided": 0, "safe": 1592,
+                         "implicit_literal": 0, "undecided_literal": 0},
     }
 
 
 def test_paper_mu1_stable_across_runs() -> None:
     system = paper()
-    runs = [forecast(system) for _ in range(2)]
+    runs = [literal_forecast(system) for _ in range(2)]
     for c in system.components:
         forget_component_graphs(c.eventless)
-    runs.append(forecast(system))
+    runs.append(literal_forecast(system))
     reports = [{k: v for k, v in r.report().items() if k != "elapsed"} for r in runs]
     assert reports[0] == reports[1] == reports[2]
     assert reports[0]["complete"] and reports[0]["deadlocks"] == 0
@@ -195,7 +205,7 @@ def test_paper_mu1_stable_across_runs() -> None:
 @pytest.mark.parametrize("name", SYSTEMS)
 def test_mu1_and_steps_by_brute_force(name: str) -> None:
     """mu1 is exactly the set where every path violates; ``steps`` is the longest wait."""
-    fc = forecast(SYSTEMS[name]())
+    fc = literal_forecast(SYSTEMS[name]())
     ref = explicit(name)
     code = codes(fc, ref)
     assert fc.space.markings == len(ref.succ)
@@ -213,7 +223,7 @@ def test_mu1_and_steps_by_brute_force(name: str) -> None:
 @pytest.mark.parametrize("name", SYSTEMS)
 def test_witnesses_are_real_paths(name: str) -> None:
     """A witness replays on the nets, stays safe until its last step, which violates; it is no longer than ``steps``."""
-    fc = forecast(SYSTEMS[name]())
+    fc = literal_forecast(SYSTEMS[name]())
     ref = explicit(name)
     for prop, risk in fc.risks.items():
         for m in ref.worst_steps(prop):
@@ -230,7 +240,7 @@ def test_witnesses_are_real_paths(name: str) -> None:
 
 def test_ovens_have_implicit_constraints() -> None:
     """The systems above have none (mu1 = violating); this one exercises ranks and witnesses."""
-    fc = forecast(ovens())
+    fc = literal_forecast(ovens())
     risk = fc.risks["hot"]
     implicit = risk.mu1.lower & ~risk.violating
     assert implicit.any() and risk.mu1.rank[implicit].max() >= 2
@@ -242,13 +252,13 @@ def test_ovens_have_implicit_constraints() -> None:
     stuck = net.marking_of({"temp.Warm", "e_heat", "e_wait"})  # oven2 preheated: dead
     v = fc.verdict("hot", {"oven": heating, "oven2": stuck})
     assert (v.status, v.steps, len(v.witness)) == ("dangerous", 1, 1)
-    assert v.witness[0] in {"oven:heat.interrupt", "oven:heat.success", "oven:heat.failure.burnt"}
+    assert v.witness[0] in {"oven:heat.interrupt", "oven:heat.success.done", "oven:heat.failure.burnt"}
     # No fairness: while oven2 can `wait` forever, oven may never be scheduled.
     assert fc.verdict("hot", {"oven": heating, "oven2": ovens().component("oven2").net.initial}).status == "safe"
 
 
 def test_unknown_marking_is_undecided() -> None:
-    fc = forecast(paper())
+    fc = literal_forecast(paper())
     marking = dict(paper().initial_marking())
     marking["spot"] = 0  # no token anywhere: never reached
     assert fc.verdict("action_guard", marking).status == "undecided"
@@ -259,7 +269,7 @@ def test_unknown_marking_is_undecided() -> None:
 
 def test_zero_budget_report_is_honest() -> None:
     system = corpus_pair()
-    fc = forecast(system, budget=0.0)
+    fc = literal_forecast(system, budget=0.0)
     report = fc.report()
     sources = fc.space.layers[0]
     assert report["complete"] is False and report["timeout_reached"] is True
@@ -268,8 +278,9 @@ def test_zero_budget_report_is_honest() -> None:
     for prop, counts in report["properties"].items():
         violating = int(np.count_nonzero(fc.risks[prop].violating))
         # A source that violates already is proven; nothing else is, and nothing is safe.
-        assert counts == {"violating": violating, "dangerous": violating, "undecided": sources - violating, "safe": 0}
-    full = forecast(system)
+        assert counts == {"violating": violating, "dangerous": violating, "undecided": sources - violating, "safe": 0,
+                          "implicit_literal": 0, "undecided_literal": sources - violating}
+    full = literal_forecast(system)
     for c in np.flatnonzero(fc.kripke.stored):
         marking = fc.space.marking(int(c))
         for prop in fc.risks:
@@ -281,14 +292,14 @@ def test_zero_budget_report_is_honest() -> None:
 @pytest.mark.parametrize("name", SYSTEMS)
 def test_truncated_forecast_is_sound(name: str) -> None:
     system = SYSTEMS[name]()
-    full = forecast(system)
+    full = literal_forecast(system)
     kripke_full = full.kripke
     skillsets = {c.name: c.skillset for c in system.components}
     texts = OVEN_FORMULAS if name == "ovens" else [f.replace("ARM", ARM[name]) for f in FORMULAS]
     formulas = [parse_formula(f, skillsets) for f in texts]
     formulas += [Temporal("AF", Not(p.expr)) for p in system.properties]
     for max_depth in range(full.space.expanded_depth + 1):
-        part = forecast(system, max_depth=max_depth)
+        part = literal_forecast(system, max_depth=max_depth)
         kripke = part.kripke
         stored = kripke.stored
         assert not part.space.complete
@@ -309,13 +320,13 @@ def test_truncated_forecast_is_sound(name: str) -> None:
                 assert got.status in (truth.status, "undecided"), (max_depth, prop, marking)
                 if got.status == "dangerous":
                     assert got.steps == truth.steps
-    assert forecast(system, max_depth=full.space.expanded_depth + 1).space.complete
+    assert literal_forecast(system, max_depth=full.space.expanded_depth + 1).space.complete
 
 
 def test_truncated_witness_stays_inside() -> None:
     """On a truncated run a witness only uses explored markings and still ends in a violation."""
     system = corpus_pair()
-    part = forecast(system, max_depth=4)
+    part = literal_forecast(system, max_depth=4)
     for prop, risk in part.risks.items():
         for c in np.flatnonzero(risk.mu1.lower)[:200]:
             code = int(c)
@@ -327,6 +338,6 @@ def test_truncated_witness_stays_inside() -> None:
 
 
 def test_kripke_of_forecast_matches_fresh_kripke() -> None:
-    fc = forecast(paper())
+    fc = literal_forecast(paper())
     k = Kripke(fc.space)
     assert np.array_equal(k.deadlock, fc.kripke.deadlock) and np.array_equal(k.outdeg, fc.kripke.outdeg)

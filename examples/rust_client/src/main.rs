@@ -58,7 +58,13 @@ struct Risk {
     skillsets: BTreeMap<String, SkillsetStatus>,
     property: String,
     status: String,
+    /// "fair" or "literal": the AF that decided it (SPEC §6.2).
+    #[serde(default)]
+    af: String,
     steps: Option<u64>,
+    /// "skillset:transition" per step to the violation.
+    #[serde(default)]
+    witness: Vec<String>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -209,11 +215,13 @@ fn run(args: Args) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
                         .collect();
                     let steps = risk.steps.map_or("?".to_string(), |s| s.to_string());
                     println!(
-                        "  risk {} {} in {} steps from {}",
+                        "  risk {} {} ({} AF) in {} steps from {}; witness: {}",
                         risk.property,
                         risk.status,
+                        risk.af,
                         steps,
-                        marking.join("; ")
+                        marking.join("; "),
+                        risk.witness.join(" -> ")
                     );
                 }
             }
