@@ -12,8 +12,10 @@ monitor then resyncs from the bridge's status.
 
 Measured on loopback (router killed for 3 s while 40 events/s flowed): every
 event delivered in order about 2 s after the router came back.  A subscriber
-history of N samples also bounds recovery to N, so none is asked for: a monitor
-that starts late does not replay the cache, it follows from the next status.
+history of N samples also bounds recovery to N, so none is asked for.  A
+subscriber that starts late still gets the whole cache (it recovers everything
+before the first heartbeat's sequence number): the monitor counts events stamped
+before it started as ``history`` and does not apply them.
 """
 
 from __future__ import annotations

@@ -46,6 +46,7 @@ class Counters:
     restarts: int = 0  # a stream begun anew: new epoch, or seq far behind (a wrap)
     resyncs: int = 0  # status resyncs applied
     unrecovered: int = 0  # events an outage took that the bridge's cache could not give back (also in lost)
+    history: int = 0  # events stamped before the monitor started (the cache replayed to a late monitor)
     divergences: int = 0  # events the model could not explain (SPEC §7)
     errors: int = 0  # unexpected exceptions while handling a payload (bugs)
 

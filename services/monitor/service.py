@@ -20,6 +20,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import threading
+import time
 import uuid
 from dataclasses import dataclass
 
@@ -38,6 +39,7 @@ from skinet.wire.messages import CanonicalEvent, LiveState, PredictReply, StateS
 log = logging.getLogger("skinet.monitor")
 _LOG_FIRST = 10  # log the first occurrences of each problem, then every 1000th
 MAX_EVENT = 64 << 10  # bytes; a canonical event is a few hundred
+HISTORY_SLACK = 2.0  # seconds: events stamped this long before the monitor started are history
 
 
 @dataclass(frozen=True)
@@ -74,6 +76,7 @@ class Monitor:
         self._last: dict[str, bytes] = {}
         self._waiters = 0  # threads in wait_change: notify only when someone listens
         self._resyncing: set[str] = set()  # skillsets with a resync query in flight
+        self._started = time.time()
         self.resync_timeout = resync_timeout
         opts = dict(congestion_control=zenoh.CongestionControl.BLOCK, express=express)
         self._pub = {k: session.declare_publisher(key, **opts) for k, key in (
@@ -147,6 +150,13 @@ class Monitor:
                 c.received += 1
                 c.malformed += 1
                 self._warn(c.malformed, "malformed event payload: %s", exc)
+            return
+        if 0 < ev.stamp < self._started - HISTORY_SLACK:
+            # The bridge's cache replayed to a monitor that starts late (zenoh.ext recovers
+            # everything before a heartbeat's seq): history, not what happens now.
+            with self._lock:
+                self._engine.counters.received += 1
+                self._engine.counters.history += 1
             return
         try:
             with self._lock:

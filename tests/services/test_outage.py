@@ -106,3 +106,28 @@ def test_outage_longer_than_the_cache_is_counted_exactly(outage: Outage) -> None
     assert counters.unrecovered > 0
     assert counters.lost == counters.unrecovered == 200 - counters.applied
     assert counters.out_of_order == counters.duplicates == 0
+
+
+def test_a_late_monitor_does_not_replay_the_cache(outage: Outage) -> None:
+    """zenoh.ext gives a new subscriber everything cached before the publisher's heartbeat:
+    a monitor started late counts that as history and follows from the next event."""
+    pub_s, mon_s = outage.login("bridge"), outage.login("monitor")
+    publisher = event_publisher(pub_s, keys.events("spot_arm", "spot"))
+    try:
+        stamp = time.time() - 10  # published before the monitor starts
+        for seq in range(50):
+            publisher.put(encode(CanonicalEvent(system="spot_arm", skillset="spot", seq=seq, stamp=stamp,
+                                                source="bridge")))
+        monitor = start_monitor(mon_s, SYSTEM)
+        try:
+            wait_until(lambda: monitor.counters.history == 50, 10, f"the cache's replay ({monitor.counters})")
+            publisher.put(encode(CanonicalEvent(system="spot_arm", skillset="spot", seq=50, stamp=time.time(),
+                                                source="bridge")))
+            wait_until(lambda: monitor.counters.applied == 1, 5, "the live event")
+            assert (monitor.counters.received, monitor.counters.lost) == (51, 0)
+        finally:
+            monitor.close()
+    finally:
+        publisher.undeclare()
+        pub_s.close()
+        mon_s.close()
