@@ -1,11 +1,13 @@
 # The two set-up commands of the README: `make demo` (main job) and `make test`.
 # Both create .venv and install the project with its test dependencies first.
+# `make test-quick` skips the tests marked slow (Docker images and containers,
+# cargo and other native builds): for development, not a replacement of `make test`.
 
 PYTHON ?= python3
 VENV ?= .venv
 STAMP := $(VENV)/.installed-stamp
 
-.PHONY: demo test test-deps bench clean
+.PHONY: demo test test-quick test-deps bench clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -22,8 +24,11 @@ test-deps:
 test: $(STAMP) test-deps
 	$(VENV)/bin/python -m pytest -q
 
+test-quick: $(STAMP)
+	$(VENV)/bin/python -m pytest -q -m "not slow"
+
 bench: $(STAMP)
 	for b in benchmarks/bench_*.py; do $(VENV)/bin/python $$b || exit 1; done
 
 clean:
-	rm -rf $(VENV) build *.egg-info .pytest_cache .hypothesis
+	rm -rf $(VENV) build *.egg-info .pytest_cache .hypothesis docker/wheels

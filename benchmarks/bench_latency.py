@@ -37,7 +37,7 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from common import table, verdict
+from common import table, terminate, verdict
 
 import msgpack  # noqa: E402
 import zenoh  # noqa: E402
@@ -289,13 +289,7 @@ def across_processes(n: int, burst: int) -> list[list[object]]:
             a.close()
             b.close()
     finally:
-        for p in reversed(procs):
-            if p.poll() is None:
-                p.send_signal(signal.SIGTERM)
-            try:
-                p.wait(5)
-            except subprocess.TimeoutExpired:
-                p.kill()
+        terminate(procs)
     return rows
 
 

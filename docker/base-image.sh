@@ -4,8 +4,9 @@
 #
 #   docker/base-image.sh [--force] [--tag skinet-base:local] [--mirror URL]
 #
-# Skips the build when the tag already exists (unless --force).  Needs root (or
-# sudo), a Debian mirror and debootstrap (installed with apt-get when missing).
+# Skips the build when the tag exists and was made by this version of the script
+# (a label holds its hash; --force rebuilds anyway).  Needs root (or sudo), a
+# Debian mirror and debootstrap (installed with apt-get when missing).
 set -euo pipefail
 
 tag="${SKINET_BASE_TAG:-skinet-base:local}"
@@ -24,8 +25,9 @@ while [ $# -gt 0 ]; do
     shift
 done
 
-if [ "$force" = 0 ] && docker image inspect "$tag" >/dev/null 2>&1; then
-    echo "base-image.sh: $tag exists (use --force to rebuild)"
+hash="$(sha256sum <"$0" | cut -c1-64)"
+if [ "$force" = 0 ] && [ "$(docker image inspect --format '{{index .Config.Labels "skinet.inputs"}}' "$tag" 2>/dev/null)" = "$hash" ]; then
+    echo "base-image.sh: $tag is up to date (use --force to rebuild)"
     exit 0
 fi
 
@@ -67,6 +69,7 @@ $sudo tar -C "$rootfs" -c . | docker import \
     --change 'ENV LANG=C.UTF-8' \
     --change 'ENV PATH=/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin' \
     --change 'CMD ["python3"]' \
+    --change "LABEL skinet.inputs=$hash" \
     --message "debootstrap $suite minbase + python3, python3-venv" \
     - "$tag" >/dev/null
 docker image ls "$tag"

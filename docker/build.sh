@@ -1,13 +1,15 @@
 #!/usr/bin/env bash
 # Build the SkiNet Live image from the repository's Dockerfile.
 #
-#   docker/build.sh [--local-base] [--tag skinet-live:local] [-- EXTRA docker build ARGS]
+#   docker/build.sh [--local-base] [--tag skinet-live:local] [--force] [-- EXTRA docker build ARGS]
 #
-# Wheels for the project and every dependency are built on the host into
-# docker/wheels/ (the image installs them offline, so no registry is needed inside
-# a build).  --local-base first builds skinet-base:local with docker/base-image.sh
-# and uses it as BASE_IMAGE (machines without a container registry); otherwise
-# BASE_IMAGE comes from $SKINET_BASE_IMAGE or the Dockerfile's default.
+# Wheels for the project and every dependency are built on the host, kept in
+# ~/.cache/skinet-live/wheels and linked into docker/wheels/ (the image installs
+# them offline, so no registry is needed inside a build).  --local-base first
+# builds skinet-base:local with docker/base-image.sh and uses it as BASE_IMAGE
+# (machines without a container registry); otherwise BASE_IMAGE comes from
+# $SKINET_BASE_IMAGE or the Dockerfile's default.  The image carries a label with
+# a hash of its inputs; when the tag already has the same hash, nothing is built.
 set -euo pipefail
 
 root="$(cd "$(dirname "$0")/.." && pwd)"
@@ -16,13 +18,16 @@ tag="${SKINET_IMAGE:-skinet-live:local}"
 base="${SKINET_BASE_IMAGE:-}"
 python="${PYTHON:-python3}"
 extra=()
+force=0
+cache="${SKINET_CACHE:-${XDG_CACHE_HOME:-$HOME/.cache}/skinet-live}"
 
 while [ $# -gt 0 ]; do
     case "$1" in
         --local-base) base="skinet-base:local" ;;
         --tag) tag="$2"; shift ;;
+        --force) force=1 ;;
         --) shift; extra=("$@"); break ;;
-        -h|--help) sed -n '2,10p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+        -h|--help) sed -n '2,12p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
         *) echo "build.sh: unknown argument '$1'" >&2; exit 2 ;;
     esac
     shift
@@ -39,11 +44,30 @@ if ! "$python" -c 'import sys; sys.exit(sys.version_info[:2] != (3, 11))'; then
     fi
 fi
 
+# Everything the image is made of: the files of the build context and of the
+# project wheel (not README.md: only the wheel's description), this script, the
+# base image and the build arguments.
+inputs() {
+    {
+        find Dockerfile .dockerignore pyproject.toml skinet services skillsets docker/zenoh \
+            docker/entrypoint.sh docker/build.sh -type f ! -path '*/__pycache__/*' ! -name '*.pyc' -print0 \
+            | LC_ALL=C sort -z | xargs -0 sha256sum
+        echo "base=${base:-default} $( [ -n "$base" ] && docker image inspect --format '{{.Id}}' "$base" 2>/dev/null)"
+        echo "extra=${extra[*]-}"
+        "$python" -c 'import sys; print(sys.version)'
+    } | sha256sum | cut -c1-64
+}
+hash="$(inputs)"
+if [ "$force" = 0 ] && [ "$(docker image inspect --format '{{index .Config.Labels "skinet.inputs"}}' "$tag" 2>/dev/null)" = "$hash" ]; then
+    echo "build.sh: $tag is up to date (inputs ${hash:0:12}); --force rebuilds"
+    exit 0
+fi
+
 # The project wheel goes to its own folder so that the image layer holding the
 # dependencies stays cached while only the project changes.  A fixed
 # SOURCE_DATE_EPOCH makes the wheel byte-identical for identical sources, so an
 # unchanged project hits the cache too.
-wheels="$root/docker/wheels"
+wheels="$cache/wheels"
 mkdir -p "$wheels/project"
 rm -f "$wheels"/skinet_live-*.whl "$wheels"/project/*.whl
 export SOURCE_DATE_EPOCH=315532800 PIP_DISABLE_PIP_VERSION_CHECK=1
@@ -71,8 +95,16 @@ reqs = [l.split(":", 1)[1].strip() for l in lines if l.startswith("Requires-Dist
 (wheels / "requirements.txt").write_text("\n".join(reqs) + "\n")
 PY
 rm -rf "$root/build"  # setuptools' scratch folder
+# The build context needs the wheels under docker/wheels: hard links to the cache
+# (copies across file systems).
+rm -rf "$root/docker/wheels"
+mkdir -p "$root/docker/wheels/project"
+for f in "$wheels"/*.whl "$wheels"/requirements.txt "$wheels"/project/*.whl; do
+    rel="${f#"$wheels"/}"
+    ln -f "$f" "$root/docker/wheels/$rel" 2>/dev/null || cp -f "$f" "$root/docker/wheels/$rel"
+done
 
-args=(--tag "$tag")
+args=(--tag "$tag" --label "skinet.inputs=$hash")
 if [ -n "$base" ]; then args+=(--build-arg "BASE_IMAGE=$base"); fi
 # A BASE_IMAGE that exists only locally needs no registry (checked with the
 # classic builder, which `docker build` falls back to without buildx).

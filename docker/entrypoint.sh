@@ -11,21 +11,25 @@
 # SKINET_ZENOH_USER with SKINET_ZENOH_PASSWORD (or SKINET_ZENOH_PASSWORD_FILE, for
 # Docker secrets; default $SKINET_SECRETS/<user>.password, which the router makes
 # at first start) adds user/password authentication to the session's configuration
-# (on top of SKINET_ZENOH_CONFIG when that is set).  A tls/ endpoint in
+# (on top of SKINET_ZENOH_CONFIG when that is set), also for a router that logs in
+# to other routers (with SKINET_ZENOH_CONNECT).  A tls/ endpoint in
 # SKINET_ZENOH_CONNECT adds the CA and the user's certificate from
-# $SKINET_SECRETS/tls/.  Clients wait for these files and for their router
-# instead of failing when they are not there yet.
+# $SKINET_SECRETS/tls/.  Clients wait for these files and for their router instead
+# of failing when they are not there yet (SKINET_ZENOH_CONNECT_TIMEOUT seconds,
+# default 60; -1: forever).
 set -eu
 
 if [ $# -eq 0 ] || [ "$1" = "--help" ] || [ "$1" = "-h" ]; then
-    sed -n '2,17p' "$0" | sed 's/^# \{0,1\}//'
+    sed -n '2,19p' "$0" | sed 's/^# \{0,1\}//'
     exit 0
 fi
 
 service="$1"
 shift
 
-if [ "$service" != "router" ] && [ "$service" != "skinet" ]; then
+# A router gets the generated configuration too when it logs in somewhere itself
+# (the fleet's off-board router, which connects to every robot's router).
+if [ "$service" != "skinet" ] && { [ "$service" != "router" ] || [ -n "${SKINET_ZENOH_USER:-}" ]; }; then
     # Written as JSON through Zenoh's own parser so that any JSON5 file given in
     # SKINET_ZENOH_CONFIG is kept, and passwords need no shell quoting.
     generated="${TMPDIR:-/tmp}/skinet-zenoh-$$.json"
@@ -56,12 +60,18 @@ if password_file:
 if user:
     config.insert_json5("transport/auth/usrpwd/user", json.dumps(user))
     config.insert_json5("transport/auth/usrpwd/password", json.dumps(password))
-connect = os.environ.get("SKINET_ZENOH_CONNECT", "")
-if user and any(e.strip().startswith("tls/") for e in connect.split(",")):
+mode = os.environ.get("SKINET_ZENOH_MODE", "client")
+if mode == "client":
+    # Wait for the router, retrying; give up after a while (a wrong endpoint then shows
+    # as a one-line error in the log, and the restart policy tries again).
+    seconds = float(os.environ.get("SKINET_ZENOH_CONNECT_TIMEOUT", "60"))
+    config.insert_json5("connect/timeout_ms", str(-1 if seconds < 0 else int(seconds * 1000)))
+connect = [e.strip() for e in os.environ.get("SKINET_ZENOH_CONNECT", "").split(",") if e.strip()]
+if mode == "router" and connect:  # clients read SKINET_ZENOH_CONNECT themselves
+    config.insert_json5("connect/endpoints", json.dumps(connect))
+if user and any(e.startswith("tls/") for e in connect):
     wait_for(secrets / "tls" / f"{user}.key")
     config.insert_json5("transport/link/tls", json.dumps(tls_connect_config(secrets / "tls", user)))
-if os.environ.get("SKINET_ZENOH_MODE", "client") == "client":
-    config.insert_json5("connect/timeout_ms", "-1")  # wait for the router, retrying
 fd = os.open(sys.argv[1], os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
 with os.fdopen(fd, "w") as f:
     f.write(str(config))

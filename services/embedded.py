@@ -22,13 +22,12 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TextIO
 
-import zenoh
-
-from services.common.zenoh_config import session_config
+from services.common.zenoh_config import open_session, session_config
 from services.monitor import Monitor, MonitorView, start_monitor
+from skinet.cli.memory import memory_limit
+from skinet.cli.options import load_live_system
 from skinet.explain import warning_line
 from skinet.cli.render import seconds, table
-from skinet.files import load_system
 
 CLEAR = "\x1b[H\x1b[J"  # cursor home, clear to end of screen
 
@@ -68,7 +67,10 @@ def render(view: MonitorView) -> list[str]:
         f"{'TRUNCATED' if space.timeout_reached else 'complete'}")
     out.append(f"predictor  last exploration: {explored}")
     out.append(f"  queries sent {p.sent}, answered {p.answered}, timed out {p.timed_out}, unanswered {p.unanswered}, "
-               f"failed {p.failed}, superseded {p.superseded}{', one in flight' if p.in_flight else ''}")
+               f"failed {p.failed}, superseded {p.superseded}, retried {p.retried}"
+               f"{', one in flight' if p.in_flight else ''}")
+    if p.answers:
+        out.append("  answers per instance: " + ", ".join(f"{name} {n}" for name, n in sorted(p.answers.items())))
     out.append(f"events  received {c.received}, applied {c.applied}, malformed {c.malformed}, duplicates "
                f"{c.duplicates}, out of order {c.out_of_order}, lost {c.lost}, divergences {c.divergences}"
                + (f", resyncs {c.resyncs}" if c.resyncs else ""))
@@ -89,14 +91,15 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     """``skinet run``: see the module docstring; returns the exit status."""
     from services.predictor.service import start_predictor
 
-    system, _ = load_system(args.system)
+    system, _ = load_live_system(args.system)
+    config = session_config("peer", args.connect, args.listen, args.zenoh_config, args.multicast_scouting)
     stop = _stop_on_signals()
-    session = zenoh.open(session_config("peer", args.connect, args.listen, args.zenoh_config,
-                                        args.multicast_scouting))
+    session = open_session(config)
     monitor: Monitor | None = None
     predictor = None
     try:
-        predictor = start_predictor(session, f"embedded-{os.getpid()}")  # first: the monitor asks at once
+        predictor = start_predictor(session, f"embedded-{os.getpid()}",  # first: the monitor asks at once
+                                    memory_limit=memory_limit(args))
         monitor = start_monitor(session, system, budget=args.budget)
         if args.once:
             deadline = time.monotonic() + args.budget + 2.0  # the first prediction, if any comes
@@ -165,7 +168,7 @@ def router(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
         ensure_tls(folder / "tls", ["router", *USERS], hostnames)
         config.insert_json5("transport/link/tls", json.dumps(tls_listen_config(folder / "tls", "router")))
         notes.append(f"TLS certificates in {folder / 'tls'}")
-    session = zenoh.open(config)
+    session = open_session(config)
     try:
         print(f"zenoh router {session.zid()} listening on {', '.join(endpoints)}"
               + "".join(f"; {n}" for n in notes), file=out, flush=True)

@@ -14,7 +14,8 @@ replaced at once and its replacement's start-up does not count against the next
 job.  Each child keeps the systems it built in a small LRU cache.
 
 Frames on the pipes are a 4-byte big-endian length and a msgpack array: jobs
-``[digest, bundle, request, budget]`` (the encoded ModelBundle and PredictRequest),
+``[digest, bundle, request, budget, memory_limit]`` (the encoded ModelBundle and
+PredictRequest; the core's memory limit in bytes, or None),
 answers ``[ok, error, reply]`` (the encoded PredictReply, or a one-line error).
 Cost per job in the parent: copying the bundle and the reply through a pipe.
 """
@@ -67,12 +68,13 @@ class Worker:
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, close_fds=True)
         self._ready = False
 
-    def run(self, digest: str, bundle: bytes, request: bytes, budget: float, grace: float = 1.0) -> bytes:
+    def run(self, digest: str, bundle: bytes, request: bytes, budget: float, grace: float = 1.0,
+            memory_limit: int | None = None) -> bytes:
         """The encoded PredictReply of one job; raises :class:`WorkerError` at a limit."""
         proc = self.wait_ready()
         deadline = time.monotonic() + budget + grace
         try:
-            _write_frame(proc.stdin, msgpack.packb([digest, bundle, request, budget]))  # type: ignore[arg-type]
+            _write_frame(proc.stdin, msgpack.packb([digest, bundle, request, budget, memory_limit]))  # type: ignore[arg-type]
             frame = _read_frame(proc.stdout, deadline)  # type: ignore[arg-type]
         except (BrokenPipeError, OSError):
             frame = None
@@ -186,7 +188,7 @@ def _serve(instance: str, cache_size: int, nice: int) -> None:
 
     cache: OrderedDict[str, System] = OrderedDict()
 
-    def job(digest: str, bundle: bytes, payload: bytes, budget: float) -> list:
+    def job(digest: str, bundle: bytes, payload: bytes, budget: float, memory_limit: int | None = None) -> list:
         started = time.perf_counter()
         try:
             request = decode(payload, PredictRequest)
@@ -202,7 +204,8 @@ def _serve(instance: str, cache_size: int, nice: int) -> None:
             cache.move_to_end(digest)
             marking = marking_of(system, request.skillsets, "request")
             left = max(0.0, budget - (time.perf_counter() - started))  # building counts against the budget
-            fc = forecast(system, marking, budget=left, options=request_options(system, request))
+            limit = {} if memory_limit is None else {"memory_limit": memory_limit}
+            fc = forecast(system, marking, budget=left, options=request_options(system, request), **limit)
             reply = PredictReply(system=request.system, digest=digest, seq=request.seq, ok=True, instance=instance,
                                  report=state_space_report(system, fc, time.time()), risks=risks(system, marking, fc))
             return [True, "", encode(reply)]

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 from dataclasses import replace
 from pathlib import Path
 
@@ -166,6 +167,33 @@ def load_typemap(path: str | Path) -> TypeMap:
         raise SourceError.at(str(path), None, "[system] 'types' must be a path string")
     types_path = path.parent / name
     return parse_typemap(read_source(types_path), str(types_path))
+
+
+_UNITS = {"": 1, "b": 1, "kb": 10**3, "mb": 10**6, "gb": 10**9, "kib": 2**10, "mib": 2**20, "gib": 2**30}
+
+
+def parse_size(text: str | int) -> int:
+    """Bytes from ``"1 GiB"``, ``"512MiB"``, ``"2 GB"`` or a plain number of bytes."""
+    match = re.fullmatch(r"\s*(\d+(?:\.\d+)?)\s*([A-Za-z]*)\s*", str(text))
+    unit = match.group(2).lower() if match else ""
+    if not match or unit not in _UNITS or float(match.group(1)) * _UNITS[unit] < 1:
+        raise ValueError(f"not a size: {text!r} (e.g. 1GiB, 512MiB, 2GB)")
+    return int(float(match.group(1)) * _UNITS[unit])
+
+
+def load_memory_limit(path: str | Path) -> int | None:
+    """``[system] memory_limit`` of a system file (bytes; ``None`` when absent), SPEC §6.1."""
+    path = Path(path)
+    data = parse_toml(read_source(path), str(path))
+    value = data.get("system", {}).get("memory_limit") if isinstance(data.get("system"), dict) else None
+    if value is None:
+        return None
+    try:
+        if isinstance(value, bool) or not isinstance(value, (int, str)):
+            raise ValueError(f"not a size: {value!r} (e.g. \"1GiB\")")
+        return parse_size(value)
+    except ValueError as exc:
+        raise SourceError.at(str(path), None, f"[system] memory_limit: {exc}") from None
 
 
 def load_state(path: str | Path, system: System, what_if: bool = False) -> Marking:

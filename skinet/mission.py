@@ -69,12 +69,53 @@ def parse_scenario(text: str, source: str = "<scenario>") -> Scenario:
             raise SourceError.at(source, None, f"step {n}: needs a 'skillset' string")
         if (s.get("transition") is None) == (s.get("consider") is None):
             raise SourceError.at(source, None, f"step {n}: give exactly one of 'transition' or 'consider'")
-        t = float(s.get("t", last))
+        if not isinstance(s.get("transition", s.get("consider")), str):
+            raise SourceError.at(source, None, f"step {n}: 'transition' or 'consider' must be a string")
+        t = s.get("t", last)
+        if isinstance(t, bool) or not isinstance(t, (int, float)) or t != t:
+            raise SourceError.at(source, None, f"step {n}: 't' must be a number of seconds, got {t!r}")
+        t = float(t)
         if t < last:
             raise SourceError.at(source, None, f"step {n}: time {t} goes backwards (previous step at {last})")
         last = t
         steps.append(Step(t, s["skillset"], s.get("transition"), s.get("consider"), str(s.get("note", ""))))
     return Scenario(head["name"], head["system"], tuple(steps))
+
+
+def step_numbers(scenario: Scenario) -> list[int]:
+    """The step number of each scenario entry, as the live monitor counts steps.
+
+    Transitions are steps 1, 2, ...; a considered command is weighed at the
+    marking before the next step, so it takes that step's number (``skinet run``
+    beside the simulator and ``skinet demo`` then show the same numbers).
+    """
+    numbers, done = [], 0
+    for step in scenario.steps:
+        if step.transition is not None:
+            done += 1
+        numbers.append(done if step.transition is not None else done + 1)
+    return numbers
+
+
+def check_scenario(scenario: Scenario, system: System, source: str = "<scenario>") -> None:
+    """Every step names a skillset of ``system`` and one of its transitions; else one error naming the step.
+
+    (A transition that is not enabled when its step comes is not an error: the
+    live monitor reports it as a model divergence.)
+    """
+    components = {c.name: c for c in system.components}
+    for n, step in enumerate(scenario.steps, 1):
+        comp = components.get(step.skillset)
+        if comp is None:
+            raise SourceError.at(source, None, f"step {n}: unknown skillset '{step.skillset}' "
+                                               f"(skillsets of {system.name}: {', '.join(components)})")
+        name = step.transition if step.transition is not None else step.consider
+        known = list(dict.fromkeys(t.name for t in comp.net.transitions))
+        if name not in known:
+            field = "transition" if step.transition is not None else "consider"
+            hint = [k for k in known if k.split(".")[0] == name.split(".")[0]] or known
+            raise SourceError.at(source, None, f"step {n}: unknown {field} '{name}' of skillset '{step.skillset}' "
+                                               f"(for example: {', '.join(hint[:6])})")
 
 
 def replay(system: System, scenario: Scenario, predict: bool = True, budget: float = 5.0) -> list[StepRecord]:
@@ -88,7 +129,7 @@ def replay(system: System, scenario: Scenario, predict: bool = True, budget: flo
     before = {p.name: holds(p.expr, live.marking, nets) for p in system.properties}
     current = analysis()
     records = []
-    for i, step in enumerate(scenario.steps, 1):
+    for i, step in zip(step_numbers(scenario), scenario.steps):
         if step.consider is not None:
             flags = flags_on(current.operator_unsafe(), step.skillset, step.consider)
             records.append(StepRecord(i, step, dict(before), [], flags, len(current.operator_unsafe())))
@@ -117,7 +158,8 @@ def flagged_before(records: Sequence[StepRecord], index: int, prop: str) -> tupl
     property may itself be flagged only because the command before it was.
     """
     run: list[tuple[int, UnsafeTransition]] = []
-    for r in reversed(records[:index]):
+    upto = next(n for n, r in enumerate(records) if r.index == index and r.step.transition is not None) + 1
+    for r in reversed(records[:upto]):
         if r.step.transition is None:
             continue
         flags = [u for u in r.flagged if u.property == prop]
@@ -128,4 +170,5 @@ def flagged_before(records: Sequence[StepRecord], index: int, prop: str) -> tupl
     return (commands or run or [None])[-1]
 
 
-__all__ = ["Scenario", "Step", "StepRecord", "flagged_before", "flags_on", "parse_scenario", "replay"]
+__all__ = ["Scenario", "Step", "StepRecord", "check_scenario", "flagged_before", "flags_on", "parse_scenario", "replay",
+           "step_numbers"]

@@ -22,6 +22,15 @@ PAPER_FILES = ("spot.rl", "manipulator.rl")
 PAPER_MANAGERS = {"spot": "/spot/spot_skillset_manager", "manipulator": "/kinova/manipulator_skillset_manager"}
 
 
+def pytest_configure(config: pytest.Config) -> None:
+    """Stop at once, with one line saying what is missing, when the corpus is not beside the repository."""
+    if not CORPUS.is_dir():
+        raise pytest.UsageError(
+            f"the test corpus is missing: {CORPUS} does not exist. The tests read real skillset files and "
+            f"ROS 2 message definitions from ../shared/corpus beside the repository ({REPO}); put the "
+            "project's shared/ folder there (it is never copied into the project)")
+
+
 def load_corpus_skillset(name: str) -> Skillset:
     """Parse one corpus file (``name`` relative to the corpus folder)."""
     return parse_skillset((CORPUS / name).read_text(encoding="utf-8"), name)

@@ -8,7 +8,7 @@ import pytest
 
 from skinet.errors import SourceError
 from skinet.files import load_system
-from skinet.mission import parse_scenario, replay
+from skinet.mission import parse_scenario, replay, step_numbers
 
 MISSIONS = Path(__file__).resolve().parents[1] / "skillsets" / "missions"
 
@@ -37,8 +37,16 @@ def test_assisted_run_warns_before_risky_commands_and_never_violates() -> None:
               for r in records if r.step.consider]
     assert warned == [
         (29, [("spot", "go_to_waypoint.start", "safety_guard", "explicit", True)]),
-        (37, [("manipulator", "arm_ready.start", "action_guard", "explicit", True)]),
+        (36, [("manipulator", "arm_ready.start", "action_guard", "explicit", True)]),  # entry 37, before step 36
     ]
+
+
+def test_step_numbers_count_transitions() -> None:
+    scenario = parse_scenario((MISSIONS / "assisted.toml").read_text(), "assisted")
+    numbers = step_numbers(scenario)
+    assert len(numbers) == 62 and numbers[-1] == 60
+    assert [(n, numbers[n - 1]) for n in (28, 29, 30, 36, 37, 38)] == [(28, 28), (29, 29), (30, 29), (36, 35),
+                                                                        (37, 36), (38, 36)]
 
 
 @pytest.mark.parametrize(

@@ -132,7 +132,7 @@ def test_assisted_run_heeds_forced_then_explicit() -> None:
     records = replay(system, scenario)
     assert not any(r.violations for r in records)
     assert [(r.index, [(w.transition, w.constraint, w.steps) for w in r.warnings]) for r in records
-            if r.step.consider] == [(4, [("navigate.start", "forced", 1)]), (8, [("navigate.start", "explicit", 0)])]
+            if r.step.consider] == [(4, [("navigate.start", "forced", 1)]), (7, [("navigate.start", "explicit", 0)])]
     assert records[7].warnings[0].reason == "violates it at once: base navigate runs while arm pose at Holding"
 
 
@@ -147,7 +147,7 @@ def test_demo_tells_forced_warnings_apart(capsys: pytest.CaptureFixture[str]) ->
     assert ("SkiNet: base:navigate.start: forced for stowed_drive — unfold may succeed (1 step) and leave "
             "arm pose at Unfolded while base navigate runs; operator refrains") in out
     assert ("   warnings heeded (commands considered, flagged, not issued): 2; base:navigate.start forced for "
-            "stowed_drive at step 4; base:navigate.start explicit for stowed_drive at step 8") in out
+            "stowed_drive at step 4; base:navigate.start explicit for stowed_drive at step 7") in out
 
 
 def test_the_issue_arm_forced_for_safety_guard_while_walking() -> None:

@@ -184,7 +184,7 @@ def test_assisted_run_shows_the_paper_warnings() -> None:
         return any(a <= t < b for a, b in spans.get(lane, []))
 
     assert during("spot.go_to_waypoint", 58.0)  # considered at step 29 (t = 58 s)
-    assert during("manipulator.arm_ready", 74.0)  # considered at step 37 (t = 74 s)
+    assert during("manipulator.arm_ready", 74.0)  # considered before step 36 (t = 74 s)
     assert not during("spot.go_to_waypoint", 10.0)  # trap 1's transfer is safe
 
 
@@ -251,6 +251,22 @@ def test_one_lane_per_skill_resource_and_property(paper_system: System) -> None:
     assert set(_lane_labels(observed)) <= set(labels)
     # ... unless the system is given.
     assert _lane_labels(observed, paper_system) == labels
+
+
+def test_recorded_times_are_labelled_to_a_tenth_without_warnings(recwarn: pytest.WarningsRecorder) -> None:
+    """A recorded log has receive times like 1700000018.3619: labels show 52.4 s, not 52.3619 s,
+    and drawing the status ticks ("|", a marker without a face) gives no matplotlib warning."""
+    import dataclasses
+
+    _, entries = _run("unassisted")
+    shifted = [dataclasses.replace(e, t=e.t + 0.3619) for e in entries[1:]]  # the first entry keeps t0
+    figure = draw([entries[0], *shifted], "recorded")
+    top = figure.axes[0]
+    assert top.get_title(loc="right") == (
+        "3 violations: action_guard at 52.4 s, safety_guard at 66.4 s, action_guard at 76.4 s")
+    assert "VIOLATED at 52.4 s" in [t.get_text() for t in top.texts]
+    figure.canvas.draw()
+    assert [str(w.message) for w in recwarn] == []
 
 
 def test_timeline_marks_violations_and_unsafe_counts() -> None:

@@ -9,21 +9,22 @@ from __future__ import annotations
 
 import argparse
 import logging
-import math
 import os
 import signal
 import sys
 import threading
+from pathlib import Path
 
 import zenoh
 
 from services.bridge_ros2.replay import replay_bag
 from services.bridge_ros2.service import default_source, start_bridge
-from services.common.cli import add_instance_arg, add_log_arg, setup_logging
+from services.common.cli import add_instance_arg, add_log_arg, one_line_errors, setup_logging
 from services.common.events import event_publisher
-from services.common.zenoh_config import add_zenoh_args, config_from_args
-from skinet.errors import SkinetError
-from skinet.files import load_system, load_typemap
+from services.common.zenoh_config import add_zenoh_args, config_from_args, open_session
+from skinet.cli.options import ArgumentParser, count, key_prefix, load_live_system, seconds
+from skinet.errors import SkinetError, SourceError
+from skinet.files import load_typemap
 from skinet.ros.keys import KeyStyle
 from skinet.wire import keys
 from skinet.wire.codec import encode
@@ -31,8 +32,8 @@ from skinet.wire.codec import encode
 log = logging.getLogger("skinet.bridge_ros2")
 
 
-def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(
+def build_parser() -> ArgumentParser:
+    parser = ArgumentParser(
         prog="python -m services.bridge_ros2",
         description="Turn what skillset managers publish (ROS 2 topics on Zenoh, or a rosbag2 file) into "
                     "canonical events on skinet/<system>/events/<skillset>.",
@@ -40,9 +41,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("system", help="system TOML file ([system] types names the type map)")
     parser.add_argument("--rmw-zenoh", action="store_true",
                         help="topics as rmw_zenoh carries them (default: zenoh-bridge-ros2dds keys)")
-    parser.add_argument("--namespace", default=os.environ.get("SKINET_ROS_NAMESPACE", ""),
+    parser.add_argument("--namespace", type=key_prefix("namespace", env="SKINET_ROS_NAMESPACE"), default=os.environ.get("SKINET_ROS_NAMESPACE", ""),
                         help="zenoh-bridge-ros2dds namespace prefixing the keys")
-    parser.add_argument("--domain", type=int, default=int(os.environ.get("ROS_DOMAIN_ID", "0")),
+    parser.add_argument("--domain", type=count(0, 232, env="ROS_DOMAIN_ID"), default=os.environ.get("ROS_DOMAIN_ID", "0"),
                         help="ROS domain id in rmw_zenoh keys (default: $ROS_DOMAIN_ID or 0)")
     parser.add_argument("--ros-distro", default=os.environ.get("ROS_DISTRO", "jazzy"),
                         help="ROS 2 distribution of rmw_zenoh (default: $ROS_DISTRO or jazzy); on humble the keys "
@@ -51,41 +52,33 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--source", default=None, help="source name in the events (default: bridge_ros2/INSTANCE)")
     parser.add_argument("--replay", metavar="BAG", help="replay a rosbag2 file (directory or .db3/.mcap) and exit")
     parser.add_argument("--realtime", action="store_true", help="with --replay: keep the recorded timing")
-    parser.add_argument("--hold", type=float, default=0.5,
+    parser.add_argument("--hold", type=seconds(zero=True), default=0.5,
                         help="seconds a status may wait for a response it overtook (each topic has its own route "
                              "through a gateway); 0 derives every status at once (default: 0.5)")
     add_log_arg(parser)
     add_zenoh_args(parser)
-    args = parser.parse_args(argv)
-    if not (math.isfinite(args.hold) and args.hold >= 0):
-        parser.error(f"--hold must be a finite number of seconds, 0 or more, not {args.hold}")
-    return args
+    return parser
 
 
+@one_line_errors("python -m services.bridge_ros2")
 def main(argv: list[str] | None = None) -> int:
-    args = parse_args(argv)
+    args = build_parser().parse_args(argv)
     setup_logging(args)
-    try:
-        system, _ = load_system(args.system)
-        typemap = load_typemap(args.system)
-    except SkinetError as exc:
-        print(str(exc), file=sys.stderr)
-        return 2
+    system, _ = load_live_system(args.system)
+    typemap = load_typemap(args.system)
+    if args.replay and not Path(args.replay).exists():
+        raise SourceError.at(args.replay, None, "cannot read file: No such file or directory")
     source = args.source or default_source(args.instance)
-    session = zenoh.open(config_from_args(args))
+    session = open_session(config_from_args(args))
     try:
         if args.replay:
             return _replay(session, system, typemap, args, source)
         stop = threading.Event()
         for sig in (signal.SIGINT, signal.SIGTERM):
             signal.signal(sig, lambda *_: stop.set())
-        try:
-            bridge = start_bridge(session, system, typemap, source=source, instance_id=args.instance, hold=args.hold,
-                                  style=KeyStyle(args.rmw_zenoh, args.namespace, args.domain,
-                                                 args.ros_distro == "humble"))
-        except (SkinetError, ValueError) as exc:
-            print(str(exc), file=sys.stderr)
-            return 2
+        bridge = start_bridge(session, system, typemap, source=source, instance_id=args.instance, hold=args.hold,
+                              style=KeyStyle(args.rmw_zenoh, args.namespace, args.domain,
+                                             args.ros_distro == "humble"))  # errors: one line
         while not stop.wait(0.5):
             pass
         bridge.close()
@@ -102,12 +95,10 @@ def _replay(session: zenoh.Session, system, typemap, args: argparse.Namespace, s
     try:
         feed = replay_bag(args.replay, system, typemap, lambda ev: publishers[ev.skillset].put(encode(ev)),
                           source=source, realtime=args.realtime, hold=args.hold)
-    except SkinetError as exc:
-        print(str(exc), file=sys.stderr)
-        return 2
+    except SkinetError:
+        raise
     except Exception as exc:  # rosbags reader errors: not a bag, missing file, unknown storage
-        print(f"{args.replay}: cannot replay: {exc}", file=sys.stderr)
-        return 2
+        raise SourceError.at(args.replay, None, f"cannot replay: {exc}") from None
     c = feed.counters
     log.info("replayed %s: %d messages, %d events (%d unnamed), %d malformed",
              args.replay, c.messages, c.events, c.unexplained, c.malformed)

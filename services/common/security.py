@@ -29,7 +29,7 @@ from cryptography.hazmat.primitives import hashes, serialization
 from cryptography.hazmat.primitives.asymmetric import ec
 from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
-USERS = ("bridge", "monitor", "predictor", "robot", "observer")
+USERS = ("bridge", "monitor", "predictor", "robot", "observer", "hub")
 DAY = datetime.timedelta(days=1)
 
 

@@ -15,16 +15,87 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 
 import zenoh
 
 LOOPBACK = "tcp/127.0.0.1:0"  # a peer's default endpoint: this host only, any free port
 ROUTER_LOOPBACK = "tcp/127.0.0.1:7447"  # a router's
 
+from skinet.errors import Pos, SkinetError, SourceError
+from skinet.files import read_text
+
+MODES = ("peer", "client", "router")
+# Protocols whose address is HOST:PORT (the others, e.g. unixsock-stream, take a path).
+_IP_PROTOCOLS = {"tcp", "udp", "tls", "quic", "ws"}
+_ENDPOINT = re.compile(r"^(?P<proto>[a-z][a-z0-9+\-]*)/(?P<address>[^?#]+)(?:\?[^#]*)?(?:#.*)?$")
+_HOST_PORT = re.compile(r"^(?P<host>\[[0-9A-Fa-f:.]+\]|[^:\[\]]+):(?P<port>[^:]*)$")
+_RUST_PLACE = re.compile(r"\s+at \S+\.rs:\d+\.?")  # " at /root/.cargo/.../x.rs:62." in ZError texts
+_JSON_MESSAGE = re.compile(r'msg: "(?P<msg>(?:[^"\\]|\\.)*)", location: Some\(Location \{ line: (?P<line>\d+), '
+                           r"column: (?P<col>\d+)")
+_JSON5_SYNTAX = re.compile(r"-->\s*(?P<line>\d+):(?P<col>\d+).*?=\s*(?P<msg>[^\n]+)", re.S)
+
+
+class ZenohSetupError(SkinetError):
+    """A Zenoh option, configuration file or session that cannot be used (one line)."""
+
+
+def check_endpoint(endpoint: str, option: str) -> str:
+    """``PROTOCOL/ADDRESS`` with a port in 0-65535 for IP protocols; raises :class:`ZenohSetupError`."""
+    m = _ENDPOINT.match(endpoint)
+    if m is None:
+        raise ZenohSetupError(f"{option} '{endpoint}': an endpoint is PROTOCOL/ADDRESS, e.g. tcp/127.0.0.1:7447")
+    if m["proto"] in _IP_PROTOCOLS:
+        hp = _HOST_PORT.match(m["address"])
+        if hp is None:
+            raise ZenohSetupError(f"{option} '{endpoint}': the address must be HOST:PORT, e.g. tcp/127.0.0.1:7447")
+        if not hp["port"].isdigit() or int(hp["port"]) > 65535:
+            raise ZenohSetupError(f"{option} '{endpoint}': port '{hp['port']}' is not a number from 0 to 65535")
+    return endpoint
+
+
+def _clean(text: str) -> str:
+    """One line, without Rust source places and a final full stop."""
+    return " ".join(_RUST_PLACE.sub("", text.replace('\\"', '"')).split()).rstrip(".")
+
+
+def zenoh_reason(exc: BaseException) -> str:
+    """The human part of a ZError, on one line."""
+    m = _JSON_MESSAGE.search(str(exc))
+    return _clean(str(exc) if m is None else m["msg"])
+
+
+def load_config_file(path: str) -> zenoh.Config:
+    """A JSON5 Zenoh configuration file; errors name the file (and line:column when Zenoh gives one)."""
+    read_text(path)  # a missing or unreadable file (or a folder): the usual "cannot read file" error
+    try:
+        return zenoh.Config.from_file(path)
+    except zenoh.ZError as exc:
+        m = _JSON_MESSAGE.search(str(exc)) or _JSON5_SYNTAX.search(str(exc))
+        pos = None if m is None else Pos(int(m["line"]), int(m["col"]))
+        reason = zenoh_reason(exc) if m is None else _clean(m["msg"])
+        raise SourceError.at(path, pos, f"invalid Zenoh configuration: {reason}") from None
+
+
+def open_session(config: zenoh.Config) -> zenoh.Session:
+    """``zenoh.open`` with a one-line :class:`ZenohSetupError` (port in use, nobody to connect to, ...)."""
+    try:
+        return zenoh.open(config)
+    except zenoh.ZError as exc:
+        reason = zenoh_reason(exc)
+        busy = re.search(r"bound to (\S+): \[.*Address already in use", reason)
+        if busy:
+            reason = f"cannot listen on {busy[1]}: address already in use"
+        unreachable = re.match(r"Unable to connect to any of \[(.*)\]", reason)
+        if unreachable:
+            endpoints = re.findall(r"\(([^()]*)\)", unreachable[1]) or [unreachable[1]]
+            reason = f"nothing answers at {', '.join(endpoints)}"
+        raise ZenohSetupError(f"cannot open the Zenoh session: {reason}") from None
+
 
 def add_zenoh_args(parser: argparse.ArgumentParser) -> None:
     g = parser.add_argument_group("zenoh")
-    g.add_argument("--mode", "-m", choices=["peer", "client", "router"],
+    g.add_argument("--mode", "-m", choices=MODES,
                    default=os.environ.get("SKINET_ZENOH_MODE", "peer"), help="session mode (default: peer)")
     g.add_argument("--connect", "-e", action="append", default=None,
                    help="endpoint to connect to, e.g. tcp/127.0.0.1:7447 (repeatable)")
@@ -56,8 +127,14 @@ def session_config(
 
     Without ``listen``, a peer or router listens on loopback only, unless the file
     ``config_file`` says where; multicast scouting is off unless asked for.
+    Raises :class:`ZenohSetupError` or :class:`SourceError` (the file) with one line.
     """
-    config = zenoh.Config.from_file(config_file) if config_file else zenoh.Config()
+    if mode not in MODES:
+        raise ZenohSetupError(f"Zenoh mode '{mode}' is not one of {', '.join(MODES)}")
+    for option, endpoints in (("--connect", connect), ("--listen", listen)):
+        for endpoint in endpoints or ():
+            check_endpoint(endpoint, option)
+    config = load_config_file(config_file) if config_file else zenoh.Config()
     config.insert_json5("mode", json.dumps(mode))
     if connect:
         config.insert_json5("connect/endpoints", json.dumps(connect))
@@ -70,13 +147,16 @@ def session_config(
 
 
 def config_from_args(args: argparse.Namespace) -> zenoh.Config:
-    return session_config(
-        args.mode,
-        args.connect if args.connect is not None else _env_list("SKINET_ZENOH_CONNECT"),
-        args.listen if args.listen is not None else _env_list("SKINET_ZENOH_LISTEN"),
-        args.zenoh_config,
-        args.multicast_scouting,
-    )
+    """The session configuration of a service's flags; bad environment values are named as such."""
+    if args.mode not in MODES:  # argparse does not check choices on a default from the environment
+        raise ZenohSetupError(f"SKINET_ZENOH_MODE '{args.mode}' is not one of {', '.join(MODES)}")
+    endpoints = {}
+    for option, env in (("connect", "SKINET_ZENOH_CONNECT"), ("listen", "SKINET_ZENOH_LISTEN")):
+        endpoints[option] = getattr(args, option)
+        if endpoints[option] is None:
+            endpoints[option] = [check_endpoint(e, env) for e in _env_list(env)]
+    return session_config(args.mode, endpoints["connect"], endpoints["listen"], args.zenoh_config,
+                          args.multicast_scouting)
 
 
 def undeclare(*entities: object) -> None:
@@ -86,3 +166,8 @@ def undeclare(*entities: object) -> None:
             entity.undeclare()  # type: ignore[attr-defined]
         except zenoh.ZError:
             pass  # session already closed
+
+
+def zenoh_error(exc: Exception) -> str:
+    """A Zenoh error in one line, without the Rust source location (`` at .../x.rs:12.``)."""
+    return re.sub(r"\s+at \S+\.rs:\d+\.?$", "", " ".join(str(exc).split()))

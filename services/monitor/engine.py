@@ -194,8 +194,13 @@ class Engine:
         self.last_seq[(ev.skillset, ev.source)] = (ev.epoch, ev.seq)
         return True
 
-    def apply(self, ev: CanonicalEvent) -> Step:
-        """Advance the live marking by ``ev`` (already seq-checked) and build its step."""
+    def apply(self, ev: CanonicalEvent) -> Step | None:
+        """Advance the live marking by ``ev`` (already seq-checked) and build its step.
+
+        None for a status that only confirms the live marking (a bridge's status at
+        start-up): it is no step, so that step numbers count the mission's transitions
+        as ``skinet demo`` and the simulator do.
+        """
         status = ev.status
         observed = None if status is None else (tuple(status.resources.items()), tuple(status.running))
         before = self.live.marking.get(ev.skillset)
@@ -212,6 +217,8 @@ class Engine:
         self.counters.applied += 1
         if hit[2] is not None:
             self.counters.divergences += 1
+        if ev.transition is None and not hit[1] and hit[2] is None:
+            return None
         return self._step(f"{ev.skillset}:{ev.transition or 'status'}#{ev.seq}", hit[1], hit[2])
 
     def prediction(self, key: MarkingKey | None = None) -> Prediction | None:

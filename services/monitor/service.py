@@ -59,12 +59,17 @@ class Monitor:
     """A running monitor; build it with :func:`start_monitor`."""
 
     def __init__(self, session: zenoh.Session, system: System, *, instance_id: str | None = None,
-                 budget: float = 1.0, query_timeout: float | None = None, retry: float = 0.5,
+                 budget: float = 1.0, query_timeout: float | None = None, retry: float = 0.5, stall: float = 0.5,
                  prediction_cache: int = 256, indirect: bool = True, express: bool = True,
                  resync_timeout: float = 2.0):
         self.session, self.system = session, system
         self.instance_id = keys.check_chunk(instance_id or uuid.uuid4().hex[:8], "instance id")
         name = keys.check_chunk(system.name, "system name")
+        others = _tokens(session, keys.alive(name, "monitor", "*"))
+        if others:
+            raise SystemNameTaken(
+                f"system '{name}' is already monitored by {others[0].rsplit('/', 1)[-1]} on this Zenoh network: "
+                f"give each robot its own system name ([system] name in its .toml)")
         self.bundle = bundle(system)
         self.digest = self.bundle.digest
         self._model_payload = encode(self.bundle)
@@ -83,16 +88,19 @@ class Monitor:
             ("state", keys.state(name)), ("verdicts", keys.verdicts(name)),
             ("unsafe", keys.unsafe(name)), ("state_space", keys.state_space(name)))}
         self._predict = PredictionClient(session, system, self.digest, self._on_prediction,
-                                         budget=budget, timeout=query_timeout, retry=retry)
+                                         budget=budget, timeout=query_timeout, retry=retry, stall=stall)
         with self._lock:
             self._publish(self._engine.initial())
         self._queryable = session.declare_queryable(keys.model(name, self.digest), self._on_model_query)
         self._predictors = session.liveliness().declare_subscriber(
             keys.alive("*", "predictor", "*"), self._on_predictor_token)
+        for token in _tokens(session, keys.alive("*", "predictor", "*")):  # the pool before the first query
+            self._predict.instance(token, True)
         self._sub, self._misses = event_subscriber(
             session, keys.events(name, "*"), zenoh.handlers.Callback(self._on_event, indirect=indirect), self._on_miss)
         # Declared last: whoever sees the token also sees the declarations above.
         self._token = session.liveliness().declare_token(keys.alive(name, "monitor", self.instance_id))
+        self._twins = session.liveliness().declare_subscriber(keys.alive(name, "monitor", "*"), self._on_monitor_token)
         self._predict.want(self._engine.key, self._engine.marking())
 
     # -- public API -----------------------------------------------------------------
@@ -130,7 +138,7 @@ class Monitor:
                 return
             self._closed = True  # callbacks still running return at once
             self._changed.notify_all()
-        undeclare(self._misses, self._sub, self._predictors, self._queryable, self._token)
+        undeclare(self._misses, self._sub, self._predictors, self._twins, self._queryable, self._token)
         self._predict.close()
         with self._lock:
             undeclare(*self._pub.values())
@@ -225,6 +233,8 @@ class Monitor:
         """Apply a checked event and publish its step (lock held)."""
         engine = self._engine
         step = engine.apply(ev)
+        if step is None:  # a status confirming the live marking
+            return
         self._publish(step)
         if step.divergence:
             self._warn(engine.counters.divergences, "divergence at %s#%d: %s", ev.skillset, ev.seq, step.divergence)
@@ -256,13 +266,21 @@ class Monitor:
             query.reply(keys.model(self.system.name, self.digest), self._model_payload)
 
     def _on_predictor_token(self, sample: zenoh.Sample) -> None:
-        if sample.kind == zenoh.SampleKind.PUT:
+        alive = sample.kind == zenoh.SampleKind.PUT
+        self._predict.instance(str(sample.key_expr), alive)
+        if alive:
             with self._lock:
                 stale = self._engine.prediction() is None
                 key, marking = self._engine.key, self._engine.marking()
             if stale:
-                self._predict.poke()
                 self._predict.want(key, marking)
+
+    def _on_monitor_token(self, sample: zenoh.Sample) -> None:
+        """A monitor of the same system name appeared later (a link between robots came up)."""
+        other = str(sample.key_expr).rsplit("/", 1)[-1]
+        if sample.kind == zenoh.SampleKind.PUT and other != self.instance_id:
+            log.error("another monitor (%s) of system '%s' is now reachable: two robots with the same system "
+                      "name? give each its own ([system] name in its .toml)", other, self.system.name)
 
     # -- helpers (call with the lock held) --------------------------------------------
 
@@ -283,12 +301,22 @@ class Monitor:
             log.warning(fmt + " [#%d]", *args, count)
 
 
+class SystemNameTaken(ValueError):
+    """Another monitor of a system with the same name is reachable (two robots, one name)."""
+
+
+def _tokens(session: zenoh.Session, key_expr: str, timeout: float = 2.0) -> list[str]:
+    """The liveliness tokens alive under ``key_expr`` (returns as soon as the router answers)."""
+    return sorted(str(r.ok.key_expr) for r in session.liveliness().get(key_expr, timeout=timeout) if r.ok is not None)
+
+
 def start_monitor(session: zenoh.Session, system: System, **options: object) -> Monitor:
     """Start a monitor of ``system`` on ``session`` (which may be shared, SPEC §7).
 
     Options: ``instance_id``, ``budget`` (predictor exploration seconds, default 1),
-    ``query_timeout`` (default budget + 1 s), ``retry`` (seconds between queries
-    nobody answers, default 0.5), ``prediction_cache`` (markings whose prediction
+    ``query_timeout`` (default 1.25 x budget + 3 s, see :func:`prediction.query_timeout`),
+    ``retry`` (seconds between queries nobody answers, default 0.5), ``stall`` (seconds of silence after which a
+    predictor instance counts as frozen and another one is asked, default 0.5), ``prediction_cache`` (markings whose prediction
     is kept, default 256), ``indirect`` (run the event callback in a Python thread
     of its own rather than on Zenoh's, default True), ``express`` (publish without
     batching, default True; False lets Zenoh batch the three messages of a step,

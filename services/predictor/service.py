@@ -6,17 +6,24 @@ not know the digest fetches the :class:`~skinet.wire.messages.ModelBundle` from
 ``skinet/<system>/model/<digest>``, checks that the bundle hashes to the digest
 before anything is built (a sha256 of its text) and keeps the bundle in a small LRU
 cache.  Building the nets, exploring from the marking and computing the replies'
-risks happen in worker processes (:mod:`services.sandbox`) under the
-request's budget and a memory limit, so a hostile model costs an instance at most
-its limits.  Every failure is answered with ``ok=False`` and a one-line ``error``
+risks happen in worker processes (:mod:`services.sandbox`) under the request's
+budget and an address-space limit, so a hostile model costs an instance at most its
+limits.  Every failure is answered with ``ok=False`` and a one-line ``error``
 (SPEC §7: bad input never crashes a service).
 
 Threading: Zenoh runs query callbacks on its own threads, and a ``get`` issued from
 inside one (the model fetch) may deadlock.  The callback therefore only decodes the
-request (cheap) and hands valid ones to a bounded pool of threads, one per worker
-process; when the pool is full it answers ``busy`` at once rather than holding the
-caller's ``get`` open.  Threads finish every query with ``with query:`` so the
-caller's ``get`` returns as soon as the reply is sent (ZENOH.md).
+request (cheap) and hands valid ones to a bounded worker pool; when the pool is full
+it answers ``busy`` at once rather than holding the caller's ``get`` open.  Workers
+finish every query with ``with query:`` so the caller's ``get`` returns as soon as
+the reply is sent (ZENOH.md).
+
+Load spreading (SPEC §7): besides the shared key every instance answers on its own
+key ``skinet/<system>/predict/<id>``, found through its liveliness token.  There it
+first replies an empty payload when it admits a request, then another every
+:data:`HEARTBEAT` seconds until the answer: a client that hears nothing for a few
+heartbeats knows the instance froze and asks another one, long before the query
+timeout or the liveliness lease.
 """
 
 from __future__ import annotations
@@ -32,12 +39,14 @@ import zenoh
 
 from services.common.zenoh_config import undeclare
 from services.sandbox import Worker, WorkerError
+from skinet.verify.explore import DEFAULT_MEMORY_LIMIT
 from skinet.wire import keys
 from skinet.wire.codec import DecodeError, decode, encode
 from skinet.wire.convert import bundle_digest
 from skinet.wire.messages import ModelBundle, PredictReply, PredictRequest
 
 log = logging.getLogger("skinet.predictor")
+HEARTBEAT = 0.1  # seconds between "working" replies on the instance key (schemas/README.md)
 
 
 class FetchError(Exception):
@@ -65,6 +74,7 @@ class Predictor:
         cache_size: int = 4,
         fetch_timeout: float = 2.0,
         max_budget: float = 10.0,
+        memory_limit: int = DEFAULT_MEMORY_LIMIT,
         memory_mb: int = 2048,
         grace: float = 1.0,
         max_bundle: int = 1 << 20,
@@ -73,6 +83,8 @@ class Predictor:
         self.instance_id = keys.check_chunk(instance_id, "instance id")
         self.fetch_timeout = fetch_timeout
         self.max_budget = max_budget
+        # Each worker may hold one forecast: the process limit is shared between them.
+        self.memory_limit = memory_limit // max(1, workers)
         self.cache_size = cache_size
         self.grace = grace
         self.max_bundle = max_bundle
@@ -83,17 +95,21 @@ class Predictor:
         self._lock = threading.Lock()  # cache and counts (callbacks and workers)
         self._fetch_lock = threading.Lock()  # one fetch at a time; waiters then hit the cache
         self._slots = threading.BoundedSemaphore(max_pending)  # queued + running requests
-        self._workers: list[Worker] = [Worker(self.instance_id, memory_mb=memory_mb, cache_size=cache_size)
-                                       for _ in range(workers)]
+        self._workers = [Worker(self.instance_id, memory_mb=memory_mb, cache_size=cache_size) for _ in range(workers)]
         self._idle: queue.SimpleQueue[Worker] = queue.SimpleQueue()
         for w in self._workers:
             w.wait_ready()  # announce nothing before the workers can answer
             self._idle.put(w)
         self._pool = ThreadPoolExecutor(workers, thread_name_prefix=f"predictor-{instance_id}")
         self._closed = False
+        self._working: set[zenoh.Query] = set()  # admitted on the instance key, not answered yet
+        self._heartbeat = threading.Thread(target=self._beat, name=f"predictor-{instance_id}-heartbeat", daemon=True)
+        self._heartbeat.start()
         self._queryable = session.declare_queryable(keys.predict("*"), self._on_query, complete=True)
+        self._own = session.declare_queryable(keys.predict_instance("*", instance_id), self._on_query, complete=True)
         self._token = session.liveliness().declare_token(keys.alive(keys.ANY_SYSTEM, "predictor", instance_id))
-        log.info("predictor %s serving %s", instance_id, keys.predict("*"))
+        log.info("predictor %s serving %s and %s", instance_id, keys.predict("*"),
+                 keys.predict_instance("*", instance_id))
 
     # -- Zenoh thread -----------------------------------------------------------------
 
@@ -108,11 +124,14 @@ class Predictor:
                 return
             reason = "busy: too many pending requests"
             if self._slots.acquire(blocking=False):
+                if key.count("/") == 3:  # the instance key: "working" replies until the answer
+                    self._working_on(query)
                 try:
                     self._pool.submit(self._serve, query, request)
                     return
                 except RuntimeError:  # close() shut the pool down while this query was arriving
                     self._slots.release()
+                    self._done_with(query)
                     reason = "predictor shutting down"
             with query:
                 self._reply(query, self._failure(request.system, request.digest, request.seq, reason), "busy")
@@ -125,7 +144,7 @@ class Predictor:
 
     def _decode(self, query: zenoh.Query, key: str) -> PredictRequest | PredictReply:
         """The request, or the failure reply to send for it."""
-        system = key.split("/")[1] if key.count("/") == 2 and "*" not in key else keys.ANY_SYSTEM
+        system = key.split("/")[1] if key.count("/") in (2, 3) and "*" not in key else keys.ANY_SYSTEM
         if query.payload is None:
             return self._failure(system, "", 0, "empty payload")
         try:
@@ -137,7 +156,7 @@ class Predictor:
             keys.check_chunk(request.digest, "digest")
         except ValueError as exc:
             return self._failure(system, "", request.seq, str(exc))
-        if not zenoh.KeyExpr(key).intersects(zenoh.KeyExpr(keys.predict(request.system))):
+        if not zenoh.KeyExpr(key).intersects(zenoh.KeyExpr(self._reply_key(key, request.system))):
             mismatch = f"system '{request.system}' does not match key '{key}'"
             return self._failure(system, request.digest, request.seq, mismatch)
         return request
@@ -147,31 +166,57 @@ class Predictor:
     def _serve(self, query: zenoh.Query, request: PredictRequest) -> None:
         with query:
             try:
-                kind, payload = self.answer(request)
-                self._send(query, request.system, payload, kind)
+                reply = self.answer(request)
+                self._done_with(query)
+                self._reply(query, reply)
             except Exception:
                 log.exception("predictor %s: request %s failed", self.instance_id, request.seq)
             finally:
+                self._done_with(query)
                 self._slots.release()
 
-    def answer(self, request: PredictRequest) -> tuple[str, bytes]:
-        """``("ok", encoded reply)`` or ``("failed", encoded failure)`` for one request (SPEC §6)."""
+    # -- heartbeats on the instance key --------------------------------------------------
+
+    def _working_on(self, query: zenoh.Query) -> None:
+        """Admitted: say so at once, then every HEARTBEAT seconds until :meth:`_done_with`."""
+        with self._lock:
+            self._working.add(query)
+            self._say_working(query)
+
+    def _done_with(self, query: zenoh.Query) -> None:
+        with self._lock:
+            self._working.discard(query)
+
+    def _beat(self) -> None:
+        while not self._closed:
+            time.sleep(HEARTBEAT)
+            with self._lock:  # held while replying: _done_with waits, so no reply after the answer
+                for query in self._working:
+                    self._say_working(query)
+
+    @staticmethod
+    def _say_working(query: zenoh.Query) -> None:
+        try:
+            query.reply(query.key_expr, b"", express=True, congestion_control=zenoh.CongestionControl.DROP)
+        except zenoh.ZError:
+            pass  # the caller gave up (timeout, cancelled)
+
+    def answer(self, request: PredictRequest) -> PredictReply:
+        """Compute the reply to one request (SPEC §6) in a worker process; failures become ``ok=False``."""
         try:
             model = self._bundle(request.system, request.digest)
             worker = self._idle.get()
             try:
                 payload = worker.run(request.digest, model, encode(request), min(request.budget, self.max_budget),
-                                     self.grace)
+                                     self.grace, self.memory_limit)
             finally:
                 self._idle.put(worker)
-            return "ok", payload
-        except (FetchError, WorkerError) as exc:
+            return decode(payload, PredictReply)
+        except (FetchError, WorkerError, DecodeError) as exc:
             if isinstance(exc, WorkerError) and "worker" in str(exc):
                 with self._lock:
                     self.counts["killed"] += 1
-            failure = self._failure(request.system, request.digest, request.seq, str(exc))
-            self._warn(failure, "failed")
-            return "failed", encode(failure)
+            return self._failure(request.system, request.digest, request.seq, str(exc))
 
     def _bundle(self, name: str, digest: str) -> bytes:
         """The checked bundle of ``digest``, from the cache or fetched from its monitor."""
@@ -239,35 +284,37 @@ class Predictor:
 
     def _reply(self, query: zenoh.Query, reply: PredictReply, failure: str = "failed") -> None:
         kind = "ok" if reply.ok else failure
-        self._warn(reply, kind)
-        self._send(query, reply.system, encode(reply), kind)
-
-    def _warn(self, reply: PredictReply, kind: str) -> None:
+        with self._lock:
+            self.counts[kind] += 1
         if not reply.ok:
             log.warning("predictor %s: %s request %s/%s: %s",
                         self.instance_id, kind, reply.system, reply.seq, reply.error)
-
-    def _send(self, query: zenoh.Query, system: str, payload: bytes, kind: str) -> None:
-        with self._lock:
-            self.counts[kind] += 1
+        key = self._reply_key(str(query.key_expr), reply.system)
+        # On the instance key the client retries a lost answer: DROP, so that a reply to a
+        # robot behind a dead link never blocks the replies to the others (schemas/README.md).
+        congestion = zenoh.CongestionControl.DROP if key.count("/") == 3 else zenoh.CongestionControl.BLOCK
         try:
-            query.reply(keys.predict(system), payload, express=True)
+            query.reply(key, encode(reply), express=True, congestion_control=congestion)
         except zenoh.ZError as exc:  # the session closed under us, or a key the query does not accept
             log.warning("predictor %s: cannot reply to %s: %s", self.instance_id, query.key_expr, exc)
 
-    def close(self) -> None:
-        """Stop serving: withdraw the token and the queryable, kill the worker processes.
+    def _reply_key(self, query_key: str, system: str) -> str:
+        """Replies go to the key that was queried: the shared one or this instance's."""
+        own = query_key.count("/") == 3
+        return keys.predict_instance(system, self.instance_id) if own else keys.predict(system)
 
-        Queued and running requests are answered with a one-line failure at once
-        (a hostile job must not delay a shutdown).  The session stays open (it may
-        be shared); a standalone instance closes it afterwards.
+    def close(self) -> None:
+        """Stop serving: withdraw the token and the queryable, then answer the queued work.
+
+        The session stays open (it may be shared); a standalone instance closes it
+        afterwards, so no admitted query is lost.
         """
         if self._closed:
             return
         self._closed = True
-        undeclare(self._token, self._queryable)
+        undeclare(self._token, self._queryable, self._own)
         for w in self._workers:
-            w.close()
+            w.close()  # queued and running requests are answered with a one-line failure at once
         self._pool.shutdown(wait=True)
         log.info("predictor %s stopped (%s)", self.instance_id, dict(self.counts))
 
@@ -281,6 +328,7 @@ def start_predictor(
     cache_size: int = 4,
     fetch_timeout: float = 2.0,
     max_budget: float = 10.0,
+    memory_limit: int = DEFAULT_MEMORY_LIMIT,
     memory_mb: int = 2048,
     grace: float = 1.0,
 ) -> Predictor:
@@ -292,9 +340,11 @@ def start_predictor(
         cache_size: systems kept (least recently used dropped first).
         fetch_timeout: seconds to wait for a model bundle.
         max_budget: cap on a request's exploration budget, seconds.
-        memory_mb: address-space limit of each worker process, MB.
+        memory_limit: peak memory the core may use, bytes, shared by the workers (SPEC §6.1);
+            beyond it answers are truncated.
+        memory_mb: address-space limit of each worker process, MB (killed beyond it).
         grace: seconds past a request's budget before its worker is killed.
     """
     return Predictor(session, instance_id, workers=workers, max_pending=max_pending,
                      cache_size=cache_size, fetch_timeout=fetch_timeout, max_budget=max_budget,
-                     memory_mb=memory_mb, grace=grace)
+                     memory_limit=memory_limit, memory_mb=memory_mb, grace=grace)

@@ -2,42 +2,40 @@
 
 from __future__ import annotations
 
-import argparse
 import os
 import signal
 import sys
 import time
 from pathlib import Path
 
-import zenoh
 
-from services.common.cli import add_log_arg, setup_logging
-from services.common.zenoh_config import add_zenoh_args, config_from_args
+from services.common.cli import add_log_arg, one_line_errors, setup_logging
+from services.common.zenoh_config import add_zenoh_args, config_from_args, open_session
 from services.simulator.driver import StepRun
 from services.simulator.service import Simulator
-from skinet.errors import SkinetError
-from skinet.files import load_system, load_typemap, read_text
-from skinet.mission import parse_scenario
+from skinet.cli.options import ArgumentParser, count, key_prefix, load_live_system, number, seconds
+from skinet.files import load_typemap, read_text
+from skinet.mission import check_scenario, parse_scenario
 from skinet.ros.keys import KeyStyle
 
 
-def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(
+def build_parser() -> ArgumentParser:
+    parser = ArgumentParser(
         prog="python -m services.simulator",
         description="Simulate the skillset managers of a scenario's system on Zenoh (ROS 2 topic keys, CDR) "
                     "and play the scenario's steps as operator requests and skill outcomes.",
     )
     parser.add_argument("scenario", help="scenario TOML file (its [scenario] system names the system file)")
-    parser.add_argument("--speed", type=float, default=float(os.environ.get("SKINET_SPEED", "1")),
+    parser.add_argument("--speed", type=number(0, env="SKINET_SPEED"), default=os.environ.get("SKINET_SPEED", "1"),
                         help="time scale: step t is played at t/SPEED seconds; 0 = as fast as possible (default: 1)")
-    parser.add_argument("--start-delay", type=float, default=0.0,
+    parser.add_argument("--start-delay", type=seconds(zero=True), default=0.0,
                         help="seconds to wait before the first step (time for a bridge to connect)")
-    parser.add_argument("--linger", type=float, default=1.0,
+    parser.add_argument("--linger", type=seconds(zero=True), default=1.0,
                         help="seconds to keep serving after the last step (default: 1)")
     parser.add_argument("--rmw-zenoh", action="store_true", help="rmw_zenoh keys and attachments instead of "
                         "zenoh-bridge-ros2dds keys")
-    parser.add_argument("--namespace", default="", help="zenoh-bridge-ros2dds namespace prefix of the keys")
-    parser.add_argument("--domain", type=int, default=0, help="ROS domain id in rmw_zenoh keys (default: 0)")
+    parser.add_argument("--namespace", type=key_prefix("namespace"), default="", help="zenoh-bridge-ros2dds namespace prefix of the keys")
+    parser.add_argument("--domain", type=count(0, 232), default=0, help="ROS domain id in rmw_zenoh keys (default: 0)")
     parser.add_argument("--ros-distro", default=os.environ.get("ROS_DISTRO", "jazzy"),
                         help="ROS 2 distribution of rmw_zenoh (default: $ROS_DISTRO or jazzy); on humble the keys "
                              "carry TypeHashNotSupported instead of a RIHS01 type hash")
@@ -48,10 +46,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                              "configures DDS (default: unicast discovery on 127.0.0.1)")
     add_log_arg(parser)
     add_zenoh_args(parser)
-    args = parser.parse_args(argv)
-    if args.dds and args.rmw_zenoh:
-        parser.error("--dds and --rmw-zenoh exclude each other")
-    return args
+    return parser
 
 
 def _line(run: StepRun) -> str:
@@ -61,20 +56,21 @@ def _line(run: StepRun) -> str:
     return f"step {run.index:>3}  t={s.t:>6.1f}s  {run.action:<9} {what}{' ' + run.detail if run.detail else ''}{flag}"
 
 
+@one_line_errors("python -m services.simulator")
 def main(argv: list[str] | None = None) -> int:
-    args = parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.dds and args.rmw_zenoh:
+        parser.error("--dds and --rmw-zenoh exclude each other")
     setup_logging(args)
-    try:
-        path = Path(args.scenario)
-        scenario = parse_scenario(read_text(path), str(path))
-        system_path = path.parent / scenario.system
-        system, _ = load_system(system_path)
-        typemap = load_typemap(system_path)
-    except SkinetError as exc:
-        print(str(exc), file=sys.stderr)
-        return 2
+    path = Path(args.scenario)
+    scenario = parse_scenario(read_text(path), str(path))
+    system_path = path.parent / scenario.system
+    system, _ = load_live_system(system_path)
+    check_scenario(scenario, system, str(path))
+    typemap = load_typemap(system_path)
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
-    session = zenoh.open(config_from_args(args))
+    session = open_session(config_from_args(args))
     try:
         style = KeyStyle(args.rmw_zenoh, args.namespace, args.domain, args.ros_distro == "humble")
         if args.dds:
@@ -88,11 +84,7 @@ def main(argv: list[str] | None = None) -> int:
         else:
             sim = Simulator(session, system, typemap, style=style)
         time.sleep(max(0.0, args.start_delay))
-        try:
-            sim.drive(scenario, args.speed, on_step=lambda run: print(_line(run), flush=True))
-        except ValueError as exc:
-            print(f"error: {exc}", file=sys.stderr)
-            return 2
+        sim.drive(scenario, args.speed, on_step=lambda run: print(_line(run), flush=True))  # errors: one line
         time.sleep(max(0.0, args.linger))
         sim.close()
     except KeyboardInterrupt:

@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING, Literal
 import zenoh
 
 from skinet.lang.model import Skillset
-from skinet.mission import Scenario, Step
+from skinet.mission import Scenario, Step, step_numbers
 from skinet.ros.interfaces import event_request_topic, skill_topic
 from skinet.ros.keys import ManagerTopic, manager_topics, rmw_attachment
 from skinet.ros.typestore import default_instance, encode
@@ -52,7 +52,7 @@ class Planned:
 class StepRun:
     """One step as played: ``ok`` is false when the robot did not do it (e.g. skill not running)."""
 
-    index: int  # 1-based, as in :class:`skinet.mission.StepRecord`
+    index: int  # the step number of :func:`skinet.mission.step_numbers`, as in :class:`skinet.mission.StepRecord`
     step: Step
     action: Action
     ok: bool
@@ -130,7 +130,7 @@ def drive(simulator: Simulator, scenario: Scenario, speed: float = 1.0,
     runs: list[StepRun] = []
     origin = time.monotonic()
     try:
-        for i, (step, p) in enumerate(zip(scenario.steps, plans), 1):
+        for i, step, p in zip(step_numbers(scenario), scenario.steps, plans):
             if speed > 0 and not math.isinf(speed):
                 delay = origin + step.t / speed - time.monotonic()
                 if delay > 0:

@@ -7,9 +7,10 @@ import re
 from pathlib import Path
 
 from skinet.errors import SourceError
-from skinet.files import load_system, load_typemap, read_text
+from skinet.cli.options import load_live_system
 from skinet.explain import plural, warning_line
-from skinet.mission import Scenario, StepRecord, flagged_before, parse_scenario, replay
+from skinet.files import load_typemap, read_text
+from skinet.mission import Scenario, StepRecord, check_scenario, flagged_before, parse_scenario, replay
 from skinet.mission_log import records_to_log
 from skinet.system import System
 from skinet.wire.log import log_line
@@ -40,9 +41,18 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def cmd_demo(args: argparse.Namespace) -> int:
     paths = [Path(p) for p in args.scenarios] or default_scenarios()
-    for path in paths:
+    for folder in {args.log, args.timeline} - {None}:  # before the runs, not after the first one
+        try:
+            Path(folder).mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise SourceError.at(folder, None, f"cannot create folder: {exc.strerror}") from None
+    runs = []
+    for path in paths:  # every file checked before the first run starts
         scenario = parse_scenario(read_text(path), str(path))
-        system, _ = load_system(path.parent / scenario.system)
+        system, _ = load_live_system(path.parent / scenario.system)
+        check_scenario(scenario, system, str(path))
+        runs.append((path, scenario, system))
+    for path, scenario, system in runs:
         if args.core:
             records = replay(system, scenario, predict=not args.no_predict)
             how = "core replay"
@@ -51,7 +61,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
             records = run_chain(system, load_typemap(path.parent / scenario.system), scenario, predict=not args.no_predict)
             how = "simulated managers -> CDR -> bridge -> monitor -> predictor, embedded Zenoh session"
-        print(f"== {scenario.name} run ({path}): {len(records)} steps, system {system.name}")
+        steps = sum(r.step.transition is not None for r in records)  # considered commands are no steps
+        print(f"== {scenario.name} run ({path}): {steps} steps, system {system.name}")
         print(f"   chain: {how}")
         for r in records:
             if args.all_steps or r.violations or r.warnings or r.flagged or r.divergence or r.step.consider:

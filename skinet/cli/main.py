@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 from collections.abc import Sequence
@@ -12,19 +13,21 @@ from pathlib import Path
 
 from skinet import __version__
 from skinet.errors import SkinetError, SourceError
-from skinet.files import load_model, load_state, load_system
-from skinet.lang.expr import to_text
+from skinet.files import load_model, load_state
 from skinet.net.build import build_net
 from skinet.net.export import FORMATS
 from skinet.props.parser import parse_formula
 from skinet.system import System, marking_problems, marking_to_json
 from skinet.verify.algorithm1 import analyse
 from skinet.verify.ctl import Kripke, check
-from skinet.verify.explore import explore
+from skinet.verify.explore import Deadline, explore
 from skinet.verify.predict import Forecast, forecast
 from skinet.cli import demo
 from skinet.cli import record as record_cli
 from skinet.cli import timeline as timeline_cli
+from skinet.cli.options import ArgumentParser, count, load_live_system, print_warnings
+from skinet.cli.options import seconds as duration
+from skinet.cli.memory import add_memory_arg, memory_limit
 from skinet.cli.render import analysis_text, seconds, table
 from skinet.cli.run import add_commands as add_service_commands
 
@@ -43,7 +46,7 @@ examples:
   skinet net skillsets/spot.rl --eventless --format tina -o spot.net
   skinet unsafe skillsets/spot_arm.toml --state state.json
   skinet explore skillsets/spot_arm.toml --budget 2
-  skinet ctl skillsets/spot_arm.toml "AG not (spot:Busy and manipulator:Busy)"
+  skinet ctl skillsets/spot_arm.toml "AG not (spot:Busy and manipulator:Busy)" "EF spot:Busy"
   skinet run skillsets/spot_arm.toml --listen tcp/127.0.0.1:7447
   skinet router --listen tcp/0.0.0.0:7447
 
@@ -65,15 +68,24 @@ def main(argv: Sequence[str] | None = None) -> int:
     except SkinetError as exc:
         print(f"skinet: error: {exc}", file=sys.stderr)
         return 1
+    except ValueError as exc:  # a name that cannot be a Zenoh key (skinet/wire/keys.py)
+        print(f"skinet: error: {exc}", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         print("skinet: interrupted", file=sys.stderr)
         return 130
     except BrokenPipeError:
         return 0
+    except Exception as exc:  # a bug: still one line, the traceback on request
+        if os.environ.get("SKINET_TRACEBACK"):
+            raise
+        print(f"skinet: internal error: {type(exc).__name__}: {exc} (a bug: please report it; "
+              "SKINET_TRACEBACK=1 shows the traceback)", file=sys.stderr)
+        return 70
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
+    p = ArgumentParser(
         prog="skinet", description=DESCRIPTION, epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     p.add_argument("--version", action="version", version=f"skinet {__version__}")
@@ -84,8 +96,8 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--json", action="store_true", help="machine-readable summary")
     c.set_defaults(func=cmd_parse)
 
-    c = sub.add_parser("net", help="print the Petri net of a skillset (SPEC §3)")
-    c.add_argument("file", help="skillset model (.rl)")
+    c = sub.add_parser("net", help="print the Petri net of a skillset or of a system's union (SPEC §3)")
+    c.add_argument("file", help="skillset model (.rl), or system file (.toml) for the union of its skillsets")
     c.add_argument("--eventless", action="store_true", help="the eventless net SkN^e (no event transitions)")
     c.add_argument("--format", choices=sorted(FORMATS), default="json", help="output format (default: json)")
     c.add_argument("-o", "--output", help="write to this file instead of standard output")
@@ -94,7 +106,8 @@ def build_parser() -> argparse.ArgumentParser:
     c = sub.add_parser("unsafe", help="Algorithm 1: unsafe transitions at a marking (SPEC §5)")
     _system_args(c)
     c.add_argument("--no-predict", action="store_true", help="explicit constraints only (mu1 empty)")
-    c.add_argument("--literal", action="store_true", help="also list transitions flagged for properties already violated")
+    c.add_argument("--literal", action="store_true",
+                   help="also print the literal algorithm's list (it flags transitions for properties already violated)")
     c.set_defaults(func=cmd_unsafe)
 
     c = sub.add_parser("explore", help="explore the eventless state space and compute mu1 (SPEC §6)")
@@ -102,9 +115,10 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--progress", action="store_true", help="print progress per layer on standard error")
     c.set_defaults(func=cmd_explore)
 
-    c = sub.add_parser("ctl", help="model-check a CTL formula on the explored state space")
+    c = sub.add_parser("ctl", help="model-check CTL formulas on the explored state space")
     _system_args(c)
-    c.add_argument("formula", help='e.g. "AG not (spot:Busy and manipulator:Busy)"')
+    c.add_argument("formulas", nargs="+", metavar="FORMULA",
+                   help='one or more formulas, e.g. "AG not (spot:Busy and manipulator:Busy)" (one exploration for all)')
     c.set_defaults(func=cmd_ctl)
 
     demo.add_parser(sub)
@@ -121,8 +135,9 @@ def _system_args(c: argparse.ArgumentParser) -> None:
         "--what-if", action="store_true",
         help="accept a --state the robot cannot be in (an invariant violated, or unreachable) for what-if analysis",
     )
-    c.add_argument("--budget", type=float, default=10.0, help="exploration time budget in seconds (default: 10)")
-    c.add_argument("--max-depth", type=int, help="expand at most this many breadth-first layers")
+    c.add_argument("--budget", type=duration(), default=10.0, help="exploration time budget in seconds (default: 10)")
+    c.add_argument("--max-depth", type=count(0), help="expand at most this many breadth-first layers")
+    add_memory_arg(c)
     c.add_argument("--no-seeds", action="store_true", help="do not seed exploration with firable events")
     c.add_argument("--json", action="store_true", help="machine-readable result")
     c.add_argument("--af", choices=["fair", "literal"],
@@ -135,9 +150,8 @@ def _system_args(c: argparse.ArgumentParser) -> None:
 
 
 def _load(args: argparse.Namespace) -> tuple[System, dict[str, int]]:
-    system, warnings = load_system(args.system)
-    for w in warnings:
-        print(str(w), file=sys.stderr)
+    system, warnings = load_live_system(args.system)
+    print_warnings(warnings)
     system = replace(system, prediction=system.prediction.override(
         af=args.af, forced=args.forced, events_uncontrollable=args.events_uncontrollable))
     marking = load_state(args.state, system, args.what_if) if args.state else system.initial_marking()
@@ -157,7 +171,7 @@ def _forecast(args: argparse.Namespace, system: System, marking: dict[str, int],
 
     result = forecast(
         system, marking, budget=args.budget, max_depth=args.max_depth, event_seeds=not args.no_seeds, progress=progress,
-        full=full,
+        full=full, memory_limit=memory_limit(args),
     )
     if last[0] > 0:
         print(file=sys.stderr)
@@ -170,8 +184,7 @@ def _emit(data: object) -> None:
 
 def cmd_parse(args: argparse.Namespace) -> int:
     model = load_model(args.file)
-    for w in model.warnings:
-        print(str(w), file=sys.stderr)
+    print_warnings(model.warnings)
     summary = [
         {
             "skillset": s.name,
@@ -195,15 +208,19 @@ def cmd_parse(args: argparse.Namespace) -> int:
 
 
 def cmd_net(args: argparse.Namespace) -> int:
-    model = load_model(args.file)
-    for w in model.warnings:
-        print(str(w), file=sys.stderr)
-    nets = [build_net(s, eventless=args.eventless) for s in model.skillsets]
-    if len(nets) > 1:
-        from skinet.net.union import union
+    from skinet.net.union import union
 
-        nets = [union(nets, Path(args.file).stem)]
-    text = FORMATS[args.format](nets[0])
+    if args.file.endswith(".toml"):  # a system file: the union of its skillsets' nets
+        system, warnings = load_live_system(args.file)
+        print_warnings(warnings)
+        nets = [c.eventless if args.eventless else c.net for c in system.components]
+        name = system.name
+    else:
+        model = load_model(args.file)
+        print_warnings(model.warnings)
+        nets = [build_net(s, eventless=args.eventless) for s in model.skillsets]
+        name = Path(args.file).stem
+    text = FORMATS[args.format](nets[0] if len(nets) == 1 else union(nets, name))
     if args.output:
         try:
             Path(args.output).write_text(text)
@@ -223,16 +240,18 @@ def cmd_unsafe(args: argparse.Namespace) -> int:
             "system": system.name,
             "marking": marking_to_json(system, marking),
             "violated": result.violated,
-            "unsafe": [u.__dict__ | {"witness": list(u.witness)} for u in (result.unsafe if args.literal else result.operator_unsafe())],
+            "unsafe": [u.__dict__ | {"witness": list(u.witness)} for u in result.operator_unsafe()],
             "options": {p.name: system.prediction.of(p.name).__dict__ for p in system.properties},
             "recovery": {p: [r.__dict__ for r in rs] for p, rs in result.recovery.items()},
+            **({"literal": [u.__dict__ | {"witness": list(u.witness)} for u in result.unsafe]} if args.literal else {}),
             "prediction": None if prediction is None else prediction.report(),
         })
         return 0
     print(analysis_text(system, result, args.literal))
     if prediction is not None:
         r = prediction.report()
-        state = "complete" if r["complete"] else f"TRUNCATED at depth {r['depth']} (unknown constraints possible)"
+        state = "complete" if r["complete"] else (
+            f"TRUNCATED by {r['truncated_by']} at depth {r['depth']} (unknown constraints possible)")
         print(f"prediction: {state}, {r['markings']} markings in {seconds(r['elapsed'])}")
     else:
         print("prediction: off (explicit constraints only)")
@@ -248,7 +267,7 @@ def cmd_explore(args: argparse.Namespace) -> int:
         return 0
     print(f"explored {system.name} ({'with' if not args.no_seeds else 'without'} event seeds)")
     rows = [
-        ["complete", "yes" if report["complete"] else "no (time budget or depth limit reached)"],
+        ["complete", "yes" if report["complete"] else f"no (truncated by {report['truncated_by']})"],
         ["elapsed", seconds(report["elapsed"])],
         ["depth", report["depth"]],
         ["markings", report["markings"]],
@@ -271,32 +290,42 @@ def cmd_explore(args: argparse.Namespace) -> int:
 
 def cmd_ctl(args: argparse.Namespace) -> int:
     system, marking = _load(args)
-    formula = parse_formula(args.formula, {c.name: c.skillset for c in system.components})
-    space = explore(system, marking, budget=args.budget, max_depth=args.max_depth, event_seeds=not args.no_seeds)
+    skillsets = {c.name: c.skillset for c in system.components}
+    several = len(args.formulas) > 1
+    formulas = [parse_formula(text, skillsets, f"<formula {n}>" if several else "<formula>")  # before exploring
+                for n, text in enumerate(args.formulas, 1)]
+    space = explore(system, marking, max_depth=args.max_depth, event_seeds=not args.no_seeds,
+                    memory_limit=memory_limit(args), properties=len(formulas), deadline=Deadline.after(args.budget))
     kripke = Kripke(space)
-    t0 = time.perf_counter()
-    result = check(kripke, formula)
-    elapsed = time.perf_counter() - t0
     start = space.code(marking)
-    if start is not None and result.lower[start]:
-        verdict = "holds"
-    elif start is not None and not result.upper[start]:
-        verdict = "fails"
-    else:
-        verdict = "undecided"
-    holds = int(result.lower.sum())
-    maybe = int((result.upper & ~result.lower).sum())
-    if args.json:
-        _emit({
-            "formula": to_text(formula), "markings": space.markings, "satisfying": holds,
-            "undecided": maybe, "start": verdict, "complete": space.complete, "elapsed": elapsed,
+    results = []
+    for text, formula in zip(args.formulas, formulas):
+        t0 = time.perf_counter()
+        result = check(kripke, formula)
+        elapsed = time.perf_counter() - t0
+        if start is not None and result.lower[start]:
+            verdict = "holds"
+        elif start is not None and not result.upper[start]:
+            verdict = "fails"
+        else:
+            verdict = "undecided"
+        results.append({
+            "formula": text, "markings": space.markings, "satisfying": int(result.lower.sum()),
+            "undecided": int((result.upper & ~result.lower).sum()), "start": verdict, "complete": kripke.truncated_by is None,
+            "truncated_by": kripke.truncated_by, "elapsed": elapsed,
         })
+    if args.json:
+        _emit(results)
         return 0
-    print(f"formula: {args.formula}")
-    print(f"satisfied by {holds} of {space.markings} markings" + (f" ({maybe} undecided)" if maybe else ""))
-    print(f"at the start marking: {verdict}")
-    if not space.complete:
-        print(f"exploration truncated at depth {space.expanded_depth}: answers are three-valued")
+    for n, r in enumerate(results):
+        if n:
+            print()
+        print(f"formula: {r['formula']}")
+        print(f"satisfied by {r['satisfying']} of {r['markings']} markings"
+              + (f" ({r['undecided']} undecided)" if r["undecided"] else ""))
+        print(f"at the start marking: {r['start']}")
+    if kripke.truncated_by is not None:
+        print(f"truncated by {kripke.truncated_by} at depth {space.expanded_depth}: answers are three-valued")
     return 0
 
 

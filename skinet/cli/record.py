@@ -20,8 +20,9 @@ from typing import TextIO
 import zenoh
 from pydantic import BaseModel
 
-from services.common.zenoh_config import add_zenoh_args, config_from_args
-from skinet.errors import SkinetError, SourceError
+from services.common.zenoh_config import add_zenoh_args, config_from_args, open_session
+from skinet.cli.options import count, key_name, seconds
+from skinet.errors import SourceError
 from skinet.wire import keys
 from skinet.wire.codec import DecodeError, decode
 from skinet.wire.log import log_line
@@ -39,10 +40,11 @@ MODEL_RETRY = 2.0  # seconds between model queries while none answered
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     c = sub.add_parser("record", help="record the monitor's messages of a system into a JSON Lines log")
-    c.add_argument("system", metavar="SYSTEM_NAME", help="system name, as in skinet/<system>/... keys")
+    c.add_argument("system", metavar="SYSTEM_NAME", type=key_name("system name"),
+                   help="system name, as in skinet/<system>/... keys")
     c.add_argument("-o", "--output", required=True, metavar="LOG.jsonl", help="log file to write (overwritten)")
-    c.add_argument("--duration", type=float, help="stop after this many seconds (default: until Ctrl-C)")
-    c.add_argument("--count", type=int, help="stop after writing this many messages")
+    c.add_argument("--duration", type=seconds(), help="stop after this many seconds (default: until Ctrl-C)")
+    c.add_argument("--count", type=count(), help="stop after writing this many messages")
     c.add_argument("--no-model", action="store_true", help="do not query the monitor's model bundle")
     add_zenoh_args(c)
     c.set_defaults(func=cmd_record)
@@ -120,11 +122,8 @@ class Recorder:
 
 
 def cmd_record(args: argparse.Namespace) -> int:
-    system = keys.check_chunk(args.system, "system name")
-    try:
-        session = zenoh.open(config_from_args(args))
-    except zenoh.ZError as exc:
-        raise SkinetError(f"cannot open a Zenoh session: {exc}") from None
+    system = args.system
+    session = open_session(config_from_args(args))
     try:
         out = open(args.output, "w", encoding="utf-8")
     except OSError as exc:

@@ -38,22 +38,27 @@ def unsafe_row(u: UnsafeTransition) -> list[object]:
 
 
 def analysis_text(system: System, analysis: Analysis, literal: bool) -> str:
-    """Algorithm 1's result as the operator sees it (or the literal list)."""
+    """Algorithm 1's result as the operator sees it; ``literal`` adds the literal algorithm's list."""
     out = [f"system {system.name} at marking:", *marking_lines(system, analysis.marking)]
     status = [f"{p.name} {'VIOLATED' if p.name in analysis.violated else 'holds'}" for p in system.properties]
     out.append("properties: " + (", ".join(status) or "none"))
-    unsafe = analysis.unsafe if literal else analysis.operator_unsafe()
-    out.append(f"unsafe transitions ({len(unsafe)}):")
+    out.extend(_unsafe_lines("unsafe transitions", analysis.operator_unsafe()))
+    for prop, recovery in analysis.recovery.items():
+        names = ", ".join(f"{r.skillset}:{r.transition}" for r in recovery) or "none"
+        out.append(f"{prop} is violated now; recovery transitions: {names}")
+    if literal:
+        out.extend(_unsafe_lines("literal Algorithm 1 (also for properties already violated)", analysis.unsafe))
+    return "\n".join(out)
+
+
+def _unsafe_lines(title: str, unsafe: Sequence[UnsafeTransition]) -> list[str]:
+    out = [f"{title} ({len(unsafe)}):"]
     if unsafe:
         header = ["skillset", "transition", "property", "constraint", "control", "steps", "witness"]
         out.extend("  " + line for line in table([unsafe_row(u) for u in unsafe], header).splitlines())
         out.append("why:")
         out.extend("  " + warning_line(u) for u in unsafe)
-    if not literal:
-        for prop, recovery in analysis.recovery.items():
-            names = ", ".join(f"{r.skillset}:{r.transition}" for r in recovery) or "none"
-            out.append(f"{prop} is violated now; recovery transitions: {names}")
-    return "\n".join(out)
+    return out
 
 
 def seconds(value: float) -> str:

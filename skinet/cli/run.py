@@ -5,6 +5,9 @@ from __future__ import annotations
 import argparse
 import os
 
+from skinet.cli.memory import add_memory_arg
+from skinet.cli.options import seconds
+
 
 def _zenoh_args(c: argparse.ArgumentParser, listen_help: str) -> None:
     c.add_argument("--listen", "-l", action="append", help=listen_help)
@@ -19,8 +22,9 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     c = sub.add_parser("run", help="monitor and predictor in one process with a live operator view (SPEC §7)")
     c.add_argument("system", help="system file (.toml), e.g. skillsets/spot_arm.toml")
     c.add_argument("--once", action="store_true", help="print one view (after the first prediction) and exit")
-    c.add_argument("--duration", type=float, help="stop after this many seconds")
-    c.add_argument("--budget", type=float, default=1.0, help="prediction budget in seconds (default: 1)")
+    c.add_argument("--duration", type=seconds(), help="stop after this many seconds")
+    c.add_argument("--budget", type=seconds(), default=1.0, help="prediction budget in seconds (default: 1)")
+    add_memory_arg(c)
     _zenoh_args(c, "endpoint on which a bridge in another process can connect (default: tcp/127.0.0.1:0, "
                    "this host only)")
     c.set_defaults(func=cmd_run)

@@ -6,12 +6,12 @@ matplotlib is imported only when a picture is drawn (Agg canvas, no display).
 from __future__ import annotations
 
 import argparse
-import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from skinet.cli.options import count, load_live_system, print_warnings
 from skinet.errors import SkinetError, SourceError
-from skinet.files import load_system, read_text
+from skinet.files import read_text
 from skinet.system import System
 from skinet.wire.log import Entry, read_log
 from skinet.wire.messages import LiveState
@@ -24,7 +24,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="picture to write (format from the extension: png, svg, pdf)")
     c.add_argument("--title", help="title (default: system and log name)")
     c.add_argument("--system", help="system file (.toml) giving the lanes when the log has no model bundle")
-    c.add_argument("--dpi", type=int, default=100, help="resolution of raster pictures (default: 100)")
+    c.add_argument("--dpi", type=count(10, 1200), default=100, help="resolution of raster pictures (default: 100)")
     c.set_defaults(func=cmd_timeline)
 
 
@@ -40,7 +40,7 @@ def save_timeline(entries: Sequence[Entry], title: str, output: str | Path, syst
             path.parent.mkdir(parents=True, exist_ok=True)
         figure.savefig(path, dpi=dpi)
     except (OSError, ValueError) as exc:
-        reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
+        reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else " ".join(str(exc).split())
         raise SourceError.at(str(path), None, f"cannot write picture: {reason}") from None
     return path
 
@@ -49,10 +49,10 @@ def cmd_timeline(args: argparse.Namespace) -> int:
     entries = read_log(read_text(args.log).splitlines(), args.log)
     system = None
     if args.system:
-        system, warnings = load_system(args.system)
-        for w in warnings:
-            print(str(w), file=sys.stderr)
-    title = args.title if args.title is not None else _default_title(entries, args.log)
+        system, warnings = load_live_system(args.system)
+        print_warnings(warnings)
+    # "$" would start matplotlib's mathtext (and a syntax error there): titles are shown as written.
+    title = args.title.replace("$", r"\$") if args.title is not None else _default_title(entries, args.log)
     try:
         path = save_timeline(entries, title, args.output, system, args.dpi)
     except SkinetError as exc:

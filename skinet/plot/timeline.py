@@ -125,7 +125,7 @@ def draw(entries: Sequence[Entry], title: str = "", system: System | None = None
         for a in (ax, low):
             a.axvline(t - t0, color=VIOLATED, linestyle=":", linewidth=1.0, zorder=0.5)
     summary = "no violation" if not onsets else f"{len(onsets)} violation{'s' * (len(onsets) > 1)}: " + ", ".join(
-        f"{p} at {t - t0:g} s" for t, p in onsets)
+        f"{p} at {f'{t - t0:.1f}'.removesuffix('.0')} s" for t, p in onsets)
 
     ax.set_yticks(range(len(labels)), labels=list(reversed(labels)), fontsize=8)
     for tick in ax.get_yticklabels():
@@ -163,7 +163,7 @@ def _events(ax: Axes, entries: Sequence[Entry], t0: float, y: dict[str, int], co
             groups.setdefault((ss, _kind(transition)), []).append(t - t0)
     for (ss, kind), xs in groups.items():
         ax.scatter(xs, [y[f"{ss} events"]] * len(xs), marker=MARKERS[kind], s=26, color=colour.get(ss, "black"),
-                   edgecolors="black", linewidths=0.4, zorder=3)
+                   edgecolors=None if kind == "status" else "black", linewidths=0.4, zorder=3)  # "|" has no face
     for e in entries:
         m = e.message
         if isinstance(m, LiveState) and m.divergence and ":" in m.event:
@@ -232,7 +232,7 @@ def _properties(ax: Axes, entries: Sequence[Entry], t0: float, end: float, lanes
             bars = [(a, b - a) for (a, b), ok in zip(zip(times[:-1], times[1:]), values) if ok is status and b > a]
             ax.broken_barh(bars, (lane - 0.38, 0.76), facecolors=fill, linewidth=0, zorder=1)
         for a, b in _merge([(a, b) for (a, b), ok in zip(zip(times[:-1], times[1:]), values) if ok is False]):
-            ax.annotate(f"VIOLATED at {a:g} s", (b, lane), xytext=(3, 0), textcoords="offset points", fontsize=7,
+            ax.annotate(f"VIOLATED at {f'{a:.1f}'.removesuffix('.0')} s", (b, lane), xytext=(3, 0), textcoords="offset points", fontsize=7,
                         color=VIOLATED, weight="bold", va="center", ha="left", zorder=4)
 
 

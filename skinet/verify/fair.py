@@ -70,13 +70,19 @@ def _graph(kripke: Kripke) -> _Graph:
     return cache
 
 
-def fair_scc_markings(kripke: Kripke, inside: np.ndarray, fairness: Sequence[np.ndarray]) -> np.ndarray:
-    """Expanded markings of ``inside`` that lie in a fair SCC of the graph restricted to ``inside``."""
+def fair_scc_markings(kripke: Kripke, inside: np.ndarray, fairness: Sequence[np.ndarray]) -> np.ndarray | None:
+    """Expanded markings of ``inside`` that lie in a fair SCC of the graph restricted to ``inside``.
+
+    ``None`` when the deadline has expired (the decomposition is one call: it
+    is not started late).
+    """
+    if kripke._expired():
+        return None
     from scipy.sparse import csr_matrix
     from scipy.sparse.csgraph import connected_components
 
     g = _graph(kripke)
-    out = np.zeros_like(kripke.stored)
+    out = np.zeros(kripke.space.size, dtype=bool)
     member = inside[g.nodes]
     n = int(np.count_nonzero(member))
     if n == 0:
@@ -100,11 +106,15 @@ def fair_eg(
     kripke: Kripke, f_lower: np.ndarray, f_upper: np.ndarray, fairness: Sequence[np.ndarray]
 ) -> tuple[np.ndarray, np.ndarray]:
     """Fair EG f as ``(lower, upper)``: where a fair path staying in f provably / possibly exists."""
-    lower = kripke.eu(f_lower, fair_scc_markings(kripke, f_lower, fairness), False)
-    if np.array_equal(f_lower, f_upper) and not kripke.frontier.any():
+    sccs = fair_scc_markings(kripke, f_lower, fairness)
+    # Past the deadline nothing is proven (lower) and every marking of f may go on fairly (upper).
+    lower = np.zeros(kripke.space.size, dtype=bool) if sccs is None else kripke.eu(f_lower, sccs, False)
+    if np.array_equal(f_lower, f_upper) and not kripke.frontier.any() and not kripke.cut:
         return lower, lower.copy()
-    targets = fair_scc_markings(kripke, f_upper, fairness) | (kripke.frontier & f_upper)
-    return lower, kripke.eu(f_upper, targets, True)
+    sccs = fair_scc_markings(kripke, f_upper, fairness)
+    if sccs is None:
+        return lower, f_upper & kripke.stored
+    return lower, kripke.eu(f_upper, sccs | (kripke.frontier & f_upper), True)
 
 
 def fair_af(kripke: Kripke, g: Result, fairness: Sequence[np.ndarray]) -> Result:
@@ -116,7 +126,7 @@ def fair_af(kripke: Kripke, g: Result, fairness: Sequence[np.ndarray]) -> Result
 
 def distance_to(kripke: Kripke, target: np.ndarray) -> np.ndarray:
     """Fewest steps from each stored marking to ``target`` (:data:`UNREACHED` when none is known)."""
-    dist = np.full(kripke.space.box, UNREACHED, dtype=np.int32)
+    dist = np.full(kripke.space.size, UNREACHED, dtype=np.int32)
     layer = np.flatnonzero(target & kripke.stored)
     dist[layer] = 0
     level = 0

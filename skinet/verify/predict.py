@@ -27,7 +27,8 @@ from skinet.props.formula import Temporal
 from skinet.system import System
 from skinet.verify.algorithm1 import PredictionVerdict
 from skinet.verify.ctl import UNREACHED, Kripke, Result, check
-from skinet.verify.explore import StateSpace, explore
+from skinet.verify.explore import DEFAULT_MEMORY_LIMIT, Deadline, StateSpace, explore
+from skinet.verify.compositional import compositional_oracle, one_step
 from skinet.verify.fair import distance_to, fair_af, skill_fairness
 from skinet.verify.forced import forced_mask
 
@@ -80,12 +81,14 @@ class Forecast:
     space: StateSpace
     kripke: Kripke
     risks: dict[str, PropertyRisk]
+    # Verdicts for markings the exploration left undecided (SPEC §6.4), when given.
+    fallback: Callable[[str, Mapping[str, int]], PredictionVerdict] | None = None
 
     def verdict(self, prop: str, marking: Mapping[str, int]) -> PredictionVerdict:
         """Algorithm 1's view of one marking (the :class:`Prediction` protocol)."""
         code = self.space.code(marking)
         if code is None or not self.kripke.stored[code]:
-            return PredictionVerdict("undecided")
+            return self.fallback(prop, marking) if self.fallback else PredictionVerdict("undecided")
         risk = self.risks[prop]
         if risk.mu1.lower[code]:
             rank = int(self.ranks(prop)[code])
@@ -94,7 +97,7 @@ class Forecast:
             return PredictionVerdict("dangerous", rank, self.witness(prop, code))
         if not risk.mu1.upper[code]:
             return PredictionVerdict("safe")
-        return PredictionVerdict("undecided")
+        return self.fallback(prop, marking) if self.fallback else PredictionVerdict("undecided")
 
     def ranks(self, prop: str) -> np.ndarray:
         """Steps to a violation of ``prop`` per marking: the bound (literal AF) or the fewest (fair AF).
@@ -122,8 +125,9 @@ class Forecast:
         stored = self.kripke.stored
         return {
             "elapsed": s.elapsed,
-            "complete": s.complete,
+            "complete": s.complete and self.kripke.truncated_by is None,
             "timeout_reached": not s.complete,
+            "truncated_by": self.kripke.truncated_by,
             "depth": s.expanded_depth,
             "markings": s.markings,
             "edges": s.edges,
@@ -144,14 +148,30 @@ def forecast(
     progress: Callable[[int, int, float], None] | None = None,
     options: PredictionOptions | None = None,
     full: bool = False,
+    memory_limit: int | None = DEFAULT_MEMORY_LIMIT,
+    compositional: bool = True,
 ) -> Forecast:
     """Explore from ``marking`` and compute mu1 for every property of ``system``.
 
     ``options`` (default: the system's) choose fair or literal AF per property;
     ``full`` also computes the other AF and the forced set, for reports.
+    ``budget`` (seconds) bounds the whole answer, fixpoints included;
+    ``memory_limit`` (bytes, whole process) bounds what is stored (SPEC §6.1).
+    With ``compositional``, markings the exploration leaves undecided are
+    decided by :mod:`skinet.verify.compositional` where it can (SPEC §6.4).
     """
     options = options or system.prediction
-    space = explore(system, marking, budget=budget, max_depth=max_depth, event_seeds=event_seeds, progress=progress)
+    fair = full or any(options.of(p.name).af == "fair" for p in system.properties)
+    if fair or compositional:
+        # Imported before the clock starts: a one-time start-up cost (about 0.3 s), not part of an answer.
+        import scipy.sparse.csgraph  # noqa: F401
+
+    answer = Deadline.after(budget)
+    # Half the budget is kept for the compositional verdicts of what stays undecided.
+    deadline = Deadline.after(None if budget is None else 0.5 * budget)
+    space = explore(system, marking, max_depth=max_depth, event_seeds=event_seeds, progress=progress,
+                    memory_limit=memory_limit, properties=len(system.properties) * (2 if full else 1),
+                    edges=fair, deadline=deadline)
     kripke = Kripke(space)
     fairness: list[np.ndarray] | None = None
     risks = {}
@@ -167,4 +187,17 @@ def forecast(
         if full:
             risk.forced = forced_mask(system, space.components, space.local, p, opts.events_uncontrollable)
         risks[p.name] = risk
-    return Forecast(space, kripke, risks)
+    oracle = compositional_oracle(system)
+    oracle.remember(space.components)
+    props = {p.name: p for p in system.properties}
+
+    def fallback(prop: str, marking: Mapping[str, int]) -> PredictionVerdict:
+        return oracle.verdict(props[prop], marking, options.of(prop).af, answer)
+
+    if compositional and kripke.truncated_by is not None:
+        # Algorithm 1 asks about the one-step successors: decide them now, within the budget.
+        for after in one_step(system, dict(marking or system.initial_marking())):
+            for name in props:
+                fallback(name, after)
+
+    return Forecast(space, kripke, risks, fallback if compositional else None)

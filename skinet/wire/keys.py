@@ -9,13 +9,16 @@ key                                       publisher           payload
 ``skinet/<system>/unsafe``                monitor             :class:`UnsafeReport`
 ``skinet/<system>/state_space``           monitor             :class:`StateSpaceReport`
 ``skinet/<system>/predict``               predictor (query)   :class:`PredictRequest` -> :class:`PredictReply`
+``skinet/<system>/predict/<instance>``    one predictor       the same, after empty "working" replies
 ``skinet/<system>/model/<digest>``        monitor (query)     -> :class:`ModelBundle`
 ``skinet/<system>/resync/<skillset>``     bridge_ros2 (query) -> :class:`CanonicalEvent` (last status)
 ``skinet/<system>/alive/<service>/<id>``  every instance      liveliness token
 ========================================  ==================  ==========================
 
-Predictors are not tied to one system: they answer on ``skinet/*/predict``
-and hold their liveliness token under ``skinet/_any/alive/predictor/<id>``.
+Predictors are not tied to one system: they answer on ``skinet/*/predict`` (any
+instance) and ``skinet/*/predict/<id>`` (this one), and hold their liveliness token
+under ``skinet/_any/alive/predictor/<id>``; a client spreading its queries finds the
+ids through the tokens.
 """
 
 from __future__ import annotations
@@ -56,6 +59,11 @@ def state_space(system: str) -> str:
 
 def predict(system: str = "*") -> str:
     return f"{ROOT}/{system}/predict"
+
+
+def predict_instance(system: str, instance: str) -> str:
+    """The key of one predictor instance (``instance`` may be ``*``)."""
+    return f"{ROOT}/{system}/predict/{instance}"
 
 
 def model(system: str, digest: str = "*") -> str:

@@ -116,18 +116,38 @@ def test_unsafe_violated_now_lists_recovery(capsys: pytest.CaptureFixture[str], 
 
 
 
+# safety_guard violated: Spot walks while the arm is at RD.
+WALKING_ARM_AT_RD = {"spot": {"resources": {"power_status": "PowerOn", "posture": "Standing", "control_mode": "Busy"},
+                              "running": ["go_to_waypoint"]},
+                     "manipulator": {"resources": {"arm_status": "RD"}}}
+
+
 def test_literal_list_keeps_violated_properties(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
-    s = state(tmp_path, {"spot": {"resources": {"power_status": "PowerOn", "posture": "Standing",
-                                                "control_mode": "Busy"}, "running": ["go_to_waypoint"]},
-                         "manipulator": {"resources": {"arm_status": "RD"}}})
+    s = state(tmp_path, WALKING_ARM_AT_RD)
     _, operator, _ = run(capsys, "unsafe", SYSTEM, "--state", s, "--json")
-    _, literal, _ = run(capsys, "unsafe", SYSTEM, "--state", s, "--literal", "--json")
-    shown = lambda out: [(u["property"], u["transition"]) for u in json.loads(out)["unsafe"]]  # noqa: E731
-    assert shown(operator) == [("action_guard", "arm_joystick.start"), ("action_guard", "arm_RD_to_HP.start")]
-    assert shown(literal) == [
+    _, both, _ = run(capsys, "unsafe", SYSTEM, "--state", s, "--literal", "--json")
+    shown = lambda items: [(u["property"], u["transition"]) for u in items]  # noqa: E731
+    assert "literal" not in json.loads(operator)
+    assert shown(json.loads(operator)["unsafe"]) == [("action_guard", "arm_joystick.start"),
+                                                     ("action_guard", "arm_RD_to_HP.start")]
+    # --literal adds the literal list to the operator view (its help says "also"), replacing nothing.
+    assert json.loads(both)["unsafe"] == json.loads(operator)["unsafe"]
+    assert json.loads(both)["recovery"] == json.loads(operator)["recovery"]
+    assert shown(json.loads(both)["literal"]) == [
         ("action_guard", "arm_joystick.start"), ("safety_guard", "arm_joystick.start"),
         ("action_guard", "arm_RD_to_HP.start"), ("safety_guard", "arm_RD_to_HP.start"),
     ]
+
+
+def test_literal_text_keeps_the_operator_view(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    s = state(tmp_path, WALKING_ARM_AT_RD)
+    _, operator, _ = run(capsys, "unsafe", SYSTEM, "--state", s, "--no-predict")
+    _, both, _ = run(capsys, "unsafe", SYSTEM, "--state", s, "--no-predict", "--literal")
+    view = operator.splitlines()[:-1]  # without the "prediction: off" line
+    assert both.splitlines()[:len(view)] == view
+    assert "safety_guard is violated now; recovery transitions: spot:power_switchoff," in operator
+    assert both.splitlines()[len(view)] == "literal Algorithm 1 (also for properties already violated) (4):"
+    assert "  manipulator  arm_joystick.start  safety_guard  explicit    controllable  0" in both.splitlines()
 
 
 def test_state_errors(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
@@ -190,8 +210,21 @@ def test_ctl(capsys: pytest.CaptureFixture[str]) -> None:
     assert code == 0
     assert out.splitlines()[1:] == ["satisfied by 63 of 63 markings", "at the start marking: holds"]
     code, out, _ = run(capsys, "ctl", SYSTEM, "AG not (spot:Busy and manipulator:Busy)", "--json")
-    data = json.loads(out)
-    assert (data["satisfying"], data["start"]) == (0, "fails")
+    (data,) = json.loads(out)
+    assert (data["formula"], data["satisfying"], data["start"]) == ("AG not (spot:Busy and manipulator:Busy)", 0, "fails")
+
+
+def test_ctl_several_formulas_share_one_exploration(capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, _ = run(capsys, "ctl", SYSTEM, "AG not spot:i_go_to_waypoint", "EF spot:Busy", "--json")
+    assert code == 0
+    assert [(d["formula"], d["satisfying"], d["markings"], d["start"]) for d in json.loads(out)] == [
+        ("AG not spot:i_go_to_waypoint", 0, 63, "fails"), ("EF spot:Busy", 63, 63, "holds")]
+    code, out, _ = run(capsys, "ctl", SYSTEM, "EF spot:Busy", "AG not spot:i_go_to_waypoint")
+    assert out.splitlines() == ["formula: EF spot:Busy", "satisfied by 63 of 63 markings", "at the start marking: holds",
+                                "", "formula: AG not spot:i_go_to_waypoint", "satisfied by 0 of 63 markings",
+                                "at the start marking: fails"]
+    code, _, err = run(capsys, "ctl", SYSTEM, "EF spot:Busy", "AG (spot:Busy")
+    assert code == 1 and err.startswith("<formula 2>:1:14: error: unexpected end of input")
 
 
 def test_ctl_syntax_error(capsys: pytest.CaptureFixture[str]) -> None:
@@ -207,7 +240,7 @@ def test_demo_reproduces_the_paper(capsys: pytest.CaptureFixture[str]) -> None:
     assert ("     safety_guard at step 33: SkiNet flagged spot:go_to_waypoint.start when it was issued at step 33 "
             "(explicit, the command itself); the operator went ahead") in out
     assert ("   warnings heeded (commands considered, flagged, not issued): 2; spot:go_to_waypoint.start explicit for "
-            "safety_guard at step 29; manipulator:arm_ready.start explicit for action_guard at step 37") in out
+            "safety_guard at step 29; manipulator:arm_ready.start explicit for action_guard at step 36") in out
     assert "   violations: 0" in out
     assert "   violations: 1; stowed_drive at step 5" in out  # the mobile manipulator after the paper's runs
 

@@ -7,7 +7,10 @@ Every session here is on 127.0.0.1 with multicast scouting off.
 from __future__ import annotations
 
 import json
+import signal
 import socket
+import subprocess
+import sys
 import tempfile
 import threading
 import time
@@ -74,6 +77,42 @@ def login_config(endpoint: str, user: str | None, password: str | None = None) -
 
 def login(endpoint: str, user: str | None, password: str | None = None) -> zenoh.Session:
     return zenoh.open(login_config(endpoint, user, password))
+
+
+class Services:
+    """Service processes (``python -m MODULE``), each a client of a router logged in as its user.
+
+    Output goes to ``folder/<module>-<n>.log``, printed when :meth:`close` stops them.
+    """
+
+    def __init__(self, folder: Path):
+        self.folder = folder
+        self.procs: list[tuple[subprocess.Popen, Path]] = []
+
+    def start(self, module: str, user: str, router: str, *args: str) -> subprocess.Popen:
+        cfg = write_login_file(self.folder / f"{user}-{len(self.procs)}.json5", user)
+        log = self.folder / f"{module}-{len(self.procs)}.log"
+        with log.open("wb") as out:
+            p = subprocess.Popen([sys.executable, "-m", module, *args, "--mode", "client", "--connect", router,
+                                  "--no-multicast-scouting", "--zenoh-config", str(cfg)],
+                                 cwd=REPO, stdout=out, stderr=subprocess.STDOUT)
+        self.procs.append((p, log))
+        return p
+
+    def log(self, proc: subprocess.Popen) -> str:
+        return next(log for p, log in self.procs if p is proc).read_text(errors="replace")
+
+    def close(self) -> None:
+        for p, _ in self.procs:
+            if p.poll() is None:
+                p.send_signal(signal.SIGTERM)
+        for p, log in self.procs:
+            try:
+                p.wait(timeout=5)
+            except subprocess.TimeoutExpired:
+                p.kill()
+                p.wait()
+            print(f"--- {' '.join(p.args[2:4])} (exit {p.returncode}) ---\n{log.read_text(errors='replace')[-3000:]}")
 
 
 def write_login_file(path: Path, user: str) -> Path:

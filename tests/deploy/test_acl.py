@@ -7,9 +7,7 @@ whose passwords the tests make (none is in the repository).  No containers: real
 
 from __future__ import annotations
 
-import signal
 import subprocess
-import sys
 import threading
 import time
 from collections.abc import Iterator
@@ -19,8 +17,8 @@ import pytest
 import zenoh
 
 from deploy_support import (
-    REPO, SYSTEM, UNASSISTED, MissionObserver, Tokens, acl_router_config, expected_violations, free_port,
-    load_scenario, login, wait_until, write_login_file,
+    REPO, SYSTEM, UNASSISTED, MissionObserver, Services, Tokens, acl_router_config, expected_violations, free_port,
+    load_scenario, login, wait_until,
 )
 from skinet.wire import keys
 from tests.services.test_outage import Outage, run
@@ -133,20 +131,25 @@ def test_each_user_publishes_only_its_own_keys(sessions: dict[str, zenoh.Session
         inbox.close()
 
 
-def _replies(session: zenoh.Session) -> list[str]:
+def _replies(session: zenoh.Session, key: str = PREDICT) -> list[str]:
     return sorted(r.ok.payload.to_string() if r.ok is not None else f"error {r.err.payload.to_string()}"
-                  for r in session.get(PREDICT, target=zenoh.QueryTarget.ALL,
+                  for r in session.get(key, target=zenoh.QueryTarget.ALL,
                                        consolidation=zenoh.ConsolidationMode.NONE, timeout=2.0))
 
 
-def test_only_predictors_answer_prediction_queries(sessions: dict[str, zenoh.Session]) -> None:
+@pytest.mark.parametrize("declared, queried", [
+    (keys.predict("*"), PREDICT),  # the shared key
+    (keys.predict_instance("*", "p1"), keys.predict_instance(SYSTEM, "p1")),  # an instance's own key
+])
+def test_only_predictors_answer_prediction_queries(sessions: dict[str, zenoh.Session], declared: str,
+                                                   queried: str) -> None:
     def answer(text: str):
         def on_query(query: zenoh.Query) -> None:
             with query:
-                query.reply(PREDICT, text)
+                query.reply(queried, text)
         return on_query
 
-    impostors = [sessions[user].declare_queryable(keys.predict("*"), answer(f"impostor {user}"), complete=True)
+    impostors = [sessions[user].declare_queryable(declared, answer(f"impostor {user}"), complete=True)
                  for user in USERS if user != "predictor"]
     impostors.append(sessions["robot"].declare_queryable("**", answer("robot on **"), complete=True))
     try:
@@ -154,14 +157,14 @@ def test_only_predictors_answer_prediction_queries(sessions: dict[str, zenoh.Ses
         # Impostors alone: their declarations never reached the router, so nothing answers
         # (and nothing holds the query until its timeout).
         t0 = time.monotonic()
-        assert _replies(sessions["asker"]) == []
+        assert _replies(sessions["asker"], queried) == []
         assert time.monotonic() - t0 < 1.0
-        genuine = sessions["predictor"].declare_queryable(keys.predict("*"), answer("predictor"), complete=True)
+        genuine = sessions["predictor"].declare_queryable(declared, answer("predictor"), complete=True)
         try:
             time.sleep(0.3)
-            assert _replies(sessions["asker"]) == ["predictor"]
+            assert _replies(sessions["asker"], queried) == ["predictor"]
             # Observers may not ask: not the predictor, not the models, not `**`.
-            assert _replies(sessions["reader"]) == []
+            assert _replies(sessions["reader"], queried) == []
             assert [r for r in sessions["reader"].get("**", timeout=1.0) if r.ok is not None] == []
         finally:
             genuine.undeclare()
@@ -182,17 +185,10 @@ def test_the_services_run_the_mission_through_the_acl_router(acl_router: str, tm
     observer_session = login(acl_router, "observer")
     observer = MissionObserver(observer_session)
     tokens = Tokens(observer_session)
-    procs: list[tuple[subprocess.Popen, Path]] = []
+    services = Services(tmp_path)
 
     def start(module: str, user: str, *args: str) -> subprocess.Popen:
-        cfg = write_login_file(tmp_path / f"{user}-{len(procs)}.json5", user)
-        log = tmp_path / f"{module}-{len(procs)}.log"
-        with log.open("wb") as out:
-            p = subprocess.Popen([sys.executable, "-m", module, *args, "--mode", "client", "--connect", acl_router,
-                                  "--no-multicast-scouting", "--zenoh-config", str(cfg)],
-                                 cwd=REPO, stdout=out, stderr=subprocess.STDOUT)
-        procs.append((p, log))
-        return p
+        return services.start(module, user, acl_router, *args)
 
     try:
         start("services.predictor", "predictor")
@@ -209,16 +205,7 @@ def test_the_services_run_the_mission_through_the_acl_router(acl_router: str, tm
     finally:
         tokens.close()
         observer.close()
-        for p, _ in procs:
-            if p.poll() is None:
-                p.send_signal(signal.SIGTERM)
-        for p, log in procs:
-            try:
-                p.wait(timeout=5)
-            except subprocess.TimeoutExpired:
-                p.kill()
-                p.wait()
-            print(f"--- {p.args[2]} (exit {p.returncode}) ---\n{log.read_text(errors='replace')[-3000:]}")
+        services.close()
         observer_session.close()
 
 

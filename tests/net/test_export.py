@@ -396,7 +396,7 @@ def test_dot_accepted_by_graphviz(mini: PetriNet, awkward: PetriNet) -> None:
 
 
 def test_formats(mini: PetriNet) -> None:
-    assert set(FORMATS) == {"json", "tina", "pnml", "dot"}
+    assert set(FORMATS) == {"json", "tina", "pnml", "dot", "promela"}
     for name, export in FORMATS.items():
         text = export(mini)
         assert isinstance(text, str) and text.endswith("\n"), name

@@ -48,9 +48,30 @@ def test_assisted_run_through_the_chain() -> None:
     assert [(r.index, [(w.transition, w.property, w.constraint, w.controllable) for w in r.warnings])
             for r in chain if r.step.consider] == [
         (29, [("go_to_waypoint.start", "safety_guard", "explicit", True)]),
-        (37, [("arm_ready.start", "action_guard", "explicit", True)]),
+        (36, [("arm_ready.start", "action_guard", "explicit", True)]),  # considered before step 36
     ]
     assert comparable(chain) == comparable(core)
+
+
+def test_step_numbers_are_the_monitors(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A record's step number is the monitor's step (LiveState.seq) after it, as `skinet run` shows it:
+    the bridge's start-up statuses are no steps, and a considered command is no step."""
+    import services.chain
+
+    seen: list[tuple[int, int, bool]] = []
+    record = services.chain._record
+
+    def spy(run, view, *rest):
+        seen.append((run.index, view.state.seq, run.step.consider is not None))
+        return record(run, view, *rest)
+
+    monkeypatch.setattr(services.chain, "_record", spy)
+    scenario = parse_scenario(read_text(MISSIONS / "assisted.toml"), "assisted")
+    system, _ = load_system(MISSIONS / scenario.system)
+    run_chain(system, load_typemap(MISSIONS / scenario.system), scenario, predict=False)
+    assert [i for i, _, considered in seen if considered] == [29, 36]
+    assert [(i, seq) for i, seq, considered in seen if not considered] == [(i, i) for i in range(1, 61)]
+    assert [(i, seq) for i, seq, considered in seen if considered] == [(29, 28), (36, 35)]  # before the step
 
 
 def test_demo_command_runs_the_chain(capsys: pytest.CaptureFixture[str]) -> None:

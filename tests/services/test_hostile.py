@@ -81,18 +81,21 @@ def test_hostile_bundle_costs_at_most_the_limits_and_the_monitor_keeps_up(peer: 
             t0 = time.monotonic()
             reply = the_reply(attacker.ask(budget=0.1, seq=n + 1))
             took = time.monotonic() - t0
-            assert (reply.ok, reply.error) == (False, f"exceeded the budget of 0.1 s (+{GRACE:g} s grace): "
-                                                      "worker killed")
+            # An answer of the core within the budget (it bounds exploration itself), or the
+            # worker killed at budget + grace.
+            killed = f"exceeded the budget of 0.1 s (+{GRACE:g} s grace): worker killed"
+            assert reply.ok or reply.error == killed, reply
             bound = 0.1 + GRACE + SLACK + (2 * startup if n else 0)  # after a kill: the replacement starts
             assert took < bound, f"attack {n}: reply after {took:.2f} s (bound {bound:.2f} s)"
         feeder.join()
-        assert predictor.counts["killed"] == 3 and predictor.counts["fetched"] == 2  # the monitor's model and h
+        assert predictor.counts["fetched"] == 2  # the monitor's model and h
         grown = (rss_kb() - before) / 1024
         assert grown < 50, f"the predictor's process grew by {grown:.0f} MB"
         deadline = time.monotonic() + 5
-        while len(states) < 65 and time.monotonic() < deadline:
+        while monitor.counters.applied < 64 and time.monotonic() < deadline:
             time.sleep(0.05)
-        assert sorted(states)[-64:] == list(range(1, 65)), "the monitor missed steps during the attack"
+        c = monitor.counters
+        assert (c.received, c.applied, c.lost, c.errors) == (64, 64, 0, 0), "the monitor missed events"
         # A genuine request still gets a real answer from the replacement worker.
         ok = monitor.predictor_stats.answered
         assert ok >= 1

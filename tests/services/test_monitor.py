@@ -258,6 +258,23 @@ def test_prediction_in_process(router, monitor_factory, session, system):
         psession.close()
 
 
+def test_big_system_answered_within_the_budget_never_a_timeout(router, monitor_factory, session, tmp_path):
+    """4 + 4 skillsets (SPEC §6.1): the predictor answers within its budget; the derived query timeout holds."""
+    fleet = load_system(_heavy_system(tmp_path))[0]
+    psession = open_client(router)
+    predictor = start_predictor(psession, "big")
+    try:
+        monitor = monitor_factory(fleet, budget=1.0)  # default query timeout: derived from the budget
+        wait_until(lambda: monitor.predictor_stats.answered >= 1, 20, "first prediction")
+        stats = monitor.predictor_stats
+        assert stats.timed_out == 0 and stats.failed == 0 and stats.last_instance == "big"
+        assert stats.last_complete is False  # truncated, yet answered
+        assert not monitor.snapshot().unsafe.prediction_stale
+    finally:
+        predictor.close()
+        psession.close()
+
+
 def test_prediction_from_predictor_process(router, monitor_factory, session, system, tmp_path):
     reports = Reports(session)
     watch = LivelinessWatch(session, keys.alive("*", "predictor", "*"))
@@ -317,13 +334,13 @@ def test_silent_predictor_times_out_without_blocking(monitor_factory, session, s
 # -- (d) predictor killed mid-query and restarted -----------------------------------------
 
 
-def _heavy_system(folder: Path) -> Path:
-    """Four Spots and four arms: exploring it outlasts any small budget (SPEC §6)."""
+def _heavy_system(folder: Path, pairs: int = 4) -> Path:
+    """Four Spots and four arms (three: fewer); the predictor uses the whole budget on it (SPEC §6.1)."""
     spot = (REPO / "skillsets" / "spot.rl").read_text()
     arm = (REPO / "skillsets" / "manipulator.rl").read_text()
     lines = ['[system]\nname = "fleet"\nproperties = "fleet.props"\n']
     props = []
-    for i in range(1, 5):
+    for i in range(1, pairs + 1):
         (folder / f"spot{i}.rl").write_text(spot.replace("skillset spot {", f"skillset spot{i} {{"))
         (folder / f"arm{i}.rl").write_text(arm.replace("skillset manipulator {", f"skillset arm{i} {{"))
         lines += [f'[[skillsets]]\nmodel = "spot{i}.rl"\n', f'[[skillsets]]\nmodel = "arm{i}.rl"\n']
@@ -344,7 +361,7 @@ def test_predictor_killed_mid_query_then_restarted(router, monitor_factory, sess
     first = spawn([*args, "doomed"], tmp_path / "doomed.log")
     try:
         watch.wait(lambda alive: any(a.endswith("/doomed") for a in alive))
-        monitor = monitor_factory(fleet, budget=0.2, query_timeout=30.0, retry=30.0)
+        monitor = monitor_factory(fleet, budget=5.0, query_timeout=30.0, retry=30.0)  # killed within the budget
         wait_until(lambda: monitor.predictor_stats.in_flight, 5, "query sent")
         wait_until(lambda: "fetched model" in (tmp_path / "doomed.log").read_text(), 5, "exploration started")
         assert monitor.predictor_stats.answered == 0, "exploration finished before the kill"

@@ -289,16 +289,16 @@ def test_driver_plays_a_scenario_over_zenoh(client_factory, spot_arm):
     assert time.monotonic() - started >= 0.25  # t = 0.5 at speed 2
     assert seen == runs and [r.action for r in runs] == ["start", "consider", "success", "start", "interrupt", "event"]
     assert [r.ok for r in runs] == [True] * 6
-    assert runs[0].detail == "short-1" and runs[4].detail == "short-4"  # the interrupt uses the running id
+    assert runs[0].detail == "short-1" and runs[4].detail == "short-3"  # the interrupt uses the running id (step 3: the consider is no step)
     items = log.wait(9)
     spot = [(t.split("/", 1)[1], m) for ss, t, m, _ in items if ss == "spot"]
     arm = [(t.split("/", 1)[1], m) for ss, t, m, _ in items if ss == "manipulator"]
     assert [t for t, _ in spot] == ["status", "skill/init_power/response", "status", "event_response", "status"]
     assert status_view(spot[-1][1])[0] == {"power_status": "PowerOff", "posture": "Sitting", "control_mode": "Idle"}
-    assert spot[3][1] == {"id": "short-6", "response": E["SUCCESS"]}
+    assert spot[3][1] == {"id": "short-5", "response": E["SUCCESS"]}
     # arm_ready is "interrupting true": INTERRUPTING, then the implementation finishes it.
     assert [t for t, _ in arm] == ["status", "status", "skill/arm_ready/response", "status"]
-    assert status_view(arm[1][1])[1]["arm_ready"] == (S["INTERRUPTING"], "short-4")
+    assert status_view(arm[1][1])[1]["arm_ready"] == (S["INTERRUPTING"], "short-3")
     assert arm[2][1]["result"] == R["INTERRUPT"]
     assert status_view(arm[3][1])[0] == {"mutex": "Free", "arm_status": "Away"}
     sim.close()

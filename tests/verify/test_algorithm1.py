@@ -393,8 +393,11 @@ def test_synthetic_verdicts(kitchen: System) -> None:
     )
     assert f.verdict("no_fire", state("Hot")) == PredictionVerdict("dangerous", 1, ("stove:blast.start",))
     assert f.verdict("no_fire", state("On", "blast")) == PredictionVerdict("dangerous", 0, ())
-    # never explored from here (heat cannot run with the flame On): undecided
-    assert f.verdict("no_fire", state("On", "heat")) == PredictionVerdict("undecided")
+    # never explored from here (heat cannot run with the flame On): undecided by the
+    # exploration, decided compositionally (SPEC §6.4)
+    alone = forecast(kitchen, m, compositional=False)
+    assert alone.verdict("no_fire", state("On", "heat")) == PredictionVerdict("undecided")
+    assert f.verdict("no_fire", state("On", "heat")).status == "dangerous"
 
 
 def test_synthetic_already_dangerous_marking(kitchen: System) -> None:
@@ -409,14 +412,14 @@ def test_synthetic_already_dangerous_marking(kitchen: System) -> None:
 
 def test_truncated_prediction_gives_unknown_never_safe(kitchen: System) -> None:
     m = kitchen.initial_marking()
-    nothing = forecast(kitchen, m, max_depth=0)
+    nothing = forecast(kitchen, m, max_depth=0, compositional=False)
     assert nothing.report()["complete"] is False
     assert summary(analyse(kitchen, m, prediction=nothing)) == [
         ("no_fire", "stove", "spark", "unknown", False),
         ("no_fire", "stove", "heat.start", "unknown", True),
         ("no_fire", "stove", "rest.start", "unknown", True),
     ]
-    one = forecast(kitchen, m, max_depth=1)
+    one = forecast(kitchen, m, max_depth=1, compositional=False)
     assert analyse(kitchen, m, prediction=one).unsafe == [
         UnsafeTransition("stove", "spark", "event", False, "no_fire", "implicit", 1, ("stove:blast.start",)),
         UnsafeTransition("stove", "heat.start", "start", True, "no_fire", "unknown", None, ()),

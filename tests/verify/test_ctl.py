@@ -138,6 +138,12 @@ class Explicit:
     def code(self, m: State) -> int:
         return sum(a * s for a, s in zip(m, self.stride))
 
+    def layers(self) -> list[int]:
+        counts = [0] * (1 + max(self.depth.values()))
+        for d in self.depth.values():
+            counts[d] += 1
+        return counts
+
     def ex(self, z: set[State]) -> set[State]:
         return {m for m in self.states if self.succ[m] & z}
 
@@ -202,8 +208,14 @@ def codes_of(ref: Explicit, states: set[State]) -> set[int]:
     return {ref.code(m) for m in states}
 
 
-def as_set(mask: np.ndarray) -> set[int]:
-    return set(np.flatnonzero(mask).tolist())
+def as_set(mask: np.ndarray, space: StateSpace | None = None) -> set[int]:
+    """Codes where ``mask`` (over ``space``'s index space; default: index = code) holds."""
+    idx = np.flatnonzero(mask)
+    return set((idx if space is None else space.code_of(idx)).tolist())
+
+
+def lift(part: StateSpace, full: StateSpace, values: np.ndarray, fill: object = False) -> np.ndarray:
+    return part.transfer(values, full, fill)
 
 
 def ranked(f: Expr) -> bool:
@@ -219,17 +231,19 @@ def test_ctl_matches_definition(data: st.DataObject) -> None:
     graphs = data.draw(systems())
     space = explore_graphs(graphs)
     ref = Explicit(graphs)
-    assert space.complete and as_set(space.stored()) == codes_of(ref, ref.states)
+    assert space.complete and as_set(space.stored(), space) == codes_of(ref, ref.states)
+    assert space.markings == len(ref.states) and space.layers == ref.layers()
     kripke = Kripke(space)
-    assert as_set(kripke.deadlock) == codes_of(ref, ref.deadlocks)
+    assert as_set(kripke.deadlock, space) == codes_of(ref, ref.deadlocks)
     names = [g.name for g in graphs]
     for f in data.draw(some_formulas(names)):
         result = check(kripke, f)
         expected, rank = ref.sat_rank(f)
-        assert as_set(result.lower) == as_set(result.upper) == codes_of(ref, expected), f
+        assert as_set(result.lower, space) == as_set(result.upper, space) == codes_of(ref, expected), f
         if ranked(f):
             assert result.rank is not None
-            assert {c: int(result.rank[c]) for c in as_set(result.lower)} == {ref.code(m): r for m, r in rank.items()}, f
+            got = {int(space.code_of(np.array([i]))[0]): int(result.rank[i]) for i in np.flatnonzero(result.lower)}
+            assert got == {ref.code(m): r for m, r in rank.items()}, f
 
 
 @pytest.mark.parametrize("op", UNARY + ("EU", "AU"))
@@ -246,8 +260,9 @@ def test_each_operator(op: str, data: st.DataObject) -> None:
     else:
         f = Until(op[0], data.draw(sub), data.draw(sub))
     ref = Explicit(graphs)
-    result = check(Kripke(explore_graphs(graphs)), f)
-    assert as_set(result.lower) == as_set(result.upper) == codes_of(ref, ref.sat(f))
+    space = explore_graphs(graphs)
+    result = check(Kripke(space), f)
+    assert as_set(result.lower, space) == as_set(result.upper, space) == codes_of(ref, ref.sat(f))
 
 
 # --- truncated explorations: lower <= truth <= upper ----------------------------------------
@@ -266,12 +281,15 @@ def test_truncation_is_sound(data: st.DataObject) -> None:
 def assert_sound(full: StateSpace, part: StateSpace, fs: list[Expr]) -> None:
     """What a truncated run proves or refutes, the complete run agrees with."""
     complete, truncated = Kripke(full), Kripke(part)
-    stored = part.stored()
     assert not np.any(truncated.deadlock & truncated.frontier)
-    assert not np.any(truncated.deadlock & ~complete.deadlock)
-    assert np.array_equal(truncated.deadlock, complete.deadlock & truncated.expanded)
+    stored = lift(part, full, part.stored())
+    deadlock, expanded = lift(part, full, truncated.deadlock), lift(part, full, truncated.expanded)
+    assert not np.any(deadlock & ~complete.deadlock)
+    assert np.array_equal(deadlock, complete.deadlock & expanded)
     for f in fs:
-        truth, r = check(complete, f), check(truncated, f)
+        truth, got = check(complete, f), check(truncated, f)
+        r = Result(lift(part, full, got.lower), lift(part, full, got.upper),
+                   None if got.rank is None else lift(part, full, got.rank, 0))
         assert np.array_equal(truth.lower, truth.upper)
         assert not np.any(r.lower & ~r.upper), f  # undecided exactly where they differ
         assert not np.any((r.lower | r.upper) & ~stored), f
@@ -294,7 +312,7 @@ def test_budget_zero_on_random_graph() -> None:
     part = explore_graphs(graphs, budget=0.0)
     assert not part.complete and part.markings == 1
     r = check(Kripke(part), Temporal("AF", PlaceAtom("c0", "p1")))
-    assert not r.lower.any() and as_set(r.upper) == {0}
+    assert not r.lower.any() and as_set(r.upper, part) == {0}
 
 
 # --- deadlocks, self-loops and ranks on hand-made structures ---------------------------------

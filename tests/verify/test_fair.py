@@ -90,6 +90,16 @@ def box_sets(data: st.DataObject, box: int, count: st.SearchStrategy[int]) -> li
             for _ in range(data.draw(count))]
 
 
+def on(space: StateSpace, box_mask: np.ndarray) -> np.ndarray:
+    """A subset of the box (by code) over ``space``'s index space."""
+    return box_mask[space.code_of(np.arange(space.size))] & space.stored()
+
+
+def at(space: StateSpace, code: int) -> int:
+    """Index of a stored code."""
+    return int(space.index(np.array([code]))[0])
+
+
 def on_states(ref: Explicit, mask: np.ndarray) -> set:
     return {m for m in ref.states if mask[ref.code(m)]}
 
@@ -114,16 +124,18 @@ def test_fair_eg_matches_definition(data: st.DataObject) -> None:
     space = explore_graphs(graphs)
     kripke = Kripke(space)
     ref = Explicit(graphs)
-    f = box_sets(data, space.box, st.just(1))[0] & kripke.stored
-    fairness = box_sets(data, space.box, st.integers(0, 3))
-    expected, cycles = reference_eg(ref, f, fairness)
+    box_f = box_sets(data, space.box, st.just(1))[0]
+    box_fairness = box_sets(data, space.box, st.integers(0, 3))
+    f, fairness = on(space, box_f), [on(space, c) for c in box_fairness]
+    expected, cycles = reference_eg(ref, box_f, box_fairness)
     lower, upper = fair_eg(kripke, f, f, fairness)
-    assert as_set(lower) == as_set(upper) == expected
-    assert as_set(fair_scc_markings(kripke, f, fairness)) == cycles
-    g = box_sets(data, space.box, st.just(1))[0] & kripke.stored
+    assert as_set(lower, space) == as_set(upper, space) == expected
+    assert as_set(fair_scc_markings(kripke, f, fairness), space) == cycles
+    box_g = box_sets(data, space.box, st.just(1))[0]
+    g = on(space, box_g)
     af = fair_af(kripke, Result(g, g.copy()), fairness)
-    not_g, _ = reference_eg(ref, kripke.stored & ~g, fairness)
-    assert as_set(af.lower) == as_set(af.upper) == codes_of(ref, ref.states) - not_g
+    not_g, _ = reference_eg(ref, ~box_g, box_fairness)
+    assert as_set(af.lower, space) == as_set(af.upper, space) == codes_of(ref, ref.states) - not_g
 
 
 @settings(max_examples=150, deadline=None)
@@ -132,21 +144,23 @@ def test_fair_eg_truncated_is_sound(data: st.DataObject) -> None:
     """Lower bounds are true on the complete run, upper bounds cover every true stored marking."""
     _, full, part = complete_and_truncated(data)
     complete, truncated = Kripke(full), Kripke(part)
-    stored = truncated.stored
     f, g = box_sets(data, full.box, st.just(2))
     fairness = box_sets(data, full.box, st.integers(0, 3))
-    truth, _ = fair_eg(complete, f & complete.stored, f & complete.stored, fairness)
-    lower, upper = fair_eg(truncated, f & stored, f & stored, fairness)
-    assert not np.any(lower & ~upper) and not np.any(upper & ~stored)
-    assert not np.any(lower & ~truth)
-    assert not np.any(truth & stored & ~upper)
+    truth, _ = fair_eg(complete, on(full, f), on(full, f), [on(full, c) for c in fairness])
+    lower, upper = fair_eg(truncated, on(part, f), on(part, f), [on(part, c) for c in fairness])
+    assert not np.any(lower & ~upper) and not np.any(upper & ~truncated.stored)
     if part.complete:
         assert np.array_equal(lower, upper)
-    af_truth = fair_af(complete, Result(g & complete.stored, g & complete.stored), fairness)
-    af = fair_af(truncated, Result(g & stored, g & stored), fairness)
-    assert not np.any(af.lower & ~af.upper) and not np.any(af.upper & ~stored)
-    assert not np.any(af.lower & ~af_truth.lower)
-    assert not np.any(af_truth.lower & stored & ~af.upper)
+    stored = part.transfer(truncated.stored, full)
+    lower, upper = part.transfer(lower, full), part.transfer(upper, full)  # into the complete run's index space
+    assert not np.any(lower & ~truth)
+    assert not np.any(truth & stored & ~upper)
+    af_truth = fair_af(complete, Result(on(full, g), on(full, g)), [on(full, c) for c in fairness])
+    af = fair_af(truncated, Result(on(part, g), on(part, g)), [on(part, c) for c in fairness])
+    assert not np.any(af.lower & ~af.upper) and not np.any(af.upper & ~truncated.stored)
+    af_lower, af_upper = part.transfer(af.lower, full), part.transfer(af.upper, full)
+    assert not np.any(af_lower & ~af_truth.lower)
+    assert not np.any(af_truth.lower & stored & ~af_upper)
 
 
 @settings(max_examples=150, deadline=None)
@@ -156,16 +170,16 @@ def test_distance_to_is_breadth_first(data: st.DataObject) -> None:
     kripke = Kripke(full)
     ref = Explicit(graphs)
     target = box_sets(data, full.box, st.just(1))[0]
-    dist = distance_to(kripke, target)
+    dist = distance_to(kripke, on(full, target))
     expected = bfs_distances(ref.states, ref.succ.__getitem__, on_states(ref, target))
-    assert {ref.code(m): int(dist[ref.code(m)]) for m in ref.states if dist[ref.code(m)] != UNREACHED} == \
-        {ref.code(m): d for m, d in expected.items()}
+    got = {ref.code(m): int(dist[at(full, ref.code(m))]) for m in ref.states}
+    assert {c: d for c, d in got.items() if d != UNREACHED} == {ref.code(m): d for m, d in expected.items()}
     assert np.all(dist[~kripke.stored] == UNREACHED)
     # Truncated: a distance found inside the explored part is a real path, never shorter than the truth.
-    short = distance_to(Kripke(part), target)
+    short = part.transfer(distance_to(Kripke(part), on(part, target)), full, UNREACHED)
     known = short != UNREACHED
     assert np.all(short[known] >= dist[known])
-    assert np.all(short[target & part.stored()] == 0)
+    assert np.all(short[on(full, target) & part.transfer(part.stored(), full)] == 0)
 
 
 def test_fair_cycle_must_meet_every_constraint() -> None:

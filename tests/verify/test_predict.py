@@ -258,7 +258,7 @@ def test_ovens_have_implicit_constraints() -> None:
 
 
 def test_unknown_marking_is_undecided() -> None:
-    fc = literal_forecast(paper())
+    fc = literal_forecast(paper(), compositional=False)
     marking = dict(paper().initial_marking())
     marking["spot"] = 0  # no token anywhere: never reached
     assert fc.verdict("action_guard", marking).status == "undecided"
@@ -300,21 +300,25 @@ def test_truncated_forecast_is_sound(name: str) -> None:
     formulas += [Temporal("AF", Not(p.expr)) for p in system.properties]
     for max_depth in range(full.space.expanded_depth + 1):
         part = literal_forecast(system, max_depth=max_depth)
-        kripke = part.kripke
-        stored = kripke.stored
+        kripke, space = part.kripke, part.space
         assert not part.space.complete
         assert not np.any(kripke.deadlock & kripke.frontier)
-        assert np.array_equal(kripke.deadlock, kripke_full.deadlock & kripke.expanded)
+
+        def lift(values: np.ndarray, fill: object = False) -> np.ndarray:  # into the full run's index space
+            return space.transfer(values, full.space, fill)
+
+        stored = lift(kripke.stored)
+        assert np.array_equal(lift(kripke.deadlock), kripke_full.deadlock & lift(kripke.expanded))
         for f in formulas:
             truth, r = check(kripke_full, f), check(kripke, f)
             assert not np.any(r.lower & ~r.upper)
-            assert not np.any(r.lower & ~truth.lower), (max_depth, f)
-            assert not np.any(stored & truth.lower & ~r.upper), (max_depth, f)
+            assert not np.any(lift(r.lower) & ~truth.lower), (max_depth, f)
+            assert not np.any(stored & truth.lower & ~lift(r.upper)), (max_depth, f)
         for prop, risk in part.risks.items():
-            proven = risk.mu1.lower
+            proven = lift(risk.mu1.lower)
             # mu1's argument is a state formula: a proven rank is the exact one.
-            assert np.array_equal(risk.mu1.rank[proven], full.risks[prop].mu1.rank[proven])
-            for c in np.flatnonzero(stored):
+            assert np.array_equal(lift(risk.mu1.rank, 0)[proven], full.risks[prop].mu1.rank[proven])
+            for c in np.flatnonzero(kripke.stored):
                 marking = part.space.marking(int(c))
                 got, truth = part.verdict(prop, marking), full.verdict(prop, marking)
                 assert got.status in (truth.status, "undecided"), (max_depth, prop, marking)

@@ -1,4 +1,4 @@
-"""Exports of a Petri net: JSON, Tina ``.net``, PNML and Graphviz (SPEC §3, *Interop*).
+"""Exports of a Petri net: JSON, Tina ``.net``, PNML, Graphviz and Promela (SPEC §3, *Interop*).
 
 Every exporter is a pure function from a :class:`~skinet.net.petrinet.PetriNet`
 to text; :data:`FORMATS` maps a format name to it (for the command line).
@@ -15,6 +15,7 @@ from skinet.net.export._common import DuplicateNameError, check_unique_names
 from skinet.net.export.dot import to_dot
 from skinet.net.export.netjson import JSON_FORMAT_VERSION, NetFormatError, from_json, to_json
 from skinet.net.export.pnml import to_pnml
+from skinet.net.export.promela import to_promela
 from skinet.net.export.tina import to_tina
 from skinet.net.petrinet import PetriNet
 
@@ -29,9 +30,10 @@ FORMATS: dict[str, Callable[[PetriNet], str]] = {
     "tina": to_tina,
     "pnml": to_pnml,
     "dot": to_dot,
+    "promela": to_promela,
 }
 
 __all__ = [
     "FORMATS", "JSON_FORMAT_VERSION", "DuplicateNameError", "NetFormatError", "check_unique_names",
-    "from_json", "to_dot", "to_json", "to_json_text", "to_pnml", "to_tina",
+    "from_json", "to_dot", "to_json", "to_json_text", "to_pnml", "to_promela", "to_tina",
 ]

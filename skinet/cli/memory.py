@@ -1,0 +1,27 @@
+"""The ``--memory-limit`` option shared by ``skinet explore/unsafe/ctl/run`` (SPEC §6.1)."""
+
+from __future__ import annotations
+
+import argparse
+
+from skinet.files import load_memory_limit, parse_size
+from skinet.verify.explore import DEFAULT_MEMORY_LIMIT
+
+
+def add_memory_arg(c: argparse.ArgumentParser) -> None:
+    c.add_argument("--memory-limit", type=memory_size, metavar="SIZE",
+                   help="peak memory of the whole process, e.g. 512MiB (default: the system file's "
+                        "[system] memory_limit, else 1GiB); beyond it the answer is truncated, never refused")
+
+
+def memory_size(text: str) -> int:
+    """argparse type of ``--memory-limit``."""
+    try:
+        return parse_size(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def memory_limit(args: argparse.Namespace) -> int:
+    """``--memory-limit``, else the system file's setting, else 1 GiB."""
+    return args.memory_limit or load_memory_limit(args.system) or DEFAULT_MEMORY_LIMIT

@@ -1,0 +1,129 @@
+"""Argument checking shared by ``skinet`` and the services: one-line errors, ranges, key names.
+
+Every bad option value is refused by the parser itself, before any work starts,
+with one line ``PROG: error: argument --budget: ...`` and exit status 2 (the
+full usage text stays with ``--help``).  Values may come from environment
+variables (argparse converts string defaults with the option's type), and the
+message then names the variable.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import re
+import sys
+from collections.abc import Callable
+from pathlib import Path
+from typing import NoReturn
+
+from skinet.errors import Diagnostic, Pos, SourceError
+from skinet.files import load_system, read_text
+from skinet.system import System
+from skinet.wire.keys import check_chunk
+
+
+class ArgumentParser(argparse.ArgumentParser):
+    """``argparse`` with a one-line error instead of the usage text (subparsers inherit it)."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def _number(kind: Callable[[str], float], what: str, low: float | None, low_open: bool,
+            high: float | None, env: str | None) -> Callable[[str], float]:
+    def convert(text: str) -> float:
+        try:
+            value = kind(text)
+        except (TypeError, ValueError):
+            value = None
+        ok = value is not None and math.isfinite(value)
+        if ok and low is not None:
+            ok = value > low if low_open else value >= low
+        if ok and high is not None:
+            ok = value <= high
+        if not ok:
+            origin = f" (from ${env})" if env and os.environ.get(env) == text else ""
+            raise argparse.ArgumentTypeError(f"expected {what}, got '{text}'{origin}")
+        return value  # type: ignore[return-value]
+
+    convert.__name__ = what  # argparse names the type in some messages
+    return convert
+
+
+def seconds(env: str | None = None, zero: bool = False) -> Callable[[str], float]:
+    """A finite duration in seconds, > 0 (>= 0 with ``zero``)."""
+    what = "a number of seconds >= 0" if zero else "a number of seconds > 0"
+    return _number(float, what, 0.0, not zero, None, env)
+
+
+def number(low: float, env: str | None = None) -> Callable[[str], float]:
+    """A finite number >= ``low``."""
+    return _number(float, f"a number >= {low:g}", low, False, None, env)
+
+
+def count(low: int = 1, high: int | None = None, env: str | None = None) -> Callable[[str], int]:
+    """An integer in ``[low, high]``."""
+    what = f"an integer >= {low}" if high is None else f"an integer from {low} to {high}"
+    return _number(int, what, low, False, high, env)  # type: ignore[return-value]
+
+
+def key_name(what: str) -> Callable[[str], str]:
+    """A Zenoh key chunk (system names, instance ids): letters, digits, ``_ - .``."""
+    def convert(text: str) -> str:
+        try:
+            return check_chunk(text, what)
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+
+    return convert
+
+
+def key_prefix(what: str, env: str | None = None) -> Callable[[str], str]:
+    """Empty, or ``/``-separated Zenoh key chunks (a ROS namespace such as ``/robot1``)."""
+    def convert(text: str) -> str:
+        try:
+            for chunk in text.strip("/").split("/") if text.strip("/") else ():
+                check_chunk(chunk, what)
+        except ValueError:
+            origin = f" (from ${env})" if env and os.environ.get(env) == text else ""
+            raise argparse.ArgumentTypeError(f"{what} '{text}'{origin} cannot be used in a Zenoh key "
+                                             "(/-separated names of letters, digits, _ - .)")
+        return text
+
+    return convert
+
+
+_NAME_LINE = re.compile(r'^\s*name\s*=\s*(["\'])')
+
+
+def load_live_system(path: str | Path) -> tuple[System, list[Diagnostic]]:
+    """:func:`skinet.files.load_system`, refusing a system name that cannot be a Zenoh key chunk.
+
+    Every command takes the name as the ``<system>`` of ``skinet/<system>/...``
+    keys, so ``skinet unsafe`` refuses what ``skinet run`` could not publish.
+    """
+    system, warnings = load_system(path)
+    try:
+        check_chunk(system.name, "system name")
+    except ValueError as exc:
+        raise SourceError.at(str(path), _name_pos(path), str(exc)) from None
+    return system, warnings
+
+
+def _name_pos(path: str | Path) -> Pos | None:
+    """Where ``name = "..."`` is written in the ``[system]`` table, if found."""
+    table = ""
+    for n, line in enumerate(read_text(path).splitlines(), 1):
+        stripped = line.strip()
+        if stripped.startswith("["):
+            table = stripped
+        elif table == "[system]" and (m := _NAME_LINE.match(line)):
+            return Pos(n, m.start(1) + 1)
+    return None
+
+
+def print_warnings(warnings: list[Diagnostic]) -> None:
+    for w in warnings:
+        print(str(w), file=sys.stderr)

@@ -1,0 +1,413 @@
+"""Every command and service entry point, with a bad value for each of its options.
+
+Each case must end with exactly one line on standard error (the expected one),
+the expected exit status (2: refused by the argument parser, 1: refused while
+running), nothing on standard output and no traceback.  A coverage test checks
+that every option taking a value, of every ``skinet`` command and every
+``python -m services.*`` entry point, has at least one case here (or is listed
+in FREE_TEXT with the reason why no value is bad).  The cases run in-process;
+a few run as real processes too, to show the entry points themselves.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import signal
+import socket
+import subprocess
+import sys
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+import services.bridge_ros2.__main__ as bridge_main
+import services.monitor.__main__ as monitor_main
+import services.predictor.__main__ as predictor_main
+import services.simulator.__main__ as simulator_main
+import skinet.cli.main as skinet_main
+
+ROOT = Path(__file__).resolve().parents[2]
+SYSTEM = str(ROOT / "skillsets" / "spot_arm.toml")
+SCENARIO = str(ROOT / "skillsets" / "missions" / "unassisted.toml")
+SPOT = str(ROOT / "skillsets" / "spot.rl")
+
+# program -> (main, argument parser factory)
+PROGRAMS: dict[str, tuple[Callable[..., int], Callable[[], argparse.ArgumentParser]]] = {
+    "skinet": (skinet_main.main, skinet_main.build_parser),
+    "python -m services.monitor": (monitor_main.main, monitor_main.build_parser),
+    "python -m services.predictor": (predictor_main.main, predictor_main.build_parser),
+    "python -m services.bridge_ros2": (bridge_main.main, bridge_main.build_parser),
+    "python -m services.simulator": (simulator_main.main, simulator_main.build_parser),
+}
+
+# Options where every value is acceptable (nothing to refuse).
+FREE_TEXT = {
+    ("skinet timeline", "--title"): "any text is a title (test_any_title_is_drawn)",
+    ("python -m services.bridge_ros2", "--source"): "any text names the source inside the events' payload",
+    ("python -m services.bridge_ros2", "--ros-distro"): "only humble changes the keys; any other name is a later one",
+    ("python -m services.simulator", "--ros-distro"): "only humble changes the keys; any other name is a later one",
+}
+
+
+@dataclass(frozen=True)
+class Case:
+    program: str  # a key of PROGRAMS
+    option: str  # the option (or positional dest) the case is about
+    argv: tuple[str, ...]
+    code: int
+    error: str  # the one line expected on standard error; {tmp} and {port} are filled in
+    env: tuple[tuple[str, str], ...] = ()
+
+    @property
+    def command(self) -> str:
+        """``skinet unsafe`` for skinet's subcommands, the program otherwise."""
+        return f"skinet {self.argv[0]}" if self.program == "skinet" else self.program
+
+    def __str__(self) -> str:
+        env = " ".join(f"{k}={v}" for k, v in self.env)
+        return f"{env + ' ' if env else ''}{self.command} {self.option}: {' '.join(self.argv)}"[:120]
+
+
+def _usage(command: str, message: str) -> str:
+    return f"{command}: error: {message} (see {command} --help)"
+
+
+def _cases() -> list[Case]:
+    cases: list[Case] = []
+
+    def add(program: str, option: str, argv: tuple[str, ...], code: int, error: str, **env: str) -> None:
+        cases.append(Case(program, option, argv, code, error, tuple(env.items())))
+
+    def usage(program: str, option: str, argv: tuple[str, ...], message: str, **env: str) -> None:
+        command = f"skinet {argv[0]}" if program == "skinet" else program
+        add(program, option, argv, 2, _usage(command, message), **env)
+
+    missing = "{tmp}/missing.toml: error: cannot read file: No such file or directory"
+    bad_name = ("{tmp}/badname.toml:2:8: error: system name 'has space/slash' cannot be used in a Zenoh key "
+                "(letters, digits, _ - . only)")
+    seconds = "expected a number of seconds > 0, got '{}'"
+
+    # skinet parse / net
+    add("skinet", "file", ("parse", "{tmp}/missing.rl"), 1,
+        "{tmp}/missing.rl: error: cannot read file: No such file or directory")
+    add("skinet", "file", ("net", "{tmp}/missing.rl"), 1,
+        "{tmp}/missing.rl: error: cannot read file: No such file or directory")
+    usage("skinet", "--format", ("net", SPOT, "--format", "svg"),
+          "argument --format: invalid choice: 'svg' (choose from 'dot', 'json', 'pnml', 'promela', 'tina')")
+    add("skinet", "-o", ("net", SPOT, "-o", "{tmp}/no/such/net.json"), 1,
+        "{tmp}/no/such/net.json: error: cannot write file: No such file or directory")
+
+    # skinet unsafe / explore / ctl: the same system options
+    for cmd in ("unsafe", "explore", "ctl"):
+        extra = ("EF spot:Busy",) if cmd == "ctl" else ()
+        add("skinet", "system", (cmd, "{tmp}/missing.toml", *extra), 1, missing)
+        add("skinet", "system", (cmd, "{tmp}/badname.toml", *extra), 1, bad_name)
+        add("skinet", "--state", (cmd, SYSTEM, "--state", "{tmp}/missing.json", *extra), 1,
+            "{tmp}/missing.json: error: cannot read file: No such file or directory")
+        for bad in ("-5", "0", "nan", "inf", "soon"):
+            usage("skinet", "--budget", (cmd, SYSTEM, "--budget", bad, *extra),
+                  "argument --budget: " + seconds.format(bad))
+        for bad in ("-1", "1.5"):
+            usage("skinet", "--max-depth", (cmd, SYSTEM, "--max-depth", bad, *extra),
+                  f"argument --max-depth: expected an integer >= 0, got '{bad}'")
+        usage("skinet", "--af", (cmd, SYSTEM, "--af", "strict", *extra),
+              "argument --af: invalid choice: 'strict' (choose from 'fair', 'literal')")
+        for bad in ("0", "lots", "1 parsec"):
+            usage("skinet", "--memory-limit", (cmd, SYSTEM, "--memory-limit", bad, *extra),
+                  f"argument --memory-limit: not a size: '{bad}' (e.g. 1GiB, 512MiB, 2GB)")
+    add("skinet", "formulas", ("ctl", SYSTEM, "EF spot:Busy", "EF spot:Bussy"), 1,
+        "<formula 2>:1:4: error: unknown name 'spot:Bussy' (candidates: spot:Busy)")
+
+    # skinet demo
+    add("skinet", "scenarios", ("demo", "{tmp}/missing.toml"), 1, missing)
+    add("skinet", "scenarios", ("demo", "{tmp}/unknown_skillset.toml"), 1,
+        "{tmp}/unknown_skillset.toml: error: step 1: unknown skillset 'spott' (skillsets of spot_arm: spot, manipulator)")
+    for core in ((), ("--core",)):  # the core replay used to call it a model divergence and exit 0
+        add("skinet", "scenarios", ("demo", "{tmp}/unknown_transition.toml", *core), 1,
+            "{tmp}/unknown_transition.toml: error: step 1: unknown transition 'init_power.strat' of skillset 'spot' "
+            "(for example: init_power.start, init_power.interrupt, init_power.success.powered_on, "
+            "init_power.failure.no_battery)")
+    add("skinet", "scenarios", ("demo", "{tmp}/bad_time.toml", "--core"), 1,
+        "{tmp}/bad_time.toml: error: step 1: 't' must be a number of seconds, got 'soon'")
+    for option in ("--log", "--timeline"):
+        add("skinet", option, ("demo", "--core", option, "{tmp}/list.json"), 1,
+            "{tmp}/list.json: error: cannot create folder: File exists")
+
+    # skinet record, run, router, and every service: the Zenoh options
+    zenoh_programs = {
+        "skinet": (("record", "spot_arm", "-o", "{tmp}/rec.jsonl", "--duration", "1"),
+                   ("run", SYSTEM, "--once"), ("router",)),
+        "python -m services.monitor": ((SYSTEM,),),
+        "python -m services.predictor": ((),),
+        "python -m services.bridge_ros2": ((SYSTEM,),),
+        "python -m services.simulator": ((SCENARIO,),),
+    }
+    for program, bases in zenoh_programs.items():
+        for base in bases:
+            prefix = "skinet: error: " if program == "skinet" else f"{program}: error: "
+            if base[:1] != ("run",) and base[:1] != ("router",):
+                usage(program, "--mode", (*base, "--mode", "server"),
+                      "argument --mode/-m: invalid choice: 'server' (choose from 'peer', 'client', 'router')")
+            add(program, "--listen", (*base, "--listen", "garbage"), 1,
+                prefix + "--listen 'garbage': an endpoint is PROTOCOL/ADDRESS, e.g. tcp/127.0.0.1:7447")
+            add(program, "--listen", (*base, "--listen", "tcp/1.2.3.4:99999"), 1,
+                prefix + "--listen 'tcp/1.2.3.4:99999': port '99999' is not a number from 0 to 65535")
+            add(program, "--listen", (*base, "--listen", "tcp/127.0.0.1:notaport"), 1,
+                prefix + "--listen 'tcp/127.0.0.1:notaport': port 'notaport' is not a number from 0 to 65535")
+            add(program, "--listen", (*base, "--no-multicast-scouting", "--listen", "tcp/127.0.0.1:{port}"), 1,
+                prefix + "cannot open the Zenoh session: cannot listen on tcp/127.0.0.1:{port}: address already in use")
+            add(program, "--connect", (*base, "--connect", "tcp/127.0.0.1"), 1,
+                prefix + "--connect 'tcp/127.0.0.1': the address must be HOST:PORT, e.g. tcp/127.0.0.1:7447")
+            add(program, "--zenoh-config", (*base, "--zenoh-config", "{tmp}/missing.json5"), 1,
+                "{tmp}/missing.json5: error: cannot read file: No such file or directory")
+            add(program, "--zenoh-config", (*base, "--zenoh-config", "{tmp}/bad.json5"), 1,
+                "{tmp}/bad.json5:2:3: error: invalid Zenoh configuration: unknown field `mood`, expected one of "
+                "`id`, `metadata`, `mode`, `region_name`, `gateway`, `connect`, `listen`, `open`, `scouting`, "
+                "`timestamping`, `queries_default_timeout`, `routing`, `aggregation`, `qos`, `transport`, "
+                "`adminspace`, `namespace`, `downsampling`, `access_control`, `low_pass_filter`, `stats`, "
+                "`plugins_loading`, `plugins`")
+            add(program, "--zenoh-config", (*base, "--zenoh-config", "{tmp}/syntax.json5"), 1,
+                "{tmp}/syntax.json5:1:1: error: invalid Zenoh configuration: expected array, boolean, null, number, "
+                "object, or string")
+            if base[:1] != ("run",) and base[:1] != ("router",):
+                add(program, "--mode", base, 1, prefix + "SKINET_ZENOH_MODE 'server' is not one of peer, client, router",
+                    SKINET_ZENOH_MODE="server")
+                add(program, "--connect", base, 1,
+                    prefix + "SKINET_ZENOH_CONNECT 'nowhere': an endpoint is PROTOCOL/ADDRESS, e.g. tcp/127.0.0.1:7447",
+                    SKINET_ZENOH_CONNECT="nowhere")
+                add(program, "--zenoh-config", base, 1,
+                    "{tmp}/missing.json5: error: cannot read file: No such file or directory",
+                    SKINET_ZENOH_CONFIG="{tmp}/missing.json5")
+
+    usage("skinet", "system", ("record", "a/b", "-o", "{tmp}/rec.jsonl"),
+          "argument SYSTEM_NAME: system name 'a/b' cannot be used in a Zenoh key (letters, digits, _ - . only)")
+    add("skinet", "-o", ("record", "spot_arm", "--no-multicast-scouting", "-o", "{tmp}/no/such/rec.jsonl"), 1,
+        "{tmp}/no/such/rec.jsonl: error: cannot write file: No such file or directory")
+    usage("skinet", "--duration", ("record", "spot_arm", "-o", "{tmp}/rec.jsonl", "--duration", "-1"),
+          "argument --duration: " + seconds.format("-1"))
+    usage("skinet", "--count", ("record", "spot_arm", "-o", "{tmp}/rec.jsonl", "--count", "0"),
+          "argument --count: expected an integer >= 1, got '0'")
+
+    add("skinet", "system", ("run", "{tmp}/missing.toml"), 1, missing)
+    add("skinet", "system", ("run", "{tmp}/badname.toml"), 1, bad_name)
+    usage("skinet", "--duration", ("run", SYSTEM, "--duration", "-1"), "argument --duration: " + seconds.format("-1"))
+    usage("skinet", "--budget", ("run", SYSTEM, "--budget", "0"), "argument --budget: " + seconds.format("0"))
+    usage("skinet", "--memory-limit", ("run", SYSTEM, "--memory-limit", "tiny"),
+          "argument --memory-limit: not a size: 'tiny' (e.g. 1GiB, 512MiB, 2GB)")
+
+    # skinet timeline
+    add("skinet", "log", ("timeline", "{tmp}/missing.jsonl", "-o", "{tmp}/t.png"), 1,
+        "{tmp}/missing.jsonl: error: cannot read file: No such file or directory")
+    add("skinet", "log", ("timeline", "{tmp}/bad.jsonl", "-o", "{tmp}/t.png"), 1,
+        "{tmp}/bad.jsonl:1: error: invalid JSON: Expecting value (column 1)")
+    add("skinet", "-o", ("timeline", "{tmp}/run.jsonl", "-o", "{tmp}/t.xyz"), 1,
+        "{tmp}/t.xyz: error: cannot write picture: Format 'xyz' is not supported (supported formats: avif, eps, "
+        "gif, jpeg, jpg, pdf, pgf, png, ps, raw, rgba, svg, svgz, tif, tiff, webp)")
+    add("skinet", "-o", ("timeline", "{tmp}/run.jsonl", "-o", "{tmp}/list.json/t.png"), 1,
+        "{tmp}/list.json/t.png: error: cannot write picture: File exists")
+    add("skinet", "--system", ("timeline", "{tmp}/run.jsonl", "-o", "{tmp}/t.png", "--system", "{tmp}/missing.toml"),
+        1, missing)
+    for bad in ("0", "5000", "high"):
+        usage("skinet", "--dpi", ("timeline", "{tmp}/run.jsonl", "-o", "{tmp}/t.png", "--dpi", bad),
+              f"argument --dpi: expected an integer from 10 to 1200, got '{bad}'")
+
+    # the services' own options
+    mon, pred, br, sim = (f"python -m services.{s}" for s in ("monitor", "predictor", "bridge_ros2", "simulator"))
+    not_a_key = "cannot be used in a Zenoh key (letters, digits, _ - . only)"
+    for program, base in ((mon, (SYSTEM,)), (br, (SYSTEM,))):
+        add(program, "system", ("{tmp}/missing.toml",), 1, missing)
+        add(program, "system", ("{tmp}/badname.toml",), 1, bad_name)
+    usage(mon, "--id", (SYSTEM, "--id", "a b"), f"argument --id: instance id 'a b' {not_a_key}")
+    usage(mon, "--budget", (SYSTEM, "--budget", "-1"), "argument --budget: " + seconds.format("-1"))
+    usage(mon, "--query-timeout", (SYSTEM, "--query-timeout", "0"), "argument --query-timeout: " + seconds.format("0"))
+    usage(mon, "--stall", (SYSTEM, "--stall", "-2"), "argument --stall: " + seconds.format("-2"))
+    usage(pred, "--instance", ("--instance", "a/b"), f"argument --instance: instance id 'a/b' {not_a_key}")
+    usage(pred, "--instance", (), f"argument --instance: instance id 'a b' {not_a_key}", SKINET_INSTANCE="a b")
+    for option in ("--workers", "--max-pending", "--cache"):
+        usage(pred, option, (option, "0"), f"argument {option}: expected an integer >= 1, got '0'")
+    for option in ("--fetch-timeout", "--max-budget"):
+        usage(pred, option, (option, "-2"), f"argument {option}: " + seconds.format("-2"))
+    usage(pred, "--memory-limit", ("--memory-limit", "1 GiBi"),
+          "argument --memory-limit: not a size: '1 GiBi' (e.g. 1GiB, 512MiB, 2GB)")
+    usage(br, "--instance", (SYSTEM, "--instance", "*"), f"argument --instance: instance id '*' {not_a_key}")
+    for program, base in ((br, (SYSTEM,)), (sim, (SCENARIO,))):
+        usage(program, "--namespace", (*base, "--namespace", "robot/*"),
+              "argument --namespace: namespace 'robot/*' cannot be used in a Zenoh key "
+              "(/-separated names of letters, digits, _ - .)")
+        usage(program, "--domain", (*base, "--domain", "233"),
+              "argument --domain: expected an integer from 0 to 232, got '233'")
+        for level, env in (("--log-level", {}), ("", {"SKINET_LOG_LEVEL": "LOUD"})):
+            argv = (*base, "--log-level", "LOUD") if level else base
+            origin = " (from $SKINET_LOG_LEVEL)" if env else ""
+            usage(program, "--log-level", argv, "argument --log-level: expected one of DEBUG, INFO, WARNING, ERROR, "
+                  f"CRITICAL, got 'LOUD'{origin}", **env)
+    for program, base in ((mon, (SYSTEM,)), (pred, ())):
+        usage(program, "--log-level", (*base, "--log-level", "LOUD"),
+              "argument --log-level: expected one of DEBUG, INFO, WARNING, ERROR, CRITICAL, got 'LOUD'")
+    usage(br, "--domain", (SYSTEM,), "argument --domain: expected an integer from 0 to 232, got 'x' "
+          "(from $ROS_DOMAIN_ID)", ROS_DOMAIN_ID="x")
+    usage(br, "--namespace", (SYSTEM,), "argument --namespace: namespace 'a b' (from $SKINET_ROS_NAMESPACE) cannot "
+          "be used in a Zenoh key (/-separated names of letters, digits, _ - .)", SKINET_ROS_NAMESPACE="a b")
+    usage(br, "--hold", (SYSTEM, "--hold", "-1"), "argument --hold: expected a number of seconds >= 0, got '-1'")
+    add(br, "--replay", (SYSTEM, "--replay", "{tmp}/missing.db3"), 1,
+        "{tmp}/missing.db3: error: cannot read file: No such file or directory")
+    add(br, "--replay", (SYSTEM, "--no-multicast-scouting", "--replay", SPOT), 1,
+        f"{SPOT}: error: cannot replay: Unrecognized storage format '.rl'")
+    add(sim, "scenario", ("{tmp}/missing.toml",), 1, missing)
+    add(sim, "scenario", ("{tmp}/unknown_skillset.toml",), 1,
+        "{tmp}/unknown_skillset.toml: error: step 1: unknown skillset 'spott' (skillsets of spot_arm: spot, manipulator)")
+    usage(sim, "--dds", (SCENARIO, "--dds", "--rmw-zenoh"), "--dds and --rmw-zenoh exclude each other")
+    usage(sim, "--speed", (SCENARIO, "--speed", "-1"), "argument --speed: expected a number >= 0, got '-1'")
+    usage(sim, "--speed", (SCENARIO,), "argument --speed: expected a number >= 0, got 'fast' (from $SKINET_SPEED)",
+          SKINET_SPEED="fast")
+    usage(sim, "--start-delay", (SCENARIO, "--start-delay", "-1"),
+          "argument --start-delay: expected a number of seconds >= 0, got '-1'")
+    usage(sim, "--linger", (SCENARIO, "--linger", "later"),
+          "argument --linger: expected a number of seconds >= 0, got 'later'")
+    return cases
+
+
+CASES = _cases()
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The bad (and a few good) input files the cases name with {tmp}."""
+    tmp = tmp_path_factory.mktemp("errors")
+    skillsets = ROOT / "skillsets"
+    (tmp / "badname.toml").write_text(
+        f'[system]\nname = "has space/slash"\nproperties = "{skillsets / "spot_arm.props"}"\n'
+        f'[[skillsets]]\nmodel = "{skillsets / "spot.rl"}"\n[[skillsets]]\nmodel = "{skillsets / "manipulator.rl"}"\n')
+    (tmp / "list.json").write_text("[]")
+    (tmp / "bad.json5").write_text('{\n  mood: "peer",\n}\n')
+    (tmp / "syntax.json5").write_text("{mode\n")
+    (tmp / "bad.jsonl").write_text("not json\n")
+    head = f'[scenario]\nname = "bad"\nsystem = "{SYSTEM}"\n[[steps]]\n'
+    (tmp / "unknown_skillset.toml").write_text(head + 't = 1.0\nskillset = "spott"\ntransition = "init_power.start"\n')
+    (tmp / "unknown_transition.toml").write_text(head + 't = 1.0\nskillset = "spot"\ntransition = "init_power.strat"\n')
+    (tmp / "bad_time.toml").write_text(head + 't = "soon"\nskillset = "spot"\ntransition = "init_power.start"\n')
+    assert skinet_main.main(["demo", "--core", "--no-predict", "--log", str(tmp), SCENARIO]) == 0
+    (tmp / "unassisted.jsonl").rename(tmp / "run.jsonl")
+    return tmp
+
+
+@pytest.fixture(scope="module")
+def busy_port() -> Iterator[int]:
+    """A port of 127.0.0.1 with a listener on it."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        s.listen()
+        yield s.getsockname()[1]
+
+
+@pytest.fixture
+def keep_signal_handlers() -> Iterator[None]:
+    """Services install SIGINT/SIGTERM handlers; a failed start must not leave them to pytest."""
+    saved = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+    yield
+    for sig, handler in saved.items():
+        signal.signal(sig, handler)
+
+
+def _fill(text: str, tmp: Path, port: int) -> str:
+    return text.replace("{tmp}", str(tmp)).replace("{port}", str(port))
+
+
+@pytest.mark.parametrize("case", CASES, ids=str)
+def test_bad_value_gives_one_line_and_exit_status(case: Case, files: Path, busy_port: int,
+                                                  capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch,
+                                                  keep_signal_handlers: None) -> None:
+    for name in ("SKINET_ZENOH_MODE", "SKINET_ZENOH_CONNECT", "SKINET_ZENOH_LISTEN", "SKINET_ZENOH_CONFIG",
+                 "SKINET_INSTANCE", "SKINET_LOG_LEVEL", "SKINET_SPEED", "ROS_DOMAIN_ID", "SKINET_ROS_NAMESPACE"):
+        monkeypatch.delenv(name, raising=False)
+    for name, value in case.env:
+        monkeypatch.setenv(name, _fill(value, files, busy_port))
+    main = PROGRAMS[case.program][0]
+    try:
+        code = main([_fill(a, files, busy_port) for a in case.argv])
+    except SystemExit as exc:  # the argument parser
+        code = exc.code
+    out, err = capsys.readouterr()
+    assert (code, err) == (case.code, _fill(case.error, files, busy_port) + "\n")
+    assert out == ""
+
+
+def _options(parser: argparse.ArgumentParser, flags: bool = False) -> Iterator[tuple[str, str]]:
+    """(command, option) for every option taking a value (and every flag too with ``flags``)."""
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for name, sub in action.choices.items():
+                yield from ((f"{parser.prog} {name}", o) for _, o in _options(sub, flags))
+        elif (flags or action.nargs != 0) and not isinstance(action, argparse._HelpAction):
+            yield parser.prog, (action.option_strings[0] if action.option_strings else action.dest)
+
+
+def test_every_option_has_a_bad_value_case() -> None:
+    options = {o for _, factory in PROGRAMS.values() for o in _options(factory())}
+    everything = {o for _, factory in PROGRAMS.values() for o in _options(factory(), flags=True)}
+    covered = {(c.command, c.option) for c in CASES} | set(FREE_TEXT)
+    assert sorted(options - covered) == []
+    assert sorted(covered - everything) == []  # no case names an option that does not exist
+
+
+# As real processes: what a user sees, from the entry points themselves.
+PROCESS_CASES = [
+    (["-m", "skinet.cli.main", "run", SYSTEM, "--listen", "garbage"], 1,
+     "skinet: error: --listen 'garbage': an endpoint is PROTOCOL/ADDRESS, e.g. tcp/127.0.0.1:7447"),
+    (["-m", "services.monitor", SYSTEM, "--listen", "garbage"], 1,
+     "python -m services.monitor: error: --listen 'garbage': an endpoint is PROTOCOL/ADDRESS, e.g. tcp/127.0.0.1:7447"),
+    (["-m", "services.predictor", "--workers", "0"], 2,
+     "python -m services.predictor: error: argument --workers: expected an integer >= 1, got '0' "
+     "(see python -m services.predictor --help)"),
+    (["-m", "services.bridge_ros2", SYSTEM, "--connect", "tcp/1.2.3.4:99999"], 1,
+     "python -m services.bridge_ros2: error: --connect 'tcp/1.2.3.4:99999': port '99999' is not a number from 0 "
+     "to 65535"),
+    (["-m", "services.simulator", SCENARIO, "--zenoh-config", "/no/such/zenoh.json5"], 1,
+     "/no/such/zenoh.json5: error: cannot read file: No such file or directory"),
+]
+
+
+@pytest.mark.parametrize(("argv", "code", "error"), PROCESS_CASES, ids=[" ".join(c[0][1:3]) for c in PROCESS_CASES])
+def test_entry_point_processes(argv: list[str], code: int, error: str) -> None:
+    env = {k: v for k, v in os.environ.items() if not k.startswith("SKINET_")}
+    r = subprocess.run([sys.executable, *argv], capture_output=True, text=True, timeout=60, cwd=ROOT, env=env)
+    assert (r.returncode, r.stderr, r.stdout) == (code, error + "\n", "")
+
+
+def test_an_unexpected_exception_is_one_line(capsys: pytest.CaptureFixture[str],
+                                             monkeypatch: pytest.MonkeyPatch) -> None:
+    def broken(args: argparse.Namespace) -> int:
+        raise RuntimeError("boom")
+
+    monkeypatch.setattr(skinet_main, "cmd_parse", broken)
+    monkeypatch.delenv("SKINET_TRACEBACK", raising=False)
+    code = skinet_main.main(["parse", SPOT])
+    assert (code, capsys.readouterr().err) == (70, "skinet: internal error: RuntimeError: boom (a bug: please report "
+                                                   "it; SKINET_TRACEBACK=1 shows the traceback)\n")
+    monkeypatch.setenv("SKINET_TRACEBACK", "1")
+    with pytest.raises(RuntimeError, match="boom"):
+        skinet_main.main(["parse", SPOT])
+
+
+
+def test_any_title_is_drawn(files: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A title with "$" (matplotlib's mathtext) is drawn as written, not parsed."""
+    code = skinet_main.main(["timeline", str(files / "run.jsonl"), "-o", str(files / "t.png"), "--title", "$\\frac{$"])
+    assert (code, capsys.readouterr().err) == (0, "")
+
+
+def test_missing_corpus_is_named(tmp_path: Path) -> None:
+    """Without ../shared beside the repository, the test run stops with one line saying what is missing."""
+    tests = tmp_path / "repo" / "tests"
+    tests.mkdir(parents=True)
+    (tests / "conftest.py").write_text((ROOT / "tests" / "conftest.py").read_text())
+    (tests / "test_nothing.py").write_text("def test_nothing():\n    pass\n")
+    r = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", str(tests)],
+                       capture_output=True, text=True, timeout=120, cwd=tests.parent)
+    assert r.returncode == 4
+    assert (f"ERROR: the test corpus is missing: {tmp_path / 'shared' / 'corpus'} does not exist. The tests read "
+            "real skillset files") in r.stderr
+    assert "Traceback" not in r.stderr + r.stdout and "FileNotFoundError" not in r.stderr + r.stdout

@@ -1,0 +1,142 @@
+"""The README's examples reproduce as written.
+
+Every ``$ skinet ...`` line of a code block is run from the repository root and
+its output compared with the lines that follow it in the README (up to the next
+``$`` line or the end of the block).  ``...`` on a line of its own stands for
+any number of lines, inside a line for any text; otherwise lines must match
+exactly and in order, the first at the start and the last at the end of the
+output.  The expectations are read from the README itself, so a changed output
+format fails here until the README shows it.  The command tables are checked
+too: every option they name exists in the command's ``--help``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+import shlex
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+import services.bridge_ros2.__main__ as bridge_main
+import services.monitor.__main__ as monitor_main
+import services.predictor.__main__ as predictor_main
+import services.simulator.__main__ as simulator_main
+from skinet.cli.main import build_parser, main
+
+ROOT = Path(__file__).resolve().parents[1]
+README = (ROOT / "README.md").read_text(encoding="utf-8")
+ELLIPSIS = "..."
+
+
+@dataclass(frozen=True)
+class Example:
+    line: int  # of the ``$`` line in README.md
+    command: str
+    expected: tuple[str, ...]
+
+
+def examples(text: str) -> list[Example]:
+    """The ``$ skinet`` commands of the README's code blocks with their expected output."""
+    found: list[Example] = []
+    in_block = False
+    current: tuple[int, str, list[str]] | None = None
+    for n, line in enumerate(text.splitlines(), 1):
+        if line.startswith("```"):
+            if current is not None:
+                found.append(Example(current[0], current[1], tuple(current[2])))
+                current = None
+            in_block = not in_block
+        elif in_block and line.startswith("$ "):
+            if current is not None:
+                found.append(Example(current[0], current[1], tuple(current[2])))
+            current = (n, line[2:], [])
+        elif current is not None:
+            current[2].append(line)
+    return found
+
+
+def _line_matches(pattern: str, line: str) -> bool:
+    if ELLIPSIS not in pattern or pattern == ELLIPSIS:
+        return pattern == line
+    return re.fullmatch(".*".join(map(re.escape, pattern.split(ELLIPSIS))), line) is not None
+
+
+def matches(expected: tuple[str, ...], actual: list[str]) -> bool:
+    """Whether ``actual`` is ``expected`` with each ``...`` line standing for any lines."""
+    def at(i: int, j: int) -> bool:
+        if i == len(expected):
+            return j == len(actual)
+        if expected[i] == ELLIPSIS:
+            return any(at(i + 1, k) for k in range(j, len(actual) + 1))
+        return j < len(actual) and _line_matches(expected[i], actual[j]) and at(i + 1, j + 1)
+
+    return at(0, 0)
+
+
+EXAMPLES = examples(README)
+
+
+def test_the_readme_has_examples() -> None:
+    assert len(EXAMPLES) >= 5
+    assert all(e.command.startswith("skinet ") for e in EXAMPLES)
+
+
+@pytest.mark.parametrize("example", EXAMPLES, ids=lambda e: f"README.md:{e.line}")
+def test_readme_example(example: Example, capsys: pytest.CaptureFixture[str],
+                        monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.chdir(ROOT)
+    code = main(shlex.split(example.command)[1:])
+    out, err = capsys.readouterr()
+    assert code == 0, f"README.md:{example.line}: {example.command}\n{err}"
+    assert matches(example.expected, out.splitlines()), (
+        f"README.md:{example.line}: {example.command}\n--- README shows:\n" + "\n".join(example.expected)
+        + "\n--- the command prints:\n" + out)
+
+
+def test_matcher() -> None:
+    assert matches(("a", ELLIPSIS, "c"), ["a", "b", "b", "c"])
+    assert matches(("a", ELLIPSIS), ["a"])
+    assert not matches(("a", "c"), ["a", "b", "c"])
+    assert not matches(("a",), ["a", "b"])
+    assert matches(("took ... ms",), ["took 3.5 ms"])
+    assert not matches(("took ... ms",), ["took 3.5 s"])
+
+
+# -- the command tables -------------------------------------------------------------------------
+
+SERVICES = {"services.monitor": monitor_main, "services.predictor": predictor_main,
+            "services.bridge_ros2": bridge_main, "services.simulator": simulator_main}
+
+
+def _help(usage: str) -> str:
+    """The ``--help`` text of the command a table row shows."""
+    words = usage.split()
+    if words[0] == "skinet":
+        (sub,) = [a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction)]
+        return sub.choices[words[1]].format_help()
+    return SERVICES[words[2]].build_parser().format_help()
+
+
+def _table_commands(text: str) -> list[str]:
+    """The usage text of each ``skinet`` and ``python -m services.*`` row of the README's tables."""
+    return re.findall(r"^\| (?:[a-z_0-9]+ \| )?`((?:skinet|python -m services\.[a-z_0-9]+) [^`]*)`", text, re.M)
+
+
+TABLE = _table_commands(README)
+
+
+def test_the_tables_name_every_command() -> None:
+    named = {u.split()[1] if u.startswith("skinet") else u.split()[2] for u in TABLE}
+    assert named == {"demo", "run", "router", "record", "timeline", "parse", "net", "unsafe", "explore", "ctl",
+                     *SERVICES}
+
+
+@pytest.mark.parametrize("usage", TABLE, ids=[u.split(" [")[0] for u in TABLE])
+def test_table_options_exist(usage: str) -> None:
+    text = _help(usage)
+    options = re.findall(r"(?<![\w-])(--?[a-z][a-z0-9-]*)", usage)
+    missing = [o for o in options if not re.search(rf"(?<![\w-]){re.escape(o)}(?![\w-])", text)]
+    assert missing == [], f"README names {missing} for `{usage}`, which its --help does not list"
