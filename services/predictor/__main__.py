@@ -35,9 +35,9 @@ def build_parser() -> ArgumentParser:
     parser.add_argument("--memory-limit", type=memory_size, default=DEFAULT_MEMORY_LIMIT, metavar="SIZE",
                         help="peak memory of the process, shared by the workers, e.g. 2GiB (default: 1GiB); "
                              "beyond it answers are truncated, never refused")
-    parser.add_argument("--memory-mb", type=int, default=2048,
+    parser.add_argument("--memory-mb", type=count(64), default=2048,
                         help="address-space limit of each worker process, MB (default: 2048)")
-    parser.add_argument("--grace", type=float, default=1.0,
+    parser.add_argument("--grace", type=seconds(), default=1.0,
                         help="seconds past a request's budget before its worker is killed (default: 1)")
     add_log_arg(parser)
     add_zenoh_args(parser)

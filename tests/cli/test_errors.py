@@ -49,6 +49,7 @@ FREE_TEXT = {
     ("python -m services.bridge_ros2", "--source"): "any text names the source inside the events' payload",
     ("python -m services.bridge_ros2", "--ros-distro"): "only humble changes the keys; any other name is a later one",
     ("python -m services.simulator", "--ros-distro"): "only humble changes the keys; any other name is a later one",
+    ("skinet router", "--secrets"): "any folder: made at first start when missing (test_security.py)",
 }
 
 
@@ -232,6 +233,8 @@ def _cases() -> list[Case]:
         usage(pred, option, (option, "-2"), f"argument {option}: " + seconds.format("-2"))
     usage(pred, "--memory-limit", ("--memory-limit", "1 GiBi"),
           "argument --memory-limit: not a size: '1 GiBi' (e.g. 1GiB, 512MiB, 2GB)")
+    usage(pred, "--memory-mb", ("--memory-mb", "8"), "argument --memory-mb: expected an integer >= 64, got '8'")
+    usage(pred, "--grace", ("--grace", "-2"), "argument --grace: " + seconds.format("-2"))
     usage(br, "--instance", (SYSTEM, "--instance", "*"), f"argument --instance: instance id '*' {not_a_key}")
     for program, base in ((br, (SYSTEM,)), (sim, (SCENARIO,))):
         usage(program, "--namespace", (*base, "--namespace", "robot/*"),
