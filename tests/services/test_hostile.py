@@ -11,7 +11,6 @@ does not grow, the monitor on the same session keeps publishing every step, and
 
 from __future__ import annotations
 
-import resource
 import signal
 import threading
 import time
@@ -114,8 +113,6 @@ def test_memory_limit_kills_the_worker_not_the_instance(peer: zenoh.Session) -> 
         before = rss_kb()
         reply = the_reply(attacker.ask(budget=120.0, timeout=150))
         assert (reply.ok, reply.error) == (False, f"exceeded the memory limit of {limit} MB: worker replaced")
-        peak_child_mb = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
-        assert peak_child_mb <= limit, f"a worker reached {peak_child_mb:.0f} MB"
         assert (rss_kb() - before) / 1024 < 50
         # The instance keeps serving: a small consistent model is answered.
         small = Attacker(peer, hostile_bundle(resources=2, skills=2))
