@@ -28,9 +28,10 @@ FROM ${BASE_IMAGE}
 ENV PATH=/opt/skinet/bin:$PATH \
     PYTHONUNBUFFERED=1 \
     SKINET_ZENOH_MODE=client \
-    SKINET_ZENOH_NO_SCOUTING=1
+    SKINET_SECRETS=/var/lib/skinet/secrets
 RUN groupadd --system --gid 10001 skinet \
- && useradd --system --uid 10001 --gid 10001 --home-dir /app --no-create-home skinet
+ && useradd --system --uid 10001 --gid 10001 --home-dir /app --no-create-home skinet \
+ && mkdir -p /var/lib/skinet/secrets && chown skinet:skinet /var/lib/skinet/secrets && chmod 0700 /var/lib/skinet/secrets
 COPY --from=deps /opt/skinet /opt/skinet
 COPY docker/entrypoint.sh /usr/local/bin/skinet-entrypoint
 COPY docker/zenoh/ /etc/skinet/zenoh/

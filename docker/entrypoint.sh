@@ -9,15 +9,18 @@
 #
 # Zenoh settings come from the SKINET_ZENOH_* variables that every service reads.
 # SKINET_ZENOH_USER with SKINET_ZENOH_PASSWORD (or SKINET_ZENOH_PASSWORD_FILE, for
-# Docker secrets) adds user/password authentication to the session's configuration
+# Docker secrets; default $SKINET_SECRETS/<user>.password, which the router makes
+# at first start) adds user/password authentication to the session's configuration
 # (on top of SKINET_ZENOH_CONFIG when that is set), also for a router that logs in
-# to other routers (with SKINET_ZENOH_CONNECT).  Clients also wait for their router
-# instead of failing when it is not up yet (SKINET_ZENOH_CONNECT_TIMEOUT seconds,
+# to other routers (with SKINET_ZENOH_CONNECT).  A tls/ endpoint in
+# SKINET_ZENOH_CONNECT adds the CA and the user's certificate from
+# $SKINET_SECRETS/tls/.  Clients wait for these files and for their router instead
+# of failing when they are not there yet (SKINET_ZENOH_CONNECT_TIMEOUT seconds,
 # default 60; -1: forever).
 set -eu
 
 if [ $# -eq 0 ] || [ "$1" = "--help" ] || [ "$1" = "-h" ]; then
-    sed -n '2,16p' "$0" | sed 's/^# \{0,1\}//'
+    sed -n '2,19p' "$0" | sed 's/^# \{0,1\}//'
     exit 0
 fi
 
@@ -31,17 +34,29 @@ if [ "$service" != "skinet" ] && { [ "$service" != "router" ] || [ -n "${SKINET_
     # SKINET_ZENOH_CONFIG is kept, and passwords need no shell quoting.
     generated="${TMPDIR:-/tmp}/skinet-zenoh-$$.json"
     python3 - "$generated" <<'PY'
-import json, os, sys
+import json, os, sys, time
+from pathlib import Path
 import zenoh
+from services.common.security import tls_connect_config
+
+def wait_for(path):
+    deadline = time.monotonic() + 120
+    while not path.exists():
+        if time.monotonic() > deadline:
+            sys.exit(f"skinet-entrypoint: {path} never appeared (does the router run with the same secrets?)")
+        time.sleep(0.5)
+    return path
 
 base = os.environ.get("SKINET_ZENOH_CONFIG")
 config = zenoh.Config.from_file(base) if base else zenoh.Config()
+secrets = Path(os.environ.get("SKINET_SECRETS", "/var/lib/skinet/secrets"))
 user = os.environ.get("SKINET_ZENOH_USER", "")
 password = os.environ.get("SKINET_ZENOH_PASSWORD", "")
 password_file = os.environ.get("SKINET_ZENOH_PASSWORD_FILE", "")
+if user and not password and not password_file:
+    password_file = str(secrets / f"{user}.password")
 if password_file:
-    with open(password_file, encoding="utf-8") as f:
-        password = f.read().strip()
+    password = wait_for(Path(password_file)).read_text(encoding="utf-8").strip()
 if user:
     config.insert_json5("transport/auth/usrpwd/user", json.dumps(user))
     config.insert_json5("transport/auth/usrpwd/password", json.dumps(password))
@@ -54,6 +69,9 @@ if mode == "client":
 connect = [e.strip() for e in os.environ.get("SKINET_ZENOH_CONNECT", "").split(",") if e.strip()]
 if mode == "router" and connect:  # clients read SKINET_ZENOH_CONNECT themselves
     config.insert_json5("connect/endpoints", json.dumps(connect))
+if user and any(e.startswith("tls/") for e in connect):
+    wait_for(secrets / "tls" / f"{user}.key")
+    config.insert_json5("transport/link/tls", json.dumps(tls_connect_config(secrets / "tls", user)))
 fd = os.open(sys.argv[1], os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
 with os.fdopen(fd, "w") as f:
     f.write(str(config))

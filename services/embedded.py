@@ -1,7 +1,8 @@
 """Embedded default (SPEC §7): monitor and predictor on one peer session, with a live view.
 
 ``skinet run SYSTEM.toml`` opens one Zenoh ``peer`` session (no router; ZENOH.md:
-share one session in a process), starts the monitor and a predictor on it, and
+share one session in a process; loopback only and no multicast scouting unless
+asked), starts the monitor and a predictor on it, and
 shows the operator view: redrawn in place on a terminal, one line per change
 otherwise.  ``--listen`` lets a bridge in another process connect.  ``skinet
 router`` runs a Zenoh router from the Python wheel.
@@ -11,12 +12,14 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 import os
 import signal
 import sys
 import threading
 import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
 
 from services.common.zenoh_config import login, open_session, session_config
@@ -79,7 +82,8 @@ def render(view: MonitorView | Observed) -> list[str]:
         if p.answers:
             out.append("  answers per instance: " + ", ".join(f"{name} {n}" for name, n in sorted(p.answers.items())))
         out.append(f"events  received {c.received}, applied {c.applied}, malformed {c.malformed}, duplicates "
-                   f"{c.duplicates}, out of order {c.out_of_order}, lost {c.lost}, divergences {c.divergences}")
+                   f"{c.duplicates}, out of order {c.out_of_order}, lost {c.lost}, divergences {c.divergences}"
+                   + (f", resyncs {c.resyncs}" if c.resyncs else ""))
     return out
 
 
@@ -108,7 +112,7 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     from services.predictor.service import start_predictor
 
     system, _ = load_live_system(args.system)
-    config = session_config("peer", args.connect, args.listen, args.zenoh_config, not args.no_multicast_scouting,
+    config = session_config("peer", args.connect, args.listen, args.zenoh_config, args.multicast_scouting,
                             **login(args))
     stop = stop_on_signals()
     session = open_session(config)
@@ -177,14 +181,41 @@ def _follow(monitor: Monitor, stop: threading.Event, duration: float | None, out
 
 
 def router(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
-    """``skinet router``: a Zenoh router (mode "router" of the Python wheel) until interrupted."""
-    config = session_config("router", args.connect, args.listen or ["tcp/0.0.0.0:7447"], args.zenoh_config,
-                            not args.no_multicast_scouting, **login(args))
+    """``skinet router``: a Zenoh router (mode "router" of the Python wheel) until interrupted.
+
+    Secure by default (issue 14): loopback only unless ``--listen`` says otherwise,
+    and user/password authentication: the ``dictionary_file`` of the configuration,
+    or ``users.txt`` in the secrets folder; missing users get random passwords at
+    first start (:func:`~services.common.security.ensure_users`).  A ``tls/``
+    endpoint without certificates in the configuration gets a CA and certificates
+    (the router's, and one per user for clients) made in ``<secrets>/tls``, with
+    mutual TLS; ``$SKINET_TLS_HOSTNAMES`` lists the names clients reach it by.
+    """
+    from services.common.security import USERS, ensure_tls, ensure_users, tls_listen_config
+
     stop = stop_on_signals()
+    config = session_config("router", args.connect, args.listen, args.zenoh_config, args.multicast_scouting,
+                            **login(args))
+    folder = Path(args.secrets or Path.home() / ".config" / "skinet" / "secrets")
+    notes = []
+    if not args.no_auth:
+        table = json.loads(config.get_json("transport/auth/usrpwd/dictionary_file") or "null")
+        if table:
+            folder = Path(table).parent
+        ensure_users(folder)
+        config.insert_json5("transport/auth/usrpwd/dictionary_file", json.dumps(str(folder / "users.txt")))
+        notes.append(f"users and passwords in {folder}")
+    endpoints = json.loads(config.get_json("listen/endpoints"))
+    if any(str(e).startswith("tls/") for e in endpoints) and \
+            json.loads(config.get_json("transport/link/tls/listen_certificate") or "null") is None:
+        hostnames = [h.strip() for h in os.environ.get("SKINET_TLS_HOSTNAMES", "").split(",") if h.strip()]
+        ensure_tls(folder / "tls", ["router", *USERS], hostnames)
+        config.insert_json5("transport/link/tls", json.dumps(tls_listen_config(folder / "tls", "router")))
+        notes.append(f"TLS certificates in {folder / 'tls'}")
     session = open_session(config)
     try:
-        print(f"zenoh router {session.zid()} listening on {', '.join(args.listen or ['tcp/0.0.0.0:7447'])}",
-              file=out, flush=True)
+        print(f"zenoh router {session.zid()} listening on {', '.join(endpoints)}"
+              + "".join(f"; {n}" for n in notes), file=out, flush=True)
         while not stop.wait(0.5):
             pass
     finally:

@@ -20,6 +20,7 @@ import zenoh
 from services.bridge_ros2.replay import replay_bag
 from services.bridge_ros2.service import default_source, start_bridge
 from services.common.cli import add_instance_arg, add_log_arg, one_line_errors, setup_logging
+from services.common.events import event_publisher
 from services.common.zenoh_config import add_zenoh_args, config_from_args, open_session
 from skinet.cli.options import ArgumentParser, count, key_prefix, load_live_system, seconds
 from skinet.errors import SkinetError, SourceError
@@ -90,9 +91,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _replay(session: zenoh.Session, system, typemap, args: argparse.Namespace, source: str) -> int:
-    publishers = {c.name: session.declare_publisher(keys.events(system.name, c.name),
-                                                     congestion_control=zenoh.CongestionControl.BLOCK)
-                  for c in system.components}
+    publishers = {c.name: event_publisher(session, keys.events(system.name, c.name)) for c in system.components}
     try:
         feed = replay_bag(args.replay, system, typemap, lambda ev: publishers[ev.skillset].put(encode(ev)),
                           source=source, realtime=args.realtime, hold=args.hold)

@@ -2,9 +2,10 @@
 
 :class:`Feed` decodes each message with the skillset's type store, hands it to the
 skillset's :class:`~skinet.ros.derive.Deriver` and numbers the resulting
-:class:`~skinet.wire.messages.CanonicalEvent` per skillset (0, 1, 2, ...).  A
-payload that does not decode is logged and dropped (SPEC §7).  A status that
-overtook one of its responses waits for it (bounded).
+:class:`~skinet.wire.messages.CanonicalEvent` per skillset (0, 1, 2, ...) within
+an epoch, the feed's start time in milliseconds, so that a monitor recognises a
+restarted bridge (issue 14).  A payload that does not decode is logged and dropped
+(SPEC §7).  A status that overtook one of its responses waits for it (bounded).
 """
 
 from __future__ import annotations
@@ -69,11 +70,12 @@ class Feed:
 
     def __init__(self, system: System, typemap: Mapping[str, str], source: str,
                  extra_types: Mapping[str, str] | None = None, *, hold: float = 0.5,
-                 clock: Callable[[], float] = time.monotonic):
+                 clock: Callable[[], float] = time.monotonic, epoch: int | None = None):
         self.system = system
         self.source = source
         self.hold = hold
         self.clock = clock
+        self.epoch = time.time_ns() // 1_000_000 if epoch is None else epoch
         self.counters = Counters()
         self.statuses: dict[str, int] = {c.name: 0 for c in system.components}  # statuses derived per skillset
         self.managers: dict[str, _Manager] = {}
@@ -237,12 +239,23 @@ class Feed:
         events = []
         for d in out.events:
             events.append(CanonicalEvent(system=self.system.name, skillset=m.component.name, seq=m.seq,
-                                         stamp=d.stamp, source=self.source, transition=d.transition,
+                                         stamp=d.stamp, source=self.source, epoch=self.epoch,
+                                         transition=d.transition,
                                          status=d.status, info=d.info))
             m.seq += 1
             self.counters.unexplained += d.transition is None
         self.counters.events += len(events)
         return events
+
+    def last_status(self, skillset: str) -> CanonicalEvent | None:
+        """A status-only event with ``skillset``'s last status, numbered as the last event
+        produced (what a monitor resyncs from); None before the first status."""
+        m = self.managers[skillset]
+        last = m.deriver.last
+        if last is None:
+            return None
+        return CanonicalEvent(system=self.system.name, skillset=skillset, seq=max(m.seq - 1, 0), stamp=last.stamp,
+                              source=self.source, epoch=self.epoch, status=last.wire(), info="resync")
 
     def has_status(self, skillset: str) -> bool:
         """Whether a status of ``skillset`` was received (since its manager restarted, if it did)."""

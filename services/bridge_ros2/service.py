@@ -4,7 +4,8 @@ Subscribes to each manager's ``status``, ``event_request``, ``event_response`` a
 ``skill/<k>/response`` on the keys of :mod:`skinet.ros.keys` (as
 ``zenoh-bridge-ros2dds`` or ``rmw_zenoh`` carry them) and publishes the derived
 :class:`~skinet.wire.messages.CanonicalEvent` on ``keys.events(system, skillset)``
-with ``CongestionControl.BLOCK`` (ZENOH.md).
+with ``CongestionControl.BLOCK`` (ZENOH.md) and a cache from which a monitor
+recovers what it missed during an outage (:mod:`services.common.events`).
 
 The manager's status is volatile (corpus README): the bridge sends
 ``status_request`` at start-up and repeats it every second until each manager has
@@ -16,6 +17,9 @@ with its sequence number going back (``rmw_zenoh`` attachments), or skill ids re
 to '' mean the manager restarted: the bridge asks again and the next status is a new
 initial status whose ``info`` says how it differs from the last one (SPEC §7).  With
 ``rmw_zenoh`` the bridge declares its own node, subscription and publisher tokens.
+A monitor that missed events asks ``keys.resync(system, skillset)``: the bridge
+answers with the skillset's last status (numbered as its last event) and asks
+the manager for a fresh one.
 
 One subscriber per manager covers all its topics (``.../<skillset>_skillset/**``):
 separate subscribers per key would run their callbacks on different threads and
@@ -39,6 +43,7 @@ import zenoh
 
 from services.bridge_ros2.feed import Counters, Feed
 from services.common.cli import default_instance_id
+from services.common.events import event_publisher
 from services.common.zenoh_config import undeclare
 from services.common.ros_liveliness import declare_node
 from skinet.ros.keys import (
@@ -87,8 +92,7 @@ class Bridge:
         own: list[tuple[EntityKind, str, str, str]] = []  # rmw_zenoh graph entities of the bridge
         for name, m in self.feed.managers.items():
             manager = m.component.manager
-            self._events[name] = session.declare_publisher(
-                keys.events(system.name, name), congestion_control=zenoh.CongestionControl.BLOCK)
+            self._events[name] = event_publisher(session, keys.events(system.name, name))
             watched = {t.topic: t for t in m.topics}
             self._subscribers.append(session.declare_subscriber(
                 style.all_topics(manager, m.component.skillset), self._callback(name, manager, watched)))
@@ -97,6 +101,7 @@ class Bridge:
             own += [("MS", topic_fqn(manager, t.topic), t.typename, style.type_hash(m.store, t.typename))
                     for t in m.topics]
             own.append(("MP", topic_fqn(manager, req.topic), req.typename, style.type_hash(m.store, req.typename)))
+        self._resync = session.declare_queryable(keys.resync(system.name, "*"), self._on_resync)
         self._token = session.liveliness().declare_token(keys.alive(system.name, "bridge_ros2", self.instance_id))
         self._ros_tokens: list[Any] = []
         self.graph: list[RosEntity] = []  # rmw_zenoh: the bridge's node and topics as ROS tools see them
@@ -150,6 +155,17 @@ class Bridge:
                 log.exception("failed to handle a message of %s", item[0] if item else "a held status")
             with self._fed:
                 self._fed.notify_all()
+
+    def _on_resync(self, query: zenoh.Query) -> None:
+        with query:
+            skillset = str(query.key_expr).rsplit("/", 1)[-1]
+            if skillset not in self.feed.managers:
+                return
+            with self._fed:
+                ev = self.feed.last_status(skillset)
+            if ev is not None:
+                query.reply(keys.resync(self.system.name, skillset), wire_encode(ev))
+            self.request_status(skillset)
 
     # -- status requests ------------------------------------------------------------------
 
@@ -234,7 +250,7 @@ class Bridge:
         if self._stop.is_set():
             return
         self._stop.set()
-        undeclare(self._token, *self._ros_tokens, *self._subscribers)
+        undeclare(self._token, self._resync, *self._ros_tokens, *self._subscribers)
         self._queue.put(None)
         self._worker.join(5.0)
         if self._asker is not None:

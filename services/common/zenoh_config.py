@@ -5,7 +5,10 @@ Environment variables give the defaults so containers need no arguments:
 ``SKINET_ZENOH_LISTEN`` (comma-separated endpoints such as
 ``tcp/127.0.0.1:7447``), ``SKINET_ZENOH_CONFIG`` (a JSON5 file),
 ``SKINET_ZENOH_USER`` with ``SKINET_ZENOH_PASSWORD`` or ``SKINET_ZENOH_PASSWORD_FILE``
-(user/password login).
+(user/password login), ``SKINET_ZENOH_SCOUTING=1`` (multicast scouting, off by default).
+
+Secure defaults (issue 14): a peer or router given no ``listen`` endpoint listens
+on loopback only (``LOOPBACK``), and multicast scouting is off unless asked for.
 """
 
 from __future__ import annotations
@@ -20,6 +23,9 @@ import zenoh
 from services.common.session import login_refused
 from skinet.errors import Pos, SkinetError, SourceError
 from skinet.files import read_text
+
+LOOPBACK = "tcp/127.0.0.1:0"  # a peer's default endpoint: this host only, any free port
+ROUTER_LOOPBACK = "tcp/127.0.0.1:7447"  # a router's
 
 MODES = ("peer", "client", "router")
 # Protocols whose address is HOST:PORT (the others, e.g. unixsock-stream, take a path).
@@ -97,9 +103,7 @@ def add_zenoh_args(parser: argparse.ArgumentParser) -> None:
                    help="endpoint to connect to, e.g. tcp/127.0.0.1:7447 (repeatable)")
     g.add_argument("--listen", "-l", action="append", default=None, help="endpoint to listen on (repeatable)")
     g.add_argument("--zenoh-config", default=os.environ.get("SKINET_ZENOH_CONFIG"), help="JSON5 Zenoh configuration file")
-    g.add_argument("--no-multicast-scouting", action="store_true",
-                   default=os.environ.get("SKINET_ZENOH_NO_SCOUTING", "") not in ("", "0"),
-                   help="disable multicast scouting (tests, containers)")
+    add_scouting_args(g)
     add_login_args(g)
 
 
@@ -127,6 +131,14 @@ def login(args: argparse.Namespace) -> dict[str, str | None]:
     return {"user": user, "password": password}
 
 
+def add_scouting_args(g: argparse._ActionsContainer) -> None:
+    """``--multicast-scouting`` (off by default); ``--no-multicast-scouting`` is kept for old scripts."""
+    g.add_argument("--multicast-scouting", action="store_true",
+                   default=os.environ.get("SKINET_ZENOH_SCOUTING", "") not in ("", "0"),
+                   help="join multicast scouting to find peers on the LAN (default: off; $SKINET_ZENOH_SCOUTING=1)")
+    g.add_argument("--no-multicast-scouting", action="store_true", help="the default; accepted for old scripts")
+
+
 def _env_list(name: str) -> list[str]:
     return [e.strip() for e in os.environ.get(name, "").split(",") if e.strip()]
 
@@ -136,12 +148,14 @@ def session_config(
     connect: list[str] | None = None,
     listen: list[str] | None = None,
     config_file: str | None = None,
-    multicast_scouting: bool = True,
+    multicast_scouting: bool = False,
     user: str | None = None,
     password: str | None = None,
 ) -> zenoh.Config:
     """A Zenoh configuration from explicit settings (endpoints in ``tcp/HOST:PORT`` form).
 
+    Without ``listen``, a peer or router listens on loopback only, unless the file
+    ``config_file`` says where; multicast scouting is off unless asked for.
     Raises :class:`ZenohSetupError` or :class:`SourceError` (the file) with one line.
     """
     if mode not in MODES:
@@ -155,8 +169,9 @@ def session_config(
         config.insert_json5("connect/endpoints", json.dumps(connect))
     if listen:
         config.insert_json5("listen/endpoints", json.dumps(listen))
-    if not multicast_scouting:
-        config.insert_json5("scouting/multicast/enabled", "false")
+    elif mode != "client" and config.get_json("listen/endpoints") == zenoh.Config().get_json("listen/endpoints"):
+        config.insert_json5("listen/endpoints", json.dumps([LOOPBACK if mode == "peer" else ROUTER_LOOPBACK]))
+    config.insert_json5("scouting/multicast/enabled", json.dumps(multicast_scouting))
     if user:
         config.insert_json5("transport/auth/usrpwd/user", json.dumps(user))
         config.insert_json5("transport/auth/usrpwd/password", json.dumps(password or ""))
@@ -173,7 +188,7 @@ def config_from_args(args: argparse.Namespace) -> zenoh.Config:
         if endpoints[option] is None:
             endpoints[option] = [check_endpoint(e, env) for e in _env_list(env)]
     return session_config(args.mode, endpoints["connect"], endpoints["listen"], args.zenoh_config,
-                          not args.no_multicast_scouting, **login(args))
+                          args.multicast_scouting, **login(args))
 
 
 def undeclare(*entities: object) -> None:

@@ -61,8 +61,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         monitor.close()
         c = monitor.counters
         log.info("stopped: %d received, %d applied, %d malformed, %d duplicates, %d out of order, %d lost, "
-                 "%d divergences", c.received, c.applied, c.malformed, c.duplicates, c.out_of_order, c.lost,
-                 c.divergences)
+                 "%d divergences; %d unrecovered, %d jumps, %d restarts, %d resyncs", c.received, c.applied,
+                 c.malformed, c.duplicates, c.out_of_order, c.lost, c.divergences, c.unrecovered, c.jumps,
+                 c.restarts, c.resyncs)
     finally:
         session.close()
     return 0

@@ -42,6 +42,11 @@ class Counters:
     duplicates: int = 0  # seq equal to the last applied one
     out_of_order: int = 0  # seq older than the last applied one
     lost: int = 0  # seq numbers skipped (gaps), events never seen
+    jumps: int = 0  # seq far ahead of the last (forged, or a long outage): resynced
+    restarts: int = 0  # a stream begun anew: new epoch, or seq far behind (a wrap)
+    resyncs: int = 0  # status resyncs applied
+    unrecovered: int = 0  # events an outage took that the bridge's cache could not give back (also in lost)
+    history: int = 0  # events stamped before the monitor started (the cache replayed to a late monitor)
     divergences: int = 0  # events the model could not explain (SPEC §7)
     errors: int = 0  # unexpected exceptions while handling a payload (bugs)
 
@@ -105,13 +110,15 @@ class Engine:
     system: System
     cache_size: int = 4096
     prediction_cache: int = 256
+    window: int = 1024  # seq distance within which events belong to the same run of a stream
+    max_streams: int = 256  # (skillset, source) pairs remembered
     counters: Counters = field(default_factory=Counters)
 
     def __post_init__(self) -> None:
         self.live = LiveSystem(self.system)
         self.names = tuple(c.name for c in self.system.components)
         self.seq = -1  # monitor step counter; the initial state is step 0
-        self.last_seq: dict[tuple[str, str], int] = {}
+        self.last_seq: OrderedDict[tuple[str, str], tuple[int, int]] = OrderedDict()  # -> (epoch, seq)
         self.predictions: OrderedDict[MarkingKey, Prediction] = OrderedDict()
         self._applied: dict[tuple, tuple[int | None, bool, str | None]] = {}
         self._frames: dict[tuple[MarkingKey, int], Frame] = {}
@@ -129,26 +136,64 @@ class Engine:
         """Step 0: the initial marking, published at start."""
         return self._step("", False, None)
 
-    def check_seq(self, ev: CanonicalEvent) -> tuple[bool, str | None]:
-        """Whether to apply ``ev`` given its seq (per skillset and source), and what to log.
+    def check_seq(self, ev: CanonicalEvent) -> tuple[bool, str | None, bool]:
+        """Whether to apply ``ev`` given its (epoch, seq), what to log, and whether to resync.
 
-        A duplicate or older seq is counted and not applied; a gap is counted
-        in ``lost`` and the event applied.  A stream may start at any seq.
+        Streams are keyed by (skillset, source) and start at any seq.  Within one
+        epoch (one run of the publisher): a duplicate or a seq less than ``window``
+        behind the last is counted and not applied; a gap is counted in ``lost``,
+        applied, and answered by a status resync.  Anything else starts the stream
+        anew, applied and resynced: a new epoch (a restarted bridge), a seq
+        ``window`` or more behind (a wrap, or a publisher restarted without epochs)
+        or ahead (a jump: counted in ``jumps``, not in ``lost``).  So one forged
+        event costs at most one resync, never the stream.  At most ``max_streams``
+        streams are remembered (least recently seen dropped).  Cost: O(1).
         """
         stream = (ev.skillset, ev.source)
-        last = self.last_seq.get(stream)
-        if last is not None and ev.seq <= last:
-            if ev.seq == last:
-                self.counters.duplicates += 1
-                return False, f"duplicate event {ev.skillset}#{ev.seq} from '{ev.source}' ignored"
-            self.counters.out_of_order += 1
-            return False, f"out-of-order event {ev.skillset}#{ev.seq} (last {last}) from '{ev.source}' ignored"
-        if ev.skillset in self.live.marking:  # unknown skillsets are not tracked
-            self.last_seq[stream] = ev.seq
-        if last is not None and ev.seq > last + 1:
-            self.counters.lost += ev.seq - last - 1
-            return True, f"lost events {ev.skillset}#{last + 1}..{ev.seq - 1} from '{ev.source}'"
-        return True, None
+        streams = self.last_seq
+        prev = streams.get(stream)
+        if ev.skillset not in self.live.marking:  # unknown skillsets are not tracked
+            return True, None, False
+        streams[stream] = (ev.epoch, ev.seq)
+        streams.move_to_end(stream)
+        if len(streams) > self.max_streams:
+            streams.popitem(last=False)
+        if prev is None:
+            return True, None, False
+        epoch, last = prev
+        who = f"{ev.skillset}#{ev.seq} from '{ev.source}'"
+        c = self.counters
+        if epoch != ev.epoch:
+            c.restarts += 1
+            return True, f"new run (epoch {ev.epoch}, was {epoch}) at {who}: resync", True
+        gap = ev.seq - last
+        if -self.window < gap <= 0:
+            streams[stream] = prev
+            if gap == 0:
+                c.duplicates += 1
+                return False, f"duplicate event {who} ignored", False
+            c.out_of_order += 1
+            return False, f"out-of-order event {who} (last {last}) ignored", False
+        if gap <= -self.window:
+            c.restarts += 1
+            return True, f"sequence restarted at {who} (last {last}): resync", True
+        if gap > self.window:
+            c.jumps += 1
+            return True, f"sequence jump at {who} (last {last}): resync", True
+        if gap > 1:
+            c.lost += gap - 1
+            return True, f"lost events {ev.skillset}#{last + 1}..{ev.seq - 1} from '{ev.source}': resync", True
+        return True, None, False
+
+    def resync(self, ev: CanonicalEvent) -> bool:
+        """Whether a resync answer (the publisher's last status) is newer than what was applied."""
+        prev = self.last_seq.get((ev.skillset, ev.source))
+        if ev.status is None or ev.skillset not in self.live.marking:
+            return False
+        if prev is not None and prev[0] == ev.epoch and 0 < prev[1] - ev.seq < self.window:
+            return False  # a later event of this run already arrived (it carries its own status)
+        self.last_seq[(ev.skillset, ev.source)] = (ev.epoch, ev.seq)
+        return True
 
     def apply(self, ev: CanonicalEvent) -> Step | None:
         """Advance the live marking by ``ev`` (already seq-checked) and build its step.

@@ -1,6 +1,7 @@
 """The monitor service: the fast path of SPEC §1 as a Zenoh shell around :class:`Engine`.
 
-Subscribes to ``keys.events(system, "*")``; per event it publishes
+Subscribes to ``keys.events(system, "*")``, recovering what an outage took from
+the bridge's cache (:mod:`services.common.events`); per event it publishes
 :class:`LiveState`, :class:`Verdicts` and :class:`UnsafeReport` (one step;
 the three share the step's ``seq``).  It answers the model queryable, the command
 check (``skinet/<system>/check``, :mod:`services.monitor.check`) and ``get`` on its
@@ -10,7 +11,9 @@ waiting for it (:mod:`services.monitor.prediction`); when a prediction for the
 live marking arrives, the UnsafeReport of the same step is published again with
 ``prediction_stale=False`` together with the :class:`StateSpaceReport`.
 Predictions are kept per marking (``prediction_cache``): a marking seen again is
-fresh at once and not queried again.  Bad payloads are counted and logged,
+fresh at once and not queried again.  A gap, a jump, a restarted bridge or events
+that could not be recovered make it ask the bridge for the skillset's last status
+(``keys.resync``) and apply it (see :meth:`Engine.check_seq`).  Bad payloads are counted and logged,
 never raised (SPEC §7).
 """
 
@@ -19,11 +22,13 @@ from __future__ import annotations
 import dataclasses
 import logging
 import threading
+import time
 import uuid
 from dataclasses import dataclass
 
 import zenoh
 
+from services.common.events import event_subscriber
 from services.common.zenoh_config import undeclare
 from services.monitor.check import Checker, Policy, request_from
 from services.monitor.engine import Counters, Engine, MarkingKey, Step
@@ -38,6 +43,8 @@ from skinet.wire.messages import (
 
 log = logging.getLogger("skinet.monitor")
 _LOG_FIRST = 10  # log the first occurrences of each problem, then every 1000th
+MAX_EVENT = 64 << 10  # bytes; a canonical event is a few hundred
+HISTORY_SLACK = 2.0  # seconds: events stamped this long before the monitor started are history
 
 
 @dataclass(frozen=True)
@@ -59,7 +66,7 @@ class Monitor:
     def __init__(self, session: zenoh.Session, system: System, *, instance_id: str | None = None,
                  budget: float = 1.0, query_timeout: float | None = None, retry: float = 0.5, stall: float = 0.5,
                  prediction_cache: int = 256, indirect: bool = True, express: bool = True,
-                 check_policy: Policy | None = None):
+                 check_policy: Policy | None = None, resync_timeout: float = 2.0):
         self.session, self.system = session, system
         self.instance_id = keys.check_chunk(instance_id or uuid.uuid4().hex[:8], "instance id")
         name = keys.check_chunk(system.name, "system name")
@@ -79,6 +86,9 @@ class Monitor:
         self._closed = False
         self._last: dict[str, bytes] = {}
         self._waiters = 0  # threads in wait_change: notify only when someone listens
+        self._resyncing: set[str] = set()  # skillsets with a resync query in flight
+        self._started = time.time()
+        self.resync_timeout = resync_timeout
         opts = dict(congestion_control=zenoh.CongestionControl.BLOCK, express=express)
         self._pub = {k: session.declare_publisher(key, **opts) for k, key in (
             ("state", keys.state(name)), ("verdicts", keys.verdicts(name)),
@@ -98,8 +108,8 @@ class Monitor:
             keys.alive("*", "predictor", "*"), self._on_predictor_token)
         for token in _tokens(session, keys.alive("*", "predictor", "*")):  # the pool before the first query
             self._predict.instance(token, True)
-        self._sub = session.declare_subscriber(
-            keys.events(name, "*"), zenoh.handlers.Callback(self._on_event, indirect=indirect))
+        self._sub, self._misses = event_subscriber(
+            session, keys.events(name, "*"), zenoh.handlers.Callback(self._on_event, indirect=indirect), self._on_miss)
         # Declared last: whoever sees the token also sees the declarations above.
         self._token = session.liveliness().declare_token(keys.alive(name, "monitor", self.instance_id))
         self._twins = session.liveliness().declare_subscriber(keys.alive(name, "monitor", "*"), self._on_monitor_token)
@@ -140,7 +150,8 @@ class Monitor:
                 return
             self._closed = True  # callbacks still running return at once
             self._changed.notify_all()
-        undeclare(self._sub, self._predictors, self._twins, self._queryable, self._check, *self._latest, self._token)
+        undeclare(self._misses, self._sub, self._predictors, self._twins, self._queryable, self._check, *self._latest,
+                  self._token)
         self._predict.close()
         with self._lock:
             undeclare(*self._pub.values())
@@ -149,6 +160,8 @@ class Monitor:
 
     def _on_event(self, sample: zenoh.Sample) -> None:
         try:
+            if len(sample.payload) > MAX_EVENT:
+                raise DecodeError(f"event payload of {len(sample.payload)} bytes (limit {MAX_EVENT})")
             ev = decode(sample.payload.to_bytes(), CanonicalEvent)
             if ev.system != self.system.name:
                 raise DecodeError(f"event of system '{ev.system}' on {sample.key_expr}")
@@ -159,30 +172,87 @@ class Monitor:
                 c.malformed += 1
                 self._warn(c.malformed, "malformed event payload: %s", exc)
             return
+        if 0 < ev.stamp < self._started - HISTORY_SLACK:
+            # The bridge's cache replayed to a monitor that starts late (zenoh.ext recovers
+            # everything before a heartbeat's seq): history, not what happens now.
+            with self._lock:
+                self._engine.counters.received += 1
+                self._engine.counters.history += 1
+            return
         try:
             with self._lock:
                 if self._closed:
                     return
                 engine = self._engine
                 engine.counters.received += 1
-                fresh, problem = engine.check_seq(ev)
+                fresh, problem, resync = engine.check_seq(ev)
                 c = engine.counters
                 if problem:
-                    self._warn(c.duplicates + c.out_of_order + c.lost, "%s", problem)
-                if not fresh:
-                    return
-                step = engine.apply(ev)
-                if step is None:  # a status confirming the live marking
-                    return
-                self._publish(step)
-                if step.divergence:
-                    self._warn(c.divergences, "divergence at %s#%d: %s", ev.skillset, ev.seq, step.divergence)
-                if engine.prediction(step.key) is None:
-                    self._predict.want(step.key, engine.marking())
+                    self._warn(c.duplicates + c.out_of_order + c.lost + c.jumps + c.restarts, "%s", problem)
+                if fresh:
+                    self._step(ev)
+            if resync:
+                self._ask_resync(ev.skillset)
         except Exception:  # a bug must not stop the monitor
             with self._lock:
                 self._engine.counters.errors += 1
             log.exception("error while handling an event")
+
+    def _on_miss(self, count: int) -> None:
+        """Events an outage took that no cache could give back: counted, then every skillset resynced."""
+        with self._lock:  # the next event shows the gap: check_seq counts it in lost and names it
+            self._engine.counters.unrecovered += count
+            self._warn(self._engine.counters.unrecovered, "%d events missed and not recoverable: resync", count)
+        for c in self.system.components:
+            self._ask_resync(c.name)
+
+    def _ask_resync(self, skillset: str) -> None:
+        """Ask the bridge for ``skillset``'s last status (one query in flight per skillset)."""
+        with self._lock:
+            if skillset in self._resyncing or self._closed:
+                return
+            self._resyncing.add(skillset)
+        done = lambda: self._resync_done(skillset)  # noqa: E731
+        try:
+            self.session.get(keys.resync(self.system.name, skillset),
+                             zenoh.handlers.Callback(self._on_resync, done), timeout=self.resync_timeout)
+        except zenoh.ZError as exc:  # session closed under us
+            log.warning("cannot ask for a resync of %s: %s", skillset, exc)
+            done()
+
+    def _resync_done(self, skillset: str) -> None:
+        with self._lock:
+            self._resyncing.discard(skillset)
+
+    def _on_resync(self, reply: zenoh.Reply) -> None:
+        try:
+            if reply.ok is None:
+                return
+            ev = decode(reply.ok.payload.to_bytes(), CanonicalEvent)
+            if ev.system != self.system.name:
+                return
+            with self._lock:
+                if self._closed or not self._engine.resync(ev):
+                    return
+                self._engine.counters.resyncs += 1
+                log.info("resync of %s from '%s' at #%d", ev.skillset, ev.source, ev.seq)
+                self._step(ev)
+        except DecodeError as exc:
+            log.warning("bad resync reply: %s", exc)
+        except Exception:
+            log.exception("error while applying a resync")
+
+    def _step(self, ev: CanonicalEvent) -> None:
+        """Apply a checked event and publish its step (lock held)."""
+        engine = self._engine
+        step = engine.apply(ev)
+        if step is None:  # a status confirming the live marking
+            return
+        self._publish(step)
+        if step.divergence:
+            self._warn(engine.counters.divergences, "divergence at %s#%d: %s", ev.skillset, ev.seq, step.divergence)
+        if engine.prediction(step.key) is None:
+            self._predict.want(step.key, engine.marking())
 
     def _on_prediction(self, key: MarkingKey, reply: PredictReply) -> None:
         try:

@@ -23,7 +23,8 @@ def build_parser() -> ArgumentParser:
         description="Answer SkiNet prediction requests on skinet/*/predict (stateless; run as many as you like).",
     )
     add_instance_arg(parser)
-    parser.add_argument("--workers", type=count(), default=2, help="threads computing forecasts (default: 2)")
+    parser.add_argument("--workers", type=count(), default=2,
+                        help="worker processes computing forecasts (default: 2)")
     parser.add_argument("--max-pending", type=count(), default=8,
                         help="requests queued or running before 'busy' (default: 8)")
     parser.add_argument("--cache", type=count(), default=4, help="systems kept in the LRU cache (default: 4)")
@@ -34,6 +35,10 @@ def build_parser() -> ArgumentParser:
     parser.add_argument("--memory-limit", type=memory_size, default=DEFAULT_MEMORY_LIMIT, metavar="SIZE",
                         help="peak memory of the process, shared by the workers, e.g. 2GiB (default: 1GiB); "
                              "beyond it answers are truncated, never refused")
+    parser.add_argument("--memory-mb", type=count(64), default=2048,
+                        help="address-space limit of each worker process, MB (default: 2048)")
+    parser.add_argument("--grace", type=seconds(), default=1.0,
+                        help="seconds past a request's budget before its worker is killed (default: 1)")
     add_log_arg(parser)
     add_zenoh_args(parser)
     return parser
@@ -50,7 +55,7 @@ def main(argv: list[str] | None = None) -> int:
     session = open_session(config)  # fails e.g. with no router at the --connect endpoint yet
     predictor = start_predictor(session, args.instance, workers=args.workers, max_pending=args.max_pending,
                                 cache_size=args.cache, fetch_timeout=args.fetch_timeout, max_budget=args.max_budget,
-                                memory_limit=args.memory_limit)
+                                memory_limit=args.memory_limit, memory_mb=args.memory_mb, grace=args.grace)
     while not stop.wait(0.2):
         pass
     # Withdraw the queryable and answer what was admitted, then retire the whole

@@ -3,11 +3,13 @@
 A :class:`~skinet.wire.messages.PredictRequest` arrives on ``skinet/<system>/predict``
 with the live marking and the digest of the monitor's model.  An instance that does
 not know the digest fetches the :class:`~skinet.wire.messages.ModelBundle` from
-``skinet/<system>/model/<digest>``, rebuilds the system and keeps it in a small LRU
-cache; then it explores from the marking within the request's budget and replies
-with the state-space report and the non-safe one-step successors.  Every failure is
-answered with ``ok=False`` and a one-line ``error`` (SPEC §7: bad input never crashes
-a service).
+``skinet/<system>/model/<digest>``, checks that the bundle hashes to the digest
+before anything is built (a sha256 of its text) and keeps the bundle in a small LRU
+cache.  Building the nets, exploring from the marking and computing the replies'
+risks happen in worker processes (:mod:`services.sandbox`) under the request's
+budget and an address-space limit, so a hostile model costs an instance at most its
+limits.  Every failure is answered with ``ok=False`` and a one-line ``error``
+(SPEC §7: bad input never crashes a service).
 
 Threading: Zenoh runs query callbacks on its own threads, and a ``get`` issued from
 inside one (the model fetch) may deadlock.  The callback therefore only decodes the
@@ -27,6 +29,7 @@ timeout or the liveliness lease.
 from __future__ import annotations
 
 import logging
+import queue
 import threading
 import time
 from collections import Counter, OrderedDict
@@ -35,13 +38,11 @@ from concurrent.futures import ThreadPoolExecutor
 import zenoh
 
 from services.common.zenoh_config import undeclare
-from skinet.errors import SkinetError
-from skinet.system import System
+from services.sandbox import Worker, WorkerError
 from skinet.verify.explore import DEFAULT_MEMORY_LIMIT
-from skinet.verify.predict import forecast
 from skinet.wire import keys
 from skinet.wire.codec import DecodeError, decode, encode
-from skinet.wire.convert import bundle, marking_of, request_options, risks, state_space_report, system_from_bundle
+from skinet.wire.convert import bundle_digest
 from skinet.wire.messages import ModelBundle, PredictReply, PredictRequest
 
 log = logging.getLogger("skinet.predictor")
@@ -49,7 +50,11 @@ HEARTBEAT = 0.1  # seconds between "working" replies on the instance key (schema
 
 
 class FetchError(Exception):
-    """The model of a digest could not be obtained."""
+    """The model of a digest could not be obtained; ``unknown``: nobody serves it."""
+
+    def __init__(self, message: str, unknown: bool = False):
+        super().__init__(message)
+        self.unknown = unknown
 
 
 def _one_line(text: str) -> str:
@@ -70,6 +75,9 @@ class Predictor:
         fetch_timeout: float = 2.0,
         max_budget: float = 10.0,
         memory_limit: int = DEFAULT_MEMORY_LIMIT,
+        memory_mb: int = 2048,
+        grace: float = 1.0,
+        max_bundle: int = 1 << 20,
     ):
         self.session = session
         self.instance_id = keys.check_chunk(instance_id, "instance id")
@@ -78,11 +86,20 @@ class Predictor:
         # Each worker may hold one forecast: the process limit is shared between them.
         self.memory_limit = memory_limit // max(1, workers)
         self.cache_size = cache_size
-        self.counts: Counter[str] = Counter()  # ok, failed, busy, fetched
-        self._cache: OrderedDict[str, System] = OrderedDict()
+        self.grace = grace
+        self.max_bundle = max_bundle
+        self.counts: Counter[str] = Counter()  # ok, failed, busy, fetched, killed
+        self._cache: OrderedDict[str, bytes] = OrderedDict()  # digest -> checked bundle
+        self._failed: OrderedDict[str, tuple[float, str]] = OrderedDict()  # digest -> (when, why) of a failed fetch
+        self.retry_fetch = 5.0  # seconds before fetching again a digest nobody served
         self._lock = threading.Lock()  # cache and counts (callbacks and workers)
         self._fetch_lock = threading.Lock()  # one fetch at a time; waiters then hit the cache
         self._slots = threading.BoundedSemaphore(max_pending)  # queued + running requests
+        self._workers = [Worker(self.instance_id, memory_mb=memory_mb, cache_size=cache_size) for _ in range(workers)]
+        self._idle: queue.SimpleQueue[Worker] = queue.SimpleQueue()
+        for w in self._workers:
+            w.wait_ready()  # announce nothing before the workers can answer
+            self._idle.put(w)
         self._pool = ThreadPoolExecutor(workers, thread_name_prefix=f"predictor-{instance_id}")
         self._closed = False
         self._working: set[zenoh.Query] = set()  # admitted on the instance key, not answered yet
@@ -185,24 +202,24 @@ class Predictor:
             pass  # the caller gave up (timeout, cancelled)
 
     def answer(self, request: PredictRequest) -> PredictReply:
-        """Compute the reply to one request (SPEC §6); failures become ``ok=False``."""
+        """Compute the reply to one request (SPEC §6) in a worker process; failures become ``ok=False``."""
         try:
-            system = self._system(request.system, request.digest)
-            marking = marking_of(system, request.skillsets, "request")
-            fc = forecast(system, marking, budget=min(request.budget, self.max_budget),
-                          options=request_options(system, request), memory_limit=self.memory_limit)
-            return PredictReply(
-                system=request.system, digest=request.digest, seq=request.seq, ok=True, instance=self.instance_id,
-                report=state_space_report(system, fc, time.time()), risks=risks(system, marking, fc),
-            )
-        except (FetchError, SkinetError) as exc:
+            model = self._bundle(request.system, request.digest)
+            worker = self._idle.get()
+            try:
+                payload = worker.run(request.digest, model, encode(request), min(request.budget, self.max_budget),
+                                     self.grace, self.memory_limit)
+            finally:
+                self._idle.put(worker)
+            return decode(payload, PredictReply)
+        except (FetchError, WorkerError, DecodeError) as exc:
+            if isinstance(exc, WorkerError) and "worker" in str(exc):
+                with self._lock:
+                    self.counts["killed"] += 1
             return self._failure(request.system, request.digest, request.seq, str(exc))
-        except Exception as exc:  # a bug or a pathological model: answer, log, keep serving
-            log.exception("predictor %s: unexpected error", self.instance_id)
-            return self._failure(request.system, request.digest, request.seq, f"{type(exc).__name__}: {exc}")
 
-    def _system(self, name: str, digest: str) -> System:
-        """The system of ``digest``, from the cache or fetched from its monitor."""
+    def _bundle(self, name: str, digest: str) -> bytes:
+        """The checked bundle of ``digest``, from the cache or fetched from its monitor."""
         with self._lock:
             if digest in self._cache:
                 self._cache.move_to_end(digest)
@@ -211,34 +228,53 @@ class Predictor:
             with self._lock:
                 if digest in self._cache:
                     return self._cache[digest]
-            system = self._fetch(name, digest)
+                failed = self._failed.get(digest)
+                if failed is not None and time.monotonic() - failed[0] < self.retry_fetch:
+                    raise FetchError(failed[1])  # a flood of unknown digests costs one fetch each per period
+            try:
+                model = self._fetch(name, digest)
+            except FetchError as exc:
+                if exc.unknown:  # not a slow or broken server, which may recover at once
+                    with self._lock:
+                        self._failed[digest] = (time.monotonic(), str(exc))
+                        while len(self._failed) > 256:
+                            self._failed.popitem(last=False)
+                raise
             with self._lock:
-                self._cache[digest] = system
+                self._cache[digest] = model
                 while len(self._cache) > self.cache_size:
                     self._cache.popitem(last=False)
                 self.counts["fetched"] += 1
-            return system
+            return model
 
-    def _fetch(self, name: str, digest: str) -> System:
-        """Query ``skinet/<system>/model/<digest>``; the first bundle that hashes to ``digest`` wins."""
+    def _fetch(self, name: str, digest: str) -> bytes:
+        """Query ``skinet/<system>/model/<digest>``; the first bundle that hashes to ``digest`` wins.
+
+        The hash is checked on the bundle's text before anything is parsed or built.
+        """
         key = keys.model(name, digest)  # both checked by _decode
         problems: list[str] = []
         for reply in self.session.get(key, timeout=self.fetch_timeout):
             if reply.ok is None:
                 problems.append(f"error reply: {reply.err.payload.to_string()}")
                 continue
+            payload = reply.ok.payload.to_bytes()
+            if len(payload) > self.max_bundle:
+                problems.append(f"bundle of {len(payload)} bytes exceeds the limit of {self.max_bundle}")
+                continue
             try:
-                system = system_from_bundle(decode(reply.ok.payload.to_bytes(), ModelBundle))
-            except (DecodeError, SkinetError) as exc:
+                model = decode(payload, ModelBundle)
+            except DecodeError as exc:
                 problems.append(str(exc))
                 continue
-            got = bundle(system).digest
-            if got == digest:
+            got = bundle_digest(model)
+            if got == digest and model.system == name:
                 log.info("predictor %s: fetched model %s", self.instance_id, key)
-                return system
-            problems.append(f"bundle hashes to {got}")
+                return payload
+            problems.append(f"bundle hashes to {got}" if model.system == name else
+                            f"bundle of system '{model.system}'")
         reasons = "; ".join(dict.fromkeys(problems))  # a frozen server can yield 'Timeout' twice
-        raise FetchError(f"cannot fetch model {key}: {reasons or 'no reply'}")
+        raise FetchError(f"cannot fetch model {key}: {reasons or 'no reply'}", unknown=not problems)
 
     # -- replies ----------------------------------------------------------------------
 
@@ -276,6 +312,8 @@ class Predictor:
             return
         self._closed = True
         undeclare(self._token, self._queryable, self._own)
+        for w in self._workers:
+            w.close()  # queued and running requests are answered with a one-line failure at once
         self._pool.shutdown(wait=True)
         log.info("predictor %s stopped (%s)", self.instance_id, dict(self.counts))
 
@@ -290,17 +328,22 @@ def start_predictor(
     fetch_timeout: float = 2.0,
     max_budget: float = 10.0,
     memory_limit: int = DEFAULT_MEMORY_LIMIT,
+    memory_mb: int = 2048,
+    grace: float = 1.0,
 ) -> Predictor:
     """Serve predictions on ``session`` (shared or own); returns a handle with ``.close()``.
 
     Args:
-        workers: threads computing forecasts.
+        workers: worker processes computing forecasts (one thread each here).
         max_pending: requests queued or running before answering ``busy``.
         cache_size: systems kept (least recently used dropped first).
         fetch_timeout: seconds to wait for a model bundle.
         max_budget: cap on a request's exploration budget, seconds.
-        memory_limit: peak memory of the process, bytes, shared by the workers (SPEC §6.1).
+        memory_limit: peak memory the core may use, bytes, shared by the workers (SPEC §6.1);
+            beyond it answers are truncated.
+        memory_mb: address-space limit of each worker process, MB (killed beyond it).
+        grace: seconds past a request's budget before its worker is killed.
     """
     return Predictor(session, instance_id, workers=workers, max_pending=max_pending,
                      cache_size=cache_size, fetch_timeout=fetch_timeout, max_budget=max_budget,
-                     memory_limit=memory_limit)
+                     memory_limit=memory_limit, memory_mb=memory_mb, grace=grace)

@@ -15,7 +15,9 @@ def _zenoh_args(c: argparse.ArgumentParser, listen_help: str) -> None:
     c.add_argument("--listen", "-l", action="append", help=listen_help)
     c.add_argument("--connect", "-e", action="append", help="endpoint to connect to (repeatable)")
     c.add_argument("--zenoh-config", default=os.environ.get("SKINET_ZENOH_CONFIG"), help="JSON5 Zenoh configuration file")
-    c.add_argument("--no-multicast-scouting", action="store_true", help="disable multicast scouting")
+    c.add_argument("--multicast-scouting", action="store_true",
+                   help="join multicast scouting to find peers on the LAN (default: off)")
+    c.add_argument("--no-multicast-scouting", action="store_true", help="the default; accepted for old scripts")
     add_login_args(c)
 
 
@@ -30,11 +32,17 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     c.add_argument("--dashboard-host", default="127.0.0.1", help="address of --dashboard (default: 127.0.0.1)")
     add_policy_arg(c)
     add_memory_arg(c)
-    _zenoh_args(c, "endpoint on which a bridge in another process can connect, e.g. tcp/127.0.0.1:7447")
+    _zenoh_args(c, "endpoint on which a bridge in another process can connect (default: tcp/127.0.0.1:0, "
+                   "this host only)")
     c.set_defaults(func=cmd_run)
 
     c = sub.add_parser("router", help="run a Zenoh router (the Python wheel in router mode) until interrupted")
-    _zenoh_args(c, "endpoint to listen on (repeatable; default: tcp/0.0.0.0:7447)")
+    _zenoh_args(c, "endpoint to listen on (repeatable; default: tcp/127.0.0.1:7447, this host only)")
+    c.add_argument("--secrets", default=os.environ.get("SKINET_SECRETS"),
+                   help="folder of users.txt and <user>.password, made at first start when missing "
+                        "(default: $SKINET_SECRETS or ~/.config/skinet/secrets)")
+    c.add_argument("--no-auth", action="store_true",
+                   help="accept sessions without user/password (tests on a closed machine only)")
     c.set_defaults(func=cmd_router)
 
 

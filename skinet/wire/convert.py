@@ -51,9 +51,18 @@ def bundle(system: System) -> ModelBundle:
         entries.append((name, text, c.manager))
     props_name = next((n for n in system.sources if n not in files), "properties")
     props = system.sources.get(props_name, "")
-    canonical = json.dumps([system.name, entries, props_name, props], separators=(",", ":"))
-    digest = hashlib.sha256(canonical.encode()).hexdigest()[:32]
+    digest = _digest(system.name, entries, props_name, props)
     return ModelBundle(system=system.name, digest=digest, skillsets=entries, properties=props, properties_name=props_name)
+
+
+def bundle_digest(b: ModelBundle) -> str:
+    """The digest ``b``'s sources hash to, computed without parsing them (cost: one sha256)."""
+    return _digest(b.system, [tuple(e) for e in b.skillsets], b.properties_name, b.properties)
+
+
+def _digest(name: str, entries: list[tuple[str, str, str]], props_name: str, props: str) -> str:
+    canonical = json.dumps([name, entries, props_name, props], separators=(",", ":"))
+    return hashlib.sha256(canonical.encode()).hexdigest()[:32]
 
 
 @lru_cache(maxsize=64)

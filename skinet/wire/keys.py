@@ -12,6 +12,7 @@ key                                       publisher           payload
 ``skinet/<system>/predict/<instance>``    one predictor       the same, after empty "working" replies
 ``skinet/<system>/model/<digest>``        monitor (query)     -> :class:`ModelBundle`
 ``skinet/<system>/check``                 monitor (query)     :class:`CheckRequest` -> :class:`CheckReply`
+``skinet/<system>/resync/<skillset>``     bridge_ros2 (query) -> :class:`CanonicalEvent` (last status)
 ``skinet/<system>/alive/<service>/<id>``  every instance      liveliness token
 ========================================  ==================  ==========================
 
@@ -72,6 +73,8 @@ def model(system: str, digest: str = "*") -> str:
 
 def check(system: str) -> str:
     return f"{ROOT}/{system}/check"
+def resync(system: str, skillset: str = "*") -> str:
+    return f"{ROOT}/{system}/resync/{skillset}"
 
 
 def alive(system: str, service: str = "*", instance: str = "*") -> str:

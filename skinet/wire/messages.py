@@ -35,6 +35,8 @@ class CanonicalEvent(_Message):
     seq: int = Field(ge=0, description="per-skillset sequence number, +1 per event")
     stamp: float = Field(description="source time, seconds since the epoch")
     source: str = Field("", description="publishing instance")
+    epoch: int = Field(0, ge=0, description="run of the publisher: a new number at each start (the bridge: its "
+                                            "start time in ms); seq restarts within a new epoch")
     transition: str | None = Field(None, description="logical transition, e.g. 'teleop.start'; None: status only")
     status: SkillsetStatus | None = Field(None, description="status observed after the event, when known")
     info: str = Field("", description="free text from the manager (response name, ids)")

@@ -54,6 +54,7 @@ FREE_TEXT = {
                        "skinet dashboard", "python -m services.monitor", "python -m services.predictor",
                        "python -m services.bridge_ros2", "python -m services.simulator")
        for option in ("--user", "--password")},
+    ("skinet router", "--secrets"): "any folder: made at first start when missing (test_security.py)",
 }
 
 
@@ -275,6 +276,8 @@ def _cases() -> list[Case]:
         usage(pred, option, (option, "-2"), f"argument {option}: " + seconds.format("-2"))
     usage(pred, "--memory-limit", ("--memory-limit", "1 GiBi"),
           "argument --memory-limit: not a size: '1 GiBi' (e.g. 1GiB, 512MiB, 2GB)")
+    usage(pred, "--memory-mb", ("--memory-mb", "8"), "argument --memory-mb: expected an integer >= 64, got '8'")
+    usage(pred, "--grace", ("--grace", "-2"), "argument --grace: " + seconds.format("-2"))
     usage(br, "--instance", (SYSTEM, "--instance", "*"), f"argument --instance: instance id '*' {not_a_key}")
     for program, base in ((br, (SYSTEM,)), (sim, (SCENARIO,))):
         usage(program, "--namespace", (*base, "--namespace", "robot/*"),

@@ -11,6 +11,7 @@ import signal
 import socket
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from collections.abc import Callable
@@ -19,6 +20,7 @@ from pathlib import Path
 
 import zenoh
 
+from services.common.security import ensure_users
 from skinet.files import load_system, read_text
 from skinet.mission import Scenario, parse_scenario, replay
 from skinet.wire import keys
@@ -31,7 +33,9 @@ from skinet.wire.messages import (
 REPO = Path(__file__).resolve().parents[2]
 ZENOH_DIR = REPO / "docker" / "zenoh"
 ROUTER_CONFIG = ZENOH_DIR / "router.json5"
-USERS_FILE = ZENOH_DIR / "users.txt"
+# No password is in the repository: the tests make their own, as an operator would.
+SECRETS = Path(tempfile.mkdtemp(prefix="skinet-test-secrets-"))
+USERS_FILE = SECRETS / "users.txt"
 UNASSISTED = REPO / "skillsets" / "missions" / "unassisted.toml"
 SYSTEM = "spot_arm"
 
@@ -44,14 +48,14 @@ def free_port() -> int:
 
 
 def passwords() -> dict[str, str]:
-    """The demo users of ``docker/zenoh/users.txt``: user -> password."""
-    pairs = (line.split(":", 1) for line in USERS_FILE.read_text().splitlines() if ":" in line)
-    return {user: password for user, password in pairs}
+    """The users of a test run (made at first use in ``SECRETS``): user -> password."""
+    return ensure_users(SECRETS)
 
 
 def acl_router_config(endpoint: str) -> zenoh.Config:
     """``docker/zenoh/router.json5`` as shipped, listening on ``endpoint``, users from the repository."""
     config = zenoh.Config.from_file(str(ROUTER_CONFIG))
+    passwords()
     config.insert_json5("transport/auth/usrpwd/dictionary_file", json.dumps(str(USERS_FILE)))
     config.insert_json5("listen/endpoints", json.dumps([endpoint]))
     config.insert_json5("scouting/delay", "0")

@@ -10,16 +10,24 @@ off-board network cut, router restart.
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Iterator
+from pathlib import Path
 
 import pytest
 import zenoh
 
+from services.common.events import event_publisher
+from services.common.security import tls_connect_config
+from skinet.wire import keys
+from skinet.wire.codec import decode, encode
+from skinet.wire.messages import CanonicalEvent, LiveState
 from deploy_support import (
     REPO, MissionObserver, Tokens, answering_predictor, expected_violations, free_port, load_scenario, login_config,
     wait_until,
@@ -28,6 +36,7 @@ from deploy_support import (
 pytestmark = pytest.mark.slow
 
 IMAGE = os.environ.get("SKINET_TEST_IMAGE", "skinet-live:local")  # own tag per checkout under test
+SECRETS_IN_IMAGE = "/var/lib/skinet/secrets"
 BUILD_TIMEOUT = 2400  # a first build (debootstrap, wheels, image) took 20 min on a loaded 2-core machine
 
 
@@ -98,6 +107,15 @@ class Stack:
         return self.start_compose("run", "-T", "--rm", "--no-deps", "simulator",
                                   SKINET_SPEED=str(speed), SKINET_START_DELAY="0")
 
+    def secrets(self, folder: Path, users: tuple[str, ...]) -> Path:
+        """The passwords and certificates the router made at its first start, copied to ``folder``."""
+        (folder / "tls").mkdir(parents=True, exist_ok=True)
+        names = ["tls/ca.pem"] + [f"{u}.password" for u in users] + [f"tls/{u}.{x}" for u in users for x in ("pem", "key")]
+        for name in names:
+            r = self.compose("exec", "-T", "router", "cat", f"{SECRETS_IN_IMAGE}/{name}")
+            (folder / name).write_text(r.stdout)
+        return folder
+
     def logs(self) -> str:
         r = self.compose("logs", "--no-color", "--tail", "300", check=False, timeout=60)
         return r.stdout + r.stderr
@@ -134,7 +152,7 @@ def stack(image: str, tmp_path_factory: pytest.TempPathFactory) -> Iterator[tupl
     s = Stack(f"skinet-test-{os.getpid()}", env)
     try:
         s.compose("up", "-d", "--no-build", "router", "bridge", "monitor", "predictor", timeout=180)
-        yield s, f"tcp/127.0.0.1:{port}"
+        yield s, f"tls/127.0.0.1:{port}"
     finally:
         log = tmp_path_factory.mktemp("compose") / "compose.log"
         log.write_text(s.logs())
@@ -143,11 +161,26 @@ def stack(image: str, tmp_path_factory: pytest.TempPathFactory) -> Iterator[tupl
 
 
 @pytest.fixture(scope="module")
-def observer(stack: tuple[Stack, str]) -> Iterator[zenoh.Session]:
-    """The host's observer session, once every service has announced itself."""
-    config = login_config(stack[1], "observer")
+def secrets(stack: tuple[Stack, str], tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """What the host needs to log in as observer, monitor or bridge (made by the router)."""
+    s = stack[0]
+    wait_until(lambda: s.compose("exec", "-T", "router", "test", "-e", f"{SECRETS_IN_IMAGE}/tls/robot.key",
+                                 check=False).returncode == 0, 60, "the router's secrets")
+    return s.secrets(tmp_path_factory.mktemp("secrets"), ("observer", "monitor", "bridge"))
+
+
+def host_login(stack: tuple[Stack, str], secrets: Path, user: str) -> zenoh.Session:
+    """A host session of ``user`` over TLS with the router's certificates."""
+    config = login_config(stack[1], user, (secrets / f"{user}.password").read_text().strip())
+    config.insert_json5("transport/link/tls", json.dumps(tls_connect_config(secrets / "tls", user)))
     config.insert_json5("connect/timeout_ms", "30000")  # the router may still be starting
-    session = zenoh.open(config)
+    return zenoh.open(config)
+
+
+@pytest.fixture(scope="module")
+def observer(stack: tuple[Stack, str], secrets: Path) -> Iterator[zenoh.Session]:
+    """The host's observer session, once every service has announced itself."""
+    session = host_login(stack, secrets, "observer")
     tokens = Tokens(session)
     try:
         wait_until(lambda: tokens.of("bridge_ros2") and tokens.of("monitor") and len(tokens.of("predictor")) >= 2,
@@ -205,14 +238,16 @@ def test_unassisted_mission_gives_the_in_process_verdicts(stack: tuple[Stack, st
         obs.close()
 
 
-def test_predictor_replaced_while_events_flow(stack: tuple[Stack, str], observer: zenoh.Session) -> None:
+def test_predictor_replaced_while_events_flow(stack: tuple[Stack, str], observer: zenoh.Session,
+                                             secrets: Path) -> None:
     s = stack[0]
     _restart_monitor(s, observer)
     obs, tokens = MissionObserver(observer), Tokens(observer)
+    asker = host_login(stack, secrets, "monitor")  # observers may not query predictors
     try:
         wait_until(lambda: len(tokens.of("predictor")) >= 2, 30, "two predictors")
         before = tokens.of("predictor")
-        victim = _container_of(answering_predictor(observer))  # the one serving the monitor
+        victim = _container_of(answering_predictor(asker))  # the one serving the monitor
         sim = s.run_simulator(speed=5)
         wait_until(lambda: obs.count() >= 10, 60, "events flowing")
         killed_at = time.monotonic()
@@ -231,6 +266,7 @@ def test_predictor_replaced_while_events_flow(stack: tuple[Stack, str], observer
         slow = {seq: d for seq, d in after.items() if d is None or d > 1.0}
         assert not slow, f"states without a fresh prediction within 1 s after the kill: {slow} (all: {after})"
     finally:
+        asker.close()
         obs.close()
         tokens.close()
 
@@ -301,3 +337,52 @@ def test_router_restart_clients_reconnect(stack: tuple[Stack, str], observer: ze
         assert any(not r.prediction_stale for _, r in obs.unsafe)
     finally:
         obs.close()
+
+
+def test_router_restart_loses_no_event(stack: tuple[Stack, str], observer: zenoh.Session, secrets: Path) -> None:
+    """Events published while the router restarts reach the monitor, in order: none lost.
+
+    The host publishes status events of its own stream as the bridge does (advanced
+    publisher: cache and heartbeats) before, during and after ``docker restart`` of
+    the router; the monitor (advanced subscriber) applies each once, so its step
+    counter grows by exactly the number of events, and it logs no gap for the stream.
+    """
+    s = stack[0]
+    states: list[LiveState] = []
+    sub = observer.declare_subscriber(keys.state("spot_arm"), lambda x: states.append(
+        decode(x.payload.to_bytes(), LiveState)))
+    bridge = host_login(stack, secrets, "bridge")
+    publisher = event_publisher(bridge, keys.events("spot_arm", "spot"))
+    source, sent = f"host-{os.getpid()}", 0
+
+    def publish(n: int, rate: float = 40.0) -> None:
+        nonlocal sent
+        for _ in range(n):
+            # Named transitions: each is a step of the monitor (a status confirming the marking is not).
+            ev = CanonicalEvent(system="spot_arm", skillset="spot", seq=sent, stamp=time.time(), source=source,
+                                transition=("init_power.start", "init_power.success.powered_on")[sent % 2])
+            publisher.put(encode(ev))
+            sent += 1
+            time.sleep(1 / rate)
+
+    try:
+        publish(10)
+        wait_until(lambda: any(st.event.endswith(f"#{sent - 1}") for st in states), 30, "the first events")
+        first = max(st.seq for st in states)
+        (router,) = s.containers("router")
+        restart = threading.Thread(target=subprocess.run, args=(["docker", "restart", "-t", "1", router],),
+                                   kwargs={"check": True, "capture_output": True})
+        restart.start()
+        publish(160)  # 4 s: the router is down for part of it
+        restart.join()
+        publish(10)
+        wait_until(lambda: any(st.event.endswith(f"#{sent - 1}") for st in states), 60,
+                   "the last event after the restart")
+        last = max(st.seq for st in states)
+        assert last - first == sent - 10, f"{sent - 10} events after step {first}, but the monitor reached {last}"
+        logs = s.compose("logs", "--no-color", "monitor", check=False).stdout
+        assert f"from '{source}'" not in logs, [line for line in logs.splitlines() if source in line]
+    finally:
+        publisher.undeclare()
+        bridge.close()
+        sub.undeclare()

@@ -57,8 +57,8 @@ def embedded() -> Iterator[tuple[str, zenoh.Session]]:
 def test_rust_client_queries_the_predictor_and_prints_verdicts(client_binary: Path,
                                                                embedded: tuple[str, zenoh.Session]) -> None:
     endpoint, bridge = embedded
-    proc = subprocess.Popen([str(client_binary), "--connect", endpoint, "--system", SYSTEM, "--user", "observer",
-                             "--password", passwords()["observer"], "--verdicts", "2", "--timeout", "20"],
+    proc = subprocess.Popen([str(client_binary), "--connect", endpoint, "--system", SYSTEM, "--user", "monitor",
+                             "--password", passwords()["monitor"], "--verdicts", "2", "--timeout", "20"],
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     lines: list[str] = []
     following = threading.Event()

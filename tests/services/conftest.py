@@ -81,6 +81,12 @@ def open_client(endpoint: str) -> zenoh.Session:
     return zenoh.open(session_config("client", connect=[endpoint], multicast_scouting=False))
 
 
+def start_skinet(*args: str) -> subprocess.Popen:
+    """``skinet ARGS`` in its own process group, output (stderr too) on its text stdout."""
+    return subprocess.Popen([sys.executable, "-m", "skinet.cli.main", *args], cwd=REPO, stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True, start_new_session=True)
+
+
 def client_args(endpoint: str) -> list[str]:
     """Command-line flags making a service a client of the router at ``endpoint``."""
     return ["--mode", "client", "--connect", endpoint, "--no-multicast-scouting"]
