@@ -132,7 +132,9 @@ def test_dashboard_joins_late_as_observer(deployment: str, tmp_path) -> None:
         assert [(e["transition"], e["property"]) for e in snap["unsafe"]["unsafe"]] == [
             ("go_to_waypoint.start", "safety_guard")]
         assert snap["alive"] == {"monitor": snap["alive"]["monitor"]} and len(snap["alive"]["monitor"]) == 1
-        assert snap["model"]["digest"] and set(snap["model"]["lanes"]) == {"spot", "manipulator"}
+        # An observer may not fetch model bundles (issue 14's ACL): given a name, the page
+        # draws its lanes from what the monitor publishes, and knows no digest.
+        assert snap["model"]["digest"] is None
     finally:
         proc.terminate()
         proc.wait(10)
