@@ -13,6 +13,7 @@ from __future__ import annotations
 import json
 import re
 import socket
+import ssl
 
 import zenoh
 
@@ -34,11 +35,42 @@ def login_refused(config: zenoh.Config) -> str | None:
     reached = [e for e in endpoints if _tcp_open(e)]
     if not reached:
         return None
+    for endpoint in reached:
+        if endpoint.startswith("tls/"):
+            problem = _tls_problem(config, endpoint)
+            if problem:
+                return f"the router at {endpoint} refused the TLS handshake: {problem}"
     login = (f"authentication failed for user '{user}' (check SKINET_ZENOH_USER and SKINET_ZENOH_PASSWORD, "
              f"or --user and --password)" if user else
              "it requires a user and password (set SKINET_ZENOH_USER and SKINET_ZENOH_PASSWORD, "
              "or --user and --password)")
     return f"the router at {', '.join(reached)} refused the login: {login}"
+
+
+def _tls_problem(config: zenoh.Config, endpoint: str) -> str | None:
+    """Why a TLS handshake with ``config``'s certificates fails at ``endpoint``, or None when it succeeds."""
+    m = re.fullmatch(r"tls/\[?([^\]]+?)\]?:(\d+)(?:[?#].*)?", endpoint)
+    if m is None:
+        return None
+    tls = _get(config, "transport/link/tls") or {}
+    ca = tls.get("root_ca_certificate") if isinstance(tls, dict) else None
+    if not ca:
+        return "this client has no CA certificate (transport/link/tls/root_ca_certificate)"
+    try:
+        context = ssl.create_default_context(cafile=ca)
+        context.check_hostname = False  # Zenoh checks the name itself; here only the chain matters
+        cert, key = tls.get("connect_certificate"), tls.get("connect_private_key")
+        if cert and key:
+            context.load_cert_chain(cert, key)
+        with socket.create_connection((m.group(1), int(m.group(2))), timeout=PROBE_TIMEOUT) as raw:
+            with context.wrap_socket(raw) as conn:
+                conn.recv(1)  # TLS 1.3: a refused client certificate shows up at the first read
+    except (ssl.SSLError, OSError) as exc:
+        if isinstance(exc, (socket.timeout, TimeoutError)):
+            return None  # the handshake went through; the router is waiting for Zenoh's hello
+        reason = getattr(exc, "reason", None) or str(exc)
+        return f"{reason} (check the CA and this client's certificate)"
+    return None
 
 
 def _tcp_open(endpoint: str) -> bool:

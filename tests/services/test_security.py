@@ -132,10 +132,17 @@ def test_tls_refuses_clients_without_the_ca_or_with_a_bad_certificate(secrets: P
                 **tls_connect_config(other, "predictor"), "root_ca_certificate": str(tls / "ca.pem")}),
             "expired certificate": client_config(endpoint, "predictor", password, tls_connect_config(tls, "expired")),
         }
+        reasons = {
+            "no CA": "this client has no CA certificate (transport/link/tls/root_ca_certificate)",
+            "another CA's certificate": "(check the CA and this client's certificate)",
+            "expired certificate": "(check the CA and this client's certificate)",
+        }
         for name, config in cases.items():
             took, lines = refused(config, tmp_path, name.replace(" ", "_").replace("'", ""))
-            assert lines == [f"python -m services.predictor: error: cannot open the Zenoh session: "
-                             f"nothing answers at {endpoint}"], (name, lines)
+            assert len(lines) == 1 and lines[0].startswith(
+                f"python -m services.predictor: error: cannot open the Zenoh session: the router at {endpoint} "
+                "refused the TLS handshake: "), (name, lines)
+            assert lines[0].endswith(reasons[name]), (name, lines)
             assert took < 15, f"{name}: refused only after {took:.1f} s"
     finally:
         assert router.stop() == 0
