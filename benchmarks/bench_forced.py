@@ -22,11 +22,10 @@ from __future__ import annotations
 import argparse
 import random
 
-import statistics
 import time
 from collections.abc import Callable
 
-from common import CORPUS, _copies, paper_system, pin_one_core, table, verdict
+from common import CORPUS, _copies, median_time, paper_system, pin_one_core, table, verdict
 
 from skinet.net.semantics import steps
 from skinet.options import PredictionOptions, PropertyOptions
@@ -40,16 +39,8 @@ EXPLICIT_ONLY = PredictionOptions(PropertyOptions(forced=False))
 LITERAL = PredictionOptions(PropertyOptions(af="literal"))
 
 
-def median_time(fn: Callable[[], object], repeats: int, before: Callable[[], None] | None = None) -> float:
-    """Median CPU time of ``fn`` (thread time: honest on a machine shared with other work)."""
-    times = []
-    for _ in range(repeats):
-        if before is not None:
-            before()
-        t0 = time.thread_time()
-        fn()
-        times.append(time.thread_time() - t0)
-    return statistics.median(times)
+def cpu_time(fn: Callable[[], object], repeats: int, before: Callable[[], None] | None = None) -> float:
+    return median_time(fn, repeats, before, clock=time.thread_time)
 
 
 def fleet(n: int) -> System:
@@ -117,11 +108,11 @@ def main() -> None:
         m = walk(system, seed)
         running = sum(bin(m[c.name]).count("1") for c in system.components)  # places marked, for the record
         n_succ = len(successors(system, m))
-        explicit = median_time(lambda: analyse(system, m, options=EXPLICIT_ONLY), args.repeats)
-        with_forced = median_time(lambda: analyse(system, m), args.repeats, before=lambda: forget_forced(system))
-        cold = median_time(lambda: all_forced(system, m), args.repeats, before=lambda: forget_forced(system))
+        explicit = cpu_time(lambda: analyse(system, m, options=EXPLICIT_ONLY), args.repeats)
+        with_forced = cpu_time(lambda: analyse(system, m), args.repeats, before=lambda: forget_forced(system))
+        cold = cpu_time(lambda: all_forced(system, m), args.repeats, before=lambda: forget_forced(system))
         all_forced(system, m)
-        warm = median_time(lambda: all_forced(system, m), args.repeats)
+        warm = cpu_time(lambda: all_forced(system, m), args.repeats)
         worst_cold = max(worst_cold, cold)
         rows.append([seed, n_succ, all_forced(system, m), f"{explicit * 1e3:.2f}", f"{with_forced * 1e3:.2f}",
                      f"{cold * 1e3:.2f}", f"{warm * 1e3:.3f}", running])
@@ -134,10 +125,10 @@ def main() -> None:
     paper = paper_system()
     forecast(paper)  # imports and first numpy calls outside the timed region
     cold_graphs = lambda: [forget_component_graphs(c.eventless) for c in paper.components]  # noqa: E731
-    fair = median_time(lambda: forecast(paper), 200)
-    literal = median_time(lambda: forecast(paper, options=LITERAL), 200)
-    fair_cold = median_time(lambda: forecast(paper), 100, before=cold_graphs)
-    literal_cold = median_time(lambda: forecast(paper, options=LITERAL), 100, before=cold_graphs)
+    fair = cpu_time(lambda: forecast(paper), 200)
+    literal = cpu_time(lambda: forecast(paper, options=LITERAL), 200)
+    fair_cold = cpu_time(lambda: forecast(paper), 100, before=cold_graphs)
+    literal_cold = cpu_time(lambda: forecast(paper, options=LITERAL), 100, before=cold_graphs)
     print("## (2) paper system: complete exploration + mu1, fair AF beside literal AF\n")
     print(table(["AF", "warm (ms)", "component graphs rebuilt (ms)", "target", "verdict"], [
         ["fair (operator default)", f"{fair * 1e3:.2f}", f"{fair_cold * 1e3:.2f}", "2 ms", verdict(fair <= 0.002)],
