@@ -174,7 +174,8 @@ def session_config(
     config.insert_json5("scouting/multicast/enabled", json.dumps(multicast_scouting))
     if user:
         config.insert_json5("transport/auth/usrpwd/user", json.dumps(user))
-        config.insert_json5("transport/auth/usrpwd/password", json.dumps(password or ""))
+    if password is not None:  # else keep the configuration file's (the container entry point writes it there)
+        config.insert_json5("transport/auth/usrpwd/password", json.dumps(password))
     return config
 
 

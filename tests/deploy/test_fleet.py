@@ -105,6 +105,7 @@ def fleet(image: str, tmp_path_factory: pytest.TempPathFactory) -> Iterator[tupl
         port = free_port()
         robots[name] = Robot(name, Stack(f"{tag}-{name}", {
             **env, "COMPOSE_PROFILES": "onboard", "SKINET_ROUTER_PORT": f"127.0.0.1:{port}",
+            "SKINET_DASHBOARD_PORT": str(free_port()),  # each robot its own dashboard port
             # robot3 is a twin: it runs robot1's system file (started by its test)
             "SKINET_SYSTEM": f"skillsets/{'robot1' if name == 'robot3' else name}.toml"}), port)
     try:

@@ -199,75 +199,13 @@ fn run(args: Args) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
             break;
         }
     }
-    let digest = digest.ok_or("no monitor answered on the model key")?;
-    println!("model {system} {digest}");
-
-    let request = PredictRequest {
-        v: SCHEMA_VERSION,
-        system: system.clone(),
-        digest,
-        seq: 1,
-        skillsets: BTreeMap::new(),
-        budget: 1.0,
-    };
-    let replies = session
-        .get(format!("skinet/{system}/predict"))
-        .payload(rmp_serde::to_vec_named(&request)?)
-        .timeout(Duration::from_secs(10))
-        .wait()?;
-    let mut answered = false;
-    while let Ok(reply) = replies.recv() {
-        match reply.result() {
-            Ok(sample) => {
-                let reply: PredictReply = rmp_serde::from_slice(&sample.payload().to_bytes())?;
-                answered = true;
-                if !reply.ok {
-                    println!("prediction failed ({}): {}", reply.instance, reply.error);
-                    continue;
-                }
-                if let Some(r) = &reply.report {
-                    println!(
-                        "prediction by {}: {} markings, {} edges, depth {}, {:.3} s{}",
-                        reply.instance,
-                        r.markings,
-                        r.edges,
-                        r.depth,
-                        r.time,
-                        if r.timeout_reached {
-                            " (truncated)"
-                        } else {
-                            ""
-                        }
-                    );
-                }
-                for risk in &reply.risks {
-                    let marking: Vec<String> = risk
-                        .skillsets
-                        .iter()
-                        .map(|(name, s)| {
-                            format!("{name}: {:?} running {:?}", s.resources, s.running)
-                        })
-                        .collect();
-                    let steps = risk.steps.map_or("?".to_string(), |s| s.to_string());
-                    println!(
-                        "  risk {} {} ({} AF) in {} steps from {}; witness: {}",
-                        risk.property,
-                        risk.status,
-                        risk.af,
-                        steps,
-                        marking.join("; "),
-                        risk.witness.join(" -> ")
-                    );
-                }
-            }
-            Err(err) => println!(
-                "prediction error: {}",
-                String::from_utf8_lossy(&err.payload().to_bytes())
-            ),
+    match digest {
+        Some(digest) => {
+            println!("model {system} {digest}");
+            predict(&session, system, digest)?;
         }
-    }
-    if !answered {
-        println!("no predictor answered");
+        // Observers may not query models or predictors (docker/zenoh/router.json5).
+        None => println!("model {system}: no answer on the model key (is a monitor up, may this user ask?)"),
     }
 
     for command in &args.checks {
@@ -363,4 +301,81 @@ fn main() -> ExitCode {
             ExitCode::FAILURE
         }
     }
+}
+
+/// Asks the predictors about the initial marking of `system` and prints the reply.
+fn predict(
+    session: &zenoh::Session,
+    system: &str,
+    digest: String,
+) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
+    let request = PredictRequest {
+        v: SCHEMA_VERSION,
+        system: system.to_string(),
+        digest,
+        seq: 1,
+        skillsets: BTreeMap::new(),
+        budget: 1.0,
+    };
+    let replies = session
+        .get(format!("skinet/{system}/predict"))
+        .payload(rmp_serde::to_vec_named(&request)?)
+        .timeout(Duration::from_secs(10))
+        .wait()?;
+    let mut answered = false;
+    while let Ok(reply) = replies.recv() {
+        match reply.result() {
+            Ok(sample) => {
+                let reply: PredictReply = rmp_serde::from_slice(&sample.payload().to_bytes())?;
+                answered = true;
+                if !reply.ok {
+                    println!("prediction failed ({}): {}", reply.instance, reply.error);
+                    continue;
+                }
+                if let Some(r) = &reply.report {
+                    println!(
+                        "prediction by {}: {} markings, {} edges, depth {}, {:.3} s{}",
+                        reply.instance,
+                        r.markings,
+                        r.edges,
+                        r.depth,
+                        r.time,
+                        if r.timeout_reached {
+                            " (truncated)"
+                        } else {
+                            ""
+                        }
+                    );
+                }
+                for risk in &reply.risks {
+                    let marking: Vec<String> = risk
+                        .skillsets
+                        .iter()
+                        .map(|(name, s)| {
+                            format!("{name}: {:?} running {:?}", s.resources, s.running)
+                        })
+                        .collect();
+                    let steps = risk.steps.map_or("?".to_string(), |s| s.to_string());
+                    println!(
+                        "  risk {} {} ({} AF) in {} steps from {}; witness: {}",
+                        risk.property,
+                        risk.status,
+                        risk.af,
+                        steps,
+                        marking.join("; "),
+                        risk.witness.join(" -> ")
+                    );
+                }
+            }
+            Err(err) => println!(
+                "prediction error: {}",
+                String::from_utf8_lossy(&err.payload().to_bytes())
+            ),
+        }
+    }
+    if !answered {
+        println!("no predictor answered");
+    }
+
+    Ok(())
 }
