@@ -14,6 +14,7 @@ PACKAGES=(
     gcc   # compiles Spin's pan.c verifier (same tests)
     chromium          # tests/services/test_dashboard.py: the dashboard in a real browser
     chromium-driver   # the same, driven by selenium
+    graphviz          # tests/net/test_export.py: the dot export renders
 )
 
 missing=()
