@@ -17,7 +17,7 @@ from collections.abc import Collection, Mapping, Sequence
 from skinet.lang.expr import And, Const, Expr, Implies, Not, Or, atoms
 from skinet.net.build import idle_place, resource_place, running_place
 from skinet.props.formula import PlaceAtom, Property
-from skinet.system import System
+from skinet.system import System, is_running, resource_state
 
 MAX_CLAUSES = 256
 Literal_ = tuple[PlaceAtom, bool]
@@ -85,15 +85,12 @@ def subject_words(system: System, atom: PlaceAtom, marking: Mapping[str, int]) -
     """The actual state at ``marking`` of what ``atom`` speaks of: ``manipulator arm_status at RD``."""
     comp = system.component(atom.skillset)
     m = marking[atom.skillset]
-    net = comp.net
     for r in comp.skillset.resources:
         if atom.place in (resource_place(r.name, s) for s in r.states):
-            state = next(s for s in r.states if m >> net.place_index(resource_place(r.name, s)) & 1)
-            return f"{atom.skillset} {r.name} at {state}"
+            return f"{atom.skillset} {r.name} at {resource_state(comp, m, r)}"
     for k in comp.skillset.skills:
         if atom.place in (idle_place(k.name), running_place(k.name)):
-            runs = bool(m >> net.place_index(running_place(k.name)) & 1)
-            return f"{atom.skillset} {k.name} {'runs' if runs else 'is idle'}"
+            return f"{atom.skillset} {k.name} {'runs' if is_running(comp, m, k.name) else 'is idle'}"
     return str(atom)
 
 

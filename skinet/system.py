@@ -10,7 +10,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 from skinet.errors import SourceError
-from skinet.lang.model import Skillset
+from skinet.lang.model import Resource, Skillset
 from skinet.net.build import build_net, idle_place, resource_place, running_place
 from skinet.net.petrinet import PetriNet
 from skinet.net.semantics import invariants_enabled
@@ -106,17 +106,23 @@ def marking_problems(system: System, marking: Mapping[str, int]) -> list[str]:
     return problems
 
 
+def resource_state(component: Component, marking: int, resource: Resource) -> str:
+    """The state ``resource`` of ``component`` is in at its net marking ``marking``."""
+    idx = component.net.place_index
+    return next(s for s in resource.states if marking >> idx(resource_place(resource.name, s)) & 1)
+
+
+def is_running(component: Component, marking: int, skill: str) -> bool:
+    return bool(marking >> component.net.place_index(running_place(skill)) & 1)
+
+
 def marking_to_json(system: System, marking: Mapping[str, int]) -> dict[str, dict]:
     """``{skillset: {"resources": {r: state}, "running": [skill, ...]}}``."""
     out: dict[str, dict] = {}
     for c in system.components:
         m = marking[c.name]
-        idx = c.net.place_index
-        resources = {
-            r.name: next(s for s in r.states if m >> idx(resource_place(r.name, s)) & 1)
-            for r in c.skillset.resources
-        }
-        running = [k.name for k in c.skillset.skills if m >> idx(running_place(k.name)) & 1]
+        resources = {r.name: resource_state(c, m, r) for r in c.skillset.resources}
+        running = [k.name for k in c.skillset.skills if is_running(c, m, k.name)]
         out[c.name] = {"resources": resources, "running": running}
     return out
 

@@ -25,13 +25,13 @@ from dataclasses import dataclass, field
 
 from skinet.net.semantics import steps
 from skinet.system import System
-from skinet.verify.algorithm1 import Analysis
+from skinet.verify.algorithm1 import CONSTRAINTS, Analysis
 from skinet.wire.codec import DecodeError, decode
 from skinet.wire.messages import CheckReason, CheckReply, CheckRequest
 
 ACTIONS = ("allow", "warn", "deny")
 _STRENGTH = {a: i for i, a in enumerate(ACTIONS)}
-KINDS = ("explicit", "implicit", "forced", "unknown")
+KINDS = CONSTRAINTS
 PRESETS: dict[str, dict[str, str]] = {
     "warn": {k: "warn" for k in KINDS},
     "strict": {"explicit": "deny", "implicit": "warn", "forced": "deny", "unknown": "warn"},

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Literal, Protocol
+from typing import Literal, Protocol, get_args
 
 from skinet import explain
 from skinet.net.petrinet import Transition
@@ -31,8 +31,8 @@ from skinet.system import Marking, System
 from skinet.verify.forced import oracle as forced_oracle
 
 Constraint = Literal["explicit", "implicit", "forced", "unknown"]
-CONSTRAINTS: tuple[str, ...] = ("explicit", "implicit", "forced", "unknown")  # worst first
-_RANK: dict[str, int] = {"explicit": 4, "implicit": 3, "forced": 2, "unknown": 1}
+CONSTRAINTS: tuple[str, ...] = get_args(Constraint)  # worst first
+_RANK: dict[str, int] = {c: len(CONSTRAINTS) - i for i, c in enumerate(CONSTRAINTS)}
 
 
 @dataclass(frozen=True)

@@ -313,7 +313,7 @@ def check(kripke: Kripke, formula: Expr) -> Result:
     s = kripke.space
     st = kripke.stored
     if isinstance(formula, (PlaceAtom, Const)) or not is_temporal(formula):
-        v = evaluate(formula, lambda a: _atom(s, a))
+        v = evaluate(formula, lambda a: place_values(s, a))
         v = np.broadcast_to(np.asarray(v, dtype=bool), (s.size,)) & st
         return Result(v, v)
     if isinstance(formula, Not):
@@ -365,7 +365,8 @@ def _pair(kripke: Kripke, a: Result, b: Result, op) -> Result:
     return Result(lo, hi, rank)
 
 
-def _atom(space: StateSpace, atom: PlaceAtom) -> np.ndarray:
+def place_values(space: StateSpace, atom: PlaceAtom) -> np.ndarray:
+    """Where ``atom``'s place is marked, over the whole space."""
     for i, g in enumerate(space.components):
         if g.name == atom.skillset:
             bit = 1 << g.net.place_index(atom.place)

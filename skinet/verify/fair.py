@@ -35,19 +35,14 @@ import numpy as np
 
 from skinet.net.build import idle_place
 from skinet.system import System
-from skinet.verify.ctl import UNREACHED, Kripke, Result
+from skinet.props.formula import PlaceAtom
+from skinet.verify.ctl import UNREACHED, Kripke, Result, place_values
 
 
 def skill_fairness(kripke: Kripke, system: System) -> list[np.ndarray]:
     """One fairness constraint per skill of ``system``: where that skill is idle."""
-    space = kripke.space
-    out = []
-    for i, g in enumerate(space.components):
-        comp = system.component(g.name)
-        for k in comp.skillset.skills:
-            bit = 1 << g.net.place_index(idle_place(k.name))
-            out.append(space.local(np.array([bool(m & bit) for m in g.states]), i))
-    return out
+    return [place_values(kripke.space, PlaceAtom(g.name, idle_place(k.name)))
+            for g in kripke.space.components for k in system.component(g.name).skillset.skills]
 
 
 class _Graph:

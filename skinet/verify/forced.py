@@ -176,8 +176,7 @@ class ForcedOracle:
             cost = sum(entry[1][0] for entry in combo)
             if best is not None and cost >= best[0]:
                 continue
-            values = {a: v for c, (valuation, _) in zip(names, combo) for a, v in zip(per[c], valuation)}
-            if not evaluate(prop.expr, values.__getitem__):
+            if _violated(prop, per, names, [valuation for valuation, _ in combo]):
                 best = (cost, tuple(entry[1][1] for entry in combo))
         if best is None:
             return None
@@ -193,12 +192,27 @@ class ForcedOracle:
                     m: int) -> dict[tuple[bool, ...], tuple[int, int]]:
         """Each valuation of ``props_atoms`` the component reaches: (least distance, state index)."""
         net = self._nets[comp]
-        bits = [net.place_index(a.place) for a in props_atoms]
+        bits = _bits(net, props_atoms)
         reach = uncontrollable_reach(net, m, self.events)
         out: dict[tuple[bool, ...], tuple[int, int]] = {}
         for i, (s, d) in enumerate(zip(reach.states, reach.dist)):
-            out.setdefault(tuple(bool(s >> b & 1) for b in bits), (d, i))
+            out.setdefault(_valuation(s, bits), (d, i))
         return out
+
+
+def _bits(net: PetriNet, props_atoms: tuple[PlaceAtom, ...]) -> list[int]:
+    return [net.place_index(a.place) for a in props_atoms]
+
+
+def _valuation(marking: int, bits: list[int]) -> tuple[bool, ...]:
+    return tuple(bool(marking >> b & 1) for b in bits)
+
+
+def _violated(prop: Property, per: Mapping[str, tuple[PlaceAtom, ...]], names: list[str],
+              valuations: Iterable[tuple[bool, ...]]) -> bool:
+    """Whether ``prop`` fails when each component of ``names`` has its valuation of its atoms."""
+    values = {a: v for c, valuation in zip(names, valuations) for a, v in zip(per[c], valuation)}
+    return not evaluate(prop.expr, values.__getitem__)
 
 
 def oracle(system: System, events: bool = False) -> ForcedOracle:
@@ -236,17 +250,13 @@ def forced_mask(
     for c in names:
         g = graphs[position[c]]
         net = system.component(c).net
-        bits = [net.place_index(a.place) for a in per[c]]
-        rows = []
-        for m in g.states:
-            reach = uncontrollable_reach(net, m, events)
-            rows.append({tuple(bool(s >> b & 1) for b in bits) for s in reach.states})
+        bits = _bits(net, per[c])
+        rows = [{_valuation(s, bits) for s in uncontrollable_reach(net, m, events).states} for m in g.states]
         reached.append(rows)
     out = local(np.zeros(graphs[0].size, dtype=bool), 0).copy()
     options = [sorted(set().union(*rows)) for rows in reached]
     for combo in product(*options):
-        values = {a: v for c, valuation in zip(names, combo) for a, v in zip(per[c], valuation)}
-        if evaluate(prop.expr, values.__getitem__):
+        if not _violated(prop, per, names, combo):
             continue
         mask = out | True
         for c, valuation, rows in zip(names, combo, reached):

@@ -7,7 +7,6 @@ Every session here is on 127.0.0.1 with multicast scouting off.
 from __future__ import annotations
 
 import json
-import signal
 import socket
 import subprocess
 import sys
@@ -22,6 +21,7 @@ import zenoh
 
 from services.common.security import ensure_users
 from skinet.files import load_system, read_text
+from tests.processes import stop_and_show
 from skinet.mission import Scenario, parse_scenario, replay
 from skinet.wire import keys
 from skinet.wire.codec import DecodeError, decode, encode
@@ -103,16 +103,7 @@ class Services:
         return next(log for p, log in self.procs if p is proc).read_text(errors="replace")
 
     def close(self) -> None:
-        for p, _ in self.procs:
-            if p.poll() is None:
-                p.send_signal(signal.SIGTERM)
-        for p, log in self.procs:
-            try:
-                p.wait(timeout=5)
-            except subprocess.TimeoutExpired:
-                p.kill()
-                p.wait()
-            print(f"--- {' '.join(p.args[2:4])} (exit {p.returncode}) ---\n{log.read_text(errors='replace')[-3000:]}")
+        stop_and_show(self.procs, tail=3000)
 
 
 def write_login_file(path: Path, user: str) -> Path:

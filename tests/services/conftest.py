@@ -8,7 +8,6 @@ sleeping.
 
 from __future__ import annotations
 
-import signal
 import socket
 import subprocess
 import sys
@@ -21,6 +20,7 @@ import pytest
 import zenoh
 
 from services.common.zenoh_config import session_config
+from tests.processes import stop_and_show
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -165,16 +165,7 @@ def spawn(tmp_path: Path) -> Iterator[Callable[..., subprocess.Popen]]:
         return proc
 
     yield start
-    for proc, _ in procs:
-        if proc.poll() is None:
-            proc.send_signal(signal.SIGTERM)
-    for proc, log in procs:
-        try:
-            proc.wait(timeout=5)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
-        print(f"--- {' '.join(proc.args[2:4])} (exit {proc.returncode}) ---\n{log.read_text(errors='replace')}")
+    stop_and_show(procs)
 
 
 # -- the paper's system with its type map (simulator and bridge tests) ---------------------
