@@ -10,7 +10,10 @@ themselves, so ``AF f`` holds at a deadlock only if ``f`` does.
 
 Fixpoints use the linear-time counting algorithms of Clarke, Emerson and
 Sistla (1986) on predecessors generated from the product structure; ``AF`` and
-``AU`` also return each marking's rank, the bound on steps to ``f``.  Cost:
+``AU`` also return each marking's rank, the bound on steps to ``f``.  ``AF g``
+(mu1, SPEC §6.2) is computed as ``not EG not g`` where that side is cheaper: on
+the box, "has a successor in Z" is one vectorised pass over slices of the box
+per component edge, with no index arithmetic at all.  Cost:
 linear in the stored markings and edges; memory: a few bytes per index (one
 per boolean array, one for ``outdeg``, one or two for ranks) plus chunks.  The
 space's deadline is checked per chunk, so the budget bounds the fixpoints too.
@@ -59,10 +62,30 @@ class Kripke:
         self.rev = [g.csr(reverse=True) for g in s.components]
         bound = 1 + sum(int(g.csr()[2].max(initial=0)) for g in s.components)
         self.degree_dtype = next(t for t in (np.int8, np.int16, np.int32) if bound <= np.iinfo(t).max)
-        outdeg, loop = self._local_degrees()
-        dead = (outdeg == 0) & ~loop & self.expanded
-        del outdeg, loop
-        self.deadlock = dead if dead.any() else np.broadcast_to(np.False_, (s.size,))
+        self.deadlock = self._deadlocks()
+
+    def _deadlocks(self) -> np.ndarray:
+        """Expanded markings with no step at all (a read-only view when there is none).
+
+        On the box, a deadlock is a product of the components' stuck states, so
+        there is one unless some component is never stuck: no box-sized pass then.
+        """
+        s = self.space
+        none = np.broadcast_to(np.False_, (s.size,))
+        if s.codes is None:
+            stuck = [(g.csr()[2] == 0) & ~g.loop for g in s.components]
+            if not all(x.any() for x in stuck):
+                return none
+            dead = np.ones(s.shape, dtype=bool)
+            for i, x in enumerate(stuck):
+                view = [1] * len(s.shape)
+                view[i] = s.shape[i]
+                dead &= x.reshape(view)
+            dead = dead.reshape(-1) & self.expanded
+        else:
+            outdeg, loop = self._local_degrees()
+            dead = (outdeg == 0) & ~loop & self.expanded
+        return dead if dead.any() else none
 
     def _local_degrees(self) -> tuple[np.ndarray, np.ndarray]:
         """Out-degree without self-loops and self-loop flag, from the components' graphs."""
@@ -253,34 +276,163 @@ class Kripke:
             layers = [np.concatenate(found)]
 
     def eg(self, f: np.ndarray, frontier_value: bool) -> np.ndarray:
-        """EG f: some path stays in f forever (greatest fixpoint)."""
-        sat = f & self.stored
+        """EG f: some path stays in f forever (greatest fixpoint).
+
+        One pass finds the markings of f with no successor in f (on the box, by
+        slices of the box: one vectorised operation per component edge); then
+        only the expanded predecessors of what was removed are checked again.
+        Cost: one pass over the edges leaving f, plus, per removed marking, its
+        predecessors' successors.  Cut by the deadline: f itself (upper) or
+        nothing (lower).
+        """
+        return self._eg(f & self.stored, frontier_value)
+
+    def _eg(self, sat: np.ndarray, frontier_value: bool) -> np.ndarray:
+        """EG on ``sat`` = f & stored, an array the caller gives up (it becomes the result)."""
         if not frontier_value:
             sat &= self.expanded
-        inside = (self.loop & sat).astype(self.degree_dtype)  # successors inside sat
-        for idx in _nonzero_chunks(sat):
-            for p in self.predecessor_chunks(idx):
-                np.add.at(inside, p, 1)
+
+        def cut() -> np.ndarray:
+            return sat if frontier_value else np.zeros(self.space.size, dtype=bool)
+
+        if self.space.codes is None:
+            has = self._box_successor_in(sat)
+            if has is None:
+                return cut()
+            drop = np.logical_not(has, out=has)
+            drop &= sat
+            drop &= self.expanded  # frontier markings keep their unknown successors
+            sat ^= drop  # in place: peak memory is two booleans per box element
+            removed = list(_nonzero_chunks(drop))
+            del has, drop
+        else:
+            removed = []
+            for block in _nonzero_chunks(sat & self.expanded):
+                for lo in range(0, block.size, CHUNK):
+                    idx = block[lo:lo + CHUNK]
+                    removed.append(idx[~self.successor_in(sat, idx)])
+                    if self._expired():
+                        return cut()
+            for idx in removed:
+                sat[idx] = False
+        while removed:
+            candidates = [unique_codes(p[sat[p]]) for idx in removed for p in self.predecessor_chunks(idx)]
             if self._expired():
-                return sat if frontier_value else np.zeros(self.space.size, dtype=bool)
-        layers = _nonzero_chunks(sat & self.expanded & (inside == 0))
-        while True:
-            found = []
-            for layer in layers:
-                sat[layer] = False
-                found_here = []
-                for p in self.predecessor_chunks(layer):
-                    p = p[sat[p]]
-                    np.subtract.at(inside, p, 1)
-                    p = unique_codes(p[inside[p] == 0])
-                    sat[p] = False
-                    found_here.append(p)
-                found.extend(found_here)
+                return cut()
+            todo = unique_codes(np.concatenate([np.empty(0, dtype=np.int64), *candidates]))
+            removed = []
+            for lo in range(0, todo.size, CHUNK):
+                idx = todo[lo:lo + CHUNK]
+                removed.append(idx[~self.successor_in(sat, idx)])
+            for idx in removed:
+                sat[idx] = False
+            removed = [idx for idx in removed if idx.size]
+        return sat
+
+    def af(self, g: np.ndarray, frontier_value: bool, ranks: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
+        """AF g (every path meets g; the paper's mu1) as not EG not g, and with ``ranks`` the bound on steps.
+
+        Same fixpoint as ``au(stored, g)``.  On the box, and wherever g holds
+        at most of the stored markings, it is computed from the other side:
+        markings that can avoid g forever are found by one pass over the edges
+        (:meth:`eg`), and ranks cost only the markings of AF g outside g
+        (:meth:`bound_ranks`).  Elsewhere the counting fixpoint from g is cheaper.
+        """
+        if self.space.codes is not None and 2 * np.count_nonzero(g & self.stored) < self.space.size:
+            # Stored markings are looked up by binary search: start from the smaller side, g.
+            return self.au(self.stored, g, frontier_value, ranks)
+        avoid = np.logical_not(g)
+        avoid &= self.stored
+        sat = self._eg(avoid, not frontier_value)
+        np.logical_not(sat, out=sat)
+        sat &= self.stored
+        if not ranks:
+            return sat, None
+        return sat, self.bound_ranks(g, sat)
+
+    def bound_ranks(self, g: np.ndarray, sat: np.ndarray) -> np.ndarray:
+        """Rank of each marking of ``sat`` = AF g: the bound on steps to g (0 on g).
+
+        Kahn's algorithm on the markings of ``sat`` outside g, whose successors
+        all lie in ``sat``: O(their markings and edges).  Unranked markings hold
+        the dtype's maximum; past the deadline those of ``sat`` are dropped
+        from it (an under-approximation, as the counting fixpoint gives).
+        """
+        s = self.space
+        target = g & self.stored
+        inner = np.flatnonzero(sat & ~target)
+        m = inner.size
+        local = np.zeros(m, dtype=np.int64)
+        if m:
+            fwd = [c.csr() for c in s.components]
+            us, vs = [], []
+            for lo in range(0, m, CHUNK):
+                codes = s.code_of(inner[lo:lo + CHUNK])
+                a, b = expand_edges(codes, s.strides, s.shape, fwd)
+                v = np.searchsorted(inner, s.index(b))
+                v[v == m] = 0
+                inside = inner[v] == s.index(b)
+                us.append(lo + np.searchsorted(codes, a[inside]))
+                vs.append(v[inside])
                 if self._expired():
-                    return sat if frontier_value else np.zeros(self.space.size, dtype=bool)
-            if not found:
-                return sat
-            layers = [np.concatenate(found)]
+                    break
+            u, v = np.concatenate(us), np.concatenate(vs)
+            remaining = np.bincount(u, minlength=m)
+            order = np.argsort(v, kind="stable")
+            preds = u[order]
+            ptr = np.searchsorted(v[order], np.arange(m + 1))
+            ready = np.flatnonzero(remaining == 0)
+            level = 1
+            while ready.size and not self._expired():
+                local[ready] = level
+                level += 1
+                cnt = ptr[ready + 1] - ptr[ready]
+                first = np.repeat(ptr[ready] - np.cumsum(cnt) + cnt, cnt)
+                p = preds[first + np.arange(int(cnt.sum()))]
+                remaining -= np.bincount(p, minlength=m)
+                p = unique_codes(p)
+                ready = p[remaining[p] == 0]
+            sat[inner[local == 0]] = False
+        top = int(local.max(initial=0))
+        dtype = next(t for t in (np.uint8, np.uint16, np.uint32) if top < np.iinfo(t).max)
+        rank = np.full(s.size, np.iinfo(dtype).max, dtype=dtype)
+        rank[target] = 0
+        rank[inner] = np.where(local > 0, local, np.iinfo(dtype).max)
+        return rank
+
+    def successor_in(self, z: np.ndarray, idx: np.ndarray) -> np.ndarray:
+        """For the sorted markings ``idx``: does some successor (self-loop included) lie in ``z``?"""
+        s = self.space
+        codes = s.code_of(idx)
+        here = z[idx]
+        out = self.deadlock[idx] & here
+        fwd = []
+        for i, c in enumerate(s.components):
+            out |= c.loop[(codes // s.strides[i]) % s.shape[i]] & here
+            fwd.append(c.csr())
+        a, b = expand_edges(codes, s.strides, s.shape, fwd)
+        j = s.index(b)
+        hit = j >= 0
+        hit[hit] = z[j[hit]]
+        out[np.searchsorted(codes, a[hit])] = True
+        return out
+
+    def _box_successor_in(self, z: np.ndarray) -> np.ndarray | None:
+        """Over the whole box: does some successor (self-loop included) lie in ``z``?  ``None`` past the deadline."""
+        s = self.space
+        zv = z.reshape(s.shape)
+        out = np.zeros(s.shape, dtype=bool)
+        for i, c in enumerate(s.components):
+            axis = (slice(None),) * i
+            for a, targets in enumerate(c.succ):
+                here = out[axis + (slice(a, a + 1),)]  # a view, also for a single component
+                for b in targets + [a] * bool(c.loop[a]):
+                    np.logical_or(here, zv[axis + (slice(b, b + 1),)], out=here)
+                if self._expired():
+                    return None
+        flat = out.reshape(-1)
+        flat |= self.deadlock & z
+        return flat
 
 
 def _nonzero_chunks(mask: np.ndarray) -> Iterator[np.ndarray]:
@@ -313,8 +465,12 @@ def check(kripke: Kripke, formula: Expr) -> Result:
     s = kripke.space
     st = kripke.stored
     if isinstance(formula, (PlaceAtom, Const)) or not is_temporal(formula):
-        v = evaluate(formula, lambda a: place_values(s, a))
-        v = np.broadcast_to(np.asarray(v, dtype=bool), (s.size,)) & st
+        if s.codes is None:  # on the box, atoms broadcast along their component's axis: one array at the end
+            v = evaluate(formula, lambda a: place_values(s, a, flat=False))
+            v = np.broadcast_to(np.asarray(v, dtype=bool), s.shape).reshape(-1) & st
+        else:
+            v = evaluate(formula, lambda a: place_values(s, a))
+            v = np.broadcast_to(np.asarray(v, dtype=bool), (s.size,)) & st
         return Result(v, v)
     if isinstance(formula, Not):
         r = check(kripke, formula.arg)
@@ -346,7 +502,7 @@ def check(kripke: Kripke, formula: Expr) -> Result:
         if op == "EF":
             return _pair(kripke, a, a, lambda _, z, up: (kripke.eu(st, z, up), None))
         if op == "AF":
-            return _pair(kripke, a, a, lambda _, z, up: kripke.au(st, z, up, ranks=not up))
+            return af(kripke, a)
         if op == "EG":
             return _pair(kripke, a, a, lambda _, z, up: (kripke.eg(z, up), None))
         if op == "AG":  # AG f = not EF not f
@@ -354,6 +510,11 @@ def check(kripke: Kripke, formula: Expr) -> Result:
             lo = ~r.upper & st
             return Result(lo, lo if r.upper is r.lower else ~r.lower & st)
     raise TypeError(f"not a CTL formula: {formula!r}")
+
+
+def af(kripke: Kripke, g: Result, ranks: bool = True) -> Result:
+    """AF g from g's own result (the lower run ranked when ``ranks``): mu1 from the violating set."""
+    return _pair(kripke, g, g, lambda _, z, up: kripke.af(z, up, ranks=ranks and not up))
 
 
 def _pair(kripke: Kripke, a: Result, b: Result, op) -> Result:
@@ -365,10 +526,19 @@ def _pair(kripke: Kripke, a: Result, b: Result, op) -> Result:
     return Result(lo, hi, rank)
 
 
-def place_values(space: StateSpace, atom: PlaceAtom) -> np.ndarray:
-    """Where ``atom``'s place is marked, over the whole space."""
+def place_values(space: StateSpace, atom: PlaceAtom, flat: bool = True) -> np.ndarray:
+    """Where ``atom``'s place is marked, over the whole space.
+
+    With ``flat`` false, on the box: an array of the box's rank, long only
+    along the atom's component, that broadcasts to the box's shape.
+    """
     for i, g in enumerate(space.components):
         if g.name == atom.skillset:
             bit = 1 << g.net.place_index(atom.place)
-            return space.local(np.array([bool(m & bit) for m in g.states]), i)
+            values = np.array([bool(m & bit) for m in g.states])
+            if not flat and space.codes is None:
+                view = [1] * len(space.shape)
+                view[i] = space.shape[i]
+                return values.reshape(view)
+            return space.local(values, i)
     raise KeyError(atom.skillset)

@@ -148,9 +148,16 @@ class StateSpace:
             if self.stored_mask is None:
                 return codes
             return np.where(self.stored_mask[codes], codes, -1)
-        pos = np.searchsorted(self.codes, codes)
+        if not self.codes.size:
+            return np.full(codes.shape, -1)
+        if codes.size > 1024:  # sorted needles search several times faster (cache locality)
+            order = np.argsort(codes)
+            pos = np.empty(codes.shape, dtype=np.int64)
+            pos[order] = np.searchsorted(self.codes, codes[order])
+        else:
+            pos = np.searchsorted(self.codes, codes)
         pos[pos == self.codes.size] = 0
-        return np.where(self.codes[pos] == codes, pos, -1) if self.codes.size else np.full(codes.shape, -1)
+        return np.where(self.codes[pos] == codes, pos, -1)
 
     def stored(self) -> np.ndarray:
         if self.codes is None and self.stored_mask is not None:

@@ -23,10 +23,9 @@ import numpy as np
 
 from skinet.lang.expr import Not
 from skinet.options import PredictionOptions
-from skinet.props.formula import Temporal
 from skinet.system import System
 from skinet.verify.algorithm1 import PredictionVerdict
-from skinet.verify.ctl import UNREACHED, Kripke, Result, check
+from skinet.verify.ctl import UNREACHED, Kripke, Result, af, check
 from skinet.verify.explore import DEFAULT_MEMORY_LIMIT, Deadline, StateSpace, explore
 from skinet.verify.compositional import compositional_oracle, one_step
 from skinet.verify.fair import distance_to, fair_af, skill_fairness
@@ -180,7 +179,7 @@ def forecast(
         violated = check(kripke, Not(p.expr))
         risk = PropertyRisk(p.name, violated.lower, opts.af)
         if full or opts.af == "literal":
-            risk.literal = check(kripke, Temporal("AF", Not(p.expr)))
+            risk.literal = af(kripke, violated)
         if full or opts.af == "fair":
             fairness = skill_fairness(kripke, system) if fairness is None else fairness
             risk.fair = fair_af(kripke, violated, fairness)
