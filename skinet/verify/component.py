@@ -10,7 +10,7 @@ stable markings and T transitions.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -70,8 +70,13 @@ class ComponentGraph:
 CACHE_SIZE = 64  # component graphs remembered per net
 
 
+class Expired(Exception):
+    """The deadline passed while a component was being explored."""
+
+
 def explore_component(
-    name: str, eventless: PetriNet, roots: Iterable[int], seeds: Iterable[int] = ()
+    name: str, eventless: PetriNet, roots: Iterable[int], seeds: Iterable[int] = (),
+    expired: Callable[[], bool] | None = None,
 ) -> ComponentGraph:
     """Breadth-first search of ``eventless`` from ``roots`` and ``seeds``.
 
@@ -80,7 +85,8 @@ def explore_component(
     graphs of each net are memoised: a live system usually moves one
     component at a time, so the others' graphs are reused.  Cached graphs are
     shared: treat them as read-only.  Safe under threads (at worst a graph is
-    computed twice).
+    computed twice).  ``expired`` is asked every few states: when it says so,
+    :class:`Expired` is raised and nothing is memoised.
     """
     key = (name, frozenset(roots), frozenset(seeds))
     # Cached on the (frozen, immutable) net itself, as PetriNet caches its place index.
@@ -88,7 +94,7 @@ def explore_component(
     cache = eventless.__dict__.setdefault("_component_graphs", {})
     graph = cache.pop(key, None)
     if graph is None:
-        graph = _explore(name, eventless, key[1], key[2])
+        graph = _explore(name, eventless, key[1], key[2], expired)
         for stale in list(cache)[: max(0, len(cache) + 1 - CACHE_SIZE)]:
             cache.pop(stale, None)  # least recently used first
     cache[key] = graph
@@ -100,7 +106,15 @@ def forget_component_graphs(eventless: PetriNet) -> None:
     eventless.__dict__.pop("_component_graphs", None)
 
 
-def _explore(name: str, eventless: PetriNet, roots: Iterable[int], seeds: Iterable[int]) -> ComponentGraph:
+def stub_component(name: str, eventless: PetriNet, marking: int) -> ComponentGraph:
+    """A graph of the one stable ``marking`` whose successors are unknown (never a deadlock once unexpanded)."""
+    return ComponentGraph(name, eventless, [marking], {marking: 0}, [[]], np.zeros(1, dtype=bool), {},
+                          np.zeros(1, dtype=np.int64), np.zeros(1, dtype=np.int64), [0], [])
+
+
+def _explore(
+    name: str, eventless: PetriNet, roots: Iterable[int], seeds: Iterable[int], expired: Callable[[], bool] | None
+) -> ComponentGraph:
     root_states = sorted({s for r in roots for s in stabilize(eventless, r)})
     seed_states = sorted({s for r in seeds for s in stabilize(eventless, r)} - set(root_states))
     states: list[int] = []
@@ -121,6 +135,8 @@ def _explore(name: str, eventless: PetriNet, roots: Iterable[int], seeds: Iterab
         add(m)
     i = 0
     while i < len(states):
+        if expired is not None and i % 64 == 0 and expired():
+            raise Expired(name)
         m = states[i]
         targets: dict[int, None] = {}
         for t, results in steps(eventless, m):

@@ -36,7 +36,7 @@ import numpy as np
 
 from skinet.net.semantics import steps
 from skinet.system import System
-from skinet.verify.component import ComponentGraph, explore_component
+from skinet.verify.component import ComponentGraph, Expired, explore_component, stub_component
 
 CHUNK = 1 << 15  # markings handled at once: bounds the temporaries of every pass
 DEFAULT_MEMORY_LIMIT = 1 << 30
@@ -250,8 +250,14 @@ class StateSpace:
         return out
 
 
-def component_graphs(system: System, marking: Mapping[str, int], event_seeds: bool = True) -> list[ComponentGraph]:
-    """Each component's stable graph from its live marking (and its event seeds)."""
+def component_graphs(
+    system: System, marking: Mapping[str, int], event_seeds: bool = True, deadline: Deadline | None = None
+) -> list[ComponentGraph]:
+    """Each component's stable graph from its live marking (and its event seeds).
+
+    Raises :class:`skinet.verify.component.Expired` when ``deadline`` passes first.
+    """
+    expired = None if deadline is None or deadline.at is None else deadline.expired
     graphs = []
     for comp in system.components:
         m = marking[comp.name]
@@ -260,7 +266,7 @@ def component_graphs(system: System, marking: Mapping[str, int], event_seeds: bo
             for t, results in steps(comp.net, m):
                 if t.kind == "event":
                     seeds.extend(results)
-        graphs.append(explore_component(comp.name, comp.eventless, [m], seeds))
+        graphs.append(explore_component(comp.name, comp.eventless, [m], seeds, expired))
     return graphs
 
 
@@ -285,7 +291,14 @@ def explore(
     t0 = time.perf_counter()
     deadline = deadline or Deadline.after(budget, t0)
     marking = dict(marking or system.initial_marking())
-    graphs = component_graphs(system, marking, event_seeds)
+    try:
+        graphs = component_graphs(system, marking, event_seeds, deadline)
+    except Expired:
+        # The budget ran out inside a component: only the live marking is known, its successors are not.
+        stubs = [stub_component(c.name, c.eventless, marking[c.name]) for c in system.components]
+        space = explore_graphs(stubs, max_depth=0, memory_limit=None, started=t0, deadline=deadline)
+        space.truncated_by = "budget"
+        return space
     return explore_graphs(graphs, max_depth=max_depth, memory_limit=memory_limit, properties=properties,
                           edges=edges, progress=progress, started=t0, deadline=deadline)
 

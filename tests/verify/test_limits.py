@@ -24,6 +24,7 @@ from skinet.props.parser import parse_formula
 from skinet.system import System
 from skinet.verify.algorithm1 import analyse
 from skinet.verify.ctl import Kripke, Result, check
+from skinet.verify.component import forget_component_graphs
 from skinet.verify.explore import Deadline, explore, layer_counts, resident_bytes
 from skinet.verify.predict import forecast
 from tests.verify.test_compositional import copies as corpus_copies
@@ -196,3 +197,20 @@ def test_result_arrays_are_shared_when_exact() -> None:
     k = Kripke(explore(system))
     r: Result = check(k, Temporal("AF", Not(system.properties[0].expr)))
     assert r.lower is r.upper and r.rank is not None and r.rank.dtype == np.uint8
+
+
+def test_budget_expiring_inside_a_component_leaves_everything_unknown() -> None:
+    """The budget also bounds exploring each component: cut there, only the live marking is stored, unexpanded."""
+    system = pair_and_arm()
+    for c in system.components:
+        forget_component_graphs(c.eventless)
+    fc = forecast(system, budget=0.0)
+    report = fc.report()
+    assert (report["markings"], report["frontier"], report["deadlocks"]) == (1, 1, 0)
+    assert report["truncated_by"] == "budget" and not report["complete"]
+    analysis = analyse(system, system.initial_marking(), fc)
+    exact = analyse(system, system.initial_marking(), forecast(system))
+    assert {(u.skillset, u.transition, u.property) for u in analysis.unsafe} >= {
+        (u.skillset, u.transition, u.property) for u in exact.unsafe}
+    assert {u.constraint for u in analysis.unsafe} <= {"explicit", "forced", "unknown"}
+    assert "unknown" in {u.constraint for u in analysis.unsafe}
