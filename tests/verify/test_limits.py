@@ -201,7 +201,7 @@ def test_result_arrays_are_shared_when_exact() -> None:
 
 def test_budget_expiring_inside_a_component_leaves_everything_unknown() -> None:
     """The budget also bounds exploring each component: cut there, only the live marking is stored, unexpanded."""
-    system = pair_and_arm()
+    system = copies(1, 2)  # fresh: no compositional verdict memoised by another test
     for c in system.components:
         forget_component_graphs(c.eventless)
     fc = forecast(system, budget=0.0)
