@@ -209,8 +209,7 @@ def router(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
         table = json.loads(config.get_json("transport/auth/usrpwd/dictionary_file") or "null")
         if table:
             folder = Path(table).parent
-        trusted, fixed = robot_fleet(folder)
-        ensure_users(folder, fixed=fixed)
+        ensure_users(folder, fixed=robot_fleet(folder)[1])
         config.insert_json5("transport/auth/usrpwd/dictionary_file", json.dumps(str(folder / "users.txt")))
         notes.append(f"users and passwords in {folder}")
     endpoints = json.loads(config.get_json("listen/endpoints"))

@@ -258,15 +258,19 @@ def add_robot(folder: Path, name: str, ca_pem: str) -> Path:
 
 
 def robot_fleet(folder: Path) -> tuple[Path | None, dict[str, str]]:
-    """On a robot's router: the CA bundle to trust (its own CA plus the joined fleet CA,
-    written to ``tls/trusted.pem``) and the fixed ``hub`` password, or ``(None, {})``
-    when the robot has not joined a fleet."""
+    """On a robot's router, after :func:`ensure_tls`: the CA bundle to trust (its own CA
+    plus the joined fleet CA, written to ``tls/trusted.pem``) and the fixed ``hub``
+    password, or ``(None, {})`` when the robot has not joined a fleet."""
     joined = folder / JOINED
     if not (joined / "ca.pem").exists() or not (joined / "hub.password").exists():
         return None, {}
+    fixed = {"hub": (joined / "hub.password").read_text().strip()}
+    own = folder / "tls" / "ca.pem"
+    if not own.exists():  # users only (ensure_tls comes later)
+        return None, fixed
     bundle = folder / "tls" / "trusted.pem"
-    _write(bundle, (folder / "tls" / "ca.pem").read_bytes() + (joined / "ca.pem").read_bytes(), 0o644)
-    return bundle, {"hub": (joined / "hub.password").read_text().strip()}
+    _write(bundle, own.read_bytes() + (joined / "ca.pem").read_bytes(), 0o644)
+    return bundle, fixed
 
 
 def hub_endpoints(folder: Path, robots: Iterable[str]) -> tuple[list[str], list[str]]:
