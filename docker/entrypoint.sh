@@ -28,7 +28,8 @@ service="$1"
 shift
 
 # A router gets the generated configuration too when it logs in somewhere itself
-# (the fleet's off-board router, which connects to every robot's router).
+# (SKINET_ZENOH_USER set). The fleet's hub does not need it: `skinet router --robots`
+# (SKINET_FLEET_ROBOTS) makes its logins and per-robot TLS settings itself.
 if [ "$service" != "skinet" ] && { [ "$service" != "router" ] || [ -n "${SKINET_ZENOH_USER:-}" ]; }; then
     # Written as JSON through Zenoh's own parser so that any JSON5 file given in
     # SKINET_ZENOH_CONFIG is kept, and passwords need no shell quoting.

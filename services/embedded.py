@@ -190,8 +190,15 @@ def router(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     endpoint without certificates in the configuration gets a CA and certificates
     (the router's, and one per user for clients) made in ``<secrets>/tls``, with
     mutual TLS; ``$SKINET_TLS_HOSTNAMES`` lists the names clients reach it by.
+
+    Fleet (issue 15): a robot's router that joined a hub (``skinet fleet join``)
+    also trusts the fleet CA and takes the fleet's password for the user ``hub``;
+    with ``--robots`` (``$SKINET_FLEET_ROBOTS``) the router is the hub, linked to
+    each robot's router over mutual TLS as ``hub`` (:func:`~services.common.security.hub_endpoints`).
     """
-    from services.common.security import USERS, ensure_tls, ensure_users, tls_listen_config
+    from services.common.security import (
+        USERS, ensure_fleet, ensure_tls, ensure_users, hub_endpoints, robot_fleet, tls_listen_config,
+    )
 
     stop = stop_on_signals()
     config = session_config("router", args.connect, args.listen, args.zenoh_config, args.multicast_scouting,
@@ -202,7 +209,7 @@ def router(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
         table = json.loads(config.get_json("transport/auth/usrpwd/dictionary_file") or "null")
         if table:
             folder = Path(table).parent
-        ensure_users(folder)
+        ensure_users(folder, fixed=robot_fleet(folder)[1])
         config.insert_json5("transport/auth/usrpwd/dictionary_file", json.dumps(str(folder / "users.txt")))
         notes.append(f"users and passwords in {folder}")
     endpoints = json.loads(config.get_json("listen/endpoints"))
@@ -210,8 +217,23 @@ def router(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
             json.loads(config.get_json("transport/link/tls/listen_certificate") or "null") is None:
         hostnames = [h.strip() for h in os.environ.get("SKINET_TLS_HOSTNAMES", "").split(",") if h.strip()]
         ensure_tls(folder / "tls", ["router", *USERS], hostnames)
-        config.insert_json5("transport/link/tls", json.dumps(tls_listen_config(folder / "tls", "router")))
+        tls = tls_listen_config(folder / "tls", "router")
+        trusted, _ = robot_fleet(folder)
+        if trusted is not None:  # the robot joined a fleet: the hub's certificate is of the fleet CA
+            tls["root_ca_certificate"] = str(trusted)
+            notes.append("member of a fleet (trusts its hub)")
+        config.insert_json5("transport/link/tls", json.dumps(tls))
         notes.append(f"TLS certificates in {folder / 'tls'}")
+    robots = [r.strip() for r in (args.robots or "").split(",") if r.strip()]
+    if robots:
+        links, left_out = hub_endpoints(folder, robots)
+        for note in left_out:
+            print(f"skinet router: {note}", file=sys.stderr, flush=True)
+        known = json.loads(config.get_json("connect/endpoints") or "[]")
+        config.insert_json5("connect/endpoints", json.dumps([*known, *links]))
+        config.insert_json5("transport/auth/usrpwd/user", json.dumps("hub"))
+        config.insert_json5("transport/auth/usrpwd/password", json.dumps(ensure_fleet(folder)))
+        notes.append(f"hub of {len(links)} of {len(robots)} robots")
     session = open_session(config)
     try:
         print(f"zenoh router {session.zid()} listening on {', '.join(endpoints)}"

@@ -13,13 +13,25 @@ expired or foreign certificates for tests.  Files are written 0600 (0644 for
 Reusable by any deployment (a fleet of routers): ``ensure_tls(folder, ["router",
 "robot1-router", ...])`` gives every name a certificate for the DNS name
 ``name`` and ``localhost``/``127.0.0.1``.
+
+A fleet (issue 15; docs/deployment.md, "Fleet") links one off-board router, the
+hub, to every robot's router over mutual TLS.  Each robot keeps its own CA and
+passwords; the hub makes a *fleet CA* (``fleet/``) that signs only the hub's link
+certificate, and one password for the user ``hub``.  The operator carries two
+things: the hub's invitation (:func:`fleet_invitation`: the fleet CA and the hub
+password, the same for every robot) to each robot (:func:`join_fleet`: the robot's
+router then trusts the fleet CA and takes that password for ``hub``), and each
+robot's ``ca.pem`` (public) back to the hub (:func:`add_robot`), which trusts it
+for that robot's link only (:func:`hub_endpoints`).
 """
 
 from __future__ import annotations
 
 import datetime
 import ipaddress
+import json
 import os
+import re
 import secrets
 from collections.abc import Iterable
 from pathlib import Path
@@ -28,6 +40,8 @@ from cryptography import x509
 from cryptography.hazmat.primitives import hashes, serialization
 from cryptography.hazmat.primitives.asymmetric import ec
 from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
+
+from skinet.errors import SkinetError
 
 USERS = ("bridge", "monitor", "predictor", "robot", "observer", "hub")
 DAY = datetime.timedelta(days=1)
@@ -42,10 +56,11 @@ def _write(path: Path, data: bytes, mode: int = 0o600) -> None:
     tmp.replace(path)
 
 
-def ensure_users(folder: Path, users: Iterable[str] = USERS) -> dict[str, str]:
+def ensure_users(folder: Path, users: Iterable[str] = USERS, fixed: dict[str, str] | None = None) -> dict[str, str]:
     """``folder/users.txt`` and ``folder/<user>.password`` for every user; returns user -> password.
 
-    Existing entries are kept; missing users get a random 24-byte password.
+    Existing entries are kept, except those of ``fixed`` (user -> password, e.g. the
+    fleet's ``hub`` password), which replace them; missing users get a random 24-byte password.
     """
     folder.mkdir(parents=True, exist_ok=True)
     table = folder / "users.txt"
@@ -56,6 +71,10 @@ def ensure_users(folder: Path, users: Iterable[str] = USERS) -> dict[str, str]:
                 user, password = line.split(":", 1)
                 known[user] = password
     changed = False
+    for user, password in (fixed or {}).items():
+        if known.get(user) != password:
+            known[user] = password
+            changed = True
     for user in users:
         if user not in known:
             known[user] = secrets.token_urlsafe(24)
@@ -158,3 +177,122 @@ def tls_connect_config(folder: Path, name: str) -> dict:
     """The ``transport/link/tls`` section of a client presenting ``name``'s certificate."""
     return {"root_ca_certificate": str(folder / "ca.pem"), "enable_mtls": True,
             "connect_certificate": str(folder / f"{name}.pem"), "connect_private_key": str(folder / f"{name}.key")}
+
+
+# -- fleet: the hub's links to the robots' routers (issue 15) --------------------------
+
+FLEET = "fleet"    # on the hub: the fleet CA, the hub's link certificate and hub.password
+JOINED = "hub"     # on a robot: the hub's fleet CA and password (join_fleet)
+ROBOTS = "robots"  # on the hub: robots/<host>.pem, each robot's CA (add_robot)
+_HOST = re.compile(r"^[A-Za-z0-9]([A-Za-z0-9.-]{0,251}[A-Za-z0-9])?$")
+
+
+class FleetError(SkinetError):
+    """Bad fleet input (an invitation, a CA, a robot endpoint): one line."""
+
+
+def ensure_fleet(folder: Path) -> str:
+    """The hub's side: a fleet CA with the certificate ``hub`` in ``folder/fleet`` and
+    ``folder/fleet/hub.password``, made when missing; returns the password."""
+    fleet = folder / FLEET
+    ensure_tls(fleet, ["hub"])
+    path = fleet / "hub.password"
+    if not path.exists():
+        _write(path, secrets.token_urlsafe(24).encode() + b"\n")
+    return path.read_text().strip()
+
+
+def fleet_invitation(folder: Path) -> str:
+    """What every robot needs from the hub, one JSON line: the fleet CA and the hub's password."""
+    password = ensure_fleet(folder)
+    return json.dumps({"fleet_ca": (folder / FLEET / "ca.pem").read_text(), "hub_password": password})
+
+
+def _ca_pem(text: str, what: str) -> x509.Certificate:
+    try:
+        cert = x509.load_pem_x509_certificate(text.encode())
+    except ValueError:
+        raise FleetError(f"{what} is not a PEM certificate") from None
+    try:
+        ca = cert.extensions.get_extension_for_class(x509.BasicConstraints).value.ca
+    except x509.ExtensionNotFound:
+        ca = False
+    if not ca:
+        raise FleetError(f"{what} is not a CA certificate (BasicConstraints CA:TRUE)")
+    return cert
+
+
+def join_fleet(folder: Path, invitation: str) -> str:
+    """The robot's side: keep the hub's invitation in ``folder/hub`` (read by
+    :func:`robot_fleet`, i.e. at the router's next start); returns the robot's own
+    ``tls/ca.pem`` for :func:`add_robot` on the hub."""
+    try:
+        data = json.loads(invitation)
+        ca, password = data["fleet_ca"], data["hub_password"]
+    except (ValueError, TypeError, KeyError):
+        raise FleetError("the invitation is not the output of `skinet fleet invite` "
+                         "(a JSON object with fleet_ca and hub_password)") from None
+    if not isinstance(password, str) or not re.fullmatch(r"[!-~]{16,}", password):
+        raise FleetError("the invitation's hub_password must be 16 or more printable characters without spaces")
+    _ca_pem(ca if isinstance(ca, str) else "", "the invitation's fleet_ca")
+    own = folder / "tls" / "ca.pem"
+    if not own.exists():
+        raise FleetError(f"{own} does not exist: start the robot's router once (it makes its CA), then join")
+    joined = folder / JOINED
+    joined.mkdir(parents=True, exist_ok=True)
+    _write(joined / "ca.pem", ca.encode(), 0o644)
+    _write(joined / "hub.password", password.encode() + b"\n")
+    return own.read_text()
+
+
+def add_robot(folder: Path, name: str, ca_pem: str) -> Path:
+    """The hub's side: trust ``ca_pem`` (a robot's ``tls/ca.pem``) for the link to the
+    robot reached at host ``name`` (the host of its endpoint in the hub's robot list)."""
+    if not _HOST.match(name):
+        raise FleetError(f"robot name '{name}' must be the host of its endpoint (letters, digits, '.', '-')")
+    _ca_pem(ca_pem, f"the CA given for robot '{name}'")
+    path = folder / ROBOTS / f"{name}.pem"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    _write(path, ca_pem.encode(), 0o644)
+    return path
+
+
+def robot_fleet(folder: Path) -> tuple[Path | None, dict[str, str]]:
+    """On a robot's router, after :func:`ensure_tls`: the CA bundle to trust (its own CA
+    plus the joined fleet CA, written to ``tls/trusted.pem``) and the fixed ``hub``
+    password, or ``(None, {})`` when the robot has not joined a fleet."""
+    joined = folder / JOINED
+    if not (joined / "ca.pem").exists() or not (joined / "hub.password").exists():
+        return None, {}
+    fixed = {"hub": (joined / "hub.password").read_text().strip()}
+    own = folder / "tls" / "ca.pem"
+    if not own.exists():  # users only (ensure_tls comes later)
+        return None, fixed
+    bundle = folder / "tls" / "trusted.pem"
+    _write(bundle, own.read_bytes() + (joined / "ca.pem").read_bytes(), 0o644)
+    return bundle, fixed
+
+
+def hub_endpoints(folder: Path, robots: Iterable[str]) -> tuple[list[str], list[str]]:
+    """The hub's connect endpoints for ``robots`` (``tls/HOST:PORT``), each with its own
+    TLS settings (Zenoh's ``#`` endpoint configuration, which overrides the session's):
+    the robot's CA ``robots/HOST.pem`` as the only trusted root, the fleet's ``hub``
+    certificate as the client certificate.  Returns (endpoints, one-line notes about
+    robots left out because their CA is missing); :class:`FleetError` on a robot
+    endpoint that is not ``tls/HOST:PORT``."""
+    ensure_fleet(folder)
+    fleet = folder / FLEET
+    out, notes = [], []
+    for endpoint in robots:
+        m = re.fullmatch(r"tls/([^:/?#\[\]]+):(\d{1,5})", endpoint)
+        if m is None:
+            raise FleetError(f"robot endpoint '{endpoint}' must be tls/HOST:PORT (a robot's router accepts TLS only)")
+        ca = folder / ROBOTS / f"{m[1]}.pem"
+        if not ca.exists():
+            notes.append(f"robot {m[1]} ({endpoint}) left out: no {ca} yet (skinet fleet add {m[1]}, "
+                         f"docs/deployment.md)")
+            continue
+        settings = {"root_ca_certificate_file": ca, "connect_certificate_file": fleet / "hub.pem",
+                    "connect_private_key_file": fleet / "hub.key", "enable_mtls": "true"}
+        out.append(endpoint + "#" + ";".join(f"{k}={v}" for k, v in settings.items()))
+    return out, notes

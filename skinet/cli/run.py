@@ -43,7 +43,21 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
                         "(default: $SKINET_SECRETS or ~/.config/skinet/secrets)")
     c.add_argument("--no-auth", action="store_true",
                    help="accept sessions without user/password (tests on a closed machine only)")
+    c.add_argument("--robots", default=os.environ.get("SKINET_FLEET_ROBOTS"), metavar="ENDPOINTS",
+                   help="be a fleet's hub: link to these robot routers (tls/HOST:PORT, comma-separated) over "
+                        "mutual TLS as user hub (default: $SKINET_FLEET_ROBOTS; docs/deployment.md)")
     c.set_defaults(func=cmd_router)
+
+    c = sub.add_parser("fleet", help="link robots' routers to a hub over mutual TLS: exchange the trust files")
+    c.add_argument("--secrets", default=os.environ.get("SKINET_SECRETS"),
+                   help="the router's secrets folder (default: $SKINET_SECRETS or ~/.config/skinet/secrets)")
+    fleet = c.add_subparsers(dest="fleet_command", required=True, metavar="COMMAND")
+    fleet.add_parser("invite", help="on the hub: print the invitation every robot joins with (fleet CA, hub password)")
+    fleet.add_parser("join", help="on a robot: read the hub's invitation on stdin, keep it for the router's next "
+                                  "start, print the robot's CA for `skinet fleet add`")
+    add = fleet.add_parser("add", help="on the hub: read a robot's CA on stdin and trust it for the link to HOST")
+    add.add_argument("host", metavar="HOST", help="the host of the robot's endpoint in SKINET_FLEET_ROBOTS")
+    c.set_defaults(func=cmd_fleet)
 
 
 def cmd_run(args: argparse.Namespace) -> int:
@@ -56,3 +70,22 @@ def cmd_router(args: argparse.Namespace) -> int:
     from services.embedded import router
 
     return router(args)
+
+
+def cmd_fleet(args: argparse.Namespace) -> int:
+    """``skinet fleet invite|join|add``: the files a hub and its robots exchange (docs/deployment.md)."""
+    import sys
+    from pathlib import Path
+
+    from services.common.security import add_robot, fleet_invitation, join_fleet
+
+    folder = Path(args.secrets or Path.home() / ".config" / "skinet" / "secrets")
+    if args.fleet_command == "invite":
+        print(fleet_invitation(folder))
+    elif args.fleet_command == "join":
+        sys.stdout.write(join_fleet(folder, sys.stdin.read()))
+        print("skinet fleet: joined; restart this robot's router to trust the hub", file=sys.stderr)
+    else:
+        path = add_robot(folder, args.host, sys.stdin.read())
+        print(f"skinet fleet: {path} written; restart the hub to link {args.host}", file=sys.stderr)
+    return 0

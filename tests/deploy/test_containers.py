@@ -74,10 +74,10 @@ class Stack:
         self.project, self.env = project, env
         self.command = _compose_command() + ["-f", str(REPO / "compose.yaml"), "-p", project]
 
-    def compose(self, *args: str, timeout: float = 120, check: bool = True,
+    def compose(self, *args: str, timeout: float = 120, check: bool = True, input: str | None = None,
                 **env: str) -> subprocess.CompletedProcess:
         r = subprocess.run([*self.command, *args], cwd=REPO, env={**self.env, **env}, capture_output=True,
-                           text=True, timeout=timeout)
+                           text=True, timeout=timeout, input=input)
         if check and r.returncode != 0:
             raise AssertionError(f"compose {' '.join(args)} failed ({r.returncode}):\n{r.stdout}\n{r.stderr}")
         return r

@@ -6,54 +6,62 @@ compose project of the ``fleet`` profile (the hub router and two pool predictors
 on a third.  The links are a fourth network, which the hub and each robot's router
 join, the routers under the alias the hub connects to (``docker network connect
 --alias robotN``).  Cutting a link is ``docker network disconnect`` of that
-robot's router.  Events come from the host,
-logged in as ``bridge`` on the robot's published port; an observer per robot reads
-its reports.  Links are plain TCP with user/password (TLS: docs/deployment.md).
+robot's router.  Events come from the host, logged in as ``bridge`` on the robot's
+published port; an observer per robot reads its reports.
+
+Every link is mutual TLS with the secrets the routers make at their first start:
+the robots join the hub with the commands of docs/deployment.md ("Fleet": ``skinet
+fleet invite``, ``join``, ``add`` through ``compose exec``, then restarts).
 """
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import subprocess
 import time
 from collections.abc import Callable, Iterator
+from pathlib import Path
 
 import pytest
 import zenoh
 
 from deploy_support import Tokens, free_port, login_config, wait_until
+from services.common.security import tls_connect_config
 from skinet.wire import keys
 from skinet.wire.codec import decode
 from skinet.wire.messages import UnsafeReport, Verdicts
-from test_containers import Stack, image  # noqa: F401  (the image fixture; skips without Docker)
+from test_containers import SECRETS_IN_IMAGE, Stack, image  # noqa: F401  (the image fixture; skips without Docker)
 from test_fleet_links import Events, fleet_skillsets
 
 pytestmark = pytest.mark.slow
-pytest.skip("the fleet profile links the hub to each robot over plain TCP with shared passwords, but since "
-            "issue 14 every robot router is TLS-only with secrets generated at its first start: moving the fleet "
-            "to TLS (issue 15, open) comes first; tests/deploy/test_fleet_links.py covers the same behaviour "
-            "without containers", allow_module_level=True)
 ROBOTS = ("robot1", "robot2")
 TWIN_ERROR = (r"python -m services\.monitor: error: system 'robot1' is already monitored by {} on this Zenoh network: "
               r"give each robot its own system name \(\[system\] name in its \.toml\)")
+LEFT_OUT = ("skinet router: robot {0} (tls/{0}:7447) left out: no /var/lib/skinet/secrets/robots/{0}.pem yet "
+            "(skinet fleet add {0}, docs/deployment.md)")
 
 
 class Robot:
     """One robot's compose project, its observer session and an event source on its router."""
 
     def __init__(self, name: str, stack: Stack, port: int):
-        self.name, self.stack, self.endpoint = name, stack, f"tcp/127.0.0.1:{port}"
+        self.name, self.stack, self.endpoint = name, stack, f"tls/127.0.0.1:{port}"
         self.items: list[tuple[float, object]] = []
         self.session: zenoh.Session | None = None
 
-    def connect(self) -> None:
-        config = login_config(self.endpoint, "observer")
-        config.insert_json5("connect/timeout_ms", "60000")  # the router may still be starting
-        self.session = zenoh.open(config)
-        bridge = login_config(self.endpoint, "bridge")
-        bridge.insert_json5("connect/timeout_ms", "60000")
-        self.bridge = zenoh.open(bridge)
+    def login(self, secrets: Path, user: str) -> zenoh.Session:
+        """A host session of ``user`` with the password and certificate this robot's router made."""
+        config = login_config(self.endpoint, user, (secrets / f"{user}.password").read_text().strip())
+        config.insert_json5("transport/link/tls", json.dumps(tls_connect_config(secrets / "tls", user)))
+        config.insert_json5("connect/timeout_ms", "60000")  # the router may still be restarting
+        return zenoh.open(config)
+
+    def connect(self, folder: Path) -> None:
+        secrets = self.stack.secrets(folder, ("observer", "bridge"))
+        self.session = self.login(secrets, "observer")
+        self.bridge = self.login(secrets, "bridge")
         self.events = Events(self.bridge, self.name)
         self.tokens = Tokens(self.session)
         self._subs = [self.session.declare_subscriber(keys.unsafe(self.name), self._on(UnsafeReport)),
@@ -93,6 +101,22 @@ def _entries(report: UnsafeReport) -> list[tuple]:
     return sorted((e.skillset, e.transition, e.property, e.constraint) for e in report.unsafe)
 
 
+def _secrets_made(stack: Stack, service: str) -> bool:
+    return stack.compose("exec", "-T", service, "test", "-e", f"{SECRETS_IN_IMAGE}/tls/robot.key",
+                         check=False).returncode == 0
+
+
+def join(hub: Stack, robots: list[Stack], names: list[str]) -> None:
+    """docs/deployment.md's exchange: the hub's invitation to each robot, each robot's CA to the hub."""
+    invitation = hub.compose("exec", "-T", "hub", "skinet", "fleet", "invite").stdout
+    for name, robot in zip(names, robots):
+        ca = robot.compose("exec", "-T", "router", "skinet", "fleet", "join", input=invitation).stdout
+        assert ca.startswith("-----BEGIN CERTIFICATE-----"), ca
+        robot.compose("restart", "-t", "2", "router")
+        hub.compose("exec", "-T", "hub", "skinet", "fleet", "add", name, input=ca)
+    hub.compose("restart", "-t", "2", "hub")
+
+
 @pytest.fixture(scope="module")
 def fleet(image: str, tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Stack, str, dict[str, Robot]]]:
     skills = fleet_skillsets(tmp_path_factory.mktemp("fleet") / "skillsets", *ROBOTS)
@@ -103,19 +127,27 @@ def fleet(image: str, tmp_path_factory: pytest.TempPathFactory) -> Iterator[tupl
     net = f"{tag}-links"
     hub = Stack(f"{tag}-hub", {**env, "COMPOSE_PROFILES": "fleet", "SKINET_HUB_PORT": f"127.0.0.1:{free_port()}",
                                "SKINET_PREDICTORS": "2",
-                               "SKINET_FLEET_ROBOTS": "tcp/robot1:7447,tcp/robot2:7447,tcp/robot3:7447"})
+                               "SKINET_FLEET_ROBOTS": "tls/robot1:7447,tls/robot2:7447,tls/robot3:7447"})
     robots = {}
     for name in (*ROBOTS, "robot3"):
         port = free_port()
         robots[name] = Robot(name, Stack(f"{tag}-{name}", {
             **env, "COMPOSE_PROFILES": "onboard", "SKINET_ROUTER_PORT": f"127.0.0.1:{port}",
+            "SKINET_TLS_HOSTNAMES": name,  # the name the hub reaches it by, in its router's certificate
             "SKINET_DASHBOARD_PORT": str(free_port()),  # each robot its own dashboard port
-            # robot3 is a twin: it runs robot1's system file (started by its test)
+            # robot3 is a twin: it runs robot1's system file (its monitor started by its test)
             "SKINET_SYSTEM": f"skillsets/{'robot1' if name == 'robot3' else name}.toml"}), port)
+    t0 = time.monotonic()
     try:
         for name in ROBOTS:
             robots[name].stack.compose("up", "-d", "--no-build", timeout=180)
+        robots["robot3"].stack.compose("up", "-d", "--no-build", "router", timeout=180)
         hub.compose("up", "-d", "--no-build", timeout=180)
+        for s, service in [(r.stack, "router") for r in robots.values()] + [(hub, "hub")]:
+            wait_until(lambda s=s, service=service: _secrets_made(s, service), 90, f"{s.project}: secrets")
+        # Before joining, the hub leaves every robot out, one line each.
+        wait_until(lambda: all(LEFT_OUT.format(n) in hub.logs() for n in robots), 30, "the hub's notes")
+        join(hub, [r.stack for r in robots.values()], list(robots))
         # The robots' links: a network of their own, `--internal` so that it never becomes
         # a container's default gateway (that would move the routers' published ports,
         # and with them this host's sessions, to the network the test cuts).
@@ -124,7 +156,9 @@ def fleet(image: str, tmp_path_factory: pytest.TempPathFactory) -> Iterator[tupl
         _docker("network", "connect", net, hub_router)
         for name in ROBOTS:
             _docker("network", "connect", "--alias", name, net, robots[name].router())
-            robots[name].connect()
+        for name, r in robots.items():
+            r.connect(tmp_path_factory.mktemp(f"secrets-{name}"))
+        print(f"fleet up and joined in {time.monotonic() - t0:.0f} s")
         yield hub, net, robots
     finally:
         for r in robots.values():
@@ -194,9 +228,7 @@ def test_whole_pool_down_marks_predictions_stale_then_recovers(fleet) -> None:
 def test_twin_system_name_is_refused_with_one_line(fleet) -> None:
     _, net, robots = fleet
     twin = robots["robot3"]
-    twin.stack.compose("up", "-d", "--no-build", "router", timeout=120)
     _docker("network", "connect", "--alias", "robot3", net, twin.router())
-    twin.connect()
     wait_until(lambda: len(twin.tokens.of("predictor")) == 2, 60, "robot3: linked to the hub")
     twin.stack.compose("up", "-d", "--no-build", "monitor", timeout=120)
     (monitor,) = twin.stack.containers("monitor", running=False)
@@ -221,4 +253,14 @@ def test_monitor_with_a_wrong_router_endpoint_exits_with_one_line(image: str) ->
     assert r.returncode == 1 and r.stdout == "", (r.stdout, r.stderr)
     assert r.stderr.splitlines() == [  # after SKINET_ZENOH_CONNECT_TIMEOUT
         "python -m services.monitor: error: cannot open the Zenoh session: nothing answers at tcp/127.0.0.1:9"]
+    assert time.monotonic() - t0 < 30
+
+
+def test_hub_with_a_plain_tcp_robot_endpoint_exits_with_one_line(image: str) -> None:
+    t0 = time.monotonic()
+    r = subprocess.run(["docker", "run", "--rm", "-e", "SKINET_FLEET_ROBOTS=tls/robot1:7447,tcp/robot2:7447",
+                        image, "router", "--listen", "tls/0.0.0.0:7447"], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 1 and r.stdout == "", (r.stdout, r.stderr)
+    assert r.stderr.splitlines() == [
+        "skinet: error: robot endpoint 'tcp/robot2:7447' must be tls/HOST:PORT (a robot's router accepts TLS only)"]
     assert time.monotonic() - t0 < 30

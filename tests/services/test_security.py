@@ -146,3 +146,69 @@ def test_tls_refuses_clients_without_the_ca_or_with_a_bad_certificate(secrets: P
             assert took < 15, f"{name}: refused only after {took:.1f} s"
     finally:
         assert router.stop() == 0
+
+
+def fleet(secrets: Path, *args: str, stdin: str = "") -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "skinet.cli.main", "fleet", "--secrets", str(secrets), *args],
+                          cwd=REPO, input=stdin, capture_output=True, text=True, timeout=30)
+
+
+def test_a_hub_links_to_joined_robots_over_mutual_tls_only(tmp_path: Path) -> None:
+    """Issue 15: the hub reaches a robot that joined (fleet CA and password) and is
+    refused by one that did not; bad fleet input is one line."""
+    hub_dir, joined_dir, other_dir = tmp_path / "hub", tmp_path / "robot1", tmp_path / "robot2"
+    ports = {"robot1": free_port(), "robot2": free_port()}
+    first = [Router("--listen", f"tls/127.0.0.1:{p}", "--secrets", str(d))
+             for p, d in ((ports["robot1"], joined_dir), (ports["robot2"], other_dir))]
+    for r in first:
+        assert r.stop() == 0  # their CAs and passwords exist now
+    invitation = fleet(hub_dir, "invite")
+    assert invitation.returncode == 0 and json.loads(invitation.stdout).keys() == {"fleet_ca", "hub_password"}
+    joined = fleet(joined_dir, "join", stdin=invitation.stdout)
+    assert joined.stdout == (joined_dir / "tls" / "ca.pem").read_text()
+    assert joined.stderr == "skinet fleet: joined; restart this robot's router to trust the hub\n"
+    for name, d in (("robot1", joined_dir), ("robot2", other_dir)):  # the hub trusts both robots' CAs
+        assert fleet(hub_dir, "add", "localhost" if name == "robot1" else "127.0.0.1",
+                     stdin=(d / "tls" / "ca.pem").read_text()).returncode == 0
+    bad = {("join",): ("{}", "skinet: error: the invitation is not the output of `skinet fleet invite` "
+                             "(a JSON object with fleet_ca and hub_password)"),
+           ("add", "robot9"): ("-----BEGIN CERTIFICATE-----\n", "skinet: error: the CA given for robot 'robot9' "
+                                                                  "is not a PEM certificate"),
+           ("add", "bad_name"): ("", "skinet: error: robot name 'bad_name' must be the host of its endpoint "
+                                     "(letters, digits, '.', '-')")}
+    for args, (stdin, line) in bad.items():
+        r = fleet(joined_dir, *args, stdin=stdin)
+        assert (r.returncode, r.stdout, r.stderr.splitlines()) == (1, "", [line]), args
+
+    robots = [Router("--listen", f"tls/127.0.0.1:{ports['robot1']}", "--secrets", str(joined_dir)),
+              Router("--listen", f"tls/127.0.0.1:{ports['robot2']}", "--secrets", str(other_dir))]
+    assert "member of a fleet (trusts its hub)" in robots[0].line and "member of a fleet" not in robots[1].line
+    hub_port = free_port()
+    hub = Router("--listen", f"tls/127.0.0.1:{hub_port}", "--secrets", str(hub_dir), "--robots",
+                 f"tls/localhost:{ports['robot1']},tls/127.0.0.1:{ports['robot2']},tls/robot3:7447")
+    sessions: list[zenoh.Session] = []
+    try:
+        assert hub.line == (f"skinet router: robot robot3 (tls/robot3:7447) left out: no {hub_dir}/robots/robot3.pem "
+                            f"yet (skinet fleet add robot3, docs/deployment.md)\n")
+        assert "hub of 2 of 3 robots" in hub.proc.stdout.readline()
+        pool = open_with(client_config(f"tls/127.0.0.1:{hub_port}", "predictor", ensure_users(hub_dir)["predictor"],
+                                       tls_connect_config(hub_dir / "tls", "predictor")))
+        sessions.append(pool)
+        token = pool.liveliness().declare_token("skinet/robot1/alive/predictor/pool1")
+        seen = {}
+        for name, d in (("robot1", joined_dir), ("robot2", other_dir)):
+            s = open_with(client_config(f"tls/127.0.0.1:{ports[name]}", "observer", ensure_users(d)["observer"],
+                                        tls_connect_config(d / "tls", "observer")))
+            sessions.append(s)
+            seen[name] = lambda s=s: [str(r.ok.key_expr) for r in s.liveliness().get("skinet/**", timeout=1) if r.ok]
+        deadline = time.monotonic() + 10
+        while not seen["robot1"]() and time.monotonic() < deadline:
+            time.sleep(0.2)
+        assert seen["robot1"]() == ["skinet/robot1/alive/predictor/pool1"]
+        assert seen["robot2"]() == [], "a robot that did not join refuses the hub"
+        token.undeclare()
+    finally:
+        for s in sessions:
+            s.close()
+        for r in (hub, *robots):
+            assert r.stop() == 0
