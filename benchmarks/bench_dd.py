@@ -290,13 +290,46 @@ class Encoding:
         rounds = 0
         while True:
             rounds += 1
-            pre = z & self.deadlock
-            for i in range(len(self.graphs)):
-                pre |= self.preimage(i, z)
-            nz = p & pre
+            nz = p & self.ex(z)
             if nz == z:
                 return z, rounds
             z = nz
+
+    def ex(self, z: Any) -> Any:
+        pre = z & self.deadlock
+        for i in range(len(self.graphs)):
+            pre |= self.preimage(i, z)
+        return pre
+
+    def eu(self, f: Any, g: Any) -> Any:
+        """Least fixpoint ``E[f U g]``."""
+        y = g
+        while True:
+            ny = y | (f & self.ex(y))
+            if ny == y:
+                return y
+            y = ny
+
+    def fair_eg(self, f: Any, fairness: Sequence[Any]) -> tuple[Any, int]:
+        """Emerson-Lei: greatest fixpoint of ``f and AND_k EX E[f U (Z and F_k)]`` (SPEC §6.2)."""
+        z = f
+        rounds = 0
+        while True:
+            rounds += 1
+            nz = f
+            for fk in fairness:
+                nz &= self.ex(self.eu(f, z & fk))
+            if nz == z:
+                return z, rounds
+            z = nz
+
+    def idle(self, system: Any) -> list[Any]:
+        """One fairness constraint per skill: its idle place is marked (SPEC §6.2)."""
+        from skinet.net.build import idle_place
+        from skinet.props.formula import PlaceAtom
+
+        return [self.formula(PlaceAtom(g.name, idle_place(k.name)))
+                for g in self.graphs for k in system.component(g.name).skillset.skills]
 
     def formula(self, expr: Any) -> Any:
         """A state formula (SPEC §4) as a BDD over the local state codes."""
@@ -322,106 +355,161 @@ class Encoding:
 SYSTEMS = {"1": (2, 2, False), "2": (3, 3, False), "3": (4, 4, True), "4": (4, 4, True)}
 
 
-def successors(system: Any) -> list[dict[str, int]]:
-    """Every one-step successor of the initial marking through the full nets (Algorithm 1's)."""
+def live_markings(system: Any, walks: int) -> list[dict[str, int]]:
+    """The initial marking, then ``walks`` live markings after 40 seeded random steps of the full nets."""
+    import random
+
     from skinet.net.semantics import steps
 
-    init = system.initial_marking()
+    out = [system.initial_marking()]
+    for seed in range(1, walks + 1):
+        rng = random.Random(seed)
+        marking = system.initial_marking()
+        for _ in range(40):
+            comp = rng.choice(system.components)
+            options = steps(comp.net, marking[comp.name])
+            if options:
+                _t, results = rng.choice(options)
+                marking[comp.name] = rng.choice(sorted(results))
+        out.append(marking)
+    return out
+
+
+def successors(system: Any, marking: Mapping[str, int]) -> list[dict[str, int]]:
+    """Every distinct one-step successor of ``marking`` through the full nets (Algorithm 1's)."""
+    from skinet.net.semantics import steps
+
     out: dict[tuple[int, ...], dict[str, int]] = {}
     for comp in system.components:
-        for _, results in steps(comp.net, init[comp.name]):
+        for _, results in steps(comp.net, marking[comp.name]):
             for m in results:
-                after = dict(init)
+                after = dict(marking)
                 after[comp.name] = m
                 out.setdefault(tuple(after[c.name] for c in system.components), after)
     return list(out.values())
 
 
-def pair_verdicts(system: Any, decide: Any) -> list[str]:
+def pair_verdicts(system: Any, marking: Mapping[str, int], decide: Any) -> list[str]:
     """explicit / dangerous / safe / unknown per (successor, property), in a fixed order."""
     from skinet.props.evaluate import holds
 
     out = []
-    for after in successors(system):
+    for after in successors(system, marking):
         for p in system.properties:
             out.append("explicit" if not holds(p.expr, after, system.nets) else decide(p, after))
     return out
 
 
-def run_ours(case: str) -> dict:
+def run_ours(case: str, af: str, walks: int) -> dict:
     from skinet.options import PredictionOptions, PropertyOptions
     from skinet.verify.algorithm1 import analyse
     from skinet.verify.predict import forecast
 
     n, m, seeds = SYSTEMS[case]
     system = copies_system(n, m)
-    literal = PredictionOptions(PropertyOptions(af="literal"))
+    options = PredictionOptions(PropertyOptions(af=af))
     import scipy.sparse.csgraph  # noqa: F401  (forecast's one-time import, outside the clock as there)
 
     t0 = time.perf_counter()
     if case in ("1", "2"):
-        fc = forecast(system, event_seeds=False, options=literal, memory_limit=GiB)
+        fc = forecast(system, event_seeds=False, options=options, memory_limit=GiB)
         rep = fc.report()
         return {"wall": time.perf_counter() - t0, "markings": rep["markings"], "complete": rep["complete"],
+                "truncated_by": rep["truncated_by"],
                 "dangerous": {k: v["dangerous"] for k, v in rep["properties"].items()}}
     if case == "3":
-        fc = forecast(system, budget=1.0, options=literal)
-        analysis = analyse(system, system.initial_marking(), fc, options=literal)
         status = {"dangerous": "dangerous", "safe": "safe"}
-        verdicts = pair_verdicts(system, lambda p, after: status.get(fc.verdict(p.name, after).status, "unknown"))
-        return {"wall": time.perf_counter() - t0, "verdicts": verdicts, "unsafe": len(analysis.unsafe),
-                "markings": fc.report()["markings"], "complete": fc.report()["complete"],
-                "af": sorted(set(fc.report()["af"].values()))}
+        verdicts: list[str] = []
+        unsafe = explored = 0
+        walls = []
+        for live in live_markings(system, walks):
+            t1 = time.perf_counter()
+            fc = forecast(system, live, budget=1.0, options=options)
+            unsafe += len(analyse(system, live, fc, options=options).unsafe)
+            verdicts += pair_verdicts(system, live,
+                                      lambda p, after: status.get(fc.verdict(p.name, after).status, "unknown"))
+            explored += fc.report()["markings"]
+            walls.append(time.perf_counter() - t1)
+        return {"wall": time.perf_counter() - t0, "verdicts": verdicts, "unsafe": unsafe, "markings": explored,
+                "worst": max(walls)}
     return {"wall": time.perf_counter() - t0, "skipped": True}
 
 
-def run_bdd(case: str, tool: str) -> dict:
-    from skinet.verify.explore import component_graphs
-
+def run_bdd(case: str, tool: str, af: str, walks: int) -> dict:
     n, m, seeds = SYSTEMS[case]
     system = copies_system(n, m)
+    if case == "3":
+        t0 = time.perf_counter()
+        verdicts: list[str] = []
+        walls = []
+        for live in live_markings(system, walks):
+            t1 = time.perf_counter()
+            bdd = backend(tool)  # a new manager per live marking: its component graphs differ
+            enc = Encoding(bdd, component_graphs(system, live, event_seeds=True, extra=successors(system, live)))
+            fairness = enc.idle(system) if af == "fair" else []
+            valid = enc.valid()
+            sets = {p.name: (enc.fair_eg(valid & enc.formula(p.expr), fairness) if af == "fair"
+                             else enc.eg(valid & enc.formula(p.expr)))[0] for p in system.properties}
+            verdicts += pair_verdicts(system, live, lambda p, after: "safe" if (enc.marking(after) & sets[p.name])
+                                      != bdd.false() else "dangerous")
+            walls.append(time.perf_counter() - t1)
+        return {"wall": time.perf_counter() - t0, "verdicts": verdicts, "worst": max(walls), "nodes": bdd.nodes()}
     bdd = backend(tool)
     t0 = time.perf_counter()
     graphs = component_graphs(system, system.initial_marking(), event_seeds=seeds)
     enc = Encoding(bdd, graphs)
     out: dict[str, Any] = {"encode": time.perf_counter() - t0}
-    if case in ("1", "2", "4"):
+    fairness = enc.idle(system) if af == "fair" else []
+
+    def eg(f: Any) -> tuple[Any, int]:
+        return enc.fair_eg(f, fairness) if af == "fair" else enc.eg(f)
+
+    t1 = time.perf_counter()
+    reach, sweeps = enc.reach()
+    out.update(reach=time.perf_counter() - t1, markings=bdd.count(reach, enc.xs), sweeps=sweeps)
+    if case in ("1", "2"):
         t1 = time.perf_counter()
-        reach, sweeps = enc.reach()
-        out.update(reach=time.perf_counter() - t1, markings=bdd.count(reach, enc.xs), sweeps=sweeps)
-        if case in ("1", "2"):
-            t1 = time.perf_counter()
-            out["dangerous"], out["rounds"] = {}, {}
-            for p in system.properties:
-                z, rounds = enc.eg(reach & enc.formula(p.expr))
-                out["dangerous"][p.name] = bdd.count(reach & ~z, enc.xs)
-                out["rounds"][p.name] = rounds
-            out["mu1"] = time.perf_counter() - t1
-    else:
-        t1 = time.perf_counter()
-        valid = enc.valid()
-        eg = {p.name: enc.eg(valid & enc.formula(p.expr))[0] for p in system.properties}
+        out["dangerous"], out["rounds"] = {}, {}
+        for p in system.properties:
+            z, rounds = eg(reach & enc.formula(p.expr))
+            out["dangerous"][p.name] = bdd.count(reach & ~z, enc.xs)
+            out["rounds"][p.name] = rounds
         out["mu1"] = time.perf_counter() - t1
-        out["verdicts"] = pair_verdicts(
-            system, lambda p, after: "safe" if (enc.marking(after) & eg[p.name]) != bdd.false() else "dangerous")
     out["wall"] = time.perf_counter() - t0
     out["nodes"] = bdd.nodes()
     return out
 
 
-def one(case: str, tool: str) -> dict:
+def component_graphs(system: Any, live: Mapping[str, int], event_seeds: bool,
+                     extra: Sequence[Mapping[str, int]] = ()) -> list[Any]:
+    """``skinet.verify.explore.component_graphs``, widened where a successor's local marking is not in it."""
+    from skinet.verify.component import explore_component
+    from skinet.verify.explore import component_graphs as graphs_of
+
+    graphs = graphs_of(system, live, event_seeds=event_seeds)
+    out = []
+    for comp, g in zip(system.components, graphs):
+        missing = {after[comp.name] for after in extra} - set(g.index)
+        if missing:  # a transient successor is stabilized by explore_component; its stable results join
+            seeds = [g.states[s] for s in g.seeds]
+            g = explore_component(comp.name, comp.eventless, [live[comp.name], *sorted(missing)], seeds)
+        out.append(g)
+    return out
+
+
+def one(case: str, tool: str, af: str, walks: int) -> dict:
     from skinet.verify.explore import peak_resident_bytes
 
-    out = run_ours(case) if tool == "ours" else run_bdd(case, tool)
+    out = run_ours(case, af, walks) if tool == "ours" else run_bdd(case, tool, af, walks)
     out["peak"] = peak_resident_bytes()
     return out
 
 
-def fresh(case: str, tool: str, deadline: float) -> dict:
-    """``one(case, tool)`` in a new process; ``{"deadline": True}`` when it does not finish in time."""
+def fresh(case: str, tool: str, af: str, deadline: float, walks: int = 0) -> dict:
+    """``one(case, tool, af, walks)`` in a new process; ``{"deadline": True}`` when it does not finish in time."""
     try:
-        run = subprocess.run([sys.executable, __file__, "--one", f"{case}:{tool}"], capture_output=True, text=True,
-                             timeout=deadline)
+        run = subprocess.run([sys.executable, __file__, "--one", f"{case}:{tool}:{af}:{walks}"], capture_output=True,
+                             text=True, timeout=deadline)
     except subprocess.TimeoutExpired:  # subprocess.run has killed it
         return {"deadline": True}
     if run.returncode:
@@ -459,33 +547,62 @@ def failed(r: dict) -> str | None:
     return None
 
 
-def counts_rows(case: str, tools: Sequence[str], deadline: float) -> list[list[str]]:
-    results = {t: fresh(case, t, deadline) for t in tools}
+def counts_rows(case: str, tools: Sequence[str], af: str, deadline: float) -> list[list[str]]:
+    results = {t: fresh(case, t, af, deadline) for t in tools}
     ref = results.get("ours", {})
     rows = []
     for t, r in results.items():
         if (why := failed(r)) is not None:
-            rows.append([t, why, "-", "-", "-", "-", "-", "-"])
+            rows.append([t, af, why, "-", "-", "-", "-", "-", "-"])
             continue
         dangerous = ", ".join(f"{k} {v:,}" for k, v in sorted(r["dangerous"].items()))
-        same = "-" if t == "ours" or not ref or failed(ref) else (
-            "yes" if r["markings"] == ref["markings"] and r["dangerous"] == ref["dangerous"] else "NO")
+        if t == "ours" or not ref or failed(ref) or not ref["complete"]:
+            same = "-"
+        else:
+            same = "yes" if r["markings"] == ref["markings"] and r["dangerous"] == ref["dangerous"] else "NO"
         phases = "-" if t == "ours" else f"{r['encode']:.2f} / {r['reach']:.2f} / {r['mu1']:.2f}"
-        rows.append([t, "yes" if r.get("complete", True) else "no (truncated)", f"{r['markings']:,}", dangerous,
-                     same, phases, f"{r['wall']:.2f}", mib(r)])
+        complete = "yes" if r.get("complete", True) else f"no ({r['truncated_by']})"
+        rows.append([t, af, complete, f"{r['markings']:,}", dangerous, same, phases, f"{r['wall']:.2f}", mib(r)])
+    return rows
+
+
+def verdict_rows(tools: Sequence[str], af: str, deadline: float, walks: int) -> list[list[str]]:
+    results = {t: fresh("3", t, af, deadline, walks) for t in tools}
+    ref = results.get("ours", {})
+    rows = []
+    for t, r in results.items():
+        if (why := failed(r)) is not None:
+            rows.append([t, af, why, "-", "-", "-", "-"])
+            continue
+        v = r["verdicts"]
+        tally = ", ".join(f"{k} {v.count(k)}" for k in ("explicit", "dangerous", "safe", "unknown") if v.count(k))
+        if t == "ours":
+            against = f"{r['markings']:,} markings explored in all, {r['unsafe']} unsafe entries"
+        elif ref and not failed(ref):
+            rv = ref["verdicts"]
+            agree = sum(a == b for a, b in zip(v, rv) if b != "unknown")
+            decided = sum(b != "unknown" for b in rv)
+            against = f"same verdict on {agree} of ours' {decided} decided"
+        else:
+            against = "-"
+        rows.append([t, af, tally, against, f"{r['worst']:.2f}", f"{r['wall']:.2f}", mib(r)])
     return rows
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--only", default="1,2,3,4", help="cases to run (1: 2+2, 2: 3+3, 3: 4+4 verdicts, 4: 4+4 reach)")
+    parser.add_argument("--only", default="1,2,3,4",
+                        help="cases (1: 2+2, 2: 3+3, 3: 4+4 successor verdicts, 4: 4+4 reachable set)")
     parser.add_argument("--tools", default=",".join(TOOLS), help="comma-separated, from " + ", ".join(TOOLS))
+    parser.add_argument("--af", default="literal,fair", help="AF semantics for cases 1-3: literal, fair or both")
+    parser.add_argument("--walks", type=int, default=4,
+                        help="case 3: live markings after seeded random walks, besides the initial marking")
     parser.add_argument("--deadline", type=float, default=120.0, help="seconds per case and tool (fresh process)")
     parser.add_argument("--one", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.one:
-        case, tool = args.one.split(":")
-        print(json.dumps(one(case, tool)))
+        case, tool, af, walks = args.one.split(":")
+        print(json.dumps(one(case, tool, af, int(walks))))
         return
     tools = [t for t in args.tools.split(",") if t]
     if bad := [t for t in tools if t not in TOOLS]:
@@ -496,54 +613,39 @@ def main() -> None:
     only = args.only.split(",")
     if bad := [c for c in only if c not in SYSTEMS]:
         raise SystemExit(f"bench_dd: unknown case {bad[0]!r} (choose from 1, 2, 3, 4)")
+    afs = args.af.split(",")
+    if bad := [a for a in afs if a not in ("literal", "fair")]:
+        raise SystemExit(f"bench_dd: unknown AF {bad[0]!r} (choose from literal, fair)")
+    from importlib.metadata import PackageNotFoundError, version
+
     versions = []
     for mod in ("dd", "oxidd"):
         try:
-            from importlib.metadata import version
-
             versions.append(f"{mod} {version(mod)}")
-        except Exception:  # noqa: BLE001  (not installed: shown as such)
+        except PackageNotFoundError:
             versions.append(f"{mod} missing")
     print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores; {pin_one_core()}; "
           f"{', '.join(versions)}; deadline {args.deadline:g} s per case")
-    headers = ["run", "complete", "markings", "dangerous (literal AF)", "= ours", "encode / reach / mu1 s",
+    headers = ["run", "AF", "complete", "markings", "dangerous (mu1)", "= ours", "encode / reach / mu1 s",
                "wall s", "peak MiB"]
     for case, title in (("1", "2 spot + 2 arm, no seeds (246 016 markings)"),
                         ("2", "3 spot + 3 arm, no seeds (122 023 936 markings)")):
         if case in only:
-            print(f"\n({case}) {title}: reachable set + literal mu1 for both properties\n")
-            print(table(headers, counts_rows(case, tools, args.deadline)))
+            print(f"\n({case}) {title}: reachable set + mu1 for both properties\n")
+            print(table(headers, [row for af in afs for row in counts_rows(case, tools, af, args.deadline)]))
     if "3" in only:
-        results = {t: fresh("3", t, args.deadline) for t in tools}
-        ref = results.get("ours", {})
-        rows = []
-        for t, r in results.items():
-            if (why := failed(r)) is not None:
-                rows.append([t, why, "-", "-", "-", "-"])
-                continue
-            v = r["verdicts"]
-            tally = ", ".join(f"{k} {v.count(k)}" for k in ("explicit", "dangerous", "safe", "unknown") if v.count(k))
-            if t == "ours":
-                same = f"{r['markings']:,} markings explored, {'complete' if r['complete'] else 'truncated'}; " \
-                       f"AF {'/'.join(r['af'])}; {r['unsafe']} unsafe entries"
-            elif ref and not failed(ref):
-                rv = ref["verdicts"]
-                agree = sum(a == b for a, b in zip(v, rv) if b != "unknown")
-                decided = sum(b != "unknown" for b in rv)
-                same = f"agrees on {agree}/{decided} of ours decided"
-            else:
-                same = "-"
-            rows.append([t, f"{len(v)} pairs", tally, same, f"{r['wall']:.2f}", mib(r)])
-        print("\n(3) 4 spot + 4 arm with seeds: AF not phi at every one-step successor of the initial marking "
-              "(pairs: successor x property)\n")
-        print(table(["run", "decided", "verdicts", "against ours", "wall s", "peak MiB"], rows))
+        print(f"\n(3) 4 spot + 4 arm with seeds: AF not phi at every one-step successor x property, at the "
+              f"initial marking and {args.walks} live markings after 40 random steps (ours: forecast with "
+              f"budget 1 s + Algorithm 1 per live marking)\n")
+        print(table(["run", "AF", "verdicts (successor x property)", "against ours", "worst marking s", "wall s",
+                     "peak MiB"], [row for af in afs for row in verdict_rows(tools, af, args.deadline, args.walks)]))
     if "4" in only:
         rows = []
         for t in tools:
             if t == "ours":
                 rows.append([t, "no (not attempted: the box holds 7 666 785 058 816 markings)", "-", "-", "-"])
                 continue
-            r = fresh("4", t, args.deadline)
+            r = fresh("4", t, "literal", args.deadline)
             if (why := failed(r)) is not None:
                 rows.append([t, why, "-", "-", "-"])
                 continue
