@@ -16,20 +16,22 @@ manager):
 (1) the reachable set from the sources SPEC §6 names (the live marking, and
     with event seeds the markings one event leads to), by chained
     partitioned images, and its number of markings;
-(2) literal mu1 per property: ``AF not phi = reach and not EG phi``, ``EG phi``
+(2) mu1 per property: literal ``AF not phi = reach and not EG phi``, ``EG phi``
     the greatest fixpoint of ``phi and reach and EX Z`` (a global deadlock
-    loops on itself, SPEC §6.2), counted;
+    loops on itself, SPEC §6.2); fair AF with fair-EG by Emerson-Lei, one
+    fairness constraint per skill (its idle place), counted;
 (3) 4 + 4 with seeds: the verdict of ``AF not phi`` at every one-step
-    successor of the initial marking (steps of the full nets, as Algorithm 1
-    asks), ``EG phi`` computed over the whole product of the component graphs
-    (no reachability needed: a graph holds everything reachable from its
-    states);
+    successor (steps of the full nets, as Algorithm 1 asks) of the initial
+    marking and of ``--walks`` live markings after 40 seeded random steps,
+    ``EG phi`` computed over the whole product of the component graphs (no
+    reachability needed: a graph holds everything reachable from its states);
 (4) 4 + 4 with seeds: the reachable set, which our explicit search cannot
     store (about 7.7e12 markings in the box).
 
-Ours, in the same run: ``forecast`` with literal AF (complete exploration +
-mu1) for (1)-(2); ``forecast(budget=1.0)`` (truncated exploration plus the
-compositional verdicts, SPEC §6.4) and Algorithm 1 for (3).  Each case runs
+Ours, in the same run, with the same AF: ``forecast`` (complete exploration +
+mu1, 1 GiB memory limit) for (1)-(2); ``forecast(budget=1.0)`` (truncated
+exploration plus the compositional verdicts, SPEC §6.4) and Algorithm 1 per
+live marking for (3).  Each case runs
 in a fresh process with a deadline (``--deadline``, default 120 s); one that
 does not finish prints "no (deadline)".  Times are wall seconds inside the
 process after the system is parsed (component graphs, encoding and fixpoints
@@ -40,7 +42,8 @@ ours, or the row says so.
 Needs the optional ``bench`` extra::
 
     pip install -e '.[bench]'          # dd (with dd.cudd in its wheel), oxidd
-    python benchmarks/bench_dd.py [--only 1,2,3,4] [--tools ours,dd.autoref,dd.cudd,oxidd] [--deadline 120]
+    python benchmarks/bench_dd.py [--only 1,2,3,4] [--tools ours,dd.autoref,dd.cudd,oxidd]
+                                  [--af literal,fair] [--walks 4] [--deadline 120]
 """
 
 from __future__ import annotations
@@ -530,7 +533,7 @@ def missing_tools(tools: Sequence[str]) -> list[str]:
         try:
             if importlib.util.find_spec(need[t]) is None:
                 out.append(t)
-        except ModuleNotFoundError:
+        except (ModuleNotFoundError, ValueError):  # parent package missing, or blocked
             out.append(t)
     return out
 
