@@ -148,12 +148,13 @@ def wait_until(predicate: Callable[[], bool], timeout: float, what: str, poll: f
         time.sleep(poll)
 
 
-def answering_predictor(session: zenoh.Session, system_file: Path = REPO / "skillsets" / "spot_arm.toml") -> str:
+def answering_predictor(session: zenoh.Session, system_file: Path = REPO / "skillsets" / "spot_arm.toml",
+                        user: str = "monitor") -> str:
     """Instance id of the predictor the router picks for a query now (the one serving
-    the monitor: ZENOH.md, the first live instance declared)."""
+    the monitor: ZENOH.md, the first live instance declared); ``session`` is logged in as ``user``."""
     system, _ = load_system(system_file)
     request = PredictRequest(system=system.name, digest=bundle(system).digest, seq=1, skillsets={}, budget=0.2)
-    for reply in session.get(keys.predict(system.name), payload=encode(request), timeout=5.0):
+    for reply in session.get(keys.predict(system.name, user), payload=encode(request), timeout=5.0):
         if reply.ok is not None:
             return decode(reply.ok.payload.to_bytes(), PredictReply).instance
     raise AssertionError("no predictor answered")
