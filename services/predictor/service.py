@@ -24,7 +24,8 @@ token bucket (:class:`~services.common.ratelimit.RateLimiter`, ``rate_limit``
 requests/s), and a query over it is answered at once with ``ok=False`` and
 ``rate limited: ...``, before it is even decoded, so a flooding client neither
 queues behind nor ahead of the others.  ``max_pending`` still bounds the whole
-instance.
+instance, and one client may hold at most half of it (``busy: client ... has its
+share``), so requests that are slow to answer cannot fill it either.
 
 Load spreading (SPEC §7): besides the shared key every instance answers on its own
 key ``skinet/<system>/predict/<client>/<id>``, found through its liveliness token.  There it
@@ -107,6 +108,9 @@ class Predictor:
         self._lock = threading.Lock()  # cache and counts (callbacks and workers)
         self._fetch_lock = threading.Lock()  # one fetch at a time; waiters then hit the cache
         self._slots = threading.BoundedSemaphore(max_pending)  # queued + running requests
+        # A client may hold at most half of them, so another one always finds room (issue 14).
+        self.client_pending = max(1, max_pending // 2)
+        self._pending: Counter[str] = Counter()  # client -> admitted requests not answered yet
         self._workers = [Worker(self.instance_id, memory_mb=memory_mb, cache_size=cache_size) for _ in range(workers)]
         self._idle: queue.SimpleQueue[Worker] = queue.SimpleQueue()
         for w in self._workers:
@@ -147,16 +151,21 @@ class Predictor:
                     self._reply(query, request)
                 return
             reason = "busy: too many pending requests"
-            if self._slots.acquire(blocking=False):
+            if not self._admit(client):
+                reason = f"busy: client '{client}' has its share of pending requests ({self.client_pending})"
+            elif self._slots.acquire(blocking=False):
                 if _own_key(key):  # the instance key: "working" replies until the answer
                     self._working_on(query)
                 try:
-                    self._pool.submit(self._serve, query, request)
+                    self._pool.submit(self._serve, query, request, client)
                     return
                 except RuntimeError:  # close() shut the pool down while this query was arriving
                     self._slots.release()
                     self._done_with(query)
                     reason = "predictor shutting down"
+                self._release(client)
+            else:
+                self._release(client)
             with query:
                 self._reply(query, self._failure(request.system, request.digest, request.seq, reason), "busy")
         except Exception:  # never let an exception escape into Zenoh
@@ -187,7 +196,21 @@ class Predictor:
 
     # -- worker threads ---------------------------------------------------------------
 
-    def _serve(self, query: zenoh.Query, request: PredictRequest) -> None:
+    def _admit(self, client: str) -> bool:
+        """Count one more pending request of ``client``, unless it holds its share already."""
+        with self._lock:
+            if self._pending[client] >= self.client_pending:
+                return False
+            self._pending[client] += 1
+            return True
+
+    def _release(self, client: str) -> None:
+        with self._lock:
+            self._pending[client] -= 1
+            if self._pending[client] <= 0:
+                del self._pending[client]  # bounded by the admitted requests, not by the clients seen
+
+    def _serve(self, query: zenoh.Query, request: PredictRequest, client: str) -> None:
         with query:
             try:
                 reply = self.answer(request)
@@ -198,6 +221,7 @@ class Predictor:
             finally:
                 self._done_with(query)
                 self._slots.release()
+                self._release(client)
 
     # -- heartbeats on the instance key --------------------------------------------------
 

@@ -293,7 +293,7 @@ def test_embedded_on_a_shared_session(peer: zenoh.Session, system: System, model
 
 def test_full_pool_answers_busy(peer: zenoh.Session, system: System, model: ModelBundle) -> None:
     server = ModelServer(peer, model, frozen=True)  # the first request holds the only slot
-    handle = start_predictor(peer, "tiny", workers=1, max_pending=1, fetch_timeout=0.3)
+    handle = start_predictor(peer, "tiny", workers=1, max_pending=1, fetch_timeout=0.3, rate_limit=0)
     try:
         first: list[list[Answer]] = []
         slow = threading.Thread(target=lambda: first.append(ask(peer, encode(request(system, model.digest)))[0]))
@@ -301,11 +301,15 @@ def test_full_pool_answers_busy(peer: zenoh.Session, system: System, model: Mode
         deadline = time.monotonic() + 2
         while server.queries == 0 and time.monotonic() < deadline:  # admitted and fetching
             time.sleep(0.005)
-        reply = ask_one(peer, encode(request(system, model.digest, seq=2)))
+        reply = ask_one(peer, encode(request(system, model.digest, seq=2)), client="other")
         assert (reply.ok, reply.error, reply.seq) == (False, "busy: too many pending requests", 2)
+        # The same client: its share (half of max_pending, at least 1) is taken.
+        reply = ask_one(peer, encode(request(system, model.digest, seq=3)))
+        assert (reply.ok, reply.error, reply.seq) == (False, "busy: client 'local' has its share of pending "
+                                                             "requests (1)", 3)
         slow.join()
         assert first[0][0].error == f"cannot fetch model skinet/spot_arm/model/{model.digest}: error reply: Timeout"
-        assert (handle.counts["busy"], handle.counts["failed"]) == (1, 1)
+        assert (handle.counts["busy"], handle.counts["failed"]) == (2, 1)
     finally:
         handle.close()
         server.close()
