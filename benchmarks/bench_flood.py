@@ -15,7 +15,12 @@ needs a query).  For each phase: how many of the monitor's steps got a fresh
   predictor's per-client rate limit (``--rate-limit``, default 20/s) refuses the
   excess at once, and a client holds at most half of ``--max-pending``;
 - *other client, limit off*: the same against a predictor started with
-  ``--rate-limit 0`` (the contrast: only the instance-wide ``--max-pending`` is left).
+  ``--rate-limit 0`` (the contrast; a client's share of ``--max-pending``, half of
+  it, still applies).
+
+On 2 shared cores the flooding process itself takes CPU from the monitor and the
+router: compare each phase with the observer flood, whose requests the router
+drops before any service sees them.
 
 Targets: the observer flood and the other client's flood with the limit on leave
 fresh predictions as in the quiet phase (at least 95 % of them).
