@@ -97,7 +97,7 @@ def in_process(n: int) -> list[list[object]]:
     system, _ = load_system(SYSTEM_FILE)
     session = zenoh.open(session_config("peer", multicast_scouting=False))
     predictor = start_predictor(session, "bench")
-    monitor = start_monitor(session, system)
+    monitor = start_monitor(session, system, check_rate_limit=0)  # one client asking as fast as it can
     try:
         send_events(session, system.name)
         wait(lambda: monitor.counters.applied == len(TO_WARNING) and not monitor.snapshot().unsafe.prediction_stale,
@@ -115,7 +115,7 @@ def in_process(n: int) -> list[list[object]]:
             live.apply(skillset, transition)
         prediction = forecast(system, live.marking, budget=5.0)
         echo = session.declare_queryable("bench/echo", lambda q: (q.reply("bench/echo", b"y"), q.drop()))
-        key = keys.check(system.name)
+        key = keys.check(system.name, keys.LOCAL_CLIENT)
         assert decode(get_once(session, key, payload), CheckReply).decision == "warn"
         rows = [
             row("in-process: Monitor.check", timed(lambda: monitor.check(REQUEST), n), 1e-3),
@@ -144,7 +144,8 @@ def through_router(n: int) -> list[list[object]]:
     client = zenoh.open(session_config("client", connect=[endpoint], multicast_scouting=False))
     other = zenoh.open(session_config("client", connect=[endpoint], multicast_scouting=False))
     monitor = subprocess.Popen([sys.executable, "-m", "services.monitor", str(SYSTEM_FILE), "--mode", "client",
-                                "--connect", endpoint, "--no-multicast-scouting", "--log-level", "ERROR"], cwd=ROOT)
+                                "--connect", endpoint, "--no-multicast-scouting", "--log-level", "ERROR",
+                                "--check-rate-limit", "0"], cwd=ROOT)
     try:
         system = "spot_arm"
         tokens: set[str] = set()
@@ -152,7 +153,7 @@ def through_router(n: int) -> list[list[object]]:
                                                      lambda s: tokens.add(str(s.key_expr)), history=True)
         wait(lambda: bool(tokens), "the monitor process")
         send_events(client, system)
-        payload, key = encode(REQUEST), keys.check(system)
+        payload, key = encode(REQUEST), keys.check(system, keys.LOCAL_CLIENT)
         wait(lambda: decode(get_once(client, key, payload), CheckReply).seq == len(TO_WARNING), "the events applied")
         echo = other.declare_queryable("bench/echo", lambda q: (q.reply("bench/echo", b"y"), q.drop()))
         time.sleep(0.2)

@@ -7,15 +7,23 @@ needs a query).  For each phase: how many of the monitor's steps got a fresh
 (predicted) UnsafeReport within 1 s.  Phases, in one run:
 
 - *quiet*: no flood;
-- *observer flood*: 8 threads of another process send valid PredictRequests (and
+- *observer flood*: 16 threads of another process send valid PredictRequests (and
   requests for unknown digests) as fast as they can, logged in as ``observer``:
   the router drops them (ACL), so nothing should change;
-- *monitor-user flood*: the same logged in as a user allowed to ask (what an
-  ACL cannot stop): the predictor's own bound (``--max-pending``, ``busy``
-  answers) is what is left.
+- *other client, limit on*: the same logged in as ``flooder``, a second user
+  allowed to ask predictions under its own name (what an ACL cannot stop); the
+  predictor's per-client rate limit (``--rate-limit``, default 20/s) refuses the
+  excess at once, and a client holds at most half of ``--max-pending``;
+- *other client, limit off*: the same against a predictor started with
+  ``--rate-limit 0`` (the contrast; a client's share of ``--max-pending``, half of
+  it, still applies).
 
-Target: the observer flood leaves fresh predictions as in the quiet phase
-(at least 95 % of them).
+On 2 shared cores the flooding process itself takes CPU from the monitor and the
+router: compare each phase with the observer flood, whose requests the router
+drops before any service sees them.
+
+Targets: the observer flood and the other client's flood with the limit on leave
+fresh predictions as in the quiet phase (at least 95 % of them).
 
     python benchmarks/bench_flood.py [--seconds 8]
 """
@@ -40,19 +48,20 @@ from skinet.files import load_system  # noqa: E402
 from skinet.wire import keys  # noqa: E402
 from skinet.wire.codec import decode, encode  # noqa: E402
 from skinet.wire.convert import bundle, statuses  # noqa: E402
-from skinet.wire.messages import LiveState, PredictRequest, UnsafeReport  # noqa: E402
+from skinet.wire.messages import LiveState, PredictReply, PredictRequest, UnsafeReport  # noqa: E402
 
 sys.path.insert(0, str(ROOT / "tests" / "deploy"))
 from deploy_support import acl_router_config, free_port, login, login_config, passwords  # noqa: E402
 
 
-def flood(endpoint: str, user: str, password: str, seconds: float, threads: int = 8) -> None:
+def flood(endpoint: str, user: str, password: str, seconds: float, threads: int = 16) -> None:
     """The flooder process: valid and unknown-digest requests, as fast as possible."""
     config = login_config(endpoint, user, password)
     session = zenoh.open(config)
     system = load_system(ROOT / "skillsets" / "spot_arm.toml")[0]
     digest = bundle(system).digest
     sent = [0]
+    answers: dict[str, int] = {}
     end = time.monotonic() + seconds
 
     def run(k: int) -> None:
@@ -62,7 +71,9 @@ def flood(endpoint: str, user: str, password: str, seconds: float, threads: int 
             d = digest if n % 2 else f"{k:02d}{n:030d}"[-32:]
             req = PredictRequest(system=system.name, digest=d, seq=n, budget=1.0,
                                  skillsets=statuses(system, system.initial_marking()))
-            list(session.get(keys.predict(system.name), payload=encode(req), timeout=2.0))
+            for reply in session.get(keys.predict(system.name, user), payload=encode(req), timeout=2.0):
+                kind = "error reply" if reply.ok is None else _kind(reply.ok.payload.to_bytes())
+                answers[kind] = answers.get(kind, 0) + 1
             sent[0] += 1
 
     workers = [threading.Thread(target=run, args=(k,)) for k in range(threads)]
@@ -70,8 +81,18 @@ def flood(endpoint: str, user: str, password: str, seconds: float, threads: int 
         w.start()
     for w in workers:
         w.join()
-    print(sent[0])
+    print(json.dumps({"sent": sent[0], "answers": answers}))
     session.close()
+
+
+def _kind(payload: bytes) -> str:
+    reply = decode(payload, PredictReply)
+    if reply.ok:
+        return "ok"
+    for kind in ("rate limited", "busy", "cannot fetch model"):
+        if reply.error.startswith(kind):
+            return kind
+    return reply.error[:40]
 
 
 class Fresh:
@@ -112,13 +133,13 @@ def main() -> None:
     args = ap.parse_args()
 
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    router = zenoh.open(acl_router_config(endpoint))
+    router = zenoh.open(acl_router_config(endpoint, askers=("flooder",)))
     sessions = {u: login(endpoint, u) for u in ("monitor", "predictor", "bridge", "observer")}
     system = load_system(ROOT / "skillsets" / "spot_arm.toml")[0]
     predictor = start_predictor(sessions["predictor"], "bench")
-    monitor = start_monitor(sessions["monitor"], system, budget=0.3, prediction_cache=1)
+    monitor = start_monitor(sessions["monitor"], system, budget=0.3, prediction_cache=1, client="monitor")
     fresh = Fresh(sessions["observer"])
-    feed = events(int(3 * args.seconds * 10) + 20)
+    feed = events(int(4 * args.seconds * 10) + 20)
     position = [0]
 
     def play(seconds: float) -> tuple[float, float]:
@@ -133,19 +154,27 @@ def main() -> None:
 
     rows = []
     results = {}
+    counts = {}
     try:
         time.sleep(1.0)
-        for phase, user in (("quiet", None), ("observer flood", "observer"), ("monitor-user flood", "monitor")):
+        for phase, user in (("quiet", None), ("observer flood", "observer"), ("other client, limit on", "flooder"),
+                            ("other client, limit off", "flooder")):
+            if phase.endswith("limit off"):
+                counts["limit on"] = dict(predictor.counts)
+                predictor.close()
+                predictor = start_predictor(sessions["predictor"], "bench-nolimit", rate_limit=0)
+                time.sleep(0.5)
             flooder = None
             if user is not None:
                 flooder = subprocess.Popen([sys.executable, __file__, "--flood", endpoint, user, passwords()[user],
                                             str(args.seconds + 1)], stdout=subprocess.PIPE, text=True)
                 time.sleep(0.5)
             window = play(args.seconds)
-            sent = flooder.communicate(timeout=60)[0].strip() if flooder else "-"
+            out = json.loads(flooder.communicate(timeout=60)[0]) if flooder else {"sent": "-", "answers": {}}
             steps, got = fresh.count(*window)
             results[phase] = (steps, got)
-            rows.append([phase, f"{got}/{steps}", sent])
+            answered = ", ".join(f"{k}: {v}" for k, v in sorted(out["answers"].items())) or "none (ACL)"
+            rows.append([phase, f"{got}/{steps}", out["sent"], answered if flooder else "-"])
     finally:
         monitor.close()
         predictor.close()
@@ -154,13 +183,24 @@ def main() -> None:
         router.close()
 
     print(f"## Prediction floods ({args.seconds:g} s per phase, 10 events/s)\n")
-    print(table(["phase", "steps with a fresh prediction within 1 s", "flood requests sent"], rows))
-    (qs, qg), (os_, og) = results["quiet"], results["observer flood"]
-    ok = og / max(os_, 1) >= 0.95 * qg / max(qs, 1)
+    print(table(["phase", "monitor steps with a fresh prediction within 1 s", "flood requests sent",
+                 "flood answers"], rows))
+    (qs, qg) = results["quiet"]
+
+    def near_quiet(phase: str) -> tuple[str, bool]:
+        s_, g = results[phase]
+        return f"{g}/{s_} vs {qg}/{qs}", g / max(s_, 1) >= 0.95 * qg / max(qs, 1)
+
     print()
     print(table(["figure", "value", "target", ""], [
-        ["fresh during the observer flood vs quiet", f"{og}/{os_} vs {qg}/{qs}", ">= 95 % of quiet", verdict(ok)],
-        ["predictor counts", json.dumps(dict(predictor.counts)), "-", ""],
+        ["fresh during the observer flood vs quiet", *near_quiet("observer flood")[:1], ">= 95 % of quiet",
+         verdict(near_quiet("observer flood")[1])],
+        ["fresh during another client's flood, limit on, vs quiet", near_quiet("other client, limit on")[0],
+         ">= 95 % of quiet", verdict(near_quiet("other client, limit on")[1])],
+        ["fresh during another client's flood, limit off, vs quiet", near_quiet("other client, limit off")[0],
+         "(contrast)", ""],
+        ["predictor counts, limit on", json.dumps(counts.get("limit on", {})), "-", ""],
+        ["predictor counts, limit off", json.dumps(dict(predictor.counts)), "-", ""],
     ]))
 
 

@@ -14,7 +14,7 @@ Rows, all in the same run:
 
 - *1 instance*: the pool of one;
 - *2 instances, shared key*: what every monitor did before load spreading (the
-  router gives every query on ``skinet/<system>/predict`` to the same instance);
+  router gives every query on ``skinet/<system>/predict/<client>`` to the same instance);
 - *2 instances, spread*: per-instance keys, least outstanding then least recent.
 
 The machine's cores are shared with whatever else runs (on the development machine,

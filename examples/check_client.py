@@ -5,7 +5,7 @@ a ``Skill<K>Request`` on the manager's ``skill/<k>/request`` topic; over Zenoh
 (zenoh-bridge-ros2dds layout) that is a CDR payload on
 ``<manager>/<skillset>/skill/<k>/request``.  :class:`GuardedSkillClient` wraps
 such a client: before each start it asks the monitor's command check
-``skinet/<system>/check`` and
+``skinet/<system>/check/<client>`` (``<client>``: its router login) and
 
 - ``allow``: sends the request;
 - ``warn``: asks ``confirm(reply)`` (here: refuse unless ``--force``), then sends or not;
@@ -31,7 +31,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import zenoh  # noqa: E402
 
-from services.common.zenoh_config import add_zenoh_args, config_from_args, open_session  # noqa: E402
+from services.common.zenoh_config import add_zenoh_args, client_name, config_from_args, open_session  # noqa: E402
 from skinet.errors import SkinetError  # noqa: E402
 from skinet.files import load_system, load_typemap  # noqa: E402
 from skinet.ros.interfaces import skill_topic  # noqa: E402
@@ -75,12 +75,14 @@ class CommandRefused(Exception):
 class GuardedSkillClient:
     """:class:`SkillManagerClient` that asks ``skinet/<system>/check`` before every start."""
 
-    def __init__(self, client: SkillManagerClient, confirm: Callable[[CheckReply], bool], timeout: float = 1.0):
-        self.client, self.confirm, self.timeout = client, confirm, timeout
+    def __init__(self, client: SkillManagerClient, confirm: Callable[[CheckReply], bool], timeout: float = 1.0,
+                 login: str = keys.LOCAL_CLIENT):
+        """``login``: the session's router user, the client chunk of the check key."""
+        self.client, self.confirm, self.timeout, self.login = client, confirm, timeout, login
 
     def check(self, skillset: str, transition: str) -> CheckReply | None:
         request = encode_message(CheckRequest(skillset=skillset, transition=transition))
-        for reply in self.client.session.get(keys.check(self.client.system.name), payload=request,
+        for reply in self.client.session.get(keys.check(self.client.system.name, self.login), payload=request,
                                              timeout=self.timeout):
             if reply.ok is not None:
                 try:
@@ -117,13 +119,15 @@ def main(argv: list[str] | None = None) -> int:
     try:
         system, _ = load_system(args.system)
         typemap = load_typemap(args.system)
-        session = open_session(config_from_args(args))
+        config = config_from_args(args)
+        session = open_session(config)
     except SkinetError as exc:
         print(f"check_client: error: {exc}", file=sys.stderr)
         return 1
     status = 0
     try:
-        guarded = GuardedSkillClient(SkillManagerClient(session, system, typemap), lambda _reply: args.force)
+        guarded = GuardedSkillClient(SkillManagerClient(session, system, typemap), lambda _reply: args.force,
+                                     login=client_name(config))
         for command in args.commands:
             skillset, _, transition = command.partition(":")
             skill, _, kind = transition.partition(".")

@@ -22,7 +22,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
 
-from services.common.zenoh_config import login, open_session, session_config
+from services.common.zenoh_config import client_name, login, open_session, session_config
 from services.monitor import Monitor, MonitorView, start_monitor
 from skinet.cli.memory import memory_limit
 from skinet.cli.options import load_live_system
@@ -121,11 +121,12 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     dashboard = None
     try:
         if args.dashboard is not None:  # first: a port in use stops the run before anything starts
-            dashboard = _start_dashboard(session, system, args.dashboard_host, args.dashboard)
+            dashboard = _start_dashboard(session, system, args.dashboard_host, args.dashboard, client_name(config))
             print(f"dashboard on {dashboard.url}", file=sys.stderr, flush=True)
         predictor = start_predictor(session, f"embedded-{os.getpid()}",  # before the monitor: it asks at once
-                                    memory_limit=memory_limit(args))
-        monitor = start_monitor(session, system, budget=args.budget, check_policy=args.check_policy)
+                                    memory_limit=memory_limit(args), rate_limit=args.rate_limit)
+        monitor = start_monitor(session, system, budget=args.budget, check_policy=args.check_policy,
+                                client=client_name(config), check_rate_limit=args.check_rate_limit)
         if args.once:
             deadline = time.monotonic() + args.budget + 2.0  # the first prediction, if any comes
             view = monitor.snapshot()
@@ -147,12 +148,12 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
             predictor.close()
 
 
-def _start_dashboard(session: zenoh.Session, system: System, host: str, port: int) -> Dashboard:
+def _start_dashboard(session: zenoh.Session, system: System, host: str, port: int, client: str) -> Dashboard:
     """The web dashboard on the shared session; raises :class:`PortError` (port in use)."""
     from services.dashboard.observer import Observer
     from services.dashboard.server import Dashboard
 
-    observer = Observer(session, system.name, system)
+    observer = Observer(session, system.name, system, client=client)
     dashboard = Dashboard(observer, host, port)
     try:
         dashboard.start()

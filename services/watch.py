@@ -16,7 +16,7 @@ import threading
 import time
 from typing import TextIO
 
-from services.common.zenoh_config import config_from_args, open_session
+from services.common.zenoh_config import client_name, config_from_args, open_session
 from services.dashboard.board import Board
 from services.dashboard.observer import Observer
 from services.dashboard.app import no_monitor_message
@@ -57,9 +57,10 @@ def _look(board: Board) -> tuple[list[str], str, tuple, bool]:
 def watch(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     """Run the view until interrupted or ``--duration``; ``--once`` prints one view (after the
     first fresh prediction, or ``--wait`` seconds) and returns.  Returns the exit status."""
-    session = open_session(config_from_args(args))
+    config = config_from_args(args)
+    session = open_session(config)
     changed = threading.Event()
-    observer = Observer(session, args.system)
+    observer = Observer(session, args.system, client=client_name(config))
     try:
         observer.listen(lambda _updates: changed.set())
         if not observer.wait_monitor(args.wait):

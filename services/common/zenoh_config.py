@@ -23,6 +23,7 @@ import zenoh
 from services.common.session import login_refused
 from skinet.errors import Pos, SkinetError, SourceError
 from skinet.files import read_text
+from skinet.wire import keys
 
 LOOPBACK = "tcp/127.0.0.1:0"  # a peer's default endpoint: this host only, any free port
 ROUTER_LOOPBACK = "tcp/127.0.0.1:7447"  # a router's
@@ -190,6 +191,22 @@ def config_from_args(args: argparse.Namespace) -> zenoh.Config:
             endpoints[option] = [check_endpoint(e, env) for e in _env_list(env)]
     return session_config(args.mode, endpoints["connect"], endpoints["listen"], args.zenoh_config,
                           args.multicast_scouting, **login(args))
+
+
+def client_name(config: zenoh.Config) -> str:
+    """The client chunk of this session's ``predict`` and ``check`` keys: its router login
+    (``transport/auth/usrpwd/user``), or ``local`` without one (``skinet.wire.keys``, issue 14).
+
+    The router's access control lets user ``U`` query only keys whose client chunk is
+    ``U``, so a service must ask under its own login name.
+    """
+    user = json.loads(config.get_json("transport/auth/usrpwd/user") or "null")
+    if not user:
+        return keys.LOCAL_CLIENT
+    try:
+        return keys.check_chunk(str(user), "user name")
+    except ValueError as exc:
+        raise ZenohSetupError(f"{exc}: a user whose queries carry its name must be a key chunk") from None
 
 
 def undeclare(*entities: object) -> None:

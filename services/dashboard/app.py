@@ -16,7 +16,7 @@ import threading
 from pathlib import Path
 
 from services.common.cli import add_log_arg, setup_logging
-from services.common.zenoh_config import add_zenoh_args, config_from_args, open_session
+from services.common.zenoh_config import add_zenoh_args, client_name, config_from_args, open_session
 from services.dashboard.observer import Observer, monitored_systems
 from services.dashboard.server import Dashboard
 from skinet.cli.options import count, load_live_system, seconds
@@ -58,8 +58,9 @@ def serve(args: argparse.Namespace, stop: threading.Event) -> int:
     setup_logging(args)
     log = logging.getLogger("skinet.dashboard")
     name, system = resolve_system(args.system)
-    session = open_session(config_from_args(args))
-    observer = Observer(session, name, system)
+    config = config_from_args(args)
+    session = open_session(config)
+    observer = Observer(session, name, system, client=client_name(config))
     dashboard = Dashboard(observer, args.host, args.port)
     try:
         dashboard.start()

@@ -46,9 +46,13 @@ def monitored_systems(session: zenoh.Session, timeout: float = 1.0) -> list[str]
 class Observer:
     """Follows ``system`` on ``session`` (which may be shared, e.g. ``skinet run``)."""
 
-    def __init__(self, session: zenoh.Session, system: str, model: System | None = None, history: int = 5000):
+    def __init__(self, session: zenoh.Session, system: str, model: System | None = None, history: int = 5000,
+                 client: str = keys.LOCAL_CLIENT):
+        """``client``: the client chunk of its check queries, the session's router login
+        (:func:`~services.common.zenoh_config.client_name`)."""
         self.session = session
         self.name = keys.check_chunk(system, "system name")
+        self.client = keys.check_chunk(client, "client name")
         self.board = Board(self.name, history, model)
         self.malformed = 0
         self._lock = threading.Lock()
@@ -94,10 +98,11 @@ class Observer:
         """Ask the monitor's command check; raises :class:`LookupError` when no monitor answers
         and ``ValueError`` for a command that is not ``skillset:transition``."""
         request = parse_command(command)
-        for reply in self.session.get(keys.check(self.name), payload=encode(request), timeout=timeout):
+        key = keys.check(self.name, self.client)
+        for reply in self.session.get(key, payload=encode(request), timeout=timeout):
             if reply.ok is not None:
                 return decode(reply.ok.payload.to_bytes(), CheckReply)
-        raise LookupError(f"no monitor of system '{self.name}' answered on {keys.check(self.name)}")
+        raise LookupError(f"no monitor of system '{self.name}' answered on {key}")
 
     def close(self) -> None:
         self._closed.set()

@@ -9,7 +9,8 @@ import threading
 from collections.abc import Sequence
 
 from services.common.cli import add_log_arg, one_line_errors, setup_logging
-from services.common.zenoh_config import add_zenoh_args, config_from_args, open_session
+from services.common.zenoh_config import add_zenoh_args, client_name, config_from_args, open_session
+from services.common.ratelimit import add_rate_args
 from services.monitor.check import add_policy_arg
 from services.monitor.service import start_monitor
 from skinet.cli.options import ArgumentParser, key_name, load_live_system, seconds
@@ -33,6 +34,7 @@ def build_parser() -> ArgumentParser:
     p.add_argument("--no-express", dest="express", action="store_false",
                    help="let Zenoh batch publications (higher burst throughput; default: express)")
     add_policy_arg(p)
+    add_rate_args(p, predict=False)
     add_log_arg(p)
     add_zenoh_args(p)
     return p
@@ -54,7 +56,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         monitor = start_monitor(session, system, instance_id=args.instance_id, budget=args.budget,
                                 query_timeout=args.query_timeout, stall=args.stall, express=args.express,
-                                check_policy=args.check_policy)
+                                check_policy=args.check_policy, client=client_name(config),
+                                check_rate_limit=args.check_rate_limit)
         log.info("monitoring %s (model %s) as %s", system.name, monitor.digest, monitor.instance_id)
         while not stop.wait(0.5):
             pass

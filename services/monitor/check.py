@@ -1,6 +1,6 @@
 """The command check: allow, warn or deny one ``skillset:transition`` now (SPEC §7, §5).
 
-A GUI or a skill-manager client asks ``skinet/<system>/check`` before it sends a
+A GUI or a skill-manager client asks ``skinet/<system>/check/<client>`` before it sends a
 command.  The answer comes from the monitor's live Algorithm 1 result (the
 operator view: properties that hold now, with the latest prediction), so it
 costs no exploration: a scan of the unsafe entries of the live marking

@@ -18,7 +18,7 @@ crash: the ``get`` ends without a reply) or stays silent for ``stall`` seconds
 (frozen); then the same request goes to another instance with the exploration
 budget that still fits before the query's deadline (``timeout`` after the
 first attempt).  Without any token the monitor queries the shared key
-``skinet/<system>/predict`` and lets the router pick (predictors that do not
+``skinet/<system>/predict/<client>`` and lets the router pick (predictors that do not
 advertise themselves).  Cost per attempt: O(instances) to pick one.
 """
 
@@ -109,8 +109,10 @@ class PredictionClient:
     """Sends PredictRequests for the wanted marking, never more than one marking at a time."""
 
     def __init__(self, session: zenoh.Session, system: System, digest: str, on_reply: OnReply, *,
-                 budget: float = 1.0, timeout: float | None = None, retry: float = 0.5, stall: float = 0.5):
+                 budget: float = 1.0, timeout: float | None = None, retry: float = 0.5, stall: float = 0.5,
+                 client: str = keys.LOCAL_CLIENT):
         self.session, self.system, self.digest, self.on_reply = session, system, digest, on_reply
+        self.client = client  # the client chunk of the keys queried: this session's router login
         self.budget, self.timeout, self.retry = budget, timeout if timeout is not None else query_timeout(budget), retry
         self.stall = stall
         self.stats = PredictorStats()
@@ -255,7 +257,8 @@ class PredictionClient:
         request = PredictRequest(system=self.system.name, digest=self.digest, seq=q.n,
                                  skillsets=statuses(self.system, q.marking), budget=budget,
                                  af=self.system.prediction.af_modes([p.name for p in self.system.properties]))
-        key = keys.predict(self.system.name) if instance is None else keys.predict_instance(self.system.name, instance)
+        name = self.system.name
+        key = keys.predict(name, self.client) if instance is None else keys.predict_instance(name, self.client, instance)
         handler = zenoh.handlers.Callback(_bind(self._on_reply, q, a), _bind(self._on_done, q, a))
         # DROP on an instance key: a query stuck behind a dead link must not block the
         # router's other traffic (the monitor's verdicts); a lost query is a silent

@@ -4,7 +4,8 @@ Subscribes to ``keys.events(system, "*")``, recovering what an outage took from
 the bridge's cache (:mod:`services.common.events`); per event it publishes
 :class:`LiveState`, :class:`Verdicts` and :class:`UnsafeReport` (one step;
 the three share the step's ``seq``).  It answers the model queryable, the command
-check (``skinet/<system>/check``, :mod:`services.monitor.check`) and ``get`` on its
+check (``skinet/<system>/check/<client>``, :mod:`services.monitor.check`, with a request budget
+per client: :class:`~services.common.ratelimit.RateLimiter`, issue 14) and ``get`` on its
 four result keys (the last publication, for late joiners), holds a
 liveliness token and asks the predictor for the live marking without ever
 waiting for it (:mod:`services.monitor.prediction`); when a prediction for the
@@ -29,6 +30,7 @@ from dataclasses import dataclass
 import zenoh
 
 from services.common.events import event_subscriber
+from services.common.ratelimit import CHECK_RATE_LIMIT, RateLimiter
 from services.common.zenoh_config import undeclare
 from services.monitor.check import Checker, Policy, request_from
 from services.monitor.engine import Counters, Engine, MarkingKey, Step
@@ -66,7 +68,8 @@ class Monitor:
     def __init__(self, session: zenoh.Session, system: System, *, instance_id: str | None = None,
                  budget: float = 1.0, query_timeout: float | None = None, retry: float = 0.5, stall: float = 0.5,
                  prediction_cache: int = 256, indirect: bool = True, express: bool = True,
-                 check_policy: Policy | None = None, resync_timeout: float = 2.0):
+                 check_policy: Policy | None = None, resync_timeout: float = 2.0, client: str = keys.LOCAL_CLIENT,
+                 check_rate_limit: float = CHECK_RATE_LIMIT):
         self.session, self.system = session, system
         self.instance_id = keys.check_chunk(instance_id or uuid.uuid4().hex[:8], "instance id")
         name = keys.check_chunk(system.name, "system name")
@@ -80,6 +83,8 @@ class Monitor:
         self._model_payload = encode(self.bundle)
         self._engine = Engine(system, prediction_cache=prediction_cache)
         self.checker = Checker(system, check_policy)
+        self.client = keys.check_chunk(client, "client name")
+        self.check_limiter = RateLimiter(check_rate_limit)
         self._lock = threading.Lock()
         self._changed = threading.Condition(self._lock)
         self._version = 0
@@ -93,12 +98,12 @@ class Monitor:
         self._pub = {k: session.declare_publisher(key, **opts) for k, key in (
             ("state", keys.state(name)), ("verdicts", keys.verdicts(name)),
             ("unsafe", keys.unsafe(name)), ("state_space", keys.state_space(name)))}
-        self._predict = PredictionClient(session, system, self.digest, self._on_prediction,
+        self._predict = PredictionClient(session, system, self.digest, self._on_prediction, client=self.client,
                                          budget=budget, timeout=query_timeout, retry=retry, stall=stall)
         with self._lock:
             self._publish(self._engine.initial())
         self._queryable = session.declare_queryable(keys.model(name, self.digest), self._on_model_query)
-        self._check = session.declare_queryable(keys.check(name), self._on_check)
+        self._check = session.declare_queryable(keys.check(name, "*"), self._on_check)
         # Late joiners (dashboards, watch) get the last publications with a get on their keys.
         self._latest = [session.declare_queryable(key, lambda q, n=name, k=key: self._on_latest(n, k, q))
                         for name, key in (("state", keys.state(system.name)), ("verdicts", keys.verdicts(system.name)),
@@ -287,10 +292,19 @@ class Monitor:
     def _on_check(self, query: zenoh.Query) -> None:
         with query:
             try:
-                payload = query.payload.to_bytes() if query.payload is not None else None
-                request = request_from(self.system.name, payload, str(query.parameters))
-                reply = request if isinstance(request, CheckReply) else self.check(request)
-                query.reply(keys.check(self.system.name), encode(reply))
+                client = keys.client_of(str(query.key_expr))
+                if client is None:
+                    query.reply_err(f"key '{query.key_expr}': the client chunk must be a name "
+                                    "(skinet/<system>/check/<client>)")
+                    return
+                if not self.check_limiter.allow(client):  # before decoding: a refusal stays cheap
+                    reply = CheckReply(system=self.system.name, skillset="", transition="", ok=False,
+                                       error=self.check_limiter.refusal(client))
+                else:
+                    payload = query.payload.to_bytes() if query.payload is not None else None
+                    request = request_from(self.system.name, payload, str(query.parameters))
+                    reply = request if isinstance(request, CheckReply) else self.check(request)
+                query.reply(keys.check(self.system.name, client), encode(reply))
             except Exception:  # a bug must not stop the monitor; the client gets an error reply
                 log.exception("error while answering a check query")
                 query.reply_err("internal error in the monitor's check (see its log)")
@@ -359,6 +373,8 @@ def start_monitor(session: zenoh.Session, system: System, **options: object) -> 
     batching, default True; False lets Zenoh batch the three messages of a step,
     which doubles burst throughput, see ``benchmarks/bench_latency.py``), ``check_policy``
     (a :class:`~services.monitor.check.Policy` for ``skinet/<system>/check``; default: warn,
-    never deny).
+    never deny), ``client`` (the client chunk of its predict queries: its router login,
+    default ``local``), ``check_rate_limit`` (check requests per second per client, 0: no
+    limit; default 20).
     """
     return Monitor(session, system, **options)  # type: ignore[arg-type]

@@ -9,9 +9,10 @@ import threading
 
 from services.common.cli import add_instance_arg, add_log_arg, one_line_errors, setup_logging
 from services.common.zenoh_config import add_zenoh_args, config_from_args, open_session
+from services.common.ratelimit import add_rate_args
 from services.predictor.service import start_predictor
 from skinet.cli.memory import memory_size
-from skinet.cli.options import ArgumentParser, count, seconds
+from skinet.cli.options import ArgumentParser, count, number, seconds
 from skinet.verify.explore import DEFAULT_MEMORY_LIMIT
 
 log = logging.getLogger("skinet.predictor")
@@ -27,6 +28,9 @@ def build_parser() -> ArgumentParser:
                         help="worker processes computing forecasts (default: 2)")
     parser.add_argument("--max-pending", type=count(), default=8,
                         help="requests queued or running before 'busy' (default: 8)")
+    add_rate_args(parser, check=False)
+    parser.add_argument("--rate-burst", type=number(1), default=None, metavar="N",
+                        help="prediction requests a client may send at once (default: one second's worth)")
     parser.add_argument("--cache", type=count(), default=4, help="systems kept in the LRU cache (default: 4)")
     parser.add_argument("--fetch-timeout", type=seconds(), default=2.0,
                         help="seconds to wait for a model bundle (default: 2)")
@@ -55,7 +59,8 @@ def main(argv: list[str] | None = None) -> int:
     session = open_session(config)  # fails e.g. with no router at the --connect endpoint yet
     predictor = start_predictor(session, args.instance, workers=args.workers, max_pending=args.max_pending,
                                 cache_size=args.cache, fetch_timeout=args.fetch_timeout, max_budget=args.max_budget,
-                                memory_limit=args.memory_limit, memory_mb=args.memory_mb, grace=args.grace)
+                                memory_limit=args.memory_limit, memory_mb=args.memory_mb, grace=args.grace,
+                                rate_limit=args.rate_limit, rate_burst=args.rate_burst)
     while not stop.wait(0.2):
         pass
     # Withdraw the queryable and answer what was admitted, then retire the whole

@@ -1,7 +1,7 @@
 """The predictor: a stateless Zenoh queryable answering prediction requests (SPEC §1, §6).
 
-A :class:`~skinet.wire.messages.PredictRequest` arrives on ``skinet/<system>/predict``
-with the live marking and the digest of the monitor's model.  An instance that does
+A :class:`~skinet.wire.messages.PredictRequest` arrives on
+``skinet/<system>/predict/<client>`` with the live marking and the digest of the monitor's model.  An instance that does
 not know the digest fetches the :class:`~skinet.wire.messages.ModelBundle` from
 ``skinet/<system>/model/<digest>``, checks that the bundle hashes to the digest
 before anything is built (a sha256 of its text) and keeps the bundle in a small LRU
@@ -18,8 +18,17 @@ it answers ``busy`` at once rather than holding the caller's ``get`` open.  Work
 finish every query with ``with query:`` so the caller's ``get`` returns as soon as
 the reply is sent (ZENOH.md).
 
+Per-client rate limit (issue 14): ``<client>`` is the querier's router login (the
+access control lets user ``U`` query only ``.../predict/U``); each client has a
+token bucket (:class:`~services.common.ratelimit.RateLimiter`, ``rate_limit``
+requests/s), and a query over it is answered at once with ``ok=False`` and
+``rate limited: ...``, before it is even decoded, so a flooding client neither
+queues behind nor ahead of the others.  ``max_pending`` still bounds the whole
+instance, and one client may hold at most half of it (``busy: client ... has its
+share``), so requests that are slow to answer cannot fill it either.
+
 Load spreading (SPEC §7): besides the shared key every instance answers on its own
-key ``skinet/<system>/predict/<id>``, found through its liveliness token.  There it
+key ``skinet/<system>/predict/<client>/<id>``, found through its liveliness token.  There it
 first replies an empty payload when it admits a request, then another every
 :data:`HEARTBEAT` seconds until the answer: a client that hears nothing for a few
 heartbeats knows the instance froze and asks another one, long before the query
@@ -37,6 +46,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import zenoh
 
+from services.common.ratelimit import PREDICT_RATE_LIMIT as RATE_LIMIT, RateLimiter
 from services.common.zenoh_config import undeclare
 from services.sandbox import Worker, WorkerError
 from skinet.verify.explore import DEFAULT_MEMORY_LIMIT
@@ -78,6 +88,8 @@ class Predictor:
         memory_mb: int = 2048,
         grace: float = 1.0,
         max_bundle: int = 1 << 20,
+        rate_limit: float = RATE_LIMIT,
+        rate_burst: float | None = None,
     ):
         self.session = session
         self.instance_id = keys.check_chunk(instance_id, "instance id")
@@ -88,13 +100,17 @@ class Predictor:
         self.cache_size = cache_size
         self.grace = grace
         self.max_bundle = max_bundle
-        self.counts: Counter[str] = Counter()  # ok, failed, busy, fetched, killed
+        self.counts: Counter[str] = Counter()  # ok, failed, busy, limited, fetched, killed
+        self.limiter = RateLimiter(rate_limit, rate_burst)
         self._cache: OrderedDict[str, bytes] = OrderedDict()  # digest -> checked bundle
         self._failed: OrderedDict[str, tuple[float, str]] = OrderedDict()  # digest -> (when, why) of a failed fetch
         self.retry_fetch = 5.0  # seconds before fetching again a digest nobody served
         self._lock = threading.Lock()  # cache and counts (callbacks and workers)
         self._fetch_lock = threading.Lock()  # one fetch at a time; waiters then hit the cache
         self._slots = threading.BoundedSemaphore(max_pending)  # queued + running requests
+        # A client may hold at most half of them, so another one always finds room (issue 14).
+        self.client_pending = max(1, max_pending // 2)
+        self._pending: Counter[str] = Counter()  # client -> admitted requests not answered yet
         self._workers = [Worker(self.instance_id, memory_mb=memory_mb, cache_size=cache_size) for _ in range(workers)]
         self._idle: queue.SimpleQueue[Worker] = queue.SimpleQueue()
         for w in self._workers:
@@ -105,11 +121,12 @@ class Predictor:
         self._working: set[zenoh.Query] = set()  # admitted on the instance key, not answered yet
         self._heartbeat = threading.Thread(target=self._beat, name=f"predictor-{instance_id}-heartbeat", daemon=True)
         self._heartbeat.start()
-        self._queryable = session.declare_queryable(keys.predict("*"), self._on_query, complete=True)
-        self._own = session.declare_queryable(keys.predict_instance("*", instance_id), self._on_query, complete=True)
+        self._queryable = session.declare_queryable(keys.predict("*", "*"), self._on_query, complete=True)
+        self._own = session.declare_queryable(keys.predict_instance("*", "*", instance_id), self._on_query,
+                                              complete=True)
         self._token = session.liveliness().declare_token(keys.alive(keys.ANY_SYSTEM, "predictor", instance_id))
-        log.info("predictor %s serving %s and %s", instance_id, keys.predict("*"),
-                 keys.predict_instance("*", instance_id))
+        log.info("predictor %s serving %s and %s (%s requests/s per client)", instance_id, keys.predict("*", "*"),
+                 keys.predict_instance("*", "*", instance_id), f"{rate_limit:g}" if rate_limit > 0 else "no limit:")
 
     # -- Zenoh thread -----------------------------------------------------------------
 
@@ -117,22 +134,38 @@ class Predictor:
         """Decode and admit a query; answer at once when it is bad or the pool is full."""
         try:
             key = str(query.key_expr)
+            client = keys.client_of(key)
+            if client is None:
+                with query:
+                    self._count("failed")
+                    query.reply_err(f"key '{key}': the client chunk must be a name (skinet/<system>/predict/<client>)")
+                return
+            if not self.limiter.allow(client):  # before anything else: a refusal must stay cheap
+                with query:
+                    system = key.split("/")[1] if "*" not in key.split("/")[1] else keys.ANY_SYSTEM
+                    self._reply(query, self._failure(system, "", 0, self.limiter.refusal(client)), "limited")
+                return
             request = self._decode(query, key)
             if isinstance(request, PredictReply):
                 with query:
                     self._reply(query, request)
                 return
             reason = "busy: too many pending requests"
-            if self._slots.acquire(blocking=False):
-                if key.count("/") == 3:  # the instance key: "working" replies until the answer
+            if not self._admit(client):
+                reason = f"busy: client '{client}' has its share of pending requests ({self.client_pending})"
+            elif self._slots.acquire(blocking=False):
+                if _own_key(key):  # the instance key: "working" replies until the answer
                     self._working_on(query)
                 try:
-                    self._pool.submit(self._serve, query, request)
+                    self._pool.submit(self._serve, query, request, client)
                     return
                 except RuntimeError:  # close() shut the pool down while this query was arriving
                     self._slots.release()
                     self._done_with(query)
                     reason = "predictor shutting down"
+                self._release(client)
+            else:
+                self._release(client)
             with query:
                 self._reply(query, self._failure(request.system, request.digest, request.seq, reason), "busy")
         except Exception:  # never let an exception escape into Zenoh
@@ -144,7 +177,7 @@ class Predictor:
 
     def _decode(self, query: zenoh.Query, key: str) -> PredictRequest | PredictReply:
         """The request, or the failure reply to send for it."""
-        system = key.split("/")[1] if key.count("/") in (2, 3) and "*" not in key else keys.ANY_SYSTEM
+        system = key.split("/")[1] if "*" not in key.split("/")[1] else keys.ANY_SYSTEM
         if query.payload is None:
             return self._failure(system, "", 0, "empty payload")
         try:
@@ -163,7 +196,21 @@ class Predictor:
 
     # -- worker threads ---------------------------------------------------------------
 
-    def _serve(self, query: zenoh.Query, request: PredictRequest) -> None:
+    def _admit(self, client: str) -> bool:
+        """Count one more pending request of ``client``, unless it holds its share already."""
+        with self._lock:
+            if self._pending[client] >= self.client_pending:
+                return False
+            self._pending[client] += 1
+            return True
+
+    def _release(self, client: str) -> None:
+        with self._lock:
+            self._pending[client] -= 1
+            if self._pending[client] <= 0:
+                del self._pending[client]  # bounded by the admitted requests, not by the clients seen
+
+    def _serve(self, query: zenoh.Query, request: PredictRequest, client: str) -> None:
         with query:
             try:
                 reply = self.answer(request)
@@ -174,6 +221,7 @@ class Predictor:
             finally:
                 self._done_with(query)
                 self._slots.release()
+                self._release(client)
 
     # -- heartbeats on the instance key --------------------------------------------------
 
@@ -282,11 +330,15 @@ class Predictor:
         return PredictReply(system=system, digest=digest, seq=seq, ok=False, error=_one_line(error),
                             instance=self.instance_id)
 
-    def _reply(self, query: zenoh.Query, reply: PredictReply, failure: str = "failed") -> None:
-        kind = "ok" if reply.ok else failure
+    def _count(self, kind: str) -> None:
         with self._lock:
             self.counts[kind] += 1
-        if not reply.ok:
+
+    def _reply(self, query: zenoh.Query, reply: PredictReply, failure: str = "failed") -> None:
+        kind = "ok" if reply.ok else failure
+        self._count(kind)
+        n = self.counts[kind]
+        if not reply.ok and (kind != "limited" or n in (1, 10, 100) or n % 1000 == 0):  # a flood: a few lines
             log.warning("predictor %s: %s request %s/%s: %s",
                         self.instance_id, kind, reply.system, reply.seq, reply.error)
         key = self._reply_key(str(query.key_expr), reply.system)
@@ -298,9 +350,11 @@ class Predictor:
             log.warning("predictor %s: cannot reply to %s: %s", self.instance_id, query.key_expr, exc)
 
     def _reply_key(self, query_key: str, system: str) -> str:
-        """Replies go to the key that was queried: the shared one or this instance's."""
-        own = query_key.count("/") == 3
-        return keys.predict_instance(system, self.instance_id) if own else keys.predict(system)
+        """Replies go to the key that was queried: the client's shared one or this instance's."""
+        client = keys.client_of(query_key) or keys.LOCAL_CLIENT
+        if _own_key(query_key):
+            return keys.predict_instance(system, client, self.instance_id)
+        return keys.predict(system, client)
 
     def close(self) -> None:
         """Stop serving: withdraw the token and the queryable, then answer the queued work.
@@ -318,6 +372,11 @@ class Predictor:
         log.info("predictor %s stopped (%s)", self.instance_id, dict(self.counts))
 
 
+def _own_key(key: str) -> bool:
+    """``skinet/<system>/predict/<client>/<instance>``, not the shared ``.../predict/<client>``."""
+    return key.count("/") == 4
+
+
 def start_predictor(
     session: zenoh.Session,
     instance_id: str,
@@ -330,6 +389,8 @@ def start_predictor(
     memory_limit: int = DEFAULT_MEMORY_LIMIT,
     memory_mb: int = 2048,
     grace: float = 1.0,
+    rate_limit: float = RATE_LIMIT,
+    rate_burst: float | None = None,
 ) -> Predictor:
     """Serve predictions on ``session`` (shared or own); returns a handle with ``.close()``.
 
@@ -343,7 +404,11 @@ def start_predictor(
             beyond it answers are truncated.
         memory_mb: address-space limit of each worker process, MB (killed beyond it).
         grace: seconds past a request's budget before its worker is killed.
+        rate_limit: requests per second per client (the key's client chunk), 0: no limit;
+            beyond it a request is answered ``rate limited`` at once.
+        rate_burst: requests a client may send at once (default: one second's worth).
     """
     return Predictor(session, instance_id, workers=workers, max_pending=max_pending,
                      cache_size=cache_size, fetch_timeout=fetch_timeout, max_budget=max_budget,
-                     memory_limit=memory_limit, memory_mb=memory_mb, grace=grace)
+                     memory_limit=memory_limit, memory_mb=memory_mb, grace=grace, rate_limit=rate_limit,
+                     rate_burst=rate_burst)

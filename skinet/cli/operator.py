@@ -66,7 +66,7 @@ EXIT = {"allow": 0, "warn": 3, "deny": 4}
 def cmd_check(args: argparse.Namespace) -> int:
     import json
 
-    from services.common.zenoh_config import config_from_args, open_session
+    from services.common.zenoh_config import client_name, config_from_args, open_session
     from services.dashboard.observer import monitored_systems
     from services.monitor.check import parse_command
     from skinet.errors import SkinetError
@@ -78,8 +78,9 @@ def cmd_check(args: argparse.Namespace) -> int:
         request = parse_command(args.command)
     except ValueError as exc:
         raise SkinetError(str(exc)) from None
-    key = keys.check(args.system)
-    session = open_session(config_from_args(args))
+    config = config_from_args(args)
+    key = keys.check(args.system, client_name(config))
+    session = open_session(config)
     try:
         replies = [r for r in session.get(key, payload=encode(request), timeout=args.timeout) if r.ok is not None]
         if not replies:

@@ -8,18 +8,24 @@ key                                       publisher           payload
 ``skinet/<system>/verdicts``              monitor             :class:`Verdicts`
 ``skinet/<system>/unsafe``                monitor             :class:`UnsafeReport`
 ``skinet/<system>/state_space``           monitor             :class:`StateSpaceReport`
-``skinet/<system>/predict``               predictor (query)   :class:`PredictRequest` -> :class:`PredictReply`
-``skinet/<system>/predict/<instance>``    one predictor       the same, after empty "working" replies
+``skinet/<system>/predict/<client>``      predictor (query)   :class:`PredictRequest` -> :class:`PredictReply`
+``skinet/<system>/predict/<client>/<i>``  one predictor ``i`` the same, after empty "working" replies
 ``skinet/<system>/model/<digest>``        monitor (query)     -> :class:`ModelBundle`
-``skinet/<system>/check``                 monitor (query)     :class:`CheckRequest` -> :class:`CheckReply`
+``skinet/<system>/check/<client>``        monitor (query)     :class:`CheckRequest` -> :class:`CheckReply`
 ``skinet/<system>/resync/<skillset>``     bridge_ros2 (query) -> :class:`CanonicalEvent` (last status)
 ``skinet/<system>/alive/<service>/<id>``  every instance      liveliness token
 ========================================  ==================  ==========================
 
-Predictors are not tied to one system: they answer on ``skinet/*/predict`` (any
-instance) and ``skinet/*/predict/<id>`` (this one), and hold their liveliness token
+Predictors are not tied to one system: they answer on ``skinet/*/predict/*`` (any
+instance) and ``skinet/*/predict/*/<id>`` (this one), and hold their liveliness token
 under ``skinet/_any/alive/predictor/<id>``; a client spreading its queries finds the
 ids through the tokens.
+
+``<client>`` is the querier's identity, its router login (issue 14): the router's
+access control lets user ``U`` query only keys whose client chunk is ``U``, so the
+chunk cannot be forged there, and the predictor and the monitor's check keep a
+request budget per client (:mod:`services.common.ratelimit`).  A session without a
+login uses :data:`LOCAL_CLIENT`.
 """
 
 from __future__ import annotations
@@ -28,6 +34,7 @@ import re
 
 ROOT = "skinet"
 ANY_SYSTEM = "_any"
+LOCAL_CLIENT = "local"  # the client chunk of a session without a login
 _CHUNK = re.compile(r"^[A-Za-z0-9_\-.]+$")
 
 
@@ -58,21 +65,34 @@ def state_space(system: str) -> str:
     return f"{ROOT}/{system}/state_space"
 
 
-def predict(system: str = "*") -> str:
-    return f"{ROOT}/{system}/predict"
+def predict(system: str, client: str) -> str:
+    """The shared prediction key of ``client`` (any instance answers)."""
+    return f"{ROOT}/{system}/predict/{client}"
 
 
-def predict_instance(system: str, instance: str) -> str:
-    """The key of one predictor instance (``instance`` may be ``*``)."""
-    return f"{ROOT}/{system}/predict/{instance}"
+def predict_instance(system: str, client: str, instance: str) -> str:
+    """The key of one predictor instance asked by ``client`` (either may be ``*``)."""
+    return f"{ROOT}/{system}/predict/{client}/{instance}"
 
 
 def model(system: str, digest: str = "*") -> str:
     return f"{ROOT}/{system}/model/{digest}"
 
 
-def check(system: str) -> str:
-    return f"{ROOT}/{system}/check"
+def check(system: str, client: str) -> str:
+    """The monitor's command check asked by ``client``."""
+    return f"{ROOT}/{system}/check/{client}"
+
+
+def client_of(key: str) -> str | None:
+    """The client chunk of a ``predict`` or ``check`` key (``skinet/<system>/<kind>/<client>[/...]``);
+    None when the key has none or it is not a plain name (a wildcard)."""
+    parts = key.split("/")
+    if len(parts) < 4 or not _CHUNK.match(parts[3]):
+        return None
+    return parts[3]
+
+
 def resync(system: str, skillset: str = "*") -> str:
     return f"{ROOT}/{system}/resync/{skillset}"
 

@@ -216,6 +216,10 @@ def _cases() -> list[Case]:
     policy = ("argument --check-policy: unknown check policy 'lax' (presets: warn, strict; or KIND=ACTION with ACTION "
               "one of allow, warn, deny)")
     usage("skinet", "--check-policy", ("run", SYSTEM, "--check-policy", "lax"), policy)
+    usage("skinet", "--rate-limit", ("run", SYSTEM, "--rate-limit", "-1"),
+          "argument --rate-limit: expected a number >= 0, got '-1'")
+    usage("skinet", "--check-rate-limit", ("run", SYSTEM, "--check-rate-limit", "fast"),
+          "argument --check-rate-limit: expected a number >= 0, got 'fast'")
     usage("skinet", "--format", ("record", "spot_arm", "-o", "{tmp}/rec.csv", "--format", "csv"),
           "argument --format: invalid choice: 'csv' (choose from 'jsonl', 'mcap')")
 
@@ -268,6 +272,12 @@ def _cases() -> list[Case]:
     usage(mon, "--query-timeout", (SYSTEM, "--query-timeout", "0"), "argument --query-timeout: " + seconds.format("0"))
     usage(mon, "--stall", (SYSTEM, "--stall", "-2"), "argument --stall: " + seconds.format("-2"))
     usage(mon, "--check-policy", (SYSTEM, "--check-policy", "lax"), policy)
+    usage(mon, "--check-rate-limit", (SYSTEM, "--check-rate-limit", "-3"),
+          "argument --check-rate-limit: expected a number >= 0, got '-3'")
+    usage(mon, "--check-rate-limit", (SYSTEM,), "argument --check-rate-limit: expected a number >= 0, got 'x' "
+          "(from $SKINET_CHECK_RATE_LIMIT)", SKINET_CHECK_RATE_LIMIT="x")
+    usage(pred, "--rate-limit", ("--rate-limit", "inf"), "argument --rate-limit: expected a number >= 0, got 'inf'")
+    usage(pred, "--rate-burst", ("--rate-burst", "0"), "argument --rate-burst: expected a number >= 1, got '0'")
     usage(pred, "--instance", ("--instance", "a/b"), f"argument --instance: instance id 'a/b' {not_a_key}")
     usage(pred, "--instance", (), f"argument --instance: instance id 'a b' {not_a_key}", SKINET_INSTANCE="a b")
     for option in ("--workers", "--max-pending", "--cache"):

@@ -52,14 +52,33 @@ def passwords() -> dict[str, str]:
     return ensure_users(SECRETS)
 
 
-def acl_router_config(endpoint: str) -> zenoh.Config:
-    """``docker/zenoh/router.json5`` as shipped, listening on ``endpoint``, users from the repository."""
+def acl_router_config(endpoint: str, askers: tuple[str, ...] = ()) -> zenoh.Config:
+    """``docker/zenoh/router.json5`` as shipped, listening on ``endpoint``, users made by the tests.
+
+    ``askers``: extra users who may ask predictions and checks under their own name,
+    as an operator adds them (docs/deployment.md, "Rate limits").
+    """
     config = zenoh.Config.from_file(str(ROUTER_CONFIG))
     passwords()
+    for user in askers:
+        add_asker(config, user)
     config.insert_json5("transport/auth/usrpwd/dictionary_file", json.dumps(str(USERS_FILE)))
     config.insert_json5("listen/endpoints", json.dumps([endpoint]))
     config.insert_json5("scouting/delay", "0")
     return config
+
+
+def add_asker(config: zenoh.Config, user: str) -> None:
+    """Let ``user`` (made in ``SECRETS``) read, and ask checks and predictions under its own name only."""
+    ensure_users(SECRETS, [user])
+    acl = json.loads(config.get_json("access_control"))
+    acl["rules"].append({"id": f"{user} asks", "permission": "allow", "flows": ["ingress"], "messages": ["query"],
+                         "key_exprs": [f"skinet/*/check/{user}", f"skinet/*/predict/{user}",
+                                       f"skinet/*/predict/{user}/*"]})
+    acl["subjects"].append({"id": user, "usernames": [user]})
+    next(s for s in acl["subjects"] if s["id"] == "users")["usernames"].append(user)
+    acl["policies"].append({"id": f"{user} asks", "rules": [f"{user} asks"], "subjects": [user]})
+    config.insert_json5("access_control", json.dumps(acl))
 
 
 def login_config(endpoint: str, user: str | None, password: str | None = None) -> zenoh.Config:
@@ -148,12 +167,13 @@ def wait_until(predicate: Callable[[], bool], timeout: float, what: str, poll: f
         time.sleep(poll)
 
 
-def answering_predictor(session: zenoh.Session, system_file: Path = REPO / "skillsets" / "spot_arm.toml") -> str:
+def answering_predictor(session: zenoh.Session, system_file: Path = REPO / "skillsets" / "spot_arm.toml",
+                        user: str = "monitor") -> str:
     """Instance id of the predictor the router picks for a query now (the one serving
-    the monitor: ZENOH.md, the first live instance declared)."""
+    the monitor: ZENOH.md, the first live instance declared); ``session`` is logged in as ``user``."""
     system, _ = load_system(system_file)
     request = PredictRequest(system=system.name, digest=bundle(system).digest, seq=1, skillsets={}, budget=0.2)
-    for reply in session.get(keys.predict(system.name), payload=encode(request), timeout=5.0):
+    for reply in session.get(keys.predict(system.name, user), payload=encode(request), timeout=5.0):
         if reply.ok is not None:
             return decode(reply.ok.payload.to_bytes(), PredictReply).instance
     raise AssertionError("no predictor answered")

@@ -24,7 +24,7 @@ from skinet.wire import keys
 from tests.services.test_outage import Outage, run
 
 EVENTS = keys.events(SYSTEM, "spot")
-PREDICT = keys.predict(SYSTEM)
+PREDICT = keys.predict(SYSTEM, "monitor")  # the monitor asks under its login (issue 14)
 ROS_STATUS = "spot/spot_skillset_manager/spot_skillset/status"
 STATUS_REQUEST = "spot/spot_skillset_manager/spot_skillset/status_request"
 USERS = ("bridge", "monitor", "predictor", "robot", "observer")
@@ -138,8 +138,8 @@ def _replies(session: zenoh.Session, key: str = PREDICT) -> list[str]:
 
 
 @pytest.mark.parametrize("declared, queried", [
-    (keys.predict("*"), PREDICT),  # the shared key
-    (keys.predict_instance("*", "p1"), keys.predict_instance(SYSTEM, "p1")),  # an instance's own key
+    (keys.predict("*", "*"), PREDICT),  # the shared key
+    (keys.predict_instance("*", "*", "p1"), keys.predict_instance(SYSTEM, "monitor", "p1")),  # an instance's own key
 ])
 def test_only_predictors_answer_prediction_queries(sessions: dict[str, zenoh.Session], declared: str,
                                                    queried: str) -> None:
@@ -163,8 +163,9 @@ def test_only_predictors_answer_prediction_queries(sessions: dict[str, zenoh.Ses
         try:
             time.sleep(0.3)
             assert _replies(sessions["asker"], queried) == ["predictor"]
-            # Observers may not ask: not the predictor, not the models, not `**`.
+            # Observers may not ask: not the predictor (under any name), not the models, not `**`.
             assert _replies(sessions["reader"], queried) == []
+            assert _replies(sessions["reader"], queried.replace("/monitor", "/observer")) == []
             assert [r for r in sessions["reader"].get("**", timeout=1.0) if r.ok is not None] == []
         finally:
             genuine.undeclare()

@@ -21,8 +21,8 @@ from deploy_support import REPO, SYSTEM, Tokens, acl_router_config, free_port, l
 from services.monitor import start_monitor
 from skinet.files import load_system
 from skinet.wire import keys
-from skinet.wire.codec import encode
-from skinet.wire.messages import CanonicalEvent
+from skinet.wire.codec import decode, encode
+from skinet.wire.messages import CanonicalEvent, CheckReply, CheckRequest
 
 SG_AT_RD = "violates it at once: spot go_to_waypoint runs while manipulator arm_status at RD"  # skinet.explain
 TO_ARM_AT_RD = [("spot", "init_power.start"), ("spot", "init_power.success.powered_on"), ("spot", "stand_up.start"),
@@ -36,7 +36,7 @@ def deployment() -> Iterator[str]:
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     router = zenoh.open(acl_router_config(endpoint))
     monitor_session, bridge = login(endpoint, "monitor"), login(endpoint, "bridge")
-    monitor = start_monitor(monitor_session, load_system(REPO / "skillsets" / "spot_arm.toml")[0])
+    monitor = start_monitor(monitor_session, load_system(REPO / "skillsets" / "spot_arm.toml")[0], client="monitor")
     tokens = Tokens(bridge)
     try:  # the monitor's token is declared last: once seen, its event subscriber is known too
         wait_until(lambda: bool(tokens.of("monitor")), 10, "the monitor's liveliness token")
@@ -80,7 +80,35 @@ def test_check_as_observer(deployment: str) -> None:
                                                        "manipulator, spot)")
     out = skinet("check", "other", "spot:x.start", "--timeout", "0.5", *zenoh_flags(deployment))
     assert (out.returncode, out.stderr.strip()) == (1, "skinet: error: no monitor of system 'other' answered on "
-                                                       "skinet/other/check (systems with a monitor: spot_arm)")
+                                                       "skinet/other/check/observer (systems with a monitor: spot_arm)")
+
+
+def test_check_flood_is_limited_per_user(deployment: str) -> None:
+    """An observer asking checks as fast as it can gets its budget (20/s, burst 20), then
+    "rate limited" at once; another user's checks are still answered (issue 14)."""
+    observer, robot = login(deployment, "observer"), login(deployment, "robot")
+    payload = encode(CheckRequest(skillset="spot", transition="sit_down.start"))
+
+    def ask(session: zenoh.Session, user: str) -> CheckReply:
+        replies = [r for r in session.get(keys.check(SYSTEM, user), payload=payload, timeout=5.0)]
+        assert len(replies) == 1 and replies[0].ok is not None, replies
+        return decode(replies[0].ok.payload.to_bytes(), CheckReply)
+
+    try:
+        start = time.monotonic()
+        answers = [ask(observer, "observer") for _ in range(100)]
+        elapsed = time.monotonic() - start
+        allowed = [a for a in answers if a.ok]
+        refused = [a for a in answers if not a.ok]
+        assert 20 <= len(allowed) <= 20 + 20 * elapsed + 1, (len(allowed), elapsed)
+        assert {a.error for a in refused} == {"rate limited: client 'observer' exceeds 20 requests/s (burst 20)"}
+        assert all(a.decision == "allow" for a in allowed)
+        other = ask(robot, "robot")
+        assert (other.ok, other.decision) == (True, "allow")
+    finally:
+        observer.close()
+        robot.close()
+        time.sleep(1.0)  # the observer's bucket refills for the next tests
 
 
 def test_watch_logs_in_from_the_environment(deployment: str) -> None:

@@ -43,7 +43,7 @@ def embedded() -> Iterator[tuple[str, zenoh.Session]]:
     sessions = {user: login(endpoint, user) for user in ("monitor", "predictor", "bridge")}
     system, _ = load_system(REPO / "skillsets" / "spot_arm.toml")
     predictor = start_predictor(sessions["predictor"], "rust-test")
-    monitor = start_monitor(sessions["monitor"], system)
+    monitor = start_monitor(sessions["monitor"], system, client="monitor")  # asks under its login
     try:
         yield endpoint, sessions["bridge"]
     finally:

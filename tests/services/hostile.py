@@ -52,7 +52,7 @@ class Attacker:
         return encode(PredictRequest(system=SYSTEM, digest=self.bundle.digest, seq=seq, skillsets={}, budget=budget))
 
     def ask(self, budget: float = 0.1, seq: int = 1, timeout: float = 30.0) -> list[zenoh.Reply]:
-        return list(self.session.get(keys.predict(SYSTEM), payload=self.request(budget, seq), timeout=timeout))
+        return list(self.session.get(keys.predict(SYSTEM, keys.LOCAL_CLIENT), payload=self.request(budget, seq), timeout=timeout))
 
     def close(self) -> None:
         self._queryable.undeclare()

@@ -19,7 +19,7 @@ STRICT = "explicit=deny,implicit=warn,forced=deny,unknown=warn"
 
 def ask(session: zenoh.Session, request: CheckRequest | None = None, parameters: str = "",
         payload: bytes | None = None) -> CheckReply:
-    selector = keys.check("spot_arm") + (f"?{parameters}" if parameters else "")
+    selector = keys.check("spot_arm", keys.LOCAL_CLIENT) + (f"?{parameters}" if parameters else "")
     body = payload if payload is not None else (encode(request) if request is not None else None)
     replies = list(session.get(selector, payload=body, timeout=5.0))
     assert len(replies) == 1 and replies[0].ok is not None, replies
@@ -169,7 +169,7 @@ def test_forced_constraint_is_denied_under_the_strict_policy(monitor_factory, se
                                  ("arm", "unfold.start")):
         events.send(skillset, transition)
     reports.step(3)
-    replies = list(session.get(keys.check(mobile.name), payload=encode(parse_command("base:navigate.start")),
+    replies = list(session.get(keys.check(mobile.name, keys.LOCAL_CLIENT), payload=encode(parse_command("base:navigate.start")),
                                timeout=5.0))
     reply = decode(replies[0].ok.payload.to_bytes(), CheckReply)
     assert (reply.ok, reply.decision, reply.enabled, reply.prediction_stale) == (True, decision, True, True)

@@ -311,7 +311,7 @@ def test_no_predictor_reports_stay_on_time(monitor_factory, session, system):
 
 def test_silent_predictor_times_out_without_blocking(monitor_factory, session, system):
     held: list[zenoh.Query] = []
-    silent = session.declare_queryable(keys.predict("*"), held.append)  # never replies (ZENOH.md: holds the get)
+    silent = session.declare_queryable(keys.predict("*", "*"), held.append)  # never replies (ZENOH.md: holds the get)
     reports = Reports(session)
     monitor = monitor_factory(system, budget=0.3, query_timeout=3.0)
     wait_until(lambda: monitor.predictor_stats.in_flight, 5, "query in flight")

@@ -2,7 +2,7 @@
 
 Predictor processes are clients of a Python router; the test plays the monitor: it
 serves the model bundle on ``skinet/<system>/model/<digest>`` and queries
-``skinet/<system>/predict``.  Expected answers are computed in-process with the
+``skinet/<system>/predict/local``.  Expected answers are computed in-process with the
 same core functions.
 """
 
@@ -79,11 +79,11 @@ def request(system: System, digest: str, skillsets: dict | None = None, seq: int
 
 
 def ask(session: zenoh.Session, payload: bytes | None, system: str = "spot_arm",
-        timeout: float = QUERY_TIMEOUT) -> tuple[list[Answer], float]:
-    """Every answer to one predict query, and the seconds the ``get`` took."""
+        timeout: float = QUERY_TIMEOUT, client: str = keys.LOCAL_CLIENT) -> tuple[list[Answer], float]:
+    """Every answer to one predict query (as ``client``), and the seconds the ``get`` took."""
     start = time.monotonic()
     answers: list[Answer] = []
-    for reply in session.get(keys.predict(system), payload=payload, timeout=timeout):
+    for reply in session.get(keys.predict(system, client), payload=payload, timeout=timeout):
         if reply.ok is not None:
             answers.append(decode(reply.ok.payload.to_bytes(), PredictReply))
         else:
@@ -162,7 +162,7 @@ def test_bad_requests_are_answered_with_errors(client: zenoh.Session, predictor:
         (encode(request(system, model.digest, unknown, seq=9)),
          f"request: error: unknown skillset 'nope' (skillsets: {names})"),
         (encode(request(system, model.digest).model_copy(update={"system": "other"})),
-         "system 'other' does not match key 'skinet/spot_arm/predict'"),
+         "system 'other' does not match key 'skinet/spot_arm/predict/local'"),
         (encode(request(system, "not/a/digest")),
          "digest 'not/a/digest' cannot be used in a Zenoh key (letters, digits, _ - . only)"),
     ]
@@ -180,7 +180,8 @@ def test_bad_requests_are_answered_with_errors(client: zenoh.Session, predictor:
 def test_failover_between_two_instances(client: zenoh.Session, predictor: Launcher, system: System,
                                         model: ModelBundle) -> None:
     ModelServer(client, model)
-    procs = {"pa": predictor("pa"), "pb": predictor("pb")}
+    # One client asking as fast as it can: no per-client limit here (see test_rate_limit_per_client).
+    procs = {name: predictor(name, "--rate-limit", "0") for name in ("pa", "pb")}
     payload = encode(request(system, model.digest))
     first = [ask_one(client, payload).instance for _ in range(10)]
     assert len(set(first)) == 1, f"default target: one instance answers ({first})"
@@ -292,7 +293,7 @@ def test_embedded_on_a_shared_session(peer: zenoh.Session, system: System, model
 
 def test_full_pool_answers_busy(peer: zenoh.Session, system: System, model: ModelBundle) -> None:
     server = ModelServer(peer, model, frozen=True)  # the first request holds the only slot
-    handle = start_predictor(peer, "tiny", workers=1, max_pending=1, fetch_timeout=0.3)
+    handle = start_predictor(peer, "tiny", workers=1, max_pending=1, fetch_timeout=0.3, rate_limit=0)
     try:
         first: list[list[Answer]] = []
         slow = threading.Thread(target=lambda: first.append(ask(peer, encode(request(system, model.digest)))[0]))
@@ -300,11 +301,15 @@ def test_full_pool_answers_busy(peer: zenoh.Session, system: System, model: Mode
         deadline = time.monotonic() + 2
         while server.queries == 0 and time.monotonic() < deadline:  # admitted and fetching
             time.sleep(0.005)
-        reply = ask_one(peer, encode(request(system, model.digest, seq=2)))
+        reply = ask_one(peer, encode(request(system, model.digest, seq=2)), client="other")
         assert (reply.ok, reply.error, reply.seq) == (False, "busy: too many pending requests", 2)
+        # The same client: its share (half of max_pending, at least 1) is taken.
+        reply = ask_one(peer, encode(request(system, model.digest, seq=3)))
+        assert (reply.ok, reply.error, reply.seq) == (False, "busy: client 'local' has its share of pending "
+                                                             "requests (1)", 3)
         slow.join()
         assert first[0][0].error == f"cannot fetch model skinet/spot_arm/model/{model.digest}: error reply: Timeout"
-        assert (handle.counts["busy"], handle.counts["failed"]) == (1, 1)
+        assert (handle.counts["busy"], handle.counts["failed"]) == (2, 1)
     finally:
         handle.close()
         server.close()
@@ -325,3 +330,30 @@ def test_lru_cache_of_systems(peer: zenoh.Session, system: System, model: ModelB
     assert sum(s.queries for s in servers) == 5
 
 
+
+
+# -- per-client rate limit (issue 14) ----------------------------------------------------
+
+
+def test_rate_limit_per_client(client: zenoh.Session, predictor: Launcher, system: System,
+                               model: ModelBundle) -> None:
+    """A client over its budget is refused at once; another client is still answered.
+
+    Without access control the client chunk is the caller's choice (the ACL test,
+    ``tests/deploy/test_rate_limit.py``, shows it cannot be forged behind the router).
+    """
+    ModelServer(client, model)
+    predictor("p1", "--rate-limit", "2", "--rate-burst", "3")
+    payload = encode(request(system, model.digest))
+    flood = [ask(client, payload, client="flooder") for _ in range(8)]
+    oks = [a for (answers, _) in flood for a in answers if isinstance(a, PredictReply) and a.ok]
+    refused = [(a, took) for (answers, took) in flood for a in answers if isinstance(a, PredictReply) and not a.ok]
+    assert 3 <= len(oks) <= 4 and len(oks) + len(refused) == 8, flood  # the burst, maybe one refilled
+    assert {a.error for a, _ in refused} == {"rate limited: client 'flooder' exceeds 2 requests/s (burst 3)"}
+    assert all(took < 0.5 for _, took in refused), "refused at once, not queued"
+    other = ask_one(client, payload)  # client "local": its own bucket
+    assert other.ok and other.risks is not None
+    # A wildcard in the client chunk is no client: an error reply, nothing computed.
+    answers, _ = ask(client, payload, client="*")
+    assert answers == ["error: key 'skinet/spot_arm/predict/*': the client chunk must be a name "
+                       "(skinet/<system>/predict/<client>)"]

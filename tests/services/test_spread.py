@@ -110,10 +110,10 @@ def test_queries_alternate_between_two_instances(pool_of, monitor_factory, sessi
     # Clients that do not spread still get one answer on the shared key.
     request = PredictRequest(system="spot_arm", digest=monitor.digest, seq=7,
                              skillsets=statuses(system, system.initial_marking()), budget=1.0)
-    replies = list(session.get(keys.predict("spot_arm"), payload=encode(request), timeout=3.0))
+    replies = list(session.get(keys.predict("spot_arm", keys.LOCAL_CLIENT), payload=encode(request), timeout=3.0))
     assert len(replies) == 1 and decode(replies[0].ok.payload.to_bytes(), PredictReply).instance in ("pa", "pb")
     # On an instance's own key: "working" replies (empty), then the answer of that instance.
-    replies = list(session.get(keys.predict_instance("spot_arm", "pb"), payload=encode(request), timeout=3.0,
+    replies = list(session.get(keys.predict_instance("spot_arm", keys.LOCAL_CLIENT, "pb"), payload=encode(request), timeout=3.0,
                                consolidation=zenoh.ConsolidationMode.NONE))
     payloads = [r.ok.payload.to_bytes() for r in replies]
     assert payloads[0] == b"" and all(p == b"" for p in payloads[:-1])

@@ -7,12 +7,15 @@
 //! ```
 //!
 //! 1. fetches the model digest from the monitor (`skinet/<system>/model/*`),
-//! 2. asks a predictor about the initial marking (`skinet/<system>/predict`,
+//! 2. asks a predictor about the initial marking (`skinet/<system>/predict/<client>`,
 //!    a `PredictRequest`) and prints the `PredictReply`,
-//! 3. asks the monitor's command check (`skinet/<system>/check`, a `CheckRequest`)
-//!    about each `--check` command and prints the decision and its reasons,
+//! 3. asks the monitor's command check (`skinet/<system>/check/<client>`, a
+//!    `CheckRequest`) about each `--check` command and prints the decision and its reasons,
 //! 4. prints every `Verdicts` published on `skinet/<system>/verdicts`, until N
 //!    were printed (default: forever) or nothing came for the timeout.
+//!
+//! `<client>` is the `--user` (`local` without a login): the router lets a user ask
+//! only under its own name, and the services count requests per name (rate limits).
 
 use std::collections::BTreeMap;
 use std::process::ExitCode;
@@ -185,6 +188,7 @@ fn config(args: &Args) -> zenoh::Result<Config> {
 fn run(args: Args) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
     let session = zenoh::open(config(&args)?).wait()?;
     let system = &args.system;
+    let client = args.user.as_deref().unwrap_or("local");
 
     // The model digest identifies the system a predictor must rebuild.
     let mut digest = None;
@@ -202,7 +206,7 @@ fn run(args: Args) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
     match digest {
         Some(digest) => {
             println!("model {system} {digest}");
-            predict(&session, system, digest)?;
+            predict(&session, system, client, digest)?;
         }
         // Observers may not query models or predictors (docker/zenoh/router.json5).
         None => println!("model {system}: no answer on the model key (is a monitor up, may this user ask?)"),
@@ -218,7 +222,7 @@ fn run(args: Args) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
             transition: transition.into(),
         };
         let replies = session
-            .get(format!("skinet/{system}/check"))
+            .get(format!("skinet/{system}/check/{client}"))
             .payload(rmp_serde::to_vec_named(&request)?)
             .timeout(Duration::from_secs(5))
             .wait()?;
@@ -307,6 +311,7 @@ fn main() -> ExitCode {
 fn predict(
     session: &zenoh::Session,
     system: &str,
+    client: &str,
     digest: String,
 ) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
     let request = PredictRequest {
@@ -318,7 +323,7 @@ fn predict(
         budget: 1.0,
     };
     let replies = session
-        .get(format!("skinet/{system}/predict"))
+        .get(format!("skinet/{system}/predict/{client}"))
         .payload(rmp_serde::to_vec_named(&request)?)
         .timeout(Duration::from_secs(10))
         .wait()?;
