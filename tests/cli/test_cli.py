@@ -308,7 +308,7 @@ def test_unsafe_imports_no_service_module() -> None:
     """Start-up (issue 10 (d)): no Zenoh, pydantic, web server, plotting or services for `skinet unsafe`."""
     code = ("import sys; from skinet.cli.main import main; code = main(['unsafe', sys.argv[1]]); "
             "print(sorted({m.split('.')[0] for m in sys.modules} & {'zenoh', 'pydantic', 'aiohttp', 'matplotlib', "
-            "'services'})); raise SystemExit(code)")
+            "'services', 'scipy'})); raise SystemExit(code)")
     done = subprocess.run([sys.executable, "-c", code, SYSTEM], cwd=ROOT, capture_output=True, text=True, timeout=60)
     assert done.returncode == 0, done.stderr
     assert done.stdout.splitlines()[-1] == "[]"
