@@ -12,6 +12,10 @@ from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
 
+# Before numpy is imported: its OpenBLAS starts a thread per core at import, 35 ms of CPU
+# (a sixth of `skinet unsafe`), and the core library does no linear algebra.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
 from skinet import __version__
 from skinet.errors import SkinetError, SourceError
 from skinet.files import load_model, load_state
