@@ -176,6 +176,10 @@ def _serve(instance: str, cache_size: int, nice: int) -> None:
     Before announcing itself the child answers a tiny job, so that imports and the
     parser's grammar are loaded before any deadline runs.
     """
+    # scipy too, although the warm-up job's graphs are too small to need it (skinet/verify/scc.py):
+    # a worker serves every size of system, and its answers use scipy's strong components throughout.
+    import scipy.sparse.csgraph  # noqa: F401
+
     from skinet.errors import SkinetError
     from skinet.system import System
     from skinet.verify.predict import forecast

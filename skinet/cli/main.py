@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import importlib
 import json
 import os
 import sys
@@ -10,6 +11,10 @@ import time
 from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
+
+# Before numpy is imported: its OpenBLAS starts a thread per core at import, 35 ms of CPU
+# (a sixth of `skinet unsafe`), and the core library does no linear algebra.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 from skinet import __version__
 from skinet.errors import SkinetError, SourceError
@@ -22,15 +27,10 @@ from skinet.verify.algorithm1 import analyse
 from skinet.verify.ctl import Kripke, check
 from skinet.verify.explore import Deadline, explore
 from skinet.verify.predict import Forecast, forecast
-from skinet.cli import demo
-from skinet.cli import operator as operator_cli
-from skinet.cli import record as record_cli
-from skinet.cli import timeline as timeline_cli
 from skinet.cli.options import ArgumentParser, count, load_live_system, print_warnings
 from skinet.cli.options import seconds as duration
 from skinet.cli.memory import add_memory_arg, memory_limit
 from skinet.cli.render import analysis_text, seconds, table
-from skinet.cli.run import add_commands as add_service_commands
 
 DESCRIPTION = """\
 SkiNet Live: predictive runtime verification of skill-based robots.
@@ -57,8 +57,37 @@ state files (--state) are JSON: {"spot": {"resources": {"posture": "Standing"},
 "running": ["teleop"]}}; omitted resources are initial, omitted skills idle."""
 
 
+# Commands whose modules import Zenoh, pydantic messages, aiohttp or plotting, in --help order:
+# (module, function registering its commands, {command: one-line help}).  Only the module of
+# the command being run is imported; the others are listed by name and help alone, so that
+# `skinet unsafe` does not pay for them (issue 10 (d); tests/cli/test_cli.py checks that the
+# helps here are the modules' own).
+LAZY_COMMANDS: tuple[tuple[str, str, dict[str, str]], ...] = (
+    ("skinet.cli.demo", "add_parser", {"demo": "replay the paper's unassisted and assisted runs (the main job)"}),
+    ("skinet.cli.record", "add_parser",
+     {"record": "record the monitor's messages of a system into a JSON Lines log"}),
+    ("skinet.cli.timeline", "add_parser",
+     {"timeline": "draw a monitor log (skinet record, skinet demo --log) as a timeline picture"}),
+    ("skinet.cli.run", "add_commands", {
+        "run": "monitor and predictor in one process with a live operator view (SPEC §7)",
+        "router": "run a Zenoh router (the Python wheel in router mode) until interrupted",
+    }),
+    ("skinet.cli.operator", "add_parsers", {
+        "dashboard": "live web dashboard of a running system (served on 127.0.0.1:8080)",
+        "watch": "terminal live view of a running system (any deployment)",
+        "check": "ask a running monitor whether a command is safe now (skinet/<system>/check)",
+    }),
+)
+
+
+def _command(argv: Sequence[str]) -> str:
+    """The subcommand named on a command line ("" when none): skinet's own options take no value."""
+    return next((a for a in argv if not a.startswith("-")), "")
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = build_parser()
+    argv = list(sys.argv[1:] if argv is None else argv)
+    parser = build_parser(_command(argv))
     args = parser.parse_args(argv)
     if not getattr(args, "command", None):
         parser.print_help()
@@ -87,7 +116,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 70
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The whole parser; with ``command``, only that command's module of :data:`LAZY_COMMANDS` is imported."""
     p = ArgumentParser(
         prog="skinet", description=DESCRIPTION, epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter
     )
@@ -124,11 +154,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help='one or more formulas, e.g. "AG not (spot:Busy and manipulator:Busy)" (one exploration for all)')
     c.set_defaults(func=cmd_ctl)
 
-    demo.add_parser(sub)
-    record_cli.add_parser(sub)
-    timeline_cli.add_parser(sub)
-    add_service_commands(sub)
-    operator_cli.add_parsers(sub)
+    for module, register, helps in LAZY_COMMANDS:
+        if command is None or command in helps:
+            getattr(importlib.import_module(module), register)(sub)
+        else:
+            for name, summary in helps.items():
+                sub.add_parser(name, help=summary)
     return p
 
 

@@ -130,7 +130,7 @@ def _terminal_display(parser: Lark, name: str) -> str | None:
     """Readable form of a terminal (``'{'``, ``identifier``); None for ignored ones."""
     if name in _DISPLAY:
         return _DISPLAY[name]
-    if name in parser.ignore_tokens or name in _UNSUGGESTED:
+    if name in parser.lexer_conf.ignore or name in _UNSUGGESTED:
         return None
     for term in parser.terminals:
         if term.name == name:

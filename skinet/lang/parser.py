@@ -34,6 +34,7 @@ from skinet.lang.model import (
     TypeDecl,
     Variable,
 )
+from skinet.lang.larkcache import cached_lark
 from skinet.lang.larkerrors import check_nesting, check_size, syntax_diagnostic
 from skinet.lang.validate import sort_diagnostics, validate
 
@@ -55,8 +56,8 @@ def _parser(start: str = "start") -> Lark:
 
     ``start`` is a file given to a command, ``library`` a file it includes.
     """
-    return Lark(
-        _GRAMMAR_PATH.read_text(encoding="utf-8"),
+    return cached_lark(
+        _GRAMMAR_PATH,
         start=start,
         parser="lalr",
         lexer="contextual",

@@ -17,6 +17,7 @@ from lark.exceptions import UnexpectedInput, VisitError
 
 from skinet.errors import Pos, SourceError
 from skinet.lang.expr import And, Const, Implies, Not, Or
+from skinet.lang.larkcache import cached_lark
 from skinet.lang.larkerrors import MAX_FORMULA_CHARS, check_nesting, check_size, syntax_error
 from skinet.lang.model import Skillset
 from skinet.net.build import idle_place, resource_place, running_place
@@ -25,8 +26,8 @@ from skinet.props.formula import PlaceAtom, Property, Temporal, Until, is_tempor
 
 @cache
 def _lark(start: str) -> Lark:
-    grammar = (Path(__file__).with_name("formula.lark")).read_text()
-    return Lark(grammar, start=start, parser="lalr", propagate_positions=True, maybe_placeholders=False)
+    return cached_lark(Path(__file__).with_name("formula.lark"), start=start, parser="lalr", propagate_positions=True,
+                       maybe_placeholders=False)
 
 
 def atom_candidates(skillset: Skillset) -> dict[str, list[str]]:

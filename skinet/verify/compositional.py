@@ -46,6 +46,7 @@ from skinet.system import System
 from skinet.verify.algorithm1 import PredictionVerdict
 from skinet.verify.component import ComponentGraph, explore_component
 from skinet.verify.explore import Deadline
+from skinet.verify.scc import strong_components_of_lists
 
 MAX_STATES = 1 << 18  # M-product markings searched per verdict
 CACHE_SIZE = 4096
@@ -278,13 +279,7 @@ def _abilities(g: ComponentGraph, start: int, idle_bits: Sequence[int]) -> tuple
 def _abilities_of(n: int, succ: Sequence[Sequence[int]], loop: np.ndarray, dead: np.ndarray,
                   all_idle: Sequence[Sequence[bool]], idle: Sequence[Sequence[bool]]) -> Abilities:
     """Cycles, fair cycles, parking and deadlocks of a graph whose nodes are all reachable."""
-    from scipy.sparse import csr_matrix
-    from scipy.sparse.csgraph import connected_components
-
-    src = np.repeat(np.arange(n), [len(s) for s in succ])
-    dst = np.array([t for s in succ for t in s], dtype=np.int64)
-    graph = csr_matrix((np.ones(src.size), (src, dst)), shape=(n, n))
-    count, labels = connected_components(graph, directed=True, connection="strong")
+    count, labels = strong_components_of_lists(succ)
     size = np.bincount(labels, minlength=count)
     cyclic = (size > 1) | (np.bincount(labels, weights=loop, minlength=count) > 0)
     idle_arr = np.array(idle, dtype=bool).reshape(n, -1)

@@ -37,6 +37,7 @@ from skinet.net.build import idle_place
 from skinet.system import System
 from skinet.props.formula import PlaceAtom
 from skinet.verify.ctl import UNREACHED, Kripke, Result, place_values
+from skinet.verify.scc import strong_components
 
 
 def skill_fairness(kripke: Kripke, system: System) -> list[np.ndarray]:
@@ -73,9 +74,6 @@ def fair_scc_markings(kripke: Kripke, inside: np.ndarray, fairness: Sequence[np.
     """
     if kripke._expired():
         return None
-    from scipy.sparse import csr_matrix
-    from scipy.sparse.csgraph import connected_components
-
     g = _graph(kripke)
     out = np.zeros(kripke.space.size, dtype=bool)
     member = inside[g.nodes]
@@ -87,8 +85,7 @@ def fair_scc_markings(kripke: Kripke, inside: np.ndarray, fairness: Sequence[np.
     src, dst = renumber[g.src[keep]], renumber[g.dst[keep]]
     indptr = np.zeros(n + 1, dtype=np.int32)
     np.cumsum(np.bincount(src, minlength=n), out=indptr[1:])
-    graph = csr_matrix((np.ones(src.size), dst.astype(np.int32), indptr), shape=(n, n))
-    count, labels = connected_components(graph, directed=True, connection="strong")
+    count, labels = strong_components(indptr, dst.astype(np.int32))
     nodes = g.nodes[member]
     fair = (np.bincount(labels, minlength=count) > 1) | (np.bincount(labels, weights=g.loop[member], minlength=count) > 0)
     for constraint in fairness:

@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import argparse
 import json
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
 
-from skinet.cli.main import main
+from skinet.cli.main import LAZY_COMMANDS, build_parser, main
 
 ROOT = Path(__file__).resolve().parents[2]
 SYSTEM = str(ROOT / "skillsets" / "spot_arm.toml")
@@ -269,3 +272,44 @@ def test_help_explains(capsys: pytest.CaptureFixture[str]) -> None:
     out = capsys.readouterr().out
     for command in ("demo", "parse", "net", "unsafe", "explore", "ctl"):
         assert command in out
+
+
+def _subparsers(parser: argparse.ArgumentParser) -> argparse._SubParsersAction:
+    (sub,) = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+    return sub
+
+
+def test_lazy_commands_list_their_modules_own_help() -> None:
+    full = build_parser()
+    assert build_parser("").format_help() == full.format_help()  # skinet --help without importing them
+    assert build_parser("unsafe").format_help() == full.format_help()
+    names = [name for _, _, helps in LAZY_COMMANDS for name in helps]
+    assert names == ["demo", "record", "timeline", "run", "router", "dashboard", "watch", "check"]
+    for name in names:
+        lazy = build_parser(name)
+        assert lazy.format_help() == full.format_help()
+        assert _subparsers(lazy).choices[name].format_help() == _subparsers(full).choices[name].format_help()
+
+
+def test_lazy_command_runs_its_module(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as info:
+        main(["record", "--help"])
+    assert info.value.code == 0
+    assert "-o LOG.jsonl|LOG.mcap, --output LOG.jsonl|LOG.mcap" in capsys.readouterr().out
+    with pytest.raises(SystemExit) as info:
+        main(["record"])
+    out, err = capsys.readouterr()
+    assert info.value.code == 2 and out == ""
+    assert err.splitlines()[-1] == ("skinet record: error: the following arguments are required: SYSTEM_NAME, "
+                                    "-o/--output (see skinet record --help)")
+
+
+def test_unsafe_imports_no_service_module() -> None:
+    """Start-up (issue 10 (d)): no Zenoh, pydantic, web server, plotting or services for `skinet unsafe`."""
+    code = ("import sys; from skinet.cli.main import main; code = main(['unsafe', sys.argv[1]]); "
+            "print(sorted({m.split('.')[0] for m in sys.modules} & {'zenoh', 'pydantic', 'aiohttp', 'matplotlib', "
+            "'services', 'scipy'})); raise SystemExit(code)")
+    done = subprocess.run([sys.executable, "-c", code, SYSTEM], cwd=ROOT, capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.splitlines()[-1] == "[]"
+    assert done.stdout.splitlines()[-2].startswith("prediction: complete, 63 markings in ")
