@@ -245,11 +245,16 @@ def join_fleet(folder: Path, invitation: str) -> str:
     return own.read_text()
 
 
+def check_robot_name(name: str) -> None:
+    """A robot is named by the host of its endpoint in the hub's robot list."""
+    if not _HOST.match(name):
+        raise FleetError(f"robot name '{name}' must be the host of its endpoint (letters, digits, '.', '-')")
+
+
 def add_robot(folder: Path, name: str, ca_pem: str) -> Path:
     """The hub's side: trust ``ca_pem`` (a robot's ``tls/ca.pem``) for the link to the
     robot reached at host ``name`` (the host of its endpoint in the hub's robot list)."""
-    if not _HOST.match(name):
-        raise FleetError(f"robot name '{name}' must be the host of its endpoint (letters, digits, '.', '-')")
+    check_robot_name(name)
     _ca_pem(ca_pem, f"the CA given for robot '{name}'")
     path = folder / ROBOTS / f"{name}.pem"
     path.parent.mkdir(parents=True, exist_ok=True)

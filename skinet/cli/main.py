@@ -71,6 +71,7 @@ LAZY_COMMANDS: tuple[tuple[str, str, dict[str, str]], ...] = (
     ("skinet.cli.run", "add_commands", {
         "run": "monitor and predictor in one process with a live operator view (SPEC §7)",
         "router": "run a Zenoh router (the Python wheel in router mode) until interrupted",
+        "fleet": "link robots' routers to a hub over mutual TLS: exchange the trust files",
     }),
     ("skinet.cli.operator", "add_parsers", {
         "dashboard": "live web dashboard of a running system (served on 127.0.0.1:8080)",

@@ -79,7 +79,7 @@ def cmd_fleet(args: argparse.Namespace) -> int:
     import sys
     from pathlib import Path
 
-    from services.common.security import add_robot, fleet_invitation, join_fleet
+    from services.common.security import add_robot, check_robot_name, fleet_invitation, join_fleet
 
     folder = Path(args.secrets or Path.home() / ".config" / "skinet" / "secrets")
     if args.fleet_command == "invite":
@@ -88,6 +88,7 @@ def cmd_fleet(args: argparse.Namespace) -> int:
         sys.stdout.write(join_fleet(folder, sys.stdin.read()))
         print("skinet fleet: joined; restart this robot's router to trust the hub", file=sys.stderr)
     else:
+        check_robot_name(args.host)  # before waiting on standard input
         path = add_robot(folder, args.host, sys.stdin.read())
         print(f"skinet fleet: {path} written; restart the hub to link {args.host}", file=sys.stderr)
     return 0

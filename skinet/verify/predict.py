@@ -162,13 +162,15 @@ def forecast(
     """
     options = options or system.prediction
     fair = full or any(options.of(p.name).af == "fair" for p in system.properties)
-    if fair or compositional:
-        # scipy imported before the clock starts when the graphs may need it (a one-time 0.15-0.3 s).
-        warm_up_for(system, marking, event_seeds)
-
     answer = Deadline.after(budget)
     # Half the budget is kept for the compositional verdicts of what stays undecided.
     deadline = Deadline.after(None if budget is None else 0.5 * budget)
+    if fair or compositional:
+        # scipy imported when the graphs may need it (a one-time 0.15-0.3 s, not counted in the budget).
+        imported = warm_up_for(system, marking, event_seeds, deadline)
+        for d in (answer, deadline):
+            if d.at is not None:
+                d.at += imported
     space = explore(system, marking, max_depth=max_depth, event_seeds=event_seeds, progress=progress,
                     memory_limit=memory_limit, properties=len(system.properties) * (2 if full else 1),
                     edges=fair, deadline=deadline)

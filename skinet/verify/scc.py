@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 import sys
+import time
 from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING
 
@@ -23,6 +24,7 @@ import numpy as np
 
 if TYPE_CHECKING:
     from skinet.system import System
+    from skinet.verify.explore import Deadline
 
 # Nodes plus edges up to which Python's Tarjan is used (when scipy is not loaded yet):
 # about 5 ms here, against 0.15-0.3 s for importing scipy (benchmarks/bench_startup.py).
@@ -33,10 +35,14 @@ def scipy_loaded() -> bool:
     return "scipy.sparse.csgraph" in sys.modules
 
 
-def warm_up(size: int) -> None:
-    """Import scipy now if a graph of ``size`` nodes plus edges may have to be decomposed."""
-    if size > SMALL_GRAPH:
-        import scipy.sparse.csgraph  # noqa: F401
+def warm_up(size: int) -> float:
+    """Import scipy now if a graph of ``size`` nodes plus edges may have to be decomposed; the seconds it took."""
+    if size <= SMALL_GRAPH or scipy_loaded():
+        return 0.0
+    started = time.perf_counter()
+    import scipy.sparse.csgraph  # noqa: F401
+
+    return time.perf_counter() - started
 
 
 def strong_components(indptr: np.ndarray, indices: np.ndarray) -> tuple[int, np.ndarray]:
@@ -66,14 +72,24 @@ def strong_components_of_lists(succ: Sequence[Sequence[int]]) -> tuple[int, np.n
     return strong_components(indptr, np.array([t for s in unique for t in s], dtype=np.int32))
 
 
-def warm_up_for(system: System, marking: Mapping[str, int] | None, event_seeds: bool = True) -> None:
+def warm_up_for(
+    system: System, marking: Mapping[str, int] | None, event_seeds: bool = True, deadline: Deadline | None = None
+) -> float:
     """:func:`warm_up` for exploring ``system`` from ``marking``: the product of its components' graphs bounds
-    every graph fair AF decomposes (the component graphs are memoised: exploring reuses them)."""
+    every graph fair AF decomposes (the component graphs are memoised: exploring reuses them).
+
+    Returns the seconds the one-time import took (callers move their deadlines by as much).
+    Component graphs are explored within ``deadline``; past it scipy is imported anyway.
+    """
+    from skinet.verify.component import Expired
     from skinet.verify.explore import component_graphs
 
-    graphs = component_graphs(system, marking or system.initial_marking(), event_seeds)
+    try:
+        graphs = component_graphs(system, marking or system.initial_marking(), event_seeds, deadline)
+    except Expired:
+        return warm_up(SMALL_GRAPH + 1)
     box = math.prod(g.size for g in graphs)
-    warm_up(box + sum(g.edge_count() * (box // g.size) for g in graphs))
+    return warm_up(box + sum(g.edge_count() * (box // g.size) for g in graphs))
 
 
 def _tarjan(n: int, ptr: list[int], adj: list[int]) -> tuple[int, np.ndarray]:

@@ -55,6 +55,7 @@ FREE_TEXT = {
                        "python -m services.bridge_ros2", "python -m services.simulator")
        for option in ("--user", "--password")},
     ("skinet router", "--secrets"): "any folder: made at first start when missing (test_security.py)",
+    ("skinet fleet", "--secrets"): "any folder: made at first start when missing (test_security.py)",
 }
 
 
@@ -323,6 +324,11 @@ def _cases() -> list[Case]:
           "argument --start-delay: expected a number of seconds >= 0, got '-1'")
     usage(sim, "--linger", (SCENARIO, "--linger", "later"),
           "argument --linger: expected a number of seconds >= 0, got 'later'")
+    # skinet router --robots, skinet fleet
+    add("skinet", "--robots", ("router", "--no-auth", "--robots", "tcp/robot2:7447"), 1,
+        "skinet: error: robot endpoint 'tcp/robot2:7447' must be tls/HOST:PORT (a robot's router accepts TLS only)")
+    add("skinet", "host", ("fleet", "--secrets", "{tmp}/fleet", "add", "bad host/x"), 1,
+        "skinet: error: robot name 'bad host/x' must be the host of its endpoint (letters, digits, '.', '-')")
     return cases
 
 
