@@ -2,8 +2,13 @@
 # Both create .venv and install the project with its test dependencies first.
 # `make test-quick` skips the tests marked slow (Docker images and containers,
 # cargo and other native builds): for development, not a replacement of `make test`.
+# Both run pytest on every core (pytest-xdist, at most 4 workers); the slow tests
+# form one group that runs on a single worker, in order, while the others share the
+# rest.  PYTEST_ADDOPTS adds options (e.g. -k, -x); pytest's exit status 5 (nothing
+# collected) fails both targets like any other non-zero status.
 
 PYTHON ?= python3
+PYTEST := -m pytest -q -n auto --maxprocesses 4 --dist loadgroup --durations 15
 VENV ?= .venv
 STAMP := $(VENV)/.installed-stamp
 
@@ -22,10 +27,10 @@ test-deps:
 	scripts/install-test-deps.sh
 
 test: $(STAMP) test-deps
-	$(VENV)/bin/python -m pytest -q
+	$(VENV)/bin/python $(PYTEST)
 
 test-quick: $(STAMP)
-	$(VENV)/bin/python -m pytest -q -m "not slow"
+	$(VENV)/bin/python $(PYTEST) -m "not slow"
 
 bench: $(STAMP)
 	for b in benchmarks/bench_*.py; do $(VENV)/bin/python $$b || exit 1; done

@@ -31,6 +31,20 @@ def pytest_configure(config: pytest.Config) -> None:
             "project's shared/ folder there (it is never copied into the project)")
 
 
+@pytest.hookimpl(tryfirst=True)  # before xdist's own hook reads the groups
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Under ``--dist loadgroup`` (``make test``) the slow tests form two groups, each on one worker, in order.
+
+    ``containers`` (the tests using the ``image`` fixture) share the Docker images that the first of them
+    builds, and stacks started side by side would take the cores from each other's timings; ``native``
+    (cargo, Spin) share the cargo target.  The two groups run beside each other, and the other tests fill the gaps.
+    """
+    for item in items:
+        if item.get_closest_marker("slow") is not None:
+            containers = "image" in getattr(item, "fixturenames", ())
+            item.add_marker(pytest.mark.xdist_group("containers" if containers else "native"))
+
+
 def load_corpus_skillset(name: str) -> Skillset:
     """Parse one corpus file (``name`` relative to the corpus folder)."""
     return parse_skillset((CORPUS / name).read_text(encoding="utf-8"), name)

@@ -214,6 +214,10 @@ def test_robots_share_the_pool_and_a_cut_link_affects_only_its_robot(fleet) -> N
 def test_whole_pool_down_marks_predictions_stale_then_recovers(fleet) -> None:
     hub, _, robots = fleet
     r2 = robots["robot2"]
+    if r2.report(1) is None:  # run alone (or first): one step so that its report's seq is known
+        wait_until(lambda: len(r2.tokens.of("predictor")) == 2 and r2.tokens.of("monitor"), 120, "robot2 up")
+        r2.send("spot", "init_power.start")
+        wait_until(lambda: r2.report(1, fresh=True) is not None, 60, "robot2: fresh step 1")
     hub.compose("stop", "-t", "5", "pool", timeout=60)
     wait_until(lambda: not r2.tokens.of("predictor"), 15, "robot2: no predictor left")
     step = max(m.seq for _, m in list(r2.items) if isinstance(m, UnsafeReport)) + 1

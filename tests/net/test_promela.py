@@ -36,7 +36,8 @@ def spin_states(model: Path) -> int:
     # -O0: pan.c of a skillset union is large and gcc -O2 takes minutes on it.
     subprocess.run(["gcc", "-O0", "-DNOCLAIM", "-DSAFETY", "-o", "pan", "pan.c"], cwd=work, check=True,
                    capture_output=True, timeout=900)
-    out = subprocess.run(["./pan", "-E", "-m100000000"], cwd=work, check=True, capture_output=True, text=True,
+    # -m is the DFS stack depth, allocated up front: 10^8 cost 5 GB of page faults for a depth of a few hundred.
+    out = subprocess.run(["./pan", "-E", "-m1000000"], cwd=work, check=True, capture_output=True, text=True,
                          timeout=300).stdout
     assert "errors: 0" in out, out
     return int(re.search(r"(\d+) states, stored", out).group(1))

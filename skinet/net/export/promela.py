@@ -15,7 +15,7 @@ markings :func:`skinet.verify.explore.explore` finds without event seeds;
 Names: places are ``p<index>`` and transitions are numbered in net order;
 comments give the real names.  Run (``-E``: a deadlock is no error here)::
 
-    spin -a model.pml && gcc -O2 -DNOCLAIM -DSAFETY -o pan pan.c && ./pan -E -m100000000
+    spin -a model.pml && gcc -O2 -DNOCLAIM -DSAFETY -o pan pan.c && ./pan -E -m1000000
 """
 
 from __future__ import annotations
