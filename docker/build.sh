@@ -33,6 +33,12 @@ while [ $# -gt 0 ]; do
     shift
 done
 
+# One build at a time per machine (parallel test workers share the images, the
+# wheel cache and docker/wheels/): the others wait, then find the image up to date.
+mkdir -p "$cache"
+exec 9>"$cache/build.lock"
+flock 9
+
 if [ "$base" = "skinet-base:local" ]; then
     docker/base-image.sh --tag "$base"
 fi

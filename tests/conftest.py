@@ -33,16 +33,16 @@ def pytest_configure(config: pytest.Config) -> None:
 
 @pytest.hookimpl(tryfirst=True)  # before xdist's own hook reads the groups
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """Under ``--dist loadgroup`` (``make test``) the slow tests form two groups, each on one worker, in order.
+    """Under ``--dist loadgroup`` (``make test``) each module of slow tests runs on one worker, in order.
 
-    ``containers`` (the tests using the ``image`` fixture) share the Docker images that the first of them
-    builds, and stacks started side by side would take the cores from each other's timings; ``native``
-    (cargo, Spin) share the cargo target.  The two groups run beside each other, and the other tests fill the gaps.
+    Their module-scoped fixtures (compose stacks, a fleet of them) are then set up once; the Docker
+    images and the cargo target they share are built once, behind ``docker/build.sh``'s lock and
+    cargo's own.  The slow modules start first (xdist hands out its largest groups first) and the
+    other tests fill the gaps.
     """
     for item in items:
         if item.get_closest_marker("slow") is not None:
-            containers = "image" in getattr(item, "fixturenames", ())
-            item.add_marker(pytest.mark.xdist_group("containers" if containers else "native"))
+            item.add_marker(pytest.mark.xdist_group(item.path.stem))
 
 
 def load_corpus_skillset(name: str) -> Skillset:
