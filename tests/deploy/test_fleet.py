@@ -22,6 +22,7 @@ import re
 import subprocess
 import time
 from collections.abc import Callable, Iterator
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import pytest
@@ -109,12 +110,22 @@ def _secrets_made(stack: Stack, service: str) -> bool:
 def join(hub: Stack, robots: list[Stack], names: list[str]) -> None:
     """docs/deployment.md's exchange: the hub's invitation to each robot, each robot's CA to the hub."""
     invitation = hub.compose("exec", "-T", "hub", "skinet", "fleet", "invite").stdout
-    for name, robot in zip(names, robots):
+
+    def one(name: str, robot: Stack) -> None:
         ca = robot.compose("exec", "-T", "router", "skinet", "fleet", "join", input=invitation).stdout
         assert ca.startswith("-----BEGIN CERTIFICATE-----"), ca
         robot.compose("restart", "-t", "2", "router")
         hub.compose("exec", "-T", "hub", "skinet", "fleet", "add", name, input=ca)
+
+    side_by_side([lambda n=n, r=r: one(n, r) for n, r in zip(names, robots)])
     hub.compose("restart", "-t", "2", "hub")
+
+
+def side_by_side(calls: list[Callable[[], object]]) -> None:
+    """Run ``calls`` in threads (compose commands mostly wait on the engine); the first error is raised."""
+    with ThreadPoolExecutor(len(calls)) as pool:
+        for future in [pool.submit(c) for c in calls]:
+            future.result()
 
 
 @pytest.fixture(scope="module")
@@ -139,10 +150,9 @@ def fleet(image: str, tmp_path_factory: pytest.TempPathFactory) -> Iterator[tupl
             "SKINET_SYSTEM": f"skillsets/{'robot1' if name == 'robot3' else name}.toml"}), port)
     t0 = time.monotonic()
     try:
-        for name in ROBOTS:
-            robots[name].stack.compose("up", "-d", "--no-build", timeout=180)
-        robots["robot3"].stack.compose("up", "-d", "--no-build", "router", timeout=180)
-        hub.compose("up", "-d", "--no-build", timeout=180)
+        side_by_side([*(lambda n=n: robots[n].stack.compose("up", "-d", "--no-build", timeout=180) for n in ROBOTS),
+                      lambda: robots["robot3"].stack.compose("up", "-d", "--no-build", "router", timeout=180),
+                      lambda: hub.compose("up", "-d", "--no-build", timeout=180)])
         for s, service in [(r.stack, "router") for r in robots.values()] + [(hub, "hub")]:
             wait_until(lambda s=s, service=service: _secrets_made(s, service), 90, f"{s.project}: secrets")
         # Before joining, the hub leaves every robot out, one line each.
@@ -163,9 +173,10 @@ def fleet(image: str, tmp_path_factory: pytest.TempPathFactory) -> Iterator[tupl
     finally:
         for r in robots.values():
             r.close()
-        for s in (*(r.stack for r in robots.values()), hub):
+        stacks = (*(r.stack for r in robots.values()), hub)
+        for s in stacks:
             print(f"--- logs of {s.project} ---\n{s.logs()}")
-            s.down()
+        side_by_side([s.down for s in stacks])
         subprocess.run(["docker", "network", "rm", net], capture_output=True, timeout=60)
 
 

@@ -179,7 +179,7 @@ print(json.dumps({{"peak": peak_resident_bytes(), "start": start, **fc.report()}
 
 
 @pytest.mark.parametrize("af", ["literal", "fair"])
-@pytest.mark.parametrize("limit_mib", [200, 400])
+@pytest.mark.parametrize("limit_mib", [150, 300])
 def test_memory_limit_bounds_the_peak(limit_mib: int, af: str) -> None:
     """3 + 3 without seeds is a full box of 122 023 936 markings: a fresh process stays under the limit."""
     copies(1, 1)  # skips without the corpus
