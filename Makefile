@@ -8,6 +8,10 @@
 # collected) fails both targets like any other non-zero status.
 
 PYTHON ?= python3
+# Python caches compiled modules in __pycache__/ (git ignores them). Some sandboxes set
+# PYTHONDONTWRITEBYTECODE, and then every pytest worker and every process a test starts
+# compiles the project and rewrites the tests' asserts again: about a minute of a run.
+unexport PYTHONDONTWRITEBYTECODE
 PYTEST := -m pytest -q -n auto --maxprocesses 4 --dist loadgroup --durations 15
 VENV ?= .venv
 STAMP := $(VENV)/.installed-stamp

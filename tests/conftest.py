@@ -31,18 +31,26 @@ def pytest_configure(config: pytest.Config) -> None:
             "project's shared/ folder there (it is never copied into the project)")
 
 
+def _shares_module_state(item: pytest.Item) -> bool:
+    """Whether ``item`` uses a fixture kept across tests of its module (a deployment, a stack, a router)."""
+    info = getattr(item, "_fixtureinfo", None)
+    return info is not None and any(d.scope in ("class", "module", "package")
+                                    for defs in info.name2fixturedefs.values() for d in defs)
+
+
 @pytest.hookimpl(tryfirst=True)  # before xdist's own hook reads the groups
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """Under ``--dist loadgroup`` (``make test``) each module of slow tests runs on one worker, in order.
+    """Under ``--dist loadgroup`` (``make test``) some modules run whole on one worker, in file order.
 
-    Their module-scoped fixtures (compose stacks, a fleet of them) are then set up once; the Docker
-    images and the cargo target they share are built once, behind ``docker/build.sh``'s lock and
-    cargo's own.  The slow modules start first (xdist hands out its largest groups first) and the
-    other tests fill the gaps.
+    These are the slow modules and those whose tests share a module-scoped fixture: such a fixture
+    (a compose stack, a fleet, a deployment the tests move on step by step) is then set up once and
+    its tests see it in the order they were written.  The Docker images and the cargo target are
+    built once, behind ``docker/build.sh``'s lock and cargo's own.  Every other test is handed out
+    alone.
     """
     for item in items:
-        if item.get_closest_marker("slow") is not None:
-            item.add_marker(pytest.mark.xdist_group(item.path.stem))
+        if item.get_closest_marker("slow") is not None or _shares_module_state(item):
+            item.add_marker(pytest.mark.xdist_group(item.nodeid.split("::")[0]))
 
 
 def load_corpus_skillset(name: str) -> Skillset:

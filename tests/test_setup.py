@@ -32,7 +32,7 @@ def test_ci_fails_when_pytest_collects_nothing() -> None:
 
 
 def test_slow_tests_are_grouped() -> None:
-    """``make test``'s ``--dist loadgroup`` keeps each module of slow tests on one worker (see conftest.py).
+    """``make test``'s ``--dist loadgroup`` keeps each slow module on one worker (see conftest.py).
 
     Their module-scoped stacks are set up once that way; pytest 9.2 broke the grouping silently
     (pytest-xdist#1386), so the versions in pyproject.toml are checked here.
@@ -45,4 +45,4 @@ def test_slow_tests_are_grouped() -> None:
     # The workers name a grouped test ``NODEID@GROUP``; --setup-plan runs neither fixtures nor tests.
     ids = [line.strip() for line in r.stdout.splitlines() if "::" in line]
     groups = {i.rsplit("@", 1)[0].split("::")[0]: i.rsplit("@", 1)[1] for i in ids}
-    assert len(ids) == 9 and groups == {f: Path(f).stem for f in files}, r.stdout[-2000:]
+    assert len(ids) == 9 and groups == {f: f for f in files}, r.stdout[-2000:]

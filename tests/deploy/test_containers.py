@@ -10,11 +10,13 @@ off-board network cut, router restart.
 
 from __future__ import annotations
 
+import io
 import json
 import os
 import shutil
 import subprocess
 import sys
+import tarfile
 import threading
 import time
 from collections.abc import Iterator
@@ -109,11 +111,13 @@ class Stack:
 
     def secrets(self, folder: Path, users: tuple[str, ...]) -> Path:
         """The passwords and certificates the router made at its first start, copied to ``folder``."""
-        (folder / "tls").mkdir(parents=True, exist_ok=True)
         names = ["tls/ca.pem"] + [f"{u}.password" for u in users] + [f"tls/{u}.{x}" for u in users for x in ("pem", "key")]
-        for name in names:
-            r = self.compose("exec", "-T", "router", "cat", f"{SECRETS_IN_IMAGE}/{name}")
-            (folder / name).write_text(r.stdout)
+        # One `exec` for all of them: each compose exec costs about a second (compose v1 is a Python program).
+        r = subprocess.run([*self.command, "exec", "-T", "router", "tar", "-C", SECRETS_IN_IMAGE, "-c", *names],
+                           cwd=REPO, env=self.env, capture_output=True, timeout=120)
+        assert r.returncode == 0, r.stderr.decode(errors="replace")
+        with tarfile.open(fileobj=io.BytesIO(r.stdout)) as tar:
+            tar.extractall(folder, filter="data")
         return folder
 
     def logs(self) -> str:
