@@ -41,7 +41,7 @@ ours, or the row says so.
 
 Needs the optional ``bench`` extra::
 
-    pip install -e '.[bench]'          # dd (with dd.cudd in its wheel), oxidd
+    pip install -e '.[bench]'          # oxidd (dd, with dd.cudd in its wheel, is a dependency)
     python benchmarks/bench_dd.py [--only 1,2,3,4] [--tools ours,dd.autoref,dd.cudd,oxidd]
                                   [--af literal,fair] [--walks 4] [--deadline 120]
 """
@@ -195,16 +195,10 @@ class Encoding:
 
     def __init__(self, bdd: Backend, graphs: Sequence[Any]):
         self.bdd = bdd
+        from skinet.verify.symbolic import variables  # the predictor's own encoding
+
         self.graphs = list(graphs)
-        self.x: list[list[str]] = []
-        self.y: list[list[str]] = []
-        order: list[str] = []
-        for i, g in enumerate(self.graphs):
-            bits = max(1, (g.size - 1).bit_length())
-            self.x.append([f"x{i}_{b}" for b in range(bits)])
-            self.y.append([f"y{i}_{b}" for b in range(bits)])
-            for b in range(bits):
-                order += [self.x[i][b], self.y[i][b]]
+        self.x, self.y, order = variables(self.graphs)
         bdd.declare(order)
         self.xs = [v for vs in self.x for v in vs]
         self.to_y = [dict(zip(self.x[i], self.y[i])) for i in range(len(self.graphs))]
@@ -328,11 +322,9 @@ class Encoding:
 
     def idle(self, system: Any) -> list[Any]:
         """One fairness constraint per skill: its idle place is marked (SPEC §6.2)."""
-        from skinet.net.build import idle_place
-        from skinet.props.formula import PlaceAtom
+        from skinet.verify.fair import idle_atoms
 
-        return [self.formula(PlaceAtom(g.name, idle_place(k.name)))
-                for g in self.graphs for k in system.component(g.name).skillset.skills]
+        return [self.formula(a) for a in idle_atoms(self.graphs, system)]
 
     def formula(self, expr: Any) -> Any:
         """A state formula (SPEC §4) as a BDD over the local state codes."""
@@ -346,10 +338,7 @@ class Encoding:
             bit = g.net.place_index(a.place)
             return self.states(i, [s for s, m in enumerate(g.states) if m >> bit & 1])
 
-        f = evaluate(expr, atom)
-        if isinstance(f, bool):
-            return self.bdd.true() if f else self.bdd.false()
-        return f
+        return evaluate(expr, atom, lambda v: self.bdd.true() if v else self.bdd.false())
 
 
 # --------------------------------------------------------------------------- one case, fresh process
@@ -612,7 +601,7 @@ def main() -> None:
         raise SystemExit(f"bench_dd: unknown tool {bad[0]!r} (choose from {', '.join(TOOLS)})")
     if lacking := missing_tools(tools):
         raise SystemExit(f"bench_dd: {', '.join(lacking)} not installed; install the bench extra: "
-                         "pip install -e '.[bench]' (dd, oxidd from PyPI), or pass --tools without them")
+                         "pip install -e '.[bench]' (oxidd from PyPI), or pass --tools without them")
     only = args.only.split(",")
     if bad := [c for c in only if c not in SYSTEMS]:
         raise SystemExit(f"bench_dd: unknown case {bad[0]!r} (choose from 1, 2, 3, 4)")

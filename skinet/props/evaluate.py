@@ -10,26 +10,28 @@ from skinet.net.petrinet import PetriNet
 from skinet.props.formula import PlaceAtom
 
 
-def evaluate(expr: Expr, atom: Callable[[PlaceAtom], Any]) -> Any:
-    """Evaluate a boolean formula; ``atom`` gives each atom's value.
+def evaluate(expr: Expr, atom: Callable[[PlaceAtom], Any], const: Callable[[bool], Any] | None = None) -> Any:
+    """Evaluate a boolean formula; ``atom`` gives each atom's value, ``const`` each constant's
+    (default: the Python bool).
 
-    Values are Python bools or numpy boolean arrays (evaluated over many
-    markings at once, broadcasting as numpy does).
+    Values are Python bools, numpy boolean arrays (evaluated over many markings
+    at once, broadcasting as numpy does) or anything with ``~``, ``&`` and ``|``
+    such as decision diagrams (then ``const`` gives their true and false).
     """
     if isinstance(expr, Const):
-        return expr.value
+        return expr.value if const is None else const(expr.value)
     if isinstance(expr, PlaceAtom):
         return atom(expr)
     if isinstance(expr, Not):
-        v = evaluate(expr.arg, atom)
+        v = evaluate(expr.arg, atom, const)
         return (not v) if isinstance(v, bool) else ~v
     if isinstance(expr, And):
-        return evaluate(expr.left, atom) & evaluate(expr.right, atom)
+        return evaluate(expr.left, atom, const) & evaluate(expr.right, atom, const)
     if isinstance(expr, Or):
-        return evaluate(expr.left, atom) | evaluate(expr.right, atom)
+        return evaluate(expr.left, atom, const) | evaluate(expr.right, atom, const)
     if isinstance(expr, Implies):
-        left = evaluate(expr.left, atom)
-        return evaluate(expr.right, atom) | ((not left) if isinstance(left, bool) else ~left)
+        left = evaluate(expr.left, atom, const)
+        return evaluate(expr.right, atom, const) | ((not left) if isinstance(left, bool) else ~left)
     raise TypeError(f"not a state formula: {expr!r}")
 
 

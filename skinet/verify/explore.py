@@ -101,6 +101,17 @@ def peak_resident_bytes() -> int:
     return 0
 
 
+def local_indices(graphs: Sequence[ComponentGraph], marking: Mapping[str, int]) -> list[int] | None:
+    """``marking`` as one local state index per component, or ``None`` when it lies outside their product."""
+    out = []
+    for g in graphs:
+        i = g.index.get(marking[g.name])
+        if i is None:
+            return None
+        out.append(i)
+    return out
+
+
 @dataclass
 class StateSpace:
     """The explored part of the product.
@@ -204,12 +215,10 @@ class StateSpace:
 
     def code(self, marking: Mapping[str, int]) -> int | None:
         """Index of a combined marking, or ``None`` when it is not stored."""
-        c = 0
-        for g, stride in zip(self.components, self.strides):
-            i = g.index.get(marking[g.name])
-            if i is None:
-                return None
-            c += i * stride
+        local = local_indices(self.components, marking)
+        if local is None:
+            return None
+        c = sum(i * stride for i, stride in zip(local, self.strides))
         if c >= MAX_CODE:
             return None
         i = int(self.index(np.array([c]))[0])
@@ -282,17 +291,20 @@ def explore(
     edges: bool = False,
     progress: Callable[[int, int, float], None] | None = None,
     deadline: Deadline | None = None,
+    graphs: Sequence[ComponentGraph] | None = None,
 ) -> StateSpace:
     """Explore the eventless union of ``system`` from ``marking`` (default: initial).
 
     Sources (depth 0) are the live marking and, with ``event_seeds``, every
-    marking one firable event leads to.  See :func:`explore_graphs`.
+    marking one firable event leads to.  ``graphs``: the components' graphs
+    when the caller has them (:func:`component_graphs`).  See
+    :func:`explore_graphs`.
     """
     t0 = time.perf_counter()
     deadline = deadline or Deadline.after(budget, t0)
     marking = dict(marking or system.initial_marking())
     try:
-        graphs = component_graphs(system, marking, event_seeds, deadline)
+        graphs = component_graphs(system, marking, event_seeds, deadline) if graphs is None else graphs
     except Expired:
         # The budget ran out inside a component: only the live marking is known, its successors are not.
         stubs = [stub_component(c.name, c.eventless, marking[c.name]) for c in system.components]

@@ -36,14 +36,19 @@ import numpy as np
 from skinet.net.build import idle_place
 from skinet.system import System
 from skinet.props.formula import PlaceAtom
+from skinet.verify.component import ComponentGraph
 from skinet.verify.ctl import UNREACHED, Kripke, Result, place_values
 from skinet.verify.scc import strong_components
 
 
+def idle_atoms(graphs: Sequence[ComponentGraph], system: System) -> list[PlaceAtom]:
+    """The fairness constraints (SPEC §6.2): one per skill of the components, its idle place marked."""
+    return [PlaceAtom(g.name, idle_place(k.name)) for g in graphs for k in system.component(g.name).skillset.skills]
+
+
 def skill_fairness(kripke: Kripke, system: System) -> list[np.ndarray]:
     """One fairness constraint per skill of ``system``: where that skill is idle."""
-    return [place_values(kripke.space, PlaceAtom(g.name, idle_place(k.name)))
-            for g in kripke.space.components for k in system.component(g.name).skillset.skills]
+    return [place_values(kripke.space, a) for a in idle_atoms(kripke.space.components, system)]
 
 
 class _Graph:

@@ -11,11 +11,15 @@ violation forever) or *undecided*.
 
 Cost: exploration (:mod:`skinet.verify.explore`), then per property one
 counting fixpoint (literal) or one SCC decomposition and backward search per
-bound (fair), all linear in the explored markings and edges.
+bound (fair), all linear in the explored markings and edges.  Where the
+product box reaches :data:`skinet.verify.symbolic.SYMBOLIC_FROM` markings and
+CUDD is installed, fair AF is computed with decision diagrams instead
+(:mod:`skinet.verify.symbolic`: no edge list, exact at every stored marking).
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
@@ -26,7 +30,10 @@ from skinet.options import PredictionOptions
 from skinet.system import System
 from skinet.verify.algorithm1 import PredictionVerdict
 from skinet.verify.ctl import UNREACHED, Kripke, Result, af, check
-from skinet.verify.explore import DEFAULT_MEMORY_LIMIT, Deadline, StateSpace, explore
+from skinet.verify import symbolic
+from skinet.verify.component import ComponentGraph, Expired
+from skinet.verify.explore import (DEFAULT_MEMORY_LIMIT, Deadline, StateSpace, component_graphs, explore,
+                                   local_indices)
 from skinet.verify.compositional import compositional_oracle, one_step
 from skinet.verify.fair import distance_to, fair_af, skill_fairness
 from skinet.verify.forced import forced_mask
@@ -75,6 +82,25 @@ class PropertyRisk:
 
 
 @dataclass
+class SymbolicFair:
+    """Fair AF by decision diagrams: the product and each property's violation, for steps and witnesses."""
+
+    product: symbolic.SymbolicProduct
+    violating: dict[str, symbolic.Function]
+    deadline: Deadline
+
+    def dangerous(self, prop: str, marking: Mapping[str, int]) -> PredictionVerdict:
+        """A marking of fair mu1: the fewest steps to a violation and one such path, when found in time."""
+        graphs = self.product.graphs
+        local = local_indices(graphs, marking)
+        path = None if local is None else self.product.shortest_path(local, self.violating[prop], self.deadline)
+        if path is None:
+            return PredictionVerdict("dangerous")
+        return PredictionVerdict("dangerous", len(path),
+                                 tuple(f"{graphs[i].name}:{graphs[i].labels[(a, b)]}" for i, a, b in path))
+
+
+@dataclass
 class Forecast:
     """The predictor's answer: the explored space and mu1 for every property."""
 
@@ -83,6 +109,7 @@ class Forecast:
     risks: dict[str, PropertyRisk]
     # Verdicts for markings the exploration left undecided (SPEC §6.4), when given.
     fallback: Callable[[str, Mapping[str, int]], PredictionVerdict] | None = None
+    symbolic_fair: SymbolicFair | None = None  # fair AF was computed with decision diagrams
 
     def verdict(self, prop: str, marking: Mapping[str, int]) -> PredictionVerdict:
         """Algorithm 1's view of one marking (the :class:`Prediction` protocol)."""
@@ -91,6 +118,8 @@ class Forecast:
             return self.fallback(prop, marking) if self.fallback else PredictionVerdict("undecided")
         risk = self.risks[prop]
         if risk.mu1.lower[code]:
+            if risk.af == "fair" and self.symbolic_fair is not None:
+                return self.symbolic_fair.dangerous(prop, marking)
             rank = int(self.ranks(prop)[code])
             if rank == UNREACHED:  # fair AF: no violation reachable inside the explored part
                 return PredictionVerdict("dangerous")
@@ -165,17 +194,29 @@ def forecast(
     answer = Deadline.after(budget)
     # Half the budget is kept for the compositional verdicts of what stays undecided.
     deadline = Deadline.after(None if budget is None else 0.5 * budget)
+    try:  # explored once: the scipy warm-up, the exploration and the BDD share them
+        graphs: list[ComponentGraph] | None = component_graphs(
+            system, dict(marking or system.initial_marking()), event_seeds, deadline)
+    except Expired:
+        graphs = None  # explore() stores the live marking alone and says why
     if fair or compositional:
         # scipy imported when the graphs may need it (a one-time 0.15-0.3 s, not counted in the budget).
-        imported = warm_up_for(system, marking, event_seeds, deadline)
+        imported = warm_up_for(graphs)
         for d in (answer, deadline):
             if d.at is not None:
                 d.at += imported
+    by_bdd = (fair and graphs is not None and math.prod(g.size for g in graphs) >= symbolic.SYMBOLIC_FROM
+              and symbolic.available())
     space = explore(system, marking, max_depth=max_depth, event_seeds=event_seeds, progress=progress,
                     memory_limit=memory_limit, properties=len(system.properties) * (2 if full else 1),
-                    edges=fair, deadline=deadline)
+                    edges=fair and not by_bdd, deadline=deadline, graphs=graphs)
     kripke = Kripke(space)
     fairness: list[np.ndarray] | None = None
+    # Past the deadline the BDD would decide nothing: the explicit fair AF then says
+    # "undecided" at once, without the dd import or an edge list.
+    product = symbolic.SymbolicProduct(space.components) if by_bdd and not deadline.expired() else None
+    symbolic_fairness = [] if product is None else product.skill_fairness(system)
+    phi = {} if product is None else {p.name: product.formula(p.expr) for p in system.properties}
     risks = {}
     for p in system.properties:
         opts = options.of(p.name)
@@ -183,7 +224,9 @@ def forecast(
         risk = PropertyRisk(p.name, violated.lower, opts.af)
         if full or opts.af == "literal":
             risk.literal = af(kripke, violated)
-        if full or opts.af == "fair":
+        if (full or opts.af == "fair") and product is not None:
+            risk.fair = _symbolic_fair_af(kripke, product, phi[p.name], symbolic_fairness)
+        elif full or opts.af == "fair":
             fairness = skill_fairness(kripke, system) if fairness is None else fairness
             risk.fair = fair_af(kripke, violated, fairness)
         if full:
@@ -202,4 +245,19 @@ def forecast(
             for name in props:
                 fallback(name, after)
 
-    return Forecast(space, kripke, risks, fallback if compositional else None)
+    sym = None if product is None else SymbolicFair(product, {name: ~f for name, f in phi.items()}, answer)
+    return Forecast(space, kripke, risks, fallback if compositional else None, sym)
+
+
+def _symbolic_fair_af(
+    kripke: Kripke, product: symbolic.SymbolicProduct, phi: symbolic.Function,
+    fairness: list[symbolic.Function],
+) -> Result:
+    """Fair AF not phi over the stored markings, exact, or undecided everywhere past the deadline."""
+    eg = product.fair_eg(phi, fairness, kripke.deadline)
+    if eg is None:
+        kripke.cut = True
+        return Result(np.zeros(kripke.space.size, dtype=bool), kripke.stored.copy())
+    sat = np.logical_not(product.mask(eg, kripke.space))
+    sat &= kripke.stored
+    return Result(sat, sat)

@@ -17,14 +17,13 @@ from __future__ import annotations
 import math
 import sys
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 if TYPE_CHECKING:
-    from skinet.system import System
-    from skinet.verify.explore import Deadline
+    from skinet.verify.component import ComponentGraph
 
 # Nodes plus edges up to which Python's Tarjan is used (when scipy is not loaded yet):
 # about 5 ms here, against 0.15-0.3 s for importing scipy (benchmarks/bench_startup.py).
@@ -72,21 +71,13 @@ def strong_components_of_lists(succ: Sequence[Sequence[int]]) -> tuple[int, np.n
     return strong_components(indptr, np.array([t for s in unique for t in s], dtype=np.int32))
 
 
-def warm_up_for(
-    system: System, marking: Mapping[str, int] | None, event_seeds: bool = True, deadline: Deadline | None = None
-) -> float:
-    """:func:`warm_up` for exploring ``system`` from ``marking``: the product of its components' graphs bounds
-    every graph fair AF decomposes (the component graphs are memoised: exploring reuses them).
+def warm_up_for(graphs: Sequence[ComponentGraph] | None) -> float:
+    """:func:`warm_up` for exploring the product of ``graphs``: it bounds every graph fair AF decomposes.
 
+    ``None`` (the budget ran out inside a component): scipy is imported anyway.
     Returns the seconds the one-time import took (callers move their deadlines by as much).
-    Component graphs are explored within ``deadline``; past it scipy is imported anyway.
     """
-    from skinet.verify.component import Expired
-    from skinet.verify.explore import component_graphs
-
-    try:
-        graphs = component_graphs(system, marking or system.initial_marking(), event_seeds, deadline)
-    except Expired:
+    if graphs is None:
         return warm_up(SMALL_GRAPH + 1)
     box = math.prod(g.size for g in graphs)
     return warm_up(box + sum(g.edge_count() * (box // g.size) for g in graphs))
