@@ -5,13 +5,17 @@ skillset's :class:`~skinet.ros.derive.Deriver` and numbers the resulting
 :class:`~skinet.wire.messages.CanonicalEvent` per skillset (0, 1, 2, ...) within
 an epoch, the feed's start time in milliseconds, so that a monitor recognises a
 restarted bridge (issue 14).  A payload that does not decode is logged and dropped
-(SPEC §7).  A status that overtook one of its responses waits for it (bounded).
+(SPEC §7).  A status that overtook one of its responses waits for it (bounded), and
+the events of other skillsets that arrive meanwhile wait behind it: the bridge emits
+events in the order their messages arrived, across skillsets too, so that the monitor
+follows the interleaving the robot went through.
 """
 
 from __future__ import annotations
 
 import logging
 import time
+from collections import deque
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 
@@ -38,12 +42,21 @@ class Counters:
 
 
 @dataclass
+class _Slot:
+    """Events in arrival order; an open slot waits for a held status (and takes its skillset's events)."""
+
+    events: list[CanonicalEvent] = field(default_factory=list)
+    open: bool = True
+
+
+@dataclass
 class _Held:
     """A status waiting for the responses it overtook."""
 
     status: derive.Status
     since: float  # clock time it arrived
     awaits: str  # what it waits for (for the log)
+    slot: _Slot = field(default_factory=_Slot)  # its place in the feed's order
 
 
 @dataclass
@@ -65,7 +78,10 @@ class Feed:
     A status that overtook a response it needs (:meth:`Deriver.awaits`) is held
     until that response comes, a newer status comes, or ``hold`` seconds of
     ``clock`` pass (:meth:`expire`, called by the bridge when :meth:`deadline` is
-    due); a status that needs nothing is derived at once.
+    due); a status that needs nothing is derived at once.  Events come out in the
+    order their messages came in: those of other skillsets that follow a held status
+    wait with it (at most ``hold`` seconds), while the held skillset's own events from
+    responses go before it, as the messages they come from were sent before it.
     """
 
     def __init__(self, system: System, typemap: Mapping[str, str], source: str,
@@ -79,6 +95,7 @@ class Feed:
         self.counters = Counters()
         self.statuses: dict[str, int] = {c.name: 0 for c in system.components}  # statuses derived per skillset
         self.managers: dict[str, _Manager] = {}
+        self._order: deque[_Slot] = deque()
         for c in system.components:
             store = build_typestore(c.skillset, typemap, extra_types)
             topics = [t for t in manager_topics(c.skillset) if t.kind in WATCHED]
@@ -114,76 +131,100 @@ class Feed:
             self.counters.malformed += 1
             self._report(m, f"malformed {topic.topic} dropped ({type(exc).__name__}: {exc})",
                          f"malformed {topic.topic} {type(exc).__name__}")
-            return []
+            return self._drain()
         if topic.kind != "status":
-            events = self._emit(m, out)
+            self._place(m, self._emit(m, out))
             if m.held is not None and m.deriver.awaits(m.held.status) is None:
-                events += self._release(m)
-            return events
+                self._release(m)
+            return self._drain()
         self._check_model(m, msg)
-        events = self._check_publisher(m, attachment) + self._check_ids(m, status)
-        events += self._release(m) if m.held is not None else []  # a newer status: the held one goes first
+        self._check_publisher(m, attachment)
+        self._check_ids(m, status)
+        if m.held is not None:  # a newer status: the held one goes first
+            self._release(m)
         awaits = None if m.restart else m.deriver.awaits(status)  # a new initial status needs nothing
         if awaits is not None and self.hold > 0:
             m.held = _Held(status, self.clock(), awaits)
-            return events
-        return events + self._status(m, status)
+            self._order.append(m.held.slot)
+        else:
+            self._place(m, self._status(m, status))
+        return self._drain()
 
     def deadline(self) -> float | None:
-        """Clock time when the first held status must be released (``None``: none held)."""
+        """Clock time when :meth:`expire` is due: a held status must be released, or events
+        released outside :meth:`feed` wait to be taken (``None``: nothing to do)."""
+        if self._order and not self._order[0].open:
+            return self.clock()
         return min((m.held.since + self.hold for m in self.managers.values() if m.held), default=None)
 
     def expire(self, now: float | None = None) -> list[CanonicalEvent]:
-        """Derive the statuses held for ``hold`` seconds or more, without what they wait for."""
+        """Derive the statuses held for ``hold`` seconds or more, without what they wait for;
+        returns the events now in order (also those :meth:`restarted` released)."""
         now = self.clock() if now is None else now
-        events: list[CanonicalEvent] = []
         for name, m in self.managers.items():
             if m.held is not None and now >= m.held.since + self.hold:
                 log.warning("%s: status derived without %s (not received within %.2f s)", name, m.held.awaits,
                             self.hold)
-                events += self._release(m)
-        return events
+                self._release(m)
+        return self._drain()
 
     def flush(self) -> list[CanonicalEvent]:
         """Derive every held status now (end of a replay)."""
-        return [ev for m in self.managers.values() if m.held is not None for ev in self._release(m)]
+        for m in self.managers.values():
+            if m.held is not None:
+                self._release(m)
+        return self._drain()
 
-    def _release(self, m: _Manager) -> list[CanonicalEvent]:
+    def _place(self, m: _Manager, events: list[CanonicalEvent]) -> None:
+        """Events of ``m`` that are not its held status: before that status, else after everything."""
+        if m.held is not None:
+            m.held.slot.events += events
+        elif events:
+            self._order.append(_Slot(events, open=False))
+
+    def _release(self, m: _Manager) -> None:
+        """Derive ``m``'s held status in its place."""
         assert m.held is not None
-        status, m.held = m.held.status, None
-        return self._status(m, status)
+        held, m.held = m.held, None
+        held.slot.events += self._status(m, held.status)
+        held.slot.open = False
 
-    def restarted(self, skillset: str, why: str) -> list[CanonicalEvent]:
+    def _drain(self) -> list[CanonicalEvent]:
+        """The events whose turn has come: up to the first held status."""
+        out: list[CanonicalEvent] = []
+        while self._order and not self._order[0].open:
+            out += self._order.popleft().events
+        return out
+
+    def restarted(self, skillset: str, why: str) -> None:
         """``skillset``'s manager restarted: its next status is a new initial status (SPEC §7).
 
-        Returns the events of a status still held from before.  The monitor then
-        follows the new status, and reports a divergence when no transition of the
-        model leads to it.
+        A status still held from before is derived in its place (the next :meth:`feed`
+        or :meth:`expire` returns its events).  The monitor then follows the new status,
+        and reports a divergence when no transition of the model leads to it.
         """
         m = self.managers[skillset]
-        events = self._release(m) if m.held is not None else []
+        if m.held is not None:
+            self._release(m)
         if not m.restart:
             self.counters.restarts += 1
             log.warning("%s: manager %s restarted (%s); its next status starts afresh", skillset,
                         m.component.manager, why)
         m.restart = why
         m.publisher = None
-        return events
 
-    def _check_publisher(self, m: _Manager, attachment: bytes | None) -> list[CanonicalEvent]:
+    def _check_publisher(self, m: _Manager, attachment: bytes | None) -> None:
         if attachment is None:
-            return []
+            return
         try:
             sequence, _, gid = parse_rmw_attachment(attachment)
         except ValueError:
-            return []
-        events = []
+            return
         if m.publisher is not None and m.deriver.last is not None and \
                 (gid != m.publisher[0] or sequence <= m.publisher[1]):
             why = "new status publisher" if gid != m.publisher[0] else "status sequence number went back"
-            events = self.restarted(m.component.name, why)
+            self.restarted(m.component.name, why)
         m.publisher = (gid, sequence)
-        return events
 
     def _check_model(self, m: _Manager, msg: Mapping) -> None:
         """Count a status naming resources, states or skills the model lacks; report each kind once."""
@@ -211,13 +252,14 @@ class Feed:
             m.reported.add(kind)
             log.warning("%s: %s (reported once; see the bridge's counters)", m.component.name, message)
 
-    def _check_ids(self, m: _Manager, status: derive.Status) -> list[CanonicalEvent]:
+    def _check_ids(self, m: _Manager, status: derive.Status) -> None:
         """A manager never forgets an execution id: ids back to '' mean it restarted."""
         last = m.held.status if m.held is not None else m.deriver.last
         if last is None or m.restart:
-            return []
+            return
         reset = [k for k, v in status.skills.items() if v.id == "" and last.skills[k].id != ""]
-        return self.restarted(m.component.name, f"skill ids reset: {', '.join(reset)}") if reset else []
+        if reset:
+            self.restarted(m.component.name, f"skill ids reset: {', '.join(reset)}")
 
     def _status(self, m: _Manager, status: derive.Status) -> list[CanonicalEvent]:
         self.statuses[m.component.name] += 1

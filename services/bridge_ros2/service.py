@@ -208,6 +208,7 @@ class Bridge:
         if back:
             with self._fed:
                 self.feed.restarted(name, "the manager (or its gateway) came back")
+            self._queue.put(())  # a status it held is released: the worker publishes its events
         self.request_status(name)
 
     def request_status(self, skillset: str) -> None:

@@ -385,10 +385,13 @@ def test_rosbag_replay_equals_live(client_factory, spot_arm, tmp_path: Path, plu
             e.model_copy(update={"epoch": 0}) for e in events.of(ss)]
         assert len({e.epoch for e in replayed} | {e.epoch for e in events.of(ss)}) == 2
     assert feed.counters.malformed == 0
-    # In real time the replay takes as long as the recording (the bag's, not the recorder's samples:
-    # a late status may reach the recorder after the bag was written).
+    # In real time the replay takes as long as the recording of the topics it follows (the bag's, not the
+    # recorder's samples: a late status may reach the recorder after the bag was written; requests and
+    # other unwatched topics may come first or last and are not waited for).
+    watched = Feed(system, typemap, SOURCE).by_fqn()
     with AnyReader([bag]) as reader:
-        stamps = [t for _, t, _ in reader.messages()]
+        stamps = [t for _, t, _ in reader.messages(connections=[c for c in reader.connections
+                                                                if c.topic in watched])]
     span = (max(stamps) - min(stamps)) * 1e-9
     started = time.monotonic()
     again: list[CanonicalEvent] = []
@@ -461,6 +464,46 @@ def test_a_held_status_is_released_after_the_hold_time(spot_arm):
     late = feed.expire()
     assert [(e.transition, e.status.resources["power_status"]) for e in late] == [(None, "PowerOn")]
     assert feed.deadline() is None and put([response]) == []  # too late: a note only
+
+
+def test_events_of_other_skillsets_wait_behind_a_held_status(spot_arm):
+    """The monitor sees the robot's interleaving: a skillset's status waiting for its response keeps
+    the other skillsets' later events behind it (the arm was ready before the legs started)."""
+    system, typemap = spot_arm
+    now = [0.0]
+    feed = Feed(system, typemap, SOURCE, hold=0.5, clock=lambda: now[0])
+    managers, topics = {}, {}
+    for name in ("spot", "manipulator"):
+        comp = system.component(name)
+        managers[name] = Manager(comp.skillset, feed.managers[name].store, info=comp.manager)
+        topics[name] = {t.topic: t for t in feed.managers[name].topics}
+
+    def put(name: str, messages) -> list[tuple[str, str | None]]:
+        store = feed.managers[name].store
+        return [(ev.skillset, ev.transition) for m in messages if m.topic in topics[name]
+                for ev in feed.feed(name, topics[name][m.topic], cdr(store, m.typename, m.msg))]
+
+    assert put("spot", managers["spot"].status_request()) == [("spot", None)]
+    assert put("manipulator", managers["manipulator"].status_request()) == [("manipulator", None)]
+    assert put("manipulator", managers["manipulator"].skill_request("arm_ready", "a")) == \
+        [("manipulator", "arm_ready.start")]
+    *_, response, status = managers["manipulator"].terminate("arm_ready", "success", "ready")
+    assert put("manipulator", [status]) == []  # overtook its response: held
+    assert put("spot", managers["spot"].skill_request("init_power", "b")) == []  # came after: waits behind it
+    assert feed.deadline() == 0.5
+    assert put("manipulator", [response]) == [("manipulator", "arm_ready.success.ready"),
+                                              ("spot", "init_power.start")]
+    assert feed.deadline() is None
+    # A response that never comes: the others wait the hold time, no more, and still come after it.
+    assert put("manipulator", managers["manipulator"].skill_request("arm_joystick", "c")) == \
+        [("manipulator", "arm_joystick.start")]
+    *_, status = managers["manipulator"].terminate("arm_joystick", "success", "released")
+    now[0] = 1.0
+    assert put("manipulator", [status]) == []
+    assert put("spot", managers["spot"].terminate("init_power", "success", "powered_on")) == []
+    now[0] = 1.5
+    assert [(e.skillset, e.transition) for e in feed.expire()] == [
+        ("manipulator", None), ("spot", "init_power.success.powered_on")]
 
 
 def test_bridge_learns_the_current_status_at_start_up(client_factory, spot_arm):

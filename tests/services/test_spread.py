@@ -95,7 +95,9 @@ def test_pool_picks_least_outstanding_then_least_recent_and_avoids_suspects() ->
 def test_queries_alternate_between_two_instances(pool_of, monitor_factory, session, system) -> None:
     pool_of("pa", "pb")
     reports = Reports(session)
-    monitor = monitor_factory(system)
+    # Stalls have their own tests: here a worker starved for 0.5 s by a loaded machine (CI builds images
+    # beside it) must not make the monitor suspect an instance and skew the rotation.
+    monitor = monitor_factory(system, stall=5.0)
     assert monitor.predictor_stats.instances == ["pa", "pb"]
     events = Events(session)
     reports.wait("unsafe", lambda m: m.seq == 0 and not m.prediction_stale, timeout=10)
