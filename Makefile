@@ -2,9 +2,10 @@
 # Both create .venv and install the project with its test dependencies first.
 # `make test-quick` skips the tests marked slow (Docker images and containers,
 # cargo and other native builds): for development, not a replacement of `make test`.
-# Both run pytest on every core (pytest-xdist, at most 4 workers); the slow tests
-# form one group that runs on a single worker, in order, while the others share the
-# rest.  PYTEST_ADDOPTS adds options (e.g. -k, -x); pytest's exit status 5 (nothing
+# Both run pytest on every core (pytest-xdist, at most 4 workers); a module of slow
+# tests, or of tests sharing a module-scoped fixture, runs whole on one worker, in
+# file order (tests/conftest.py), while the other tests are spread one by one.
+# PYTEST_ADDOPTS adds options (e.g. -k, -x); pytest's exit status 5 (nothing
 # collected) fails both targets like any other non-zero status.
 
 PYTHON ?= python3

@@ -38,19 +38,26 @@ def _shares_module_state(item: pytest.Item) -> bool:
                                     for defs in info.name2fixturedefs.values() for d in defs)
 
 
+# Modules that time the services under load run one after the other on one worker: the rate-limit
+# test's flood saturates both cores of a 2-core machine, and beside it the container mission (steps
+# 0.2 s apart) saw events overtake each other and verdicts come 1.7 s late.
+SHARED_GROUPS = {"tests/deploy/test_containers.py": "timed", "tests/deploy/test_rate_limit.py": "timed"}
+
+
 @pytest.hookimpl(tryfirst=True)  # before xdist's own hook reads the groups
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     """Under ``--dist loadgroup`` (``make test``) some modules run whole on one worker, in file order.
 
     These are the slow modules and those whose tests share a module-scoped fixture: such a fixture
     (a compose stack, a fleet, a deployment the tests move on step by step) is then set up once and
-    its tests see it in the order they were written.  The Docker images and the cargo target are
-    built once, behind ``docker/build.sh``'s lock and cargo's own.  Every other test is handed out
-    alone.
+    its tests see it in the order they were written; the modules of ``SHARED_GROUPS`` share one
+    group.  The Docker images and the cargo target are built once, behind ``docker/build.sh``'s lock
+    and cargo's own.  Every other test is handed out alone.
     """
     for item in items:
         if item.get_closest_marker("slow") is not None or _shares_module_state(item):
-            item.add_marker(pytest.mark.xdist_group(item.nodeid.split("::")[0]))
+            module = item.nodeid.split("::")[0]
+            item.add_marker(pytest.mark.xdist_group(SHARED_GROUPS.get(module, module)))
 
 
 def load_corpus_skillset(name: str) -> Skillset:

@@ -31,18 +31,26 @@ def test_ci_fails_when_pytest_collects_nothing() -> None:
     assert "no tests ran" in r.stdout and "Error 5" in r.stderr, r.stdout[-2000:] + r.stderr[-2000:]
 
 
+def _groups(*args: str) -> list[tuple[str, str]]:
+    """(module, xdist group) of each test ``make test``'s options would hand out with ``args``."""
+    r = subprocess.run([sys.executable, "-m", "pytest", "-n", "2", "--dist", "loadgroup", "-v", "-p",
+                        "no:cacheprovider", "--setup-plan", *args], cwd=REPO, capture_output=True, text=True,
+                       timeout=300)
+    assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
+    # The workers name a grouped test ``NODEID@GROUP``; --setup-plan runs neither fixtures nor tests.
+    ids = [line.strip() for line in r.stdout.splitlines() if "::" in line]
+    return [(i.split("::")[0], i.rsplit("@", 1)[1] if "@" in i else "") for i in ids]
+
+
 def test_slow_tests_are_grouped() -> None:
     """``make test``'s ``--dist loadgroup`` keeps each slow module on one worker (see conftest.py).
 
     Their module-scoped stacks are set up once that way; pytest 9.2 broke the grouping silently
-    (pytest-xdist#1386), so the versions in pyproject.toml are checked here.
+    (pytest-xdist#1386), so the versions in pyproject.toml are checked here.  The modules that time
+    services under load share one group.
     """
     files = ["tests/net/test_promela.py", "tests/deploy/test_rust_client.py", "tests/deploy/test_fleet.py"]
-    r = subprocess.run([sys.executable, "-m", "pytest", "-n", "2", "--dist", "loadgroup", "-v", "-p",
-                        "no:cacheprovider", "--setup-plan", "-m", "slow", *files],
-                       cwd=REPO, capture_output=True, text=True, timeout=300)
-    assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
-    # The workers name a grouped test ``NODEID@GROUP``; --setup-plan runs neither fixtures nor tests.
-    ids = [line.strip() for line in r.stdout.splitlines() if "::" in line]
-    groups = {i.rsplit("@", 1)[0].split("::")[0]: i.rsplit("@", 1)[1] for i in ids}
-    assert len(ids) == 9 and groups == {f: f for f in files}, r.stdout[-2000:]
+    slow = _groups("-m", "slow", *files)
+    assert len(slow) == 9 and dict(slow) == {f: f for f in files}, slow
+    timed = _groups("tests/deploy/test_containers.py", "tests/deploy/test_rate_limit.py")
+    assert len(timed) == 7 and {g for _, g in timed} == {"timed"}, timed

@@ -220,6 +220,7 @@ class MissionObserver:
         self.state_space: list[tuple[float, StateSpaceReport]] = []
         self.arrivals: dict[tuple[str, int], float] = {}  # ("state"|"verdicts", seq) -> arrival
         self.event_arrivals: dict[tuple[str, int], float] = {}  # (skillset, event seq) -> arrival
+        self.event_log: list[tuple[float, float, str]] = []  # (arrival, source stamp, skillset:transition#seq)
         self.last_arrival = 0.0
         self._subs = [
             session.declare_subscriber(keys.events(system, "*"), self._on(CanonicalEvent, self._event)),
@@ -243,6 +244,7 @@ class MissionObserver:
 
     def _event(self, now: float, m: CanonicalEvent) -> None:
         self.event_arrivals.setdefault((m.skillset, m.seq), now)
+        self.event_log.append((now, m.stamp, f"{m.skillset}:{m.transition}#{m.seq}"))
 
     def _state(self, now: float, m: LiveState) -> None:
         self.states[m.seq] = m
@@ -284,7 +286,10 @@ class MissionObserver:
             out: dict[int, float | None] = {}
             for (kind, seq), t in self.arrivals.items():
                 if kind == "state" and t >= since:
-                    later = [ft for ft, fs in fresh if fs >= seq and ft >= t]
+                    # A report of seq >= this one follows this state, whatever its arrival stamp: the
+                    # two keys' callbacks run on Zenoh's threads, so a report published right after its
+                    # state (a cached prediction, the mission's last marking) may be stamped first.
+                    later = [max(ft, t) for ft, fs in fresh if fs >= seq]
                     out[seq] = min(later) - t if later else None
             return dict(sorted(out.items()))
 
@@ -313,6 +318,13 @@ class MissionObserver:
     def quiet_for(self, seconds: float) -> bool:
         with self._lock:
             return bool(self.states) and time.monotonic() - self.last_arrival >= seconds
+
+    def event_trace(self) -> str:
+        """The canonical events as this observer received them, with their source stamps (for failures)."""
+        with self._lock:
+            log = list(self.event_log)
+        t0 = log[0][0] if log else 0.0
+        return "\n".join(f"{arrival - t0:8.3f} {stamp:.3f} {name}" for arrival, stamp, name in log)
 
     def events(self) -> list[tuple[int, str, str]]:
         """``(seq, skillset, transition)`` of every state published, in seq order."""
