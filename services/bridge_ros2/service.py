@@ -94,8 +94,11 @@ class Bridge:
             manager = m.component.manager
             self._events[name] = event_publisher(session, keys.events(system.name, name))
             watched = {t.topic: t for t in m.topics}
+            # On Zenoh's own thread: a Python thread per subscriber (indirect) would let one manager's
+            # messages overtake another's, and the monitor follow an interleaving the robot never took.
             self._subscribers.append(session.declare_subscriber(
-                style.all_topics(manager, m.component.skillset), self._callback(name, manager, watched)))
+                style.all_topics(manager, m.component.skillset),
+                zenoh.handlers.Callback(self._callback(name, manager, watched), indirect=False)))
             req = next(t for t in manager_topics(m.component.skillset) if t.kind == "status_request")
             self._requests[name] = (manager, req, encode(m.store, EMPTY_TYPE, default_instance(m.store, EMPTY_TYPE)))
             own += [("MS", topic_fqn(manager, t.topic), t.typename, style.type_hash(m.store, t.typename))
