@@ -158,7 +158,10 @@ def test_formerly_refused_systems_are_answered(n_spot: int, n_arm: int, seeds: b
     report = fc.report()
     assert not report["complete"] and report["truncated_by"] in ("budget", "memory")
     assert report["markings"] > 0 and report["markings"] == sum(fc.space.layers)
-    assert (fc.symbolic_fair is not None) == symbolic.available()  # fair AF (the default) on a box this big
+    # Fair AF (the default) on a box this big is computed by BDD, unless the half budget the exploration
+    # may take was gone before it (a loaded machine): then it is undecided, never guessed.
+    if fc.symbolic_fair is None:
+        assert not symbolic.available() or report["truncated_by"] == "budget"
     for counts in report["properties"].values():
         assert counts["dangerous"] + counts["undecided"] + counts["safe"] == report["markings"]
         if fc.symbolic_fair is None:
