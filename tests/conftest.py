@@ -40,7 +40,7 @@ def _shares_module_state(item: pytest.Item) -> bool:
 
 # Modules that time the services under load run one after the other on one worker: the rate-limit
 # test's flood saturates both cores of a 2-core machine, and beside it the container mission (steps
-# 0.2 s apart) saw events overtake each other and verdicts come 1.7 s late.
+# 0.2 s apart) saw verdicts come 1.7 s late.
 SHARED_GROUPS = {"tests/deploy/test_containers.py": "timed", "tests/deploy/test_rate_limit.py": "timed"}
 
 

@@ -190,13 +190,13 @@ def forecast(
     decided by :mod:`skinet.verify.compositional` where it can (SPEC §6.4).
     """
     options = options or system.prediction
+    marking = dict(marking or system.initial_marking())
     fair = full or any(options.of(p.name).af == "fair" for p in system.properties)
     answer = Deadline.after(budget)
     # Half the budget is kept for the compositional verdicts of what stays undecided.
     deadline = Deadline.after(None if budget is None else 0.5 * budget)
     try:  # explored once: the scipy warm-up, the exploration and the BDD share them
-        graphs: list[ComponentGraph] | None = component_graphs(
-            system, dict(marking or system.initial_marking()), event_seeds, deadline)
+        graphs: list[ComponentGraph] | None = component_graphs(system, marking, event_seeds, deadline)
     except Expired:
         graphs = None  # explore() stores the live marking alone and says why
     if fair or compositional:
@@ -241,7 +241,7 @@ def forecast(
 
     if compositional and kripke.truncated_by is not None:
         # Algorithm 1 asks about the one-step successors: decide them now, within the budget.
-        for after in one_step(system, dict(marking or system.initial_marking())):
+        for after in one_step(system, marking):
             for name in props:
                 fallback(name, after)
 

@@ -286,9 +286,9 @@ class MissionObserver:
             out: dict[int, float | None] = {}
             for (kind, seq), t in self.arrivals.items():
                 if kind == "state" and t >= since:
-                    # A report of seq >= this one follows this state, whatever its arrival stamp: the
-                    # two keys' callbacks run on Zenoh's threads, so a report published right after its
-                    # state (a cached prediction, the mission's last marking) may be stamped first.
+                    # A report of seq >= this one follows this state, whatever its arrival stamp: each
+                    # key's callback runs in a Python thread of its own, so a report published right after
+                    # its state (a cached prediction, the mission's last marking) may be stamped first.
                     later = [max(ft, t) for ft, fs in fresh if fs >= seq]
                     out[seq] = min(later) - t if later else None
             return dict(sorted(out.items()))
