@@ -236,7 +236,7 @@ def cpu_seconds(pid: int) -> float:
 def across_processes(n: int, burst: int) -> list[list[object]]:
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     client = ["--mode", "client", "--connect", endpoint, "--no-multicast-scouting"]
-    router = spawn(["-m", "skinet.cli.main", "router", "--listen", endpoint, "--no-auth"])  # loopback only
+    router = spawn(["-m", "skinet_cli.main", "router", "--listen", endpoint, "--no-auth"])  # loopback only
     procs = [router]
     rows = []
     try:

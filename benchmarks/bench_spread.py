@@ -146,7 +146,7 @@ def main() -> None:
     system, marking = fleet_system(folder, args.pairs)
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     zargs = ["--mode", "client", "--connect", endpoint, "--no-multicast-scouting"]
-    router = spawn(["-m", "skinet.cli.main", "router", "--listen", endpoint, "--no-auth"])  # loopback only
+    router = spawn(["-m", "skinet_cli.main", "router", "--listen", endpoint, "--no-auth"])  # loopback only
     procs: list[subprocess.Popen] = [router]
     rows = []
     try:

@@ -4,7 +4,7 @@ Times ``skinet unsafe skillsets/spot_arm.toml`` end to end in fresh processes
 (CPU time, user + system: wall time on the shared 2-core machine varies twofold;
 least of ``--repeats`` runs, after one warm-up run that writes the .pyc files
 and the lark tables; ``--no-bytecode`` compiles every module at every run, as
-this sandbox's PYTHONDONTWRITEBYTECODE=1 does), and the import of ``skinet.cli.main`` alone.  The
+this sandbox's PYTHONDONTWRITEBYTECODE=1 does), and the import of ``skinet_cli.main`` alone.  The
 baseline is a temporary ``git worktree`` of ``--baseline`` (default: the
 commit before issue 10), run with the same interpreter, alternating with this
 tree's runs.  This tree runs twice: with the lark tables cached (the usual
@@ -28,8 +28,11 @@ from pathlib import Path
 from common import ROOT, table, verdict
 
 BASELINE = "a542d23"
-UNSAFE = "from skinet.cli.main import main; raise SystemExit(main(['unsafe', 'skillsets/spot_arm.toml']))"
-IMPORT = "import skinet.cli.main"
+# The command line moved from skinet/cli/ to skinet_cli/ (issue 25): the baseline tree has the old one.
+_MAIN = ("try:\n    from skinet_cli import main as cli\nexcept ImportError:\n"
+         "    from skinet.cli import main as cli\n")
+UNSAFE = _MAIN + "raise SystemExit(cli.main(['unsafe', 'skillsets/spot_arm.toml']))"
+IMPORT = _MAIN
 
 
 BYTECODE = True  # see --no-bytecode
@@ -88,7 +91,7 @@ def main() -> None:
         try:
             ((empty, empty_wall),) = least([(ROOT, False)], "pass", args.repeats, cache)
             rows = []
-            for label, code in (("import skinet.cli.main", IMPORT), ("skinet unsafe spot_arm.toml", UNSAFE)):
+            for label, code in (("import skinet_cli.main", IMPORT), ("skinet unsafe spot_arm.toml", UNSAFE)):
                 (theirs, theirs_wall), (ours, ours_wall), (cold, cold_wall) = least(
                     [(base, False), (ROOT, False), (ROOT, True)], code, args.repeats, cache)
                 theirs, ours, cold = theirs - empty, ours - empty, cold - empty

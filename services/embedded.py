@@ -24,10 +24,10 @@ from typing import TYPE_CHECKING, TextIO
 
 from services.common.zenoh_config import client_name, login, open_session, session_config
 from services.monitor import Monitor, MonitorView, start_monitor
-from skinet.cli.memory import memory_limit
-from skinet.cli.options import load_live_system
+from skinet_cli.memory import memory_limit
+from skinet_cli.options import load_live_system
 from skinet.explain import warning_line
-from skinet.cli.render import seconds, table
+from skinet_cli.render import seconds, table
 from skinet.system import System
 from skinet.wire.messages import LiveState, StateSpaceReport, UnsafeReport, Verdicts
 

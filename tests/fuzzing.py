@@ -40,7 +40,7 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:  # run as a script
     sys.path.insert(0, str(REPO))
 
-from skinet.cli.main import main as skinet_main  # noqa: E402
+from skinet_cli.main import main as skinet_main  # noqa: E402
 from skinet.errors import SkinetError  # noqa: E402
 from skinet.files import load_state, load_system  # noqa: E402
 from skinet.lang.larkerrors import MAX_FORMULA_CHARS, MAX_SOURCE_CHARS  # noqa: E402

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from skinet.cli.main import main
+from skinet_cli.main import main
 from skinet.errors import SourceError
 from skinet.files import load_model, load_state, load_system, load_typemap
 from skinet.system import marking_problems

@@ -137,7 +137,7 @@ def test_assisted_run_heeds_forced_then_explicit() -> None:
 
 
 def test_demo_tells_forced_warnings_apart(capsys: pytest.CaptureFixture[str]) -> None:
-    from skinet.cli.main import main
+    from skinet_cli.main import main
 
     paths = [str(MISSIONS / "mobile_unassisted.toml"), str(MISSIONS / "mobile_assisted.toml")]
     assert main(["demo", "--core", *paths]) == 0

@@ -25,7 +25,7 @@ import services.dashboard.__main__ as dashboard_main
 import services.monitor.__main__ as monitor_main
 import services.predictor.__main__ as predictor_main
 import services.simulator.__main__ as simulator_main
-from skinet.cli.main import build_parser, main
+from skinet_cli.main import build_parser, main
 
 ROOT = Path(__file__).resolve().parents[1]
 README = (ROOT / "README.md").read_text(encoding="utf-8")

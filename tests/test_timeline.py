@@ -14,11 +14,11 @@ import pytest
 import zenoh
 
 from services.common.zenoh_config import session_config
-from skinet.cli.main import main
+from skinet_cli.main import main
 from skinet.errors import SourceError
 from skinet.files import load_system, read_text
 from skinet.mission import parse_scenario, replay
-from skinet.cli.timeline import load_log
+from skinet_cli.timeline import load_log
 from skinet.mission_log import records_to_log
 from skinet.plot.timeline import draw, flagged, lanes_of, violations
 from skinet.system import System

@@ -22,7 +22,7 @@ from services.bridge_ros2.service import default_source, start_bridge
 from services.common.cli import add_instance_arg, add_log_arg, one_line_errors, setup_logging
 from services.common.events import event_publisher
 from services.common.zenoh_config import add_zenoh_args, config_from_args, open_session
-from skinet.cli.options import ArgumentParser, count, key_prefix, load_live_system, seconds
+from skinet_cli.options import ArgumentParser, count, key_prefix, load_live_system, seconds
 from skinet.errors import SkinetError, SourceError
 from skinet.files import load_typemap
 from skinet.ros.keys import KeyStyle

@@ -11,7 +11,7 @@ import socket
 import sys
 from collections.abc import Callable, Sequence
 
-from skinet.cli.options import key_name
+from skinet_cli.options import key_name
 from skinet.errors import SkinetError, SourceError
 
 LEVELS = ("DEBUG", "INFO", "WARNING", "ERROR", "CRITICAL")

@@ -19,7 +19,7 @@ from services.common.cli import add_log_arg, setup_logging
 from services.common.zenoh_config import add_zenoh_args, client_name, config_from_args, open_session
 from services.dashboard.observer import Observer, monitored_systems
 from services.dashboard.server import Dashboard
-from skinet.cli.options import count, load_live_system, seconds
+from skinet_cli.options import count, load_live_system, seconds
 from skinet.errors import SkinetError
 from skinet.system import System
 from skinet.wire import keys

@@ -13,7 +13,7 @@ from services.common.zenoh_config import add_zenoh_args, client_name, config_fro
 from services.common.ratelimit import add_rate_args
 from services.monitor.check import add_policy_arg
 from services.monitor.service import start_monitor
-from skinet.cli.options import ArgumentParser, key_name, load_live_system, seconds
+from skinet_cli.options import ArgumentParser, key_name, load_live_system, seconds
 
 
 def build_parser() -> ArgumentParser:

@@ -19,24 +19,46 @@ from __future__ import annotations
 import logging
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Literal
+from typing import Literal, Protocol
 
 import zenoh
 
 from skinet.lang.model import Skillset
 from skinet.mission import Scenario, Step, step_numbers
 from skinet.ros.interfaces import event_request_topic, skill_topic
-from skinet.ros.keys import ManagerTopic, manager_topics, rmw_attachment
-from skinet.ros.typestore import default_instance, encode
-
-if TYPE_CHECKING:
-    from services.simulator.service import Simulator
+from skinet.ros.keys import KeyStyle, ManagerTopic, manager_topics, rmw_attachment
+from skinet.ros.typestore import Typestore, default_instance, encode
+from skinet.system import Component
 
 log = logging.getLogger("skinet.simulator")
 
 Action = Literal["start", "interrupt", "event", "success", "failure", "consider"]
+
+
+class ManagerNode(Protocol):
+    """One manager as the driver sees it: its skillset and its message types."""
+
+    component: Component
+    store: Typestore
+
+
+class Managers(Protocol):
+    """What the driver needs of the managers it drives (:class:`services.simulator.service.Simulator`
+    is one; this module does not import it, so the dependency goes one way)."""
+
+    session: zenoh.Session
+    style: KeyStyle
+    nodes: Mapping[str, ManagerNode]
+
+    def handled(self, skillset: str, topic: str) -> int: ...
+
+    def wait_handled(self, skillset: str, topic: str, count: int, timeout: float = 5.0) -> bool: ...
+
+    def terminate(self, skillset: str, skill: str, kind: str, mode: str = "") -> bool: ...
+
+    def skill_status(self, skillset: str, skill: str) -> tuple[bool, str]: ...
 
 
 @dataclass(frozen=True)
@@ -82,7 +104,7 @@ def plan(skillset: Skillset, step: Step) -> Planned:
 class Operator:
     """Sends requests to the managers over Zenoh, like an operator GUI."""
 
-    def __init__(self, session: zenoh.Session, simulator: Simulator):
+    def __init__(self, session: zenoh.Session, simulator: Managers):
         self.simulator = simulator
         self._publishers: dict[tuple[str, str], tuple[ManagerTopic, zenoh.Publisher]] = {}
         for name, node in simulator.nodes.items():
@@ -111,7 +133,7 @@ class Operator:
             pub.undeclare()
 
 
-def drive(simulator: Simulator, scenario: Scenario, speed: float = 1.0,
+def drive(simulator: Managers, scenario: Scenario, speed: float = 1.0,
           on_step: Callable[[StepRun], None] | None = None) -> list[StepRun]:
     """Play ``scenario`` on ``simulator`` (``speed`` <= 0 or ``inf``: as fast as possible).
 
@@ -162,4 +184,4 @@ def drive(simulator: Simulator, scenario: Scenario, speed: float = 1.0,
     return runs
 
 
-__all__ = ["Operator", "Planned", "StepRun", "drive", "plan"]
+__all__ = ["Managers", "Operator", "Planned", "StepRun", "drive", "plan"]

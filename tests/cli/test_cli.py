@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from skinet.cli.main import LAZY_COMMANDS, build_parser, main
+from skinet_cli.main import LAZY_COMMANDS, build_parser, main
 
 ROOT = Path(__file__).resolve().parents[2]
 SYSTEM = str(ROOT / "skillsets" / "spot_arm.toml")
@@ -306,7 +306,7 @@ def test_lazy_command_runs_its_module(capsys: pytest.CaptureFixture[str]) -> Non
 
 def test_unsafe_imports_no_service_module() -> None:
     """Start-up (issue 10 (d)): no Zenoh, pydantic, web server, plotting or services for `skinet unsafe`."""
-    code = ("import sys; from skinet.cli.main import main; code = main(['unsafe', sys.argv[1]]); "
+    code = ("import sys; from skinet_cli.main import main; code = main(['unsafe', sys.argv[1]]); "
             "print(sorted({m.split('.')[0] for m in sys.modules} & {'zenoh', 'pydantic', 'aiohttp', 'matplotlib', "
             "'services', 'scipy'})); raise SystemExit(code)")
     done = subprocess.run([sys.executable, "-c", code, SYSTEM], cwd=ROOT, capture_output=True, text=True, timeout=60)

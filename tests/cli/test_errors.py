@@ -27,7 +27,7 @@ import services.bridge_ros2.__main__ as bridge_main
 import services.monitor.__main__ as monitor_main
 import services.predictor.__main__ as predictor_main
 import services.simulator.__main__ as simulator_main
-import skinet.cli.main as skinet_main
+import skinet_cli.main as skinet_main
 
 ROOT = Path(__file__).resolve().parents[2]
 SYSTEM = str(ROOT / "skillsets" / "spot_arm.toml")
@@ -417,7 +417,7 @@ def test_every_option_has_a_bad_value_case() -> None:
 
 # As real processes: what a user sees, from the entry points themselves.
 PROCESS_CASES = [
-    (["-m", "skinet.cli.main", "run", SYSTEM, "--listen", "garbage"], 1,
+    (["-m", "skinet_cli.main", "run", SYSTEM, "--listen", "garbage"], 1,
      "skinet: error: --listen 'garbage': an endpoint is PROTOCOL/ADDRESS, e.g. tcp/127.0.0.1:7447"),
     (["-m", "services.monitor", SYSTEM, "--listen", "garbage"], 1,
      "python -m services.monitor: error: --listen 'garbage': an endpoint is PROTOCOL/ADDRESS, e.g. tcp/127.0.0.1:7447"),

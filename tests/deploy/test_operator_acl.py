@@ -56,7 +56,7 @@ def deployment() -> Iterator[str]:
 
 def skinet(*args: str, env: dict[str, str] | None = None, timeout: float = 60) -> subprocess.CompletedProcess:
     clean = {k: v for k, v in os.environ.items() if not k.startswith("SKINET_ZENOH_")}
-    return subprocess.run([sys.executable, "-m", "skinet.cli.main", *args], cwd=REPO, capture_output=True, text=True,
+    return subprocess.run([sys.executable, "-m", "skinet_cli.main", *args], cwd=REPO, capture_output=True, text=True,
                           timeout=timeout, env={**clean, **(env or {})})
 
 
@@ -172,7 +172,7 @@ def test_watch_on_a_terminal_redraws_the_view(deployment: str) -> None:
     import pty
 
     leader, follower = pty.openpty()
-    proc = subprocess.Popen([sys.executable, "-m", "skinet.cli.main", "watch", SYSTEM, "--duration", "3",
+    proc = subprocess.Popen([sys.executable, "-m", "skinet_cli.main", "watch", SYSTEM, "--duration", "3",
                              *zenoh_flags(deployment)], cwd=REPO, stdout=follower, stderr=follower)
     os.close(follower)
     out = b""
@@ -194,7 +194,7 @@ def test_watch_on_a_terminal_redraws_the_view(deployment: str) -> None:
 
 def test_watch_in_a_pipe_prints_one_line_per_step(deployment: str) -> None:
     """Last in this file: it moves the deployment on (the transfer with the arm at RD)."""
-    proc = subprocess.Popen([sys.executable, "-m", "skinet.cli.main", "watch", SYSTEM, "--duration", "60",
+    proc = subprocess.Popen([sys.executable, "-m", "skinet_cli.main", "watch", SYSTEM, "--duration", "60",
                              *zenoh_flags(deployment)], cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True)
     bridge = login(deployment, "bridge")

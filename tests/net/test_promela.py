@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from skinet.cli.main import main
+from skinet_cli.main import main
 from skinet.files import load_system
 from skinet.net.export.promela import to_promela
 from skinet.net.union import union

@@ -83,7 +83,7 @@ def open_client(endpoint: str) -> zenoh.Session:
 
 def start_skinet(*args: str) -> subprocess.Popen:
     """``skinet ARGS`` in its own process group, output (stderr too) on its text stdout."""
-    return subprocess.Popen([sys.executable, "-m", "skinet.cli.main", *args], cwd=REPO, stdout=subprocess.PIPE,
+    return subprocess.Popen([sys.executable, "-m", "skinet_cli.main", *args], cwd=REPO, stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT, text=True, start_new_session=True)
 
 

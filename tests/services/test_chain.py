@@ -75,7 +75,7 @@ def test_step_numbers_are_the_monitors(monkeypatch: pytest.MonkeyPatch) -> None:
 
 
 def test_demo_command_runs_the_chain(capsys: pytest.CaptureFixture[str]) -> None:
-    from skinet.cli.main import main
+    from skinet_cli.main import main
 
     assert main(["demo", "--all-steps"]) == 0
     out = capsys.readouterr().out

@@ -323,7 +323,7 @@ def test_skinet_run_serves_the_dashboard_beside_its_monitor(tmp_path) -> None:
     import sys
 
     port = free_port()
-    proc = subprocess.Popen([sys.executable, "-m", "skinet.cli.main", "run", str(SYSTEM_FILE), "--duration", "30",
+    proc = subprocess.Popen([sys.executable, "-m", "skinet_cli.main", "run", str(SYSTEM_FILE), "--duration", "30",
                              "--no-multicast-scouting", "--dashboard", str(port)], cwd=REPO,
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     try:
@@ -340,7 +340,7 @@ def test_skinet_run_serves_the_dashboard_beside_its_monitor(tmp_path) -> None:
         with urllib.request.urlopen(f"http://127.0.0.1:{port}/api/check?command=spot:init_power.start",
                                     timeout=2) as r:
             assert json.load(r)["decision"] == "allow"
-        busy = subprocess.run([sys.executable, "-m", "skinet.cli.main", "run", str(SYSTEM_FILE), "--once",
+        busy = subprocess.run([sys.executable, "-m", "skinet_cli.main", "run", str(SYSTEM_FILE), "--once",
                                "--no-multicast-scouting", "--dashboard", str(port)], cwd=REPO, capture_output=True,
                               text=True, timeout=60)
         assert (busy.returncode, busy.stderr.strip()) == (

@@ -456,7 +456,7 @@ def test_divergence_is_reported_and_observed_marking_adopted(monitor_factory, se
 
 
 def test_skinet_run_once_prints_the_view():
-    out = subprocess.run([sys.executable, "-m", "skinet.cli.main", "run", str(SYSTEM_FILE), "--once",
+    out = subprocess.run([sys.executable, "-m", "skinet_cli.main", "run", str(SYSTEM_FILE), "--once",
                           "--no-multicast-scouting"], cwd=REPO, capture_output=True, text=True, timeout=20)
     assert out.returncode == 0, out.stderr
     text = out.stdout
@@ -469,7 +469,7 @@ def test_skinet_run_once_prints_the_view():
 
 def test_skinet_run_listens_for_a_bridge_and_logs_changes(tmp_path):
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    proc = subprocess.Popen([sys.executable, "-m", "skinet.cli.main", "run", str(SYSTEM_FILE), "--listen", endpoint,
+    proc = subprocess.Popen([sys.executable, "-m", "skinet_cli.main", "run", str(SYSTEM_FILE), "--listen", endpoint,
                              "--no-multicast-scouting", "--duration", "15"], cwd=REPO, stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT, text=True, start_new_session=True)
     bridge = None
@@ -497,7 +497,7 @@ def test_skinet_run_listens_for_a_bridge_and_logs_changes(tmp_path):
 
 def test_skinet_router_links_clients():
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    proc = subprocess.Popen([sys.executable, "-m", "skinet.cli.main", "router", "--listen", endpoint, "--no-auth",
+    proc = subprocess.Popen([sys.executable, "-m", "skinet_cli.main", "router", "--listen", endpoint, "--no-auth",
                              "--no-multicast-scouting"], cwd=REPO, stdout=subprocess.PIPE, text=True,
                             start_new_session=True)
     try:

@@ -149,7 +149,7 @@ def test_tls_refuses_clients_without_the_ca_or_with_a_bad_certificate(secrets: P
 
 
 def fleet(secrets: Path, *args: str, stdin: str = "") -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "skinet.cli.main", "fleet", "--secrets", str(secrets), *args],
+    return subprocess.run([sys.executable, "-m", "skinet_cli.main", "fleet", "--secrets", str(secrets), *args],
                           cwd=REPO, input=stdin, capture_output=True, text=True, timeout=30)
 
 

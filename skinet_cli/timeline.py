@@ -9,7 +9,7 @@ import argparse
 from collections.abc import Sequence
 from pathlib import Path
 
-from skinet.cli.options import count, load_live_system, print_warnings
+from skinet_cli.options import count, load_live_system, print_warnings
 from skinet.errors import SkinetError, SourceError
 from skinet.files import read_text
 from skinet.system import System

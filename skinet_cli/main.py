@@ -27,10 +27,10 @@ from skinet.verify.algorithm1 import analyse
 from skinet.verify.ctl import Kripke, check
 from skinet.verify.explore import Deadline, explore
 from skinet.verify.predict import Forecast, forecast
-from skinet.cli.options import ArgumentParser, count, load_live_system, print_warnings
-from skinet.cli.options import seconds as duration
-from skinet.cli.memory import add_memory_arg, memory_limit
-from skinet.cli.render import analysis_text, seconds, table
+from skinet_cli.options import ArgumentParser, count, load_live_system, print_warnings
+from skinet_cli.options import seconds as duration
+from skinet_cli.memory import add_memory_arg, memory_limit
+from skinet_cli.render import analysis_text, seconds, table
 
 DESCRIPTION = """\
 SkiNet Live: predictive runtime verification of skill-based robots.
@@ -63,17 +63,17 @@ state files (--state) are JSON: {"spot": {"resources": {"posture": "Standing"},
 # `skinet unsafe` does not pay for them (issue 10 (d); tests/cli/test_cli.py checks that the
 # helps here are the modules' own).
 LAZY_COMMANDS: tuple[tuple[str, str, dict[str, str]], ...] = (
-    ("skinet.cli.demo", "add_parser", {"demo": "replay the paper's unassisted and assisted runs (the main job)"}),
-    ("skinet.cli.record", "add_parser",
+    ("skinet_cli.demo", "add_parser", {"demo": "replay the paper's unassisted and assisted runs (the main job)"}),
+    ("skinet_cli.record", "add_parser",
      {"record": "record the monitor's messages of a system into a JSON Lines log"}),
-    ("skinet.cli.timeline", "add_parser",
+    ("skinet_cli.timeline", "add_parser",
      {"timeline": "draw a monitor log (skinet record, skinet demo --log) as a timeline picture"}),
-    ("skinet.cli.run", "add_commands", {
+    ("skinet_cli.run", "add_commands", {
         "run": "monitor and predictor in one process with a live operator view (SPEC §7)",
         "router": "run a Zenoh router (the Python wheel in router mode) until interrupted",
         "fleet": "link robots' routers to a hub over mutual TLS: exchange the trust files",
     }),
-    ("skinet.cli.operator", "add_parsers", {
+    ("skinet_cli.operator", "add_parsers", {
         "dashboard": "live web dashboard of a running system (served on 127.0.0.1:8080)",
         "watch": "terminal live view of a running system (any deployment)",
         "check": "ask a running monitor whether a command is safe now (skinet/<system>/check)",

@@ -7,7 +7,7 @@ from __future__ import annotations
 import argparse
 
 from services.common.zenoh_config import add_zenoh_args
-from skinet.cli.options import key_name, seconds
+from skinet_cli.options import key_name, seconds
 
 
 def add_parsers(sub: argparse._SubParsersAction) -> None:

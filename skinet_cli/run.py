@@ -8,8 +8,8 @@ import os
 from services.common.ratelimit import add_rate_args
 from services.common.zenoh_config import add_login_args
 from services.monitor.check import add_policy_arg
-from skinet.cli.memory import add_memory_arg
-from skinet.cli.options import count, seconds
+from skinet_cli.memory import add_memory_arg
+from skinet_cli.options import count, seconds
 
 
 def _zenoh_args(c: argparse.ArgumentParser, listen_help: str) -> None:

@@ -22,7 +22,7 @@ import zenoh
 from pydantic import BaseModel
 
 from services.common.zenoh_config import add_zenoh_args, config_from_args, open_session
-from skinet.cli.options import count, key_name, seconds
+from skinet_cli.options import count, key_name, seconds
 from skinet.errors import SourceError
 from skinet.wire import keys
 from skinet.wire.codec import DecodeError, decode

@@ -7,7 +7,7 @@ import re
 from pathlib import Path
 
 from skinet.errors import SourceError
-from skinet.cli.options import load_live_system
+from skinet_cli.options import load_live_system
 from skinet.explain import plural, warning_line
 from skinet.files import load_typemap, read_text
 from skinet.mission import Scenario, StepRecord, check_scenario, flagged_before, parse_scenario, replay
@@ -87,7 +87,7 @@ def _write_run(args: argparse.Namespace, system: System, scenario: Scenario, rec
             raise SourceError.at(str(path), None, f"cannot write file: {exc.strerror}") from None
         print(f"   log: {path} ({len(entries)} messages)")
     if args.timeline:
-        from skinet.cli.timeline import save_timeline
+        from skinet_cli.timeline import save_timeline
 
         title = f"{system.name}: {scenario.name} run"
         path = save_timeline(entries, title, Path(args.timeline) / f"{stem}.png", system)
