@@ -4,16 +4,20 @@ A scenario is a TOML file of timed steps; each step is a model transition of
 one skillset (``transition = "teleop.start"``: an operator command, an event
 or a skill outcome) or an operator *considering* a command without issuing it
 (``consider = "arm_ready.start"``), which shows whether SkiNet warns about it.
+A transition step the model does not allow at that moment is a model divergence
+(SPEC §7); a scenario that plays one on purpose (a conformance test, a faulty
+robot) says so with ``expect_divergence = true`` on the step.
 The simulator of issue 5 plays the same files through the whole chain.
 """
 
 from __future__ import annotations
 
+import re
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import TypeVar
 
-from skinet.errors import SourceError
+from skinet.errors import Pos, SourceError
 from skinet.live import LiveSystem
 from skinet.props.evaluate import holds
 from skinet.system import System
@@ -32,6 +36,7 @@ class Step:
     transition: str | None = None
     consider: str | None = None
     note: str = ""
+    expect_divergence: bool = False  # the model is expected not to explain this step
 
 
 @dataclass(frozen=True)
@@ -78,8 +83,27 @@ def parse_scenario(text: str, source: str = "<scenario>") -> Scenario:
         if t < last:
             raise SourceError.at(source, None, f"step {n}: time {t} goes backwards (previous step at {last})")
         last = t
-        steps.append(Step(t, s["skillset"], s.get("transition"), s.get("consider"), str(s.get("note", ""))))
+        expect = s.get("expect_divergence", False)
+        if not isinstance(expect, bool):
+            raise SourceError.at(source, _step_key(text, n, "expect_divergence"),
+                                 f"step {n}: 'expect_divergence' must be true or false, got {expect!r}")
+        if expect and s.get("transition") is None:
+            raise SourceError.at(source, _step_key(text, n, "expect_divergence"),
+                                 f"step {n}: 'expect_divergence' needs a 'transition' (a considered command is "
+                                 "not played)")
+        steps.append(Step(t, s["skillset"], s.get("transition"), s.get("consider"), str(s.get("note", "")), expect))
     return Scenario(head["name"], head["system"], tuple(steps))
+
+
+def _step_key(text: str, n: int, key: str) -> Pos | None:
+    """Where ``key = ...`` is written in the ``n``-th ``[[steps]]`` table of ``text``, if it is."""
+    tables = 0
+    for line_no, line in enumerate(text.splitlines(), 1):
+        if re.match(r"\s*\[\[\s*steps\s*\]\]", line):
+            tables += 1
+        elif tables == n and (m := re.match(rf"(\s*){re.escape(key)}\s*=", line)):
+            return Pos(line_no, len(m.group(1)) + 1)
+    return None
 
 
 def step_numbers(scenario: Scenario) -> list[int]:
