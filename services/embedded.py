@@ -121,7 +121,8 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     dashboard = None
     try:
         if args.dashboard is not None:  # first: a port in use stops the run before anything starts
-            dashboard = _start_dashboard(session, system, args.dashboard_host, args.dashboard, client_name(config))
+            dashboard = start_dashboard(session, system.name, args.dashboard_host, args.dashboard,
+                                        client_name(config), system)
             print(f"dashboard on {dashboard.url}", file=sys.stderr, flush=True)
         predictor = start_predictor(session, f"embedded-{os.getpid()}",  # before the monitor: it asks at once
                                     memory_limit=memory_limit(args), rate_limit=args.rate_limit)
@@ -148,12 +149,14 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
             predictor.close()
 
 
-def _start_dashboard(session: zenoh.Session, system: System, host: str, port: int, client: str) -> Dashboard:
-    """The web dashboard on the shared session; raises :class:`PortError` (port in use)."""
+def start_dashboard(session: zenoh.Session, name: str, host: str, port: int, client: str,
+                    model: System | None = None) -> Dashboard:
+    """The web dashboard of system ``name`` on the shared session (``model`` gives the timeline's
+    lanes before the model bundle is fetched); raises :class:`PortError` (port in use)."""
     from services.dashboard.observer import Observer
     from services.dashboard.server import Dashboard
 
-    observer = Observer(session, system.name, system, client=client)
+    observer = Observer(session, name, model, client=client)
     dashboard = Dashboard(observer, host, port)
     try:
         dashboard.start()
