@@ -26,7 +26,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                                    "managers, use python -m services.bridge_ros2 SYSTEM.toml --replay BAG.")
     c.add_argument("log", metavar="LOG.jsonl|LOG.mcap", help="monitor log, JSON Lines or MCAP (skinet record)")
     c.add_argument("--speed", type=number(0), default=1.0, metavar="X",
-                   help="time scale: a message recorded t seconds after the first is published at t/SPEED; "
+                   help="time scale: a message recorded t seconds after the first is published at t/X; "
                         "0 = as fast as possible (default: 1, the recorded pace)")
     c.add_argument("--linger", type=seconds(zero=True), metavar="S",
                    help="after the last message, keep answering late joiners (and serving --dashboard) this "
