@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING, TextIO
 from services.common.zenoh_config import client_name, login, open_session, session_config
 from services.monitor import Monitor, MonitorView, start_monitor
 from skinet_cli.memory import memory_limit
-from skinet_cli.options import load_live_system
+from skinet_cli.options import load_live_system, require_properties
 from skinet.explain import warning_line
 from skinet_cli.render import seconds, table
 from skinet.system import System
@@ -112,6 +112,7 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     from services.predictor.service import start_predictor
 
     system, _ = load_live_system(args.system)
+    require_properties(system, args.system, args.no_properties)
     config = session_config("peer", args.connect, args.listen, args.zenoh_config, args.multicast_scouting,
                             **login(args))
     stop = stop_on_signals()

@@ -7,7 +7,7 @@ import re
 from pathlib import Path
 
 from skinet.errors import SourceError
-from skinet_cli.options import load_live_system
+from skinet_cli.options import add_no_properties_arg, load_live_system, require_properties
 from skinet.explain import plural, warning_line
 from skinet.files import load_typemap, read_text
 from skinet.mission import Scenario, StepRecord, check_scenario, flagged_before, parse_scenario, replay
@@ -31,6 +31,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     c = sub.add_parser("demo", help="replay the paper's unassisted and assisted runs (the main job)")
     c.add_argument("scenarios", nargs="*", help="scenario files (default: skillsets/missions/{unassisted,assisted}.toml)")
     c.add_argument("--no-predict", action="store_true", help="explicit constraints only")
+    add_no_properties_arg(c)
     c.add_argument("--core", action="store_true",
                    help="replay on the core library only (no simulator, ROS 2 encoding, bridge, Zenoh)")
     c.add_argument("--all-steps", action="store_true", help="print every step, not only the notable ones")
@@ -50,6 +51,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     for path in paths:  # every file checked before the first run starts
         scenario = parse_scenario(read_text(path), str(path))
         system, _ = load_live_system(path.parent / scenario.system)
+        require_properties(system, path.parent / scenario.system, args.no_properties)
         check_scenario(scenario, system, str(path))
         runs.append((path, scenario, system))
     for path, scenario, system in runs:

@@ -9,7 +9,7 @@ from services.common.ratelimit import add_rate_args
 from services.common.zenoh_config import add_login_args
 from services.monitor.check import add_policy_arg
 from skinet_cli.memory import add_memory_arg
-from skinet_cli.options import count, seconds
+from skinet_cli.options import add_no_properties_arg, count, seconds
 
 
 def _zenoh_args(c: argparse.ArgumentParser, listen_help: str) -> None:
@@ -31,6 +31,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     c.add_argument("--dashboard", type=count(0, 65535), metavar="PORT",
                    help="also serve the live web dashboard on this port (0: a free one; see skinet dashboard)")
     c.add_argument("--dashboard-host", default="127.0.0.1", help="address of --dashboard (default: 127.0.0.1)")
+    add_no_properties_arg(c)
     add_policy_arg(c)
     add_rate_args(c)
     add_memory_arg(c)

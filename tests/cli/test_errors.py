@@ -131,14 +131,14 @@ def _cases() -> list[Case]:
     # skinet demo
     add("skinet", "scenarios", ("demo", "{tmp}/missing.toml"), 1, missing)
     add("skinet", "scenarios", ("demo", "{tmp}/unknown_skillset.toml"), 1,
-        "{tmp}/unknown_skillset.toml: error: step 1: unknown skillset 'spott' (skillsets of spot_arm: spot, manipulator)")
+        "{tmp}/unknown_skillset.toml:6:1: error: step 1: unknown skillset 'spott' (skillsets of spot_arm: spot, manipulator)")
     for core in ((), ("--core",)):  # the core replay used to call it a model divergence and exit 0
         add("skinet", "scenarios", ("demo", "{tmp}/unknown_transition.toml", *core), 1,
-            "{tmp}/unknown_transition.toml: error: step 1: unknown transition 'init_power.strat' of skillset 'spot' "
+            "{tmp}/unknown_transition.toml:7:1: error: step 1: unknown transition 'init_power.strat' of skillset 'spot' "
             "(for example: init_power.start, init_power.interrupt, init_power.success.powered_on, "
             "init_power.failure.no_battery)")
     add("skinet", "scenarios", ("demo", "{tmp}/bad_time.toml", "--core"), 1,
-        "{tmp}/bad_time.toml: error: step 1: 't' must be a number of seconds, got 'soon'")
+        "{tmp}/bad_time.toml:5:1: error: step 1: 't' must be a number of seconds, got 'soon'")
     for option in ("--log", "--timeline"):
         add("skinet", option, ("demo", "--core", option, "{tmp}/list.json"), 1,
             "{tmp}/list.json: error: cannot create folder: File exists")
@@ -315,7 +315,7 @@ def _cases() -> list[Case]:
         f"{SPOT}: error: cannot replay: Unrecognized storage format '.rl'")
     add(sim, "scenario", ("{tmp}/missing.toml",), 1, missing)
     add(sim, "scenario", ("{tmp}/unknown_skillset.toml",), 1,
-        "{tmp}/unknown_skillset.toml: error: step 1: unknown skillset 'spott' (skillsets of spot_arm: spot, manipulator)")
+        "{tmp}/unknown_skillset.toml:6:1: error: step 1: unknown skillset 'spott' (skillsets of spot_arm: spot, manipulator)")
     usage(sim, "--dds", (SCENARIO, "--dds", "--rmw-zenoh"), "--dds and --rmw-zenoh exclude each other")
     usage(sim, "--speed", (SCENARIO, "--speed", "-1"), "argument --speed: expected a number >= 0, got '-1'")
     usage(sim, "--speed", (SCENARIO,), "argument --speed: expected a number >= 0, got 'fast' (from $SKINET_SPEED)",
