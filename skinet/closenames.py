@@ -21,9 +21,10 @@ from collections.abc import Sequence
 MAX_CANDIDATES = 6
 
 
-def close_names(name: str, known: Sequence[str]) -> list[str]:
-    """The names of ``known`` close to ``name``, closest first (at most :data:`MAX_CANDIDATES`)."""
-    return difflib.get_close_matches(name, list(known), n=MAX_CANDIDATES, cutoff=0.6)
+def close_names(name: str, known: Sequence[str], cutoff: float = 0.6) -> list[str]:
+    """The names of ``known`` close to ``name`` (similarity ratio >= ``cutoff``), closest first
+    (at most :data:`MAX_CANDIDATES`)."""
+    return difflib.get_close_matches(name, list(known), n=MAX_CANDIDATES, cutoff=cutoff)
 
 
 def unknown(what: str, name: str, known: Sequence[str], where: str = "") -> str:

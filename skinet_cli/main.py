@@ -27,6 +27,7 @@ from skinet.verify.algorithm1 import analyse
 from skinet.verify.ctl import Kripke, check
 from skinet.verify.explore import Deadline, explore
 from skinet.verify.predict import Forecast, forecast
+from skinet_cli.environment import check_environment
 from skinet_cli.options import ArgumentParser, count, load_live_system, print_warnings
 from skinet_cli.options import seconds as duration
 from skinet_cli.memory import add_memory_arg, memory_limit
@@ -94,6 +95,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.print_help()
         return 2
     try:
+        check_environment()
         return int(args.func(args) or 0)
     except SourceError as exc:
         print(str(exc), file=sys.stderr)

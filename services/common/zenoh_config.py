@@ -24,6 +24,7 @@ from services.common.session import login_refused
 from skinet.errors import Pos, SkinetError, SourceError
 from skinet.files import read_text
 from skinet.wire import keys
+from skinet_cli.environment import flag
 
 LOOPBACK = "tcp/127.0.0.1:0"  # a peer's default endpoint: this host only, any free port
 ROUTER_LOOPBACK = "tcp/127.0.0.1:7447"  # a router's
@@ -134,8 +135,7 @@ def login(args: argparse.Namespace) -> dict[str, str | None]:
 
 def add_scouting_args(g: argparse._ActionsContainer) -> None:
     """``--multicast-scouting`` (off by default); ``--no-multicast-scouting`` is kept for old scripts."""
-    g.add_argument("--multicast-scouting", action="store_true",
-                   default=os.environ.get("SKINET_ZENOH_SCOUTING", "") not in ("", "0"),
+    g.add_argument("--multicast-scouting", action="store_true", default=flag("SKINET_ZENOH_SCOUTING"),
                    help="join multicast scouting to find peers on the LAN (default: off; $SKINET_ZENOH_SCOUTING=1)")
     g.add_argument("--no-multicast-scouting", action="store_true", help="the default; accepted for old scripts")
 
