@@ -200,6 +200,8 @@ _UNITS = {"": 1, "b": 1, "kb": 10**3, "mb": 10**6, "gb": 10**9, "kib": 2**10, "m
 
 def parse_size(text: str | int) -> int:
     """Bytes from ``"1 GiB"``, ``"512MiB"``, ``"2 GB"`` or a plain number of bytes."""
+    if str(text).strip().startswith("-"):
+        raise ValueError(f"not a size: {text!r} (a size is positive, e.g. 1GiB, 512MiB, 2GB)")
     match = re.fullmatch(r"\s*(\d+(?:\.\d+)?)\s*([A-Za-z]*)\s*", str(text))
     unit = match.group(2).lower() if match else ""
     if not match or unit not in _UNITS or float(match.group(1)) * _UNITS[unit] < 1:
@@ -228,24 +230,27 @@ def _memory_limit(system: object, source: str, text: str) -> int | None:
 
 
 def load_state(path: str | Path, system: System, what_if: bool = False) -> Marking:
-    """A combined marking from a JSON state file (see :func:`skinet.system.marking_from_json`).
+    """A combined marking from a JSON state file (see :func:`parse_state`)."""
+    return parse_state(read_source(path), str(path), system, what_if)
+
+
+def parse_state(text: str, source: str, system: System, what_if: bool = False) -> Marking:
+    """A combined marking from JSON text (see :func:`skinet.system.marking_from_json`).
 
     A marking the live system cannot be in (see :func:`skinet.system.marking_problems`)
     is refused unless ``what_if``.
     """
-    text = read_source(path)
     try:
         data = json.loads(text)
     except json.JSONDecodeError as exc:
-        raise SourceError.at(str(path), Pos(exc.lineno, exc.colno), f"invalid JSON: {exc.msg}") from None
+        raise SourceError.at(source, Pos(exc.lineno, exc.colno), f"invalid JSON: {exc.msg}") from None
     except RecursionError:
-        raise SourceError.at(str(path), None, "invalid JSON: nested too deeply") from None
-    marking = marking_from_json(system, data, str(path))
+        raise SourceError.at(source, None, "invalid JSON: nested too deeply") from None
+    marking = marking_from_json(system, data, source)
     problems = [] if what_if else marking_problems(system, marking)
     if problems:
         raise SourceError.at(
-            str(path), None,
+            source, None,
             "impossible state: " + "; ".join(problems) + " (use --what-if to analyse it anyway)",
         )
     return marking
-

@@ -28,6 +28,12 @@ from skinet.wire.keys import check_chunk
 class ArgumentParser(argparse.ArgumentParser):
     """``argparse`` with a one-line error instead of the usage text (subparsers inherit it)."""
 
+    def __init__(self, *args: object, **kwargs: object) -> None:
+        super().__init__(*args, **kwargs)  # type: ignore[arg-type]
+        # A dash then a digit is a value, not an option: `--memory-limit -5MiB` reaches the option's own check
+        # (argparse takes only plain negative numbers as values, and said "expected one argument").
+        self._negative_number_matcher = re.compile(r"^-\.?\d")
+
     def error(self, message: str) -> NoReturn:
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 

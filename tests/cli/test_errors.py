@@ -100,6 +100,9 @@ def _cases() -> list[Case]:
     # skinet parse / net
     add("skinet", "file", ("parse", "{tmp}/missing.rl"), 1,
         "{tmp}/missing.rl: error: cannot read file: No such file or directory")
+    add("skinet", "file", ("parse", SYSTEM), 1,
+        f"{SYSTEM}: error: this is a system or scenario file (.toml); skinet parse checks a skillset model (.rl): "
+        f"for a system try skinet net {SYSTEM} or skinet unsafe {SYSTEM}")
     add("skinet", "file", ("net", "{tmp}/missing.rl"), 1,
         "{tmp}/missing.rl: error: cannot read file: No such file or directory")
     usage("skinet", "--format", ("net", SPOT, "--format", "svg"),
@@ -125,6 +128,11 @@ def _cases() -> list[Case]:
         for bad in ("0", "lots", "1 parsec"):
             usage("skinet", "--memory-limit", (cmd, SYSTEM, "--memory-limit", bad, *extra),
                   f"argument --memory-limit: not a size: '{bad}' (e.g. 1GiB, 512MiB, 2GB)")
+        for argv in (("--memory-limit", "-5MiB"), ("--memory-limit=-5MiB",)):  # the first was "expected one argument"
+            usage("skinet", "--memory-limit", (cmd, SYSTEM, *argv, *extra),
+                  "argument --memory-limit: not a size: '-5MiB' (a size is positive, e.g. 1GiB, 512MiB, 2GB)")
+        add("skinet", "--state", (cmd, SYSTEM, "--state", '{"spot": ', *extra), 1,
+            "<state>:1:10: error: invalid JSON: Expecting value")
     add("skinet", "formulas", ("ctl", SYSTEM, "EF spot:Busy", "EF spot:Bussy"), 1,
         "<formula 2>:1:4: error: unknown name 'spot:Bussy' (candidates: spot:Busy)")
 
