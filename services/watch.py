@@ -17,7 +17,9 @@ import time
 from collections import deque
 from typing import TextIO
 
-from services.common.zenoh_config import client_name, config_from_args, open_session
+from services.common.zenoh_config import (
+    check_connected, client_name, config_from_args, open_session, warn_on_stderr,
+)
 from services.dashboard.board import Board
 from services.dashboard.observer import Observer
 from services.dashboard.app import no_monitor_message
@@ -85,7 +87,7 @@ def watch(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     """Run the view until interrupted or ``--duration``; ``--once`` prints one view (after the
     first fresh prediction, or ``--wait`` seconds) and returns.  Returns the exit status."""
     config = config_from_args(args)
-    session = open_session(config)
+    session = open_session(config, warn_on_stderr("skinet watch"))
     changed = threading.Event()
     observer = Observer(session, args.system, client=client_name(config))
     tty = out.isatty()
@@ -101,6 +103,7 @@ def watch(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     try:
         observer.listen(on_update)
         if not observer.wait_monitor(args.wait):
+            check_connected(session, config)
             raise SkinetError(no_monitor_message(session, args.system).replace("; waiting for one", ""))
         stop = stop_on_signals()
         now = time.monotonic()

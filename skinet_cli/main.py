@@ -43,20 +43,33 @@ fair by default) or through skill outcomes no command can prevent (forced
 constraints)."""
 
 EPILOG = """\
-examples:
+examples (from the repository's root; tests/cli/test_help_examples.py runs every one):
   skinet demo
   skinet parse skillsets/spot.rl
   skinet net skillsets/spot.rl --eventless --format tina -o spot.net
-  skinet unsafe skillsets/spot_arm.toml --state state.json
+  skinet unsafe skillsets/spot_arm.toml --state skillsets/states/arm_at_RD.json
+  skinet unsafe skillsets/spot_arm.toml --state '{"spot": {"resources": {"power_status": "PowerOn", "posture": "Standing", "control_mode": "Busy"}, "running": ["teleop"]}}'
   skinet explore skillsets/spot_arm.toml --budget 2
   skinet ctl skillsets/spot_arm.toml "AG not (spot:Busy and manipulator:Busy)" "EF spot:Busy"
-  skinet run skillsets/spot_arm.toml --listen tcp/127.0.0.1:7447
-  skinet router --listen tcp/0.0.0.0:7447
-  skinet run skillsets/spot_arm.toml --dashboard 8080
-  skinet dashboard skillsets/spot_arm.toml --connect tcp/127.0.0.1:7447 --user observer
 
-state files (--state) are JSON: {"spot": {"resources": {"posture": "Standing"},
-"running": ["teleop"]}}; omitted resources are initial, omitted skills idle."""
+a live system, one command per terminal (skinet run prints the lines that reach it;
+Ctrl-C stops the ones that keep running):
+  skinet run skillsets/spot_arm.toml --listen tcp/127.0.0.1:7447 --dashboard 8080
+  python -m services.bridge_ros2 skillsets/spot_arm.toml -e tcp/127.0.0.1:7447
+  skinet watch spot_arm -e tcp/127.0.0.1:7447
+  skinet record spot_arm -o run.jsonl -e tcp/127.0.0.1:7447
+  python -m services.simulator skillsets/missions/unassisted.toml -e tcp/127.0.0.1:7447 --speed 10
+  skinet check spot_arm spot:teleop.start -e tcp/127.0.0.1:7447
+  skinet timeline run.jsonl -o run.png
+
+through a router with logins (it makes the passwords at its first start; --user with
+--connect makes a session a client of the router):
+  skinet router --listen tcp/127.0.0.1:7448
+  skinet run skillsets/spot_arm.toml -e tcp/127.0.0.1:7448 --user monitor --password-file ~/.config/skinet/secrets/monitor.password
+  skinet dashboard spot_arm -e tcp/127.0.0.1:7448 --user observer --password-file ~/.config/skinet/secrets/observer.password --port 8081
+
+state (--state) is a JSON file or the JSON itself, {"SKILLSET": {"resources": {...},
+"running": [...]}}; omitted resources are initial, omitted skills idle."""
 
 PROGRESS_EVERY = 0.2  # seconds between progress reports of an exploration
 

@@ -35,8 +35,11 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     add_policy_arg(c)
     add_rate_args(c)
     add_memory_arg(c)
-    _zenoh_args(c, "endpoint on which a bridge in another process can connect (default: tcp/127.0.0.1:0, "
-                   "this host only)")
+    _zenoh_args(c, "endpoint on which a bridge, watch, dashboard or check in another process can connect "
+                   "(default: tcp/127.0.0.1 with a free port, this host only; printed at start)")
+    c.add_argument("--mode", "-m", choices=("peer", "client"),
+                   help="peer: others connect to --listen (the default); client: run behind a router (--connect) "
+                        "with a login (--user), the default when both are given")
     c.set_defaults(func=cmd_run)
 
     c = sub.add_parser("router", help="run a Zenoh router (the Python wheel in router mode) until interrupted")

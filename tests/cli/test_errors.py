@@ -213,6 +213,8 @@ def _cases() -> list[Case]:
     add("skinet", "system", ("run", "{tmp}/missing.toml"), 1, missing)
     add("skinet", "system", ("run", "{tmp}/badname.toml"), 1, bad_name)
     usage("skinet", "--duration", ("run", SYSTEM, "--duration", "-1"), "argument --duration: " + seconds.format("-1"))
+    usage("skinet", "--mode", ("run", SYSTEM, "--mode", "router"),
+          "argument --mode/-m: invalid choice: 'router' (choose from 'peer', 'client')")
     usage("skinet", "--budget", ("run", SYSTEM, "--budget", "0"), "argument --budget: " + seconds.format("0"))
     usage("skinet", "--memory-limit", ("run", SYSTEM, "--memory-limit", "tiny"),
           "argument --memory-limit: not a size: 'tiny' (e.g. 1GiB, 512MiB, 2GB)")
