@@ -2,10 +2,12 @@
 
 ``skinet run SYSTEM.toml`` opens one Zenoh ``peer`` session (no router; ZENOH.md:
 share one session in a process; loopback only and no multicast scouting unless
-asked), starts the monitor and a predictor on it, and
-shows the operator view: redrawn in place on a terminal, one line per change
-otherwise.  ``--listen`` lets a bridge in another process connect.  ``skinet
-router`` runs a Zenoh router from the Python wheel.
+asked), starts the monitor and a predictor on it, prints the endpoint it
+listens on (a free port is chosen before opening, so that it can be printed)
+with the exact commands that reach it, and shows the operator view: redrawn in
+place on a terminal, one line per change otherwise.  ``--listen`` lets a bridge
+in another process connect; ``--mode client`` runs it behind a router instead.
+``skinet router`` runs a Zenoh router from the Python wheel.
 """
 
 from __future__ import annotations
@@ -163,15 +165,21 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
 
 def _fix_free_ports(config: zenoh.Config) -> list[str]:
     """The ``listen`` endpoints, ``tcp/HOST:0`` given a free port now (so that it can be printed)."""
+    given = json.loads(config.get_json("listen/endpoints") or "[]")
+    if not isinstance(given, list):  # per mode, in a configuration file: left as it is
+        return []
     endpoints = []
-    for endpoint in json.loads(config.get_json("listen/endpoints") or "[]"):
-        m = re.fullmatch(r"tcp/(\[?[^\]]*\]?|[^:]+):0", str(endpoint))
+    for endpoint in map(str, given):
+        m = re.fullmatch(r"tcp/(\[?[^\]]*\]?|[^:]+):0", endpoint)
         if m:
             host = m.group(1).strip("[]")
-            with socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET, socket.SOCK_STREAM) as probe:
-                probe.bind((host, 0))
-                endpoint = f"tcp/{m.group(1)}:{probe.getsockname()[1]}"
-        endpoints.append(str(endpoint))
+            try:
+                with socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET, socket.SOCK_STREAM) as probe:
+                    probe.bind((host, 0))
+                    endpoint = f"tcp/{m.group(1)}:{probe.getsockname()[1]}"
+            except OSError:
+                pass  # Zenoh says why it cannot listen there
+        endpoints.append(endpoint)
     config.insert_json5("listen/endpoints", json.dumps(endpoints))
     return endpoints
 
@@ -188,12 +196,13 @@ def connect_lines(args: argparse.Namespace, system: System, mode: str, listening
     folder = Path(args.password_file).parent if args.password_file else Path("~/.config/skinet/secrets")
 
     def flags(user: str) -> str:  # a router's users log in; a peer of skinet run takes no login
-        login = f" --user {user} --password-file {folder / f'{user}.password'}" if mode == "client" and args.user else ""
-        return f"-e {endpoint}{login}"
+        login = mode == "client" and args.user
+        return f"-e {endpoint}" + (f" --user {user} --password-file {folder / f'{user}.password'}" if login else "")
 
     first = system.components[0]
     command = f"{first.name}:{first.skillset.skills[0].name}.start" if first.skillset.skills else "SKILLSET:TRANSITION"
-    return [head, f"  skinet watch {system.name} {flags('observer')}", f"  skinet dashboard {system.name} {flags('observer')}",
+    return [head, f"  skinet watch {system.name} {flags('observer')}",
+            f"  skinet dashboard {system.name} {flags('observer')}",
             f"  skinet check {system.name} {command} {flags('observer')}",
             f"  python -m services.bridge_ros2 {args.system} {flags('bridge')}   (the robot's side)"]
 

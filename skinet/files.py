@@ -127,7 +127,8 @@ def load_system(path: str | Path) -> tuple[System, list[Diagnostic]]:
     models: dict[Path, tuple[Model, dict[str, str]]] = {}
     for n, entry in enumerate(entries, 1):
         if not isinstance(entry, dict) or not isinstance(entry.get("model"), str):
-            raise SourceError.at(where, locate(text, ("skillsets", n - 1)), f"skillsets entry {n} needs a 'model' path")
+            raise SourceError.at(where, locate(text, ("skillsets", n - 1)),
+                                 f"skillsets entry {n} needs a 'model' path")
         table, label = ("skillsets", n - 1), f"[[skillsets]] entry {n}"
         check_keys(entry, SKILLSET_KEYS, where, text, table, label)
         for key in ("manager", "name"):

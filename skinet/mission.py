@@ -70,8 +70,9 @@ def parse_scenario(text: str, source: str = "<scenario>") -> Scenario:
     data = parse_toml(text, source)
     check_tables(data, SCENARIO_TABLES, source, text)
     head = data.get("scenario", {})
-    if not isinstance(head, dict) or not isinstance(head.get("name"), str) or not isinstance(head.get("system"), str):
-        raise SourceError.at(source, locate(text, ("scenario",)), "missing [scenario] table with 'name' and 'system' strings")
+    if not isinstance(head, dict) or not all(isinstance(head.get(k), str) for k in ("name", "system")):
+        raise SourceError.at(source, locate(text, ("scenario",)),
+                             "missing [scenario] table with 'name' and 'system' strings")
     check_keys(head, SCENARIO_KEYS, source, text, ("scenario",), "[scenario]")
     entries = data.get("steps", [])
     if not isinstance(entries, list):
@@ -85,13 +86,15 @@ def parse_scenario(text: str, source: str = "<scenario>") -> Scenario:
                                  f"step {n}: needs a 'skillset' string")
         check_keys(s, STEP_KEYS, source, text, table, f"step {n}")
         if (s.get("transition") is None) == (s.get("consider") is None):
-            raise SourceError.at(source, locate(text, table), f"step {n}: give exactly one of 'transition' or 'consider'")
+            raise SourceError.at(source, locate(text, table),
+                                 f"step {n}: give exactly one of 'transition' or 'consider'")
         if not isinstance(s.get("transition", s.get("consider")), str):
             key = "transition" if "transition" in s else "consider"
             raise SourceError.at(source, locate(text, table, key), f"step {n}: '{key}' must be a string")
         t = s.get("t", last)
         if isinstance(t, bool) or not isinstance(t, (int, float)) or t != t:
-            raise SourceError.at(source, locate(text, table, "t"), f"step {n}: 't' must be a number of seconds, got {t!r}")
+            raise SourceError.at(source, locate(text, table, "t"),
+                                 f"step {n}: 't' must be a number of seconds, got {t!r}")
         t = float(t)
         if t < last:
             raise SourceError.at(source, locate(text, table, "t"),

@@ -16,7 +16,8 @@ from skinet.system import System
 from skinet.wire.log import log_line
 
 MISSIONS = ("unassisted.toml", "assisted.toml", "mobile_unassisted.toml", "mobile_assisted.toml")
-HELP = f"play {len(MISSIONS)} runs: the paper's unassisted and assisted runs, then the mobile manipulator's two (the main job)"
+HELP = (f"play {len(MISSIONS)} runs: the paper's unassisted and assisted runs, then the mobile manipulator's two "
+        "(the main job)")
 DESCRIPTION = (
     f"Play {len(MISSIONS)} runs through the whole chain (simulated managers, CDR, bridge, monitor, predictor on one "
     "embedded Zenoh session) and print what the operator would have seen: the paper's unassisted run "

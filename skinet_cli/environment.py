@@ -41,7 +41,7 @@ def _seconds_or_forever(text: str) -> float:
         value = float(text)
     except ValueError:
         value = float("nan")
-    if not (value >= 0 or value == -1):
+    if not (0 <= value < float("inf") or value == -1):
         raise ValueError("expected a number of seconds >= 0, or -1 (forever)")
     return value
 

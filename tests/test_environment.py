@@ -31,8 +31,9 @@ def test_every_variable_the_repository_names_is_in_the_table() -> None:
         path = ROOT / name
         if path.suffix in (".png", ".mcap") or not path.is_file() or path == Path(__file__):
             continue  # this file names misspelt variables on purpose
-        text = path.read_text(encoding="utf-8", errors="replace")
-        named |= set(re.findall(r"\bSKINET_[A-Z0-9_]*[A-Z0-9]\b", text))
+        for line in path.read_text(encoding="utf-8", errors="replace").splitlines():
+            if "unknown environment variable" not in line:  # an example of the error names a misspelt one
+                named |= set(re.findall(r"\bSKINET_[A-Z0-9_]*[A-Z0-9]\b", line))
     named.discard("SKINET_ZENOH")  # "SKINET_ZENOH_*" in prose
     assert sorted(named - set(VARIABLES)) == []
     assert sorted(set(VARIABLES) - named) == []
