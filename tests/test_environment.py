@@ -13,7 +13,6 @@ from pathlib import Path
 import pytest
 
 import services.predictor.__main__ as predictor_main
-from skinet_cli.environment import VARIABLES, check_environment
 from skinet_cli.main import build_parser, main
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -25,6 +24,8 @@ def _clean_env(**extra: str) -> dict[str, str]:
 
 
 def test_every_variable_the_repository_names_is_in_the_table() -> None:
+    from skinet_cli.environment import VARIABLES
+
     files = subprocess.run(["git", "ls-files"], cwd=ROOT, capture_output=True, text=True, check=True).stdout.split()
     named: set[str] = set()
     for name in files:
@@ -69,6 +70,8 @@ def test_unknown_names_and_bad_values_are_refused(name: str, value: str, message
 
 
 def test_known_names_pass() -> None:
+    from skinet_cli.environment import check_environment
+
     check_environment({"SKINET_ZENOH_SCOUTING": "0", "SKINET_ZENOH_CONNECT_TIMEOUT": "-1", "SKINET_PREDICTORS": "4",
                        "SKINET_ROUTER_PORT": "127.0.0.1:7447", "SKINET_HUB_PORT": "7448",
                        "SKINET_ONBOARD_ENDPOINT": "tls/robot.example:7447", "SKINET_START_DELAY": "0",

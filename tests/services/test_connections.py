@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pytest
 
-from services.common.zenoh_config import config_from_args, session_mode
+from services.common.zenoh_config import config_from_args
 from skinet_cli.main import build_parser
 from tests.processes import Watched
 from tests.services.conftest import REPO, free_port
@@ -137,6 +137,8 @@ def test_run_prints_where_it_listens_and_lines_that_work() -> None:
     (["watch", "s", "-e", "tcp/127.0.0.1:7447"], "peer"),
 ])
 def test_user_with_connect_means_a_router_client(argv: list[str], mode: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    from services.common.zenoh_config import session_mode
+
     for name in ("SKINET_ZENOH_MODE", "SKINET_ZENOH_USER", "SKINET_ZENOH_CONNECT"):
         monkeypatch.delenv(name, raising=False)
     args = build_parser("watch").parse_args(argv)
