@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 from skinet.errors import SourceError
-from skinet_cli.options import load_live_system
+from skinet_cli.options import add_no_properties_arg, load_live_system, require_properties
 from skinet.explain import plural, warning_line
 from skinet.files import load_typemap, read_text
 from skinet.mission import Scenario, StepRecord, check_scenario, flagged_before, parse_scenario, replay
@@ -18,6 +18,16 @@ from skinet.wire.log import log_line
 
 MISSIONS = ("unassisted.toml", "assisted.toml", "mobile_unassisted.toml", "mobile_assisted.toml")
 UNEXPECTED = 3  # exit status: a divergence the scenario did not declare, or a declared one that did not happen
+HELP = (f"play {len(MISSIONS)} runs: the paper's unassisted and assisted runs, then the mobile manipulator's two "
+        "(the main job)")
+DESCRIPTION = (
+    f"Play {len(MISSIONS)} runs through the whole chain (simulated managers, CDR, bridge, monitor, predictor on one "
+    "embedded Zenoh session) and print what the operator would have seen: the paper's unassisted run "
+    "(three violations) and assisted run (two warnings heeded, no violation), then the mobile manipulator's "
+    "unassisted and assisted runs (a forced constraint). Given SCENARIO files, it plays those instead. "
+    "A step the model does not allow then is shown as a model divergence. Exit status: 0; 3 when a run diverged "
+    "at a step its scenario does not mark expect_divergence = true, or a marked step did not diverge; 1 on bad "
+    "input.")
 
 
 def default_scenarios() -> list[Path]:
@@ -30,14 +40,12 @@ def default_scenarios() -> list[Path]:
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    c = sub.add_parser("demo", help="replay the paper's unassisted and assisted runs (the main job)",
-                       description="Play mission scenarios and print what the operator would have seen: "
-                                   "violations, SkiNet's warnings, and model divergences (steps the model does "
-                                   "not allow then). Exit status: 0, or 3 when a run diverged at a step its "
-                                   "scenario does not mark with expect_divergence = true (or a marked step did "
-                                   "not diverge), 1 on bad input.")
-    c.add_argument("scenarios", nargs="*", help="scenario files (default: skillsets/missions/{unassisted,assisted}.toml)")
+    c = sub.add_parser("demo", help=HELP, description=DESCRIPTION)
+    c.add_argument("scenarios", nargs="*", metavar="SCENARIO",
+                   help=f"scenario files (default: the {len(MISSIONS)} runs above, skillsets/missions/"
+                        f"{{{','.join(m.removesuffix('.toml') for m in MISSIONS)}}}.toml)")
     c.add_argument("--no-predict", action="store_true", help="explicit constraints only")
+    add_no_properties_arg(c)
     c.add_argument("--core", action="store_true",
                    help="replay on the core library only (no simulator, ROS 2 encoding, bridge, Zenoh)")
     c.add_argument("--all-steps", action="store_true", help="print every step, not only the notable ones")
@@ -57,6 +65,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     for path in paths:  # every file checked before the first run starts
         scenario = parse_scenario(read_text(path), str(path))
         system, _ = load_live_system(path.parent / scenario.system)
+        require_properties(system, path.parent / scenario.system, args.no_properties)
         check_scenario(scenario, system, str(path))
         runs.append((path, scenario, system))
     surprises: list[str] = []
