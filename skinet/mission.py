@@ -63,7 +63,7 @@ class StepRecord:
 
 SCENARIO_TABLES = ("[scenario]", "[[steps]]")
 SCENARIO_KEYS = ("name", "system")
-STEP_KEYS = ("t", "skillset", "transition", "consider", "note")
+STEP_KEYS = ("t", "skillset", "transition", "consider", "note", "expect_divergence")
 
 
 def parse_scenario(text: str, source: str = "<scenario>") -> Scenario:
