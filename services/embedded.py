@@ -127,7 +127,7 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
         raise ZenohSetupError("--mode client needs the router's endpoint: --connect ENDPOINT")
     config = session_config(mode, args.connect, args.listen, args.zenoh_config, args.multicast_scouting,
                             **login(args))
-    listening = _fix_free_ports(config) if mode == "peer" else []
+    listening = fix_free_ports(config) if mode == "peer" else []
     stop = stop_on_signals()
     session = open_session(config, warn_on_stderr("skinet run"))
     monitor: Monitor | None = None
@@ -164,7 +164,7 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
             predictor.close()
 
 
-def _fix_free_ports(config: zenoh.Config) -> list[str]:
+def fix_free_ports(config: zenoh.Config) -> list[str]:
     """The ``listen`` endpoints, ``tcp/HOST:0`` given a free port now (so that it can be printed)."""
     given = json.loads(config.get_json("listen/endpoints") or "[]")
     if not isinstance(given, list):  # per mode, in a configuration file: left as it is

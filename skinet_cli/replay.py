@@ -7,11 +7,14 @@ Zenoh and the web server are imported when the command runs.
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 import time
 
 from services.common.zenoh_config import add_zenoh_args
 from skinet_cli.options import count, number, seconds
+
+CONNECT_WAIT = 2.0  # seconds for an explicit --connect endpoint to answer before the replay gives up
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -39,21 +42,30 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
-    from services.common.zenoh_config import client_name, config_from_args, open_session
-    from services.embedded import start_dashboard, stop_on_signals
+    from services.common.zenoh_config import (
+        check_connected, client_name, config_from_args, open_session, wait_connected, warn_on_stderr,
+    )
+    from services.embedded import fix_free_ports, start_dashboard, stop_on_signals
     from services.replay import Replay, recording
     from skinet_cli.timeline import load_log
 
     rec = recording(load_log(args.log), args.log)
     config = config_from_args(args)
+    listening = fix_free_ports(config) if json.loads(config.get_json("mode")) == "peer" else []
     stop = stop_on_signals()
-    session = open_session(config)
+    session = open_session(config, warn_on_stderr("skinet replay"))
     dashboard = replay = None
     try:
+        if not wait_connected(session, config, CONNECT_WAIT):  # publishing to an endpoint never reached is no replay
+            check_connected(session, config)
         if args.dashboard is not None:  # first: a port in use stops the replay before anything is published
             dashboard = start_dashboard(session, rec.system, args.dashboard_host, args.dashboard, client_name(config))
             print(f"dashboard on {dashboard.url}", file=sys.stderr, flush=True)
         replay = Replay(session, rec, args.log)
+        endpoint = next((e for e in listening if e.startswith("tcp/")), None)
+        if endpoint is not None:
+            print(f"skinet replay: listening on {', '.join(listening)}; follow it with: skinet watch {rec.system} "
+                  f"-e {endpoint}", file=sys.stderr, flush=True)
         left_out = "".join(f", {n} {kind}" for kind, n in rec.left_out.items())
         print(f"skinet replay: {args.log}: system {rec.system}, {len(rec.messages)} monitor messages over "
               f"{rec.duration:.1f} s recorded, at speed {args.speed:g}"
