@@ -127,7 +127,7 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
         raise ZenohSetupError("--mode client needs the router's endpoint: --connect ENDPOINT")
     config = session_config(mode, args.connect, args.listen, args.zenoh_config, args.multicast_scouting,
                             **login(args))
-    listening = _fix_free_ports(config) if mode == "peer" else []
+    listening = fix_free_ports(config) if mode == "peer" else []
     stop = stop_on_signals()
     session = open_session(config, warn_on_stderr("skinet run"))
     monitor: Monitor | None = None
@@ -135,7 +135,8 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     dashboard = None
     try:
         if args.dashboard is not None:  # first: a port in use stops the run before anything starts
-            dashboard = _start_dashboard(session, system, args.dashboard_host, args.dashboard, client_name(config))
+            dashboard = start_dashboard(session, system.name, args.dashboard_host, args.dashboard,
+                                        client_name(config), system)
             print(f"dashboard on {dashboard.url}", file=sys.stderr, flush=True)
         predictor = start_predictor(session, f"embedded-{os.getpid()}",  # before the monitor: it asks at once
                                     memory_limit=memory_limit(args), rate_limit=args.rate_limit)
@@ -163,7 +164,7 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
             predictor.close()
 
 
-def _fix_free_ports(config: zenoh.Config) -> list[str]:
+def fix_free_ports(config: zenoh.Config) -> list[str]:
     """The ``listen`` endpoints, ``tcp/HOST:0`` given a free port now (so that it can be printed)."""
     given = json.loads(config.get_json("listen/endpoints") or "[]")
     if not isinstance(given, list):  # per mode, in a configuration file: left as it is
@@ -207,12 +208,14 @@ def connect_lines(args: argparse.Namespace, system: System, mode: str, listening
             f"  python -m services.bridge_ros2 {args.system} {flags('bridge')}   (the robot's side)"]
 
 
-def _start_dashboard(session: zenoh.Session, system: System, host: str, port: int, client: str) -> Dashboard:
-    """The web dashboard on the shared session; raises :class:`PortError` (port in use)."""
+def start_dashboard(session: zenoh.Session, name: str, host: str, port: int, client: str,
+                    model: System | None = None) -> Dashboard:
+    """The web dashboard of system ``name`` on the shared session (``model`` gives the timeline's
+    lanes before the model bundle is fetched); raises :class:`PortError` (port in use)."""
     from services.dashboard.observer import Observer
     from services.dashboard.server import Dashboard
 
-    observer = Observer(session, system.name, system, client=client)
+    observer = Observer(session, name, model, client=client)
     dashboard = Dashboard(observer, host, port)
     try:
         dashboard.start()

@@ -24,6 +24,7 @@ from services.dashboard.board import Board
 from services.dashboard.observer import Observer
 from services.dashboard.app import no_monitor_message
 from services.embedded import CLEAR, Observed, render, stop_on_signals, summary
+from services.replay import INSTANCE_PREFIX as REPLAY
 from skinet.errors import SkinetError
 
 
@@ -38,6 +39,8 @@ def view_lines(board: Board) -> list[str]:
     out.append("services  " + ", ".join(f"{s}: {len(alive.get(s, ()))}" for s in ("monitor", "bridge_ros2", "predictor")))
     if not alive.get("monitor"):
         out.append("  NO MONITOR ALIVE: showing its last messages")
+    elif all(i.startswith(REPLAY) for i in alive["monitor"]):
+        out.append("  REPLAY of a recorded run (skinet replay), not the live robot")
     out.append(f"violations ({len(board.violations)})" + "".join(
         f"\n  {v['property']} at step {v['seq']}" + (f" by {v['event']}" if v["event"] else "")
         for v in board.violations[-10:]))

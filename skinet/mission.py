@@ -4,6 +4,9 @@ A scenario is a TOML file of timed steps; each step is a model transition of
 one skillset (``transition = "teleop.start"``: an operator command, an event
 or a skill outcome) or an operator *considering* a command without issuing it
 (``consider = "arm_ready.start"``), which shows whether SkiNet warns about it.
+A transition step the model does not allow at that moment is a model divergence
+(SPEC §7); a scenario that plays one on purpose (a conformance test, a faulty
+robot) says so with ``expect_divergence = true`` on the step.
 The simulator of issue 5 plays the same files through the whole chain.
 """
 
@@ -32,6 +35,7 @@ class Step:
     transition: str | None = None
     consider: str | None = None
     note: str = ""
+    expect_divergence: bool = False  # the model is expected not to explain this step
 
 
 @dataclass(frozen=True)
@@ -59,7 +63,7 @@ class StepRecord:
 
 SCENARIO_TABLES = ("[scenario]", "[[steps]]")
 SCENARIO_KEYS = ("name", "system")
-STEP_KEYS = ("t", "skillset", "transition", "consider", "note")
+STEP_KEYS = ("t", "skillset", "transition", "consider", "note", "expect_divergence")
 
 
 def parse_scenario(text: str, source: str = "<scenario>") -> Scenario:
@@ -100,7 +104,15 @@ def parse_scenario(text: str, source: str = "<scenario>") -> Scenario:
             raise SourceError.at(source, locate(text, table, "t"),
                                  f"step {n}: time {t} goes backwards (previous step at {last})")
         last = t
-        steps.append(Step(t, s["skillset"], s.get("transition"), s.get("consider"), str(s.get("note", ""))))
+        expect = s.get("expect_divergence", False)
+        if not isinstance(expect, bool):
+            raise SourceError.at(source, locate(text, table, "expect_divergence"),
+                                 f"step {n}: 'expect_divergence' must be true or false, got {expect!r}")
+        if expect and s.get("transition") is None:
+            raise SourceError.at(source, locate(text, table, "expect_divergence"),
+                                 f"step {n}: 'expect_divergence' needs a 'transition' (a considered command is "
+                                 "not played)")
+        steps.append(Step(t, s["skillset"], s.get("transition"), s.get("consider"), str(s.get("note", "")), expect))
     return Scenario(head["name"], head["system"], tuple(steps), text)
 
 

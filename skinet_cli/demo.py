@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import re
+import sys
 from pathlib import Path
 
 from skinet.errors import SourceError
@@ -16,13 +17,17 @@ from skinet.system import System
 from skinet.wire.log import log_line
 
 MISSIONS = ("unassisted.toml", "assisted.toml", "mobile_unassisted.toml", "mobile_assisted.toml")
+UNEXPECTED = 3  # exit status: a divergence the scenario did not declare, or a declared one that did not happen
 HELP = (f"play {len(MISSIONS)} runs: the paper's unassisted and assisted runs, then the mobile manipulator's two "
         "(the main job)")
 DESCRIPTION = (
     f"Play {len(MISSIONS)} runs through the whole chain (simulated managers, CDR, bridge, monitor, predictor on one "
     "embedded Zenoh session) and print what the operator would have seen: the paper's unassisted run "
     "(three violations) and assisted run (two warnings heeded, no violation), then the mobile manipulator's "
-    "unassisted and assisted runs (a forced constraint). Given SCENARIO files, it plays those instead.")
+    "unassisted and assisted runs (a forced constraint). Given SCENARIO files, it plays those instead. "
+    "A step the model does not allow then is shown as a model divergence. Exit status: 0; 3 when a run diverged "
+    "at a step its scenario does not mark expect_divergence = true, or a marked step did not diverge; 1 on bad "
+    "input.")
 
 
 def default_scenarios() -> list[Path]:
@@ -63,6 +68,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
         require_properties(system, path.parent / scenario.system, args.no_properties)
         check_scenario(scenario, system, str(path))
         runs.append((path, scenario, system))
+    surprises: list[str] = []
     for path, scenario, system in runs:
         if args.core:
             records = replay(system, scenario, predict=not args.no_predict)
@@ -79,10 +85,25 @@ def cmd_demo(args: argparse.Namespace) -> int:
             if args.all_steps or r.violations or r.warnings or r.flagged or r.divergence or r.step.consider:
                 print(_line(r))
         print(_summary(records))
+        surprises += [f"{path}: {s}" for s in unexpected(records)]
         if args.log or args.timeline:
             _write_run(args, system, scenario, records)
         print()
-    return 0
+    for line in surprises:
+        print(f"skinet demo: {line}", file=sys.stderr)
+    return UNEXPECTED if surprises else 0
+
+
+def unexpected(records: list[StepRecord]) -> list[str]:
+    """Divergences at steps without ``expect_divergence``, and marked steps that did not diverge."""
+    out = []
+    for r in records:
+        if r.step.transition is None or bool(r.divergence) == r.step.expect_divergence:
+            continue
+        what = f"step {r.index} ({r.step.skillset}:{r.step.transition} at t={r.step.t:g} s)"
+        out.append(f"{what}: model divergence the scenario does not expect (mark it expect_divergence = true): "
+                   f"{r.divergence}" if r.divergence else f"{what}: expected a model divergence, none happened")
+    return out
 
 
 def _write_run(args: argparse.Namespace, system: System, scenario: Scenario, records: list[StepRecord]) -> None:
@@ -119,6 +140,10 @@ def _summary(records: list[StepRecord]) -> str:
             ahead = "the command itself" if j == i else f"{plural(i - j)} ahead"
             lines.append(f"     {p} at step {i}: SkiNet flagged {u.skillset}:{u.transition} when it was issued at "
                          f"step {j} ({u.constraint}, {ahead}); the operator went ahead")
+    diverged = [r for r in records if r.divergence]
+    lines.append(f"   divergences: {len(diverged)}" + "".join(
+        f"; {r.step.skillset}:{r.step.transition} at step {r.index}"
+        f" ({'expected' if r.step.expect_divergence else 'NOT EXPECTED'})" for r in diverged))
     heeded = [(w, r.index) for r in records for w in r.warnings]
     lines.append(f"   warnings heeded (commands considered, flagged, not issued): {len(heeded)}"
                  + "".join(f"; {w.skillset}:{w.transition} {w.constraint} for {w.property} at step {i}"

@@ -85,6 +85,8 @@ LAZY_COMMANDS: tuple[tuple[str, str, dict[str, str]], ...] = (
      {"record": "record the monitor's messages of a system into a JSON Lines log"}),
     ("skinet_cli.timeline", "add_parser",
      {"timeline": "draw a monitor log (skinet record, skinet demo --log) as a timeline picture"}),
+    ("skinet_cli.replay", "add_parser",
+     {"replay": "publish a recorded run (skinet record) again, for dashboard and watch"}),
     ("skinet_cli.run", "add_commands", {
         "run": "monitor and predictor in one process with a live operator view (SPEC §7)",
         "router": "run a Zenoh router (the Python wheel in router mode) until interrupted",

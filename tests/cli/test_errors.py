@@ -50,7 +50,7 @@ FREE_TEXT = {
     ("python -m services.bridge_ros2", "--ros-distro"): "only humble changes the keys; any other name is a later one",
     ("python -m services.simulator", "--ros-distro"): "only humble changes the keys; any other name is a later one",
     **{(program, option): "any user name and password is sent; the router judges them (tests/deploy/test_operator_acl.py)"
-       for program in ("skinet record", "skinet run", "skinet router", "skinet watch", "skinet check",
+       for program in ("skinet record", "skinet replay", "skinet run", "skinet router", "skinet watch", "skinet check",
                        "skinet dashboard", "python -m services.monitor", "python -m services.predictor",
                        "python -m services.bridge_ros2", "python -m services.simulator")
        for option in ("--user", "--password")},
@@ -156,7 +156,8 @@ def _cases() -> list[Case]:
         "skinet": (("record", "spot_arm", "-o", "{tmp}/rec.jsonl", "--duration", "1"),
                    ("run", SYSTEM, "--once"), ("router",), ("watch", "spot_arm", "--wait", "0.5"),
                    ("check", "spot_arm", "spot:teleop.start", "--timeout", "0.5"),
-                   ("dashboard", "spot_arm", "--port", "0", "--wait", "0")),
+                   ("dashboard", "spot_arm", "--port", "0", "--wait", "0"),
+                   ("replay", "{tmp}/run.jsonl", "--linger", "0")),
         "python -m services.monitor": ((SYSTEM,),),
         "python -m services.predictor": ((),),
         "python -m services.bridge_ros2": ((SYSTEM,),),
@@ -272,6 +273,25 @@ def _cases() -> list[Case]:
         usage("skinet", "--dpi", ("timeline", "{tmp}/run.jsonl", "-o", "{tmp}/t.png", "--dpi", bad),
               f"argument --dpi: expected an integer from 10 to 1200, got '{bad}'")
 
+    # skinet replay
+    add("skinet", "log", ("replay", "{tmp}/missing.jsonl"), 1,
+        "{tmp}/missing.jsonl: error: cannot read file: No such file or directory")
+    add("skinet", "log", ("replay", "{tmp}/bad.jsonl"), 1,
+        "{tmp}/bad.jsonl:1: error: invalid JSON: Expecting value (column 1)")
+    add("skinet", "log", ("replay", "{tmp}/events.jsonl"), 1,
+        "{tmp}/events.jsonl: error: no message of a monitor to replay (LiveState, Verdicts, UnsafeReport, "
+        "StateSpaceReport): the log holds 1 CanonicalEvent")
+    for bad in ("-1", "fast"):
+        usage("skinet", "--speed", ("replay", "{tmp}/run.jsonl", "--speed", bad),
+              f"argument --speed: expected a number >= 0, got '{bad}'")
+    usage("skinet", "--linger", ("replay", "{tmp}/run.jsonl", "--linger", "-1"),
+          "argument --linger: expected a number of seconds >= 0, got '-1'")
+    usage("skinet", "--dashboard", ("replay", "{tmp}/run.jsonl", "--dashboard", "65536"),
+          "argument --dashboard: expected an integer from 0 to 65535, got '65536'")
+    add("skinet", "--dashboard-host", ("replay", "{tmp}/run.jsonl", "--no-multicast-scouting", "--dashboard", "0",
+                                       "--dashboard-host", "999.0.0.1"), 1,
+        "skinet: error: cannot listen on 999.0.0.1:0: Name or service not known")
+
     # the services' own options
     mon, pred, br, sim = (f"python -m services.{s}" for s in ("monitor", "predictor", "bridge_ros2", "simulator"))
     not_a_key = "cannot be used in a Zenoh key (letters, digits, _ - . only)"
@@ -323,6 +343,9 @@ def _cases() -> list[Case]:
         "{tmp}/missing.db3: error: cannot read file: No such file or directory")
     add(br, "--replay", (SYSTEM, "--no-multicast-scouting", "--replay", SPOT), 1,
         f"{SPOT}: error: cannot replay: Unrecognized storage format '.rl'")
+    add(br, "--replay", (SYSTEM, "--no-multicast-scouting", "--replay", "{tmp}/run.jsonl"), 1,
+        "{tmp}/run.jsonl: error: a SkiNet monitor log (JSON Lines, skinet record), not a rosbag2 file of the "
+        "managers: replay it with 'skinet replay {tmp}/run.jsonl'")
     add(sim, "scenario", ("{tmp}/missing.toml",), 1, missing)
     add(sim, "scenario", ("{tmp}/unknown_skillset.toml",), 1,
         "{tmp}/unknown_skillset.toml:6:1: error: step 1: unknown skillset 'spott' (skillsets of spot_arm: spot, manipulator)")
@@ -363,6 +386,8 @@ def files(tmp_path_factory: pytest.TempPathFactory) -> Path:
     (tmp / "bad_time.toml").write_text(head + 't = "soon"\nskillset = "spot"\ntransition = "init_power.start"\n')
     assert skinet_main.main(["demo", "--core", "--no-predict", "--log", str(tmp), SCENARIO]) == 0
     (tmp / "unassisted.jsonl").rename(tmp / "run.jsonl")
+    event = next(line for line in (tmp / "run.jsonl").read_text().splitlines() if '"CanonicalEvent"' in line)
+    (tmp / "events.jsonl").write_text(event + "\n")  # a log with no monitor message
     return tmp
 
 
