@@ -287,7 +287,7 @@ def cmd_unsafe(args: argparse.Namespace) -> int:
     if prediction is not None:
         r = prediction.report()
         state = "complete" if r["complete"] else (
-            f"TRUNCATED by {r['truncated_by']} at depth {r['depth']} (unknown constraints possible)")
+            f"TRUNCATED by {r['truncated_by']} ({prediction.space.explored()}; unknown constraints possible)")
         print(f"prediction: {state}, {r['markings']} markings in {seconds(r['elapsed'])}")
     else:
         print("prediction: off (explicit constraints only)")
@@ -303,7 +303,7 @@ def cmd_explore(args: argparse.Namespace) -> int:
         return 0
     print(f"explored {system.name} ({'with' if not args.no_seeds else 'without'} event seeds)")
     rows = [
-        ["complete", "yes" if report["complete"] else f"no (truncated by {report['truncated_by']})"],
+        ["complete", "yes" if report["complete"] else f"no (truncated by {report['truncated_by']}: {result.space.explored()})"],
         ["elapsed", seconds(report["elapsed"])],
         ["depth", report["depth"]],
         ["markings", report["markings"]],
@@ -361,7 +361,7 @@ def cmd_ctl(args: argparse.Namespace) -> int:
               + (f" ({r['undecided']} undecided)" if r["undecided"] else ""))
         print(f"at the start marking: {r['start']}")
     if kripke.truncated_by is not None:
-        print(f"truncated by {kripke.truncated_by} at depth {space.expanded_depth}: answers are three-valued")
+        print(f"truncated by {kripke.truncated_by} ({space.explored()}): answers are three-valued")
     return 0
 
 
