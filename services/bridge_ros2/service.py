@@ -87,6 +87,7 @@ class Bridge:
         self._requests: dict[str, tuple[str, ManagerTopic, bytes]] = {}  # skillset -> (manager, topic, CDR)
         self._hashes: dict[str, str] = {}  # skillset -> status_request type hash learned from the manager's token
         self._present: dict[str, str] = {}  # skillset -> token of its manager's status_request subscription
+        self._seen: set[str] = set()  # skillsets whose manager's token was seen at least once
         self._sequence = 0
         self._gid = os.urandom(16)  # rmw_zenoh attachments of the status requests
         own: list[tuple[EntityKind, str, str, str]] = []  # rmw_zenoh graph entities of the bridge
@@ -206,8 +207,13 @@ class Bridge:
                 return
             if hash_:
                 self._hashes[name] = hash_
-            back = name not in self._present and self.feed.managers[name].deriver.last is not None
+            # Only a manager seen before can come back.  The tokens present at start-up come as
+            # the subscriber's history, with no mark and no order against the topics' samples:
+            # on a loaded start they arrive after the first status, and are no restart.
+            back = name in self._seen and name not in self._present and \
+                self.feed.managers[name].deriver.last is not None
             self._present[name] = key
+            self._seen.add(name)
         if back:
             with self._fed:
                 self.feed.restarted(name, "the manager (or its gateway) came back")
