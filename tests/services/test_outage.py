@@ -10,6 +10,7 @@ get back and resyncs.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -29,6 +30,7 @@ from skinet.wire import keys
 from skinet.wire.codec import decode, encode
 from skinet.wire.messages import CanonicalEvent, LiveState
 from tests.services.conftest import free_port, open_client, open_router
+from tests.services.test_bridge import CHAIN
 from tests.services.test_monitor import wait_until
 
 REPO = Path(__file__).resolve().parents[2]
@@ -140,21 +142,9 @@ def test_a_late_monitor_does_not_replay_the_cache(outage: Outage) -> None:
 
 # -- between the managers and the bridge (issue 25, item 8) ---------------------------------
 
-FIRST_STEPS = """
-[scenario]
-name = "c"
-system = "spot_arm.toml"
-[[steps]]
-skillset = "spot"
-transition = "init_power.start"
-[[steps]]
-skillset = "spot"
-transition = "init_power.success.powered_on"
-[[steps]]
-skillset = "spot"
-transition = "stand_up.start"
-"""
-NEXT_STEP = FIRST_STEPS.split("[[steps]]")[0] + '[[steps]]\nskillset = "spot"\ntransition = "stand_up.success.standing"\n'
+CHAIN_STEPS = parse_scenario(CHAIN, "chain.toml")
+FIRST_STEPS = dataclasses.replace(CHAIN_STEPS, steps=CHAIN_STEPS.steps[:3])  # init_power (start, success), stand_up
+NEXT_STEP = dataclasses.replace(CHAIN_STEPS, steps=CHAIN_STEPS.steps[3:4])  # stand_up.success.standing
 
 
 @pytest.mark.parametrize("style", [KeyStyle(), KeyStyle(rmw_zenoh=True, domain=8)], ids=["ros2dds", "rmw_zenoh"])
@@ -178,7 +168,7 @@ def test_router_restart_between_managers_and_bridge_is_resynced(outage: Outage, 
         wait_until(lambda: len(got) == 2, 5, "the initial statuses")
         outage.down()
         down = time.monotonic()
-        assert [r.ok for r in sim.drive(parse_scenario(FIRST_STEPS, "c.toml"), speed=0)] == [True, True, True]
+        assert [r.ok for r in sim.drive(FIRST_STEPS, speed=0)] == [True, True, True]
         time.sleep(max(0.0, 3.0 - (time.monotonic() - down)))
         outage.up()
         wait_until(lambda: {e.skillset for e in got if e.info.startswith("resync")} == {"spot", "manipulator"},
@@ -195,7 +185,7 @@ def test_router_restart_between_managers_and_bridge_is_resynced(outage: Outage, 
             {"power_status": "PowerOn", "posture": "Sitting", "control_mode": "Busy"}, ["stand_up"])
         assert (bridge.counters.resyncs, bridge.counters.restarts) == (2, 0)
         n = len(got)
-        assert [r.ok for r in sim.drive(parse_scenario(NEXT_STEP, "n.toml"), speed=0)] == [True]
+        assert [r.ok for r in sim.drive(NEXT_STEP, speed=0)] == [True]
         wait_until(lambda: len(got) == n + 1, 5, "the next step")
         assert (got[-1].transition, got[-1].info, got[-1].seq) == ("stand_up.success.standing", "", spot[-1].seq + 1)
         assert missed == []
