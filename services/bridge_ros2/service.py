@@ -19,7 +19,10 @@ initial status whose ``info`` says how it differs from the last one (SPEC §7). 
 ``rmw_zenoh`` the bridge declares its own node, subscription and publisher tokens.
 A monitor that missed events asks ``keys.resync(system, skillset)``: the bridge
 answers with the skillset's last status (numbered as its last event) and asks
-the manager for a fresh one.
+the manager for a fresh one.  What managers publish while the bridge's session
+has lost every router is lost (their topics are volatile): the first status after
+such a cut is a counted resync whose event says so, and every manager is asked
+again when the link is back (:meth:`Bridge._watch_link`).
 
 One subscriber per manager covers all its topics (``.../<skillset>_skillset/**``):
 separate subscribers per key would run their callbacks on different threads and

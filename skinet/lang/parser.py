@@ -83,7 +83,8 @@ def parse_unit(text: str, source: str, library: bool = False) -> Unit:
     """The syntax and structure of one file, not yet validated (see :func:`link`).
 
     A ``library`` (a file named by an ``include``) may declare no skillset, and
-    its syntax errors quote none of its text.  Raises :class:`SourceError` on a syntax error.  Cost: linear in the text.
+    its syntax errors quote none of its text.  Raises :class:`SourceError` on a
+    syntax error.  Cost: linear in the text.
     """
     check_size(text, source)
     parser = _parser("library" if library else "start")
