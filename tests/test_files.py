@@ -243,7 +243,7 @@ def test_include_errors(tmp_path: Path) -> None:
 def test_include_stays_in_the_models_folder(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
                                             capsys: pytest.CaptureFixture[str]) -> None:
     """No include reads outside the model's folder, and none echoes what a file holds (issue 25, item 6)."""
-    monkeypatch.setenv("SKINET_TEST_TOKEN", "s3cr3t-token")
+    monkeypatch.setenv("MODEL_TEST_TOKEN", "s3cr3t-token")
     monkeypatch.delenv("SKINET_INCLUDE_ROOT", raising=False)
     (tmp_path / "models").mkdir()
     write(tmp_path, "token.txt", "s3cr3t-token\n")

@@ -389,7 +389,7 @@ def test_monitor_refuses_a_budget_below_the_predictors_minimum(peer: zenoh.Sessi
 def test_model_bundle_includes_are_never_read(peer: zenoh.Session, system: System,
                                               monkeypatch: pytest.MonkeyPatch) -> None:
     """A bundle carries its texts: an ``include`` in it names no file the predictor opens (issue 25, item 6)."""
-    monkeypatch.setenv("SKINET_BUNDLE_SECRET", "s3cr3t-value")  # in /proc/self/environ of the workers
+    monkeypatch.setenv("BUNDLE_TEST_SECRET", "s3cr3t-value")  # in /proc/self/environ of the workers
     spot = (REPO / "skillsets" / "spot.rl").read_text()
     hostile = model_of(system, 'include "/proc/self/environ"\ninclude "../../etc/shadow"\n' + spot)
     server = ModelServer(peer, hostile)
