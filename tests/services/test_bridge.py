@@ -373,7 +373,7 @@ def test_a_late_history_token_is_no_restart(client_factory, spot_arm, monkeypatc
     start: test_rmw_zenoh_chain failed so now and then): that is the first sight of each manager, not a
     comeback. A real restart is still reported."""
     system, typemap = spot_arm
-    style = KeyStyle(rmw_zenoh=True, domain=7)
+    style = KeyStyle(rmw_zenoh=True, domain=9)
     gate = threading.Event()
     late = Bridge._on_token
 
