@@ -11,6 +11,11 @@ skillset, the ROS 2 node of its manager; paths are relative to the file::
     model = "spot.rl"
     manager = "/spot/spot_skillset_manager"
 
+A skillset without a manager may name a *binding* instead (SPEC §9), a TOML file
+mapping its skills, resources and events to plain ROS 2 action servers,
+lifecycle nodes and topics: ``binding = "nav2.binding.toml"`` (read by
+:func:`load_bindings`).
+
 ``[system] types = "spot_arm.types.json"`` names the type map (ONERA's JSON
 format) that gives each ``.rl`` type its ROS 2 message; :func:`load_typemap`
 reads it.
@@ -107,7 +112,7 @@ def load_system(path: str | Path) -> tuple[System, list[Diagnostic]]:
     entries = data.get("skillsets")
     if not isinstance(entries, list) or not entries:
         raise SourceError.at(where, None, "missing [[skillsets]] entries (each with 'model' and 'manager')")
-    skillsets: list[tuple[Skillset, str]] = []
+    skillsets: list[tuple[Skillset, str, str]] = []
     warnings: list[Diagnostic] = []
     sources: dict[str, str] = {}
     models: dict[Path, tuple[Model, dict[str, str]]] = {}
@@ -119,8 +124,9 @@ def load_system(path: str | Path) -> tuple[System, list[Diagnostic]]:
             models[model_path] = _load_linked(model_path)
             warnings.extend(models[model_path][0].warnings)
         model, texts = models[model_path]
+        binding = _entry_binding(entry, n, path, text)
         for ss in _entry_skillsets(entry, n, model, where):
-            skillsets.append((ss, str(entry.get("manager", ""))))
+            skillsets.append((ss, str(entry.get("manager", "")), binding))
             sources[Path(ss.source).name] = texts[ss.source]
     props_name = system.get("properties")
     props_text, props_source = "", "<no properties>"
@@ -131,6 +137,32 @@ def load_system(path: str | Path) -> tuple[System, list[Diagnostic]]:
     built = build_system(system["name"], skillsets, props_text, props_source, sources)
     options = parse_prediction(data.get("prediction"), [p.name for p in built.properties], where, text)
     return replace(built, prediction=options), warnings
+
+
+def _entry_binding(entry: dict[str, object], n: int, path: Path, text: str) -> str:
+    """The binding file of a ``[[skillsets]]`` entry, relative to the system file ('' when none)."""
+    binding = entry.get("binding")
+    if binding is None:
+        return ""
+    where, pos = str(path), _locate_key(text, "binding", n)
+    if not isinstance(binding, str) or not binding:
+        raise SourceError.at(where, pos, f"skillsets entry {n}: 'binding' must be a path string")
+    if "manager" in entry:
+        raise SourceError.at(where, pos, f"skillsets entry {n}: give 'manager' (a skillset manager) or 'binding' "
+                                         "(plain ROS 2 interfaces), not both")
+    return str(path.parent / binding)
+
+
+def _locate_key(text: str, key: str, entry: int) -> Pos | None:
+    """Where ``key = ...`` is written in the ``entry``-th ``[[skillsets]]`` table of a system file."""
+    seen = 0
+    for line_no, line in enumerate(text.splitlines(), 1):
+        stripped = line.strip()
+        if stripped.startswith("["):
+            seen += stripped.replace(" ", "").startswith("[[skillsets]]")
+        elif seen == entry and re.match(rf"{re.escape(key)}\s*=", stripped):
+            return Pos(line_no, line.index(key) + 1)
+    return None
 
 
 def _entry_skillsets(entry: dict[str, object], n: int, model: Model, where: str) -> list[Skillset]:
@@ -147,7 +179,7 @@ def _entry_skillsets(entry: dict[str, object], n: int, model: Model, where: str)
             if ss.name == expected:
                 return [ss]
         raise SourceError.at(where, None, f"skillsets entry {n} names '{expected}' but {entry['model']} declares {declared}")
-    if len(model.skillsets) > 1 and "manager" in entry:
+    if len(model.skillsets) > 1 and ("manager" in entry or "binding" in entry):
         raise SourceError.at(
             where, None,
             f"skillsets entry {n}: {entry['model']} declares {len(model.skillsets)} skillsets ({declared});"
