@@ -34,6 +34,8 @@ from skinet.lang.larkerrors import MAX_SOURCE_CHARS
 from skinet.lang.model import Model, Skillset
 from skinet.lang.parser import link, parse_unit
 from skinet.options import parse_prediction
+from skinet.ros.binding import Binding, definitions_folder, parse_binding
+from skinet.ros.definitions import KINDS
 from skinet.ros.typemap import TypeMap, parse_typemap
 from skinet.tomltext import parse_toml
 from skinet.system import Marking, System, build_system, marking_from_json, marking_problems
@@ -199,6 +201,40 @@ def load_typemap(path: str | Path) -> TypeMap:
         raise SourceError.at(str(path), None, "[system] 'types' must be a path string")
     types_path = path.parent / name
     return parse_typemap(read_source(types_path), str(types_path))
+
+
+def load_bindings(system: System) -> tuple[dict[str, Binding], list[Diagnostic]]:
+    """The binding of every skillset of ``system`` that names one (SPEC §9), and their warnings.
+
+    A binding's ``definitions`` folder (relative to the binding file) holds
+    ``<package>/<msg|srv|action>/<Name>.<msg|srv|action>`` files; each is read and
+    registered as ``<package>/<kind>/<Name>``.
+    """
+    bindings: dict[str, Binding] = {}
+    warnings: list[Diagnostic] = []
+    for c in system.components:
+        if not c.binding:
+            continue
+        path = Path(c.binding)
+        text = read_source(path)
+        folder = definitions_folder(text, str(path))
+        texts, sources = _read_definitions(path.parent / folder, str(path)) if folder else ({}, {})
+        bindings[c.name] = parse_binding(text, str(path), c.skillset, texts, sources)
+        warnings.extend(bindings[c.name].warnings)
+    return bindings, warnings
+
+
+def _read_definitions(folder: Path, binding: str) -> tuple[dict[str, str], dict[str, str]]:
+    """Every definition file below ``folder`` by type name, and the file of each."""
+    if not folder.is_dir():
+        raise SourceError.at(binding, None, f"definitions folder {folder} is not a folder")
+    texts: dict[str, str] = {}
+    sources: dict[str, str] = {}
+    for kind in KINDS:
+        for file in sorted(folder.glob(f"*/{kind}/*.{kind}")):
+            name = f"{file.parent.parent.name}/{kind}/{file.stem}"
+            texts[name], sources[name] = read_source(file), str(file)
+    return texts, sources
 
 
 _UNITS = {"": 1, "b": 1, "kb": 10**3, "mb": 10**6, "gb": 10**9, "kib": 2**10, "mib": 2**20, "gib": 2**30}
