@@ -21,6 +21,7 @@ from services.predictor.service import start_predictor
 from services.simulator import Simulator
 from services.simulator.driver import StepRun
 from skinet.mission import Scenario, StepRecord, flags_on
+from skinet.ros.binding import Binding
 from skinet.ros.keys import KeyStyle
 from skinet.system import System
 from skinet.verify.algorithm1 import UnsafeTransition
@@ -101,6 +102,80 @@ def run_chain(
                 on_record(record)
 
         simulator.drive(scenario, speed=speed, on_step=on_step)
+        return records
+    finally:
+        for service in reversed(services):
+            service.close()
+        if own:
+            session.close()
+
+
+def run_bound_chain(
+    system: System,
+    bindings: Mapping[str, Binding],
+    scenario: Scenario,
+    *,
+    predict: bool = True,
+    speed: float = 0.0,
+    settle: float = 10.0,
+    session: zenoh.Session | None = None,
+    style: KeyStyle = KeyStyle(),
+    on_record: Callable[[StepRecord], None] | None = None,
+) -> list[StepRecord]:
+    """:func:`run_chain` for a system whose skillsets are all bound to plain ROS 2 interfaces (SPEC §9).
+
+    The simulated robot's action servers, lifecycle nodes and topics (CDR on Zenoh keys)
+    -> the bound bridge -> monitor -> predictor.  After each step the chain waits until
+    the bridge has fed every message the robot published on a bound topic (and fetched
+    the results it needed), and the monitor has applied every event.
+    """
+    from services.bridge_ros2.bound_live import start_bound_bridge
+    from services.simulator.bound import BoundSimulator
+
+    own = session is None
+    if session is None:
+        session = zenoh.open(session_config("peer", multicast_scouting=False))
+    services: list = []
+    try:
+        monitor = start_monitor(session, system)
+        services.append(monitor)
+        if predict:
+            services.append(start_predictor(session, "embedded"))
+        robot = BoundSimulator(session, system, bindings, style=style)
+        services.append(robot)
+        bridge = start_bound_bridge(session, system, bindings, style=style, settle=0.2, retry=0.2)
+        services.append(bridge)
+        robot.publish_topics(scenario.topics)
+        _wait(lambda: monitor.counters.applied >= len(system.components), settle, "initial statuses")
+        watched = set(bridge.feed.routes)
+
+        def caught_up() -> bool:
+            published = sum(n for t, n in robot.published().items() if t in watched)
+            return bridge.counters.messages >= published and not bridge.feed.pending_results()
+
+        records: list[StepRecord] = []
+        before = {p.name: True for p in system.properties}
+        if predict:
+            _wait(lambda: not monitor.snapshot().unsafe.prediction_stale, settle, "initial prediction")
+        shown = [unsafe_transition(u) for u in monitor.snapshot().unsafe.unsafe]
+
+        def on_step(run: StepRun) -> None:
+            nonlocal before, shown
+            _wait(caught_up, settle, f"step {run.index}: the bridge's messages")
+            bridge.wait_idle(settle)
+            _wait(lambda: monitor.counters.applied >= bridge.counters.events, settle, f"step {run.index} applied")
+            if predict:
+                _wait(lambda: not monitor.snapshot().unsafe.prediction_stale, settle, f"step {run.index} prediction")
+            view = monitor.snapshot()
+            record = _record(run, view, before, shown)
+            if run.step.transition is not None:
+                before = record.holds
+                shown = [unsafe_transition(u) for u in view.unsafe.unsafe]
+            records.append(record)
+            if on_record is not None:
+                on_record(record)
+
+        robot.drive(scenario, speed=speed, on_step=on_step)
         return records
     finally:
         for service in reversed(services):

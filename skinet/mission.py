@@ -4,14 +4,17 @@ A scenario is a TOML file of timed steps; each step is a model transition of
 one skillset (``transition = "teleop.start"``: an operator command, an event
 or a skill outcome) or an operator *considering* a command without issuing it
 (``consider = "arm_ready.start"``), which shows whether SkiNet warns about it.
+For a skillset bound to plain ROS 2 interfaces (SPEC §9), ``message = {...}``
+gives the fields of the message that causes the step (a goal's inputs or result,
+a topic sample), and ``[scenario] topics`` the first sample of each bound topic.
 The simulator of issue 5 plays the same files through the whole chain.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import TypeVar
+from typing import Any, TypeVar
 
 from skinet.errors import SourceError
 from skinet.live import LiveSystem
@@ -32,6 +35,8 @@ class Step:
     transition: str | None = None
     consider: str | None = None
     note: str = ""
+    message: Mapping[str, Any] | None = field(default=None, compare=False)  # on a bound interface (SPEC §9): the
+    # fields of the message that causes the step
 
 
 @dataclass(frozen=True)
@@ -39,6 +44,8 @@ class Scenario:
     name: str
     system: str  # path of the system file, relative to the scenario file
     steps: tuple[Step, ...]
+    # bound skillsets (SPEC §9): the first sample the simulated robot publishes on each bound topic
+    topics: Mapping[str, Mapping[str, Any]] = field(default_factory=dict, compare=False)
 
 
 @dataclass
@@ -78,8 +85,14 @@ def parse_scenario(text: str, source: str = "<scenario>") -> Scenario:
         if t < last:
             raise SourceError.at(source, None, f"step {n}: time {t} goes backwards (previous step at {last})")
         last = t
-        steps.append(Step(t, s["skillset"], s.get("transition"), s.get("consider"), str(s.get("note", ""))))
-    return Scenario(head["name"], head["system"], tuple(steps))
+        message = s.get("message")
+        if message is not None and not isinstance(message, dict):
+            raise SourceError.at(source, None, f"step {n}: 'message' must be a table of message fields")
+        steps.append(Step(t, s["skillset"], s.get("transition"), s.get("consider"), str(s.get("note", "")), message))
+    topics = head.get("topics", {})
+    if not isinstance(topics, dict) or not all(isinstance(v, dict) for v in topics.values()):
+        raise SourceError.at(source, None, "[scenario] 'topics' must map topic names to tables of message fields")
+    return Scenario(head["name"], head["system"], tuple(steps), topics)
 
 
 def step_numbers(scenario: Scenario) -> list[int]:

@@ -9,13 +9,14 @@ from pathlib import Path
 from skinet.errors import SourceError
 from skinet_cli.options import load_live_system
 from skinet.explain import plural, warning_line
-from skinet.files import load_typemap, read_text
+from skinet.files import load_bindings, load_typemap, read_text
 from skinet.mission import Scenario, StepRecord, check_scenario, flagged_before, parse_scenario, replay
 from skinet.mission_log import records_to_log
 from skinet.system import System
 from skinet.wire.log import log_line
 
 MISSIONS = ("unassisted.toml", "assisted.toml", "mobile_unassisted.toml", "mobile_assisted.toml")
+EXAMPLES = {"nav2": Path("examples") / "nav2" / "missions" / "nav2_run.toml"}  # skinet demo nav2
 
 
 def default_scenarios() -> list[Path]:
@@ -27,9 +28,19 @@ def default_scenarios() -> list[Path]:
     return [Path("skillsets/missions") / m for m in MISSIONS]
 
 
+def example_scenario(name: str) -> Path:
+    """The scenario of a named example (``nav2``): here, else beside the installed package."""
+    for root in (Path.cwd(), Path(__file__).resolve().parents[1]):
+        if (root / EXAMPLES[name]).exists():
+            return root / EXAMPLES[name]
+    return EXAMPLES[name]
+
+
 def add_parser(sub: argparse._SubParsersAction) -> None:
     c = sub.add_parser("demo", help="replay the paper's unassisted and assisted runs (the main job)")
-    c.add_argument("scenarios", nargs="*", help="scenario files (default: skillsets/missions/{unassisted,assisted}.toml)")
+    c.add_argument("scenarios", nargs="*",
+                   help="scenario files (default: skillsets/missions/{unassisted,assisted}.toml), or 'nav2': a "
+                        "Nav2 base bound to its action servers, lifecycle node and topics (examples/nav2)")
     c.add_argument("--no-predict", action="store_true", help="explicit constraints only")
     c.add_argument("--core", action="store_true",
                    help="replay on the core library only (no simulator, ROS 2 encoding, bridge, Zenoh)")
@@ -40,7 +51,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
-    paths = [Path(p) for p in args.scenarios] or default_scenarios()
+    paths = [example_scenario(p) if p in EXAMPLES else Path(p) for p in args.scenarios] or default_scenarios()
     for folder in {args.log, args.timeline} - {None}:  # before the runs, not after the first one
         try:
             Path(folder).mkdir(parents=True, exist_ok=True)
@@ -56,6 +67,13 @@ def cmd_demo(args: argparse.Namespace) -> int:
         if args.core:
             records = replay(system, scenario, predict=not args.no_predict)
             how = "core replay"
+        elif any(c.binding for c in system.components):
+            from services.chain import run_bound_chain  # Zenoh only when the chain runs
+
+            bindings, _ = load_bindings(system)
+            records = run_bound_chain(system, bindings, scenario, predict=not args.no_predict)
+            how = ("simulated action servers, lifecycle node and topics -> CDR -> bridge (bindings) -> monitor -> "
+                   "predictor, embedded Zenoh session")
         else:
             from services.chain import run_chain  # Zenoh only when the chain runs
 

@@ -48,6 +48,7 @@ examples:
   skinet unsafe skillsets/spot_arm.toml --state state.json
   skinet explore skillsets/spot_arm.toml --budget 2
   skinet ctl skillsets/spot_arm.toml "AG not (spot:Busy and manipulator:Busy)" "EF spot:Busy"
+  skinet conform examples/nav2/nav2.toml robot_run.mcap
   skinet run skillsets/spot_arm.toml --listen tcp/127.0.0.1:7447
   skinet router --listen tcp/0.0.0.0:7447
   skinet run skillsets/spot_arm.toml --dashboard 8080
@@ -68,6 +69,8 @@ LAZY_COMMANDS: tuple[tuple[str, str, dict[str, str]], ...] = (
      {"record": "record the monitor's messages of a system into a JSON Lines log"}),
     ("skinet_cli.timeline", "add_parser",
      {"timeline": "draw a monitor log (skinet record, skinet demo --log) as a timeline picture"}),
+    ("skinet_cli.conform", "add_parser",
+     {"conform": "replay rosbag2 files against the model and report every divergence"}),
     ("skinet_cli.run", "add_commands", {
         "run": "monitor and predictor in one process with a live operator view (SPEC §7)",
         "router": "run a Zenoh router (the Python wheel in router mode) until interrupted",

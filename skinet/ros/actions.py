@@ -36,7 +36,8 @@ from skinet.ros.typestore import decode, default_instance, encode, to_plain
 CANCEL_CODES = {0: "ERROR_NONE", 1: "ERROR_REJECTED", 2: "ERROR_UNKNOWN_GOAL_ID", 3: "ERROR_GOAL_TERMINATED"}
 
 
-def _uuid(store: Typestore, goal_id: bytes) -> Any:
+def goal_uuid(store: Typestore, goal_id: bytes) -> Any:
+    """A ``unique_identifier_msgs/msg/UUID`` holding ``goal_id`` (16 bytes)."""
     if len(goal_id) != 16:
         raise ValueError(f"a goal id is a 16-byte UUID, got {len(goal_id)} bytes")
     return default_instance(store, "unique_identifier_msgs/msg/UUID", uuid=np.frombuffer(goal_id, dtype=np.uint8).copy())
@@ -64,7 +65,7 @@ def send_goal_request(store: Typestore, action: str, goal_id: bytes, inputs: Map
     """CDR of ``<action>_SendGoal_Request``: the goal id and the goal's fields from ``inputs``."""
     goal = message(store, f"{action}_Goal", inputs or {})
     return encode(store, f"{action}_SendGoal_Request", default_instance(
-        store, f"{action}_SendGoal_Request", goal_id=_uuid(store, goal_id), goal=goal))
+        store, f"{action}_SendGoal_Request", goal_id=goal_uuid(store, goal_id), goal=goal))
 
 
 def send_goal_reply(store: Typestore, action: str, payload: bytes) -> tuple[bool, float]:
@@ -79,7 +80,7 @@ def cancel_goal_request(store: Typestore, goal_id: bytes, stamp: float = 0.0) ->
     (A zero goal id with a stamp cancels every goal accepted before it, as ROS 2 defines it.)
     """
     sec = int(stamp)
-    info = default_instance(store, "action_msgs/msg/GoalInfo", goal_id=_uuid(store, goal_id),
+    info = default_instance(store, "action_msgs/msg/GoalInfo", goal_id=goal_uuid(store, goal_id),
                             stamp=default_instance(store, "builtin_interfaces/msg/Time", sec=sec,
                                                    nanosec=int(round((stamp - sec) * 1e9))))
     return encode(store, f"{CANCEL_TYPE}_Request", default_instance(store, f"{CANCEL_TYPE}_Request", goal_info=info))
@@ -95,7 +96,7 @@ def cancel_goal_reply(store: Typestore, payload: bytes) -> tuple[str, list[bytes
 def get_result_request(store: Typestore, action: str, goal_id: bytes) -> bytes:
     """CDR of ``<action>_GetResult_Request`` for one goal."""
     return encode(store, f"{action}_GetResult_Request", default_instance(
-        store, f"{action}_GetResult_Request", goal_id=_uuid(store, goal_id)))
+        store, f"{action}_GetResult_Request", goal_id=goal_uuid(store, goal_id)))
 
 
 def get_result_reply(store: Typestore, action: str, payload: bytes) -> tuple[int, dict[str, Any]]:
@@ -150,5 +151,5 @@ class SentGoal:
 
 __all__ = [
     "CANCEL_CODES", "SentGoal", "cancel_goal_reply", "cancel_goal_request", "get_result_reply", "get_result_request",
-    "get_state_reply", "get_state_request", "message", "send_goal_reply", "send_goal_request",
+    "get_state_reply", "get_state_request", "goal_uuid", "message", "send_goal_reply", "send_goal_request",
 ]
