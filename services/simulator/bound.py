@@ -411,7 +411,11 @@ class BoundSimulator:
                 if not ok:
                     log.info("step %d: %s:%s had no effect on the simulated robot", index, step.skillset,
                              step.transition)
-                run = StepRun(index, step, "event", ok)
+                head, _, rest = step.transition.partition(".")
+                kind = rest.split(".")[0] if rest else "event"
+                goal = self.sent.get((step.skillset, head))
+                detail = f"goal {goal.hex()}" if kind == "start" and goal else ""
+                run = StepRun(index, step, kind, ok, detail)  # type: ignore[arg-type]
             runs.append(run)
             if on_step is not None:
                 on_step(run)

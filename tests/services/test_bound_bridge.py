@@ -253,3 +253,25 @@ def test_a_bad_binding_stops_the_bridge_command_with_one_line(tmp_path: Path) ->
     assert done.stderr.strip().splitlines() == [
         f"{tmp_path / 'b.toml'}:3:9: error: unknown action type 'nav2_msgs/action/NavigateToPose': put its .action "
         "file in the binding's definitions folder as <package>/action/<Name>.action (actions known: none)"]
+
+
+def test_simulator_and_bridge_commands_on_rmw_zenoh_keys(nav2, client, zenoh_args, spawn, tmp_path: Path) -> None:
+    """``python -m services.simulator nav2_run.toml --rmw-zenoh`` and ``python -m services.bridge_ros2 nav2.toml
+    --rmw-zenoh`` as separate processes through a router: every transition of the run, in order."""
+    import subprocess
+    import sys
+
+    system, _, scenario = nav2
+    events = Events(client, system.name)
+    ros = ["--rmw-zenoh", "--domain", "5"]
+    spawn("services.bridge_ros2", str(NAV2 / "nav2.toml"), *ros, "--settle", "0.2", *zenoh_args)
+    sim = subprocess.run([sys.executable, "-m", "services.simulator", str(NAV2 / "missions" / "nav2_run.toml"), *ros,
+                          "--speed", "0", "--start-delay", "2", "--linger", "1", *zenoh_args], cwd=REPO,
+                         capture_output=True, text=True, timeout=120)
+    assert sim.returncode == 0, sim.stdout + sim.stderr
+    steps = [line for line in sim.stdout.splitlines() if line.startswith("step ")]
+    assert len(steps) == len(scenario.steps) and not any(line.endswith("(no effect)") for line in steps)
+    assert steps[3].split()[4:6] == ["start", "nav2:undock_robot.start"] and " goal " in steps[3]
+    got = events.wait(lambda items: len(items) == 17, timeout=20)
+    assert [e.transition for e in got] == [None] + [s.transition for s in scenario.steps if s.transition]
+    assert got[0].info == "initial status"
