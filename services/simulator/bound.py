@@ -30,11 +30,8 @@ from __future__ import annotations
 import logging
 import math
 import os
-import threading
 import time
-from collections import OrderedDict
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
 from typing import Any
 
 import zenoh
@@ -44,33 +41,16 @@ from services.common.ros_liveliness import declare_node
 from services.common.zenoh_config import undeclare
 from services.simulator.driver import StepRun
 from skinet.mission import Scenario, step_numbers
-from skinet.ros.actions import cancel_goal_request, goal_uuid, message, send_goal_reply, send_goal_request
+from services.simulator.protocols import ABORTED, SUCCEEDED, ActionLogic, LifecycleLogic
+from skinet.ros.actions import cancel_goal_request, message, send_goal_reply, send_goal_request
 from skinet.ros.binding import (
-    CANCEL_TYPE, GET_STATE_TYPE, LIFECYCLE_STATES, STATUS_TYPE, TRANSITION_EVENT_TYPE, Binding, ResourceBinding,
-    SkillBinding,
+    CANCEL_TYPE, GET_STATE_TYPE, STATUS_TYPE, TRANSITION_EVENT_TYPE, Binding, ResourceBinding, SkillBinding,
 )
 from skinet.ros.keys import KeyStyle, rmw_attachment
-from skinet.ros.typestore import decode, default_instance, encode
+from skinet.ros.typestore import encode
 from skinet.system import System
 
 log = logging.getLogger("skinet.simulator")
-
-ACCEPTED, EXECUTING, CANCELING, SUCCEEDED, CANCELED, ABORTED = 1, 2, 3, 4, 5, 6
-# lifecycle: (from, to) primary states -> the transition state between them
-TRANSITION_STATES = {(1, 2): 10, (2, 1): 11, (2, 3): 13, (3, 2): 14}
-SHUTTING_DOWN, ERROR_PROCESSING = 12, 15
-LABELS = {v: k for k, v in LIFECYCLE_STATES.items()} | {10: "configuring", 11: "cleaningup", 12: "shuttingdown",
-                                                       13: "activating", 14: "deactivating", 15: "errorprocessing"}
-
-
-@dataclass
-class _Goal:
-    id: bytes
-    stamp: float
-    status: int = ACCEPTED
-    result: dict[str, Any] = field(default_factory=dict)
-    waiting: list[Any] = field(default_factory=list)  # get_result queries answered when it ends
-
 
 class _Publisher:
     """One output topic: CDR payloads, rmw_zenoh attachments, a count of messages published."""
@@ -95,14 +75,14 @@ class _Publisher:
 
 
 class _ActionServer:
-    def __init__(self, sim: "BoundSimulator", skillset: str, binding: Binding, skill: SkillBinding):
-        self.sim, self.skillset, self.binding, self.skill = sim, skillset, binding, skill
-        self.store = binding.store
-        self.goals: OrderedDict[bytes, _Goal] = OrderedDict()
-        self.lock = threading.Lock()
+    """An action server on Zenoh keys: queryables for its services, publishers for status and feedback."""
+
+    def __init__(self, sim: "BoundSimulator", binding: Binding, skill: SkillBinding):
+        self.sim, self.skill, self.store = sim, skill, binding.store
+        self.logic = ActionLogic(binding.store, skill.type)
+        self.out = {"status": sim.publisher(skill.name("status"), STATUS_TYPE, self.store, advanced=True),
+                    "feedback": sim.publisher(skill.name("feedback"), f"{skill.type}_FeedbackMessage", self.store)}
         key = sim.key
-        self.status = sim.publisher(skill.name("status"), STATUS_TYPE, self.store, advanced=True)
-        self.feedback = sim.publisher(skill.name("feedback"), f"{skill.type}_FeedbackMessage", self.store)
         self.queryables = [
             sim.session.declare_queryable(key(skill.name("send_goal"), f"{skill.type}_SendGoal", self.store),
                                           self._send_goal),
@@ -111,139 +91,77 @@ class _ActionServer:
                                           self._get_result),
         ]
 
-    def current(self) -> _Goal | None:
-        return next((g for g in reversed(self.goals.values()) if g.status in (ACCEPTED, EXECUTING, CANCELING)), None)
+    def _reply(self, query: zenoh.Query, payload: bytes) -> None:
+        with query:
+            query.reply(query.key_expr, payload, attachment=self.sim.reply_attachment(query))
 
-    def _publish_status(self) -> None:
-        items = []
-        for g in self.goals.values():
-            sec = int(g.stamp)
-            info = default_instance(self.store, "action_msgs/msg/GoalInfo", goal_id=goal_uuid(self.store, g.id),
-                                    stamp=default_instance(self.store, "builtin_interfaces/msg/Time", sec=sec,
-                                                           nanosec=int((g.stamp - sec) * 1e9)))
-            items.append(default_instance(self.store, "action_msgs/msg/GoalStatus", goal_info=info, status=g.status))
-        self.status.put(encode(self.store, STATUS_TYPE, default_instance(self.store, STATUS_TYPE, status_list=items)))
+    def _send(self, outputs: list[tuple[str, bytes]], due: list[tuple[Any, bytes]] = ()) -> None:  # type: ignore[assignment]
+        for topic, payload in outputs:
+            self.out[topic].put(payload)
+        for query, payload in due:
+            self._reply(query, payload)
 
     def _send_goal(self, query: zenoh.Query) -> None:
-        with query, self.lock:
-            try:
-                request = decode(self.store, f"{self.skill.type}_SendGoal_Request", query.payload.to_bytes())
-            except Exception as exc:  # never crash on a bad request (SPEC §7)
-                log.warning("%s: bad send_goal request ignored: %s", self.skill.action, exc)
-                return
-            goal = _Goal(bytes(request.goal_id.uuid), time.time())
-            self.goals[goal.id] = goal
-            stamp = default_instance(self.store, "builtin_interfaces/msg/Time", sec=int(goal.stamp))
-            reply = encode(self.store, f"{self.skill.type}_SendGoal_Response", default_instance(
-                self.store, f"{self.skill.type}_SendGoal_Response", accepted=True, stamp=stamp))
-            if not self.sim.status_first:
-                query.reply(query.key_expr, reply, attachment=self.sim.reply_attachment(query))
-            self._publish_status()  # ACCEPTED
-            goal.status = EXECUTING
-            self._publish_status()
-            feedback = default_instance(self.store, f"{self.skill.type}_FeedbackMessage",
-                                        goal_id=goal_uuid(self.store, goal.id))
-            self.feedback.put(encode(self.store, f"{self.skill.type}_FeedbackMessage", feedback))
-            if self.sim.status_first:
-                query.reply(query.key_expr, reply, attachment=self.sim.reply_attachment(query))
-
-    def _cancel(self, query: zenoh.Query) -> None:
-        with query, self.lock:
-            try:
-                request = decode(self.store, f"{CANCEL_TYPE}_Request", query.payload.to_bytes())
-            except Exception as exc:
-                log.warning("%s: bad cancel_goal request ignored: %s", self.skill.action, exc)
-                return
-            goal = self.goals.get(bytes(request.goal_info.goal_id.uuid))
-            canceling = []
-            if goal is not None and goal.status in (ACCEPTED, EXECUTING):
-                goal.status = CANCELING
-                self._publish_status()
-                canceling.append(default_instance(self.store, "action_msgs/msg/GoalInfo",
-                                                  goal_id=goal_uuid(self.store, goal.id)))
-            code = 0 if canceling else 2 if goal is None else 3
-            query.reply(query.key_expr, encode(self.store, f"{CANCEL_TYPE}_Response", default_instance(
-                self.store, f"{CANCEL_TYPE}_Response", return_code=code, goals_canceling=canceling)),
-                attachment=self.sim.reply_attachment(query))
-            if goal is not None and canceling:
-                self._end(goal, CANCELED, {})
-
-    def _get_result(self, query: zenoh.Query) -> None:
-        with self.lock:
-            try:
-                request = decode(self.store, f"{self.skill.type}_GetResult_Request", query.payload.to_bytes())
-            except Exception as exc:
-                log.warning("%s: bad get_result request ignored: %s", self.skill.action, exc)
+        with self.logic.lock:
+            done = self.logic.send_goal(query.payload.to_bytes())
+            if done is None:
                 query.drop()
                 return
-            goal = self.goals.get(bytes(request.goal_id.uuid))
-            if goal is None:
-                self._reply_result(query, 0, {})
-            elif goal.status in (SUCCEEDED, CANCELED, ABORTED):
-                self._reply_result(query, goal.status, goal.result)
-            else:
-                goal.waiting.append(query)  # answered when it ends (rclcpp does the same)
+            reply, outputs = done
+            if not self.sim.status_first:
+                self._reply(query, reply)
+            self._send(outputs)
+            if self.sim.status_first:  # the status overtakes the reply (each has its own route)
+                self._reply(query, reply)
 
-    def _reply_result(self, query: zenoh.Query, status: int, result: Mapping[str, Any]) -> None:
-        with query:
-            typename = f"{self.skill.type}_GetResult_Response"
-            query.reply(query.key_expr, encode(self.store, typename, default_instance(
-                self.store, typename, status=status, result=message(self.store, f"{self.skill.type}_Result", result))),
-                attachment=self.sim.reply_attachment(query))
+    def _cancel(self, query: zenoh.Query) -> None:
+        with self.logic.lock:
+            done = self.logic.cancel(query.payload.to_bytes())
+            if done is None:
+                query.drop()
+                return
+            reply, outputs, due = done
+            self._send(outputs[:1])
+            self._reply(query, reply)
+            self._send(outputs[1:], due)
 
-    def _end(self, goal: _Goal, status: int, result: Mapping[str, Any]) -> None:
-        goal.status, goal.result = status, dict(result)
-        self._publish_status()
-        for query in goal.waiting:
-            self._reply_result(query, status, result)
-        goal.waiting.clear()
+    def _get_result(self, query: zenoh.Query) -> None:
+        with self.logic.lock:
+            reply = self.logic.get_result(query.payload.to_bytes(), query)
+            if reply is not None:
+                self._reply(query, reply)
 
     def finish(self, status: int, result: Mapping[str, Any]) -> bool:
-        """End the active goal (SUCCEEDED or ABORTED) with ``result``; False when none is active."""
-        with self.lock:
-            goal = self.current()
-            if goal is None:
-                return False
-            message(self.store, f"{self.skill.type}_Result", result)  # unknown fields: an error now
-            self._end(goal, status, result)
-            return True
+        with self.logic.lock:
+            done = self.logic.finish(status, result)
+            if done is not None:
+                self._send(*done)
+            return done is not None
 
     def close(self) -> None:
-        with self.lock:
-            for g in self.goals.values():
-                for q in g.waiting:
-                    q.drop()
-                g.waiting.clear()
+        with self.logic.lock:
+            for query in self.logic.pending():
+                query.drop()
             undeclare(*self.queryables)
 
 
 class _LifecycleNode:
     def __init__(self, sim: "BoundSimulator", binding: Binding, resource: ResourceBinding, state: int):
-        self.sim, self.resource, self.store = sim, resource, binding.store
-        self.state = state
-        self.lock = threading.Lock()
-        self.events = sim.publisher(resource.transition_event, TRANSITION_EVENT_TYPE, self.store)
-        self.queryable = sim.session.declare_queryable(sim.key(resource.get_state, GET_STATE_TYPE, self.store),
+        self.sim, self.resource = sim, resource
+        self.logic = LifecycleLogic(binding.store, state)
+        self.events = sim.publisher(resource.transition_event, TRANSITION_EVENT_TYPE, binding.store)
+        self.queryable = sim.session.declare_queryable(sim.key(resource.get_state, GET_STATE_TYPE, binding.store),
                                                        self._get_state)
 
-    def _state(self, state_id: int) -> Any:
-        return default_instance(self.store, "lifecycle_msgs/msg/State", id=state_id, label=LABELS.get(state_id, ""))
-
     def _get_state(self, query: zenoh.Query) -> None:
-        with query, self.lock:
-            typename = f"{GET_STATE_TYPE}_Response"
-            query.reply(query.key_expr, encode(self.store, typename, default_instance(
-                self.store, typename, current_state=self._state(self.state))), attachment=self.sim.reply_attachment(query))
+        with query, self.logic.lock:
+            query.reply(query.key_expr, self.logic.get_state(), attachment=self.sim.reply_attachment(query))
 
     def transition(self, target: int) -> None:
         """Go to the primary state ``target`` through its transition state, publishing both events."""
-        with self.lock:
-            middle = TRANSITION_STATES.get((self.state, target), SHUTTING_DOWN if target == 4 else ERROR_PROCESSING)
-            for start, goal in ((self.state, middle), (middle, target)):
-                msg = default_instance(self.store, TRANSITION_EVENT_TYPE, timestamp=time.time_ns(),
-                                       start_state=self._state(start), goal_state=self._state(goal))
-                self.events.put(encode(self.store, TRANSITION_EVENT_TYPE, msg))
-            self.state = target
+        with self.logic.lock:
+            for payload in self.logic.transition(target):
+                self.events.put(payload)
 
     def close(self) -> None:
         undeclare(self.queryable)
@@ -268,7 +186,7 @@ class BoundSimulator:
         for name, b in self.bindings.items():
             skillset = system.component(name).skillset
             for s in b.skills:
-                self.actions[(name, s.skill)] = _ActionServer(self, name, b, s)
+                self.actions[(name, s.skill)] = _ActionServer(self, b, s)
                 entities += [("SS", s.name(n), t, self._hash(b, t)) for n, t in (
                     ("send_goal", f"{s.type}_SendGoal"), ("cancel_goal", CANCEL_TYPE),
                     ("get_result", f"{s.type}_GetResult"))]
@@ -351,16 +269,20 @@ class BoundSimulator:
         self.sent[(skillset, skill)] = goal
         reply = self._call(self.key(s.name("send_goal"), f"{s.type}_SendGoal", b.store),
                            send_goal_request(b.store, s.type, goal, inputs))
+        with self.actions[(skillset, skill)].logic.lock:  # the server has published what followed its reply
+            pass
         return reply is not None and send_goal_reply(b.store, s.type, reply)[0]
 
     def cancel(self, skillset: str, skill: str) -> bool:
         """Cancel the active goal of ``skill`` as a client would; True when it is canceling."""
         b, server = self.bindings[skillset], self.actions[(skillset, skill)]
-        goal = server.current()
+        goal = server.logic.current()
         if goal is None:
             return False
         reply = self._call(self.key(server.skill.name("cancel_goal"), CANCEL_TYPE, b.store),
                            cancel_goal_request(b.store, goal.id))
+        with server.logic.lock:  # the server has published what followed its reply
+            pass
         return reply is not None
 
     # -- scenarios ----------------------------------------------------------------------------
