@@ -181,3 +181,17 @@ def test_a_bad_binding_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixture
     assert capsys.readouterr().err.strip().splitlines() == [
         f"{tmp_path / 'b.toml'}:1:1: error: unknown skill 'navigat' of skillset 'nav2' (did you mean navigate?) "
         "(skills: navigate, dock_robot, undock_robot)"]
+
+
+def test_the_docs_show_what_conform_prints_on_the_example_bag(capsys: pytest.CaptureFixture[str],
+                                                              monkeypatch: pytest.MonkeyPatch) -> None:
+    """docs/robot.md's block after `skinet conform ... nav2_drift`, as the README's examples are checked
+    (``...`` inside a line stands for any text)."""
+    from tests.test_readme import matches
+
+    monkeypatch.chdir(REPO)
+    docs = (REPO / "docs" / "robot.md").read_text()
+    block = docs.split("what the model expected, and exits 3 when there is one (0 when there is none):")[1]
+    expected = tuple(line[3:] for line in block.split("```")[1].strip("\n").rstrip().splitlines())
+    assert main(["conform", "examples/nav2/nav2.toml", "examples/nav2/bags/nav2_drift"]) == 3
+    assert matches(expected, capsys.readouterr().out.splitlines())
