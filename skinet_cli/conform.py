@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 from datetime import datetime, timezone
 from pathlib import Path
 
@@ -38,6 +39,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def cmd_conform(args: argparse.Namespace) -> int:
     from services.bridge_ros2.bound import replay_bags  # rosbags' reader only when the command runs
+
+    logging.getLogger("skinet.bridge_ros2").disabled = True  # the report below says it all, once
 
     system, warnings = load_live_system(args.system)
     bindings, more = load_bindings(system)
