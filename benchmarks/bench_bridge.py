@@ -60,13 +60,25 @@ class _IndirectZenoh:
         return getattr(self._zenoh, name)
 
 
+def _sessions() -> tuple[Any, Any]:
+    """The bridge's session listening on a free loopback port, and a client of it that publishes."""
+    import zenoh
+
+    from services.common.zenoh_config import session_config
+
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        endpoint = f"tcp/127.0.0.1:{sock.getsockname()[1]}"
+    listener = zenoh.open(session_config("peer", listen=[endpoint], multicast_scouting=False))
+    return listener, zenoh.open(session_config("client", connect=[endpoint]))
+
+
 def one(mode: str, cycles: int) -> dict:
     """One run in this process: messages/s and inversions."""
     import zenoh
 
     from services.bridge_ros2 import Feed, start_bridge
     from services.bridge_ros2 import service
-    from services.common.zenoh_config import session_config
     from services.simulator.manager import Manager
     from skinet.files import load_system, load_typemap
     from skinet.ros.keys import KeyStyle
@@ -94,11 +106,7 @@ def one(mode: str, cycles: int) -> dict:
     expected = {(ev.skillset, ev.seq): i for i, ev in enumerate(
         ev for ss, topic, data in interleaved for ev in feed.feed(ss, topic, data))}
 
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        endpoint = f"tcp/127.0.0.1:{s.getsockname()[1]}"
-    listener = zenoh.open(session_config("peer", listen=[endpoint], multicast_scouting=False))
-    publisher = zenoh.open(session_config("client", connect=[endpoint]))
+    listener, publisher = _sessions()
     order: list[int] = []
     done = threading.Event()
 
@@ -211,16 +219,11 @@ def side(kind: str, cycles: int, samples: int) -> dict:
 
     from services.bridge_ros2 import start_bridge
     from services.bridge_ros2.bound_live import start_bound_bridge
-    from services.common.zenoh_config import session_config
     from services.simulator.bound import BoundSimulator
     from skinet.ros.keys import KeyStyle
     from skinet.wire import keys
 
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        endpoint = f"tcp/127.0.0.1:{sock.getsockname()[1]}"
-    listener = zenoh.open(session_config("peer", listen=[endpoint], multicast_scouting=False))
-    publisher = zenoh.open(session_config("client", connect=[endpoint]))
+    listener, publisher = _sessions()
     arrived: list[float] = []
     cond = threading.Condition()
 

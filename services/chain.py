@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Mapping
+from typing import Any
 
 import zenoh
 
@@ -78,29 +79,13 @@ def run_chain(
             # routes exist (volatile QoS); count them once the answers to the retries are in.
             time.sleep(0.5)
             lost = {name: n - bridge.feed.statuses[name] for name, n in simulator.statuses_published().items()}
-        records: list[StepRecord] = []
-        before = {p.name: True for p in system.properties}
-        if predict:
-            _wait(lambda: not monitor.snapshot().unsafe.prediction_stale, settle, "initial prediction")
-        shown = [unsafe_transition(u) for u in monitor.snapshot().unsafe.unsafe]  # what the operator sees
-
-        def on_step(run: StepRun) -> None:
-            nonlocal before, shown
+        def caught_up(run: StepRun) -> None:
             expected = {name: n - lost[name] for name, n in simulator.statuses_published().items()}
             if not bridge.wait_statuses(expected):
                 raise ChainError(f"step {run.index}: the bridge did not receive every status")
             _wait(lambda: monitor.counters.applied >= bridge.counters.events, settle, f"step {run.index} applied")
-            if predict:
-                _wait(lambda: not monitor.snapshot().unsafe.prediction_stale, settle, f"step {run.index} prediction")
-            view = monitor.snapshot()
-            record = _record(run, view, before, shown)
-            if run.step.transition is not None:
-                before = record.holds
-                shown = [unsafe_transition(u) for u in view.unsafe.unsafe]
-            records.append(record)
-            if on_record is not None:
-                on_record(record)
 
+        records, on_step = _recorder(system, monitor, caught_up, predict, settle, on_record)
         simulator.drive(scenario, speed=speed, on_step=on_step)
         return records
     finally:
@@ -153,28 +138,12 @@ def run_bound_chain(
             published = sum(n for t, n in robot.published().items() if t in watched)
             return bridge.counters.messages >= published and not bridge.feed.pending_results()
 
-        records: list[StepRecord] = []
-        before = {p.name: True for p in system.properties}
-        if predict:
-            _wait(lambda: not monitor.snapshot().unsafe.prediction_stale, settle, "initial prediction")
-        shown = [unsafe_transition(u) for u in monitor.snapshot().unsafe.unsafe]
-
-        def on_step(run: StepRun) -> None:
-            nonlocal before, shown
+        def step_done(run: StepRun) -> None:
             _wait(caught_up, settle, f"step {run.index}: the bridge's messages")
             bridge.wait_idle(settle)
             _wait(lambda: monitor.counters.applied >= bridge.counters.events, settle, f"step {run.index} applied")
-            if predict:
-                _wait(lambda: not monitor.snapshot().unsafe.prediction_stale, settle, f"step {run.index} prediction")
-            view = monitor.snapshot()
-            record = _record(run, view, before, shown)
-            if run.step.transition is not None:
-                before = record.holds
-                shown = [unsafe_transition(u) for u in view.unsafe.unsafe]
-            records.append(record)
-            if on_record is not None:
-                on_record(record)
 
+        records, on_step = _recorder(system, monitor, step_done, predict, settle, on_record)
         robot.drive(scenario, speed=speed, on_step=on_step)
         return records
     finally:
@@ -182,6 +151,33 @@ def run_bound_chain(
             service.close()
         if own:
             session.close()
+
+
+def _recorder(system: System, monitor: Any, caught_up: Callable[[StepRun], None], predict: bool, settle: float,
+              on_record: Callable[[StepRecord], None] | None) -> tuple[list[StepRecord], Callable[[StepRun], None]]:
+    """The records of a run and the step callback filling them: after ``caught_up(run)`` (the bridge has
+    every message of the step and the monitor every event), what the monitor shows."""
+    records: list[StepRecord] = []
+    before = {p.name: True for p in system.properties}
+    if predict:
+        _wait(lambda: not monitor.snapshot().unsafe.prediction_stale, settle, "initial prediction")
+    shown = [unsafe_transition(u) for u in monitor.snapshot().unsafe.unsafe]  # what the operator sees
+
+    def on_step(run: StepRun) -> None:
+        nonlocal before, shown
+        caught_up(run)
+        if predict:
+            _wait(lambda: not monitor.snapshot().unsafe.prediction_stale, settle, f"step {run.index} prediction")
+        view = monitor.snapshot()
+        record = _record(run, view, before, shown)
+        if run.step.transition is not None:
+            before = record.holds
+            shown = [unsafe_transition(u) for u in view.unsafe.unsafe]
+        records.append(record)
+        if on_record is not None:
+            on_record(record)
+
+    return records, on_step
 
 
 def unsafe_transition(u: UnsafeEntry) -> UnsafeTransition:

@@ -36,7 +36,8 @@ def _toml_error(source: str, text: str, exc: tomllib.TOMLDecodeError) -> SourceE
 
 
 _HEADER = re.compile(r"\s*\[\[?\s*([^\]]+?)\s*\]\]?\s*(#.*)?$")
-_KEY = re.compile(r"\s*((?:[A-Za-z0-9_-]+|\"[^\"]*\"|'[^']*')(?:\s*\.\s*(?:[A-Za-z0-9_-]+|\"[^\"]*\"|'[^']*'))*)\s*=\s*")
+_PART = r"(?:[A-Za-z0-9_-]+|\"[^\"]*\"|'[^']*')"  # a bare or quoted key
+_KEY = re.compile(rf"\s*({_PART}(?:\s*\.\s*{_PART})*)\s*=\s*")
 
 
 def _dotted(text: str) -> tuple[str, ...]:
@@ -74,7 +75,10 @@ def locate(text: str, path: tuple[str, ...], value: bool = False) -> Pos | None:
             scope, column = full, key.end() + 1  # into the inline table
             while True:  # skip to the next key of the inline table that could be on the path
                 inner = _KEY.match(line, column)
-                if inner is None or scope + _dotted(inner.group(1)) == path[: len(scope) + len(_dotted(inner.group(1)))]:
+                if inner is None:
+                    break
+                keys = _dotted(inner.group(1))
+                if scope + keys == path[: len(scope) + len(keys)]:
                     break
                 end = _value_end(line, inner.end())
                 column = end + 1 if end < len(line) and line[end] == "," else end

@@ -61,8 +61,8 @@ def cmd_conform(args: argparse.Namespace) -> int:
             # A bound skillset's drifts come with the message that showed them (below); the live nets
             # only add what the derivation did not see.
             if out.divergence and not ev.info.startswith("model divergence"):
-                what = f"{ev.transition or 'status'}"
-                found.append((ev.stamp, ev.skillset, f"{what}: {out.divergence}" + (f" ({ev.info})" if ev.info else "")))
+                what = f"{ev.transition or 'status'}: {out.divergence}" + (f" ({ev.info})" if ev.info else "")
+                found.append((ev.stamp, ev.skillset, what))
 
         try:
             done = replay_bags(bag, system, typemap, bindings, apply, source="skinet conform")

@@ -88,7 +88,8 @@ class ActionLogic:
             stamp=default_instance(self.store, "builtin_interfaces/msg/Time", sec=int(goal.stamp))))
         outputs = [("status", self.status_array())]  # ACCEPTED
         goal.status = EXECUTING
-        feedback = default_instance(self.store, f"{self.action}_FeedbackMessage", goal_id=goal_uuid(self.store, goal.id))
+        feedback = default_instance(self.store, f"{self.action}_FeedbackMessage",
+                                    goal_id=goal_uuid(self.store, goal.id))
         outputs += [("status", self.status_array()),
                     ("feedback", encode(self.store, f"{self.action}_FeedbackMessage", feedback))]
         return reply, outputs

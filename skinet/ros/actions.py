@@ -40,7 +40,8 @@ def goal_uuid(store: Typestore, goal_id: bytes) -> Any:
     """A ``unique_identifier_msgs/msg/UUID`` holding ``goal_id`` (16 bytes)."""
     if len(goal_id) != 16:
         raise ValueError(f"a goal id is a 16-byte UUID, got {len(goal_id)} bytes")
-    return default_instance(store, "unique_identifier_msgs/msg/UUID", uuid=np.frombuffer(goal_id, dtype=np.uint8).copy())
+    return default_instance(store, "unique_identifier_msgs/msg/UUID",
+                            uuid=np.frombuffer(goal_id, dtype=np.uint8).copy())
 
 
 def message(store: Typestore, typename: str, values: Mapping[str, Any]) -> Any:

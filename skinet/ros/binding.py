@@ -237,14 +237,20 @@ class _Parser:
 
     # -- sections ---------------------------------------------------------------------------
 
+    def section(self, kind: str, name: str, table: object, names: Sequence[str]) -> dict[str, Any]:
+        """The table ``[<kind>s.<name>]``, checked: ``name`` one of the model's ``names``, known keys only."""
+        path = (f"{kind}s", name)
+        if name not in names:
+            raise self.error(path, f"unknown {kind} '{name}' of skillset '{self.skillset.name}'"
+                                   f"{_close(name, names)} ({kind}s: {', '.join(names) or 'none'})")
+        table = self.table(table, path, f"[{kind}s.{name}]")
+        self.keys(table, path, f"{kind}s")
+        return table
+
     def skill(self, name: str, table: object) -> SkillBinding:
         path = ("skills", name)
         skills = {k.name: k for k in self.skillset.skills}
-        if name not in skills:
-            raise self.error(path, f"unknown skill '{name}' of skillset '{self.skillset.name}'"
-                                   f"{_close(name, skills)} (skills: {', '.join(skills) or 'none'})")
-        table = self.table(table, path, f"[skills.{name}]")
-        self.keys(table, path, "skills")
+        table = self.section("skill", name, table, list(skills))
         action = self.ros_name(table, path, "action")
         typename = self.string(table, path, "type")
         known = action_types(self.store)
@@ -287,11 +293,7 @@ class _Parser:
     def resource(self, name: str, table: object) -> ResourceBinding:
         path = ("resources", name)
         resources = {r.name: r for r in self.skillset.resources}
-        if name not in resources:
-            raise self.error(path, f"unknown resource '{name}' of skillset '{self.skillset.name}'"
-                                   f"{_close(name, resources)} (resources: {', '.join(resources) or 'none'})")
-        table = self.table(table, path, f"[resources.{name}]")
-        self.keys(table, path, "resources")
+        table = self.section("resource", name, table, list(resources))
         model = resources[name]
         if ("lifecycle" in table) == ("topic" in table):
             raise self.error(path, f"[resources.{name}] needs either 'lifecycle' (a lifecycle node) or 'topic'")
@@ -334,12 +336,7 @@ class _Parser:
 
     def event(self, name: str, table: object) -> EventBinding:
         path = ("events", name)
-        events = [e.name for e in self.skillset.events]
-        if name not in events:
-            raise self.error(path, f"unknown event '{name}' of skillset '{self.skillset.name}'"
-                                   f"{_close(name, events)} (events: {', '.join(events) or 'none'})")
-        table = self.table(table, path, f"[events.{name}]")
-        self.keys(table, path, "events")
+        table = self.section("event", name, table, [e.name for e in self.skillset.events])
         topic = self.ros_name(table, path, "topic")
         typename = self.message_type(table, path, topic)
         if "when" not in table:

@@ -45,7 +45,7 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from skinet.lang.expr import And, Const, Implies, Not, Or, StateAtom, to_text
+from skinet.lang.expr import holds, to_text
 from skinet.lang.model import Skill
 from skinet.net.build import idle_place, resource_place, running_place
 from skinet.net.semantics import enabled, stabilize, stable_successors
@@ -399,7 +399,7 @@ class BoundDeriver:
         states = self.resource_states()
         if skill.name in self.running():
             return f"{skill.name} already runs in the model"
-        false = [f"'{p.name}' ({to_text(p.expr)})" for p in skill.preconditions if not _holds(p.expr, states)]
+        false = [f"'{p.name}' ({to_text(p.expr)})" for p in skill.preconditions if not holds(p.expr, states)]
         if false:
             shown = ", ".join(f"{r} is {s}" for r, s in states.items())
             return f"the model says {skill.name} cannot start: precondition {', '.join(false)} false ({shown})"
@@ -543,22 +543,6 @@ class BoundDeriver:
         if self.marking is None:
             return None
         return SkillsetStatus(resources=self.resource_states(), running=self.running())
-
-
-def _holds(expr: object, states: Mapping[str, str]) -> bool:
-    if isinstance(expr, Const):
-        return expr.value
-    if isinstance(expr, StateAtom):
-        return states.get(expr.resource) == expr.state
-    if isinstance(expr, Not):
-        return not _holds(expr.arg, states)
-    if isinstance(expr, And):
-        return _holds(expr.left, states) and _holds(expr.right, states)
-    if isinstance(expr, Or):
-        return _holds(expr.left, states) or _holds(expr.right, states)
-    if isinstance(expr, Implies):
-        return not _holds(expr.left, states) or _holds(expr.right, states)
-    raise TypeError(f"not a guard: {expr!r}")
 
 
 def _trim(goals: OrderedDict[bytes, int]) -> None:

@@ -14,15 +14,13 @@ from __future__ import annotations
 
 import os
 import time
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 import zenoh
 
 from event_watch import Events
-from gateway import Gateway, free_domain
-from native_build import native_binary
+from gateway import free_domain
 from services.bridge_ros2.bound_live import start_bound_bridge
 from services.common.zenoh_config import session_config
 from services.simulator.dds_bound import DdsBoundRobot
@@ -37,33 +35,24 @@ NAVIGATE = "nav2_msgs/action/NavigateToPose"
 
 
 @pytest.fixture(scope="module")
-def plugin() -> Path:
-    return native_binary("skinet-ros2dds-bridge")
-
-
-@pytest.fixture(scope="module")
 def nav2():
     system, _ = load_system(REPO / "examples" / "nav2" / "nav2.toml")
     bindings, _ = load_bindings(system)
     return system, bindings
 
 
-@pytest.fixture
-def gateway_factory(plugin: Path, tmp_path: Path) -> Iterator:
-    gateways: list[Gateway] = []
-
-    def start(**options) -> Gateway:
-        gateways.append(Gateway(plugin, tmp_path, **options))
-        return gateways[-1]
-
-    yield start
-    for g in gateways:
-        g.close()
-        print(f"--- zenoh-plugin-ros2dds (exit {g.proc.returncode}) ---\n{g.output()}")
-
-
 def client(endpoint: str) -> zenoh.Session:
     return zenoh.open(session_config("client", connect=[endpoint], multicast_scouting=False))
+
+
+def initial_status(robot: DdsBoundRobot, events: Events, battery: dict) -> object:
+    """The battery publishes until the bridge's route exists (a volatile topic: samples before it are lost);
+    the first event is then the initial status."""
+    deadline = time.monotonic() + 20
+    while not events.items and time.monotonic() < deadline:
+        robot.publish("nav2", "/battery_state", battery)
+        time.sleep(0.3)
+    return events.wait(lambda items: len(items) >= 1)[0]
 
 
 def call(session: zenoh.Session, key: str, payload: bytes, timeout: float = 10.0) -> bytes:
@@ -89,12 +78,7 @@ def test_a_nav2_run_on_dds_action_servers(gateway_factory, nav2, distro: str, na
     events = Events(session, system.name)
     bridge = start_bound_bridge(session, system, bindings, style=style, settle=0.5, retry=0.3)
     try:
-        # the battery publishes until the bridge's route exists (a volatile topic: samples before it are lost)
-        deadline = time.monotonic() + 20
-        while not events.items and time.monotonic() < deadline:
-            robot.publish("nav2", "/battery_state", {"percentage": 0.9, "power_supply_status": 1})
-            time.sleep(0.3)
-        first = events.wait(lambda items: len(items) >= 1)[0]
+        first = initial_status(robot, events, {"percentage": 0.9, "power_supply_status": 1})
         assert (first.transition, first.info, first.status.running) == (None, "initial status", [])
         robot.lifecycle("nav2", "navigator", "Inactive")
         robot.lifecycle("nav2", "navigator", "Active")
@@ -144,11 +128,7 @@ def test_the_bridge_reads_a_busy_robot_at_start_up(gateway_factory, nav2) -> Non
         events = Events(session, system.name)
         bridge = start_bound_bridge(session, system, bindings, settle=0.5, retry=0.3)
         try:
-            deadline = time.monotonic() + 20
-            while not events.items and time.monotonic() < deadline:
-                robot.publish("nav2", "/battery_state", {"percentage": 0.5, "power_supply_status": 2})
-                time.sleep(0.3)
-            first = events.wait(lambda items: len(items) >= 1)[0]
+            first = initial_status(robot, events, {"percentage": 0.5, "power_supply_status": 2})
         finally:
             bridge.close()
             session.close()

@@ -15,7 +15,6 @@ from skinet.files import load_bindings, load_system
 from skinet.ros.binding import LIFECYCLE_STATES, parse_binding
 from skinet.ros.condition import parse_condition
 from skinet.ros.definitions import action_types, build_store, rihs01
-from skinet_cli.main import main
 
 REPO = Path(__file__).resolve().parents[2]
 NAV2 = REPO / "examples" / "nav2"
