@@ -10,7 +10,8 @@ the core replay gives, so both can be printed and compared alike.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
+from contextlib import contextmanager
 from typing import Any
 
 import zenoh
@@ -57,15 +58,7 @@ def run_chain(
     then closes itself.  ``on_record`` is called after each step with what the
     monitor showed then.
     """
-    own = session is None
-    if session is None:
-        session = zenoh.open(session_config("peer", multicast_scouting=False))
-    services: list = []
-    try:
-        monitor = start_monitor(session, system)
-        services.append(monitor)
-        if predict:
-            services.append(start_predictor(session, "embedded"))
+    with _embedded(session, system, predict) as (session, monitor, services):
         external = simulator is not None
         if simulator is None:
             simulator = Simulator(session, system, typemap)
@@ -79,6 +72,7 @@ def run_chain(
             # routes exist (volatile QoS); count them once the answers to the retries are in.
             time.sleep(0.5)
             lost = {name: n - bridge.feed.statuses[name] for name, n in simulator.statuses_published().items()}
+
         def caught_up(run: StepRun) -> None:
             expected = {name: n - lost[name] for name, n in simulator.statuses_published().items()}
             if not bridge.wait_statuses(expected):
@@ -88,11 +82,6 @@ def run_chain(
         records, on_step = _recorder(system, monitor, caught_up, predict, settle, on_record)
         simulator.drive(scenario, speed=speed, on_step=on_step)
         return records
-    finally:
-        for service in reversed(services):
-            service.close()
-        if own:
-            session.close()
 
 
 def run_bound_chain(
@@ -117,15 +106,7 @@ def run_bound_chain(
     from services.bridge_ros2.bound_live import start_bound_bridge
     from services.simulator.bound import BoundSimulator
 
-    own = session is None
-    if session is None:
-        session = zenoh.open(session_config("peer", multicast_scouting=False))
-    services: list = []
-    try:
-        monitor = start_monitor(session, system)
-        services.append(monitor)
-        if predict:
-            services.append(start_predictor(session, "embedded"))
+    with _embedded(session, system, predict) as (session, monitor, services):
         robot = BoundSimulator(session, system, bindings, style=style)
         services.append(robot)
         bridge = start_bound_bridge(session, system, bindings, style=style, settle=0.2, retry=0.2)
@@ -146,6 +127,23 @@ def run_bound_chain(
         records, on_step = _recorder(system, monitor, step_done, predict, settle, on_record)
         robot.drive(scenario, speed=speed, on_step=on_step)
         return records
+
+
+@contextmanager
+def _embedded(session: zenoh.Session | None, system: System,
+              predict: bool) -> Iterator[tuple[zenoh.Session, Any, list[Any]]]:
+    """A session (a new peer one unless given), the monitor and a predictor on it, and the list of
+    services to close in reverse order at the end (the session too, if it is ours)."""
+    own = session is None
+    if session is None:
+        session = zenoh.open(session_config("peer", multicast_scouting=False))
+    services: list[Any] = []
+    try:
+        monitor = start_monitor(session, system)
+        services.append(monitor)
+        if predict:
+            services.append(start_predictor(session, "embedded"))
+        yield session, monitor, services
     finally:
         for service in reversed(services):
             service.close()
