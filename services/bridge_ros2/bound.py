@@ -155,7 +155,7 @@ class BoundFeed:
         """Results the derivation waits for (skillset, request)."""
         out = []
         for name, ss in self.skillsets.items():
-            waiting = ss.deriver._waiting  # noqa: SLF001 - the feed owns its derivers
+            waiting = ss.deriver.waiting
             if waiting is not None:
                 out.append((name, waiting))
         return out

@@ -167,6 +167,11 @@ class BoundDeriver:
     def synced(self) -> bool:
         return self.marking is not None
 
+    @property
+    def waiting(self) -> ResultRequest | None:
+        """The result the derivation waits for before it goes on (later observations are queued)."""
+        return self._waiting
+
     def missing(self) -> list[str]:
         """The readings start-up still waits for (empty once synced)."""
         if self.synced:
@@ -175,7 +180,7 @@ class BoundDeriver:
         for r in self.binding.resources:
             if r.resource not in self.readings:
                 out.append(f"the state of {r.lifecycle}" if r.lifecycle else f"a first {r.topic} message")
-        return out
+        return list(dict.fromkeys(out))  # two resources of one topic wait for one message
 
     def no_status(self, skill: str, stamp: float) -> BoundOutput:
         """The server of ``skill``'s action is up and has published no status: no goal yet."""

@@ -195,3 +195,14 @@ def test_the_docs_show_what_conform_prints_on_the_example_bag(capsys: pytest.Cap
     expected = tuple(line[3:] for line in block.split("```")[1].strip("\n").rstrip().splitlines())
     assert main(["conform", "examples/nav2/nav2.toml", "examples/nav2/bags/nav2_drift"]) == 3
     assert matches(expected, capsys.readouterr().out.splitlines())
+
+
+def test_a_system_of_managers_and_bindings(clean, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Managers' topics go to the manager derivation, bound topics to the bindings', in one replay."""
+    skillsets = REPO / "skillsets"
+    (tmp_path / "mixed.toml").write_text(
+        f'[system]\nname = "mixed"\ntypes = "{skillsets / "spot_arm.types.json"}"\n'
+        f'[[skillsets]]\nmodel = "{skillsets / "spot.rl"}"\nmanager = "/spot/spot_skillset_manager"\n'
+        f'[[skillsets]]\nmodel = "{NAV2 / "nav2.rl"}"\nbinding = "{NAV2 / "nav2.binding.toml"}"\n')
+    assert main(["conform", str(tmp_path / "mixed.toml"), str(clean["mcap"])]) == 0
+    assert capsys.readouterr().out.splitlines()[0].endswith(": 26 messages, 16 events, 0 model divergences")
