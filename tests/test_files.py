@@ -74,11 +74,11 @@ def test_a_skillset_bound_to_plain_ros2_names_its_binding_file(tmp_path: Path) -
         ("alpha", "", str(tmp_path / "alpha.binding.toml")), ("beta", "/m", "")]
     both = write(tmp_path, "x.toml", '[system]\nname = "x"\n[[skillsets]]\nmodel = "two.rl"\nname = "alpha"\n'
                  'manager = "/m"\n  binding = "a.toml"\n')
-    assert error(load_system, both) == (f"{both}:7:3: error: skillsets entry 1: give 'manager' (a skillset manager) "
-                                        "or 'binding' (plain ROS 2 interfaces), not both")
+    assert error(load_system, both) == (f"{both}:7:3: error: [[skillsets]] entry 1: give 'manager' (a skillset "
+                                        "manager) or 'binding' (plain ROS 2 interfaces), not both")
     number = write(tmp_path, "n.toml", '[system]\nname = "n"\n[[skillsets]]\nmodel = "two.rl"\nname = "beta"\n'
                    '[[skillsets]]\nmodel = "two.rl"\nname = "alpha"\nbinding = 3\n')
-    assert error(load_system, number) == f"{number}:9:1: error: skillsets entry 2: 'binding' must be a path string"
+    assert error(load_system, number) == f"{number}:9:1: error: [[skillsets]] entry 2 'binding' must be a string, not 3"
     whole = write(tmp_path, "w.toml", '[system]\nname = "w"\n[[skillsets]]\nmodel = "two.rl"\nbinding = "a.toml"\n')
     assert error(load_system, whole).startswith(f"{whole}: error: skillsets entry 1: two.rl declares 2 skillsets")
 

@@ -88,9 +88,11 @@ def main(argv: list[str] | None = None) -> int:
             signal.signal(sig, lambda *_: stop.set())
         style = KeyStyle(args.rmw_zenoh, args.namespace, args.domain, args.ros_distro == "humble")
         bridge = None
-        if any(not c.binding for c in system.components):
+        managed = [c.name for c in system.components if not c.binding]
+        if managed:
             bridge = start_bridge(session, system, typemap, source=source, instance_id=args.instance, hold=args.hold,
                                   style=style)  # errors: one line
+            log.info("bridging the managers of %s (%s) as %s", system.name, ", ".join(managed), args.instance)
         bound = start_bound_bridge(session, system, bindings, source=source, instance_id=args.instance,
                                    hold=args.hold, settle=args.settle, style=style) if bindings else None
         while not stop.wait(0.5):

@@ -40,7 +40,6 @@ in the file.
 
 from __future__ import annotations
 
-import difflib
 import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -48,11 +47,12 @@ from typing import Any
 
 from rosbags.typesys.store import Typestore
 
+from skinet.closenames import close_names, unknown
 from skinet.errors import Diagnostic, Pos, SourceError
 from skinet.lang.model import Skill, Skillset
 from skinet.ros.condition import Condition, parse_condition
 from skinet.ros.definitions import action_types, build_store
-from skinet.tomltext import locate, parse_toml
+from skinet.tomltext import locate_path, parse_toml
 
 # lifecycle_msgs/msg/State ids of the primary states (transition states 10-15 settle into one of them).
 LIFECYCLE_STATES: dict[str, int] = {"unconfigured": 1, "inactive": 2, "active": 3, "finalized": 4}
@@ -168,7 +168,7 @@ def definitions_folder(text: str, source: str) -> str:
     head = data.get("binding", {})
     folder = head.get("definitions", "") if isinstance(head, dict) else ""
     if not isinstance(folder, str):
-        raise SourceError.at(source, locate(text, ("binding", "definitions"), True),
+        raise SourceError.at(source, locate_path(text, ("binding", "definitions"), True),
                              "[binding] definitions must be a folder path string")
     return folder
 
@@ -182,9 +182,9 @@ class _Parser:
         self.topic_types: dict[str, tuple[str, tuple[str, ...]]] = {}
 
     def error(self, path: tuple[str, ...], message: str, value: bool = False) -> SourceError:
-        pos = locate(self.text, path, value)
+        pos = locate_path(self.text, path, value)
         if pos is None and len(path) > 1:  # a key not written (missing): point at its table
-            pos = locate(self.text, path[:-1])
+            pos = locate_path(self.text, path[:-1])
         return SourceError.at(self.source, pos, message)
 
     def table(self, value: object, path: tuple[str, ...], what: str) -> dict[str, Any]:
@@ -197,8 +197,7 @@ class _Parser:
         for key in table:
             if key not in known:
                 where = f"[{'.'.join(path)}]" if path else "the binding"
-                raise self.error((*path, key), f"unknown key '{key}' in {where}{_close(key, known)} "
-                                               f"(keys: {', '.join(known)})")
+                raise self.error((*path, key), unknown("key", key, known, f" in {where}"))
 
     def string(self, table: dict[str, Any], path: tuple[str, ...], key: str, required: bool = True) -> str:
         if key not in table:
@@ -219,15 +218,18 @@ class _Parser:
     def condition(self, text: object, typename: str, path: tuple[str, ...]) -> Condition:
         if not isinstance(text, str):
             raise self.error(path, f"the condition of {path[-1]} must be a string", True)
-        at = locate(self.text, path, True) or Pos(1, 1)
+        at = locate_path(self.text, path, True) or Pos(1, 1)
         return parse_condition(text, typename, self.store, self.source, at)
 
     def message_type(self, table: dict[str, Any], path: tuple[str, ...], topic: str) -> str:
         typename = self.string(table, path, "type")
         if typename not in self.store.fielddefs or "/msg/" not in typename:
             candidates = [n for n in self.store.fielddefs if "/msg/" in n]
-            raise self.error((*path, "type"), f"unknown message type '{typename}'{_close(typename, candidates)} "
-                                              "(rosbags' standard messages and the binding's definitions)", True)
+            close = close_names(typename, candidates)
+            message = unknown("message type", typename, close) if close else (
+                f"unknown message type '{typename}' (not among rosbags' standard messages nor the binding's "
+                "definitions)")
+            raise self.error((*path, "type"), message, True)
         previous = self.topic_types.get(topic)
         if previous is not None and previous[0] != typename:
             raise self.error((*path, "type"), f"topic {topic} is bound as {previous[0]} in "
@@ -241,8 +243,7 @@ class _Parser:
         """The table ``[<kind>s.<name>]``, checked: ``name`` one of the model's ``names``, known keys only."""
         path = (f"{kind}s", name)
         if name not in names:
-            raise self.error(path, f"unknown {kind} '{name}' of skillset '{self.skillset.name}'"
-                                   f"{_close(name, names)} ({kind}s: {', '.join(names) or 'none'})")
+            raise self.error(path, unknown(kind, name, names, f" of skillset '{self.skillset.name}'"))
         table = self.table(table, path, f"[{kind}s.{name}]")
         self.keys(table, path, f"{kind}s")
         return table
@@ -255,10 +256,9 @@ class _Parser:
         typename = self.string(table, path, "type")
         known = action_types(self.store)
         if typename not in known:
-            hint = _close(typename, known)
-            raise self.error((*path, "type"), f"unknown action type '{typename}'{hint}: put its .action file in the "
-                                              "binding's definitions folder as <package>/action/<Name>.action"
-                                              f" (actions known: {', '.join(known) or 'none'})", True)
+            raise self.error((*path, "type"), unknown("action type", typename, known) + "; put its .action file in "
+                                              "the binding's definitions folder as <package>/action/<Name>.action",
+                             True)
         skill = skills[name]
         return SkillBinding(name, action, typename, self.outcome(table, path, skill, "success", typename),
                             self.outcome(table, path, skill, "failure", typename))
@@ -269,8 +269,8 @@ class _Parser:
 
         def check(mode: object, key: tuple[str, ...]) -> str:
             if not isinstance(mode, str) or mode not in modes:
-                raise self.error(key, f"skill '{skill.name}' has no {kind} mode {mode!r}{_close(str(mode), modes)} "
-                                      f"({kind} modes: {shown})", key[-1] == kind)
+                raise self.error(key, unknown(f"{kind} mode", str(mode), modes, f" of skill '{skill.name}'"),
+                                 key[-1] == kind)
             return mode
 
         if kind in table:
@@ -303,8 +303,7 @@ class _Parser:
             for state in states:
                 if state not in model.states:
                     raise self.error((*path, "states", state),
-                                     f"resource '{name}' has no state '{state}'{_close(state, model.states)} "
-                                     f"(states: {', '.join(model.states)})")
+                                     unknown("state", state, model.states, f" of resource '{name}'"))
         if "lifecycle" in table:
             if "type" in table:
                 raise self.error((*path, "type"), f"[resources.{name}] a lifecycle node has no 'type' "
@@ -318,9 +317,8 @@ class _Parser:
             pairs, seen = [], set()
             for state, label in states.items():
                 if label not in LIFECYCLE_STATES:
-                    raise self.error((*path, "states", state), f"'{label}' is not a lifecycle state"
-                                     f"{_close(str(label), LIFECYCLE_STATES)} (states: {', '.join(LIFECYCLE_STATES)})",
-                                     True)
+                    raise self.error((*path, "states", state),
+                                     unknown("lifecycle state", str(label), list(LIFECYCLE_STATES)), True)
                 if label in seen:
                     raise self.error((*path, "states", state), f"lifecycle state '{label}' is bound twice", True)
                 seen.add(label)
@@ -380,11 +378,6 @@ def parse_binding(text: str, source: str, skillset: Skillset, definitions: Mappi
 def definition_folder_of(head: Mapping[str, Any]) -> str:
     folder = head.get("definitions", "")
     return folder if isinstance(folder, str) else ""
-
-
-def _close(name: str, candidates: Sequence[str] | Mapping[str, Any]) -> str:
-    close = difflib.get_close_matches(name, list(candidates), n=3, cutoff=0.6)
-    return f" (did you mean {', '.join(close)}?)" if close else ""
 
 
 __all__ = [

@@ -24,7 +24,6 @@ Examples:
 
 from __future__ import annotations
 
-import difflib
 import operator
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -38,6 +37,7 @@ from rosbags.interfaces import Nodetype
 from rosbags.typesys.base import normalize_fieldname
 from rosbags.typesys.store import Typestore
 
+from skinet.closenames import unknown
 from skinet.errors import Pos, SourceError
 from skinet.lang.larkcache import cached_lark
 from skinet.lang.larkerrors import check_nesting, check_size, syntax_error
@@ -169,12 +169,8 @@ class _Compiler:
             consts, fielddefs = self.store.fielddefs[current]
             found = dict(fielddefs).get(name)
             if found is None:
-                written = ".".join(names[:i + 1])
-                fields = [f for f, _ in fielddefs]
-                close = difflib.get_close_matches(name, fields + [c[0] for c in consts], n=3, cutoff=0.6)
-                hint = f"; did you mean {', '.join(close)}?" if close else ""
-                raise self.error(token, f"'{written}': {current} has no field or constant '{name}' "
-                                        f"(fields: {', '.join(fields)}){hint}")
+                known = [f for f, _ in fielddefs] + ([c[0] for c in consts] if i == 0 else [])
+                raise self.error(token, unknown("field" if i else "field or constant", name, known, f" of {current}"))
             keys.append(normalize_fieldname(name))
             desc = found
             if desc[0] == Nodetype.NAME and i < len(names) - 1:

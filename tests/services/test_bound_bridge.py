@@ -251,8 +251,8 @@ def test_a_bad_binding_stops_the_bridge_command_with_one_line(tmp_path: Path) ->
                           capture_output=True, text=True, timeout=60)
     assert done.returncode == 1
     assert done.stderr.strip().splitlines() == [
-        f"{tmp_path / 'b.toml'}:3:9: error: unknown action type 'nav2_msgs/action/NavigateToPose': put its .action "
-        "file in the binding's definitions folder as <package>/action/<Name>.action (actions known: none)"]
+        f"{tmp_path / 'b.toml'}:3:9: error: unknown action type 'nav2_msgs/action/NavigateToPose' (expected one of: "
+        "none); put its .action file in the binding's definitions folder as <package>/action/<Name>.action"]
 
 
 def test_simulator_and_bridge_commands_on_rmw_zenoh_keys(nav2, client, zenoh_args, spawn, tmp_path: Path) -> None:
