@@ -51,6 +51,7 @@ examples (from the repository's root; tests/cli/test_help_examples.py runs every
   skinet unsafe skillsets/spot_arm.toml --state '{"spot": {"resources": {"power_status": "PowerOn", "posture": "Standing", "control_mode": "Busy"}, "running": ["teleop"]}}'
   skinet explore skillsets/spot_arm.toml --budget 2
   skinet ctl skillsets/spot_arm.toml "AG not (spot:Busy and manipulator:Busy)" "EF spot:Busy"
+  skinet conform examples/nav2/nav2.toml examples/nav2/bags/nav2_run
 
 a live system, one command per terminal (skinet run prints the lines that reach it;
 Ctrl-C stops the ones that keep running):
@@ -87,6 +88,8 @@ LAZY_COMMANDS: tuple[tuple[str, str, dict[str, str]], ...] = (
      {"timeline": "draw a monitor log (skinet record, skinet demo --log) as a timeline picture"}),
     ("skinet_cli.replay", "add_parser",
      {"replay": "publish a recorded run (skinet record) again, for dashboard and watch"}),
+    ("skinet_cli.conform", "add_parser",
+     {"conform": "replay rosbag2 files against the model and report every divergence"}),
     ("skinet_cli.run", "add_commands", {
         "run": "monitor and predictor in one process with a live operator view (SPEC §7)",
         "router": "run a Zenoh router (the Python wheel in router mode) until interrupted",

@@ -65,6 +65,25 @@ def test_one_model_file_with_two_skillsets_errors(tmp_path: Path) -> None:
     assert error(load_system, twice) == f"{tmp_path / 'two.rl'}:1:10: error: skillset 'alpha' appears twice in system 't'"
 
 
+def test_a_skillset_bound_to_plain_ros2_names_its_binding_file(tmp_path: Path) -> None:
+    """``binding`` (SPEC §9) is a path relative to the system file, instead of ``manager``."""
+    write(tmp_path, "two.rl", TWO)
+    path = write(tmp_path, "b.toml", '[system]\nname = "b"\n[[skillsets]]\nmodel = "two.rl"\nname = "alpha"\n'
+                 'binding = "alpha.binding.toml"\n[[skillsets]]\nmodel = "two.rl"\nname = "beta"\nmanager = "/m"\n')
+    system, _ = load_system(path)
+    assert [(c.name, c.manager, c.binding) for c in system.components] == [
+        ("alpha", "", str(tmp_path / "alpha.binding.toml")), ("beta", "/m", "")]
+    both = write(tmp_path, "x.toml", '[system]\nname = "x"\n[[skillsets]]\nmodel = "two.rl"\nname = "alpha"\n'
+                 'manager = "/m"\n  binding = "a.toml"\n')
+    assert error(load_system, both) == (f"{both}:7:3: error: [[skillsets]] entry 1: give 'manager' (a skillset "
+                                        "manager) or 'binding' (plain ROS 2 interfaces), not both")
+    number = write(tmp_path, "n.toml", '[system]\nname = "n"\n[[skillsets]]\nmodel = "two.rl"\nname = "beta"\n'
+                   '[[skillsets]]\nmodel = "two.rl"\nname = "alpha"\nbinding = 3\n')
+    assert error(load_system, number) == f"{number}:9:1: error: [[skillsets]] entry 2 'binding' must be a string, not 3"
+    whole = write(tmp_path, "w.toml", '[system]\nname = "w"\n[[skillsets]]\nmodel = "two.rl"\nbinding = "a.toml"\n')
+    assert error(load_system, whole).startswith(f"{whole}: error: skillsets entry 1: two.rl declares 2 skillsets")
+
+
 def test_two_skillset_file_travels_to_the_predictor(tmp_path: Path) -> None:
     from skinet.wire.convert import bundle, system_from_bundle
 

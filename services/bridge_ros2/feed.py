@@ -95,10 +95,12 @@ class Feed:
         self.clock = clock
         self.epoch = time.time_ns() // 1_000_000 if epoch is None else epoch
         self.counters = Counters()
-        self.statuses: dict[str, int] = {c.name: 0 for c in system.components}  # statuses derived per skillset
+        self.statuses: dict[str, int] = {c.name: 0 for c in system.components if not c.binding}  # statuses derived
         self.managers: dict[str, _Manager] = {}
         self._order: deque[_Slot] = deque()
         for c in system.components:
+            if c.binding:  # bound to plain ROS 2 interfaces: services.bridge_ros2.bound
+                continue
             store = build_typestore(c.skillset, typemap, extra_types)
             topics = [t for t in manager_topics(c.skillset) if t.kind in WATCHED]
             self.managers[c.name] = _Manager(c, store, derive.Deriver(c.skillset, c.net), topics)

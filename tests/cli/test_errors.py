@@ -347,6 +347,11 @@ def _cases() -> list[Case]:
     usage(br, "--namespace", (SYSTEM,), "argument --namespace: namespace 'a b' (from $SKINET_ROS_NAMESPACE) cannot "
           "be used in a Zenoh key (/-separated names of letters, digits, _ - .)", SKINET_ROS_NAMESPACE="a b")
     usage(br, "--hold", (SYSTEM, "--hold", "-1"), "argument --hold: expected a number of seconds >= 0, got '-1'")
+    usage(br, "--settle", (SYSTEM, "--settle", "soon"), "argument --settle: expected a number of seconds >= 0, "
+                                                          "got 'soon'")
+    add("skinet", "system", ("conform", "{tmp}/missing.toml", "{tmp}/run.mcap"), 1, missing)
+    add("skinet", "bags", ("conform", SYSTEM, "{tmp}/missing.db3"), 1,
+        "{tmp}/missing.db3: error: cannot read file: No such file or directory")
     add(br, "--replay", (SYSTEM, "--replay", "{tmp}/missing.db3"), 1,
         "{tmp}/missing.db3: error: cannot read file: No such file or directory")
     add(br, "--replay", (SYSTEM, "--no-multicast-scouting", "--replay", SPOT), 1,
