@@ -191,6 +191,9 @@ def router(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     endpoint without certificates in the configuration gets a CA and certificates
     (the router's, and one per user for clients) made in ``<secrets>/tls``, with
     mutual TLS; ``$SKINET_TLS_HOSTNAMES`` lists the names clients reach it by.
+    A folder with ``tls/ca.pem`` but no CA key holds the router's own certificate,
+    handed out by the compose job ``secrets`` (:mod:`services.secrets`): the router
+    then makes no certificate, and a missing one is a one-line error.
 
     Fleet (issue 15): a robot's router that joined a hub (``skinet fleet join``)
     also trusts the fleet CA and takes the fleet's password for the user ``hub``;
@@ -217,7 +220,9 @@ def router(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     if any(str(e).startswith("tls/") for e in endpoints) and \
             json.loads(config.get_json("transport/link/tls/listen_certificate") or "null") is None:
         hostnames = [h.strip() for h in os.environ.get("SKINET_TLS_HOSTNAMES", "").split(",") if h.strip()]
-        ensure_tls(folder / "tls", ["router", *USERS], hostnames)
+        certificates = folder / "tls"
+        handed_out = (certificates / "ca.pem").exists() and not (certificates / "ca.key").exists()
+        ensure_tls(certificates, ["router"] if handed_out else ["router", *USERS], hostnames)
         tls = tls_listen_config(folder / "tls", "router")
         trusted, _ = robot_fleet(folder)
         if trusted is not None:  # the robot joined a fleet: the hub's certificate is of the fleet CA

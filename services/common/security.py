@@ -5,10 +5,13 @@ user (``users.txt`` for the router's ``dictionary_file``, ``<user>.password`` fo
 each service) and :func:`ensure_tls` a certificate authority with one certificate
 per name (``ca.pem``; ``<name>.pem`` and ``<name>.key``), with the well-kept
 ``cryptography`` library.  Both keep what already exists, so an operator may put
-their own files there first, and both are idempotent: the router's entry point and
-``skinet router`` call them at every start.  :func:`make_certificate` also makes
-expired or foreign certificates for tests.  Files are written 0600 (0644 for
-``ca.pem`` and certificates).
+their own files there first, and both are idempotent: the compose job ``secrets``
+(:mod:`services.secrets`) and ``skinet router`` call them at every start.
+:func:`make_certificate` also makes expired or foreign certificates for tests.
+Secret files (passwords, ``users.txt``, keys) are 0600, and made so again at the
+next start when found looser; certificates and ``ca.pem`` are 0644.  A certificate
+is made only where the CA key is: :func:`ensure_tls` refuses a folder that has
+``ca.pem`` without ``ca.key`` instead of making a new CA over it.
 
 Reusable by any deployment (a fleet of routers): ``ensure_tls(folder, ["router",
 "robot1-router", ...])`` gives every name a certificate for the DNS name
@@ -56,6 +59,12 @@ def _write(path: Path, data: bytes, mode: int = 0o600) -> None:
     tmp.replace(path)
 
 
+def private(path: Path) -> None:
+    """Make an existing secret file 0600 if group or others may read it (files of older versions)."""
+    if path.stat().st_mode & 0o077:
+        os.chmod(path, 0o600)
+
+
 def ensure_users(folder: Path, users: Iterable[str] = USERS, fixed: dict[str, str] | None = None) -> dict[str, str]:
     """``folder/users.txt`` and ``folder/<user>.password`` for every user; returns user -> password.
 
@@ -81,9 +90,11 @@ def ensure_users(folder: Path, users: Iterable[str] = USERS, fixed: dict[str, st
             changed = True
         path = folder / f"{user}.password"
         if not path.exists() or path.read_text().strip() != known[user]:
-            _write(path, known[user].encode() + b"\n", 0o644 if user == "observer" else 0o600)
+            _write(path, known[user].encode() + b"\n")
+        private(path)
     if changed or not table.exists():
         _write(table, "".join(f"{u}:{p}\n" for u, p in known.items()).encode())
+    private(table)
     return known
 
 
@@ -157,12 +168,28 @@ def make_certificate(folder: Path, name: str, ca: tuple[x509.Certificate, ec.Ell
 
 
 def ensure_tls(folder: Path, names: Iterable[str], hostnames: Iterable[str] = ()) -> None:
-    """A CA in ``folder`` (made if missing) and a certificate for each name that has none;
-    ``hostnames`` (addresses clients use, e.g. ``robot.example``) go into every new one."""
-    ca = load_ca(folder) if (folder / "ca.pem").exists() and (folder / "ca.key").exists() else make_ca(folder)
-    for name in names:
-        if not (folder / f"{name}.pem").exists() or not (folder / f"{name}.key").exists():
-            make_certificate(folder, name, ca, hostnames=hostnames)
+    """A certificate in ``folder`` for each name that has none, signed by the CA there
+    (made with the first certificate when ``folder`` has no ``ca.pem``); ``hostnames``
+    (addresses clients use, e.g. ``robot.example``) go into every new one.
+
+    The CA key is read only when a certificate is missing; :class:`SkinetError` when
+    one is and ``folder`` holds ``ca.pem`` without ``ca.key`` (a router's or a
+    client's handed-out files, or an operator's own CA): a new CA would silently
+    replace the one every other party trusts.
+    """
+    names = list(names)
+    missing = [n for n in names if not (folder / f"{n}.pem").exists() or not (folder / f"{n}.key").exists()]
+    for key in [folder / "ca.key", *(folder / f"{n}.key" for n in names if n not in missing)]:
+        if key.exists():
+            private(key)
+    if not missing:
+        return
+    if (folder / "ca.pem").exists() and not (folder / "ca.key").exists():
+        raise SkinetError(f"{folder} has ca.pem but no ca.key: cannot make the certificate of "
+                          f"{', '.join(missing)} (make it where the CA key is: docs/deployment.md, TLS)")
+    ca = load_ca(folder) if (folder / "ca.pem").exists() else make_ca(folder)
+    for name in missing:
+        make_certificate(folder, name, ca, hostnames=hostnames)
 
 
 def tls_listen_config(folder: Path, name: str) -> dict:
@@ -199,6 +226,7 @@ def ensure_fleet(folder: Path) -> str:
     path = fleet / "hub.password"
     if not path.exists():
         _write(path, secrets.token_urlsafe(24).encode() + b"\n")
+    private(path)
     return path.read_text().strip()
 
 
