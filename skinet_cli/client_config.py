@@ -56,6 +56,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def cmd_client_config(args: argparse.Namespace) -> int:
+    from services.common.security import write_file
     from services.common.zenoh_config import check_endpoint
     from services.secrets.handout import client_config, client_files
     from skinet.errors import SkinetError
@@ -76,12 +77,7 @@ def cmd_client_config(args: argparse.Namespace) -> int:
                 "// It holds the password: keep it private.  Use it with --zenoh-config, e.g.\n"
                 f"//   skinet watch SYSTEM_NAME -m client --zenoh-config {output}\n" + text)
     try:
-        tmp = output.with_name(output.name + ".tmp")
-        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(text)
-        os.chmod(tmp, 0o600)
-        tmp.replace(output)
+        write_file(output, text.encode())
     except OSError as exc:
         raise SkinetError(f"cannot write {output}: {exc.strerror}") from None
     print(f"wrote {output}: user {args.user} at {args.connect} (password, CA, certificate and key of {folder})")

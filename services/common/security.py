@@ -50,7 +50,9 @@ USERS = ("bridge", "monitor", "predictor", "robot", "observer", "hub")
 DAY = datetime.timedelta(days=1)
 
 
-def _write(path: Path, data: bytes, mode: int = 0o600) -> None:
+def write_file(path: Path, data: bytes, mode: int = 0o600) -> None:
+    """``path`` with ``data`` and ``mode`` (0600 by default), replaced at once: never half written
+    nor, for a moment, readable by others."""
     tmp = path.with_name(path.name + ".tmp")
     fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, mode)
     with os.fdopen(fd, "wb") as f:
@@ -65,8 +67,10 @@ def private(path: Path) -> None:
         os.chmod(path, 0o600)
 
 
-def ensure_users(folder: Path, users: Iterable[str] = USERS, fixed: dict[str, str] | None = None) -> dict[str, str]:
-    """``folder/users.txt`` and ``folder/<user>.password`` for every user; returns user -> password.
+def ensure_users(folder: Path, users: Iterable[str] = USERS, fixed: dict[str, str] | None = None,
+                 password_files: bool = True) -> dict[str, str]:
+    """``folder/users.txt`` and, with ``password_files``, ``folder/<user>.password`` for every
+    user; returns user -> password.
 
     Existing entries are kept, except those of ``fixed`` (user -> password, e.g. the
     fleet's ``hub`` password), which replace them; missing users get a random 24-byte password.
@@ -89,11 +93,13 @@ def ensure_users(folder: Path, users: Iterable[str] = USERS, fixed: dict[str, st
             known[user] = secrets.token_urlsafe(24)
             changed = True
         path = folder / f"{user}.password"
+        if not password_files:
+            continue
         if not path.exists() or path.read_text().strip() != known[user]:
-            _write(path, known[user].encode() + b"\n")
+            write_file(path, known[user].encode() + b"\n")
         private(path)
     if changed or not table.exists():
-        _write(table, "".join(f"{u}:{p}\n" for u, p in known.items()).encode())
+        write_file(table, "".join(f"{u}:{p}\n" for u, p in known.items()).encode())
     private(table)
     return known
 
@@ -122,8 +128,8 @@ def make_ca(folder: Path, name: str = "SkiNet Live CA", days: int = 3650) -> tup
                                          key_agreement=False, encipher_only=False, decipher_only=False),
                            critical=True)
             .sign(key, hashes.SHA256()))
-    _write(folder / "ca.pem", cert.public_bytes(serialization.Encoding.PEM), 0o644)
-    _write(folder / "ca.key", _pem_key(key))
+    write_file(folder / "ca.pem", cert.public_bytes(serialization.Encoding.PEM), 0o644)
+    write_file(folder / "ca.key", _pem_key(key))
     return cert, key
 
 
@@ -162,8 +168,8 @@ def make_certificate(folder: Path, name: str, ca: tuple[x509.Certificate, ec.Ell
             .sign(ca_key, hashes.SHA256()))
     folder.mkdir(parents=True, exist_ok=True)
     chain = cert.public_bytes(serialization.Encoding.PEM) + ca_cert.public_bytes(serialization.Encoding.PEM)
-    _write(folder / f"{name}.pem", chain, 0o644)
-    _write(folder / f"{name}.key", _pem_key(key))
+    write_file(folder / f"{name}.pem", chain, 0o644)
+    write_file(folder / f"{name}.key", _pem_key(key))
     return folder / f"{name}.pem"
 
 
@@ -225,7 +231,7 @@ def ensure_fleet(folder: Path) -> str:
     ensure_tls(fleet, ["hub"])
     path = fleet / "hub.password"
     if not path.exists():
-        _write(path, secrets.token_urlsafe(24).encode() + b"\n")
+        write_file(path, secrets.token_urlsafe(24).encode() + b"\n")
     private(path)
     return path.read_text().strip()
 
@@ -268,8 +274,8 @@ def join_fleet(folder: Path, invitation: str) -> str:
         raise FleetError(f"{own} does not exist: start the robot's router once (it makes its CA), then join")
     joined = folder / JOINED
     joined.mkdir(parents=True, exist_ok=True)
-    _write(joined / "ca.pem", ca.encode(), 0o644)
-    _write(joined / "hub.password", password.encode() + b"\n")
+    write_file(joined / "ca.pem", ca.encode(), 0o644)
+    write_file(joined / "hub.password", password.encode() + b"\n")
     return own.read_text()
 
 
@@ -286,7 +292,7 @@ def add_robot(folder: Path, name: str, ca_pem: str) -> Path:
     _ca_pem(ca_pem, f"the CA given for robot '{name}'")
     path = folder / ROBOTS / f"{name}.pem"
     path.parent.mkdir(parents=True, exist_ok=True)
-    _write(path, ca_pem.encode(), 0o644)
+    write_file(path, ca_pem.encode(), 0o644)
     return path
 
 
@@ -302,7 +308,7 @@ def robot_fleet(folder: Path) -> tuple[Path | None, dict[str, str]]:
     if not own.exists():  # users only (ensure_tls comes later)
         return None, fixed
     bundle = folder / "tls" / "trusted.pem"
-    _write(bundle, own.read_bytes() + (joined / "ca.pem").read_bytes(), 0o644)
+    write_file(bundle, own.read_bytes() + (joined / "ca.pem").read_bytes(), 0o644)
     return bundle, fixed
 
 

@@ -29,7 +29,7 @@ from cryptography.exceptions import InvalidSignature
 from cryptography.hazmat.primitives import serialization
 from cryptography.x509.oid import NameOID
 
-from services.common.security import FLEET, USERS, private
+from services.common.security import FLEET, USERS, write_file
 from skinet.errors import SkinetError
 
 ROUTER = "router"
@@ -51,11 +51,7 @@ def _copy(source: Path, target: Path) -> None:
     mode = 0o644 if target.suffix == ".pem" else 0o600
     data = source.read_bytes()
     if not target.exists() or target.read_bytes() != data:
-        tmp = target.with_name(target.name + ".tmp")
-        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, mode)
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-        tmp.replace(target)
+        write_file(target, data, mode)
     os.chmod(target, mode)
 
 

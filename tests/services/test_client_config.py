@@ -63,7 +63,9 @@ def deployment(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Path,
     try:
         assert router.stdout is not None
         assert router.stdout.readline().endswith(f"TLS certificates in {out / 'router' / 'tls'}\n")
-        assert not list(out.rglob("ca.key")), "the router made a CA of its own"
+        # It made nothing: no CA of its own, no password file of its clients.
+        assert sorted(str(f.relative_to(out / "router")) for f in (out / "router").rglob("*") if f.is_file()) == [
+            "tls/ca.pem", "tls/router.key", "tls/router.pem", "users.txt"]
         monitor_config = client_config(out / "monitor", "monitor", endpoint, root / "monitor.json5")
         log = root / "monitor.log"
         with log.open("wb") as f:
