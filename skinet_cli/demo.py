@@ -7,7 +7,7 @@ import re
 from pathlib import Path
 
 from skinet.errors import SourceError
-from skinet_cli.options import load_live_system
+from skinet_cli.options import add_no_properties_arg, load_live_system, require_properties
 from skinet.explain import plural, warning_line
 from skinet.files import load_typemap, read_text
 from skinet.mission import Scenario, StepRecord, check_scenario, flagged_before, parse_scenario, replay
@@ -16,6 +16,13 @@ from skinet.system import System
 from skinet.wire.log import log_line
 
 MISSIONS = ("unassisted.toml", "assisted.toml", "mobile_unassisted.toml", "mobile_assisted.toml")
+HELP = (f"play {len(MISSIONS)} runs: the paper's unassisted and assisted runs, then the mobile manipulator's two "
+        "(the main job)")
+DESCRIPTION = (
+    f"Play {len(MISSIONS)} runs through the whole chain (simulated managers, CDR, bridge, monitor, predictor on one "
+    "embedded Zenoh session) and print what the operator would have seen: the paper's unassisted run "
+    "(three violations) and assisted run (two warnings heeded, no violation), then the mobile manipulator's "
+    "unassisted and assisted runs (a forced constraint). Given SCENARIO files, it plays those instead.")
 
 
 def default_scenarios() -> list[Path]:
@@ -28,9 +35,12 @@ def default_scenarios() -> list[Path]:
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    c = sub.add_parser("demo", help="replay the paper's unassisted and assisted runs (the main job)")
-    c.add_argument("scenarios", nargs="*", help="scenario files (default: skillsets/missions/{unassisted,assisted}.toml)")
+    c = sub.add_parser("demo", help=HELP, description=DESCRIPTION)
+    c.add_argument("scenarios", nargs="*", metavar="SCENARIO",
+                   help=f"scenario files (default: the {len(MISSIONS)} runs above, skillsets/missions/"
+                        f"{{{','.join(m.removesuffix('.toml') for m in MISSIONS)}}}.toml)")
     c.add_argument("--no-predict", action="store_true", help="explicit constraints only")
+    add_no_properties_arg(c)
     c.add_argument("--core", action="store_true",
                    help="replay on the core library only (no simulator, ROS 2 encoding, bridge, Zenoh)")
     c.add_argument("--all-steps", action="store_true", help="print every step, not only the notable ones")
@@ -50,6 +60,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     for path in paths:  # every file checked before the first run starts
         scenario = parse_scenario(read_text(path), str(path))
         system, _ = load_live_system(path.parent / scenario.system)
+        require_properties(system, path.parent / scenario.system, args.no_properties)
         check_scenario(scenario, system, str(path))
         runs.append((path, scenario, system))
     for path, scenario, system in runs:

@@ -52,11 +52,11 @@ def test_step_numbers_count_transitions() -> None:
 @pytest.mark.parametrize(
     ("text", "message"),
     [
-        ("[scenario]\nname = 'x'\n", "s.toml: error: missing [scenario] table with 'name' and 'system' strings"),
+        ("[scenario]\nname = 'x'\n", "s.toml:1:1: error: missing [scenario] table with 'name' and 'system' strings"),
         ("[scenario]\nname='x'\nsystem='y'\n[[steps]]\nskillset='a'\n",
-         "s.toml: error: step 1: give exactly one of 'transition' or 'consider'"),
+         "s.toml:4:1: error: step 1: give exactly one of 'transition' or 'consider'"),
         ("[scenario]\nname='x'\nsystem='y'\n[[steps]]\nt=2\nskillset='a'\ntransition='b'\n[[steps]]\nt=1\nskillset='a'\ntransition='b'\n",
-         "s.toml: error: step 2: time 1.0 goes backwards (previous step at 2.0)"),
+         "s.toml:9:1: error: step 2: time 1.0 goes backwards (previous step at 2.0)"),
     ],
 )
 def test_scenario_errors(text: str, message: str) -> None:

@@ -79,6 +79,8 @@ def main(argv: list[str] | None = None) -> int:
         bridge = start_bridge(session, system, typemap, source=source, instance_id=args.instance, hold=args.hold,
                               style=KeyStyle(args.rmw_zenoh, args.namespace, args.domain,
                                              args.ros_distro == "humble"))  # errors: one line
+        log.info("bridging the managers of %s (%s) as %s", system.name,
+                 ", ".join(c.name for c in system.components), args.instance)
         while not stop.wait(0.5):
             pass
         bridge.close()

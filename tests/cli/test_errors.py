@@ -100,6 +100,9 @@ def _cases() -> list[Case]:
     # skinet parse / net
     add("skinet", "file", ("parse", "{tmp}/missing.rl"), 1,
         "{tmp}/missing.rl: error: cannot read file: No such file or directory")
+    add("skinet", "file", ("parse", SYSTEM), 1,
+        f"{SYSTEM}: error: this is a system or scenario file (.toml); skinet parse checks a skillset model (.rl): "
+        f"for a system try skinet net {SYSTEM} or skinet unsafe {SYSTEM}")
     add("skinet", "file", ("net", "{tmp}/missing.rl"), 1,
         "{tmp}/missing.rl: error: cannot read file: No such file or directory")
     usage("skinet", "--format", ("net", SPOT, "--format", "svg"),
@@ -125,20 +128,25 @@ def _cases() -> list[Case]:
         for bad in ("0", "lots", "1 parsec"):
             usage("skinet", "--memory-limit", (cmd, SYSTEM, "--memory-limit", bad, *extra),
                   f"argument --memory-limit: not a size: '{bad}' (e.g. 1GiB, 512MiB, 2GB)")
+        for argv in (("--memory-limit", "-5MiB"), ("--memory-limit=-5MiB",)):  # the first was "expected one argument"
+            usage("skinet", "--memory-limit", (cmd, SYSTEM, *argv, *extra),
+                  "argument --memory-limit: not a size: '-5MiB' (a size is positive, e.g. 1GiB, 512MiB, 2GB)")
+        add("skinet", "--state", (cmd, SYSTEM, "--state", '{"spot": ', *extra), 1,
+            "<state>:1:10: error: invalid JSON: Expecting value")
     add("skinet", "formulas", ("ctl", SYSTEM, "EF spot:Busy", "EF spot:Bussy"), 1,
         "<formula 2>:1:4: error: unknown name 'spot:Bussy' (candidates: spot:Busy)")
 
     # skinet demo
     add("skinet", "scenarios", ("demo", "{tmp}/missing.toml"), 1, missing)
     add("skinet", "scenarios", ("demo", "{tmp}/unknown_skillset.toml"), 1,
-        "{tmp}/unknown_skillset.toml: error: step 1: unknown skillset 'spott' (skillsets of spot_arm: spot, manipulator)")
+        "{tmp}/unknown_skillset.toml:6:1: error: step 1: unknown skillset 'spott' (skillsets of spot_arm: spot, manipulator)")
     for core in ((), ("--core",)):  # the core replay used to call it a model divergence and exit 0
         add("skinet", "scenarios", ("demo", "{tmp}/unknown_transition.toml", *core), 1,
-            "{tmp}/unknown_transition.toml: error: step 1: unknown transition 'init_power.strat' of skillset 'spot' "
+            "{tmp}/unknown_transition.toml:7:1: error: step 1: unknown transition 'init_power.strat' of skillset 'spot' "
             "(for example: init_power.start, init_power.interrupt, init_power.success.powered_on, "
             "init_power.failure.no_battery)")
     add("skinet", "scenarios", ("demo", "{tmp}/bad_time.toml", "--core"), 1,
-        "{tmp}/bad_time.toml: error: step 1: 't' must be a number of seconds, got 'soon'")
+        "{tmp}/bad_time.toml:5:1: error: step 1: 't' must be a number of seconds, got 'soon'")
     for option in ("--log", "--timeline"):
         add("skinet", option, ("demo", "--core", option, "{tmp}/list.json"), 1,
             "{tmp}/list.json: error: cannot create folder: File exists")
@@ -205,6 +213,8 @@ def _cases() -> list[Case]:
     add("skinet", "system", ("run", "{tmp}/missing.toml"), 1, missing)
     add("skinet", "system", ("run", "{tmp}/badname.toml"), 1, bad_name)
     usage("skinet", "--duration", ("run", SYSTEM, "--duration", "-1"), "argument --duration: " + seconds.format("-1"))
+    usage("skinet", "--mode", ("run", SYSTEM, "--mode", "router"),
+          "argument --mode/-m: invalid choice: 'router' (choose from 'peer', 'client')")
     usage("skinet", "--budget", ("run", SYSTEM, "--budget", "0"), "argument --budget: " + seconds.format("0"))
     usage("skinet", "--memory-limit", ("run", SYSTEM, "--memory-limit", "tiny"),
           "argument --memory-limit: not a size: 'tiny' (e.g. 1GiB, 512MiB, 2GB)")
@@ -315,7 +325,7 @@ def _cases() -> list[Case]:
         f"{SPOT}: error: cannot replay: Unrecognized storage format '.rl'")
     add(sim, "scenario", ("{tmp}/missing.toml",), 1, missing)
     add(sim, "scenario", ("{tmp}/unknown_skillset.toml",), 1,
-        "{tmp}/unknown_skillset.toml: error: step 1: unknown skillset 'spott' (skillsets of spot_arm: spot, manipulator)")
+        "{tmp}/unknown_skillset.toml:6:1: error: step 1: unknown skillset 'spott' (skillsets of spot_arm: spot, manipulator)")
     usage(sim, "--dds", (SCENARIO, "--dds", "--rmw-zenoh"), "--dds and --rmw-zenoh exclude each other")
     usage(sim, "--speed", (SCENARIO, "--speed", "-1"), "argument --speed: expected a number >= 0, got '-1'")
     usage(sim, "--speed", (SCENARIO,), "argument --speed: expected a number >= 0, got 'fast' (from $SKINET_SPEED)",
