@@ -139,12 +139,12 @@ class Stack:
         return r.stdout + r.stderr
 
     def down(self) -> None:
-        self.compose("down", "-t", "2", "--remove-orphans", check=False, timeout=120)
+        self.compose("down", "-v", "-t", "2", "--remove-orphans", check=False, timeout=120)
         left = subprocess.run(["docker", "ps", "-aq", "--filter", f"label=com.docker.compose.project={self.project}"],
                               capture_output=True, text=True).stdout.split()
         if left:  # one-off containers of `compose run -d`
             subprocess.run(["docker", "rm", "-f", *left], capture_output=True)
-            self.compose("down", "-t", "2", check=False, timeout=120)
+            self.compose("down", "-v", "-t", "2", check=False, timeout=120)
 
 
 @pytest.fixture(scope="module")
