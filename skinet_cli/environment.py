@@ -119,8 +119,9 @@ VARIABLES: dict[str, Variable] = {
     "SKINET_ZENOH_PASSWORD_FILE": Variable("--password-file of every command and service"),
     "SKINET_ZENOH_CONNECT_TIMEOUT": Variable("docker/entrypoint.sh: seconds a client waits for its router",
                                              _seconds_or_forever),
-    "SKINET_SECRETS": Variable("skinet router, skinet fleet, docker/entrypoint.sh, compose.yaml: the secrets folder"),
-    "SKINET_TLS_HOSTNAMES": Variable("skinet router: names in the certificates it makes"),
+    "SKINET_SECRETS": Variable("skinet router, skinet fleet, skinet client-config, python -m services.secrets, "
+                               "docker/entrypoint.sh, compose.yaml: the secrets folder (compose: the vault)"),
+    "SKINET_TLS_HOSTNAMES": Variable("skinet router, python -m services.secrets: names in the certificates they make"),
     "SKINET_FLEET_ROBOTS": Variable("skinet router --robots, compose.yaml"),
     # services
     "SKINET_LOG_LEVEL": Variable("--log-level of the services, compose.yaml"),
@@ -143,6 +144,7 @@ VARIABLES: dict[str, Variable] = {
     "SKINET_SKILLSETS": Variable("compose.yaml: the host folder of models and scenarios"),
     "SKINET_SYSTEM": Variable("compose.yaml: the system file of the bridge, monitor and dashboard"),
     "SKINET_ZENOH_DIR": Variable("compose.yaml: the host folder of router.json5"),
+    "SKINET_PREDICTOR_SECRETS": Variable("compose.yaml: the predictors' own secrets (off-board: a host folder)"),
     "SKINET_ROUTER_PORT": Variable("compose.yaml: the router's published port", _published_port),
     "SKINET_HUB_PORT": Variable("compose.yaml: the hub's published port", _published_port),
     "SKINET_DASHBOARD_BIND": Variable("compose.yaml: the address the dashboard's port is published on"),
