@@ -48,6 +48,7 @@ examples:
   skinet unsafe skillsets/spot_arm.toml --state state.json
   skinet explore skillsets/spot_arm.toml --budget 2
   skinet ctl skillsets/spot_arm.toml "AG not (spot:Busy and manipulator:Busy)" "EF spot:Busy"
+  skinet plan skillsets/spot_arm.toml "reach spot:Standing and manipulator:RD"
   skinet run skillsets/spot_arm.toml --listen tcp/127.0.0.1:7447
   skinet router --listen tcp/0.0.0.0:7447
   skinet run skillsets/spot_arm.toml --dashboard 8080
@@ -73,6 +74,8 @@ LAZY_COMMANDS: tuple[tuple[str, str, dict[str, str]], ...] = (
         "router": "run a Zenoh router (the Python wheel in router mode) until interrupted",
         "fleet": "link robots' routers to a hub over mutual TLS: exchange the trust files",
     }),
+    ("skinet_cli.plan", "add_parser",
+     {"plan": "plan the commands that reach a goal without violating any property (SPEC §8)"}),
     ("skinet_cli.operator", "add_parsers", {
         "dashboard": "live web dashboard of a running system (served on 127.0.0.1:8080)",
         "watch": "terminal live view of a running system (any deployment)",
