@@ -128,6 +128,18 @@ class Planner:
                         f"{'memory limit' if cut == 'memory' else cut}", stats())
         return Plan(goal, arena, start, "none", diagnose(arena, goal, game, relaxed, deadline.expired), stats())
 
+    def admissible(self, marking: Mapping[str, int]) -> list[tuple[str, str]]:
+        """The commands at ``marking`` after which every result is in Safe, ``(skillset, transition)``
+        in the fixed order: SPEC §8 says they are exactly those the ``strict`` check allows."""
+        arena = self.arena(marking)
+        local = arena.root
+        out = []
+        for action in arena.actions(local, None):
+            if action.component is not None and action.move is not None and all(
+                    arena.safe_at(r) for _, r in arena.post(local, action, None) if r is not None):
+                out.append((arena.names[action.component], action.move.name))
+        return out
+
     def mission(self, goals: Sequence[Goal], marking: Mapping[str, int] | None = None,
                 budget: float | None = None) -> list[Plan]:
         """Plans for ``goals`` one after another, each from where the previous one's favourable

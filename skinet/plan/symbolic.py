@@ -130,9 +130,6 @@ class SymbolicSpace:
     def assignment(self, local: Local) -> dict[str, bool]:
         return {v: bool(s >> b & 1) for names, s in zip(self.x, local) for b, v in enumerate(names)}
 
-    def local(self, values: dict[str, bool]) -> Local:
-        return tuple(sum(1 << b for b, v in enumerate(names) if values[v]) for names in self.x)
-
 
 class SymbolicGame:
     """One goal's game on a :class:`SymbolicSpace` (the :class:`skinet.plan.solve.Game` of BDDs)."""
@@ -239,8 +236,19 @@ class SymbolicGame:
         return f
 
     def pick(self, s: Function) -> Local:
-        values = self.space.bdd.pick(s & self.space.universe, care_vars=set(self.space.xs))
-        return self.space.local(values)
+        """The least marking of ``s`` by local indices, component after component (the explicit
+        engine's first in code order: the same example in both)."""
+        sp = self.space
+        rest = s & sp.universe
+        out = []
+        for i, g in enumerate(sp.arena.games):
+            for state in range(g.size):
+                here = rest & sp._code(sp.x[i], state)
+                if here != sp.bdd.false:
+                    out.append(state)
+                    rest = here
+                    break
+        return tuple(out)
 
     def preimage(self, s: Function, allowed: bool) -> Function:
         """Markings with a move into ``s``: any command (``allowed``: only those of A(m)) or outcome."""
