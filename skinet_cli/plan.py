@@ -7,13 +7,13 @@ import json
 from collections.abc import Mapping
 from typing import Any
 
-from skinet.errors import SourceError
+from skinet.errors import SkinetError, SourceError
 from skinet.files import load_goals, load_state, load_typemap
 from skinet.plan.goal import Goal, parse_goal
 from skinet.plan.inputs import Inputs, parse_inputs
 from skinet.plan.planner import ENGINES, Planner
 from skinet.plan.policy import Branch, Command, Plan, Reached, Step, Wait
-from skinet.system import System, marking_to_json
+from skinet.system import System, marking_problems, marking_to_json
 from skinet.tomltext import parse_toml
 from skinet_cli.memory import add_memory_arg, memory_limit
 from skinet_cli.options import load_live_system, print_warnings
@@ -80,8 +80,7 @@ def _goals(args: argparse.Namespace, system: System) -> list[Goal]:
     for n, text in enumerate(args.goals, 1):
         goals.append(parse_goal(system, text, inputs, f"<goal {n}>" if several else "<goal>", types=types))
     if not goals:
-        raise SourceError.at(args.goals_file or "<goals>", None,
-                             "no goals: give GOAL arguments (e.g. \"reach spot:Standing\") or --goals FILE")
+        raise SkinetError("no goals: give GOAL arguments (e.g. \"reach spot:Standing\") or --goals FILE")
     return goals
 
 
@@ -89,7 +88,12 @@ def cmd_plan(args: argparse.Namespace) -> int:
     system, warnings = load_live_system(args.system)
     print_warnings(warnings)
     goals = _goals(args, system)
-    marking = load_state(args.state, system) if args.state else system.initial_marking()
+    marking = system.initial_marking()
+    if args.state:
+        marking = load_state(args.state, system, what_if=True)
+        problems = marking_problems(system, marking)
+        if problems:  # (no --what-if here: no plan starts where the robot cannot be)
+            raise SourceError.at(args.state, None, "impossible state: " + "; ".join(problems))
     planner = Planner(system, args.engine, memory_limit(args))
     plans = planner.mission(goals, marking, args.budget)
     if args.json:

@@ -93,7 +93,7 @@ def locate(lines: list[str], lo: int, hi: int, keys: Sequence[str]) -> Pos | Non
     (1-based, inclusive; 0 for the start): each key searched after the previous one."""
     line, column = max(lo, 1), 1
     for key in keys:
-        pattern = re.compile(rf"(?<![\w\"'.-])(\"|'|){re.escape(key)}\1\s*[=.]")
+        pattern = re.compile(rf"(?<![\w\"'-])(\"|'|){re.escape(key)}\1\s*[=.]")
         found = None
         for n in range(line, min(hi, len(lines)) + 1):
             m = pattern.search(lines[n - 1], column - 1 if n == line else 0)
