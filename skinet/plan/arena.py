@@ -186,15 +186,20 @@ class Arena:
         return out
 
     def actions(self, local: Local, allowed: Sequence[np.ndarray] | None) -> Iterator[Action]:
-        """The controller's moves at ``local`` in the fixed order of ties: commands by component
-        and net order (those ``allowed`` lets through, all when None), then waiting if an outcome
-        is enabled."""
+        """The controller's moves at ``local`` in the fixed order of ties: starts by component and
+        net order (those ``allowed`` lets through, all when None), then waiting if an outcome is
+        enabled, then interrupts (never interrupt a skill when waiting for it does as well)."""
+        interrupts = []
         for i, (g, s) in enumerate(zip(self.games, local)):
             for mv in g.commands[s]:
                 if allowed is None or allowed[i][g.command_names.index(mv.name)]:
-                    yield Action(i, mv)
+                    if mv.kind == "interrupt":
+                        interrupts.append(Action(i, mv))
+                    else:
+                        yield Action(i, mv)
         if any(g.outcomes[s] for g, s in zip(self.games, local)):
             yield WAIT
+        yield from interrupts
 
     def post(self, local: Local, action: Action, goal: Goal | None) -> list[tuple[str, Local | None]]:
         """``Post(m, a)`` with the transition (``skillset:name``) behind each result; a ``run``

@@ -168,7 +168,7 @@ def _shortest(arena: Arena, goal: Goal, game: Any, target: Any, allowed: bool,
 
 def _step_into(arena: Arena, goal: Goal, game: Any, local: Local, ring: Any, allowed: bool
                ) -> tuple[str, Local, list[tuple[str, Local | None]], Local] | None:
-    """The first action at ``local`` (fixed order) with a result in ``ring``: its move, ``local``,
+    """The first action at ``local`` (the policy's order) with a result in ``ring``: its move, ``local``,
     its results (waiting: every outcome's) and the result taken."""
     masks = arena.enabled(goal, relaxed=True)
     for action in arena.actions(local, masks):

@@ -1,8 +1,8 @@
 """A plan: its answer, its policy by descent in the layers, and its steps (SPEC §8, *Plans*).
 
 At a marking of rank ``k > 0`` the policy takes the first action, in the fixed
-order of :meth:`skinet.plan.arena.Arena.actions` (commands by component and net
-order, then waiting), whose results all lie in layer ``k - 1`` (strong), or
+order of :meth:`skinet.plan.arena.Arena.actions` (starts by component and net
+order, then waiting, then interrupts), whose results all lie in layer ``k - 1`` (strong), or
 all in ``W_c`` with one in layer ``k - 1`` (cyclic): the same question always
 gets the same plan.  The *steps* follow the policy from the start marking
 along favourable outcomes (the result of least rank, the first on ties);

@@ -29,9 +29,10 @@ def test_a_strong_plan_reads_as_steps(capsys: pytest.CaptureFixture[str], tmp_pa
                      '"control_mode": "Busy"}, "running": ["teleop"]}}')
     out = run(capsys, SYSTEM, "reach spot:Idle", "--state", str(state))
     lines = out.splitlines()
-    assert lines[:4] == ["goal: reach spot:Idle", "strong: at most 1 move, whatever the outcomes", "steps:",
-                         "  1. spot:teleop.interrupt"]
-    assert lines[4].startswith("explicit engine: 63 markings (complete), ") and len(lines) == 5
+    assert lines[:5] == ["goal: reach spot:Idle", "strong: at most 1 move, whatever the outcomes", "steps:",
+                         "  1. wait for spot:teleop.success.done",
+                         "     if spot:teleop.failure.link_lost: the goal is reached"]
+    assert lines[5].startswith("explicit engine: 63 markings (complete), ") and len(lines) == 6
 
 
 def test_a_mission_with_retries_and_another_route(capsys: pytest.CaptureFixture[str]) -> None:

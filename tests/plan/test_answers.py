@@ -80,15 +80,24 @@ def test_goals_that_hold_answer_strong_with_no_move(engine: str) -> None:
 
 
 @pytest.mark.parametrize("engine", ENGINES)
-def test_a_strong_plan(engine: str) -> None:
-    """Interrupting teleop ends it whatever comes first: an interrupt or an outcome (strong, 1 move)."""
+def test_strong_plans(engine: str) -> None:
+    """teleop ends whatever its outcome: waiting is a strong plan of 1 move (an interrupt would do
+    as well, but the policy never interrupts a skill that waiting ends as well); from a standing,
+    idle Spot, starting teleop reaches i_teleop whatever comes."""
     system = paper()
-    start = marking_from_json(system, {"spot": {"resources": {"power_status": "PowerOn", "posture": "Standing",
-                                                              "control_mode": "Busy"}, "running": ["teleop"]}})
-    plan = Planner(system, engine).plan(parse_goal(system, "reach not spot:i_teleop"), start)
-    assert (plan.answer, plan.moves) == ("strong", 1)
-    assert plan.action(start) == Command("spot", "teleop.interrupt", {})
-    Brute(system, start).check(plan)
+    planner = Planner(system, engine)
+    teleop = marking_from_json(system, {"spot": {"resources": {"power_status": "PowerOn", "posture": "Standing",
+                                                               "control_mode": "Busy"}, "running": ["teleop"]}})
+    plan = planner.plan(parse_goal(system, "reach not spot:i_teleop"), teleop)
+    assert (plan.answer, plan.moves, plan.action(teleop)) == ("strong", 1, Wait())
+    (step,) = plan.steps
+    assert (step.action, step.expect, [(b.transition, b.then) for b in step.branches]) == (
+        "wait", "teleop.success.done", [("teleop.failure.link_lost", "reached")])
+    Brute(system, teleop).check(plan)
+    standing = marking_from_json(system, {"spot": {"resources": {"power_status": "PowerOn", "posture": "Standing"}}})
+    plan = planner.plan(parse_goal(system, "reach spot:i_teleop and spot:Busy"), standing)
+    assert (plan.answer, plan.moves, plan.action(standing)) == ("strong", 1, Command("spot", "teleop.start", {}))
+    Brute(system, standing).check(plan)
 
 
 # -- the reasons of none ------------------------------------------------------------------------
@@ -278,32 +287,36 @@ def test_the_same_question_gets_the_same_plan(engine: str) -> None:
 
 @pytest.mark.parametrize("engine", ENGINES)
 def test_races_an_outcome_before_a_command_takes_effect(engine: str) -> None:
-    """Wherever the policy sends a command, any outcome that comes first leaves a safe marking
-    from which the planner answers again (and the plan still covers it, or None says replan)."""
-    system = paper()
+    """Wherever a policy sends a command while a skill runs (the mobile manipulator's arm and base
+    work side by side), any outcome that comes first leaves a safe marking, from which the plan
+    goes on where it covers the marking and the planner answers again where it does not."""
+    system = mobile()
     planner = Planner(system, engine)
-    goal = parse_goal(system, "run spot:go_to_waypoint", TARGET)
-    start = marking_from_json(system, {"spot": {"resources": {"power_status": "PowerOn", "posture": "Standing",
-                                                              "control_mode": "Busy"}, "running": ["teleop"]},
-                                       "manipulator": {"resources": {"arm_status": "RD"}}})
-    plan = planner.plan(goal, start)
-    assert plan.answer == "cyclic"
-    raced = 0
-    for marking, action, _ in plan.policy()[0]:
-        if not isinstance(action, Command):
+    rng = random.Random(1)
+    raced = covered = 0
+    for _ in range(60):
+        goal, start = random_goal(system, rng), random_marking(system, rng)
+        plan = planner.plan(goal, start)
+        if plan.answer not in ("strong", "cyclic"):
             continue
-        for c in system.components:
-            for t, results in steps(c.net, marking[c.name]):
-                if t.kind not in ("success", "failure"):
-                    continue
-                for r in results:
-                    after = {**marking, c.name: r}
-                    raced += 1
-                    assert planner.arena(after).safe_at(planner.arena(after).root)
-                    again = planner.plan(goal, after)
-                    assert again.answer in ("strong", "cyclic")
-                    assert plan.covers(after) == (plan.action(after) is not None)
-    assert raced > 0
+        for marking, action, _ in plan.policy()[0]:
+            if not isinstance(action, Command):
+                continue
+            for c in system.components:
+                for t, results in steps(c.net, marking[c.name]):
+                    if t.kind not in ("success", "failure") or goal.target(c.name, t.name):
+                        continue
+                    for r in results:
+                        after = {**marking, c.name: r}
+                        raced += 1
+                        assert planner.arena(after).safe_at(planner.arena(after).root)
+                        if plan.covers(after):
+                            covered += 1
+                            assert plan.action(after) is not None
+                        else:
+                            assert plan.action(after) is None
+                            assert planner.plan(goal, after).answer in ("strong", "cyclic", "none")
+    assert raced > 20 and covered > 0
 
 
 @pytest.mark.parametrize("engine", ENGINES)
