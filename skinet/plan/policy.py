@@ -165,10 +165,11 @@ class Plan:
             return None
         if k == 0:
             return Reached()
-        return self._command(local, self._choose(local))
+        chosen = self._choose(local)
+        return None if chosen is None else self._command(local, chosen)  # None: never a guessed move
 
-    def _command(self, local: Local, action: Action | None) -> Command | Wait:
-        if action is None or action.component is None or action.move is None:
+    def _command(self, local: Local, action: Action) -> Command | Wait:
+        if action.component is None or action.move is None:
             return Wait()
         name = self.arena.names[action.component]
         inputs = self.goal.given(name, action.move.skill or "") if action.move.kind == "start" else None
@@ -230,10 +231,13 @@ class Plan:
                 return out, False
             local = todo.popleft()
             k = self._rank_of(local)
-            action = self._choose(local)
-            out.append((self.arena.marking(local), Reached() if k == 0 else self._command(local, action), k or 0))
-            if action is None:
+            if not k:
+                out.append((self.arena.marking(local), Reached(), 0))
                 continue
+            action = self._choose(local)
+            if action is None:  # a marking of rank k > 0 has an action into layer k - 1, by the fixpoint
+                raise RuntimeError(f"no action at a marking of rank {k}: the layers are inconsistent")
+            out.append((self.arena.marking(local), self._command(local, action), k))
             for _, r in self.arena.post(local, action, self.goal):
                 if r is not DONE and r not in seen:
                     seen.add(r)

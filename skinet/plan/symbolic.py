@@ -37,6 +37,7 @@ from typing import Any
 from skinet.plan.arena import DONE, Arena, Local
 from skinet.plan.goal import Goal
 from skinet.props.evaluate import evaluate
+from skinet.verify.symbolic import cube, cubes
 
 Function = Any  # dd.cudd.Function
 
@@ -103,17 +104,11 @@ class SymbolicSpace:
     # ------------------------------------------------------------ sets
 
     def _code(self, names: Sequence[str], value: int) -> Function:
-        f = self.bdd.true
-        for b, n in enumerate(names):
-            f &= self.bdd.var(n) if value >> b & 1 else ~self.bdd.var(n)
-        return f
+        return cube(self.bdd, names, value)
 
     def states(self, i: int, indices: Iterable[int], primed: bool = False) -> Function:
         """Component ``i`` in one of the local states ``indices``, the others anywhere."""
-        f = self.bdd.false
-        for s in indices:
-            f |= self._code(self.y[i] if primed else self.x[i], s)
-        return f
+        return cubes(self.bdd, self.y[i] if primed else self.x[i], indices)
 
     def _boxes(self, boxes: list[list[tuple[int, Any]]]) -> Function:
         out = self.bdd.false

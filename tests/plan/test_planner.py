@@ -13,9 +13,11 @@ from __future__ import annotations
 
 import random
 from collections.abc import Callable
+from dataclasses import replace
 
 import pytest
 
+from skinet.options import PredictionOptions, PropertyOptions
 from skinet.plan.planner import Planner
 from skinet.plan.policy import Plan
 from skinet.system import System
@@ -80,7 +82,14 @@ SYSTEMS: dict[str, tuple[Callable[[], System], int, int]] = {  # goals per start
     "mobile": (mobile, 40, 6),
     "corpus": (corpus, 15, 4),
     "cranes": (cranes, 40, 5),  # commands with several results (invariant cascades in either order)
+    "paper, events uncontrollable": (lambda: with_events(paper()), 30, 4),  # events are outcomes too (SPEC §6.3)
+    "mobile, events uncontrollable": (lambda: with_events(mobile()), 30, 4),
 }
+
+
+def with_events(system: System) -> System:
+    """``system`` with ``events_uncontrollable``: the game is played on the full nets, events being outcomes."""
+    return replace(system, prediction=PredictionOptions(PropertyOptions(events_uncontrollable=True)))
 
 
 @needs_cudd
