@@ -317,7 +317,12 @@ def one(spec: dict[str, Any]) -> dict[str, Any]:
         solved = result.status in (PlanGenerationResultStatus.SOLVED_SATISFICING, PlanGenerationResultStatus.SOLVED_OPTIMALLY)
         steps = [names[a.action.name] for a in result.plan.actions] if solved else []
         plays = play_fd(arena, goal, steps, spec["runs"]) if solved else None
-        return {"status": result.status.name, "length": len(steps), "time": wall, "encode": encode,
+        status = result.status.name.lower()
+        logs = " ".join(m.message for m in (result.log_messages or [])).lower()
+        if not solved and ("memory" in logs or children.peak >= 0.95 * limit):
+            status = f"out of memory at the {limit / GiB:.0f} GiB cap"  # what unified-planning reports as
+            # unsolvable_incompletely: Fast Downward's exit for a search that ran out of memory
+        return {"status": status, "length": len(steps), "time": wall, "encode": encode,
                 "actions": len(names), "peak": children.peak, "self_peak": peak_resident_bytes(), "plays": plays}
     planner = Planner(system, spec["who"], memory_limit=GiB)
     c0 = time.thread_time()
@@ -393,7 +398,7 @@ def main() -> None:
             if "error" in r:
                 rows.append([label, who, r["error"], "-", "-", "-", "-"])
             elif who == "fd":
-                rows.append([label, "Fast Downward", f"{r['status'].lower()}, {r['length']} actions",
+                rows.append([label, "Fast Downward", f"{r['status']}, {r['length']} actions" if r["length"] else r["status"],
                              ms(r["time"]) + f" (+ {ms(r['encode'])} to encode {r['actions']} actions)", "-",
                              mib(r["peak"]) + f" (search; ours {mib(r['self_peak'])})", plays_text(r["plays"])])
             else:

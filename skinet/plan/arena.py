@@ -218,12 +218,3 @@ class Arena:
                 else:
                     out.extend((label, local[:i] + (r,) + local[i + 1:]) for r in mv.results)
         return out
-
-    def moves_between(self, a: Local, b: Local) -> str:
-        """The name of one move from ``a`` to ``b`` (they differ in one component)."""
-        i = next(j for j, (x, y) in enumerate(zip(a, b)) if x != y) if a != b else 0
-        g = self.games[i]
-        for mv in g.commands[a[i]] + g.outcomes[a[i]]:
-            if b[i] in mv.results:
-                return f"{g.name}:{mv.name}"
-        raise ValueError(f"no move from {a} to {b}")

@@ -42,7 +42,6 @@ GameFactory = Callable[[bool], Any]  # relaxed -> game
 def diagnose(arena: Arena, goal: Goal, game: Any, relaxed_game: GameFactory, expired: Expired) -> str:
     """The reason why ``goal`` has no plan from ``arena.root``; ``game`` is the goal's game."""
     start = arena.root
-    system = arena.system
     if game.empty(game.goal_markings):
         if goal.kind == "run":
             return f"{goal.skillset}:{goal.skill} never runs from here: no reachable marking lets it start"

@@ -201,8 +201,6 @@ class ExplicitGame:
             self.goal_markings[self.wait_src[hits]] = True
             self.target = np.zeros(n + 1, dtype=bool)
             self.target[space.done] = True
-        self.universe = space.stored.copy()
-        self.universe[space.done] = goal.kind == "run"
 
     # ------------------------------------------------------------ fixpoints (solve.Game)
 
@@ -251,14 +249,6 @@ class ExplicitGame:
 
     def empty(self, s: np.ndarray) -> bool:
         return not s.any()
-
-    def count(self, s: np.ndarray) -> int:
-        return int(s[:self.space.n].sum())
-
-    def singleton(self, local: Local) -> np.ndarray:
-        out = np.zeros(self.space.n + 1, dtype=bool)
-        out[self.space.index(local)] = True
-        return out
 
     def pick(self, s: np.ndarray) -> Local:
         """The first marking of ``s`` (in code order)."""

@@ -221,15 +221,6 @@ class SymbolicGame:
     def empty(self, s: Function) -> bool:
         return s == self.space.bdd.false
 
-    def count(self, s: Function) -> int:
-        return int(self.space.bdd.count(s & self.space.universe, nvars=len(self.space.xs)))
-
-    def singleton(self, local: Local) -> Function:
-        f = self.space.bdd.true
-        for i, s in enumerate(local):
-            f &= self.space._code(self.space.x[i], s)
-        return f
-
     def pick(self, s: Function) -> Local:
         """The least marking of ``s`` by local indices, component after component (the explicit
         engine's first in code order: the same example in both)."""

@@ -13,7 +13,6 @@ from skinet.errors import SourceError
 from skinet.files import load_system
 from skinet.lang.model import Effect, Skillset
 from skinet.lang.parser import parse_skillset
-from skinet.net.build import idle_place, resource_place, running_place
 from skinet.net.semantics import steps
 from skinet.plan.goal import Goal, parse_goal
 from skinet.system import System, build_system
@@ -163,6 +162,3 @@ def _mutate(ss: Skillset, rng: random.Random) -> Skillset | None:
                      failures=tuple(replace(m, effects=s.effects) if m is f else m for m in k.failures))
     return replace(ss, skills=tuple(k2 if x is k else x for x in ss.skills))
 
-
-__all__ = ["CORPUS", "ROOT", "corpus", "cranes", "idle_place", "inputs_for", "mobile", "mutants", "paper", "random_formula",
-           "random_goal", "random_marking", "resource_place", "running_place"]
