@@ -19,13 +19,20 @@ from pathlib import Path
 from typing import NoReturn
 
 from skinet.errors import Diagnostic, Pos, SourceError
-from skinet.files import load_system, read_text
-from skinet.system import System
+from skinet.files import load_state, load_system, parse_state, read_text
+from skinet.system import Marking, System
+from skinet.tomltext import locate, parse_toml
 from skinet.wire.keys import check_chunk
 
 
 class ArgumentParser(argparse.ArgumentParser):
     """``argparse`` with a one-line error instead of the usage text (subparsers inherit it)."""
+
+    def __init__(self, *args: object, **kwargs: object) -> None:
+        super().__init__(*args, **kwargs)  # type: ignore[arg-type]
+        # A dash then a digit is a value, not an option: `--memory-limit -5MiB` reaches the option's own check
+        # (argparse takes only plain negative numbers as values, and said "expected one argument").
+        self._negative_number_matcher = re.compile(r"^-\.?\d")
 
     def error(self, message: str) -> NoReturn:
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
@@ -112,6 +119,31 @@ def load_live_system(path: str | Path) -> tuple[System, list[Diagnostic]]:
     return system, warnings
 
 
+def add_no_properties_arg(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--no-properties", action="store_true",
+                        help="accept a system without safety properties (by default refused: nothing would ever be "
+                             "reported unsafe)")
+
+
+def require_properties(system: System, path: str | Path, allowed: bool) -> None:
+    """Refuse a system without safety properties unless ``allowed`` (``--no-properties``).
+
+    A monitor with no property reports every command safe: run on purpose, or
+    because ``properties`` was left out of the system file, it would vouch for
+    everything.
+    """
+    if system.properties or allowed:
+        return
+    text = read_text(path)
+    data = parse_toml(text, str(path))
+    named = data["system"].get("properties") if isinstance(data.get("system"), dict) else None
+    why = (f"{named} defines none" if named is not None
+           else "its [system] table names no properties file (properties = \"FILE.props\")")
+    raise SourceError.at(str(path), locate(text, ("system",), "properties") or locate(text, ("system",)),
+                         f"system '{system.name}' has no safety properties: {why}; nothing would ever be reported "
+                         "unsafe (--no-properties runs it anyway)")
+
+
 def _name_pos(path: str | Path) -> Pos | None:
     """Where ``name = "..."`` is written in the ``[system]`` table, if found."""
     table = ""
@@ -122,6 +154,16 @@ def _name_pos(path: str | Path) -> Pos | None:
         elif table == "[system]" and (m := _NAME_LINE.match(line)):
             return Pos(n, m.start(1) + 1)
     return None
+
+
+def state_marking(state: str, system: System, what_if: bool = False) -> tuple[Marking, str]:
+    """The marking ``--state`` gives, a JSON file or the JSON itself, and its source name for errors.
+
+    A marking the robot cannot be in is refused unless ``what_if`` (:func:`skinet.files.parse_state`).
+    """
+    if state.lstrip().startswith("{"):  # the JSON itself
+        return parse_state(state, "<state>", system, what_if), "<state>"
+    return load_state(state, system, what_if), state
 
 
 def print_warnings(warnings: list[Diagnostic]) -> None:

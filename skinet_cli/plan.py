@@ -7,8 +7,8 @@ import json
 from collections.abc import Mapping
 from typing import Any
 
-from skinet.errors import SkinetError, SourceError
-from skinet.files import load_goals, load_state, load_typemap
+from skinet.errors import Pos, SkinetError, SourceError
+from skinet.files import load_goals, load_typemap
 from skinet.plan.goal import Goal, parse_goal
 from skinet.plan.inputs import Inputs, parse_inputs
 from skinet.plan.planner import ENGINES, Planner
@@ -16,7 +16,7 @@ from skinet.plan.policy import Branch, Command, Plan, Reached, Step, Wait
 from skinet.system import System, marking_problems, marking_to_json
 from skinet.tomltext import parse_toml
 from skinet_cli.memory import add_memory_arg, memory_limit
-from skinet_cli.options import load_live_system, print_warnings
+from skinet_cli.options import load_live_system, print_warnings, state_marking
 from skinet_cli.options import seconds as duration
 from skinet_cli.render import seconds
 
@@ -54,7 +54,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     c.add_argument("--inputs", metavar="TOML",
                    help="skill inputs of the GOAL arguments, as TOML: 'go_to_waypoint.target = {x = 1.0, y = 2.0, z = 0.0}' "
                         "(a skill name, or skillset:skill in quotes, then each input)")
-    c.add_argument("--state", help="start marking as JSON (default: initial marking)")
+    c.add_argument("--state", metavar="STATE",
+                   help="start marking: a JSON file, or the JSON itself ('{\"spot\": {...}}'); omitted resources are "
+                        "initial, omitted skills idle (default: the initial marking)")
     c.add_argument("--budget", type=duration(), default=10.0,
                    help="time budget per goal in seconds (default: 10); past it the answer is unknown")
     add_memory_arg(c)
@@ -70,12 +72,11 @@ def _goals(args: argparse.Namespace, system: System) -> list[Goal]:
     goals = load_goals(args.goals_file, system, types) if args.goals_file else []
     inputs: Inputs = {}
     if args.inputs is not None:
-        text = args.inputs
-        from skinet.plan.goalfile import locate
+        from skinet.plan.goalfile import nested
 
-        lines = text.splitlines()
-        inputs = parse_inputs(system, parse_toml(text, "<--inputs>"), "<--inputs>",
-                              lambda keys: locate(lines, 0, len(lines), keys), types)
+        lines = args.inputs.splitlines()
+        inputs = parse_inputs(system, parse_toml(args.inputs, "<--inputs>"), "<--inputs>",
+                              lambda keys: nested(lines, Pos(1, 1), keys) if keys else None, types)
     several = len(args.goals) > 1
     for n, text in enumerate(args.goals, 1):
         goals.append(parse_goal(system, text, inputs, f"<goal {n}>" if several else "<goal>", types=types))
@@ -90,10 +91,10 @@ def cmd_plan(args: argparse.Namespace) -> int:
     goals = _goals(args, system)
     marking = system.initial_marking()
     if args.state:
-        marking = load_state(args.state, system, what_if=True)
+        marking, source = state_marking(args.state, system, what_if=True)
         problems = marking_problems(system, marking)
         if problems:  # (no --what-if here: no plan starts where the robot cannot be)
-            raise SourceError.at(args.state, None, "impossible state: " + "; ".join(problems))
+            raise SourceError.at(source, None, "impossible state: " + "; ".join(problems))
     planner = Planner(system, args.engine, memory_limit(args))
     plans = planner.mission(goals, marking, args.budget)
     if args.json:

@@ -26,7 +26,6 @@ Examples:
 
 from __future__ import annotations
 
-import difflib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from functools import cache
@@ -36,6 +35,7 @@ from typing import Any, Literal
 from lark import Lark, Token
 from lark.exceptions import UnexpectedInput
 
+from skinet.closenames import unknown
 from skinet.errors import Diagnostic, Pos, SourceError
 from skinet.lang.expr import Expr
 from skinet.lang.larkcache import cached_lark
@@ -134,17 +134,17 @@ def _parse(system: System, text: str, inputs: Inputs | Mapping[str, Any] | None,
     where = Pos(names[0].line, names[0].column)
     comps = {c.name: c for c in system.components}
     if skillset not in comps:
-        raise SourceError.at(source, where, f"unknown skillset '{skillset}'{_close(skillset, list(comps))}")
+        raise SourceError.at(source, where, unknown("skillset", skillset, list(comps)))
     declared = {k.name: k for k in comps[skillset].skillset.skills}
     if skill not in declared:
         raise SourceError.at(source, Pos(names[1].line, names[1].column),
-                             f"unknown skill '{skill}' of '{skillset}'{_close(skill, list(declared))}")
+                             unknown("skill", skill, list(declared), f" of '{skillset}'"))
     k = declared[skill]
     if mode is not None:
         successes = [m.name for m in k.successes if m.name]
         if mode not in successes:
             raise SourceError.at(source, Pos(names[2].line, names[2].column),
-                                 f"'{skillset}:{skill}' has no success mode '{mode}'{_close(mode, successes)}")
+                                 unknown("success mode", mode, successes, f" of '{skillset}:{skill}'"))
     elif not k.successes:
         raise SourceError.at(source, Pos(names[1].line, names[1].column),
                              f"'{skillset}:{skill}' has no success mode: it can never succeed")
@@ -176,7 +176,3 @@ def _inputs(system: System, inputs: Inputs | Mapping[str, Any] | None, source: s
         return dict(inputs)  # type: ignore[arg-type]  # already checked
     return parse_inputs(system, inputs, source, types=types)
 
-
-def _close(name: str, known: list[str]) -> str:
-    close = difflib.get_close_matches(name, known, n=6, cutoff=0.6) or sorted(known)
-    return f" (candidates: {', '.join(close)})" if close else ""

@@ -24,16 +24,16 @@ Examples:
     >>> parse_inputs(system, {"go_to_waypoint": {"goal": 1.0}}, "<inputs>")
     Traceback (most recent call last):
     ...
-    skinet.errors.SourceError: <inputs>: error: spot:go_to_waypoint has no input 'goal' (inputs: target)
+    skinet.errors.SourceError: <inputs>: error: unknown input 'goal' of spot:go_to_waypoint (expected one of: target)
 """
 
 from __future__ import annotations
 
-import difflib
 from collections.abc import Callable, Mapping, Sequence
 from functools import cache
 from typing import Any
 
+from skinet.closenames import unknown
 from skinet.errors import Pos, SourceError
 from skinet.lang.model import Skill, Variable
 from skinet.system import System
@@ -62,11 +62,8 @@ def skill_named(system: System, key: str) -> tuple[str, Skill]:
     if found:
         options = " or ".join(f"'{ss}:{k.name}'" for ss, k in found)
         raise ValueError(f"skill '{key}' is in several skillsets: write {options}")
-    names = [f"{ss}:{k.name}" for ss, k in every] + [k.name for _, k in every]
-    close = difflib.get_close_matches(key, names, n=6, cutoff=0.6)
-    with_inputs = [f"{ss}:{k.name}" for ss, k in every if k.inputs]
-    hint = f"did you mean {', '.join(close)}?" if close else f"skills with inputs: {', '.join(with_inputs) or 'none'}"
-    raise ValueError(f"unknown skill '{key}' ({hint})")
+    raise ValueError(unknown("skill", key, [f"{ss}:{k.name}" for ss, k in every if k.inputs]
+                             + [k.name for _, k in every if k.inputs]))
 
 
 def parse_inputs(system: System, table: object, source: str, locate: Locate | None = None,
@@ -89,8 +86,7 @@ def parse_inputs(system: System, table: object, source: str, locate: Locate | No
         declared = {v.name: v for v in skill.inputs}
         for field, value in values.items():
             if field not in declared:
-                known = ", ".join(declared) or "none"
-                raise SourceError.at(source, where((key, field)), f"{name} has no input '{field}' (inputs: {known})")
+                raise SourceError.at(source, where((key, field)), unknown("input", field, list(declared), f" of {name}"))
             problem = type_problem(value, declared[field], types or {})
             if problem:
                 raise SourceError.at(source, where((key, field)),

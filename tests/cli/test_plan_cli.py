@@ -106,3 +106,19 @@ def test_the_help_explains_goals(capsys: pytest.CaptureFixture[str]) -> None:
     for text in ("reach FORMULA", "run SKILLSET:SKILL.success.MODE", "--goals FILE", "--inputs TOML",
                  "--engine {auto,explicit,symbolic}", "strong", "cyclic", "unknown"):
         assert text in out
+
+
+def test_the_examples_of_plan_help_work(capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    """Every example of ``skinet plan --help`` runs as written (lines joined at their backslash)."""
+    import shlex
+
+    from skinet_cli.plan import EPILOG
+
+    monkeypatch.chdir(ROOT)
+    examples = EPILOG.split("examples:")[1].replace("\\\n", " ").strip().splitlines()
+    assert len(examples) == 3
+    for line in examples:
+        argv = shlex.split(line)
+        assert argv[:2] == ["skinet", "plan"]
+        out = run(capsys, *argv[2:])
+        assert "cyclic" in out, line
