@@ -33,6 +33,7 @@ from skinet import explain
 from skinet.plan.arena import DONE, WAIT, Arena, Local
 from skinet.plan.goal import Goal
 from skinet.plan.inputs import missing
+from skinet.plan.policy import Command, Plan, Stats
 from skinet.plan.solve import Expired, cyclic, strong, weak
 from skinet.verify.forced import oracle
 
@@ -48,7 +49,8 @@ def diagnose(arena: Arena, goal: Goal, game: Any, relaxed_game: GameFactory, exp
         return "no marking reachable from here satisfies it"
     if game.empty(game.goal_markings & game.safe):
         example = game.pick(game.goal_markings)
-        where = "wherever it can succeed" if goal.kind == "run" else "every marking where it holds"
+        where = (f"every marking where {goal.skillset}:{goal.skill} can succeed" if goal.kind == "run"
+                 else "every marking where it holds")
         return f"the goal is unsafe: {where} is forced for {_forced_words(arena, example)}"
     relaxed = relaxed_game(True)
     region = None
@@ -106,8 +108,6 @@ def _target_label(arena: Arena, goal: Goal, local: Local) -> str:
 
 def _inputs_reason(arena: Arena, goal: Goal, relaxed: Any, layers: list[Any], answer: str) -> str:
     """A plan exists once every start is allowed: name the starts it makes that lack inputs."""
-    from skinet.plan.policy import Command, Plan, Stats  # a plan, once: no cycle at import
-
     plan = Plan(goal, arena, arena.root, answer, None, Stats("", 0, True, None, 0.0), relaxed, layers)  # type: ignore[arg-type]
     plan._allowed = arena.enabled(goal, relaxed=True)
     needed: list[str] = []

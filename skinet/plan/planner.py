@@ -43,7 +43,8 @@ CACHE_SIZE = 8  # start markings whose goal-independent structures are kept
 
 
 class Planner:
-    """Plans goals on one system; see the package docstring (:mod:`skinet.plan`) for the pilot's use."""
+    """Plans goals on one system; see the package docstring (:mod:`skinet.plan`) for the pilot's use.
+    Not thread-safe: one planner per thread (it keeps the structures of recent start markings)."""
 
     def __init__(self, system: System, engine: str = "auto", memory_limit: int | None = DEFAULT_MEMORY_LIMIT):
         if engine not in ENGINES:
@@ -132,7 +133,8 @@ class Planner:
 
     def admissible(self, marking: Mapping[str, int]) -> list[tuple[str, str]]:
         """The commands at ``marking`` after which every result is in Safe, ``(skillset, transition)``
-        in the fixed order: SPEC §8 says they are exactly those the ``strict`` check allows."""
+        in the fixed order: those the ``strict`` check allows wherever no property is violated
+        (SPEC §8; where one is, the check judges only the others, SPEC §5: tests/plan/test_answers.py)."""
         arena = self.arena(marking)
         local = arena.root
         out = []
