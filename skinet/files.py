@@ -58,6 +58,8 @@ def read_text(path: str | Path, limit: int | None = None) -> str:
         return data.decode("utf-8")
     except (OSError, UnicodeDecodeError, ValueError) as exc:  # ValueError: a NUL in the path
         reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
+        if isinstance(exc, UnicodeDecodeError):  # its text quotes the byte: no content in an error
+            reason = f"not UTF-8 text (byte {exc.start})"
         raise SourceError.at(str(path), None, f"cannot read file: {reason}") from None
 
 
@@ -66,21 +68,29 @@ def read_source(path: str | Path) -> str:
     return read_text(path, MAX_SOURCE_CHARS)
 
 
-def load_model(path: str | Path) -> Model:
-    """Parse and validate a ``.rl`` file, with the files it includes."""
-    return _load_linked(Path(path))[0]
+# The folder that included files must lie in, when not the model's own (issue 25).
+INCLUDE_ROOT_ENV = "SKINET_INCLUDE_ROOT"
 
 
-def _load_linked(path: Path) -> tuple[Model, dict[str, str]]:
+def load_model(path: str | Path, include_root: str | Path | None = None) -> Model:
+    """Parse and validate a ``.rl`` file, with the files it includes (see :func:`_load_linked`)."""
+    return _load_linked(Path(path), include_root)[0]
+
+
+def _load_linked(path: Path, include_root: str | Path | None = None) -> tuple[Model, dict[str, str]]:
     """A model file linked with every file it includes, and each file's text by source.
 
     ``include "name"`` is relative to the including file; each file is read once
-    (so include cycles end).
+    (so include cycles end).  Included files must lie, symbolic links resolved,
+    inside ``include_root`` (default: ``$SKINET_INCLUDE_ROOT``, else the model
+    file's folder), and be regular files; their syntax errors give the position
+    but quote no text, so an include can never show what another file holds.
     """
     text = read_source(path)
     units = [parse_unit(text, str(path))]
     texts = {str(path): text}
     seen = {path.resolve()}
+    root = Path(include_root or os.environ.get(INCLUDE_ROOT_ENV) or path.parent).resolve()
     i = 0
     while i < len(units):
         including = Path(units[i][0].source)
@@ -88,9 +98,15 @@ def _load_linked(path: Path) -> tuple[Model, dict[str, str]]:
         for name, pos in units[i - 1][0].includes:
             target = including.parent / name
             try:
-                if target.resolve() in seen:
+                resolved = target.resolve()
+                if resolved in seen:
                     continue
-                seen.add(target.resolve())
+                if not resolved.is_relative_to(root):
+                    raise SourceError.at(str(target), None, f"it lies outside {root} (included files stay in "
+                                                            f"the model's folder, or in ${INCLUDE_ROOT_ENV})")
+                if resolved.exists() and not resolved.is_file():
+                    raise SourceError.at(str(target), None, "not a regular file")
+                seen.add(resolved)
                 included = read_source(target)
             except (SourceError, OSError, RuntimeError, ValueError) as exc:  # RuntimeError: a symlink loop
                 reason = exc.diagnostics[0].message if isinstance(exc, SourceError) else f"cannot read file: {exc}"

@@ -62,6 +62,24 @@ def _positive_seconds(text: str) -> float:
     return value
 
 
+def _budget(text: str) -> float:
+    from skinet.wire.limits import MIN_BUDGET
+
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not MIN_BUDGET <= value < float("inf"):
+        raise ValueError(f"expected a number of seconds >= {MIN_BUDGET:g} (the predictor's minimum budget)")
+    return value
+
+
+def _folder(text: str) -> str:
+    if not os.path.isdir(text):
+        raise ValueError("expected an existing folder")
+    return text
+
+
 def _seconds(text: str) -> float:
     return 0.0 if text.strip() in ("0", "0.0") else _positive_seconds(text)
 
@@ -115,6 +133,8 @@ VARIABLES: dict[str, Variable] = {
     "SKINET_DASHBOARD_HOST": Variable("--host of the dashboard"),
     "SKINET_DASHBOARD_PORT": Variable("--port of the dashboard, compose.yaml (the host port)"),
     "SKINET_TRACEBACK": Variable("skinet: print the traceback of an internal error"),
+    "SKINET_INCLUDE_ROOT": Variable("skinet.files: the folder included model files must stay in (default: the "
+                                    "including model's own)", _folder),
     # compose.yaml, docker/*.sh
     "SKINET_IMAGE": Variable("compose.yaml, docker/build.sh: the image"),
     "SKINET_BASE_IMAGE": Variable("compose.yaml, docker/build.sh: the base image"),
@@ -128,7 +148,7 @@ VARIABLES: dict[str, Variable] = {
     "SKINET_DASHBOARD_BIND": Variable("compose.yaml: the address the dashboard's port is published on"),
     "SKINET_ONBOARD_ENDPOINT": Variable("compose.yaml: where off-board predictors connect", _endpoint),
     "SKINET_PREDICTORS": Variable("compose.yaml: predictor replicas", _count),
-    "SKINET_PREDICT_BUDGET": Variable("compose.yaml: the monitor's --budget", _positive_seconds),
+    "SKINET_PREDICT_BUDGET": Variable("compose.yaml: the monitor's --budget", _budget),
     "SKINET_SCENARIO": Variable("compose.yaml: the simulator's scenario"),
     "SKINET_START_DELAY": Variable("compose.yaml: the simulator's --start-delay", _seconds),
     # tests

@@ -248,11 +248,6 @@ def _forecast(args: argparse.Namespace, system: System, marking: dict[str, int],
     return result
 
 
-def _depth_reached(depth: int) -> str:
-    """Where a truncated exploration stopped: ``depth`` is the last layer expanded, -1 for none."""
-    return f"at depth {depth}" if depth >= 0 else "before expanding any layer"
-
-
 def _emit(data: object) -> None:
     print(json.dumps(data, indent=2))
 
@@ -330,7 +325,7 @@ def cmd_unsafe(args: argparse.Namespace) -> int:
     if prediction is not None:
         r = prediction.report()
         state = "complete" if r["complete"] else (
-            f"TRUNCATED by {r['truncated_by']} {_depth_reached(r['depth'])} (unknown constraints possible)")
+            f"TRUNCATED by {r['truncated_by']} ({prediction.space.explored()}; unknown constraints possible)")
         print(f"prediction: {state}, {plural(r['markings'], 'marking')} in {seconds(r['elapsed'])}")
     else:
         print("prediction: off (explicit constraints only)")
@@ -346,7 +341,7 @@ def cmd_explore(args: argparse.Namespace) -> int:
         return 0
     print(f"explored {system.name} ({'with' if not args.no_seeds else 'without'} event seeds)")
     rows = [
-        ["complete", "yes" if report["complete"] else f"no (truncated by {report['truncated_by']})"],
+        ["complete", "yes" if report["complete"] else f"no (truncated by {report['truncated_by']}: {result.space.explored()})"],
         ["elapsed", seconds(report["elapsed"])],
         ["depth", report["depth"] if report["depth"] >= 0 else "none (no layer expanded)"],
         ["markings", report["markings"]],
@@ -404,7 +399,7 @@ def cmd_ctl(args: argparse.Namespace) -> int:
               + (f" ({r['undecided']} undecided)" if r["undecided"] else ""))
         print(f"at the start marking: {r['start']}")
     if kripke.truncated_by is not None:
-        print(f"truncated by {kripke.truncated_by} {_depth_reached(space.expanded_depth)}: answers are three-valued")
+        print(f"truncated by {kripke.truncated_by} ({space.explored()}): answers are three-valued")
     return 0
 
 

@@ -23,6 +23,7 @@ from skinet.files import load_state, load_system, parse_state, read_text
 from skinet.system import Marking, System
 from skinet.tomltext import locate, parse_toml
 from skinet.wire.keys import check_chunk
+from skinet.wire.limits import MIN_BUDGET
 
 
 class ArgumentParser(argparse.ArgumentParser):
@@ -63,6 +64,12 @@ def seconds(env: str | None = None, zero: bool = False) -> Callable[[str], float
     """A finite duration in seconds, > 0 (>= 0 with ``zero``)."""
     what = "a number of seconds >= 0" if zero else "a number of seconds > 0"
     return _number(float, what, 0.0, not zero, None, env)
+
+
+def budget(env: str | None = None) -> Callable[[str], float]:
+    """A prediction budget in seconds: at least the predictor's minimum (SPEC §6.1)."""
+    return _number(float, f"a number of seconds >= {MIN_BUDGET:g} (the predictor's minimum budget)",
+                   MIN_BUDGET, False, None, env)
 
 
 def number(low: float, env: str | None = None) -> Callable[[str], float]:

@@ -90,7 +90,8 @@ def main(argv: list[str] | None = None) -> int:
         bridge.close()
         c = bridge.counters
         log.info("stopped: %d messages, %d events (%d unnamed), %d malformed, %d statuses not matching the model, "
-                 "%d manager restarts", c.messages, c.events, c.unexplained, c.malformed, c.mismatched, c.restarts)
+                 "%d manager restarts, %d resyncs after a cut link", c.messages, c.events, c.unexplained, c.malformed,
+                 c.mismatched, c.restarts, c.resyncs)
         return 0
     finally:
         session.close()

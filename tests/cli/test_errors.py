@@ -96,6 +96,7 @@ def _cases() -> list[Case]:
     bad_name = ("{tmp}/badname.toml:2:8: error: system name 'has space/slash' cannot be used in a Zenoh key "
                 "(letters, digits, _ - . only)")
     seconds = "expected a number of seconds > 0, got '{}'"
+    budget = "expected a number of seconds >= 0.05 (the predictor's minimum budget), got '{}'"
 
     # skinet parse / net
     add("skinet", "file", ("parse", "{tmp}/missing.rl"), 1,
@@ -282,7 +283,9 @@ def _cases() -> list[Case]:
     usage("skinet", "--duration", ("run", SYSTEM, "--duration", "-1"), "argument --duration: " + seconds.format("-1"))
     usage("skinet", "--mode", ("run", SYSTEM, "--mode", "router"),
           "argument --mode/-m: invalid choice: 'router' (choose from 'peer', 'client')")
-    usage("skinet", "--budget", ("run", SYSTEM, "--budget", "0"), "argument --budget: " + seconds.format("0"))
+    usage("skinet", "--budget", ("run", SYSTEM, "--budget", "0"), "argument --budget: " + budget.format("0"))
+    # Below the predictor's minimum the monitor would never ask, and every check would look fresh (issue 25).
+    usage("skinet", "--budget", ("run", SYSTEM, "--budget", "0.01"), "argument --budget: " + budget.format("0.01"))
     usage("skinet", "--memory-limit", ("run", SYSTEM, "--memory-limit", "tiny"),
           "argument --memory-limit: not a size: 'tiny' (e.g. 1GiB, 512MiB, 2GB)")
 
@@ -365,8 +368,11 @@ def _cases() -> list[Case]:
         add(program, "system", ("{tmp}/missing.toml",), 1, missing)
         add(program, "system", ("{tmp}/badname.toml",), 1, bad_name)
     usage(mon, "--id", (SYSTEM, "--id", "a b"), f"argument --id: instance id 'a b' {not_a_key}")
-    usage(mon, "--budget", (SYSTEM, "--budget", "-1"), "argument --budget: " + seconds.format("-1"))
+    usage(mon, "--budget", (SYSTEM, "--budget", "-1"), "argument --budget: " + budget.format("-1"))
+    usage(mon, "--budget", (SYSTEM, "--budget", "0.049"), "argument --budget: " + budget.format("0.049"))
     usage(mon, "--query-timeout", (SYSTEM, "--query-timeout", "0"), "argument --query-timeout: " + seconds.format("0"))
+    usage(mon, "--query-timeout", (SYSTEM, "--budget", "2", "--query-timeout", "1.5"),
+          "argument --query-timeout: 1.5 s is not above --budget 2 s: no prediction could ever arrive in time")
     usage(mon, "--stall", (SYSTEM, "--stall", "-2"), "argument --stall: " + seconds.format("-2"))
     usage(mon, "--check-policy", (SYSTEM, "--check-policy", "lax"), policy)
     usage(mon, "--check-rate-limit", (SYSTEM, "--check-rate-limit", "-3"),
@@ -379,10 +385,12 @@ def _cases() -> list[Case]:
     usage(pred, "--instance", (), f"argument --instance: instance id 'a b' {not_a_key}", SKINET_INSTANCE="a b")
     for option in ("--workers", "--max-pending", "--cache"):
         usage(pred, option, (option, "0"), f"argument {option}: expected an integer >= 1, got '0'")
-    for option in ("--fetch-timeout", "--max-budget"):
-        usage(pred, option, (option, "-2"), f"argument {option}: " + seconds.format("-2"))
+    usage(pred, "--fetch-timeout", ("--fetch-timeout", "-2"), "argument --fetch-timeout: " + seconds.format("-2"))
+    usage(pred, "--max-budget", ("--max-budget", "0.01"), "argument --max-budget: " + budget.format("0.01"))
     usage(pred, "--memory-limit", ("--memory-limit", "1 GiBi"),
           "argument --memory-limit: not a size: '1 GiBi' (e.g. 1GiB, 512MiB, 2GB)")
+    usage(pred, "--max-request", ("--max-request", "lots"),
+          "argument --max-request: not a size: 'lots' (e.g. 1GiB, 512MiB, 2GB)")
     usage(pred, "--memory-mb", ("--memory-mb", "8"), "argument --memory-mb: expected an integer >= 64, got '8'")
     usage(pred, "--grace", ("--grace", "-2"), "argument --grace: " + seconds.format("-2"))
     usage(br, "--instance", (SYSTEM, "--instance", "*"), f"argument --instance: instance id '*' {not_a_key}")
