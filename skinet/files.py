@@ -26,8 +26,10 @@ from __future__ import annotations
 import json
 import os
 import re
+from collections.abc import Mapping
 from dataclasses import replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from skinet.errors import Diagnostic, Pos, SourceError
 from skinet.lang.larkerrors import MAX_SOURCE_CHARS
@@ -39,6 +41,9 @@ from skinet.ros.definitions import KINDS
 from skinet.ros.typemap import TypeMap, parse_typemap
 from skinet.tomltext import check_keys, check_tables, locate, parse_toml
 from skinet.system import Marking, System, build_system, marking_from_json, marking_problems
+
+if TYPE_CHECKING:
+    from skinet.plan.goal import Goal
 
 
 def read_text(path: str | Path, limit: int | None = None) -> str:
@@ -218,6 +223,13 @@ def _entry_skillsets(entry: dict[str, object], n: int, model: Model, where: str)
             " give one entry per skillset, each with its 'name' and 'manager'",
         )
     return list(model.skillsets)
+
+
+def load_goals(path: str | Path, system: System, types: Mapping[str, str] | None = None) -> list[Goal]:
+    """A goals file (a mission, SPEC §8): see :mod:`skinet.plan.goalfile`; ``types``: the system's type map."""
+    from skinet.plan.goalfile import parse_goals
+
+    return parse_goals(read_source(path), system, str(path), types)
 
 
 def load_typemap(path: str | Path) -> TypeMap:

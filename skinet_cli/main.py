@@ -19,7 +19,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 from skinet import __version__
 from skinet.errors import SkinetError, SourceError
 from skinet.explain import plural
-from skinet.files import load_model, load_state, parse_state
+from skinet.files import load_model
 from skinet.net.build import build_net
 from skinet.net.export import FORMATS
 from skinet.props.parser import parse_formula
@@ -29,7 +29,7 @@ from skinet.verify.ctl import Kripke, check
 from skinet.verify.explore import Deadline, explore
 from skinet.verify.predict import Forecast, forecast
 from skinet_cli.environment import check_environment
-from skinet_cli.options import ArgumentParser, count, load_live_system, print_warnings
+from skinet_cli.options import ArgumentParser, count, load_live_system, print_warnings, state_marking
 from skinet_cli.options import seconds as duration
 from skinet_cli.memory import add_memory_arg, memory_limit
 from skinet_cli.render import analysis_text, seconds, table
@@ -52,6 +52,7 @@ examples (from the repository's root; tests/cli/test_help_examples.py runs every
   skinet explore skillsets/spot_arm.toml --budget 2
   skinet ctl skillsets/spot_arm.toml "AG not (spot:Busy and manipulator:Busy)" "EF spot:Busy"
   skinet conform examples/nav2/nav2.toml examples/nav2/bags/nav2_run
+  skinet plan skillsets/spot_arm.toml "reach spot:Standing and manipulator:RD"
 
 a live system, one command per terminal (skinet run prints the lines that reach it;
 Ctrl-C stops the ones that keep running):
@@ -95,6 +96,8 @@ LAZY_COMMANDS: tuple[tuple[str, str, dict[str, str]], ...] = (
         "router": "run a Zenoh router (the Python wheel in router mode) until interrupted",
         "fleet": "link robots' routers to a hub over mutual TLS: exchange the trust files",
     }),
+    ("skinet_cli.plan", "add_parser",
+     {"plan": "plan the commands that reach a goal without violating any property (SPEC §8)"}),
     ("skinet_cli.operator", "add_parsers", {
         "dashboard": "live web dashboard of a running system (served on 127.0.0.1:8080)",
         "watch": "terminal live view of a running system (any deployment)",
@@ -220,12 +223,7 @@ def _load(args: argparse.Namespace) -> tuple[System, dict[str, int]]:
     print_warnings(warnings)
     system = replace(system, prediction=system.prediction.override(
         af=args.af, forced=args.forced, events_uncontrollable=args.events_uncontrollable))
-    if args.state is None:
-        marking = system.initial_marking()
-    elif args.state.lstrip().startswith("{"):  # the JSON itself
-        marking = parse_state(args.state, "<state>", system, args.what_if)
-    else:
-        marking = load_state(args.state, system, args.what_if)
+    marking = system.initial_marking() if args.state is None else state_marking(args.state, system, args.what_if)[0]
     for problem in marking_problems(system, marking) if args.what_if else ():
         print(f"what-if analysis: {problem}", file=sys.stderr if args.json else sys.stdout)
     return system, marking

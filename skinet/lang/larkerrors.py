@@ -13,7 +13,8 @@ from lark.exceptions import UnexpectedCharacters, UnexpectedInput, UnexpectedTok
 from skinet.errors import Diagnostic, Pos, SourceError
 
 _MAX_EXPECTED = 10
-_DISPLAY = {"$END": "end of input", "NAME": "identifier", "NUMBER": "number", "_NL": "end of line"}
+_DISPLAY = {"$END": "end of input", "NAME": "identifier", "NUMBER": "number", "_NL": "end of line",
+            "REACH": "'reach'", "RUN": "'run'", "FORMULA": "a formula"}  # the last three: goals (skinet/plan)
 # Accepted but not suggested: `parameter` sections and `include` only exist in old
 # ONERA dialects (robot_language 2022, rl_model 2023), and listing them would push the keywords
 # every file uses past the cap of an expected list.

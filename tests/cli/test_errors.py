@@ -137,6 +137,72 @@ def _cases() -> list[Case]:
     add("skinet", "formulas", ("ctl", SYSTEM, "EF spot:Busy", "EF spot:Bussy"), 1,
         "<formula 2>:1:4: error: unknown name 'spot:Bussy' (candidates: spot:Busy)")
 
+    # skinet plan (issue 23): bad goals, goal files, inputs and states, each one line with its place
+    add("skinet", "system", ("plan", "{tmp}/missing.toml", "reach spot:Busy"), 1, missing)
+    add("skinet", "system", ("plan", "{tmp}/badname.toml", "reach spot:Busy"), 1, bad_name)
+    for goal, error in (
+        ("run spt:teleop", "<goal>:1:5: error: unknown skillset 'spt' (candidates: spot)"),
+        ("run spot:telop", "<goal>:1:10: error: unknown skill 'telop' of 'spot' (candidates: teleop)"),
+        ("run spot:teleop.success.finished", "<goal>:1:25: error: unknown success mode 'finished' of 'spot:teleop' "
+                                             "(expected one of: done)"),
+        ("run spot:teleop.failure.link_lost", "<goal>:1:17: error: unexpected 'failure', expected 'success'"),
+        ("reach spot:Stnding", "<goal>:1:7: error: unknown name 'spot:Stnding' (candidates: spot:Standing, "
+                               "spot:Sitting, spot:posture.Standing)"),
+        ("reach (spot:Busy and", "<goal>:1:21: error: unexpected end of input, expected one of: '(', 'false', "
+                                 "'not', 'true', identifier"),
+        ("reach EF spot:Busy", "<goal>:1:7: error: reach takes a state formula (atoms, not, and, or, =>), "
+                               "not a temporal operator"),
+        ("fly spot:Busy", "<goal>:1:1: error: unexpected 'fly', expected one of: 'reach', 'run'"),
+        ("run spot:go_to_waypoint", "<goal>:1:5: error: run spot:go_to_waypoint needs input 'target' (GeoPoint): "
+                                    "give it in the goal's inputs, e.g. inputs = { go_to_waypoint = { target = ... } }"),
+    ):
+        add("skinet", "goals", ("plan", SYSTEM, goal), 1, error)
+    add("skinet", "goals", ("plan", SYSTEM, "reach spot:Busy", "reach manipulator:Bussy"), 1,
+        "<goal 2>:1:7: error: unknown name 'manipulator:Bussy' (candidates: manipulator:Busy)")
+    add("skinet", "goals", ("plan", SYSTEM), 1,
+        'skinet: error: no goals: give GOAL arguments (e.g. "reach spot:Standing") or --goals FILE')
+    add("skinet", "--goals", ("plan", SYSTEM, "--goals", "{tmp}/missing.toml"), 1, missing)
+    for name, error in (
+        ("empty", "1:1: error: no goals: a goals file lists [[goals]] tables, each with reach = \"FORMULA\" or "
+                  "run = \"SKILLSET:SKILL\""),
+        ("syntax", "3:4: error: invalid TOML: Expected '=' after a key in a key/value pair"),
+        ("top_key", "1:1: error: unknown key 'goal' at the top level (keys belong in a table) (candidates: [[goals]])"),
+        ("goal_key", "6:1: error: unknown key 'input' in [[goals]] (candidates: inputs)"),
+        ("both", "3:1: error: goal 1 has both reach and run"),
+        ("neither", "1:1: error: goal 1 needs reach = \"FORMULA\" or run = \"SKILLSET:SKILL\""),
+        ("formula", "5:28: error: unknown name 'spot:Bussy' (candidates: spot:Busy)"),
+        ("not_string", "2:1: error: goal 1: reach must be a string"),
+        ("input_type", "3:31: error: input 'target' of spot:go_to_waypoint (GeoPoint): expected a table of the fields "
+                       "of geometry_msgs/msg/Point, got a string"),
+        ("input_field", "3:31: error: input 'target' of spot:go_to_waypoint (GeoPoint): expected float64 at y, "
+                        "got a string"),
+        ("input_name", "3:31: error: unknown input 'goal' of spot:go_to_waypoint (expected one of: target)"),
+        ("input_skill", "3:12: error: unknown skill 'go_to_waypont' (candidates: go_to_waypoint, spot:go_to_waypoint)"),
+        ("input_missing", "2:8: error: run spot:go_to_waypoint needs input 'target' (GeoPoint): give it in the goal's "
+                          "inputs, e.g. inputs = { go_to_waypoint = { target = ... } }"),
+    ):
+        add("skinet", "--goals", ("plan", SYSTEM, "--goals", f"{{tmp}}/goals_{name}.toml"), 1,
+            f"{{tmp}}/goals_{name}.toml:{error}")
+    add("skinet", "--inputs", ("plan", SYSTEM, "run spot:go_to_waypoint", "--inputs", "go_to_waypoint.target = {x = \"far\"}"),
+        1, "<--inputs>:1:16: error: input 'target' of spot:go_to_waypoint (GeoPoint): expected float64 at x, got a string")
+    add("skinet", "--inputs", ("plan", SYSTEM, "reach spot:Busy", "--inputs", "target ="), 1,
+        "<--inputs>:1:9: error: invalid TOML: Invalid value")
+    add("skinet", "--state", ("plan", SYSTEM, "reach spot:Busy", "--state", "{tmp}/missing.json"), 1,
+        "{tmp}/missing.json: error: cannot read file: No such file or directory")
+    add("skinet", "--state", ("plan", SYSTEM, "reach spot:Busy", "--state", "{tmp}/impossible.json"), 1,
+        "{tmp}/impossible.json: error: impossible state: 'spot' is not stable: invariant violated (stand_up.inv.powered);"
+        " the manager never publishes such a state")
+    add("skinet", "--state", ("plan", SYSTEM, "reach spot:Busy", "--state", '{"spot": {"running": ["stand_up"]}}'), 1,
+        "<state>: error: impossible state: 'spot' is not stable: invariant violated (stand_up.inv.powered); the manager "
+        "never publishes such a state")
+    for bad in ("0", "-1", "never"):
+        usage("skinet", "--budget", ("plan", SYSTEM, "reach spot:Busy", "--budget", bad),
+              "argument --budget: " + seconds.format(bad))
+    usage("skinet", "--memory-limit", ("plan", SYSTEM, "reach spot:Busy", "--memory-limit", "much"),
+          "argument --memory-limit: not a size: 'much' (e.g. 1GiB, 512MiB, 2GB)")
+    usage("skinet", "--engine", ("plan", SYSTEM, "reach spot:Busy", "--engine", "fast"),
+          "argument --engine: invalid choice: 'fast' (choose from 'auto', 'explicit', 'symbolic')")
+
     # skinet demo
     add("skinet", "scenarios", ("demo", "{tmp}/missing.toml"), 1, missing)
     add("skinet", "scenarios", ("demo", "{tmp}/unknown_skillset.toml"), 1,
@@ -397,6 +463,25 @@ def files(tmp_path_factory: pytest.TempPathFactory) -> Path:
     (tmp / "unknown_skillset.toml").write_text(head + 't = 1.0\nskillset = "spott"\ntransition = "init_power.start"\n')
     (tmp / "unknown_transition.toml").write_text(head + 't = 1.0\nskillset = "spot"\ntransition = "init_power.strat"\n')
     (tmp / "bad_time.toml").write_text(head + 't = "soon"\nskillset = "spot"\ntransition = "init_power.start"\n')
+    (tmp / "impossible.json").write_text('{"spot": {"running": ["stand_up"]}}')
+    goals = {
+        "empty": "# nothing\n",
+        "syntax": "[[goals]]\nreach = \"spot:Busy\"\nrun\n",
+        "top_key": "goal = 3\n",
+        "goal_key": '[[goals]]\nreach = "spot:Busy"\n\n[[goals]]\nreach = "spot:Idle"\ninput = {}\n',
+        "both": '[[goals]]\nreach = "spot:Busy"\nrun = "spot:teleop"\n',
+        "neither": "[[goals]]\ninputs = {}\n",
+        "formula": '[[goals]]\nreach = "spot:Busy"\n\n[[goals]]\nreach = "spot:Standing and spot:Bussy"\n',
+        "not_string": "[[goals]]\nreach = 3\n",
+        "input_type": '[[goals]]\nrun = "spot:go_to_waypoint"\ninputs = { go_to_waypoint = { target = "home" } }\n',
+        "input_field": '[[goals]]\nrun = "spot:go_to_waypoint"\ninputs = { go_to_waypoint = { target = { x = 1.0, '
+                       'y = "north" } } }\n',
+        "input_name": '[[goals]]\nrun = "spot:go_to_waypoint"\ninputs = { go_to_waypoint = { goal = 1 } }\n',
+        "input_skill": '[[goals]]\nrun = "spot:go_to_waypoint"\ninputs = { go_to_waypont = { target = {} } }\n',
+        "input_missing": '[[goals]]\nrun = "spot:go_to_waypoint"\n',
+    }
+    for name, text in goals.items():
+        (tmp / f"goals_{name}.toml").write_text(text)
     assert skinet_main.main(["demo", "--core", "--no-predict", "--log", str(tmp), SCENARIO]) == 0
     (tmp / "unassisted.jsonl").rename(tmp / "run.jsonl")
     event = next(line for line in (tmp / "run.jsonl").read_text().splitlines() if '"CanonicalEvent"' in line)
