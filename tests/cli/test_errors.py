@@ -441,6 +441,16 @@ def _cases() -> list[Case]:
         "skinet: error: robot endpoint 'tcp/robot2:7447' must be tls/HOST:PORT (a robot's router accepts TLS only)")
     add("skinet", "host", ("fleet", "--secrets", "{tmp}/fleet", "add", "bad host/x"), 1,
         "skinet: error: robot name 'bad host/x' must be the host of its endpoint (letters, digits, '.', '-')")
+    # skinet client-config
+    add("skinet", "--secrets", ("client-config", "--secrets", "{tmp}/no/such/dir"), 1,
+        "skinet: error: secrets folder {tmp}/no/such/dir does not exist")
+    usage("skinet", "--user", ("client-config", "--user", "bad/name"),
+          "argument --user: user name 'bad/name' cannot be used in a Zenoh key (letters, digits, _ - . only)")
+    add("skinet", "--connect", ("client-config", "--connect", "tcp/127.0.0.1:7447"), 1,
+        "skinet: error: --connect 'tcp/127.0.0.1:7447': the router checks certificates on a tls/ endpoint only, "
+        "e.g. tls/127.0.0.1:7447")
+    add("skinet", "-o", ("client-config", "-o", "{tmp}/observer.txt"), 1,
+        "skinet: error: {tmp}/observer.txt: the name must end with .json5 or .json (Zenoh reads the format from it)")
     return cases
 
 
