@@ -66,7 +66,7 @@ def snapshot(url: str) -> dict:
 def test_help_has_the_examples_of_every_kind() -> None:
     found = sections(EPILOG)
     assert len(found) == 3
-    assert [len(s) for s in found] == [8, 7, 3]
+    assert [len(s) for s in found] == [9, 7, 3]
     assert '{"spot": {"resources": {"power_status": "PowerOn", "posture": "Standing", "control_mode": "Busy"}, ' \
            '"running": ["teleop"]}}' in EPILOG  # a state the robot can be in (teleop.inv.powered holds)
 
