@@ -44,6 +44,7 @@ import zenoh
 from services.bridge_ros2.feed import Counters, Feed
 from services.common.cli import default_instance_id
 from services.common.events import event_publisher
+from services.common.heartbeat import HeartbeatPublisher
 from services.common.zenoh_config import undeclare
 from services.common.ros_liveliness import declare_node
 from skinet.ros.keys import (
@@ -54,6 +55,7 @@ from skinet.ros.typestore import default_instance, encode
 from skinet.system import System
 from skinet.wire import keys
 from skinet.wire.codec import encode as wire_encode
+from skinet.wire.messages import HeartbeatSkillset
 
 log = logging.getLogger("skinet.bridge_ros2")
 
@@ -87,6 +89,7 @@ class Bridge:
         self._requests: dict[str, tuple[str, ManagerTopic, bytes]] = {}  # skillset -> (manager, topic, CDR)
         self._hashes: dict[str, str] = {}  # skillset -> status_request type hash learned from the manager's token
         self._present: dict[str, str] = {}  # skillset -> token of its manager's status_request subscription
+        self._gone: set[str] = set()  # skillsets whose manager's token went away (and has not come back)
         self._sequence = 0
         self._gid = os.urandom(16)  # rmw_zenoh attachments of the status requests
         own: list[tuple[EntityKind, str, str, str]] = []  # rmw_zenoh graph entities of the bridge
@@ -105,7 +108,9 @@ class Bridge:
                     for t in m.topics]
             own.append(("MP", topic_fqn(manager, req.topic), req.typename, style.type_hash(m.store, req.typename)))
         self._resync = session.declare_queryable(keys.resync(system.name, "*"), self._on_resync)
-        self._token = session.liveliness().declare_token(keys.alive(system.name, "bridge_ros2", self.instance_id))
+        token = keys.alive(system.name, "bridge_ros2", self.instance_id)
+        self._token = session.liveliness().declare_token(token)
+        self._heartbeat = HeartbeatPublisher(session, system.name, self.feed.source, self.feed.epoch, token, self._beat)
         self._ros_tokens: list[Any] = []
         self.graph: list[RosEntity] = []  # rmw_zenoh: the bridge's node and topics as ROS tools see them
         if style.rmw_zenoh:
@@ -201,6 +206,7 @@ class Bridge:
             if sample.kind != zenoh.SampleKind.PUT:
                 if self._present.get(name) == key:
                     del self._present[name]
+                    self._gone.add(name)
                     log.warning("%s: manager %s left (its status_request subscription is gone)", name,
                                 self._requests[name][0])
                 return
@@ -208,11 +214,20 @@ class Bridge:
                 self._hashes[name] = hash_
             back = name not in self._present and self.feed.managers[name].deriver.last is not None
             self._present[name] = key
+            self._gone.discard(name)
         if back:
             with self._fed:
                 self.feed.restarted(name, "the manager (or its gateway) came back")
             self._queue.put(())  # a status it held is released: the worker publishes its events
         self.request_status(name)
+
+    def _beat(self) -> dict[str, HeartbeatSkillset]:
+        """Per skillset, the seq of its last event and whether its manager is present (the heartbeat)."""
+        with self._lock:
+            present, gone = set(self._present), set(self._gone)
+        return {name: HeartbeatSkillset(seq=m.seq - 1 if m.seq else None,
+                                        manager=True if name in present else False if name in gone else None)
+                for name, m in self.feed.managers.items()}
 
     def request_status(self, skillset: str) -> None:
         """Ask ``skillset``'s manager to publish its status."""
@@ -254,6 +269,7 @@ class Bridge:
         if self._stop.is_set():
             return
         self._stop.set()
+        self._heartbeat.close()
         undeclare(self._token, self._resync, *self._ros_tokens, *self._subscribers)
         self._queue.put(None)
         self._worker.join(5.0)
