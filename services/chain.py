@@ -70,7 +70,13 @@ def run_chain(
             services.append(simulator)
         bridge = start_bridge(session, system, typemap, style=style)
         services.append(bridge)
-        _wait(lambda: monitor.counters.applied >= len(system.components), settle, "initial statuses")
+        _wait(monitor.synced, settle, "initial statuses")  # SPEC §7: every skillset live
+
+        def caught_up() -> bool:  # the monitor handled every event the bridge published
+            last = {name: monitor.last_seq(name, bridge.feed.source) for name in bridge.feed.managers}
+            return all(m.seq == 0 or (last[name] is not None and last[name] >= m.seq - 1)
+                       for name, m in bridge.feed.managers.items())
+
         lost = {name: 0 for name in simulator.nodes}
         if external:
             # Behind a gateway, statuses answering the first requests are lost until its
@@ -88,7 +94,7 @@ def run_chain(
             expected = {name: n - lost[name] for name, n in simulator.statuses_published().items()}
             if not bridge.wait_statuses(expected):
                 raise ChainError(f"step {run.index}: the bridge did not receive every status")
-            _wait(lambda: monitor.counters.applied >= bridge.counters.events, settle, f"step {run.index} applied")
+            _wait(caught_up, settle, f"step {run.index} applied")
             if predict:
                 _wait(lambda: not monitor.snapshot().unsafe.prediction_stale, settle, f"step {run.index} prediction")
             view = monitor.snapshot()
