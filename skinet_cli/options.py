@@ -58,6 +58,11 @@ def seconds(env: str | None = None, zero: bool = False) -> Callable[[str], float
     return _number(float, what, 0.0, not zero, None, env)
 
 
+def seconds_within(low: float, high: float, env: str | None = None) -> Callable[[str], float]:
+    """A duration in seconds in ``[low, high]``."""
+    return _number(float, f"a number of seconds from {low:g} to {high:g}", low, False, high, env)
+
+
 def number(low: float, env: str | None = None) -> Callable[[str], float]:
     """A finite number >= ``low``."""
     return _number(float, f"a number >= {low:g}", low, False, None, env)

@@ -8,6 +8,7 @@ import os
 from services.common.ratelimit import add_rate_args
 from services.common.zenoh_config import add_login_args
 from services.monitor.check import add_policy_arg
+from services.monitor.sync import add_lost_after_arg
 from skinet_cli.memory import add_memory_arg
 from skinet_cli.options import count, seconds
 
@@ -32,6 +33,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
                    help="also serve the live web dashboard on this port (0: a free one; see skinet dashboard)")
     c.add_argument("--dashboard-host", default="127.0.0.1", help="address of --dashboard (default: 127.0.0.1)")
     add_policy_arg(c)
+    add_lost_after_arg(c)
     add_rate_args(c)
     add_memory_arg(c)
     _zenoh_args(c, "endpoint on which a bridge in another process can connect (default: tcp/127.0.0.1:0, "

@@ -29,6 +29,7 @@ from skinet.mission import Scenario, Step, StepRecord
 from skinet.system import System
 from skinet.wire import keys
 from skinet.wire.codec import decode, encode
+from skinet.wire.convert import statuses
 from skinet.wire.messages import CheckReply, CheckRequest, LiveState
 from tests.services.conftest import LivelinessWatch, client_args
 from tests.services.test_monitor import AG, PAPER_STEPS, SG, wait_until
@@ -219,3 +220,27 @@ def test_stamps_from_simulated_time_give_the_wall_clock_verdicts(client_factory,
     simulated = _mission(lambda: time.monotonic() - start, client_factory, spot_arm)  # from 1970-01-01
     future = _mission(lambda: time.time() + 10 * 365 * 86400, client_factory, spot_arm)
     assert simulated == wall and future == wall
+
+
+def test_terminal_views_show_a_stale_state_first_in_colour() -> None:
+    """``skinet watch`` and ``skinet run``: one banner line per skillset not live, red when lost, yellow
+    when syncing (on a terminal), and a mark on the skillset's line."""
+    from services.embedded import RED, YELLOW, PLAIN, Observed, render, summary
+    from skinet.wire.messages import PropertyVerdict, SkillsetSync, UnsafeReport, Verdicts
+
+    system = load_system(SYSTEM_FILE)[0]
+    state = LiveState(system="spot_arm", seq=3, stamp=0.0, skillsets=statuses(system, system.initial_marking()),
+                      sync={"spot": SkillsetSync(state="lost", since=0.0, reason="its manager left"),
+                            "manipulator": SkillsetSync(state="syncing", since=0.0, reason="waiting")})
+    view = Observed(state, Verdicts(system="spot_arm", seq=3, stamp=0.0, properties=[
+        PropertyVerdict(name=AG, holds=True)]), UnsafeReport(system="spot_arm", seq=3, stamp=0.0, unsafe=[],
+                                                             prediction_stale=True), None)
+    at = time.strftime("%H:%M:%S", time.localtime(0.0))
+    lines = render(view, colour=True)
+    assert lines[1:3] == [f"{RED}  STATE LOST: spot since {at}: its manager left{PLAIN}",
+                          f"{YELLOW}  STATE SYNCING: manipulator since {at}: waiting{PLAIN}"]
+    assert lines[4].endswith(f"running: -  [LOST since {at}]")
+    assert render(view)[1] == f"  STATE LOST: spot since {at}: its manager left"
+    assert summary(view).endswith(f" | STATE STALE: spot lost since {at}, manipulator syncing since {at}")
+    live = state.model_copy(update={"sync": {n: SkillsetSync(state="live", since=0.0) for n in state.sync}})
+    assert not [line for line in render(Observed(live, view.verdicts, view.unsafe, None)) if "STATE" in line]
