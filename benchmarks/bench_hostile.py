@@ -42,6 +42,7 @@ from services.predictor import start_predictor  # noqa: E402
 from skinet.files import load_system  # noqa: E402
 from skinet.wire import keys  # noqa: E402
 from skinet.wire.convert import system_from_bundle  # noqa: E402
+from tests.bridge_side import BridgeSide  # noqa: E402
 from tests.services.hostile import Attacker, hostile_bundle  # noqa: E402
 
 GRACE = 1.0
@@ -94,6 +95,7 @@ def main() -> None:
     predictor = start_predictor(session, "bench", memory_mb=args.memory_mb, grace=GRACE)
     startup = time.monotonic() - t0
     monitor = start_monitor(session, system, budget=0.5)
+    side = BridgeSide(session, "spot_arm", source="bench", model=system)  # the monitor syncs from it first
     rows = []
     feed = Feed(int(3 * args.seconds / 0.005) + 100)
     try:
@@ -129,6 +131,7 @@ def main() -> None:
         rows.append(row("in-process peer (the same model built on a thread)", inproc))
     finally:
         monitor.close()
+        side.close()
         predictor.close()
         session.close()
 

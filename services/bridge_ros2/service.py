@@ -17,9 +17,13 @@ with its sequence number going back (``rmw_zenoh`` attachments), or skill ids re
 to '' mean the manager restarted: the bridge asks again and the next status is a new
 initial status whose ``info`` says how it differs from the last one (SPEC §7).  With
 ``rmw_zenoh`` the bridge declares its own node, subscription and publisher tokens.
-A monitor that missed events asks ``keys.resync(system, skillset)``: the bridge
-answers with the skillset's last status (numbered as its last event) and asks
-the manager for a fresh one.
+A monitor that missed events, or that starts, asks ``keys.resync(system, skillset)``:
+the bridge answers with the skillset's last status (numbered as its last event) and
+asks the manager for a fresh one.  Every 0.5 s it publishes a
+:class:`~skinet.wire.messages.Heartbeat` (:mod:`services.common.heartbeat`): its
+token, and per skillset its last event's number and whether the manager is present
+(its token seen, gone, or never announced), so that a monitor can tell a silent
+bridge from a quiet robot (SPEC §7).
 
 One subscriber per manager covers all its topics (``.../<skillset>_skillset/**``):
 separate subscribers per key would run their callbacks on different threads and
