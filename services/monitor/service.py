@@ -37,8 +37,10 @@ import threading
 import time
 import uuid
 from dataclasses import dataclass
+from typing import TypeVar
 
 import zenoh
+from pydantic import BaseModel
 
 from services.common.events import event_subscriber
 from services.common.ratelimit import CHECK_RATE_LIMIT, RateLimiter
@@ -46,7 +48,7 @@ from services.common.zenoh_config import undeclare
 from services.monitor.check import MAX_REQUEST, Checker, Policy, request_from
 from services.monitor.engine import Counters, Engine, MarkingKey, Step
 from services.monitor.prediction import PredictionClient, PredictorStats
-from services.monitor.sync import BOUND, SyncTracker
+from services.monitor.sync import BOUND, SYNCING, SyncTracker
 from skinet.errors import SourceError
 from skinet.system import System
 from skinet.wire import keys
@@ -62,6 +64,7 @@ _LOG_FIRST = 10  # log the first occurrences of each problem, then every 1000th
 MAX_EVENT = 64 << 10  # bytes; a canonical event or a heartbeat is a few hundred
 MAX_WAITING = 256  # check requests waiting at once; more are answered at once
 TICK = 0.1  # seconds between the watchdog's looks at silences and waiting checks
+M = TypeVar("M", bound=BaseModel)
 
 
 @dataclass
@@ -134,7 +137,7 @@ class Monitor:
         self._waiting: list[_Waiting] = []  # check requests waiting for a synced state or a fresh prediction
         self._wake = threading.Event()  # something changed that a waiting check may want
         self._behind: dict[str, tuple[float, CanonicalEvent]] = {}  # skillset -> (deadline, resync answer ahead)
-        self.resync_timeout = resync_timeout
+        self.resync_timeout, self.lost_after = resync_timeout, lost_after
         opts = dict(congestion_control=zenoh.CongestionControl.BLOCK, express=express)
         self._pub = {k: session.declare_publisher(key, **opts) for k, key in (
             ("state", keys.state(name)), ("verdicts", keys.verdicts(name)),
@@ -228,19 +231,27 @@ class Monitor:
 
     # -- callbacks --------------------------------------------------------------------
 
-    def _on_event(self, sample: zenoh.Sample) -> None:
+    def _read(self, sample: zenoh.Sample, kind: type[M], what: str) -> M | None:
+        """``sample``'s payload as a ``kind`` of this system; None, counted in ``malformed`` and logged, else."""
         try:
             if len(sample.payload) > MAX_EVENT:
-                raise DecodeError(f"event payload of {len(sample.payload)} bytes (limit {MAX_EVENT})")
-            ev = decode(sample.payload.to_bytes(), CanonicalEvent)
-            if ev.system != self.system.name:
-                raise DecodeError(f"event of system '{ev.system}' on {sample.key_expr}")
+                raise DecodeError(f"{what} payload of {len(sample.payload)} bytes (limit {MAX_EVENT})")
+            message = decode(sample.payload.to_bytes(), kind)
+            if message.system != self.system.name:  # type: ignore[attr-defined]
+                raise DecodeError(f"{what} of system '{message.system}' on {sample.key_expr}")  # type: ignore[attr-defined]
+            return message
         except DecodeError as exc:
             with self._lock:
                 c = self._engine.counters
-                c.received += 1
                 c.malformed += 1
-                self._warn(c.malformed, "malformed event payload: %s", exc)
+                self._warn(c.malformed, "malformed %s payload: %s", what, exc)
+            return None
+
+    def _on_event(self, sample: zenoh.Sample) -> None:
+        ev = self._read(sample, CanonicalEvent, "event")
+        if ev is None:
+            with self._lock:
+                self._engine.counters.received += 1
             return
         try:
             with self._lock:
@@ -278,23 +289,16 @@ class Monitor:
             self._ask_resync(c.name)
 
     def _on_heartbeat(self, sample: zenoh.Sample) -> None:
-        try:
-            if len(sample.payload) > MAX_EVENT:
-                raise DecodeError(f"heartbeat payload of {len(sample.payload)} bytes (limit {MAX_EVENT})")
-            hb = decode(sample.payload.to_bytes(), Heartbeat)
-            if hb.system != self.system.name:
-                raise DecodeError(f"heartbeat of system '{hb.system}' on {sample.key_expr}")
-        except DecodeError as exc:
-            with self._lock:
-                self._engine.counters.malformed += 1
-                self._warn(self._engine.counters.malformed, "malformed heartbeat: %s", exc)
+        hb = self._read(sample, Heartbeat, "heartbeat")
+        if hb is None:
             return
         with self._lock:
             if self._closed:
                 return
             self._sync.heartbeat(hb)
             self._settle()
-            due = [n for n, b in hb.skillsets.items() if b.seq is not None and not self._sync.live(n)]
+            due = [n for n, b in hb.skillsets.items() if b.seq is not None and n in self._sync.skillsets
+                   and self._sync.skillsets[n].state == SYNCING]
         for name in due:  # it has a status to give: ask at once rather than at the next retry
             self._ask_resync(name)
 
@@ -304,7 +308,7 @@ class Monitor:
                 return
             self._sync.token(str(sample.key_expr), sample.kind == zenoh.SampleKind.PUT)
             self._settle()
-            due = [n for n, s in self._sync.skillsets.items() if s.state == "syncing"]
+            due = [n for n, s in self._sync.skillsets.items() if s.state == SYNCING]
         for name in due:
             self._ask_resync(name)
 
