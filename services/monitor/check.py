@@ -128,7 +128,7 @@ def parse_command(text: str) -> CheckRequest:
 class Checker:
     """Answers :class:`CheckRequest` for one system under one policy.
 
-    :meth:`unknown` and :meth:`policy` read nothing that changes (call them without
+    :meth:`unknown` and :meth:`policy_for` read nothing that changes (call them without
     the monitor's lock); :meth:`answer` caches the firable transitions of the live
     marking (call it under the lock)."""
 

@@ -8,8 +8,13 @@ The work per event is compiled once per marking, in the spirit of rosbags'
 generated deserialisers: the result of ``LiveSystem.apply`` is cached per
 (skillset marking, transition, observed status), and the msgpack bytes of the
 three messages per (combined marking, prediction) with holes for the fields of
-a step (seq, stamp, event, divergence).  Both caches are bounded and exact (the
-core functions are pure); a step packs four small values and joins bytes.
+a step (seq, stamp, event, divergence, and the sync states of SPEC §7, left out
+while they hold their default).  Both caches are bounded and exact (the core
+functions are pure); a step packs a few small values and joins bytes.
+
+A resync answer adopted while a skillset was not live (:meth:`Engine.adopt`) sets
+its marking without judging how the robot got there, and the events of its
+stream up to the answer's seq become history (:meth:`Engine.check_seq`).
 """
 
 from __future__ import annotations
@@ -177,7 +182,7 @@ class Engine:
         streams[stream] = (ev.epoch, ev.seq)
         streams.move_to_end(stream)
         if len(streams) > self.max_streams:
-            streams.popitem(last=False)
+            self.covered.pop(streams.popitem(last=False)[0], None)
         if prev is None:
             return True, None, False
         epoch, last = prev
