@@ -39,6 +39,12 @@ import json, os, sys, time
 from pathlib import Path
 import zenoh
 from services.common.security import tls_connect_config
+from skinet_cli.environment import EnvironmentVariableError, check_environment
+
+try:
+    check_environment()  # a misspelt SKINET_ variable or a bad value: one line, before anything waits
+except EnvironmentVariableError as exc:
+    sys.exit(f"skinet-entrypoint: error: {exc}")
 
 def wait_for(path):
     deadline = time.monotonic() + 120

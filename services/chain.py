@@ -5,6 +5,14 @@ Simulated skillset managers -> ROS 2 encoding (CDR on bridge keys) -> bridge
 scenario is driven through the simulator and, after each step, the monitor's
 published view is read back into the same :class:`~skinet.mission.StepRecord`
 the core replay gives, so both can be printed and compared alike.
+
+A step the model does not allow (``pick.success.picked`` while pick is idle) is a
+model divergence there, as in the core replay (SPEC §7).  The simulated managers
+refuse such a step as real ones would, so the monitor sees nothing happen; the
+chain then judges the step itself on the marking the monitor published, with the
+core's :class:`~skinet.live.LiveSystem`, and records the same divergence as the
+core replay.  A step the model allows but the managers did not carry out is a
+divergence too (the robot and its model disagree).
 """
 
 from __future__ import annotations
@@ -20,10 +28,12 @@ from services.monitor.service import MonitorView, start_monitor
 from services.predictor.service import start_predictor
 from services.simulator import Simulator
 from services.simulator.driver import StepRun
+from skinet.live import LiveSystem
 from skinet.mission import Scenario, StepRecord, flags_on
 from skinet.ros.keys import KeyStyle
 from skinet.system import System
 from skinet.verify.algorithm1 import UnsafeTransition
+from skinet.wire.convert import marking_of
 from skinet.wire.messages import UnsafeEntry
 
 
@@ -87,10 +97,12 @@ def run_chain(
         before = {p.name: True for p in system.properties}
         if predict:
             _wait(lambda: not monitor.snapshot().unsafe.prediction_stale, settle, "initial prediction")
-        shown = [unsafe_transition(u) for u in monitor.snapshot().unsafe.unsafe]  # what the operator sees
+        first = monitor.snapshot()
+        shown = [unsafe_transition(u) for u in first.unsafe.unsafe]  # what the operator sees
+        seq = first.state.seq  # the monitor's last step
 
         def on_step(run: StepRun) -> None:
-            nonlocal before, shown
+            nonlocal before, shown, seq
             expected = {name: n - lost[name] for name, n in simulator.statuses_published().items()}
             if not bridge.wait_statuses(expected):
                 raise ChainError(f"step {run.index}: the bridge did not receive every status")
@@ -98,7 +110,8 @@ def run_chain(
             if predict:
                 _wait(lambda: not monitor.snapshot().unsafe.prediction_stale, settle, f"step {run.index} prediction")
             view = monitor.snapshot()
-            record = _record(run, view, before, shown)
+            stepped, seq = view.state.seq != seq, view.state.seq
+            record = _record(run, view, before, shown, _divergence(system, run, view, stepped))
             if run.step.transition is not None:
                 before = record.holds
                 shown = [unsafe_transition(u) for u in view.unsafe.unsafe]
@@ -120,7 +133,27 @@ def unsafe_transition(u: UnsafeEntry) -> UnsafeTransition:
                             tuple(u.witness), u.reason)
 
 
-def _record(run: StepRun, view: MonitorView, before: dict[str, bool], shown: list[UnsafeTransition]) -> StepRecord:
+def _divergence(system: System, run: StepRun, view: MonitorView, stepped: bool) -> str | None:
+    """Why the model could not explain ``run``'s step, if it could not.
+
+    ``stepped``: the monitor published a step for it, whose divergence it reported
+    itself.  Otherwise the robot did nothing the monitor could see: the step is
+    applied to the published marking as the core replay applies it.
+    """
+    step = run.step
+    if step.transition is None:
+        return None
+    if stepped:
+        return view.state.divergence
+    outcome = LiveSystem(system, marking_of(system, view.state.skillsets)).apply(step.skillset, step.transition)
+    if outcome.divergence is not None or not outcome.changed:
+        return outcome.divergence
+    return (f"'{step.transition}' did not happen on the robot ({run.detail or 'no effect'}), "
+            "though the model allows it here")
+
+
+def _record(run: StepRun, view: MonitorView, before: dict[str, bool], shown: list[UnsafeTransition],
+            divergence: str | None) -> StepRecord:
     holds = {v.name: v.holds for v in view.verdicts.properties}
     unsafe = view.unsafe.unsafe
     if run.step.consider is not None:
@@ -130,7 +163,7 @@ def _record(run: StepRun, view: MonitorView, before: dict[str, bool], shown: lis
     recovery: dict[str, list[str]] = {p: [] for p in view.unsafe.violated}
     for r in view.unsafe.recovery:
         recovery.setdefault(r.property, []).append(f"{r.skillset}:{r.transition}")
-    return StepRecord(run.index, run.step, holds, violations, [], len(unsafe), view.state.divergence,
+    return StepRecord(run.index, run.step, holds, violations, [], len(unsafe), divergence,
                       flags_on(shown, run.step.skillset, run.step.transition or ""), recovery)
 
 

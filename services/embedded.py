@@ -2,10 +2,12 @@
 
 ``skinet run SYSTEM.toml`` opens one Zenoh ``peer`` session (no router; ZENOH.md:
 share one session in a process; loopback only and no multicast scouting unless
-asked), starts the monitor and a predictor on it, and
-shows the operator view: redrawn in place on a terminal, one line per change
-otherwise.  ``--listen`` lets a bridge in another process connect.  ``skinet
-router`` runs a Zenoh router from the Python wheel.
+asked), starts the monitor and a predictor on it, prints the endpoint it
+listens on (a free port is chosen before opening, so that it can be printed)
+with the exact commands that reach it, and shows the operator view: redrawn in
+place on a terminal, one line per change otherwise.  ``--listen`` lets a bridge
+in another process connect; ``--mode client`` runs it behind a router instead.
+``skinet router`` runs a Zenoh router from the Python wheel.
 """
 
 from __future__ import annotations
@@ -14,7 +16,9 @@ import argparse
 import dataclasses
 import json
 import os
+import re
 import signal
+import socket
 import sys
 import threading
 import time
@@ -22,10 +26,12 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
 
-from services.common.zenoh_config import client_name, login, open_session, session_config
+from services.common.zenoh_config import (
+    ZenohSetupError, client_name, login, open_session, session_config, session_mode, warn_on_stderr,
+)
 from services.monitor import Monitor, MonitorView, start_monitor
 from skinet_cli.memory import memory_limit
-from skinet_cli.options import load_live_system
+from skinet_cli.options import load_live_system, require_properties
 from skinet.explain import warning_line
 from skinet_cli.render import seconds, table
 from skinet.system import System
@@ -139,22 +145,32 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     from services.predictor.service import start_predictor
 
     system, _ = load_live_system(args.system)
-    config = session_config("peer", args.connect, args.listen, args.zenoh_config, args.multicast_scouting,
+    require_properties(system, args.system, args.no_properties)
+    mode = session_mode(args, args.connect or [])
+    if mode == "client" and args.listen:
+        raise ZenohSetupError("--listen: a client listens on nothing (--mode client, or --user with --connect); "
+                              "the others connect to its router")
+    if mode == "client" and not args.connect and not args.zenoh_config:
+        raise ZenohSetupError("--mode client needs the router's endpoint: --connect ENDPOINT")
+    config = session_config(mode, args.connect, args.listen, args.zenoh_config, args.multicast_scouting,
                             **login(args))
+    listening = fix_free_ports(config) if mode == "peer" else []
     stop = stop_on_signals()
-    session = open_session(config)
+    session = open_session(config, warn_on_stderr("skinet run"))
     monitor: Monitor | None = None
     predictor = None
     dashboard = None
     try:
         if args.dashboard is not None:  # first: a port in use stops the run before anything starts
-            dashboard = _start_dashboard(session, system, args.dashboard_host, args.dashboard, client_name(config))
+            dashboard = start_dashboard(session, system.name, args.dashboard_host, args.dashboard,
+                                        client_name(config), system)
             print(f"dashboard on {dashboard.url}", file=sys.stderr, flush=True)
         predictor = start_predictor(session, f"embedded-{os.getpid()}",  # before the monitor: it asks at once
                                     memory_limit=memory_limit(args), rate_limit=args.rate_limit)
         monitor = start_monitor(session, system, budget=args.budget, check_policy=args.check_policy,
                                 client=client_name(config), check_rate_limit=args.check_rate_limit,
                                 lost_after=args.lost_after)
+        print("\n".join(connect_lines(args, system, mode, listening)), file=sys.stderr, flush=True)
         if args.once:
             deadline = time.monotonic() + args.budget + 2.0  # the first prediction, if any comes
             view = monitor.snapshot()
@@ -176,12 +192,58 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
             predictor.close()
 
 
-def _start_dashboard(session: zenoh.Session, system: System, host: str, port: int, client: str) -> Dashboard:
-    """The web dashboard on the shared session; raises :class:`PortError` (port in use)."""
+def fix_free_ports(config: zenoh.Config) -> list[str]:
+    """The ``listen`` endpoints, ``tcp/HOST:0`` given a free port now (so that it can be printed)."""
+    given = json.loads(config.get_json("listen/endpoints") or "[]")
+    if not isinstance(given, list):  # per mode, in a configuration file: left as it is
+        return []
+    endpoints = []
+    for endpoint in map(str, given):
+        m = re.fullmatch(r"tcp/(\[?[^\]]*\]?|[^:]+):0", endpoint)
+        if m:
+            host = m.group(1).strip("[]")
+            try:
+                with socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET, socket.SOCK_STREAM) as probe:
+                    probe.bind((host, 0))
+                    endpoint = f"tcp/{m.group(1)}:{probe.getsockname()[1]}"
+            except OSError:
+                pass  # Zenoh says why it cannot listen there
+        endpoints.append(endpoint)
+    config.insert_json5("listen/endpoints", json.dumps(endpoints))
+    return endpoints
+
+
+def connect_lines(args: argparse.Namespace, system: System, mode: str, listening: list[str]) -> list[str]:
+    """What ``skinet run`` prints at start: where it listens, and the exact commands that reach it."""
+    if mode == "peer":
+        endpoint = next((e for e in listening if e.startswith("tcp/")), listening[0] if listening else "")
+        endpoint = re.sub(r"^tcp/0\.0\.0\.0:", "tcp/127.0.0.1:", re.sub(r"^tcp/\[::\]:", "tcp/[::1]:", endpoint))
+        head = f"skinet run: system {system.name}, listening on {', '.join(listening)}; connect with:"
+    else:
+        endpoint = (args.connect or ["(its --zenoh-config router)"])[0]
+        head = f"skinet run: system {system.name}, a client of the router at {endpoint}; connect with:"
+    folder = Path(args.password_file).parent if args.password_file else Path("~/.config/skinet/secrets")
+
+    def flags(user: str) -> str:  # a router's users log in; a peer of skinet run takes no login
+        login = mode == "client" and args.user
+        return f"-e {endpoint}" + (f" --user {user} --password-file {folder / f'{user}.password'}" if login else "")
+
+    first = system.components[0]
+    command = f"{first.name}:{first.skillset.skills[0].name}.start" if first.skillset.skills else "SKILLSET:TRANSITION"
+    return [head, f"  skinet watch {system.name} {flags('observer')}",
+            f"  skinet dashboard {system.name} {flags('observer')}",
+            f"  skinet check {system.name} {command} {flags('observer')}",
+            f"  python -m services.bridge_ros2 {args.system} {flags('bridge')}   (the robot's side)"]
+
+
+def start_dashboard(session: zenoh.Session, name: str, host: str, port: int, client: str,
+                    model: System | None = None) -> Dashboard:
+    """The web dashboard of system ``name`` on the shared session (``model`` gives the timeline's
+    lanes before the model bundle is fetched); raises :class:`PortError` (port in use)."""
     from services.dashboard.observer import Observer
     from services.dashboard.server import Dashboard
 
-    observer = Observer(session, system.name, system, client=client)
+    observer = Observer(session, name, model, client=client)
     dashboard = Dashboard(observer, host, port)
     try:
         dashboard.start()
@@ -263,7 +325,7 @@ def router(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
         config.insert_json5("transport/auth/usrpwd/user", json.dumps("hub"))
         config.insert_json5("transport/auth/usrpwd/password", json.dumps(ensure_fleet(folder)))
         notes.append(f"hub of {len(links)} of {len(robots)} robots")
-    session = open_session(config)
+    session = open_session(config, warn_on_stderr("skinet router"))
     try:
         print(f"zenoh router {session.zid()} listening on {', '.join(endpoints)}"
               + "".join(f"; {n}" for n in notes), file=out, flush=True)

@@ -3,9 +3,10 @@
 A read-only observer (:class:`~services.dashboard.observer.Observer`) follows the
 monitor's messages through Zenoh; the view is the one ``skinet run`` draws
 (:func:`services.embedded.render`), plus the services alive and the violations
-seen: redrawn in place on a terminal, one line per step otherwise; a state the monitor
-cannot vouch for (a skillset syncing or lost, SPEC §7) is a banner on top, red or
-yellow on a terminal, and ``STATE STALE`` in each line of a pipe.  With no
+seen: redrawn in place on a terminal, one line per step otherwise (:class:`StepLines`); a
+state the monitor cannot vouch for (a skillset syncing or lost, SPEC §7) is a banner on top,
+red or yellow on a terminal, and ``STATE STALE`` in a pipe's line (a change of it is a line of
+its own).  With no
 monitor of the system alive within ``--wait`` seconds it says so, naming the
 systems it can see, and exits 1.
 """
@@ -16,13 +17,17 @@ import argparse
 import sys
 import threading
 import time
+from collections import deque
 from typing import TextIO
 
-from services.common.zenoh_config import client_name, config_from_args, open_session
+from services.common.zenoh_config import (
+    check_connected, client_name, config_from_args, open_session, warn_on_stderr,
+)
 from services.dashboard.board import Board
 from services.dashboard.observer import Observer
 from services.dashboard.app import no_monitor_message
 from services.embedded import CLEAR, Observed, render, stop_on_signals, summary
+from services.replay import INSTANCE_PREFIX as REPLAY
 from skinet.errors import SkinetError
 
 
@@ -37,6 +42,8 @@ def view_lines(board: Board, colour: bool = False) -> list[str]:
     out.append("services  " + ", ".join(f"{s}: {len(alive.get(s, ()))}" for s in ("monitor", "bridge_ros2", "predictor")))
     if not alive.get("monitor"):
         out.append("  NO MONITOR ALIVE: showing its last messages")
+    elif all(i.startswith(REPLAY) for i in alive["monitor"]):
+        out.append("  REPLAY of a recorded run (skinet replay), not the live robot")
     out.append(f"violations ({len(board.violations)})" + "".join(
         f"\n  {v['property']} at step {v['seq']}" + (f" by {v['event']}" if v["event"] else "")
         for v in board.violations[-10:]))
@@ -44,13 +51,14 @@ def view_lines(board: Board, colour: bool = False) -> list[str]:
 
 
 def _look(board: Board, colour: bool = False) -> tuple[list[str], str, tuple, bool]:
-    """(view lines, one-line summary, what changed, prediction fresh and state live) of ``board``."""
+    """(view lines, one-line summary, what changed, prediction fresh and every skillset live) of ``board``;
+    what changed starts with (epoch, step, sync states)."""
     lines = view_lines(board, colour)
     if not lines:
         return [], "", (), False
     line = summary(Observed(board.state, board.verdicts, board.unsafe, board.state_space))  # type: ignore[arg-type]
     sync = tuple((n, s.state) for n, s in board.state.sync.items())  # type: ignore[union-attr]
-    key = (board.epoch, board.state.seq, board.unsafe.stamp, sync,  # type: ignore[union-attr]
+    key = (board.epoch, board.state.seq, sync, board.unsafe.stamp,  # type: ignore[union-attr]
            board.state_space and board.state_space.stamp,
            tuple(sorted((s, len(ids)) for s, ids in board.alive.items())), len(board.violations))
     fresh = not board.unsafe.prediction_stale and board.state_space is not None and \
@@ -58,21 +66,61 @@ def _look(board: Board, colour: bool = False) -> tuple[list[str], str, tuple, bo
     return lines, line, key, fresh
 
 
+class StepLines:
+    """One line per monitor step for a pipe: a step's line is written once, when its prediction is
+    fresh (or no predictor is alive to make it so, or the state is stale), when the next step comes,
+    or at the end; the monitor publishes a step several times (its prediction pending, then fresh;
+    its sync states changed: a step of its own here)."""
+
+    def __init__(self, out: TextIO):
+        self.out = out
+        self.step: tuple | None = None  # (epoch, seq, sync states) of the step last seen
+        self.line = ""
+        self.written = True
+
+    def see(self, step: tuple, line: str, final: bool) -> None:
+        if step != self.step:
+            self.flush()
+            self.step, self.written = step, False
+        self.line = line
+        if final:
+            self.flush()
+
+    def flush(self) -> None:
+        if not self.written:
+            self.out.write(self.line + "\n")
+            self.out.flush()
+            self.written = True
+
+
 def watch(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     """Run the view until interrupted or ``--duration``; ``--once`` prints one view (after the
     first fresh prediction, or ``--wait`` seconds) and returns.  Returns the exit status."""
     config = config_from_args(args)
-    session = open_session(config)
+    session = open_session(config, warn_on_stderr("skinet watch"))
     changed = threading.Event()
     observer = Observer(session, args.system, client=client_name(config))
+    tty = out.isatty()
+    seen: deque[tuple[tuple, str, bool]] = deque()  # a pipe's (step, line, final), every update
+
+    def on_update(_updates: object) -> None:  # on Zenoh's thread, the observer's lock held
+        if not tty and not args.once:
+            lines, line, key, fresh = _look(observer.board)
+            if lines:
+                final = fresh or not observer.board.alive.get("predictor") or observer.board.unsafe.state_stale
+                seen.append((key[:3], line, final))
+        changed.set()
+
     try:
-        observer.listen(lambda _updates: changed.set())
+        observer.listen(on_update)
         if not observer.wait_monitor(args.wait):
+            check_connected(session, config)
             raise SkinetError(no_monitor_message(session, args.system).replace("; waiting for one", ""))
         stop = stop_on_signals()
         now = time.monotonic()
         end = now + args.wait if args.once else (None if args.duration is None else now + args.duration)
-        tty, shown = out.isatty(), None
+        shown = None
+        steps = StepLines(out)
         while True:
             changed.clear()
             lines, line, key, fresh = observer.read(lambda b: _look(b, tty))  # type: ignore[misc]
@@ -81,11 +129,14 @@ def watch(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
                 if lines and (fresh or done):
                     print("\n".join(lines), file=out, flush=True)
                     return 0
-            elif lines and key != shown:
-                out.write(CLEAR + "\n".join(lines) + "\n" if tty else line + "\n")
+            elif tty and lines and key != shown:
+                out.write(CLEAR + "\n".join(lines) + "\n")
                 out.flush()
                 shown = key
+            while seen:
+                steps.see(*seen.popleft())
             if done:
+                steps.flush()
                 return 0
             changed.wait(0.5)
     finally:

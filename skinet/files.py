@@ -30,7 +30,7 @@ from skinet.lang.model import Model, Skillset
 from skinet.lang.parser import link, parse_unit
 from skinet.options import parse_prediction
 from skinet.ros.typemap import TypeMap, parse_typemap
-from skinet.tomltext import parse_toml
+from skinet.tomltext import check_keys, check_tables, locate, parse_toml
 from skinet.system import Marking, System, build_system, marking_from_json, marking_problems
 
 
@@ -95,15 +95,29 @@ def _load_linked(path: Path) -> tuple[Model, dict[str, str]]:
     return link(units), texts
 
 
+SYSTEM_TABLES = ("[system]", "[[skillsets]]", "[prediction]")
+SYSTEM_KEYS = ("name", "properties", "types", "memory_limit")
+SKILLSET_KEYS = ("model", "manager", "name")
+
+
 def load_system(path: str | Path) -> tuple[System, list[Diagnostic]]:
-    """Load a system file and everything it names; returns the warnings too."""
+    """Load a system file and everything it names; returns the warnings too.
+
+    Strict: an unknown table or key, or a value of the wrong kind, is an error at
+    its position (a misspelt ``properties`` would leave the system with none).
+    """
     path = Path(path)
     text = read_source(path)
     data = parse_toml(text, str(path))
     where = str(path)
+    check_tables(data, SYSTEM_TABLES, where, text)
     system = data.get("system")
     if not isinstance(system, dict) or not isinstance(system.get("name"), str):
-        raise SourceError.at(where, None, "missing [system] table with a 'name' string")
+        raise SourceError.at(where, locate(text, ("system",)), "missing [system] table with a 'name' string")
+    check_keys(system, SYSTEM_KEYS, where, text, ("system",), "[system]")
+    for key in ("properties", "types"):
+        _check_string(system, key, where, text, ("system",), "[system]")
+    _memory_limit(system, where, text)
     entries = data.get("skillsets")
     if not isinstance(entries, list) or not entries:
         raise SourceError.at(where, None, "missing [[skillsets]] entries (each with 'model' and 'manager')")
@@ -113,7 +127,12 @@ def load_system(path: str | Path) -> tuple[System, list[Diagnostic]]:
     models: dict[Path, tuple[Model, dict[str, str]]] = {}
     for n, entry in enumerate(entries, 1):
         if not isinstance(entry, dict) or not isinstance(entry.get("model"), str):
-            raise SourceError.at(where, None, f"skillsets entry {n} needs a 'model' path")
+            raise SourceError.at(where, locate(text, ("skillsets", n - 1)),
+                                 f"skillsets entry {n} needs a 'model' path")
+        table, label = ("skillsets", n - 1), f"[[skillsets]] entry {n}"
+        check_keys(entry, SKILLSET_KEYS, where, text, table, label)
+        for key in ("manager", "name"):
+            _check_string(entry, key, where, text, table, label)
         model_path = path.parent / entry["model"]
         if model_path not in models:
             models[model_path] = _load_linked(model_path)
@@ -131,6 +150,14 @@ def load_system(path: str | Path) -> tuple[System, list[Diagnostic]]:
     built = build_system(system["name"], skillsets, props_text, props_source, sources)
     options = parse_prediction(data.get("prediction"), [p.name for p in built.properties], where, text)
     return replace(built, prediction=options), warnings
+
+
+def _check_string(table: dict[str, object], key: str, source: str, text: str, at: tuple[str | int, ...],
+                  label: str) -> None:
+    """A key that, when given, must be a string (a path or a name)."""
+    value = table.get(key)
+    if value is not None and not isinstance(value, str):
+        raise SourceError.at(source, locate(text, at, key), f"{label} '{key}' must be a string, not {value!r}")
 
 
 def _entry_skillsets(entry: dict[str, object], n: int, model: Model, where: str) -> list[Skillset]:
@@ -174,6 +201,8 @@ _UNITS = {"": 1, "b": 1, "kb": 10**3, "mb": 10**6, "gb": 10**9, "kib": 2**10, "m
 
 def parse_size(text: str | int) -> int:
     """Bytes from ``"1 GiB"``, ``"512MiB"``, ``"2 GB"`` or a plain number of bytes."""
+    if str(text).strip().startswith("-"):
+        raise ValueError(f"not a size: {text!r} (a size is positive, e.g. 1GiB, 512MiB, 2GB)")
     match = re.fullmatch(r"\s*(\d+(?:\.\d+)?)\s*([A-Za-z]*)\s*", str(text))
     unit = match.group(2).lower() if match else ""
     if not match or unit not in _UNITS or float(match.group(1)) * _UNITS[unit] < 1:
@@ -184,8 +213,13 @@ def parse_size(text: str | int) -> int:
 def load_memory_limit(path: str | Path) -> int | None:
     """``[system] memory_limit`` of a system file (bytes; ``None`` when absent), SPEC §6.1."""
     path = Path(path)
-    data = parse_toml(read_source(path), str(path))
-    value = data.get("system", {}).get("memory_limit") if isinstance(data.get("system"), dict) else None
+    text = read_source(path)
+    data = parse_toml(text, str(path))
+    return _memory_limit(data.get("system"), str(path), text)
+
+
+def _memory_limit(system: object, source: str, text: str) -> int | None:
+    value = system.get("memory_limit") if isinstance(system, dict) else None
     if value is None:
         return None
     try:
@@ -193,28 +227,31 @@ def load_memory_limit(path: str | Path) -> int | None:
             raise ValueError(f"not a size: {value!r} (e.g. \"1GiB\")")
         return parse_size(value)
     except ValueError as exc:
-        raise SourceError.at(str(path), None, f"[system] memory_limit: {exc}") from None
+        raise SourceError.at(source, locate(text, ("system",), "memory_limit"), f"[system] memory_limit: {exc}") from None
 
 
 def load_state(path: str | Path, system: System, what_if: bool = False) -> Marking:
-    """A combined marking from a JSON state file (see :func:`skinet.system.marking_from_json`).
+    """A combined marking from a JSON state file (see :func:`parse_state`)."""
+    return parse_state(read_source(path), str(path), system, what_if)
+
+
+def parse_state(text: str, source: str, system: System, what_if: bool = False) -> Marking:
+    """A combined marking from JSON text (see :func:`skinet.system.marking_from_json`).
 
     A marking the live system cannot be in (see :func:`skinet.system.marking_problems`)
     is refused unless ``what_if``.
     """
-    text = read_source(path)
     try:
         data = json.loads(text)
     except json.JSONDecodeError as exc:
-        raise SourceError.at(str(path), Pos(exc.lineno, exc.colno), f"invalid JSON: {exc.msg}") from None
+        raise SourceError.at(source, Pos(exc.lineno, exc.colno), f"invalid JSON: {exc.msg}") from None
     except RecursionError:
-        raise SourceError.at(str(path), None, "invalid JSON: nested too deeply") from None
-    marking = marking_from_json(system, data, str(path))
+        raise SourceError.at(source, None, "invalid JSON: nested too deeply") from None
+    marking = marking_from_json(system, data, source)
     problems = [] if what_if else marking_problems(system, marking)
     if problems:
         raise SourceError.at(
-            str(path), None,
+            source, None,
             "impossible state: " + "; ".join(problems) + " (use --what-if to analyse it anyway)",
         )
     return marking
-

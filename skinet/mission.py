@@ -4,6 +4,9 @@ A scenario is a TOML file of timed steps; each step is a model transition of
 one skillset (``transition = "teleop.start"``: an operator command, an event
 or a skill outcome) or an operator *considering* a command without issuing it
 (``consider = "arm_ready.start"``), which shows whether SkiNet warns about it.
+A transition step the model does not allow at that moment is a model divergence
+(SPEC §7); a scenario that plays one on purpose (a conformance test, a faulty
+robot) says so with ``expect_divergence = true`` on the step.
 The simulator of issue 5 plays the same files through the whole chain.
 """
 
@@ -17,7 +20,7 @@ from skinet.errors import SourceError
 from skinet.live import LiveSystem
 from skinet.props.evaluate import holds
 from skinet.system import System
-from skinet.tomltext import parse_toml
+from skinet.tomltext import check_keys, check_tables, locate, parse_toml
 from skinet.verify.algorithm1 import Analysis, UnsafeTransition, analyse
 from skinet.verify.predict import forecast
 
@@ -32,6 +35,7 @@ class Step:
     transition: str | None = None
     consider: str | None = None
     note: str = ""
+    expect_divergence: bool = False  # the model is expected not to explain this step
 
 
 @dataclass(frozen=True)
@@ -39,6 +43,7 @@ class Scenario:
     name: str
     system: str  # path of the system file, relative to the scenario file
     steps: tuple[Step, ...]
+    text: str = field(default="", compare=False, repr=False)  # the file's text, to locate errors in it
 
 
 @dataclass
@@ -56,30 +61,59 @@ class StepRecord:
     recovery: dict[str, list[str]] = field(default_factory=dict)  # violated property -> recovery transitions
 
 
+SCENARIO_TABLES = ("[scenario]", "[[steps]]")
+SCENARIO_KEYS = ("name", "system")
+STEP_KEYS = ("t", "skillset", "transition", "consider", "note", "expect_divergence")
+
+
 def parse_scenario(text: str, source: str = "<scenario>") -> Scenario:
-    """Parse a scenario file; errors name the file and the step number."""
+    """Parse a scenario file; errors name the file, the position and the step number.
+
+    Strict: an unknown table or key is an error with the close names.
+    """
     data = parse_toml(text, source)
+    check_tables(data, SCENARIO_TABLES, source, text)
     head = data.get("scenario", {})
-    if not isinstance(head.get("name"), str) or not isinstance(head.get("system"), str):
-        raise SourceError.at(source, None, "missing [scenario] table with 'name' and 'system' strings")
+    if not isinstance(head, dict) or not all(isinstance(head.get(k), str) for k in ("name", "system")):
+        raise SourceError.at(source, locate(text, ("scenario",)),
+                             "missing [scenario] table with 'name' and 'system' strings")
+    check_keys(head, SCENARIO_KEYS, source, text, ("scenario",), "[scenario]")
+    entries = data.get("steps", [])
+    if not isinstance(entries, list):
+        raise SourceError.at(source, locate(text, (), "steps"), "'steps' must be [[steps]] tables")
     steps = []
     last = 0.0
-    for n, s in enumerate(data.get("steps", []), 1):
+    for n, s in enumerate(entries, 1):
+        table = ("steps", n - 1)
         if not isinstance(s, dict) or not isinstance(s.get("skillset"), str):
-            raise SourceError.at(source, None, f"step {n}: needs a 'skillset' string")
+            raise SourceError.at(source, locate(text, table, "skillset") or locate(text, table),
+                                 f"step {n}: needs a 'skillset' string")
+        check_keys(s, STEP_KEYS, source, text, table, f"step {n}")
         if (s.get("transition") is None) == (s.get("consider") is None):
-            raise SourceError.at(source, None, f"step {n}: give exactly one of 'transition' or 'consider'")
+            raise SourceError.at(source, locate(text, table),
+                                 f"step {n}: give exactly one of 'transition' or 'consider'")
         if not isinstance(s.get("transition", s.get("consider")), str):
-            raise SourceError.at(source, None, f"step {n}: 'transition' or 'consider' must be a string")
+            key = "transition" if "transition" in s else "consider"
+            raise SourceError.at(source, locate(text, table, key), f"step {n}: '{key}' must be a string")
         t = s.get("t", last)
         if isinstance(t, bool) or not isinstance(t, (int, float)) or t != t:
-            raise SourceError.at(source, None, f"step {n}: 't' must be a number of seconds, got {t!r}")
+            raise SourceError.at(source, locate(text, table, "t"),
+                                 f"step {n}: 't' must be a number of seconds, got {t!r}")
         t = float(t)
         if t < last:
-            raise SourceError.at(source, None, f"step {n}: time {t} goes backwards (previous step at {last})")
+            raise SourceError.at(source, locate(text, table, "t"),
+                                 f"step {n}: time {t} goes backwards (previous step at {last})")
         last = t
-        steps.append(Step(t, s["skillset"], s.get("transition"), s.get("consider"), str(s.get("note", ""))))
-    return Scenario(head["name"], head["system"], tuple(steps))
+        expect = s.get("expect_divergence", False)
+        if not isinstance(expect, bool):
+            raise SourceError.at(source, locate(text, table, "expect_divergence"),
+                                 f"step {n}: 'expect_divergence' must be true or false, got {expect!r}")
+        if expect and s.get("transition") is None:
+            raise SourceError.at(source, locate(text, table, "expect_divergence"),
+                                 f"step {n}: 'expect_divergence' needs a 'transition' (a considered command is "
+                                 "not played)")
+        steps.append(Step(t, s["skillset"], s.get("transition"), s.get("consider"), str(s.get("note", "")), expect))
+    return Scenario(head["name"], head["system"], tuple(steps), text)
 
 
 def step_numbers(scenario: Scenario) -> list[int]:
@@ -107,15 +141,17 @@ def check_scenario(scenario: Scenario, system: System, source: str = "<scenario>
     for n, step in enumerate(scenario.steps, 1):
         comp = components.get(step.skillset)
         if comp is None:
-            raise SourceError.at(source, None, f"step {n}: unknown skillset '{step.skillset}' "
-                                               f"(skillsets of {system.name}: {', '.join(components)})")
+            raise SourceError.at(source, locate(scenario.text, ("steps", n - 1), "skillset"),
+                                 f"step {n}: unknown skillset '{step.skillset}' "
+                                 f"(skillsets of {system.name}: {', '.join(components)})")
         name = step.transition if step.transition is not None else step.consider
         known = list(dict.fromkeys(t.name for t in comp.net.transitions))
         if name not in known:
-            field = "transition" if step.transition is not None else "consider"
+            key = "transition" if step.transition is not None else "consider"
             hint = [k for k in known if k.split(".")[0] == name.split(".")[0]] or known
-            raise SourceError.at(source, None, f"step {n}: unknown {field} '{name}' of skillset '{step.skillset}' "
-                                               f"(for example: {', '.join(hint[:6])})")
+            raise SourceError.at(source, locate(scenario.text, ("steps", n - 1), key),
+                                 f"step {n}: unknown {key} '{name}' of skillset '{step.skillset}' "
+                                 f"(for example: {', '.join(hint[:6])})")
 
 
 def replay(system: System, scenario: Scenario, predict: bool = True, budget: float = 5.0) -> list[StepRecord]:

@@ -1,16 +1,27 @@
-"""TOML texts (system and scenario files) with every decoder failure as a SourceError.
+"""TOML texts (system, scenario and goal files): decoding, positions of keys, strict key sets.
 
 ``tomllib`` reports a syntax error "at end of document" without a position and
 recurses on nested arrays and tables: both become one ``FILE:LINE:COL`` error.
-Pure; cost linear in the text.
+``tomllib`` gives no positions for what it decoded, so :func:`locate` finds
+where a table or a key is written (a line scan that follows table headers);
+:func:`check_tables` and :func:`check_keys` refuse names a reader does not
+know, at their position, with the close names (:mod:`skinet.closenames`): a
+misspelt key is an error, never ignored.  Pure; cost linear in the text.
 """
 
 from __future__ import annotations
 
 import re
 import tomllib
+from collections.abc import Mapping, Sequence
 
+from skinet.closenames import unknown
 from skinet.errors import Pos, SourceError
+
+Path = tuple[str | int, ...]  # a table: ("system",), ("skillsets", 0) for the first [[skillsets]], () for the top
+
+_HEADER = re.compile(r"^\s*(\[\[?)\s*([^\[\]#]+?)\s*\]\]?\s*(?:#.*)?$")
+_KEY = re.compile(r"""^\s*(?:"([^"]*)"|'([^']*)'|([A-Za-z0-9_-]+))\s*[=.]""")
 
 
 def parse_toml(text: str, source: str) -> dict[str, object]:
@@ -33,3 +44,71 @@ def _toml_error(source: str, text: str, exc: tomllib.TOMLDecodeError) -> SourceE
         stripped = text.rstrip()  # as for syntax errors: just after the last character
         pos = Pos(stripped.count("\n") + 1, len(stripped.rsplit("\n", 1)[-1]) + 1)
     return SourceError.at(source, pos, f"invalid TOML: {message}")
+
+
+def locate(text: str, table: Path = (), key: str | None = None) -> Pos | None:
+    """Where ``key = ...`` is written inside ``table`` (its header without ``key``), if it is.
+
+    Follows ``[a.b]`` and ``[[a]]`` headers (the n-th ``[[a]]`` is ``("a", n)``,
+    from 0) and skips multi-line strings; dotted keys and inline tables are
+    found by their first name only.
+    """
+    current: Path = ()
+    counts: dict[Path, int] = {}
+    in_string: str | None = None  # the quotes of a multi-line string left open
+    for n, line in enumerate(text.splitlines(), 1):
+        if in_string is not None:
+            if line.count(in_string) % 2:
+                in_string = None
+            continue
+        in_string = next((q for q in ('"""', "'''") if line.count(q) % 2), None)
+        header = _HEADER.match(line)
+        if header:
+            names: Path = tuple(part.strip().strip("\"'") for part in header.group(2).split("."))
+            if header.group(1) == "[[":
+                counts[names] = counts.get(names, -1) + 1
+                names = (*names, counts[names])
+            current = names
+            if key is None and current == tuple(table):
+                return Pos(n, line.index("[") + 1)
+            continue
+        found = _KEY.match(line)
+        if key is not None and found and current == tuple(table) and key in found.groups():
+            group = next(i for i in (1, 2, 3) if found.group(i) is not None)
+            return Pos(n, found.start(group) + (1 if group == 3 else 0))  # a quoted key: at its quote
+    return None
+
+
+def check_tables(data: Mapping[str, object], tables: Sequence[str], source: str, text: str) -> None:
+    """Refuse a top-level table or key of ``data`` not named in ``tables`` (``[system]``, ``[[skillsets]]``)."""
+    known = {t.strip("[]"): t for t in tables}
+    for name, value in data.items():
+        if name in known:
+            continue
+        if isinstance(value, list) and value and all(isinstance(v, dict) for v in value):
+            shown, pos = f"[[{name}]]", locate(text, (name, 0))
+        elif isinstance(value, dict):
+            shown, pos = f"[{name}]", locate(text, (name,)) or _first_subtable(text, name)
+        else:
+            raise SourceError.at(source, locate(text, (), name),
+                                 unknown("key", name, list(tables), " at the top level (keys belong in a table)"))
+        close = unknown("table", shown, list(tables))
+        raise SourceError.at(source, pos, close)
+
+
+def check_keys(data: Mapping[str, object], allowed: Sequence[str], source: str, text: str, table: Path,
+               label: str) -> None:
+    """Refuse a key of ``data`` (the table ``table``, shown as ``label``) not in ``allowed``."""
+    for name in data:
+        if name not in allowed:
+            pos = locate(text, table, name) or locate(text, table)
+            raise SourceError.at(source, pos, unknown("key", name, allowed, f" in {label}"))
+
+
+def _first_subtable(text: str, name: str) -> Pos | None:
+    """The first ``[name.x]`` header: a table that has sub-tables only."""
+    for n, line in enumerate(text.splitlines(), 1):
+        header = _HEADER.match(line)
+        if header and header.group(2).split(".")[0].strip().strip("\"'") == name:
+            return Pos(n, line.index("[") + 1)
+    return None

@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import argparse
 import re
+import sys
 from pathlib import Path
 
 from skinet.errors import SourceError
-from skinet_cli.options import load_live_system
+from skinet_cli.options import add_no_properties_arg, load_live_system, require_properties
 from skinet.explain import plural, warning_line
 from skinet.files import load_typemap, read_text
 from skinet.mission import Scenario, StepRecord, check_scenario, flagged_before, parse_scenario, replay
@@ -16,6 +17,17 @@ from skinet.system import System
 from skinet.wire.log import log_line
 
 MISSIONS = ("unassisted.toml", "assisted.toml", "mobile_unassisted.toml", "mobile_assisted.toml")
+UNEXPECTED = 3  # exit status: a divergence the scenario did not declare, or a declared one that did not happen
+HELP = (f"play {len(MISSIONS)} runs: the paper's unassisted and assisted runs, then the mobile manipulator's two "
+        "(the main job)")
+DESCRIPTION = (
+    f"Play {len(MISSIONS)} runs through the whole chain (simulated managers, CDR, bridge, monitor, predictor on one "
+    "embedded Zenoh session) and print what the operator would have seen: the paper's unassisted run "
+    "(three violations) and assisted run (two warnings heeded, no violation), then the mobile manipulator's "
+    "unassisted and assisted runs (a forced constraint). Given SCENARIO files, it plays those instead. "
+    "A step the model does not allow then is shown as a model divergence. Exit status: 0; 3 when a run diverged "
+    "at a step its scenario does not mark expect_divergence = true, or a marked step did not diverge; 1 on bad "
+    "input.")
 
 
 def default_scenarios() -> list[Path]:
@@ -28,9 +40,12 @@ def default_scenarios() -> list[Path]:
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    c = sub.add_parser("demo", help="replay the paper's unassisted and assisted runs (the main job)")
-    c.add_argument("scenarios", nargs="*", help="scenario files (default: skillsets/missions/{unassisted,assisted}.toml)")
+    c = sub.add_parser("demo", help=HELP, description=DESCRIPTION)
+    c.add_argument("scenarios", nargs="*", metavar="SCENARIO",
+                   help=f"scenario files (default: the {len(MISSIONS)} runs above, skillsets/missions/"
+                        f"{{{','.join(m.removesuffix('.toml') for m in MISSIONS)}}}.toml)")
     c.add_argument("--no-predict", action="store_true", help="explicit constraints only")
+    add_no_properties_arg(c)
     c.add_argument("--core", action="store_true",
                    help="replay on the core library only (no simulator, ROS 2 encoding, bridge, Zenoh)")
     c.add_argument("--all-steps", action="store_true", help="print every step, not only the notable ones")
@@ -50,8 +65,10 @@ def cmd_demo(args: argparse.Namespace) -> int:
     for path in paths:  # every file checked before the first run starts
         scenario = parse_scenario(read_text(path), str(path))
         system, _ = load_live_system(path.parent / scenario.system)
+        require_properties(system, path.parent / scenario.system, args.no_properties)
         check_scenario(scenario, system, str(path))
         runs.append((path, scenario, system))
+    surprises: list[str] = []
     for path, scenario, system in runs:
         if args.core:
             records = replay(system, scenario, predict=not args.no_predict)
@@ -68,10 +85,25 @@ def cmd_demo(args: argparse.Namespace) -> int:
             if args.all_steps or r.violations or r.warnings or r.flagged or r.divergence or r.step.consider:
                 print(_line(r))
         print(_summary(records))
+        surprises += [f"{path}: {s}" for s in unexpected(records)]
         if args.log or args.timeline:
             _write_run(args, system, scenario, records)
         print()
-    return 0
+    for line in surprises:
+        print(f"skinet demo: {line}", file=sys.stderr)
+    return UNEXPECTED if surprises else 0
+
+
+def unexpected(records: list[StepRecord]) -> list[str]:
+    """Divergences at steps without ``expect_divergence``, and marked steps that did not diverge."""
+    out = []
+    for r in records:
+        if r.step.transition is None or bool(r.divergence) == r.step.expect_divergence:
+            continue
+        what = f"step {r.index} ({r.step.skillset}:{r.step.transition} at t={r.step.t:g} s)"
+        out.append(f"{what}: model divergence the scenario does not expect (mark it expect_divergence = true): "
+                   f"{r.divergence}" if r.divergence else f"{what}: expected a model divergence, none happened")
+    return out
 
 
 def _write_run(args: argparse.Namespace, system: System, scenario: Scenario, records: list[StepRecord]) -> None:
@@ -108,6 +140,10 @@ def _summary(records: list[StepRecord]) -> str:
             ahead = "the command itself" if j == i else f"{plural(i - j)} ahead"
             lines.append(f"     {p} at step {i}: SkiNet flagged {u.skillset}:{u.transition} when it was issued at "
                          f"step {j} ({u.constraint}, {ahead}); the operator went ahead")
+    diverged = [r for r in records if r.divergence]
+    lines.append(f"   divergences: {len(diverged)}" + "".join(
+        f"; {r.step.skillset}:{r.step.transition} at step {r.index}"
+        f" ({'expected' if r.step.expect_divergence else 'NOT EXPECTED'})" for r in diverged))
     heeded = [(w, r.index) for r in records for w in r.warnings]
     lines.append(f"   warnings heeded (commands considered, flagged, not issued): {len(heeded)}"
                  + "".join(f"; {w.skillset}:{w.transition} {w.constraint} for {w.property} at step {i}"

@@ -18,7 +18,8 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 from skinet import __version__
 from skinet.errors import SkinetError, SourceError
-from skinet.files import load_model, load_state
+from skinet.explain import plural
+from skinet.files import load_model, load_state, parse_state
 from skinet.net.build import build_net
 from skinet.net.export import FORMATS
 from skinet.props.parser import parse_formula
@@ -27,6 +28,7 @@ from skinet.verify.algorithm1 import analyse
 from skinet.verify.ctl import Kripke, check
 from skinet.verify.explore import Deadline, explore
 from skinet.verify.predict import Forecast, forecast
+from skinet_cli.environment import check_environment
 from skinet_cli.options import ArgumentParser, count, load_live_system, print_warnings
 from skinet_cli.options import seconds as duration
 from skinet_cli.memory import add_memory_arg, memory_limit
@@ -41,21 +43,35 @@ fair by default) or through skill outcomes no command can prevent (forced
 constraints)."""
 
 EPILOG = """\
-examples:
+examples (from the repository's root; tests/cli/test_help_examples.py runs every one):
   skinet demo
   skinet parse skillsets/spot.rl
   skinet net skillsets/spot.rl --eventless --format tina -o spot.net
-  skinet unsafe skillsets/spot_arm.toml --state state.json
+  skinet unsafe skillsets/spot_arm.toml --state skillsets/states/arm_at_RD.json
+  skinet unsafe skillsets/spot_arm.toml --state '{"spot": {"resources": {"power_status": "PowerOn", "posture": "Standing", "control_mode": "Busy"}, "running": ["teleop"]}}'
   skinet explore skillsets/spot_arm.toml --budget 2
   skinet ctl skillsets/spot_arm.toml "AG not (spot:Busy and manipulator:Busy)" "EF spot:Busy"
-  skinet run skillsets/spot_arm.toml --listen tcp/127.0.0.1:7447
-  skinet router --listen tcp/0.0.0.0:7447
-  skinet run skillsets/spot_arm.toml --dashboard 8080
-  skinet dashboard skillsets/spot_arm.toml --connect tcp/127.0.0.1:7447 --user observer
 
-state files (--state) are JSON: {"spot": {"resources": {"posture": "Standing"},
-"running": ["teleop"]}}; omitted resources are initial, omitted skills idle."""
+a live system, one command per terminal (skinet run prints the lines that reach it;
+Ctrl-C stops the ones that keep running):
+  skinet run skillsets/spot_arm.toml --listen tcp/127.0.0.1:7447 --dashboard 8080
+  python -m services.bridge_ros2 skillsets/spot_arm.toml -e tcp/127.0.0.1:7447
+  skinet watch spot_arm -e tcp/127.0.0.1:7447
+  skinet record spot_arm -o run.jsonl -e tcp/127.0.0.1:7447
+  python -m services.simulator skillsets/missions/unassisted.toml -e tcp/127.0.0.1:7447 --speed 10
+  skinet check spot_arm spot:teleop.start -e tcp/127.0.0.1:7447
+  skinet timeline run.jsonl -o run.png
 
+through a router with logins (it makes the passwords at its first start; --user with
+--connect makes a session a client of the router):
+  skinet router --listen tcp/127.0.0.1:7448
+  skinet run skillsets/spot_arm.toml -e tcp/127.0.0.1:7448 --user monitor --password-file ~/.config/skinet/secrets/monitor.password
+  skinet dashboard spot_arm -e tcp/127.0.0.1:7448 --user observer --password-file ~/.config/skinet/secrets/observer.password --port 8081
+
+state (--state) is a JSON file or the JSON itself, {"SKILLSET": {"resources": {...},
+"running": [...]}}; omitted resources are initial, omitted skills idle."""
+
+PROGRESS_EVERY = 0.2  # seconds between progress reports of an exploration
 
 # Commands whose modules import Zenoh, pydantic messages, aiohttp or plotting, in --help order:
 # (module, function registering its commands, {command: one-line help}).  Only the module of
@@ -63,11 +79,14 @@ state files (--state) are JSON: {"spot": {"resources": {"posture": "Standing"},
 # `skinet unsafe` does not pay for them (issue 10 (d); tests/cli/test_cli.py checks that the
 # helps here are the modules' own).
 LAZY_COMMANDS: tuple[tuple[str, str, dict[str, str]], ...] = (
-    ("skinet_cli.demo", "add_parser", {"demo": "replay the paper's unassisted and assisted runs (the main job)"}),
+    ("skinet_cli.demo", "add_parser", {"demo": "play 4 runs: the paper's unassisted and assisted runs, then the mobile "
+                                               "manipulator's two (the main job)"}),
     ("skinet_cli.record", "add_parser",
      {"record": "record the monitor's messages of a system into a JSON Lines log"}),
     ("skinet_cli.timeline", "add_parser",
      {"timeline": "draw a monitor log (skinet record, skinet demo --log) as a timeline picture"}),
+    ("skinet_cli.replay", "add_parser",
+     {"replay": "publish a recorded run (skinet record) again, for dashboard and watch"}),
     ("skinet_cli.run", "add_commands", {
         "run": "monitor and predictor in one process with a live operator view (SPEC §7)",
         "router": "run a Zenoh router (the Python wheel in router mode) until interrupted",
@@ -94,6 +113,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.print_help()
         return 2
     try:
+        check_environment()
         return int(args.func(args) or 0)
     except SourceError as exc:
         print(str(exc), file=sys.stderr)
@@ -146,7 +166,9 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
 
     c = sub.add_parser("explore", help="explore the eventless state space and compute mu1 (SPEC §6)")
     _system_args(c)
-    c.add_argument("--progress", action="store_true", help="print progress per layer on standard error")
+    c.add_argument("--progress", action="store_true",
+                   help=f"print the layer and markings so far on standard error every {PROGRESS_EVERY:g} s (on a "
+                        "terminal this is the default), or say the run was too short to need it")
     c.set_defaults(func=cmd_explore)
 
     c = sub.add_parser("ctl", help="model-check CTL formulas on the explored state space")
@@ -166,7 +188,9 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
 
 def _system_args(c: argparse.ArgumentParser) -> None:
     c.add_argument("system", help="system file (.toml), e.g. skillsets/spot_arm.toml")
-    c.add_argument("--state", help="start marking as JSON (default: initial marking)")
+    c.add_argument("--state", metavar="STATE",
+                   help="start marking: a JSON file, or the JSON itself ('{\"spot\": {...}}'); omitted resources are "
+                        "initial, omitted skills idle (default: the initial marking)")
     c.add_argument(
         "--what-if", action="store_true",
         help="accept a --state the robot cannot be in (an invariant violated, or unreachable) for what-if analysis",
@@ -190,28 +214,45 @@ def _load(args: argparse.Namespace) -> tuple[System, dict[str, int]]:
     print_warnings(warnings)
     system = replace(system, prediction=system.prediction.override(
         af=args.af, forced=args.forced, events_uncontrollable=args.events_uncontrollable))
-    marking = load_state(args.state, system, args.what_if) if args.state else system.initial_marking()
+    if args.state is None:
+        marking = system.initial_marking()
+    elif args.state.lstrip().startswith("{"):  # the JSON itself
+        marking = parse_state(args.state, "<state>", system, args.what_if)
+    else:
+        marking = load_state(args.state, system, args.what_if)
     for problem in marking_problems(system, marking) if args.what_if else ():
         print(f"what-if analysis: {problem}", file=sys.stderr if args.json else sys.stdout)
     return system, marking
 
 
 def _forecast(args: argparse.Namespace, system: System, marking: dict[str, int], full: bool = False) -> Forecast:
-    show = getattr(args, "progress", False) or (sys.stderr.isatty() and not args.json)
-    last = [0.0]
+    asked = getattr(args, "progress", False)
+    show, tty = asked or (sys.stderr.isatty() and not args.json), sys.stderr.isatty()
+    last, shown = [0.0], [0]
 
     def progress(depth: int, markings: int, elapsed: float) -> None:
-        if show and elapsed - last[0] >= 0.2:
+        if show and elapsed - last[0] >= PROGRESS_EVERY:
             last[0] = elapsed
-            print(f"\r  layer {depth}: {markings} markings, {seconds(elapsed)}", end="", file=sys.stderr, flush=True)
+            shown[0] += 1
+            line = f"  layer {depth}: {plural(markings, 'marking')}, {seconds(elapsed)}"
+            print(f"\r{line}" if tty else line, end="" if tty else "\n", file=sys.stderr, flush=True)
 
+    t0 = time.perf_counter()
     result = forecast(
         system, marking, budget=args.budget, max_depth=args.max_depth, event_seeds=not args.no_seeds, progress=progress,
         full=full, memory_limit=memory_limit(args),
     )
-    if last[0] > 0:
+    if shown[0] and tty:
         print(file=sys.stderr)
+    elif asked and not shown[0]:
+        print(f"progress: none to show, the exploration took {seconds(time.perf_counter() - t0)} (a report comes "
+              f"every {PROGRESS_EVERY:g} s)", file=sys.stderr)
     return result
+
+
+def _depth_reached(depth: int) -> str:
+    """Where a truncated exploration stopped: ``depth`` is the last layer expanded, -1 for none."""
+    return f"at depth {depth}" if depth >= 0 else "before expanding any layer"
 
 
 def _emit(data: object) -> None:
@@ -219,6 +260,10 @@ def _emit(data: object) -> None:
 
 
 def cmd_parse(args: argparse.Namespace) -> int:
+    if args.file.endswith(".toml"):
+        raise SourceError.at(args.file, None, "this is a system or scenario file (.toml); skinet parse checks a "
+                                              f"skillset model (.rl): for a system try skinet net {args.file} or "
+                                              f"skinet unsafe {args.file}")
     model = load_model(args.file)
     print_warnings(model.warnings)
     summary = [
@@ -287,8 +332,8 @@ def cmd_unsafe(args: argparse.Namespace) -> int:
     if prediction is not None:
         r = prediction.report()
         state = "complete" if r["complete"] else (
-            f"TRUNCATED by {r['truncated_by']} at depth {r['depth']} (unknown constraints possible)")
-        print(f"prediction: {state}, {r['markings']} markings in {seconds(r['elapsed'])}")
+            f"TRUNCATED by {r['truncated_by']} {_depth_reached(r['depth'])} (unknown constraints possible)")
+        print(f"prediction: {state}, {plural(r['markings'], 'marking')} in {seconds(r['elapsed'])}")
     else:
         print("prediction: off (explicit constraints only)")
     return 0
@@ -305,7 +350,7 @@ def cmd_explore(args: argparse.Namespace) -> int:
     rows = [
         ["complete", "yes" if report["complete"] else f"no (truncated by {report['truncated_by']})"],
         ["elapsed", seconds(report["elapsed"])],
-        ["depth", report["depth"]],
+        ["depth", report["depth"] if report["depth"] >= 0 else "none (no layer expanded)"],
         ["markings", report["markings"]],
         ["edges", report["edges"]],
         ["deadlocks", report["deadlocks"]],
@@ -361,7 +406,7 @@ def cmd_ctl(args: argparse.Namespace) -> int:
               + (f" ({r['undecided']} undecided)" if r["undecided"] else ""))
         print(f"at the start marking: {r['start']}")
     if kripke.truncated_by is not None:
-        print(f"truncated by {kripke.truncated_by} at depth {space.expanded_depth}: answers are three-valued")
+        print(f"truncated by {kripke.truncated_by} {_depth_reached(space.expanded_depth)}: answers are three-valued")
     return 0
 
 

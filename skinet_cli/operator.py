@@ -75,8 +75,11 @@ EXIT = {"allow": 0, "warn": 3, "deny": 4}
 
 def cmd_check(args: argparse.Namespace) -> int:
     import json
+    import time
 
-    from services.common.zenoh_config import client_name, config_from_args, open_session
+    from services.common.zenoh_config import (
+        check_connected, client_name, config_from_args, open_session, wait_connected, warn_on_stderr,
+    )
     from services.dashboard.observer import monitored_systems
     from services.monitor.check import parse_command, parse_policy
     from skinet.errors import SkinetError
@@ -92,11 +95,14 @@ def cmd_check(args: argparse.Namespace) -> int:
         raise SkinetError(str(exc)) from None
     config = config_from_args(args)
     key = keys.check(args.system, client_name(config))
-    session = open_session(config)
+    session = open_session(config, warn_on_stderr("skinet check"))
     try:
-        replies = [r for r in session.get(key, payload=encode(request), timeout=args.timeout + args.wait)
-                   if r.ok is not None]
+        deadline = time.monotonic() + args.timeout
+        wait_connected(session, config, args.timeout)  # an endpoint Zenoh still tries may come up in time
+        left = max(0.1, deadline - time.monotonic()) + args.wait  # the monitor may keep it that long
+        replies = [r for r in session.get(key, payload=encode(request), timeout=left) if r.ok is not None]
         if not replies:
+            check_connected(session, config)
             others = monitored_systems(session)
             raise SkinetError(f"no monitor of system '{args.system}' answered on {key} "
                               f"({'systems with a monitor: ' + ', '.join(others) if others else 'no monitor is reachable'})")

@@ -21,11 +21,18 @@ from typing import NoReturn
 from skinet.errors import Diagnostic, Pos, SourceError
 from skinet.files import load_system, read_text
 from skinet.system import System
+from skinet.tomltext import locate, parse_toml
 from skinet.wire.keys import check_chunk
 
 
 class ArgumentParser(argparse.ArgumentParser):
     """``argparse`` with a one-line error instead of the usage text (subparsers inherit it)."""
+
+    def __init__(self, *args: object, **kwargs: object) -> None:
+        super().__init__(*args, **kwargs)  # type: ignore[arg-type]
+        # A dash then a digit is a value, not an option: `--memory-limit -5MiB` reaches the option's own check
+        # (argparse takes only plain negative numbers as values, and said "expected one argument").
+        self._negative_number_matcher = re.compile(r"^-\.?\d")
 
     def error(self, message: str) -> NoReturn:
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
@@ -115,6 +122,31 @@ def load_live_system(path: str | Path) -> tuple[System, list[Diagnostic]]:
     except ValueError as exc:
         raise SourceError.at(str(path), _name_pos(path), str(exc)) from None
     return system, warnings
+
+
+def add_no_properties_arg(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--no-properties", action="store_true",
+                        help="accept a system without safety properties (by default refused: nothing would ever be "
+                             "reported unsafe)")
+
+
+def require_properties(system: System, path: str | Path, allowed: bool) -> None:
+    """Refuse a system without safety properties unless ``allowed`` (``--no-properties``).
+
+    A monitor with no property reports every command safe: run on purpose, or
+    because ``properties`` was left out of the system file, it would vouch for
+    everything.
+    """
+    if system.properties or allowed:
+        return
+    text = read_text(path)
+    data = parse_toml(text, str(path))
+    named = data["system"].get("properties") if isinstance(data.get("system"), dict) else None
+    why = (f"{named} defines none" if named is not None
+           else "its [system] table names no properties file (properties = \"FILE.props\")")
+    raise SourceError.at(str(path), locate(text, ("system",), "properties") or locate(text, ("system",)),
+                         f"system '{system.name}' has no safety properties: {why}; nothing would ever be reported "
+                         "unsafe (--no-properties runs it anyway)")
 
 
 def _name_pos(path: str | Path) -> Pos | None:

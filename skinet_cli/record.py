@@ -21,9 +21,11 @@ from typing import BinaryIO, TextIO
 import zenoh
 from pydantic import BaseModel
 
-from services.common.zenoh_config import add_zenoh_args, config_from_args, open_session
+from services.common.zenoh_config import (
+    add_zenoh_args, config_from_args, connect_problems, open_session, warn_on_stderr,
+)
 from skinet_cli.options import count, key_name, seconds
-from skinet.errors import SourceError
+from skinet.errors import SkinetError, SourceError
 from skinet.wire import keys
 from skinet.wire.codec import DecodeError, decode
 from skinet.wire.log import log_line
@@ -156,7 +158,8 @@ class Recorder:
 
 def cmd_record(args: argparse.Namespace) -> int:
     system = args.system
-    session = open_session(config_from_args(args))
+    config = config_from_args(args)
+    session = open_session(config, warn_on_stderr("skinet record"))
     mcap = (args.format or ("mcap" if args.output.endswith(".mcap") else "jsonl")) == "mcap"
     try:
         sink = McapSink(open(args.output, "wb")) if mcap else JsonlSink(open(args.output, "w", encoding="utf-8"))
@@ -185,7 +188,22 @@ def cmd_record(args: argparse.Namespace) -> int:
         pass
     finally:
         recorder.close()
+        why = _nothing_recorded(session, config, system) if recorder.written == 0 else None
         session.close()
+    if why is not None:  # an empty log is never a success
+        raise SkinetError(f"nothing recorded in {args.output}: {why}")
     print(f"skinet record: {recorder.written} messages written to {args.output}"
           f" ({recorder.skipped} undecodable skipped)", file=sys.stderr)
     return 0
+
+
+def _nothing_recorded(session: zenoh.Session, config: zenoh.Config, system: str) -> str:
+    """Why no message came: an endpoint not reached, or no monitor of ``system`` (naming those seen)."""
+    from services.dashboard.observer import monitored_systems
+
+    problems = connect_problems(session, config)
+    if problems:
+        return "; ".join(problems)
+    others = monitored_systems(session)
+    return (f"no monitor of system '{system}' published anything "
+            f"({'systems with a monitor: ' + ', '.join(others) if others else 'no monitor is reachable'})")

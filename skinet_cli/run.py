@@ -10,7 +10,7 @@ from services.common.zenoh_config import add_login_args
 from services.monitor.check import add_policy_arg
 from services.monitor.sync import add_lost_after_arg
 from skinet_cli.memory import add_memory_arg
-from skinet_cli.options import count, seconds
+from skinet_cli.options import add_no_properties_arg, count, seconds
 
 
 def _zenoh_args(c: argparse.ArgumentParser, listen_help: str) -> None:
@@ -32,12 +32,16 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     c.add_argument("--dashboard", type=count(0, 65535), metavar="PORT",
                    help="also serve the live web dashboard on this port (0: a free one; see skinet dashboard)")
     c.add_argument("--dashboard-host", default="127.0.0.1", help="address of --dashboard (default: 127.0.0.1)")
+    add_no_properties_arg(c)
     add_policy_arg(c)
     add_lost_after_arg(c)
     add_rate_args(c)
     add_memory_arg(c)
-    _zenoh_args(c, "endpoint on which a bridge in another process can connect (default: tcp/127.0.0.1:0, "
-                   "this host only)")
+    _zenoh_args(c, "endpoint on which a bridge, watch, dashboard or check in another process can connect "
+                   "(default: tcp/127.0.0.1 with a free port, this host only; printed at start)")
+    c.add_argument("--mode", "-m", choices=("peer", "client"),
+                   help="peer: others connect to --listen (the default); client: run behind a router (--connect) "
+                        "with a login (--user), the default when both are given")
     c.set_defaults(func=cmd_run)
 
     c = sub.add_parser("router", help="run a Zenoh router (the Python wheel in router mode) until interrupted")

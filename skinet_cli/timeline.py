@@ -6,6 +6,7 @@ matplotlib is imported only when a picture is drawn (Agg canvas, no display).
 from __future__ import annotations
 
 import argparse
+import sys
 from collections.abc import Sequence
 from pathlib import Path
 

@@ -52,14 +52,28 @@ def test_step_numbers_count_transitions() -> None:
 @pytest.mark.parametrize(
     ("text", "message"),
     [
-        ("[scenario]\nname = 'x'\n", "s.toml: error: missing [scenario] table with 'name' and 'system' strings"),
+        ("[scenario]\nname = 'x'\n", "s.toml:1:1: error: missing [scenario] table with 'name' and 'system' strings"),
         ("[scenario]\nname='x'\nsystem='y'\n[[steps]]\nskillset='a'\n",
-         "s.toml: error: step 1: give exactly one of 'transition' or 'consider'"),
+         "s.toml:4:1: error: step 1: give exactly one of 'transition' or 'consider'"),
         ("[scenario]\nname='x'\nsystem='y'\n[[steps]]\nt=2\nskillset='a'\ntransition='b'\n[[steps]]\nt=1\nskillset='a'\ntransition='b'\n",
-         "s.toml: error: step 2: time 1.0 goes backwards (previous step at 2.0)"),
+         "s.toml:9:1: error: step 2: time 1.0 goes backwards (previous step at 2.0)"),
+        ("[scenario]\nname='x'\nsystem='y'\n[[steps]]\nskillset='a'\ntransition='b'\n[[steps]]\nskillset='a'\n"
+         "transition='b'\n  expect_divergence = 'yes'\n",
+         "s.toml:10:3: error: step 2: 'expect_divergence' must be true or false, got 'yes'"),
+        ("[scenario]\nname='x'\nsystem='y'\n[[steps]]\nskillset='a'\nconsider='b'\nexpect_divergence = true\n",
+         "s.toml:7:1: error: step 1: 'expect_divergence' needs a 'transition' (a considered command is not played)"),
     ],
 )
 def test_scenario_errors(text: str, message: str) -> None:
     with pytest.raises(SourceError) as info:
         parse_scenario(text, "s.toml")
     assert str(info.value) == message
+
+
+def test_a_step_may_expect_a_divergence() -> None:
+    scenario = parse_scenario((MISSIONS / "mobile_divergence.toml").read_text(), "mobile_divergence")
+    assert [(n, s.transition) for n, s in enumerate(scenario.steps, 1) if s.expect_divergence] == [
+        (3, "pick.success.picked")]
+    system, _ = load_system(MISSIONS / scenario.system)
+    assert [(r.index, r.divergence) for r in replay(system, scenario) if r.divergence] == [
+        (3, "'pick.success.picked' is not enabled in the live marking")]

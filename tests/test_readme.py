@@ -132,7 +132,7 @@ TABLE = _table_commands(README)
 
 def test_the_tables_name_every_command() -> None:
     named = {u.split()[1] if u.startswith("skinet") else u.split()[2] for u in TABLE}
-    assert named == {"demo", "run", "router", "record", "timeline", "parse", "net", "unsafe", "explore", "ctl",
+    assert named == {"demo", "run", "router", "record", "timeline", "replay", "parse", "net", "unsafe", "explore", "ctl",
                      "dashboard", "watch", "check", *SERVICES}
 
 

@@ -128,6 +128,27 @@ def test_timeline_command_reports_a_malformed_log(tmp_path: Path, capsys: pytest
     assert not (tmp_path / "x.png").exists()
 
 
+def test_timeline_command_draws_an_unfinished_mcap_log(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                       monkeypatch: pytest.MonkeyPatch) -> None:
+    """A recorder killed without warning leaves an MCAP file without its end: drawn, with a warning
+    (the warning used to be an internal error, NameError)."""
+    from skinet.wire import mcap_log
+
+    monkeypatch.setattr(mcap_log, "CHUNK_SIZE", 2048)
+    log = tmp_path / "cut.mcap"
+    with log.open("wb") as f:
+        writer = mcap_log.McapLogWriter(f)
+        for n in range(20):
+            for key, message in _messages():
+                writer.write(key, message, 100.0 + n)
+        writer.finish()
+    log.write_bytes(log.read_bytes()[: log.stat().st_size // 2])
+    assert main(["timeline", str(log), "-o", str(tmp_path / "cut.png")]) == 0
+    out, err = capsys.readouterr()
+    assert err.startswith(f"{log}: warning: the MCAP file ends early (recorder stopped without finishing it?): ")
+    assert out.startswith("timeline of ") and (tmp_path / "cut.png").exists()
+
+
 def test_timeline_command_needs_live_states(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     log = tmp_path / "verdicts.jsonl"
     key, message = _messages()[2]

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import zenoh
 
-from services.bridge_ros2.replay import replay_bag
+from services.bridge_ros2.replay import monitor_log, replay_bag
 from services.bridge_ros2.service import default_source, start_bridge
 from services.common.cli import add_instance_arg, add_log_arg, one_line_errors, setup_logging
 from services.common.events import event_publisher
@@ -68,6 +68,10 @@ def main(argv: list[str] | None = None) -> int:
     typemap = load_typemap(args.system)
     if args.replay and not Path(args.replay).exists():
         raise SourceError.at(args.replay, None, "cannot read file: No such file or directory")
+    kind = monitor_log(args.replay) if args.replay else None
+    if kind is not None:
+        raise SourceError.at(args.replay, None, f"a SkiNet monitor log ({kind}, skinet record), not a rosbag2 "
+                                                f"file of the managers: replay it with 'skinet replay {args.replay}'")
     source = args.source or default_source(args.instance)
     session = open_session(config_from_args(args))
     try:
@@ -79,6 +83,8 @@ def main(argv: list[str] | None = None) -> int:
         bridge = start_bridge(session, system, typemap, source=source, instance_id=args.instance, hold=args.hold,
                               style=KeyStyle(args.rmw_zenoh, args.namespace, args.domain,
                                              args.ros_distro == "humble"))  # errors: one line
+        log.info("bridging the managers of %s (%s) as %s", system.name,
+                 ", ".join(c.name for c in system.components), args.instance)
         while not stop.wait(0.5):
             pass
         bridge.close()

@@ -5,6 +5,9 @@ manager topics the system knows (by ROS topic name, e.g.
 ``/spot/spot_skillset_manager/spot_skillset/status``), and feeds them in time
 order to the same :class:`~services.bridge_ros2.feed.Feed` as the live bridge:
 as fast as possible, or paced by the recorded timestamps with ``realtime``.
+SkiNet's own logs (``skinet record``: JSON Lines, or MCAP of JSON messages) are
+no bags: :func:`monitor_log` recognises them, so that the bridge can point at
+``skinet replay``.
 """
 
 from __future__ import annotations
@@ -17,10 +20,14 @@ from pathlib import Path
 from rosbags.highlevel import AnyReader
 
 from services.bridge_ros2.feed import Feed
+from skinet.errors import SourceError
 from skinet.system import System
+from skinet.wire.log import read_log
+from skinet.wire.mcap_log import LIBRARY, MAGIC, is_mcap
 from skinet.wire.messages import CanonicalEvent
 
 log = logging.getLogger("skinet.bridge_ros2")
+HEAD = 256 << 10  # bytes read to recognise a JSON Lines log
 
 
 def replay_bag(
@@ -61,4 +68,25 @@ def replay_bag(
     return feed
 
 
-__all__ = ["replay_bag"]
+def monitor_log(path: str | Path) -> str | None:
+    """What SkiNet log the file at ``path`` is (``"MCAP"``, ``"JSON Lines"``), or None when it is none
+    (a bag, a folder, an unreadable file: the bag reader says why)."""
+    from mcap.exceptions import McapError
+    from mcap.reader import make_reader
+
+    path = Path(path)
+    try:
+        with path.open("rb") as f:
+            if is_mcap(f.read(len(MAGIC))):
+                f.seek(0)
+                return "MCAP" if make_reader(f).get_header().library == LIBRARY else None
+            f.seek(0)
+            head = f.read(HEAD)  # a log line is a few KiB; a bag may have no line break at all
+        first = next((line for line in head.splitlines() if line.strip()), b"")
+        read_log([first.decode("utf-8")], str(path))
+    except (OSError, UnicodeDecodeError, McapError, SourceError):
+        return None
+    return "JSON Lines" if first else None
+
+
+__all__ = ["monitor_log", "replay_bag"]

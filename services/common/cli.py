@@ -11,6 +11,7 @@ import socket
 import sys
 from collections.abc import Callable, Sequence
 
+from skinet_cli.environment import check_environment
 from skinet_cli.options import key_name
 from skinet.errors import SkinetError, SourceError
 
@@ -51,6 +52,7 @@ def one_line_errors(prog: str) -> Callable[[Callable[[Sequence[str] | None], int
         @functools.wraps(main)
         def guarded(argv: Sequence[str] | None = None) -> int:
             try:
+                check_environment()
                 return main(argv)
             except SourceError as exc:
                 print(str(exc), file=sys.stderr)

@@ -15,16 +15,22 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import os
 import re
+import sys
+import time
+from collections.abc import Callable
 
 import zenoh
 
-from services.common.session import login_refused
+from services.common.session import connect_problem, login_refused, unconnected
 from skinet.errors import Pos, SkinetError, SourceError
 from skinet.files import read_text
 from skinet.wire import keys
+from skinet_cli.environment import flag
 
+_log = logging.getLogger("skinet.zenoh")
 LOOPBACK = "tcp/127.0.0.1:0"  # a peer's default endpoint: this host only, any free port
 ROUTER_LOOPBACK = "tcp/127.0.0.1:7447"  # a router's
 
@@ -80,10 +86,15 @@ def load_config_file(path: str) -> zenoh.Config:
         raise SourceError.at(path, pos, f"invalid Zenoh configuration: {reason}") from None
 
 
-def open_session(config: zenoh.Config) -> zenoh.Session:
-    """``zenoh.open`` with a one-line :class:`ZenohSetupError` (port in use, nobody to connect to, ...)."""
+def open_session(config: zenoh.Config, warn: Callable[[str], None] | None = None) -> zenoh.Session:
+    """``zenoh.open`` with a one-line :class:`ZenohSetupError` (port in use, nobody to connect to, ...).
+
+    A client that reaches none of its ``connect`` endpoints fails here.  A peer or
+    a router opens anyway and keeps trying: each endpoint it could not reach is
+    reported at once through ``warn`` (default: a log warning), with the reason.
+    """
     try:
-        return zenoh.open(config)
+        session = zenoh.open(config)
     except zenoh.ZError as exc:
         reason = zenoh_reason(exc)
         busy = re.search(r"bound to (\S+): \[.*Address already in use", reason)
@@ -94,12 +105,41 @@ def open_session(config: zenoh.Config) -> zenoh.Session:
             endpoints = re.findall(r"\(([^()]*)\)", unreachable[1]) or [unreachable[1]]
             reason = login_refused(config) or f"nothing answers at {', '.join(endpoints)}"
         raise ZenohSetupError(f"cannot open the Zenoh session: {reason}") from None
+    for problem in connect_problems(session, config):
+        (warn or _log.warning)(f"{problem}; Zenoh keeps trying in the background")
+    return session
+
+
+def connect_problems(session: zenoh.Session, config: zenoh.Config) -> list[str]:
+    """``cannot connect to E: REASON`` for each ``connect`` endpoint ``session`` has no link to
+    (peers and routers; empty for a client, which has one, or failed to open)."""
+    return [f"cannot connect to {re.sub(r'[?#].*', '', e)}: {connect_problem(config, e)}"  # without its settings
+            for e in unconnected(session, config)]
+
+
+def wait_connected(session: zenoh.Session, config: zenoh.Config, timeout: float) -> bool:
+    """Whether every ``connect`` endpoint has a link within ``timeout`` seconds (Zenoh retries them)."""
+    deadline = time.monotonic() + timeout
+    while unconnected(session, config):
+        if time.monotonic() >= deadline:
+            return False
+        time.sleep(0.1)
+    return True
+
+
+def check_connected(session: zenoh.Session, config: zenoh.Config) -> None:
+    """Raise :class:`ZenohSetupError` naming every ``connect`` endpoint still unreached, with the reason:
+    what a command that needs the connection says when its timeout ends."""
+    problems = connect_problems(session, config)
+    if problems:
+        raise ZenohSetupError("; ".join(problems))
 
 
 def add_zenoh_args(parser: argparse.ArgumentParser) -> None:
     g = parser.add_argument_group("zenoh")
-    g.add_argument("--mode", "-m", choices=MODES,
-                   default=os.environ.get("SKINET_ZENOH_MODE", "peer"), help="session mode (default: peer)")
+    g.add_argument("--mode", "-m", choices=MODES, default=os.environ.get("SKINET_ZENOH_MODE") or None,
+                   help="session mode (default: $SKINET_ZENOH_MODE, else client with --user and --connect: a "
+                        "router login, else peer)")
     g.add_argument("--connect", "-e", action="append", default=None,
                    help="endpoint to connect to, e.g. tcp/127.0.0.1:7447 (repeatable)")
     g.add_argument("--listen", "-l", action="append", default=None, help="endpoint to listen on (repeatable)")
@@ -134,8 +174,7 @@ def login(args: argparse.Namespace) -> dict[str, str | None]:
 
 def add_scouting_args(g: argparse._ActionsContainer) -> None:
     """``--multicast-scouting`` (off by default); ``--no-multicast-scouting`` is kept for old scripts."""
-    g.add_argument("--multicast-scouting", action="store_true",
-                   default=os.environ.get("SKINET_ZENOH_SCOUTING", "") not in ("", "0"),
+    g.add_argument("--multicast-scouting", action="store_true", default=flag("SKINET_ZENOH_SCOUTING"),
                    help="join multicast scouting to find peers on the LAN (default: off; $SKINET_ZENOH_SCOUTING=1)")
     g.add_argument("--no-multicast-scouting", action="store_true", help="the default; accepted for old scripts")
 
@@ -180,16 +219,31 @@ def session_config(
     return config
 
 
+def session_mode(args: argparse.Namespace, connect: list[str]) -> str:
+    """``--mode``, else ``$SKINET_ZENOH_MODE`` (checked: argparse does not check choices on a default from
+    the environment), else ``client`` when a user logs in to an endpoint of ``connect`` (a router: a
+    peer would reach no other peer through it, ZENOH.md), else ``peer``."""
+    if args.mode is None:
+        return "client" if getattr(args, "user", None) and connect else "peer"
+    if args.mode not in MODES:
+        raise ZenohSetupError(f"SKINET_ZENOH_MODE '{args.mode}' is not one of {', '.join(MODES)}")
+    return str(args.mode)
+
+
+def warn_on_stderr(prog: str) -> Callable[[str], None]:
+    """A ``warn`` for :func:`open_session` that prints ``PROG: warning: ...`` at once (commands)."""
+    return lambda message: print(f"{prog}: warning: {message}", file=sys.stderr, flush=True)
+
+
 def config_from_args(args: argparse.Namespace) -> zenoh.Config:
     """The session configuration of a service's flags; bad environment values are named as such."""
-    if args.mode not in MODES:  # argparse does not check choices on a default from the environment
-        raise ZenohSetupError(f"SKINET_ZENOH_MODE '{args.mode}' is not one of {', '.join(MODES)}")
     endpoints = {}
     for option, env in (("connect", "SKINET_ZENOH_CONNECT"), ("listen", "SKINET_ZENOH_LISTEN")):
         endpoints[option] = getattr(args, option)
         if endpoints[option] is None:
             endpoints[option] = [check_endpoint(e, env) for e in _env_list(env)]
-    return session_config(args.mode, endpoints["connect"], endpoints["listen"], args.zenoh_config,
+    mode = session_mode(args, endpoints["connect"])
+    return session_config(mode, endpoints["connect"], endpoints["listen"], args.zenoh_config,
                           args.multicast_scouting, **login(args))
 
 

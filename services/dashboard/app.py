@@ -16,7 +16,9 @@ import threading
 from pathlib import Path
 
 from services.common.cli import add_log_arg, setup_logging
-from services.common.zenoh_config import add_zenoh_args, client_name, config_from_args, open_session
+from services.common.zenoh_config import (
+    add_zenoh_args, check_connected, client_name, config_from_args, open_session,
+)
 from services.dashboard.observer import Observer, monitored_systems
 from services.dashboard.server import Dashboard
 from skinet_cli.options import count, load_live_system, seconds
@@ -71,6 +73,7 @@ def serve(args: argparse.Namespace, stop: threading.Event) -> int:
     print(f"skinet dashboard: system {name} on {dashboard.url}", file=sys.stderr, flush=True)
     try:
         if not observer.wait_monitor(args.wait) and not stop.is_set():
+            check_connected(session, config)  # an explicit endpoint still unreached: exit 1 with the reason
             log.warning("%s", no_monitor_message(session, name))
         stop.wait()
     finally:

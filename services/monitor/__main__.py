@@ -14,7 +14,9 @@ from services.common.ratelimit import add_rate_args
 from services.monitor.check import add_policy_arg
 from services.monitor.service import start_monitor
 from services.monitor.sync import add_lost_after_arg
-from skinet_cli.options import ArgumentParser, key_name, load_live_system, seconds
+from skinet_cli.options import (
+    ArgumentParser, add_no_properties_arg, key_name, load_live_system, require_properties, seconds,
+)
 
 
 def build_parser() -> ArgumentParser:
@@ -34,6 +36,7 @@ def build_parser() -> ArgumentParser:
                         "and the query goes to another one (default: 0.5; instances reply every 0.1 s)")
     p.add_argument("--no-express", dest="express", action="store_false",
                    help="let Zenoh batch publications (higher burst throughput; default: express)")
+    add_no_properties_arg(p)
     add_policy_arg(p)
     add_lost_after_arg(p)
     add_rate_args(p, predict=False)
@@ -47,6 +50,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     setup_logging(args)
     system, warnings = load_live_system(args.system)
+    require_properties(system, args.system, args.no_properties)
     config = config_from_args(args)
     log = logging.getLogger("skinet.monitor")
     for w in warnings:

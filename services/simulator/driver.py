@@ -163,6 +163,7 @@ def drive(simulator: Managers, scenario: Scenario, speed: float = 1.0,
                 detail = f"{scenario.name}-{i}"
                 ok = operator.send(step.skillset, skill_topic(ss, p.skill or "", "request"), id=detail)
                 ok = ok and simulator.skill_status(step.skillset, p.skill or "") == (True, detail)
+                detail = detail if ok else f"the manager did not start {p.skill} (request '{detail}')"
             elif p.action == "interrupt":
                 running, detail = simulator.skill_status(step.skillset, p.skill or "")
                 ok = operator.send(step.skillset, skill_topic(ss, p.skill or "", "interrupt"), id=detail)

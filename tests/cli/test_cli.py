@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -284,7 +285,7 @@ def test_lazy_commands_list_their_modules_own_help() -> None:
     assert build_parser("").format_help() == full.format_help()  # skinet --help without importing them
     assert build_parser("unsafe").format_help() == full.format_help()
     names = [name for _, _, helps in LAZY_COMMANDS for name in helps]
-    assert names == ["demo", "record", "timeline", "run", "router", "fleet", "dashboard", "watch", "check"]
+    assert names == ["demo", "record", "timeline", "replay", "run", "router", "fleet", "dashboard", "watch", "check"]
     for name in names:
         lazy = build_parser(name)
         assert lazy.format_help() == full.format_help()
@@ -313,3 +314,58 @@ def test_unsafe_imports_no_service_module() -> None:
     assert done.returncode == 0, done.stderr
     assert done.stdout.splitlines()[-1] == "[]"
     assert done.stdout.splitlines()[-2].startswith("prediction: complete, 63 markings in ")
+
+
+# -- issue 27, item 8: the small ones a new user hit -------------------------------------------
+
+TELEOP = {"spot": {"resources": {"power_status": "PowerOn", "posture": "Standing", "control_mode": "Busy"},
+                   "running": ["teleop"]}}
+
+
+def test_state_takes_inline_json_or_a_file(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    _, from_file, _ = run(capsys, "unsafe", SYSTEM, "--state", state(tmp_path, TELEOP), "--no-predict", "--json")
+    code, inline, err = run(capsys, "unsafe", SYSTEM, "--state", json.dumps(TELEOP), "--no-predict", "--json")
+    assert (code, err) == (0, "")
+    assert json.loads(inline) == json.loads(from_file)
+    assert [u["transition"] for u in json.loads(inline)["unsafe"]] == ["arm_ready.start"]
+    code, _, err = run(capsys, "unsafe", SYSTEM, "--state", ' {"spot": {"running": ["teleop"]}}')
+    assert code == 1 and err.startswith("<state>: error: impossible state: 'spot' is not stable: invariant violated")
+
+
+def test_demo_help_says_how_many_runs_it_plays(capsys: pytest.CaptureFixture[str]) -> None:
+    from skinet_cli.demo import MISSIONS
+
+    with pytest.raises(SystemExit):
+        main(["demo", "--help"])
+    help_text = " ".join(capsys.readouterr().out.split())
+    assert f"Play {len(MISSIONS)} runs through the whole chain" in help_text
+    assert "skillsets/missions/{unassisted,assisted,mobile_unassisted,mobile_assisted}.toml" in help_text.replace(
+        " ", "")
+    code, out, _ = run(capsys, "demo", "--core", "--no-predict")
+    assert code == 0 and len([line for line in out.splitlines() if line.startswith("== ")]) == len(MISSIONS) == 4
+
+
+def test_max_depth_zero_says_no_layer_was_expanded(capsys: pytest.CaptureFixture[str]) -> None:
+    _, out, _ = run(capsys, "explore", SYSTEM, "--max-depth", "0")
+    assert "  depth      none (no layer expanded)" in out.splitlines()
+    _, out, _ = run(capsys, "unsafe", SYSTEM, "--max-depth", "0")
+    assert out.splitlines()[-1].startswith("prediction: TRUNCATED by depth before expanding any layer (unknown "
+                                           "constraints possible), 1 marking in ")
+    _, out, _ = run(capsys, "ctl", SYSTEM, "EF spot:Busy", "--max-depth", "0")
+    assert out.splitlines()[-1] == "truncated by depth before expanding any layer: answers are three-valued"
+    assert "-1" not in out
+
+
+def test_explore_progress_shows_progress_or_says_why_not(capsys: pytest.CaptureFixture[str],
+                                                         monkeypatch: pytest.MonkeyPatch) -> None:
+    import skinet_cli.main as cli
+
+    code, _, err = run(capsys, "explore", SYSTEM, "--progress")
+    assert code == 0
+    assert re.fullmatch(r"progress: none to show, the exploration took [\d.]+ ms \(a report comes every 0.2 s\)\n",
+                        err)
+    monkeypatch.setattr(cli, "PROGRESS_EVERY", 0.0)  # as if every chunk took 0.2 s: a report per chunk
+    code, _, err = run(capsys, "explore", SYSTEM, "--progress")
+    assert code == 0 and err.splitlines() and all(re.fullmatch(r"  layer \d+: \d+ markings?, [\d.]+ m?s", line)
+                                                  for line in err.splitlines())
+    assert err.splitlines()[-1].startswith("  layer 9: 63 markings, ")

@@ -50,7 +50,7 @@ FREE_TEXT = {
     ("python -m services.bridge_ros2", "--ros-distro"): "only humble changes the keys; any other name is a later one",
     ("python -m services.simulator", "--ros-distro"): "only humble changes the keys; any other name is a later one",
     **{(program, option): "any user name and password is sent; the router judges them (tests/deploy/test_operator_acl.py)"
-       for program in ("skinet record", "skinet run", "skinet router", "skinet watch", "skinet check",
+       for program in ("skinet record", "skinet replay", "skinet run", "skinet router", "skinet watch", "skinet check",
                        "skinet dashboard", "python -m services.monitor", "python -m services.predictor",
                        "python -m services.bridge_ros2", "python -m services.simulator")
        for option in ("--user", "--password")},
@@ -100,6 +100,9 @@ def _cases() -> list[Case]:
     # skinet parse / net
     add("skinet", "file", ("parse", "{tmp}/missing.rl"), 1,
         "{tmp}/missing.rl: error: cannot read file: No such file or directory")
+    add("skinet", "file", ("parse", SYSTEM), 1,
+        f"{SYSTEM}: error: this is a system or scenario file (.toml); skinet parse checks a skillset model (.rl): "
+        f"for a system try skinet net {SYSTEM} or skinet unsafe {SYSTEM}")
     add("skinet", "file", ("net", "{tmp}/missing.rl"), 1,
         "{tmp}/missing.rl: error: cannot read file: No such file or directory")
     usage("skinet", "--format", ("net", SPOT, "--format", "svg"),
@@ -125,20 +128,25 @@ def _cases() -> list[Case]:
         for bad in ("0", "lots", "1 parsec"):
             usage("skinet", "--memory-limit", (cmd, SYSTEM, "--memory-limit", bad, *extra),
                   f"argument --memory-limit: not a size: '{bad}' (e.g. 1GiB, 512MiB, 2GB)")
+        for argv in (("--memory-limit", "-5MiB"), ("--memory-limit=-5MiB",)):  # the first was "expected one argument"
+            usage("skinet", "--memory-limit", (cmd, SYSTEM, *argv, *extra),
+                  "argument --memory-limit: not a size: '-5MiB' (a size is positive, e.g. 1GiB, 512MiB, 2GB)")
+        add("skinet", "--state", (cmd, SYSTEM, "--state", '{"spot": ', *extra), 1,
+            "<state>:1:10: error: invalid JSON: Expecting value")
     add("skinet", "formulas", ("ctl", SYSTEM, "EF spot:Busy", "EF spot:Bussy"), 1,
         "<formula 2>:1:4: error: unknown name 'spot:Bussy' (candidates: spot:Busy)")
 
     # skinet demo
     add("skinet", "scenarios", ("demo", "{tmp}/missing.toml"), 1, missing)
     add("skinet", "scenarios", ("demo", "{tmp}/unknown_skillset.toml"), 1,
-        "{tmp}/unknown_skillset.toml: error: step 1: unknown skillset 'spott' (skillsets of spot_arm: spot, manipulator)")
+        "{tmp}/unknown_skillset.toml:6:1: error: step 1: unknown skillset 'spott' (skillsets of spot_arm: spot, manipulator)")
     for core in ((), ("--core",)):  # the core replay used to call it a model divergence and exit 0
         add("skinet", "scenarios", ("demo", "{tmp}/unknown_transition.toml", *core), 1,
-            "{tmp}/unknown_transition.toml: error: step 1: unknown transition 'init_power.strat' of skillset 'spot' "
+            "{tmp}/unknown_transition.toml:7:1: error: step 1: unknown transition 'init_power.strat' of skillset 'spot' "
             "(for example: init_power.start, init_power.interrupt, init_power.success.powered_on, "
             "init_power.failure.no_battery)")
     add("skinet", "scenarios", ("demo", "{tmp}/bad_time.toml", "--core"), 1,
-        "{tmp}/bad_time.toml: error: step 1: 't' must be a number of seconds, got 'soon'")
+        "{tmp}/bad_time.toml:5:1: error: step 1: 't' must be a number of seconds, got 'soon'")
     for option in ("--log", "--timeline"):
         add("skinet", option, ("demo", "--core", option, "{tmp}/list.json"), 1,
             "{tmp}/list.json: error: cannot create folder: File exists")
@@ -148,7 +156,8 @@ def _cases() -> list[Case]:
         "skinet": (("record", "spot_arm", "-o", "{tmp}/rec.jsonl", "--duration", "1"),
                    ("run", SYSTEM, "--once"), ("router",), ("watch", "spot_arm", "--wait", "0.5"),
                    ("check", "spot_arm", "spot:teleop.start", "--timeout", "0.5"),
-                   ("dashboard", "spot_arm", "--port", "0", "--wait", "0")),
+                   ("dashboard", "spot_arm", "--port", "0", "--wait", "0"),
+                   ("replay", "{tmp}/run.jsonl", "--linger", "0")),
         "python -m services.monitor": ((SYSTEM,),),
         "python -m services.predictor": ((),),
         "python -m services.bridge_ros2": ((SYSTEM,),),
@@ -205,6 +214,8 @@ def _cases() -> list[Case]:
     add("skinet", "system", ("run", "{tmp}/missing.toml"), 1, missing)
     add("skinet", "system", ("run", "{tmp}/badname.toml"), 1, bad_name)
     usage("skinet", "--duration", ("run", SYSTEM, "--duration", "-1"), "argument --duration: " + seconds.format("-1"))
+    usage("skinet", "--mode", ("run", SYSTEM, "--mode", "router"),
+          "argument --mode/-m: invalid choice: 'router' (choose from 'peer', 'client')")
     usage("skinet", "--budget", ("run", SYSTEM, "--budget", "0"), "argument --budget: " + seconds.format("0"))
     usage("skinet", "--memory-limit", ("run", SYSTEM, "--memory-limit", "tiny"),
           "argument --memory-limit: not a size: 'tiny' (e.g. 1GiB, 512MiB, 2GB)")
@@ -269,6 +280,25 @@ def _cases() -> list[Case]:
         usage("skinet", "--dpi", ("timeline", "{tmp}/run.jsonl", "-o", "{tmp}/t.png", "--dpi", bad),
               f"argument --dpi: expected an integer from 10 to 1200, got '{bad}'")
 
+    # skinet replay
+    add("skinet", "log", ("replay", "{tmp}/missing.jsonl"), 1,
+        "{tmp}/missing.jsonl: error: cannot read file: No such file or directory")
+    add("skinet", "log", ("replay", "{tmp}/bad.jsonl"), 1,
+        "{tmp}/bad.jsonl:1: error: invalid JSON: Expecting value (column 1)")
+    add("skinet", "log", ("replay", "{tmp}/events.jsonl"), 1,
+        "{tmp}/events.jsonl: error: no message of a monitor to replay (LiveState, Verdicts, UnsafeReport, "
+        "StateSpaceReport): the log holds 1 CanonicalEvent")
+    for bad in ("-1", "fast"):
+        usage("skinet", "--speed", ("replay", "{tmp}/run.jsonl", "--speed", bad),
+              f"argument --speed: expected a number >= 0, got '{bad}'")
+    usage("skinet", "--linger", ("replay", "{tmp}/run.jsonl", "--linger", "-1"),
+          "argument --linger: expected a number of seconds >= 0, got '-1'")
+    usage("skinet", "--dashboard", ("replay", "{tmp}/run.jsonl", "--dashboard", "65536"),
+          "argument --dashboard: expected an integer from 0 to 65535, got '65536'")
+    add("skinet", "--dashboard-host", ("replay", "{tmp}/run.jsonl", "--no-multicast-scouting", "--dashboard", "0",
+                                       "--dashboard-host", "999.0.0.1"), 1,
+        "skinet: error: cannot listen on 999.0.0.1:0: Name or service not known")
+
     # the services' own options
     mon, pred, br, sim = (f"python -m services.{s}" for s in ("monitor", "predictor", "bridge_ros2", "simulator"))
     not_a_key = "cannot be used in a Zenoh key (letters, digits, _ - . only)"
@@ -324,9 +354,12 @@ def _cases() -> list[Case]:
         "{tmp}/missing.db3: error: cannot read file: No such file or directory")
     add(br, "--replay", (SYSTEM, "--no-multicast-scouting", "--replay", SPOT), 1,
         f"{SPOT}: error: cannot replay: Unrecognized storage format '.rl'")
+    add(br, "--replay", (SYSTEM, "--no-multicast-scouting", "--replay", "{tmp}/run.jsonl"), 1,
+        "{tmp}/run.jsonl: error: a SkiNet monitor log (JSON Lines, skinet record), not a rosbag2 file of the "
+        "managers: replay it with 'skinet replay {tmp}/run.jsonl'")
     add(sim, "scenario", ("{tmp}/missing.toml",), 1, missing)
     add(sim, "scenario", ("{tmp}/unknown_skillset.toml",), 1,
-        "{tmp}/unknown_skillset.toml: error: step 1: unknown skillset 'spott' (skillsets of spot_arm: spot, manipulator)")
+        "{tmp}/unknown_skillset.toml:6:1: error: step 1: unknown skillset 'spott' (skillsets of spot_arm: spot, manipulator)")
     usage(sim, "--dds", (SCENARIO, "--dds", "--rmw-zenoh"), "--dds and --rmw-zenoh exclude each other")
     usage(sim, "--speed", (SCENARIO, "--speed", "-1"), "argument --speed: expected a number >= 0, got '-1'")
     usage(sim, "--speed", (SCENARIO,), "argument --speed: expected a number >= 0, got 'fast' (from $SKINET_SPEED)",
@@ -364,6 +397,8 @@ def files(tmp_path_factory: pytest.TempPathFactory) -> Path:
     (tmp / "bad_time.toml").write_text(head + 't = "soon"\nskillset = "spot"\ntransition = "init_power.start"\n')
     assert skinet_main.main(["demo", "--core", "--no-predict", "--log", str(tmp), SCENARIO]) == 0
     (tmp / "unassisted.jsonl").rename(tmp / "run.jsonl")
+    event = next(line for line in (tmp / "run.jsonl").read_text().splitlines() if '"CanonicalEvent"' in line)
+    (tmp / "events.jsonl").write_text(event + "\n")  # a log with no monitor message
     return tmp
 
 

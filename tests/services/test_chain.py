@@ -94,3 +94,68 @@ def test_mobile_runs_through_the_chain() -> None:
     chain, core = both("mobile_assisted")
     assert not any(r.violations for r in chain)
     assert comparable(chain) == comparable(core)
+
+
+# -- steps the model does not allow (issue 27, item 3) -----------------------------------------
+
+MOBILE = MISSIONS.parent / "mobile_manip.toml"
+# Refused by the managers as real ones would: precondition, guard, already running, pick not running.
+REFUSED = [("arm", "pick.start"), ("base", "bumper_hit"), ("arm", "unfold.start"), ("arm", "unfold.start"),
+           ("arm", "unfold.interrupt"), ("arm", "pick.success.picked")]
+DIVERGING = [1, 2, 4, 6]
+
+
+def refused_scenario(marked: set[int] = frozenset()) -> str:
+    """A scenario of :data:`REFUSED` whose steps ``marked`` (1-based) say ``expect_divergence = true``."""
+    steps = "".join(f'\n[[steps]]\nskillset = "{s}"\ntransition = "{t}"\n'
+                    + ("expect_divergence = true\n" if n in marked else "")
+                    for n, (s, t) in enumerate(REFUSED, 1))
+    return f'[scenario]\nname = "refused"\nsystem = "{MOBILE}"\n{steps}'
+
+
+def test_steps_the_model_does_not_allow_are_divergences_in_the_chain_as_in_the_core() -> None:
+    """The monitor sees nothing happen (the managers refuse): the chain shows the core's divergences anyway."""
+    scenario = parse_scenario(refused_scenario(), "refused.toml")
+    system, _ = load_system(MOBILE)
+    chain = run_chain(system, load_typemap(MOBILE), scenario)
+    assert [(r.index, r.divergence) for r in chain if r.divergence] == [
+        (i, f"'{REFUSED[i - 1][1]}' is not enabled in the live marking") for i in DIVERGING]
+    assert comparable(chain) == comparable(replay(system, scenario))
+
+
+def test_mobile_divergence_mission_diverges_where_it_says(capsys: pytest.CaptureFixture[str]) -> None:
+    from skinet_cli.main import main
+
+    assert main(["demo", str(MISSIONS / "mobile_divergence.toml")]) == 0
+    out, err = capsys.readouterr()
+    assert "             model divergence: 'pick.success.picked' is not enabled in the live marking\n" in out
+    assert "   divergences: 1; arm:pick.success.picked at step 3 (expected)\n" in out
+    assert "skinet demo:" not in err
+
+
+@pytest.mark.parametrize("core", [False, True], ids=["chain", "core"])
+def test_demo_exit_status_says_whether_divergences_were_expected(tmp_path: Path, core: bool,
+                                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    from skinet_cli.main import main
+
+    def demo(marked: set[int]) -> tuple[int, str, list[str]]:
+        path.write_text(refused_scenario(marked))
+        code = main(["demo", *(["--core"] if core else []), str(path)])
+        out, err = capsys.readouterr()
+        return code, out, [line for line in err.splitlines() if line.startswith("skinet demo:")]
+
+    path = tmp_path / "refused.toml"
+    code, out, err = demo(set())
+    assert code == 3
+    assert ("   divergences: 4; arm:pick.start at step 1 (NOT EXPECTED); base:bumper_hit at step 2 (NOT EXPECTED); "
+            "arm:unfold.start at step 4 (NOT EXPECTED); arm:pick.success.picked at step 6 (NOT EXPECTED)\n") in out
+    assert err == [f"skinet demo: {path}: step {i} ({':'.join(REFUSED[i - 1])} at t=0 s): model divergence the "
+                   f"scenario does not expect (mark it expect_divergence = true): '{REFUSED[i - 1][1]}' is not "
+                   "enabled in the live marking" for i in DIVERGING]
+    code, out, err = demo(set(DIVERGING))
+    assert (code, err) == (0, [])
+    assert ("   divergences: 4; arm:pick.start at step 1 (expected); base:bumper_hit at step 2 (expected); "
+            "arm:unfold.start at step 4 (expected); arm:pick.success.picked at step 6 (expected)\n") in out
+    code, out, err = demo({1, 2, 3, 4, 6})  # step 3 (a real start) marked: it did not diverge
+    assert (code, err) == (3, [f"skinet demo: {path}: step 3 (arm:unfold.start at t=0 s): expected a model "
+                               "divergence, none happened"])

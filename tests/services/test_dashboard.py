@@ -392,3 +392,13 @@ def test_skinet_run_serves_the_dashboard_beside_its_monitor(tmp_path) -> None:
     finally:
         proc.terminate()
         assert proc.wait(15) == 0
+
+
+def test_no_violation_reads_none_not_a_numbered_none(browser, dashboard) -> None:
+    """The empty violations list showed "1. none" (a numbered list item); it reads "none"."""
+    browser.get(dashboard())
+    until(browser, lambda d: css(d, "#violations li.none"), "the empty violations list")
+    marker = browser.execute_script(
+        "return getComputedStyle(document.querySelector('#violations li.none')).listStyleType")
+    assert marker == "none"
+    assert browser.execute_script("return document.getElementById('violations').innerText").strip() == "none"

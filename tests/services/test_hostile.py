@@ -129,7 +129,9 @@ def test_skinet_run_under_attack_stops_on_sigterm() -> None:
     proc = start_skinet("run", str(SYSTEM_FILE), "--listen", endpoint, "--duration", "60")
     session = None
     try:
-        assert proc.stdout is not None and proc.stdout.readline().startswith("[0] start")
+        assert proc.stdout is not None
+        while not (line := proc.stdout.readline()).startswith("[0] start"):  # after the lines that reach it
+            assert line.startswith(("skinet run: system spot_arm, listening on", "  ")), line
         session = open_client(endpoint)
         LivelinessWatch(session, keys.alive("*", "predictor", "*")).wait(bool)
         attacker = Attacker(session)

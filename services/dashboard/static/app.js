@@ -101,10 +101,13 @@ function renderHeader() {
   const st = document.getElementById("status");
   st.dataset.connected = view.connected;
   st.textContent = view.connected ? "live" : "disconnected, reconnecting\u2026";
+  const monitors = view.alive.monitor || [];
+  const replay = monitors.length > 0 && monitors.every((id) => id.startsWith("replay-"));  // skinet replay's token
   const services = [["monitor", "monitor"], ["bridge_ros2", "bridge"], ["predictor", "predictors"]].map(([s, label]) => {
     const ids = view.alive[s] || [];
+    const up = s === "predictor" ? ids.length : (s === "monitor" && replay ? "replay" : "up");
     return el("span", { class: "service " + (ids.length ? "up" : "down"), "data-service": s, "data-alive": ids.length,
-      title: ids.join(", ") || "none alive" }, `${label}: ${ids.length ? (s === "predictor" ? ids.length : "up") : "none"}`);
+      title: ids.join(", ") || "none alive" }, `${label}: ${ids.length ? up : "none"}`);
   });
   fill("services", ...services);
   const s = view.state;
@@ -123,10 +126,12 @@ function renderHeader() {
   div.hidden = !(s && s.divergence);
   div.textContent = s && s.divergence ? `MODEL DIVERGENCE at step ${s.seq}: ${s.divergence}` : "";
   const notice = document.getElementById("notice");
-  const noMonitor = !(view.alive.monitor || []).length;
-  notice.hidden = !noMonitor;
+  const noMonitor = !monitors.length;
+  notice.hidden = !(noMonitor || replay);
+  notice.dataset.replay = replay;
   notice.textContent = noMonitor ? `No monitor of system '${view.system}' is alive on the network: waiting for one`
-    + (view.state ? " (showing the last messages received)." : ".") : "";
+    + (view.state ? " (showing the last messages received)." : ".")
+    : replay ? "Replay of a recorded run (skinet replay), not the live robot: times are the recording's." : "";
 }
 
 function renderSkillsets() {

@@ -1,0 +1,157 @@
+"""Loud connections (issue 27, item 2): an explicit ``--connect`` endpoint that cannot be reached,
+or that refuses the login, is reported at once in every mode, peer included, naming the endpoint
+and the reason; the commands that need it exit 1 after their timeout; ``skinet run`` prints
+where it listens and the exact commands that reach it; ``--user`` with ``--connect`` logs in to
+a router as a client.
+
+A peer session does not fail to open when it reaches nobody (ZENOH.md): it keeps trying in the
+background.  Real processes and sessions on 127.0.0.1.
+"""
+
+from __future__ import annotations
+
+import re
+import shlex
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from services.common.zenoh_config import config_from_args
+from skinet_cli.main import build_parser
+from tests.processes import Watched
+from tests.services.conftest import REPO, free_port
+
+SYSTEM = str(REPO / "skillsets" / "spot_arm.toml")
+
+
+def skinet(*args: str) -> Watched:
+    return Watched([sys.executable, "-m", "skinet_cli.main", *args], REPO)
+
+
+def _dead() -> str:
+    return f"tcp/127.0.0.1:{free_port()}"
+
+
+@pytest.mark.parametrize("command", [
+    ("watch", "spot_arm", "--wait", "8"),
+    ("check", "spot_arm", "spot:teleop.start", "--timeout", "8"),
+    ("record", "spot_arm", "-o", "{tmp}/rec.jsonl", "--duration", "8"),
+    ("dashboard", "spot_arm", "--port", "0", "--wait", "8"),
+])
+def test_an_unreachable_endpoint_is_reported_at_once_then_fails(command: tuple[str, ...], tmp_path: Path) -> None:
+    """Peer mode (the default): the old behaviour was no word at all, and record's "0 messages
+    written", exit 0."""
+    endpoint = _dead()
+    proc = skinet(*(a.replace("{tmp}", str(tmp_path)) for a in command), "--connect", endpoint)
+    code = proc.wait(60)
+    problem = f"cannot connect to {endpoint}: nothing answers there"
+    warnings = [(t, line) for t, line in proc.timed if problem in line and "keeps trying" in line]
+    assert len(warnings) == 1, proc.text
+    assert warnings[0][0] < proc.timed[-1][0] - 4, f"the warning came late: {proc.timed}"  # not at the timeout
+    assert code == 1, proc.text
+    last = proc.lines[-1]
+    assert last.startswith("skinet: error: ") and last.endswith(problem), proc.text
+    assert "0 messages written" not in proc.text
+
+
+def test_a_peer_connects_when_the_endpoint_comes_up_later() -> None:
+    endpoint = _dead()
+    watch = skinet("watch", "spot_arm", "--once", "--wait", "30", "-e", endpoint)
+    watch.wait_for(lambda text: "keeps trying" in text, "warning")
+    run = skinet("run", SYSTEM, "--listen", endpoint, "--duration", "60")
+    try:
+        assert watch.wait(60) == 0, watch.text
+        assert "SkiNet Live  system spot_arm  step 0" in watch.text
+    finally:
+        run.stop()
+
+
+def test_a_refused_login_is_reported_in_peer_mode_too(tmp_path: Path) -> None:
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    router = skinet("router", "--listen", endpoint, "--secrets", str(tmp_path / "secrets"))
+    try:
+        router.wait_for(lambda text: "zenoh router" in text, "listening")
+        peer = skinet("watch", "spot_arm", "--wait", "3", "-m", "peer", "-e", endpoint, "--user", "observer",
+                      "--password", "wrong")
+        assert peer.wait(60) == 1
+        reason = (f"cannot connect to {endpoint}: the router refused the login: authentication failed for user "
+                  "'observer' (check SKINET_ZENOH_USER and SKINET_ZENOH_PASSWORD, or --user and --password)")
+        assert peer.lines == [f"skinet watch: warning: {reason}; Zenoh keeps trying in the background",
+                              f"skinet: error: {reason}"]
+        # --user with --connect is a client of the router: it fails at once, with the same reason.
+        client = skinet("watch", "spot_arm", "--wait", "3", "-e", endpoint, "--user", "observer", "--password", "x")
+        assert client.wait(60) == 1
+        assert client.lines == [f"skinet: error: cannot open the Zenoh session: the router at {endpoint} refused the "
+                                "login: authentication failed for user 'observer' (check SKINET_ZENOH_USER and "
+                                "SKINET_ZENOH_PASSWORD, or --user and --password)"]
+    finally:
+        router.stop()
+
+
+def test_services_log_an_unreachable_endpoint_and_keep_trying() -> None:
+    endpoint = _dead()
+    monitor = Watched([sys.executable, "-m", "services.monitor", SYSTEM, "-e", endpoint], REPO)
+    try:
+        monitor.wait_for(lambda text: "monitoring spot_arm" in text, "monitoring")
+        assert any(re.search(rf"skinet.zenoh WARNING cannot connect to {endpoint}: nothing answers there; Zenoh "
+                             "keeps trying in the background$", line) for line in monitor.lines), monitor.text
+    finally:
+        assert monitor.stop() == 0
+
+
+def test_record_with_no_monitor_is_an_error(router: str, tmp_path: Path) -> None:
+    proc = skinet("record", "spot_arm", "-o", str(tmp_path / "r.jsonl"), "--duration", "2", "-m", "client",
+                  "-e", router)
+    assert proc.wait(60) == 1
+    assert proc.lines[-1] == (f"skinet: error: nothing recorded in {tmp_path / 'r.jsonl'}: no monitor of system "
+                              "'spot_arm' published anything (no monitor is reachable)")
+
+
+def test_run_prints_where_it_listens_and_lines_that_work() -> None:
+    run = skinet("run", SYSTEM, "--duration", "120")
+    try:
+        run.wait_for(lambda text: "  python -m services.bridge_ros2 " in text, "ready")
+        head = next(line for line in run.lines if line.startswith("skinet run: "))
+        endpoint = re.fullmatch(r"skinet run: system spot_arm, listening on (tcp/127\.0\.0\.1:\d+); connect with:",
+                                head).group(1)
+        lines = [line.strip() for line in run.lines if line.startswith("  skinet ")]
+        assert lines == [f"skinet watch spot_arm -e {endpoint}", f"skinet dashboard spot_arm -e {endpoint}",
+                         f"skinet check spot_arm spot:init_power.start -e {endpoint}"]
+        watch = subprocess.run([sys.executable, "-m", "skinet_cli.main", *shlex.split(lines[0])[1:], "--once"],
+                               cwd=REPO, capture_output=True, text=True, timeout=60)
+        assert watch.returncode == 0 and watch.stdout.startswith("SkiNet Live  system spot_arm  step 0"), watch
+        check = subprocess.run([sys.executable, "-m", "skinet_cli.main", *shlex.split(lines[2])[1:]],
+                               cwd=REPO, capture_output=True, text=True, timeout=60)
+        assert check.returncode == 0 and check.stdout == "spot:init_power.start: ALLOW at step 0\n", check
+    finally:
+        assert run.stop() == 0
+
+
+@pytest.mark.parametrize(("argv", "mode"), [
+    (["watch", "s"], "peer"),
+    (["watch", "s", "--user", "observer"], "peer"),  # nobody to log in to
+    (["watch", "s", "--user", "observer", "-e", "tcp/127.0.0.1:7447"], "client"),
+    (["watch", "s", "--user", "observer", "-e", "tcp/127.0.0.1:7447", "-m", "peer"], "peer"),
+    (["watch", "s", "-e", "tcp/127.0.0.1:7447"], "peer"),
+])
+def test_user_with_connect_means_a_router_client(argv: list[str], mode: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    from services.common.zenoh_config import session_mode
+
+    for name in ("SKINET_ZENOH_MODE", "SKINET_ZENOH_USER", "SKINET_ZENOH_CONNECT"):
+        monkeypatch.delenv(name, raising=False)
+    args = build_parser("watch").parse_args(argv)
+    assert session_mode(args, args.connect or []) == mode
+    assert config_from_args(args).get_json("mode") == f'"{mode}"'
+
+
+def test_run_as_a_client_of_a_router(capsys: pytest.CaptureFixture[str]) -> None:
+    from skinet_cli.main import main
+
+    assert main(["run", SYSTEM, "--mode", "client", "--listen", "tcp/127.0.0.1:0"]) == 1
+    assert capsys.readouterr().err == ("skinet: error: --listen: a client listens on nothing (--mode client, or "
+                                       "--user with --connect); the others connect to its router\n")
+    assert main(["run", SYSTEM, "--mode", "client"]) == 1
+    assert capsys.readouterr().err == "skinet: error: --mode client needs the router's endpoint: --connect ENDPOINT\n"
+

@@ -1,0 +1,59 @@
+"""``skinet watch`` in a pipe (issue 27, item 8): one line per monitor step, as its help says.
+
+The monitor publishes a step more than once (its prediction pending, then fresh), and
+services come and go; a pipe used to get a line for each of those.  Real processes: a
+loopback router, the monitor and a predictor on a client session, ``skinet watch`` as a
+child process writing into a pipe.
+"""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+import time
+
+import zenoh
+
+from services.monitor import start_monitor
+from services.predictor.service import start_predictor
+from skinet.files import load_system
+from skinet.wire import keys
+from tests.services.conftest import REPO, LivelinessWatch, client_args, open_client
+from tests.services.test_monitor import Events, wait_until
+
+SYSTEM_FILE = REPO / "skillsets" / "spot_arm.toml"
+STEPS = [("spot", "init_power.start"), ("spot", "init_power.success.powered_on"), ("spot", "stand_up.start"),
+         ("spot", "stand_up.success.standing")]
+
+
+def test_watch_in_a_pipe_prints_one_line_per_step(router: str, client: zenoh.Session) -> None:
+    system = load_system(SYSTEM_FILE)[0]
+    session = open_client(router)
+    predictor = start_predictor(session, "watched")
+    monitor = start_monitor(session, system, budget=1.0)
+    alive = LivelinessWatch(client, keys.alive("spot_arm", "monitor", "*"))
+    proc = subprocess.Popen([sys.executable, "-m", "skinet_cli.main", "watch", "spot_arm", "--duration", "60",
+                             *client_args(router)], cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+    try:
+        alive.wait(lambda names: bool(names))
+        wait_until(lambda: monitor.snapshot().state_space is not None, 20, "the first prediction")
+        time.sleep(2.0)  # the watcher's session is up and has read step 0 (its line waits for the next step)
+        events = Events(client)
+        for skillset, transition in STEPS:
+            events.send(skillset, transition)
+            wait_until(lambda: not monitor.snapshot().unsafe.prediction_stale, 20, f"the prediction after {transition}")
+            time.sleep(0.3)  # the fresh report reaches the watcher
+    finally:
+        time.sleep(1.0)
+        proc.terminate()
+        out, err = proc.communicate(timeout=20)
+        monitor.close()
+        predictor.close()
+        alive.close()
+        session.close()
+    lines = out.splitlines()
+    assert [int(re.match(r"\[(\d+)\]", line).group(1)) for line in lines] == [0, 1, 2, 3, 4], out + err
+    assert all(line.endswith("prediction fresh") for line in lines), out
+    assert [line.split(" | ")[0] for line in lines[1:]] == [f"[{n}] {s}:{t}#{n - 1}" for n, (s, t) in enumerate(STEPS, 1)]
