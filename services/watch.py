@@ -5,8 +5,8 @@ monitor's messages through Zenoh; the view is the one ``skinet run`` draws
 (:func:`services.embedded.render`), plus the services alive and the violations
 seen: redrawn in place on a terminal, one line per step otherwise (:class:`StepLines`); a
 state the monitor cannot vouch for (a skillset syncing or lost, SPEC §7) is a banner on top,
-red or yellow on a terminal, and ``STATE STALE`` in a pipe's line (a change of it is a line of
-its own).  With no
+red or yellow on a terminal, and ``STATE STALE`` in a pipe's line (a skillset lost is a line at
+once, one still syncing after a second too).  With no
 monitor of the system alive within ``--wait`` seconds it says so, naming the
 systems it can see, and exits 1.
 """
@@ -52,13 +52,14 @@ def view_lines(board: Board, colour: bool = False) -> list[str]:
 
 def _look(board: Board, colour: bool = False) -> tuple[list[str], str, tuple, bool]:
     """(view lines, one-line summary, what changed, prediction fresh and every skillset live) of ``board``;
-    what changed starts with (epoch, step, sync states)."""
+    what changed starts with (epoch, step, the skillsets not live with their states)."""
     lines = view_lines(board, colour)
     if not lines:
         return [], "", (), False
     line = summary(Observed(board.state, board.verdicts, board.unsafe, board.state_space))  # type: ignore[arg-type]
     sync = tuple((n, s.state) for n, s in board.state.sync.items())  # type: ignore[union-attr]
-    key = (board.epoch, board.state.seq, sync, board.unsafe.stamp,  # type: ignore[union-attr]
+    stale = tuple((n, state) for n, state in sync if state != "live")
+    key = (board.epoch, board.state.seq, stale, board.unsafe.stamp,  # type: ignore[union-attr]
            board.state_space and board.state_space.stamp,
            tuple(sorted((s, len(ids)) for s, ids in board.alive.items())), len(board.violations))
     fresh = not board.unsafe.prediction_stale and board.state_space is not None and \
@@ -68,22 +69,32 @@ def _look(board: Board, colour: bool = False) -> tuple[list[str], str, tuple, bo
 
 class StepLines:
     """One line per monitor step for a pipe: a step's line is written once, when its prediction is
-    fresh (or no predictor is alive to make it so, or the state is stale), when the next step comes,
-    or at the end; the monitor publishes a step several times (its prediction pending, then fresh;
-    its sync states changed: a step of its own here)."""
+    fresh and every skillset live (or no predictor is alive to make it so), when the next step
+    comes, or at the end; the monitor publishes a step several times (its prediction pending, then
+    fresh; its sync states changed).  A step whose skillsets are not all live (SPEC §7) is a line of
+    its own per set of sync states: at once when one is lost, after ``settle`` seconds otherwise
+    (the seconds' syncing at start is no line), and the step's line is due again once they are
+    all live.  A step here is (epoch, seq, the skillsets not live with their states)."""
 
-    def __init__(self, out: TextIO):
-        self.out = out
-        self.step: tuple | None = None  # (epoch, seq, sync states) of the step last seen
+    def __init__(self, out: TextIO, settle: float = 1.0):
+        self.out, self.settle = out, settle
+        self.step: tuple | None = None  # (epoch, seq, states not live) of the step last seen
         self.line = ""
         self.written = True
+        self.since = 0.0  # monotonic time the step was first seen
 
     def see(self, step: tuple, line: str, final: bool) -> None:
         if step != self.step:
-            self.flush()
-            self.step, self.written = step, False
+            if self.step is None or step[:2] != self.step[:2]:
+                self.flush()  # a new step: the last one's line, if not written yet
+            self.step, self.written, self.since = step, False, time.monotonic()  # else it was superseded
         self.line = line
         if final:
+            self.flush()
+
+    def due(self, now: float) -> None:
+        """Write the line of a step whose skillsets have not all been live for ``settle`` seconds."""
+        if self.step is not None and self.step[2] and now - self.since >= self.settle:
             self.flush()
 
     def flush(self) -> None:
@@ -107,7 +118,9 @@ def watch(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
         if not tty and not args.once:
             lines, line, key, fresh = _look(observer.board)
             if lines:
-                final = fresh or not observer.board.alive.get("predictor") or observer.board.unsafe.state_stale
+                live = not observer.board.unsafe.state_stale
+                lost = any(state == "lost" for _, state in key[2])
+                final = lost or fresh or (live and not observer.board.alive.get("predictor"))
                 seen.append((key[:3], line, final))
         changed.set()
 
@@ -135,6 +148,7 @@ def watch(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
                 shown = key
             while seen:
                 steps.see(*seen.popleft())
+            steps.due(time.monotonic())
             if done:
                 steps.flush()
                 return 0
