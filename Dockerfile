@@ -29,9 +29,15 @@ ENV PATH=/opt/skinet/bin:$PATH \
     PYTHONUNBUFFERED=1 \
     SKINET_ZENOH_MODE=client \
     SKINET_SECRETS=/var/lib/skinet/secrets
+# Mount points of the secrets volumes (compose.yaml), owned by the service user so that a
+# new named volume starts with that owner: the vault and each service's own folder
+# (/var/lib/skinet/secrets), and the folders the job `secrets` hands them out to.
 RUN groupadd --system --gid 10001 skinet \
  && useradd --system --uid 10001 --gid 10001 --home-dir /app --no-create-home skinet \
- && mkdir -p /var/lib/skinet/secrets && chown skinet:skinet /var/lib/skinet/secrets && chmod 0700 /var/lib/skinet/secrets
+ && mkdir -p /var/lib/skinet/secrets /var/lib/skinet/out/router /var/lib/skinet/out/bridge \
+        /var/lib/skinet/out/monitor /var/lib/skinet/out/predictor /var/lib/skinet/out/robot \
+        /var/lib/skinet/out/observer \
+ && chown -R skinet:skinet /var/lib/skinet && chmod -R 0700 /var/lib/skinet
 COPY --from=deps /opt/skinet /opt/skinet
 COPY docker/entrypoint.sh /usr/local/bin/skinet-entrypoint
 COPY docker/zenoh/ /etc/skinet/zenoh/

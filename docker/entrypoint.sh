@@ -4,13 +4,14 @@
 #   router                      skinet router ARGS
 #   monitor | predictor | simulator | dashboard | bridge_ros2 (or bridge)
 #                               python -m services.SERVICE ARGS
+#   secrets                     python -m services.secrets ARGS (compose's one-shot job)
 #   skinet                      the skinet command line
 #   anything else               run as given
 #
 # Zenoh settings come from the SKINET_ZENOH_* variables that every service reads.
 # SKINET_ZENOH_USER with SKINET_ZENOH_PASSWORD (or SKINET_ZENOH_PASSWORD_FILE, for
-# Docker secrets; default $SKINET_SECRETS/<user>.password, which the router makes
-# at first start) adds user/password authentication to the session's configuration
+# Docker secrets; default $SKINET_SECRETS/<user>.password, which the job `secrets`
+# hands out) adds user/password authentication to the session's configuration
 # (on top of SKINET_ZENOH_CONFIG when that is set), also for a router that logs in
 # to other routers (with SKINET_ZENOH_CONNECT).  A tls/ endpoint in
 # SKINET_ZENOH_CONNECT adds the CA and the user's certificate from
@@ -20,17 +21,23 @@
 set -eu
 
 if [ $# -eq 0 ] || [ "$1" = "--help" ] || [ "$1" = "-h" ]; then
-    sed -n '2,19p' "$0" | sed 's/^# \{0,1\}//'
+    sed -n '2,20p' "$0" | sed 's/^# \{0,1\}//'
     exit 0
 fi
 
 service="$1"
 shift
 
-# A router gets the generated configuration too when it logs in somewhere itself
-# (SKINET_ZENOH_USER set). The fleet's hub does not need it: `skinet router --robots`
-# (SKINET_FLEET_ROBOTS) makes its logins and per-robot TLS settings itself.
-if [ "$service" != "skinet" ] && { [ "$service" != "router" ] || [ -n "${SKINET_ZENOH_USER:-}" ]; }; then
+# Services that open a Zenoh session get the generated configuration; a router only
+# when it logs in somewhere itself (SKINET_ZENOH_USER set). The fleet's hub does not
+# need it: `skinet router --robots` (SKINET_FLEET_ROBOTS) makes its logins and
+# per-robot TLS settings itself.
+case "$service" in
+    monitor|predictor|simulator|dashboard|bridge|bridge_ros2) session=1 ;;
+    router) session="${SKINET_ZENOH_USER:+1}" ;;
+    *) session= ;;
+esac
+if [ -n "$session" ]; then
     # Written as JSON through Zenoh's own parser so that any JSON5 file given in
     # SKINET_ZENOH_CONFIG is kept, and passwords need no shell quoting.
     generated="${TMPDIR:-/tmp}/skinet-zenoh-$$.json"
@@ -88,6 +95,7 @@ fi
 
 case "$service" in
     router) exec skinet router "$@" ;;
+    secrets) exec python3 -m services.secrets "$@" ;;
     skinet) exec skinet "$@" ;;
     bridge|bridge_ros2) exec python3 -m services.bridge_ros2 "$@" ;;
     monitor|predictor|simulator|dashboard) exec python3 -m "services.$service" "$@" ;;

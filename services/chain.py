@@ -18,7 +18,9 @@ divergence too (the robot and its model disagree).
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
+from contextlib import contextmanager
+from typing import Any
 
 import zenoh
 
@@ -30,6 +32,7 @@ from services.simulator import Simulator
 from services.simulator.driver import StepRun
 from skinet.live import LiveSystem
 from skinet.mission import Scenario, StepRecord, flags_on
+from skinet.ros.binding import Binding
 from skinet.ros.keys import KeyStyle
 from skinet.system import System
 from skinet.verify.algorithm1 import UnsafeTransition
@@ -65,15 +68,7 @@ def run_chain(
     then closes itself.  ``on_record`` is called after each step with what the
     monitor showed then.
     """
-    own = session is None
-    if session is None:
-        session = zenoh.open(session_config("peer", multicast_scouting=False))
-    services: list = []
-    try:
-        monitor = start_monitor(session, system)
-        services.append(monitor)
-        if predict:
-            services.append(start_predictor(session, "embedded"))
+    with _embedded(session, system, predict) as (session, monitor, services):
         external = simulator is not None
         if simulator is None:
             simulator = Simulator(session, system, typemap)
@@ -81,51 +76,131 @@ def run_chain(
         bridge = start_bridge(session, system, typemap, style=style)
         services.append(bridge)
         _wait(monitor.synced, settle, "initial statuses")  # SPEC §7: every skillset live
-
-        def caught_up() -> bool:  # the monitor handled every event the bridge published
-            last = {name: monitor.last_seq(name, bridge.feed.source) for name in bridge.feed.managers}
-            return all(m.seq == 0 or (last[name] is not None and last[name] >= m.seq - 1)
-                       for name, m in bridge.feed.managers.items())
-
         lost = {name: 0 for name in simulator.nodes}
         if external:
             # Behind a gateway, statuses answering the first requests are lost until its
             # routes exist (volatile QoS); count them once the answers to the retries are in.
             time.sleep(0.5)
             lost = {name: n - bridge.feed.statuses[name] for name, n in simulator.statuses_published().items()}
-        records: list[StepRecord] = []
-        before = {p.name: True for p in system.properties}
-        if predict:
-            _wait(lambda: not monitor.snapshot().unsafe.prediction_stale, settle, "initial prediction")
-        first = monitor.snapshot()
-        shown = [unsafe_transition(u) for u in first.unsafe.unsafe]  # what the operator sees
-        seq = first.state.seq  # the monitor's last step
 
-        def on_step(run: StepRun) -> None:
-            nonlocal before, shown, seq
+        def caught_up(run: StepRun) -> None:
             expected = {name: n - lost[name] for name, n in simulator.statuses_published().items()}
             if not bridge.wait_statuses(expected):
                 raise ChainError(f"step {run.index}: the bridge did not receive every status")
-            _wait(caught_up, settle, f"step {run.index} applied")
-            if predict:
-                _wait(lambda: not monitor.snapshot().unsafe.prediction_stale, settle, f"step {run.index} prediction")
-            view = monitor.snapshot()
-            stepped, seq = view.state.seq != seq, view.state.seq
-            record = _record(run, view, before, shown, _divergence(system, run, view, stepped))
-            if run.step.transition is not None:
-                before = record.holds
-                shown = [unsafe_transition(u) for u in view.unsafe.unsafe]
-            records.append(record)
-            if on_record is not None:
-                on_record(record)
+            _wait(lambda: _handled(monitor, bridge.feed.source, {n: m.seq for n, m in bridge.feed.managers.items()}),
+                  settle, f"step {run.index} applied")
 
+        records, on_step = _recorder(system, monitor, caught_up, predict, settle, on_record)
         simulator.drive(scenario, speed=speed, on_step=on_step)
         return records
+
+
+def run_bound_chain(
+    system: System,
+    bindings: Mapping[str, Binding],
+    scenario: Scenario,
+    *,
+    predict: bool = True,
+    speed: float = 0.0,
+    settle: float = 10.0,
+    session: zenoh.Session | None = None,
+    style: KeyStyle = KeyStyle(),
+    on_record: Callable[[StepRecord], None] | None = None,
+) -> list[StepRecord]:
+    """:func:`run_chain` for a system whose skillsets are all bound to plain ROS 2 interfaces (SPEC §9).
+
+    The simulated robot's action servers, lifecycle nodes and topics (CDR on Zenoh keys)
+    -> the bound bridge -> monitor -> predictor.  After each step the chain waits until
+    the bridge has fed every message the robot published on a bound topic (and fetched
+    the results it needed), and the monitor has applied every event.
+    """
+    from services.bridge_ros2.bound_live import start_bound_bridge
+    from services.simulator.bound import BoundSimulator
+
+    with _embedded(session, system, predict) as (session, monitor, services):
+        robot = BoundSimulator(session, system, bindings, style=style)
+        services.append(robot)
+        bridge = start_bound_bridge(session, system, bindings, style=style, settle=0.2, retry=0.2)
+        services.append(bridge)
+        robot.publish_topics(scenario.topics)
+        _wait(monitor.synced, settle, "initial statuses")  # SPEC §7: every skillset live
+        watched = set(bridge.feed.routes)
+
+        def caught_up() -> bool:
+            published = sum(n for t, n in robot.published().items() if t in watched)
+            return bridge.counters.messages >= published and not bridge.feed.pending_results()
+
+        def step_done(run: StepRun) -> None:
+            _wait(caught_up, settle, f"step {run.index}: the bridge's messages")
+            bridge.wait_idle(settle)
+            _wait(lambda: _handled(monitor, bridge.feed.source, {n: s.seq for n, s in bridge.feed.skillsets.items()}),
+                  settle, f"step {run.index} applied")
+
+        records, on_step = _recorder(system, monitor, step_done, predict, settle, on_record)
+        robot.drive(scenario, speed=speed, on_step=on_step)
+        return records
+
+
+@contextmanager
+def _embedded(session: zenoh.Session | None, system: System,
+              predict: bool) -> Iterator[tuple[zenoh.Session, Any, list[Any]]]:
+    """A session (a new peer one unless given), the monitor and a predictor on it, and the list of
+    services to close in reverse order at the end (the session too, if it is ours)."""
+    own = session is None
+    if session is None:
+        session = zenoh.open(session_config("peer", multicast_scouting=False))
+    services: list[Any] = []
+    try:
+        monitor = start_monitor(session, system)
+        services.append(monitor)
+        if predict:
+            services.append(start_predictor(session, "embedded"))
+        yield session, monitor, services
     finally:
         for service in reversed(services):
             service.close()
         if own:
             session.close()
+
+
+def _recorder(system: System, monitor: Any, caught_up: Callable[[StepRun], None], predict: bool, settle: float,
+              on_record: Callable[[StepRecord], None] | None) -> tuple[list[StepRecord], Callable[[StepRun], None]]:
+    """The records of a run and the step callback filling them: after ``caught_up(run)`` (the bridge has
+    every message of the step and the monitor every event), what the monitor shows."""
+    records: list[StepRecord] = []
+    before = {p.name: True for p in system.properties}
+    if predict:
+        _wait(lambda: not monitor.snapshot().unsafe.prediction_stale, settle, "initial prediction")
+    first = monitor.snapshot()
+    shown = [unsafe_transition(u) for u in first.unsafe.unsafe]  # what the operator sees
+    seq = first.state.seq  # the monitor's last step
+
+    def on_step(run: StepRun) -> None:
+        nonlocal before, shown, seq
+        caught_up(run)
+        if predict:
+            _wait(lambda: not monitor.snapshot().unsafe.prediction_stale, settle, f"step {run.index} prediction")
+        view = monitor.snapshot()
+        stepped, seq = view.state.seq != seq, view.state.seq
+        record = _record(run, view, before, shown, _divergence(system, run, view, stepped))
+        if run.step.transition is not None:
+            before = record.holds
+            shown = [unsafe_transition(u) for u in view.unsafe.unsafe]
+        records.append(record)
+        if on_record is not None:
+            on_record(record)
+
+    return records, on_step
+
+
+def _handled(monitor: Any, source: str, next_seq: Mapping[str, int]) -> bool:
+    """Whether the monitor handled every event ``source`` published (``next_seq``: per skillset, the seq
+    its next event will have): applied, or covered by the resync it synced from."""
+    for name, n in next_seq.items():
+        last = monitor.last_seq(name, source)
+        if n and (last is None or last < n - 1):
+            return False
+    return True
 
 
 def unsafe_transition(u: UnsafeEntry) -> UnsafeTransition:

@@ -281,6 +281,9 @@ def router(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     endpoint without certificates in the configuration gets a CA and certificates
     (the router's, and one per user for clients) made in ``<secrets>/tls``, with
     mutual TLS; ``$SKINET_TLS_HOSTNAMES`` lists the names clients reach it by.
+    A folder with ``tls/ca.pem`` but no CA key holds the router's own certificate,
+    handed out by the compose job ``secrets`` (:mod:`services.secrets`): the router
+    then makes no certificate, and a missing one is a one-line error.
 
     Fleet (issue 15): a robot's router that joined a hub (``skinet fleet join``)
     also trusts the fleet CA and takes the fleet's password for the user ``hub``;
@@ -295,19 +298,22 @@ def router(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     config = session_config("router", args.connect, args.listen, args.zenoh_config, args.multicast_scouting,
                             **login(args))
     folder = Path(args.secrets or Path.home() / ".config" / "skinet" / "secrets")
+    table = json.loads(config.get_json("transport/auth/usrpwd/dictionary_file") or "null")
+    if table and not args.no_auth:
+        folder = Path(table).parent
+    certificates = folder / "tls"
+    # The router's own files handed out by the compose job `secrets`: no CA key, no client's password file.
+    handed_out = (certificates / "ca.pem").exists() and not (certificates / "ca.key").exists()
     notes = []
     if not args.no_auth:
-        table = json.loads(config.get_json("transport/auth/usrpwd/dictionary_file") or "null")
-        if table:
-            folder = Path(table).parent
-        ensure_users(folder, fixed=robot_fleet(folder)[1])
+        ensure_users(folder, fixed=robot_fleet(folder)[1], password_files=not handed_out)
         config.insert_json5("transport/auth/usrpwd/dictionary_file", json.dumps(str(folder / "users.txt")))
         notes.append(f"users and passwords in {folder}")
     endpoints = json.loads(config.get_json("listen/endpoints"))
     if any(str(e).startswith("tls/") for e in endpoints) and \
             json.loads(config.get_json("transport/link/tls/listen_certificate") or "null") is None:
         hostnames = [h.strip() for h in os.environ.get("SKINET_TLS_HOSTNAMES", "").split(",") if h.strip()]
-        ensure_tls(folder / "tls", ["router", *USERS], hostnames)
+        ensure_tls(certificates, ["router"] if handed_out else ["router", *USERS], hostnames)
         tls = tls_listen_config(folder / "tls", "router")
         trusted, _ = robot_fleet(folder)
         if trusted is not None:  # the robot joined a fleet: the hub's certificate is of the fleet CA

@@ -11,6 +11,11 @@ skillset, the ROS 2 node of its manager; paths are relative to the file::
     model = "spot.rl"
     manager = "/spot/spot_skillset_manager"
 
+A skillset without a manager may name a *binding* instead (SPEC §9), a TOML file
+mapping its skills, resources and events to plain ROS 2 action servers,
+lifecycle nodes and topics: ``binding = "nav2.binding.toml"`` (read by
+:func:`load_bindings`).
+
 ``[system] types = "spot_arm.types.json"`` names the type map (ONERA's JSON
 format) that gives each ``.rl`` type its ROS 2 message; :func:`load_typemap`
 reads it.
@@ -21,17 +26,24 @@ from __future__ import annotations
 import json
 import os
 import re
+from collections.abc import Mapping
 from dataclasses import replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from skinet.errors import Diagnostic, Pos, SourceError
 from skinet.lang.larkerrors import MAX_SOURCE_CHARS
 from skinet.lang.model import Model, Skillset
 from skinet.lang.parser import link, parse_unit
 from skinet.options import parse_prediction
+from skinet.ros.binding import Binding, definitions_folder, parse_binding
+from skinet.ros.definitions import KINDS
 from skinet.ros.typemap import TypeMap, parse_typemap
 from skinet.tomltext import check_keys, check_tables, locate, parse_toml
 from skinet.system import Marking, System, build_system, marking_from_json, marking_problems
+
+if TYPE_CHECKING:
+    from skinet.plan.goal import Goal
 
 
 def read_text(path: str | Path, limit: int | None = None) -> str:
@@ -53,6 +65,8 @@ def read_text(path: str | Path, limit: int | None = None) -> str:
         return data.decode("utf-8")
     except (OSError, UnicodeDecodeError, ValueError) as exc:  # ValueError: a NUL in the path
         reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
+        if isinstance(exc, UnicodeDecodeError):  # its text quotes the byte: no content in an error
+            reason = f"not UTF-8 text (byte {exc.start})"
         raise SourceError.at(str(path), None, f"cannot read file: {reason}") from None
 
 
@@ -61,21 +75,29 @@ def read_source(path: str | Path) -> str:
     return read_text(path, MAX_SOURCE_CHARS)
 
 
-def load_model(path: str | Path) -> Model:
-    """Parse and validate a ``.rl`` file, with the files it includes."""
-    return _load_linked(Path(path))[0]
+# The folder that included files must lie in, when not the model's own (issue 25).
+INCLUDE_ROOT_ENV = "SKINET_INCLUDE_ROOT"
 
 
-def _load_linked(path: Path) -> tuple[Model, dict[str, str]]:
+def load_model(path: str | Path, include_root: str | Path | None = None) -> Model:
+    """Parse and validate a ``.rl`` file, with the files it includes (see :func:`_load_linked`)."""
+    return _load_linked(Path(path), include_root)[0]
+
+
+def _load_linked(path: Path, include_root: str | Path | None = None) -> tuple[Model, dict[str, str]]:
     """A model file linked with every file it includes, and each file's text by source.
 
     ``include "name"`` is relative to the including file; each file is read once
-    (so include cycles end).
+    (so include cycles end).  Included files must lie, symbolic links resolved,
+    inside ``include_root`` (default: ``$SKINET_INCLUDE_ROOT``, else the model
+    file's folder), and be regular files; their syntax errors give the position
+    but quote no text, so an include can never show what another file holds.
     """
     text = read_source(path)
     units = [parse_unit(text, str(path))]
     texts = {str(path): text}
     seen = {path.resolve()}
+    root = Path(include_root or os.environ.get(INCLUDE_ROOT_ENV) or path.parent).resolve()
     i = 0
     while i < len(units):
         including = Path(units[i][0].source)
@@ -83,9 +105,15 @@ def _load_linked(path: Path) -> tuple[Model, dict[str, str]]:
         for name, pos in units[i - 1][0].includes:
             target = including.parent / name
             try:
-                if target.resolve() in seen:
+                resolved = target.resolve()
+                if resolved in seen:
                     continue
-                seen.add(target.resolve())
+                if not resolved.is_relative_to(root):
+                    raise SourceError.at(str(target), None, f"it lies outside {root} (included files stay in "
+                                                            f"the model's folder, or in ${INCLUDE_ROOT_ENV})")
+                if resolved.exists() and not resolved.is_file():
+                    raise SourceError.at(str(target), None, "not a regular file")
+                seen.add(resolved)
                 included = read_source(target)
             except (SourceError, OSError, RuntimeError, ValueError) as exc:  # RuntimeError: a symlink loop
                 reason = exc.diagnostics[0].message if isinstance(exc, SourceError) else f"cannot read file: {exc}"
@@ -97,7 +125,7 @@ def _load_linked(path: Path) -> tuple[Model, dict[str, str]]:
 
 SYSTEM_TABLES = ("[system]", "[[skillsets]]", "[prediction]")
 SYSTEM_KEYS = ("name", "properties", "types", "memory_limit")
-SKILLSET_KEYS = ("model", "manager", "name")
+SKILLSET_KEYS = ("model", "manager", "name", "binding")
 
 
 def load_system(path: str | Path) -> tuple[System, list[Diagnostic]]:
@@ -121,7 +149,7 @@ def load_system(path: str | Path) -> tuple[System, list[Diagnostic]]:
     entries = data.get("skillsets")
     if not isinstance(entries, list) or not entries:
         raise SourceError.at(where, None, "missing [[skillsets]] entries (each with 'model' and 'manager')")
-    skillsets: list[tuple[Skillset, str]] = []
+    skillsets: list[tuple[Skillset, str, str]] = []
     warnings: list[Diagnostic] = []
     sources: dict[str, str] = {}
     models: dict[Path, tuple[Model, dict[str, str]]] = {}
@@ -131,15 +159,16 @@ def load_system(path: str | Path) -> tuple[System, list[Diagnostic]]:
                                  f"skillsets entry {n} needs a 'model' path")
         table, label = ("skillsets", n - 1), f"[[skillsets]] entry {n}"
         check_keys(entry, SKILLSET_KEYS, where, text, table, label)
-        for key in ("manager", "name"):
+        for key in ("manager", "name", "binding"):
             _check_string(entry, key, where, text, table, label)
         model_path = path.parent / entry["model"]
         if model_path not in models:
             models[model_path] = _load_linked(model_path)
             warnings.extend(models[model_path][0].warnings)
         model, texts = models[model_path]
+        binding = _entry_binding(entry, path, text, table, label)
         for ss in _entry_skillsets(entry, n, model, where):
-            skillsets.append((ss, str(entry.get("manager", ""))))
+            skillsets.append((ss, str(entry.get("manager", "")), binding))
             sources[Path(ss.source).name] = texts[ss.source]
     props_name = system.get("properties")
     props_text, props_source = "", "<no properties>"
@@ -160,6 +189,19 @@ def _check_string(table: dict[str, object], key: str, source: str, text: str, at
         raise SourceError.at(source, locate(text, at, key), f"{label} '{key}' must be a string, not {value!r}")
 
 
+def _entry_binding(entry: dict[str, object], path: Path, text: str, table: tuple[str | int, ...],
+                   label: str) -> str:
+    """The binding file of a ``[[skillsets]]`` entry, relative to the system file ('' when none)."""
+    binding = entry.get("binding")
+    if binding is None:
+        return ""
+    if "manager" in entry:
+        raise SourceError.at(str(path), locate(text, table, "binding"),
+                             f"{label}: give 'manager' (a skillset manager) or 'binding' (plain ROS 2 interfaces), "
+                             "not both")
+    return str(path.parent / str(binding))
+
+
 def _entry_skillsets(entry: dict[str, object], n: int, model: Model, where: str) -> list[Skillset]:
     """The skillsets a ``[[skillsets]]`` entry takes from its model file.
 
@@ -174,13 +216,20 @@ def _entry_skillsets(entry: dict[str, object], n: int, model: Model, where: str)
             if ss.name == expected:
                 return [ss]
         raise SourceError.at(where, None, f"skillsets entry {n} names '{expected}' but {entry['model']} declares {declared}")
-    if len(model.skillsets) > 1 and "manager" in entry:
+    if len(model.skillsets) > 1 and ("manager" in entry or "binding" in entry):
         raise SourceError.at(
             where, None,
             f"skillsets entry {n}: {entry['model']} declares {len(model.skillsets)} skillsets ({declared});"
             " give one entry per skillset, each with its 'name' and 'manager'",
         )
     return list(model.skillsets)
+
+
+def load_goals(path: str | Path, system: System, types: Mapping[str, str] | None = None) -> list[Goal]:
+    """A goals file (a mission, SPEC §8): see :mod:`skinet.plan.goalfile`; ``types``: the system's type map."""
+    from skinet.plan.goalfile import parse_goals
+
+    return parse_goals(read_source(path), system, str(path), types)
 
 
 def load_typemap(path: str | Path) -> TypeMap:
@@ -194,6 +243,40 @@ def load_typemap(path: str | Path) -> TypeMap:
         raise SourceError.at(str(path), None, "[system] 'types' must be a path string")
     types_path = path.parent / name
     return parse_typemap(read_source(types_path), str(types_path))
+
+
+def load_bindings(system: System) -> tuple[dict[str, Binding], list[Diagnostic]]:
+    """The binding of every skillset of ``system`` that names one (SPEC §9), and their warnings.
+
+    A binding's ``definitions`` folder (relative to the binding file) holds
+    ``<package>/<msg|srv|action>/<Name>.<msg|srv|action>`` files; each is read and
+    registered as ``<package>/<kind>/<Name>``.
+    """
+    bindings: dict[str, Binding] = {}
+    warnings: list[Diagnostic] = []
+    for c in system.components:
+        if not c.binding:
+            continue
+        path = Path(c.binding)
+        text = read_source(path)
+        folder = definitions_folder(text, str(path))
+        texts, sources = _read_definitions(path.parent / folder, str(path)) if folder else ({}, {})
+        bindings[c.name] = parse_binding(text, str(path), c.skillset, texts, sources)
+        warnings.extend(bindings[c.name].warnings)
+    return bindings, warnings
+
+
+def _read_definitions(folder: Path, binding: str) -> tuple[dict[str, str], dict[str, str]]:
+    """Every definition file below ``folder`` by type name, and the file of each."""
+    if not folder.is_dir():
+        raise SourceError.at(binding, None, f"definitions folder {folder} is not a folder")
+    texts: dict[str, str] = {}
+    sources: dict[str, str] = {}
+    for kind in KINDS:
+        for file in sorted(folder.glob(f"*/{kind}/*.{kind}")):
+            name = f"{file.parent.parent.name}/{kind}/{file.stem}"
+            texts[name], sources[name] = read_source(file), str(file)
+    return texts, sources
 
 
 _UNITS = {"": 1, "b": 1, "kb": 10**3, "mb": 10**6, "gb": 10**9, "kib": 2**10, "mib": 2**20, "gib": 2**30}

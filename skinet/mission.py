@@ -7,14 +7,17 @@ or a skill outcome) or an operator *considering* a command without issuing it
 A transition step the model does not allow at that moment is a model divergence
 (SPEC §7); a scenario that plays one on purpose (a conformance test, a faulty
 robot) says so with ``expect_divergence = true`` on the step.
+For a skillset bound to plain ROS 2 interfaces (SPEC §9), ``message = {...}``
+gives the fields of the message that causes the step (a goal's inputs or result,
+a topic sample), and ``[scenario] topics`` the first sample of each bound topic.
 The simulator of issue 5 plays the same files through the whole chain.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import TypeVar
+from typing import Any, TypeVar
 
 from skinet.errors import SourceError
 from skinet.live import LiveSystem
@@ -36,6 +39,8 @@ class Step:
     consider: str | None = None
     note: str = ""
     expect_divergence: bool = False  # the model is expected not to explain this step
+    message: Mapping[str, Any] | None = field(default=None, compare=False)  # on a bound interface (SPEC §9): the
+    # fields of the message that causes the step
 
 
 @dataclass(frozen=True)
@@ -44,6 +49,8 @@ class Scenario:
     system: str  # path of the system file, relative to the scenario file
     steps: tuple[Step, ...]
     text: str = field(default="", compare=False, repr=False)  # the file's text, to locate errors in it
+    # bound skillsets (SPEC §9): the first sample the simulated robot publishes on each bound topic
+    topics: Mapping[str, Mapping[str, Any]] = field(default_factory=dict, compare=False)
 
 
 @dataclass
@@ -62,8 +69,8 @@ class StepRecord:
 
 
 SCENARIO_TABLES = ("[scenario]", "[[steps]]")
-SCENARIO_KEYS = ("name", "system")
-STEP_KEYS = ("t", "skillset", "transition", "consider", "note", "expect_divergence")
+SCENARIO_KEYS = ("name", "system", "topics")
+STEP_KEYS = ("t", "skillset", "transition", "consider", "note", "expect_divergence", "message")
 
 
 def parse_scenario(text: str, source: str = "<scenario>") -> Scenario:
@@ -112,8 +119,17 @@ def parse_scenario(text: str, source: str = "<scenario>") -> Scenario:
             raise SourceError.at(source, locate(text, table, "expect_divergence"),
                                  f"step {n}: 'expect_divergence' needs a 'transition' (a considered command is "
                                  "not played)")
-        steps.append(Step(t, s["skillset"], s.get("transition"), s.get("consider"), str(s.get("note", "")), expect))
-    return Scenario(head["name"], head["system"], tuple(steps), text)
+        message = s.get("message")
+        if message is not None and not isinstance(message, dict):
+            raise SourceError.at(source, locate(text, table, "message"),
+                                 f"step {n}: 'message' must be a table of message fields")
+        steps.append(Step(t, s["skillset"], s.get("transition"), s.get("consider"), str(s.get("note", "")), expect,
+                          message))
+    topics = head.get("topics", {})
+    if not isinstance(topics, dict) or not all(isinstance(v, dict) for v in topics.values()):
+        raise SourceError.at(source, locate(text, ("scenario",), "topics"),
+                             "[scenario] 'topics' must map topic names to tables of message fields")
+    return Scenario(head["name"], head["system"], tuple(steps), text, topics)
 
 
 def step_numbers(scenario: Scenario) -> list[int]:

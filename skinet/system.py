@@ -30,6 +30,7 @@ class Component:
     net: PetriNet
     eventless: PetriNet
     manager: str = ""  # ROS 2 node of the skillset manager, e.g. /spot/spot_skillset_manager
+    binding: str = ""  # binding file (SPEC §9), when plain ROS 2 interfaces stand for a manager
 
     @property
     def name(self) -> str:
@@ -66,21 +67,22 @@ class System:
 
 def build_system(
     name: str,
-    skillsets: Sequence[tuple[Skillset, str]],
+    skillsets: Sequence[tuple[Skillset, str] | tuple[Skillset, str, str]],
     properties_text: str,
     properties_source: str = "<properties>",
     sources: Mapping[str, str] | None = None,
     prediction: PredictionOptions | None = None,
 ) -> System:
-    """Assemble a system from parsed skillsets (each with its manager node) and properties text."""
+    """Assemble a system from parsed skillsets (each with its manager node, and its binding file
+    if it has one) and properties text."""
     seen: set[str] = set()
     components = []
-    for ss, manager in skillsets:
+    for ss, manager, *binding in skillsets:
         if ss.name in seen:
             raise SourceError.at(ss.source, ss.pos, f"skillset '{ss.name}' appears twice in system '{name}'")
         seen.add(ss.name)
-        components.append(Component(ss, build_net(ss), build_net(ss, eventless=True), manager))
-    props = parse_properties(properties_text, {s.name: s for s, _ in skillsets}, properties_source)
+        components.append(Component(ss, build_net(ss), build_net(ss, eventless=True), manager, *binding))
+    props = parse_properties(properties_text, {s[0].name: s[0] for s in skillsets}, properties_source)
     return System(name, tuple(components), tuple(props), dict(sources or {}), prediction or PredictionOptions())
 
 

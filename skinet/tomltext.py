@@ -4,6 +4,7 @@
 recurses on nested arrays and tables: both become one ``FILE:LINE:COL`` error.
 ``tomllib`` gives no positions for what it decoded, so :func:`locate` finds
 where a table or a key is written (a line scan that follows table headers);
+:func:`locate_path` also finds keys of inline tables and where values start;
 :func:`check_tables` and :func:`check_keys` refuse names a reader does not
 know, at their position, with the close names (:mod:`skinet.closenames`): a
 misspelt key is an error, never ignored.  Pure; cost linear in the text.
@@ -112,3 +113,74 @@ def _first_subtable(text: str, name: str) -> Pos | None:
         if header and header.group(2).split(".")[0].strip().strip("\"'") == name:
             return Pos(n, line.index("[") + 1)
     return None
+
+
+_PART = r"(?:[A-Za-z0-9_-]+|\"[^\"]*\"|'[^']*')"  # a bare or quoted key
+_KEY_PATH = re.compile(rf"\s*({_PART}(?:\s*\.\s*{_PART})*)\s*=\s*")
+
+
+def _dotted(text: str) -> tuple[str, ...]:
+    return tuple(part.strip().strip("\"'") for part in re.findall(r"\"[^\"]*\"|'[^']*'|[^.]+", text))
+
+
+def locate_path(text: str, path: tuple[str, ...], value: bool = False) -> Pos | None:
+    """Where the key at ``path`` is written (``value``: where its value starts; inside a string,
+    the character after the opening quote), or ``None`` when it cannot be found.
+
+    Understands table headers (``[skills.navigate]``, ``[[skillsets]]``), dotted keys and
+    one-line inline tables (``states = { Low = "percentage < 0.2" }``); a ``[[...]]`` array
+    of tables is addressed by its name alone (its first entry).  Binding files use it: their
+    conditions are strings inside inline tables, and errors point into them.  Cost: one pass
+    over the text.
+    """
+    table: tuple[str, ...] = ()
+    for n, line in enumerate(text.splitlines(), 1):
+        header = _HEADER.match(line)
+        if header:
+            table = _dotted(header.group(2))
+            if table == path and not value:
+                return Pos(n, line.index("[") + 1)
+            continue
+        column = 0
+        scope = table
+        while True:
+            key = _KEY_PATH.match(line, column)
+            if key is None:
+                break
+            full = scope + _dotted(key.group(1))
+            if full == path:
+                return Pos(n, key.end() + 1 + (line[key.end():key.end() + 1] in "\"'")) if value else \
+                    Pos(n, key.start(1) + 1)
+            if path[: len(full)] != full or line[key.end():key.end() + 1] != "{":
+                break
+            scope, column = full, key.end() + 1  # into the inline table
+            while True:  # skip to the next key of the inline table that could be on the path
+                inner = _KEY_PATH.match(line, column)
+                if inner is None:
+                    break
+                keys = _dotted(inner.group(1))
+                if scope + keys == path[: len(scope) + len(keys)]:
+                    break
+                end = _value_end(line, inner.end())
+                column = end + 1 if end < len(line) and line[end] == "," else end
+    return None
+
+
+def _value_end(line: str, start: int) -> int:
+    """Index just after the value starting at ``start`` of an inline table (a string, or up to , or })."""
+    if start < len(line) and line[start] in "\"'":
+        close = line.find(line[start], start + 1)
+        return len(line) if close < 0 else close + 1
+    depth, i = 0, start
+    while i < len(line):
+        c = line[i]
+        if c in "[{":
+            depth += 1
+        elif c in "]}":
+            if depth == 0:
+                return i
+            depth -= 1
+        elif c == "," and depth == 0:
+            return i
+        i += 1
+    return i

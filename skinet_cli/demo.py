@@ -10,7 +10,7 @@ from pathlib import Path
 from skinet.errors import SourceError
 from skinet_cli.options import add_no_properties_arg, load_live_system, require_properties
 from skinet.explain import plural, warning_line
-from skinet.files import load_typemap, read_text
+from skinet.files import load_bindings, load_typemap, read_text
 from skinet.mission import Scenario, StepRecord, check_scenario, flagged_before, parse_scenario, replay
 from skinet.mission_log import records_to_log
 from skinet.system import System
@@ -18,16 +18,18 @@ from skinet.wire.log import log_line
 
 MISSIONS = ("unassisted.toml", "assisted.toml", "mobile_unassisted.toml", "mobile_assisted.toml")
 UNEXPECTED = 3  # exit status: a divergence the scenario did not declare, or a declared one that did not happen
+EXAMPLES = {"nav2": Path("examples") / "nav2" / "missions" / "nav2_run.toml"}  # skinet demo nav2
 HELP = (f"play {len(MISSIONS)} runs: the paper's unassisted and assisted runs, then the mobile manipulator's two "
         "(the main job)")
 DESCRIPTION = (
     f"Play {len(MISSIONS)} runs through the whole chain (simulated managers, CDR, bridge, monitor, predictor on one "
     "embedded Zenoh session) and print what the operator would have seen: the paper's unassisted run "
     "(three violations) and assisted run (two warnings heeded, no violation), then the mobile manipulator's "
-    "unassisted and assisted runs (a forced constraint). Given SCENARIO files, it plays those instead. "
-    "A step the model does not allow then is shown as a model divergence. Exit status: 0; 3 when a run diverged "
-    "at a step its scenario does not mark expect_divergence = true, or a marked step did not diverge; 1 on bad "
-    "input.")
+    "unassisted and assisted runs (a forced constraint). Given SCENARIO files, it plays those instead; 'nav2' "
+    "plays a Nav2 base that has no skillset manager, bound to its action servers, lifecycle node and topics "
+    "(examples/nav2). A step the model does not allow then is shown as a model divergence. Exit status: 0; 3 when "
+    "a run diverged at a step its scenario does not mark expect_divergence = true, or a marked step did not "
+    "diverge; 1 on bad input.")
 
 
 def default_scenarios() -> list[Path]:
@@ -39,11 +41,19 @@ def default_scenarios() -> list[Path]:
     return [Path("skillsets/missions") / m for m in MISSIONS]
 
 
+def example_scenario(name: str) -> Path:
+    """The scenario of a named example (``nav2``): here, else beside the installed package."""
+    for root in (Path.cwd(), Path(__file__).resolve().parents[1]):
+        if (root / EXAMPLES[name]).exists():
+            return root / EXAMPLES[name]
+    return EXAMPLES[name]
+
+
 def add_parser(sub: argparse._SubParsersAction) -> None:
     c = sub.add_parser("demo", help=HELP, description=DESCRIPTION)
     c.add_argument("scenarios", nargs="*", metavar="SCENARIO",
                    help=f"scenario files (default: the {len(MISSIONS)} runs above, skillsets/missions/"
-                        f"{{{','.join(m.removesuffix('.toml') for m in MISSIONS)}}}.toml)")
+                        f"{{{','.join(m.removesuffix('.toml') for m in MISSIONS)}}}.toml), or 'nav2' (examples/nav2)")
     c.add_argument("--no-predict", action="store_true", help="explicit constraints only")
     add_no_properties_arg(c)
     c.add_argument("--core", action="store_true",
@@ -55,7 +65,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
-    paths = [Path(p) for p in args.scenarios] or default_scenarios()
+    paths = [example_scenario(p) if p in EXAMPLES else Path(p) for p in args.scenarios] or default_scenarios()
     for folder in {args.log, args.timeline} - {None}:  # before the runs, not after the first one
         try:
             Path(folder).mkdir(parents=True, exist_ok=True)
@@ -73,6 +83,13 @@ def cmd_demo(args: argparse.Namespace) -> int:
         if args.core:
             records = replay(system, scenario, predict=not args.no_predict)
             how = "core replay"
+        elif any(c.binding for c in system.components):
+            from services.chain import run_bound_chain  # Zenoh only when the chain runs
+
+            bindings, _ = load_bindings(system)
+            records = run_bound_chain(system, bindings, scenario, predict=not args.no_predict)
+            how = ("simulated action servers, lifecycle node and topics -> CDR -> bridge (bindings) -> monitor -> "
+                   "predictor, embedded Zenoh session")
         else:
             from services.chain import run_chain  # Zenoh only when the chain runs
 

@@ -62,6 +62,24 @@ def _positive_seconds(text: str) -> float:
     return value
 
 
+def _budget(text: str) -> float:
+    from skinet.wire.limits import MIN_BUDGET
+
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not MIN_BUDGET <= value < float("inf"):
+        raise ValueError(f"expected a number of seconds >= {MIN_BUDGET:g} (the predictor's minimum budget)")
+    return value
+
+
+def _folder(text: str) -> str:
+    if not os.path.isdir(text):
+        raise ValueError("expected an existing folder")
+    return text
+
+
 def _seconds(text: str) -> float:
     return 0.0 if text.strip() in ("0", "0.0") else _positive_seconds(text)
 
@@ -101,8 +119,9 @@ VARIABLES: dict[str, Variable] = {
     "SKINET_ZENOH_PASSWORD_FILE": Variable("--password-file of every command and service"),
     "SKINET_ZENOH_CONNECT_TIMEOUT": Variable("docker/entrypoint.sh: seconds a client waits for its router",
                                              _seconds_or_forever),
-    "SKINET_SECRETS": Variable("skinet router, skinet fleet, docker/entrypoint.sh, compose.yaml: the secrets folder"),
-    "SKINET_TLS_HOSTNAMES": Variable("skinet router: names in the certificates it makes"),
+    "SKINET_SECRETS": Variable("skinet router, skinet fleet, skinet client-config, python -m services.secrets, "
+                               "docker/entrypoint.sh, compose.yaml: the secrets folder (compose: the vault)"),
+    "SKINET_TLS_HOSTNAMES": Variable("skinet router, python -m services.secrets: names in the certificates they make"),
     "SKINET_FLEET_ROBOTS": Variable("skinet router --robots, compose.yaml"),
     # services
     "SKINET_LOG_LEVEL": Variable("--log-level of the services, compose.yaml"),
@@ -116,6 +135,8 @@ VARIABLES: dict[str, Variable] = {
     "SKINET_DASHBOARD_HOST": Variable("--host of the dashboard"),
     "SKINET_DASHBOARD_PORT": Variable("--port of the dashboard, compose.yaml (the host port)"),
     "SKINET_TRACEBACK": Variable("skinet: print the traceback of an internal error"),
+    "SKINET_INCLUDE_ROOT": Variable("skinet.files: the folder included model files must stay in (default: the "
+                                    "including model's own)", _folder),
     # compose.yaml, docker/*.sh
     "SKINET_IMAGE": Variable("compose.yaml, docker/build.sh: the image"),
     "SKINET_BASE_IMAGE": Variable("compose.yaml, docker/build.sh: the base image"),
@@ -124,12 +145,13 @@ VARIABLES: dict[str, Variable] = {
     "SKINET_SKILLSETS": Variable("compose.yaml: the host folder of models and scenarios"),
     "SKINET_SYSTEM": Variable("compose.yaml: the system file of the bridge, monitor and dashboard"),
     "SKINET_ZENOH_DIR": Variable("compose.yaml: the host folder of router.json5"),
+    "SKINET_PREDICTOR_SECRETS": Variable("compose.yaml: the predictors' own secrets (off-board: a host folder)"),
     "SKINET_ROUTER_PORT": Variable("compose.yaml: the router's published port", _published_port),
     "SKINET_HUB_PORT": Variable("compose.yaml: the hub's published port", _published_port),
     "SKINET_DASHBOARD_BIND": Variable("compose.yaml: the address the dashboard's port is published on"),
     "SKINET_ONBOARD_ENDPOINT": Variable("compose.yaml: where off-board predictors connect", _endpoint),
     "SKINET_PREDICTORS": Variable("compose.yaml: predictor replicas", _count),
-    "SKINET_PREDICT_BUDGET": Variable("compose.yaml: the monitor's --budget", _positive_seconds),
+    "SKINET_PREDICT_BUDGET": Variable("compose.yaml: the monitor's --budget", _budget),
     "SKINET_SCENARIO": Variable("compose.yaml: the simulator's scenario"),
     "SKINET_START_DELAY": Variable("compose.yaml: the simulator's --start-delay", _seconds),
     # tests

@@ -19,7 +19,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 from skinet import __version__
 from skinet.errors import SkinetError, SourceError
 from skinet.explain import plural
-from skinet.files import load_model, load_state, parse_state
+from skinet.files import load_model
 from skinet.net.build import build_net
 from skinet.net.export import FORMATS
 from skinet.props.parser import parse_formula
@@ -29,7 +29,7 @@ from skinet.verify.ctl import Kripke, check
 from skinet.verify.explore import Deadline, explore
 from skinet.verify.predict import Forecast, forecast
 from skinet_cli.environment import check_environment
-from skinet_cli.options import ArgumentParser, count, load_live_system, print_warnings
+from skinet_cli.options import ArgumentParser, count, load_live_system, print_warnings, state_marking
 from skinet_cli.options import seconds as duration
 from skinet_cli.memory import add_memory_arg, memory_limit
 from skinet_cli.render import analysis_text, seconds, table
@@ -51,6 +51,8 @@ examples (from the repository's root; tests/cli/test_help_examples.py runs every
   skinet unsafe skillsets/spot_arm.toml --state '{"spot": {"resources": {"power_status": "PowerOn", "posture": "Standing", "control_mode": "Busy"}, "running": ["teleop"]}}'
   skinet explore skillsets/spot_arm.toml --budget 2
   skinet ctl skillsets/spot_arm.toml "AG not (spot:Busy and manipulator:Busy)" "EF spot:Busy"
+  skinet conform examples/nav2/nav2.toml examples/nav2/bags/nav2_run
+  skinet plan skillsets/spot_arm.toml "reach spot:Standing and manipulator:RD"
 
 a live system, one command per terminal (skinet run prints the lines that reach it;
 Ctrl-C stops the ones that keep running):
@@ -87,15 +89,22 @@ LAZY_COMMANDS: tuple[tuple[str, str, dict[str, str]], ...] = (
      {"timeline": "draw a monitor log (skinet record, skinet demo --log) as a timeline picture"}),
     ("skinet_cli.replay", "add_parser",
      {"replay": "publish a recorded run (skinet record) again, for dashboard and watch"}),
+    ("skinet_cli.conform", "add_parser",
+     {"conform": "replay rosbag2 files against the model and report every divergence"}),
     ("skinet_cli.run", "add_commands", {
         "run": "monitor and predictor in one process with a live operator view (SPEC §7)",
         "router": "run a Zenoh router (the Python wheel in router mode) until interrupted",
         "fleet": "link robots' routers to a hub over mutual TLS: exchange the trust files",
     }),
+    ("skinet_cli.plan", "add_parser",
+     {"plan": "plan the commands that reach a goal without violating any property (SPEC §8)"}),
     ("skinet_cli.operator", "add_parsers", {
         "dashboard": "live web dashboard of a running system (served on 127.0.0.1:8080)",
         "watch": "terminal live view of a running system (any deployment)",
         "check": "ask a running monitor whether a command is safe now (skinet/<system>/check)",
+    }),
+    ("skinet_cli.client_config", "add_parser", {
+        "client-config": "write the Zenoh client configuration (TLS, login) of one user from a deployment's secrets",
     }),
 )
 
@@ -214,12 +223,7 @@ def _load(args: argparse.Namespace) -> tuple[System, dict[str, int]]:
     print_warnings(warnings)
     system = replace(system, prediction=system.prediction.override(
         af=args.af, forced=args.forced, events_uncontrollable=args.events_uncontrollable))
-    if args.state is None:
-        marking = system.initial_marking()
-    elif args.state.lstrip().startswith("{"):  # the JSON itself
-        marking = parse_state(args.state, "<state>", system, args.what_if)
-    else:
-        marking = load_state(args.state, system, args.what_if)
+    marking = system.initial_marking() if args.state is None else state_marking(args.state, system, args.what_if)[0]
     for problem in marking_problems(system, marking) if args.what_if else ():
         print(f"what-if analysis: {problem}", file=sys.stderr if args.json else sys.stdout)
     return system, marking
@@ -248,11 +252,6 @@ def _forecast(args: argparse.Namespace, system: System, marking: dict[str, int],
         print(f"progress: none to show, the exploration took {seconds(time.perf_counter() - t0)} (a report comes "
               f"every {PROGRESS_EVERY:g} s)", file=sys.stderr)
     return result
-
-
-def _depth_reached(depth: int) -> str:
-    """Where a truncated exploration stopped: ``depth`` is the last layer expanded, -1 for none."""
-    return f"at depth {depth}" if depth >= 0 else "before expanding any layer"
 
 
 def _emit(data: object) -> None:
@@ -332,7 +331,7 @@ def cmd_unsafe(args: argparse.Namespace) -> int:
     if prediction is not None:
         r = prediction.report()
         state = "complete" if r["complete"] else (
-            f"TRUNCATED by {r['truncated_by']} {_depth_reached(r['depth'])} (unknown constraints possible)")
+            f"TRUNCATED by {r['truncated_by']} ({prediction.space.explored()}; unknown constraints possible)")
         print(f"prediction: {state}, {plural(r['markings'], 'marking')} in {seconds(r['elapsed'])}")
     else:
         print("prediction: off (explicit constraints only)")
@@ -348,7 +347,7 @@ def cmd_explore(args: argparse.Namespace) -> int:
         return 0
     print(f"explored {system.name} ({'with' if not args.no_seeds else 'without'} event seeds)")
     rows = [
-        ["complete", "yes" if report["complete"] else f"no (truncated by {report['truncated_by']})"],
+        ["complete", "yes" if report["complete"] else f"no (truncated by {report['truncated_by']}: {result.space.explored()})"],
         ["elapsed", seconds(report["elapsed"])],
         ["depth", report["depth"] if report["depth"] >= 0 else "none (no layer expanded)"],
         ["markings", report["markings"]],
@@ -406,7 +405,7 @@ def cmd_ctl(args: argparse.Namespace) -> int:
               + (f" ({r['undecided']} undecided)" if r["undecided"] else ""))
         print(f"at the start marking: {r['start']}")
     if kripke.truncated_by is not None:
-        print(f"truncated by {kripke.truncated_by} {_depth_reached(space.expanded_depth)}: answers are three-valued")
+        print(f"truncated by {kripke.truncated_by} ({space.explored()}): answers are three-valued")
     return 0
 
 

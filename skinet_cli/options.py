@@ -19,10 +19,11 @@ from pathlib import Path
 from typing import NoReturn
 
 from skinet.errors import Diagnostic, Pos, SourceError
-from skinet.files import load_system, read_text
-from skinet.system import System
+from skinet.files import load_state, load_system, parse_state, read_text
+from skinet.system import Marking, System
 from skinet.tomltext import locate, parse_toml
 from skinet.wire.keys import check_chunk
+from skinet.wire.limits import MIN_BUDGET
 
 
 class ArgumentParser(argparse.ArgumentParser):
@@ -68,6 +69,12 @@ def seconds(env: str | None = None, zero: bool = False) -> Callable[[str], float
 def seconds_within(low: float, high: float, env: str | None = None) -> Callable[[str], float]:
     """A duration in seconds in ``[low, high]``."""
     return _number(float, f"a number of seconds from {low:g} to {high:g}", low, False, high, env)
+
+
+def budget(env: str | None = None) -> Callable[[str], float]:
+    """A prediction budget in seconds: at least the predictor's minimum (SPEC §6.1)."""
+    return _number(float, f"a number of seconds >= {MIN_BUDGET:g} (the predictor's minimum budget)",
+                   MIN_BUDGET, False, None, env)
 
 
 def number(low: float, env: str | None = None) -> Callable[[str], float]:
@@ -159,6 +166,16 @@ def _name_pos(path: str | Path) -> Pos | None:
         elif table == "[system]" and (m := _NAME_LINE.match(line)):
             return Pos(n, m.start(1) + 1)
     return None
+
+
+def state_marking(state: str, system: System, what_if: bool = False) -> tuple[Marking, str]:
+    """The marking ``--state`` gives, a JSON file or the JSON itself, and its source name for errors.
+
+    A marking the robot cannot be in is refused unless ``what_if`` (:func:`skinet.files.parse_state`).
+    """
+    if state.lstrip().startswith("{"):  # the JSON itself
+        return parse_state(state, "<state>", system, what_if), "<state>"
+    return load_state(state, system, what_if), state
 
 
 def print_warnings(warnings: list[Diagnostic]) -> None:

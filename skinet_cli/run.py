@@ -10,7 +10,7 @@ from services.common.zenoh_config import add_login_args
 from services.monitor.check import add_policy_arg
 from services.monitor.sync import add_lost_after_arg
 from skinet_cli.memory import add_memory_arg
-from skinet_cli.options import add_no_properties_arg, count, seconds
+from skinet_cli.options import add_no_properties_arg, budget, count, seconds
 
 
 def _zenoh_args(c: argparse.ArgumentParser, listen_help: str) -> None:
@@ -28,7 +28,8 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     c.add_argument("system", help="system file (.toml), e.g. skillsets/spot_arm.toml")
     c.add_argument("--once", action="store_true", help="print one view (after the first prediction) and exit")
     c.add_argument("--duration", type=seconds(), help="stop after this many seconds")
-    c.add_argument("--budget", type=seconds(), default=1.0, help="prediction budget in seconds (default: 1)")
+    c.add_argument("--budget", type=budget(), default=1.0,
+                   help="prediction budget in seconds, at least 0.05 (default: 1)")
     c.add_argument("--dashboard", type=count(0, 65535), metavar="PORT",
                    help="also serve the live web dashboard on this port (0: a free one; see skinet dashboard)")
     c.add_argument("--dashboard-host", default="127.0.0.1", help="address of --dashboard (default: 127.0.0.1)")

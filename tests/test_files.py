@@ -4,6 +4,7 @@ states the robot cannot be in are refused unless asked for (SPEC §3)."""
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 import pytest
@@ -62,6 +63,25 @@ def test_one_model_file_with_two_skillsets_errors(tmp_path: Path) -> None:
     assert error(load_system, gamma) == f"{gamma}: error: skillsets entry 1 names 'gamma' but two.rl declares 'alpha', 'beta'"
     twice = write(tmp_path, "t.toml", '[system]\nname = "t"\n[[skillsets]]\nmodel = "two.rl"\n[[skillsets]]\nmodel = "two.rl"\n')
     assert error(load_system, twice) == f"{tmp_path / 'two.rl'}:1:10: error: skillset 'alpha' appears twice in system 't'"
+
+
+def test_a_skillset_bound_to_plain_ros2_names_its_binding_file(tmp_path: Path) -> None:
+    """``binding`` (SPEC §9) is a path relative to the system file, instead of ``manager``."""
+    write(tmp_path, "two.rl", TWO)
+    path = write(tmp_path, "b.toml", '[system]\nname = "b"\n[[skillsets]]\nmodel = "two.rl"\nname = "alpha"\n'
+                 'binding = "alpha.binding.toml"\n[[skillsets]]\nmodel = "two.rl"\nname = "beta"\nmanager = "/m"\n')
+    system, _ = load_system(path)
+    assert [(c.name, c.manager, c.binding) for c in system.components] == [
+        ("alpha", "", str(tmp_path / "alpha.binding.toml")), ("beta", "/m", "")]
+    both = write(tmp_path, "x.toml", '[system]\nname = "x"\n[[skillsets]]\nmodel = "two.rl"\nname = "alpha"\n'
+                 'manager = "/m"\n  binding = "a.toml"\n')
+    assert error(load_system, both) == (f"{both}:7:3: error: [[skillsets]] entry 1: give 'manager' (a skillset "
+                                        "manager) or 'binding' (plain ROS 2 interfaces), not both")
+    number = write(tmp_path, "n.toml", '[system]\nname = "n"\n[[skillsets]]\nmodel = "two.rl"\nname = "beta"\n'
+                   '[[skillsets]]\nmodel = "two.rl"\nname = "alpha"\nbinding = 3\n')
+    assert error(load_system, number) == f"{number}:9:1: error: [[skillsets]] entry 2 'binding' must be a string, not 3"
+    whole = write(tmp_path, "w.toml", '[system]\nname = "w"\n[[skillsets]]\nmodel = "two.rl"\nbinding = "a.toml"\n')
+    assert error(load_system, whole).startswith(f"{whole}: error: skillsets entry 1: two.rl declares 2 skillsets")
 
 
 def test_two_skillset_file_travels_to_the_predictor(tmp_path: Path) -> None:
@@ -230,13 +250,49 @@ def test_include_errors(tmp_path: Path) -> None:
     assert error(load_model, missing) == f"{missing}:2:9: error: cannot include 'nowhere.rl': cannot read file: No such file or directory"
     write(tmp_path, "bad.rl", "skillset s { data x: Undeclared\n  oops }\n")
     including = write(tmp_path, "i.rl", 'include "bad.rl"\n')
-    assert error(load_model, including) == (
-        f"{tmp_path / 'bad.rl'}:2:3: error: unexpected 'oops',"
+    assert error(load_model, including) == (  # the position, never the text of an included file
+        f"{tmp_path / 'bad.rl'}:2:3: error: unexpected text (not quoted from an included file),"
         " expected one of: 'data', 'event', 'period', 'resource', 'skill', '}'"
     )
     write(tmp_path, "dup.rl", "skillset s {}\n")
     twice = write(tmp_path, "t.rl", 'include "dup.rl"\nskillset s {}\n')
     assert error(load_model, twice) == f"{tmp_path / 'dup.rl'}:1:10: error: duplicate skillset 's' (first declared at {twice}:2:10)"
+
+
+def test_include_stays_in_the_models_folder(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                            capsys: pytest.CaptureFixture[str]) -> None:
+    """No include reads outside the model's folder, and none echoes what a file holds (issue 25, item 6)."""
+    monkeypatch.setenv("MODEL_TEST_TOKEN", "s3cr3t-token")
+    monkeypatch.delenv("SKINET_INCLUDE_ROOT", raising=False)
+    (tmp_path / "models").mkdir()
+    write(tmp_path, "token.txt", "s3cr3t-token\n")
+    outside = "it lies outside {} (included files stay in the model's folder, or in $SKINET_INCLUDE_ROOT)"
+    root = tmp_path / "models"
+    for name, target in [("/proc/self/environ", "/proc/self/environ"), ("../token.txt", str(tmp_path / "token.txt"))]:
+        rl = write(tmp_path, "models/m.rl", f'include "{name}"\nskillset s {{}}\n')
+        message = error(load_model, rl)
+        assert message == f"{rl}:1:9: error: cannot include '{name}': " + outside.format(root), target
+        assert "s3cr3t" not in message
+        assert main(["parse", str(rl)]) == 1  # the command: that one line, no traceback
+        assert capsys.readouterr().err == message + "\n"
+    (root / "link.rl").symlink_to(tmp_path / "token.txt")  # a link out of the folder is outside too
+    rl = write(tmp_path, "models/m.rl", 'include "link.rl"\nskillset s {}\n')
+    assert error(load_model, rl) == f"{rl}:1:9: error: cannot include 'link.rl': " + outside.format(root)
+    os.mkfifo(root / "pipe")  # would block a reader forever
+    rl = write(tmp_path, "models/m.rl", 'include "pipe"\nskillset s {}\n')
+    assert error(load_model, rl) == f"{rl}:1:9: error: cannot include 'pipe': not a regular file"
+    # A configured root lets a model include from a shared folder; the text is still never quoted.
+    monkeypatch.setenv("SKINET_INCLUDE_ROOT", str(tmp_path))
+    rl = write(tmp_path, "models/m.rl", 'include "../token.txt"\nskillset s {}\n')
+    assert error(load_model, rl) == (f"{tmp_path / 'models' / '../token.txt'}:1:1: error: unexpected text (not quoted "
+                                     "from an included file), expected one of: 'skillset', 'type', end of input")
+    (tmp_path / "bin.rl").write_bytes(b"\xffs3cr3t")
+    rl = write(tmp_path, "models/m.rl", 'include "../bin.rl"\nskillset s {}\n')
+    assert error(load_model, rl) == f"{rl}:1:9: error: cannot include '../bin.rl': cannot read file: not UTF-8 text (byte 0)"
+    write(tmp_path, "types.rl", "type Pose\n")
+    rl = write(tmp_path, "models/m.rl", 'include "../types.rl"\nskillset s { data p: Pose }\n')
+    assert load_model(rl).warnings == ()
+    assert error(load_model, rl, root).endswith(outside.format(root))  # the caller's root wins
 
 
 def test_include_cycle(tmp_path: Path) -> None:

@@ -132,8 +132,8 @@ TABLE = _table_commands(README)
 
 def test_the_tables_name_every_command() -> None:
     named = {u.split()[1] if u.startswith("skinet") else u.split()[2] for u in TABLE}
-    assert named == {"demo", "run", "router", "record", "timeline", "replay", "parse", "net", "unsafe", "explore", "ctl",
-                     "dashboard", "watch", "check", *SERVICES}
+    assert named == {"demo", "conform", "run", "router", "record", "timeline", "replay", "parse", "net", "unsafe",
+                     "explore", "ctl", "plan", "dashboard", "watch", "check", "client-config", *SERVICES}
 
 
 @pytest.mark.parametrize("usage", TABLE, ids=[u.split(" [")[0] for u in TABLE])

@@ -66,7 +66,7 @@ def test_the_typo_no_longer_means_no_properties(folder: Path, capsys: pytest.Cap
 
 @pytest.mark.parametrize(("text", "message"), [
     ("[scenario]\nname = 'x'\nsystem = 'y'\nspeed = 2\n",
-     "4:1: error: unknown key 'speed' in [scenario] (expected one of: name, system)"),
+     "4:1: error: unknown key 'speed' in [scenario] (expected one of: name, system, topics)"),
     ("[scenario]\nname = 'x'\nsystem = 'y'\n[[steps]]\nt = 1\nskillset = 'spot'\ntransiton = 'teleop.start'\n",
      "7:1: error: unknown key 'transiton' in step 1 (candidates: transition)"),
     ("[scenario]\nname = 'x'\nsystem = 'y'\n[[step]]\nt = 1\n",

@@ -1,6 +1,7 @@
-"""``python -m services.bridge_ros2 SYSTEM.toml``: canonical events from skillset managers (SPEC §1, §7).
+"""``python -m services.bridge_ros2 SYSTEM.toml``: canonical events from skillset managers (SPEC §1, §7)
+and from skillsets bound to plain ROS 2 action servers, lifecycle nodes and topics (SPEC §9).
 
-Live (default): subscribes to the managers' topics on Zenoh.  ``--replay BAG``:
+Live (default): subscribes to the managers' topics and the bound interfaces on Zenoh.  ``--replay BAG``:
 reads a rosbag2 file (sqlite3 or mcap) instead, as fast as possible or with
 ``--realtime``, publishes its events and exits.
 """
@@ -17,6 +18,8 @@ from pathlib import Path
 
 import zenoh
 
+from services.bridge_ros2.bound import replay_bags
+from services.bridge_ros2.bound_live import start_bound_bridge
 from services.bridge_ros2.replay import monitor_log, replay_bag
 from services.bridge_ros2.service import default_source, start_bridge
 from services.common.cli import add_instance_arg, add_log_arg, one_line_errors, setup_logging
@@ -24,7 +27,7 @@ from services.common.events import event_publisher
 from services.common.zenoh_config import add_zenoh_args, config_from_args, open_session
 from skinet_cli.options import ArgumentParser, count, key_prefix, load_live_system, seconds
 from skinet.errors import SkinetError, SourceError
-from skinet.files import load_typemap
+from skinet.files import load_bindings, load_typemap
 from skinet.ros.keys import KeyStyle
 from skinet.wire import keys
 from skinet.wire.codec import encode
@@ -35,8 +38,9 @@ log = logging.getLogger("skinet.bridge_ros2")
 def build_parser() -> ArgumentParser:
     parser = ArgumentParser(
         prog="python -m services.bridge_ros2",
-        description="Turn what skillset managers publish (ROS 2 topics on Zenoh, or a rosbag2 file) into "
-                    "canonical events on skinet/<system>/events/<skillset>.",
+        description="Turn what skillset managers publish, or what the action servers, lifecycle nodes and topics "
+                    "of a bound skillset show (ROS 2 on Zenoh, or a rosbag2 file), into canonical events on "
+                    "skinet/<system>/events/<skillset>.",
     )
     parser.add_argument("system", help="system TOML file ([system] types names the type map)")
     parser.add_argument("--rmw-zenoh", action="store_true",
@@ -55,6 +59,9 @@ def build_parser() -> ArgumentParser:
     parser.add_argument("--hold", type=seconds(zero=True), default=0.5,
                         help="seconds a status may wait for a response it overtook (each topic has its own route "
                              "through a gateway); 0 derives every status at once (default: 0.5)")
+    parser.add_argument("--settle", type=seconds(zero=True), default=0.5,
+                        help="bound skillsets: seconds after an action server appears before its empty status cache "
+                             "is read as 'no goal yet' (default: 0.5)")
     add_log_arg(parser)
     add_zenoh_args(parser)
     return parser
@@ -66,6 +73,9 @@ def main(argv: list[str] | None = None) -> int:
     setup_logging(args)
     system, _ = load_live_system(args.system)
     typemap = load_typemap(args.system)
+    bindings, warnings = load_bindings(system)
+    for w in warnings:
+        log.warning("%s", w)
     if args.replay and not Path(args.replay).exists():
         raise SourceError.at(args.replay, None, "cannot read file: No such file or directory")
     kind = monitor_log(args.replay) if args.replay else None
@@ -76,28 +86,55 @@ def main(argv: list[str] | None = None) -> int:
     session = open_session(config_from_args(args))
     try:
         if args.replay:
-            return _replay(session, system, typemap, args, source)
+            return _replay(session, system, typemap, bindings, args, source)
         stop = threading.Event()
         for sig in (signal.SIGINT, signal.SIGTERM):
             signal.signal(sig, lambda *_: stop.set())
-        bridge = start_bridge(session, system, typemap, source=source, instance_id=args.instance, hold=args.hold,
-                              style=KeyStyle(args.rmw_zenoh, args.namespace, args.domain,
-                                             args.ros_distro == "humble"))  # errors: one line
-        log.info("bridging the managers of %s (%s) as %s", system.name,
-                 ", ".join(c.name for c in system.components), args.instance)
+        style = KeyStyle(args.rmw_zenoh, args.namespace, args.domain, args.ros_distro == "humble")
+        bridge = None
+        managed = [c.name for c in system.components if not c.binding]
+        if managed:
+            bridge = start_bridge(session, system, typemap, source=source, instance_id=args.instance, hold=args.hold,
+                                  style=style)  # errors: one line
+            log.info("bridging the managers of %s (%s) as %s", system.name, ", ".join(managed), args.instance)
+        bound = start_bound_bridge(session, system, bindings, source=source, instance_id=args.instance,
+                                   hold=args.hold, settle=args.settle, style=style) if bindings else None
         while not stop.wait(0.5):
             pass
-        bridge.close()
-        c = bridge.counters
-        log.info("stopped: %d messages, %d events (%d unnamed), %d malformed, %d statuses not matching the model, "
-                 "%d manager restarts", c.messages, c.events, c.unexplained, c.malformed, c.mismatched, c.restarts)
+        if bridge is not None:
+            bridge.close()
+            c = bridge.counters
+            log.info("stopped: %d messages, %d events (%d unnamed), %d malformed, %d statuses not matching the "
+                     "model, %d manager restarts, %d resyncs after a cut link", c.messages, c.events, c.unexplained,
+                     c.malformed, c.mismatched, c.restarts, c.resyncs)
+        if bound is not None:
+            bound.close()
+            _log_bound(bound.counters)
         return 0
     finally:
         session.close()
 
 
-def _replay(session: zenoh.Session, system, typemap, args: argparse.Namespace, source: str) -> int:
+def _log_bound(c) -> None:  # type: ignore[no-untyped-def]
+    bad = ", ".join(f"{n} {kind}" for kind, n in sorted(c.bad.items())) or "no other bad input"
+    log.info("bound skillsets: %d messages, %d events, %d model divergences, %d malformed, %s", c.messages,
+             c.events, c.drifts, c.malformed, bad)
+
+
+def _replay(session: zenoh.Session, system, typemap, bindings, args: argparse.Namespace, source: str) -> int:
     publishers = {c.name: event_publisher(session, keys.events(system.name, c.name)) for c in system.components}
+    if bindings:
+        try:
+            done = replay_bags(args.replay, system, typemap, bindings,
+                               lambda ev: publishers[ev.skillset].put(encode(ev)), source=source,
+                               realtime=args.realtime, hold=args.hold)
+        except SkinetError:
+            raise
+        except Exception as exc:  # rosbags reader errors: not a bag, missing file, unknown storage
+            raise SourceError.at(args.replay, None, f"cannot replay: {exc}") from None
+        if done.bound is not None:
+            _log_bound(done.bound.counters)
+        return 0
     try:
         feed = replay_bag(args.replay, system, typemap, lambda ev: publishers[ev.skillset].put(encode(ev)),
                           source=source, realtime=args.realtime, hold=args.hold)

@@ -38,6 +38,7 @@ class Counters:
     events: int = 0  # canonical events produced
     unexplained: int = 0  # canonical events without a transition name
     restarts: int = 0  # managers that came back (new process, or their gateway reconnected)
+    resyncs: int = 0  # statuses asked again after the link to the managers was cut (their messages lost)
     mismatched: int = 0  # statuses naming skills or resources the model lacks
 
 
@@ -68,6 +69,7 @@ class _Manager:
     seq: int = 0
     held: _Held | None = None
     restart: str = ""  # why the next status starts afresh (the manager restarted)
+    resync: str = ""  # why the next status follows a gap: the manager's messages since its last one are lost
     publisher: tuple[bytes, int] | None = None  # rmw_zenoh: GID and sequence number of the last status
     reported: set[str] = field(default_factory=set)  # kinds of bad input already logged
 
@@ -93,10 +95,12 @@ class Feed:
         self.clock = clock
         self.epoch = time.time_ns() // 1_000_000 if epoch is None else epoch
         self.counters = Counters()
-        self.statuses: dict[str, int] = {c.name: 0 for c in system.components}  # statuses derived per skillset
+        self.statuses: dict[str, int] = {c.name: 0 for c in system.components if not c.binding}  # statuses derived
         self.managers: dict[str, _Manager] = {}
         self._order: deque[_Slot] = deque()
         for c in system.components:
+            if c.binding:  # bound to plain ROS 2 interfaces: services.bridge_ros2.bound
+                continue
             store = build_typestore(c.skillset, typemap, extra_types)
             topics = [t for t in manager_topics(c.skillset) if t.kind in WATCHED]
             self.managers[c.name] = _Manager(c, store, derive.Deriver(c.skillset, c.net), topics)
@@ -142,7 +146,8 @@ class Feed:
         self._check_ids(m, status)
         if m.held is not None:  # a newer status: the held one goes first
             self._release(m)
-        awaits = None if m.restart else m.deriver.awaits(status)  # a new initial status needs nothing
+        # A new initial status needs nothing; after a gap, what it awaits was lost.
+        awaits = None if m.restart or m.resync else m.deriver.awaits(status)
         if awaits is not None and self.hold > 0:
             m.held = _Held(status, self.clock(), awaits)
             self._order.append(m.held.slot)
@@ -213,6 +218,24 @@ class Feed:
         m.restart = why
         m.publisher = None
 
+    def resync(self, skillset: str, why: str) -> None:
+        """Messages of ``skillset``'s manager may have been lost (the link was cut): its next
+        status closes the gap, and its event says so (SPEC §7: never lost without a trace).
+
+        Unlike :meth:`restarted`, the manager kept its state and execution ids: the next
+        status is derived from the last one as usual.  Counted once per gap.
+        """
+        m = self.managers[skillset]
+        if m.deriver.last is None and m.held is None:
+            return  # nothing known yet: the first status is the initial one anyway
+        if m.held is not None:
+            self._release(m)
+        if not m.resync:
+            self.counters.resyncs += 1
+            log.warning("%s: messages of manager %s may be lost (%s); its next status closes the gap", skillset,
+                        m.component.manager, why)
+        m.resync = why
+
     def _check_publisher(self, m: _Manager, attachment: bytes | None) -> None:
         if attachment is None:
             return
@@ -263,6 +286,9 @@ class Feed:
 
     def _status(self, m: _Manager, status: derive.Status) -> list[CanonicalEvent]:
         self.statuses[m.component.name] += 1
+        if m.resync and not m.restart:
+            return self._emit(m, self._resynced(m, status))
+        m.resync = ""  # a restart is the stronger news
         if not m.restart:
             return self._emit(m, m.deriver.on_status(status))
         last, m.deriver = m.deriver.last, derive.Deriver(m.component.skillset, m.component.net)
@@ -274,6 +300,21 @@ class Feed:
         out.events = [replace(d, info=info) for d in out.events]
         m.restart = ""
         return self._emit(m, out)
+
+    def _resynced(self, m: _Manager, status: derive.Status) -> derive.Output:
+        """The status after a gap, derived from the last one; every event says so, and an
+        unchanged status is published too, so the gap always leaves a trace."""
+        last = m.deriver.last
+        out = m.deriver.on_status(status)
+        diverged = _differences(last, status) if last is not None else ""
+        info = f"resync after {m.resync}; " + (f"state now differs: {diverged}" if diverged else "same state as before")
+        log.warning("%s: %s", m.component.name, info)
+        m.resync = ""
+        if not out.events:
+            out.events.append(derive.Derived(None, status.wire(), status.stamp, info))
+        else:
+            out.events = [replace(d, info="; ".join(x for x in (info, d.info) if x)) for d in out.events]
+        return out
 
     def _emit(self, m: _Manager, out: derive.Output) -> list[CanonicalEvent]:
         for note in out.notes:
@@ -300,9 +341,10 @@ class Feed:
                               source=self.source, epoch=self.epoch, status=last.wire(), info="resync")
 
     def has_status(self, skillset: str) -> bool:
-        """Whether a status of ``skillset`` was received (since its manager restarted, if it did)."""
+        """Whether a status of ``skillset`` was received (since its manager restarted or the link
+        to it was cut, if either happened)."""
         m = self.managers[skillset]
-        return (m.deriver.last is not None or m.held is not None) and not m.restart
+        return (m.deriver.last is not None or m.held is not None) and not m.restart and not m.resync
 
 
 def _differences(before: derive.Status, now: derive.Status) -> str:

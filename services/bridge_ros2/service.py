@@ -19,7 +19,10 @@ initial status whose ``info`` says how it differs from the last one (SPEC §7). 
 ``rmw_zenoh`` the bridge declares its own node, subscription and publisher tokens.
 A monitor that missed events, or that starts, asks ``keys.resync(system, skillset)``:
 the bridge answers with the skillset's last status (numbered as its last event) and
-asks the manager for a fresh one.  Every 0.5 s it publishes a
+asks the manager for a fresh one.  What managers publish while the bridge's session
+has lost every router is lost (their topics are volatile): the first status after
+such a cut is a counted resync whose event says so, and every manager is asked
+again when the link is back (:meth:`Bridge._watch_link`).  Every 0.5 s it publishes a
 :class:`~skinet.wire.messages.Heartbeat` (:mod:`services.common.heartbeat`): its
 token, and per skillset its last event's number and whether the manager is present
 (its token seen, gone, or never announced), so that a monitor can tell a silent
@@ -64,6 +67,7 @@ from skinet.wire.messages import HeartbeatSkillset
 log = logging.getLogger("skinet.bridge_ros2")
 
 PLUGIN_TOKENS = "@/*/@ros2_lv/MS/**"  # zenoh-bridge-ros2dds: one token per route to a DDS subscription
+LINK_POLL = 0.2  # seconds between looks at the session's routers (a client reconnects about 2 s after a restart)
 
 
 def default_source(instance: str | None = None) -> str:
@@ -83,7 +87,8 @@ class Bridge:
         self.style = style
         self.instance_id = keys.check_chunk(instance_id or default_instance_id(), "instance id")
         self.feed = Feed(system, typemap, source or default_source(self.instance_id), extra_types, hold=hold)
-        self._queue: queue.SimpleQueue[tuple[str, ManagerTopic, bytes, bytes | None] | tuple[()] | None] = \
+        # Samples, () when a held status is due, a resync's reason (str) in its place among them, None: stop.
+        self._queue: queue.SimpleQueue[tuple[str, ManagerTopic, bytes, bytes | None] | tuple[()] | str | None] = \
             queue.SimpleQueue()
         self._fed = threading.Condition()
         self._stop = threading.Event()
@@ -94,6 +99,8 @@ class Bridge:
         self._hashes: dict[str, str] = {}  # skillset -> status_request type hash learned from the manager's token
         self._present: dict[str, str] = {}  # skillset -> token of its manager's status_request subscription
         self._gone: set[str] = set()  # skillsets whose manager's token went away (and has not come back)
+        self._cuts = 0  # times the link to every router was lost (see _watch_link)
+        self._cuts_seen: dict[str, int] = {}  # skillset -> _cuts when its manager's token last appeared
         self._sequence = 0
         self._gid = os.urandom(16)  # rmw_zenoh attachments of the status requests
         own: list[tuple[EntityKind, str, str, str]] = []  # rmw_zenoh graph entities of the bridge
@@ -126,6 +133,9 @@ class Bridge:
         # ask a manager for its status as soon as it can hear us, and again when it comes back.
         self._subscribers.append(session.liveliness().declare_subscriber(
             liveliness_key_expr(style.domain) if style.rmw_zenoh else PLUGIN_TOKENS, self._on_token, history=True))
+        self._request = request_status
+        self._linker = threading.Thread(target=self._watch_link, name="bridge_ros2-link", daemon=True)
+        self._linker.start()
         self._asker = None
         if request_status:
             self._asker = threading.Thread(target=self._ask_status, args=(retry,), name="bridge_ros2-status",
@@ -160,7 +170,10 @@ class Bridge:
                 return
             try:
                 with self._fed:
-                    events = self.feed.feed(*item) if item else self.feed.expire()
+                    if isinstance(item, str):
+                        for name in self.feed.managers:
+                            self.feed.resync(name, item)
+                    events = self.feed.feed(*item) if item and not isinstance(item, str) else self.feed.expire()
                 for ev in events:
                     self._events[ev.skillset].put(wire_encode(ev))
             except Exception:  # a bug must not stop the bridge (SPEC §7)
@@ -216,9 +229,17 @@ class Bridge:
                 return
             if hash_:
                 self._hashes[name] = hash_
-            back = name not in self._present and self.feed.managers[name].deriver.last is not None
+            # Only a manager seen before can come back.  The tokens present at start-up come as
+            # the subscriber's history, with no mark and no order against the topics' samples:
+            # on a loaded start they arrive after the first status, and are no restart.  Nor is
+            # a token that left with our link (cut since it last appeared): the resync after the
+            # cut covers it (_watch_link), and a manager that restarted meanwhile shows it in
+            # its status (skill ids reset, a new publisher).
+            back = name not in self._present and self._cuts_seen.get(name) == self._cuts and \
+                self.feed.managers[name].deriver.last is not None
             self._present[name] = key
             self._gone.discard(name)
+            self._cuts_seen[name] = self._cuts
         if back:
             with self._fed:
                 self.feed.restarted(name, "the manager (or its gateway) came back")
@@ -232,6 +253,41 @@ class Bridge:
         return {name: HeartbeatSkillset(seq=m.seq - 1 if m.seq else None,
                                         manager=True if name in present else False if name in gone else None)
                 for name, m in self.feed.managers.items()}
+
+    def _watch_link(self) -> None:
+        """Resync every manager after the session lost every router.
+
+        What a manager publishes meanwhile is lost (its topics are volatile): the bridge
+        marks a resync (counted, and said by the next event of each skillset: the first
+        status after the cut closes the gap) and, when the link is back, asks every
+        manager for its status.  A link replaced by another router at once (a restart
+        faster than a poll) counts as a cut too.  Cost: one look at the session's
+        routers every :data:`LINK_POLL` seconds.
+        """
+        routers: set[str] = set()
+        cut = False
+        while True:  # a first look at once: the link may be cut within the first poll
+            try:
+                now = {str(z) for z in self.session.info.routers_zid()}
+            except zenoh.ZError:  # the session is closing
+                return
+            if routers and not cut and (not now or not now & routers):
+                cut = True
+                with self._lock:
+                    self._cuts += 1
+                log.warning("link to the router(s) lost: manager messages may be lost until it is back")
+                # Queued behind every sample received before the cut, ahead of every one after it.
+                self._queue.put("the link to the managers was cut")
+            if now and cut:
+                cut = False
+                log.warning("link to the router(s) back: asking every manager for its status")
+                if self._request:
+                    for name in self.feed.managers:
+                        self.request_status(name)
+            if now:
+                routers = now
+            if self._stop.wait(LINK_POLL):
+                return
 
     def request_status(self, skillset: str) -> None:
         """Ask ``skillset``'s manager to publish its status."""
@@ -279,6 +335,7 @@ class Bridge:
         self._worker.join(5.0)
         if self._asker is not None:
             self._asker.join(5.0)
+        self._linker.join(5.0)
         undeclare(*self._events.values())
 
 

@@ -5,10 +5,13 @@ user (``users.txt`` for the router's ``dictionary_file``, ``<user>.password`` fo
 each service) and :func:`ensure_tls` a certificate authority with one certificate
 per name (``ca.pem``; ``<name>.pem`` and ``<name>.key``), with the well-kept
 ``cryptography`` library.  Both keep what already exists, so an operator may put
-their own files there first, and both are idempotent: the router's entry point and
-``skinet router`` call them at every start.  :func:`make_certificate` also makes
-expired or foreign certificates for tests.  Files are written 0600 (0644 for
-``ca.pem`` and certificates).
+their own files there first, and both are idempotent: the compose job ``secrets``
+(:mod:`services.secrets`) and ``skinet router`` call them at every start.
+:func:`make_certificate` also makes expired or foreign certificates for tests.
+Secret files (passwords, ``users.txt``, keys) are 0600, and made so again at the
+next start when found looser; certificates and ``ca.pem`` are 0644.  A certificate
+is made only where the CA key is: :func:`ensure_tls` refuses a folder that has
+``ca.pem`` without ``ca.key`` instead of making a new CA over it.
 
 Reusable by any deployment (a fleet of routers): ``ensure_tls(folder, ["router",
 "robot1-router", ...])`` gives every name a certificate for the DNS name
@@ -47,7 +50,9 @@ USERS = ("bridge", "monitor", "predictor", "robot", "observer", "hub")
 DAY = datetime.timedelta(days=1)
 
 
-def _write(path: Path, data: bytes, mode: int = 0o600) -> None:
+def write_file(path: Path, data: bytes, mode: int = 0o600) -> None:
+    """``path`` with ``data`` and ``mode`` (0600 by default), replaced at once: never half written
+    nor, for a moment, readable by others."""
     tmp = path.with_name(path.name + ".tmp")
     fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, mode)
     with os.fdopen(fd, "wb") as f:
@@ -56,8 +61,16 @@ def _write(path: Path, data: bytes, mode: int = 0o600) -> None:
     tmp.replace(path)
 
 
-def ensure_users(folder: Path, users: Iterable[str] = USERS, fixed: dict[str, str] | None = None) -> dict[str, str]:
-    """``folder/users.txt`` and ``folder/<user>.password`` for every user; returns user -> password.
+def private(path: Path) -> None:
+    """Make an existing secret file 0600 if group or others may read it (files of older versions)."""
+    if path.stat().st_mode & 0o077:
+        os.chmod(path, 0o600)
+
+
+def ensure_users(folder: Path, users: Iterable[str] = USERS, fixed: dict[str, str] | None = None,
+                 password_files: bool = True) -> dict[str, str]:
+    """``folder/users.txt`` and, with ``password_files``, ``folder/<user>.password`` for every
+    user; returns user -> password.
 
     Existing entries are kept, except those of ``fixed`` (user -> password, e.g. the
     fleet's ``hub`` password), which replace them; missing users get a random 24-byte password.
@@ -80,10 +93,14 @@ def ensure_users(folder: Path, users: Iterable[str] = USERS, fixed: dict[str, st
             known[user] = secrets.token_urlsafe(24)
             changed = True
         path = folder / f"{user}.password"
+        if not password_files:
+            continue
         if not path.exists() or path.read_text().strip() != known[user]:
-            _write(path, known[user].encode() + b"\n", 0o644 if user == "observer" else 0o600)
+            write_file(path, known[user].encode() + b"\n")
+        private(path)
     if changed or not table.exists():
-        _write(table, "".join(f"{u}:{p}\n" for u, p in known.items()).encode())
+        write_file(table, "".join(f"{u}:{p}\n" for u, p in known.items()).encode())
+    private(table)
     return known
 
 
@@ -111,8 +128,8 @@ def make_ca(folder: Path, name: str = "SkiNet Live CA", days: int = 3650) -> tup
                                          key_agreement=False, encipher_only=False, decipher_only=False),
                            critical=True)
             .sign(key, hashes.SHA256()))
-    _write(folder / "ca.pem", cert.public_bytes(serialization.Encoding.PEM), 0o644)
-    _write(folder / "ca.key", _pem_key(key))
+    write_file(folder / "ca.pem", cert.public_bytes(serialization.Encoding.PEM), 0o644)
+    write_file(folder / "ca.key", _pem_key(key))
     return cert, key
 
 
@@ -151,18 +168,34 @@ def make_certificate(folder: Path, name: str, ca: tuple[x509.Certificate, ec.Ell
             .sign(ca_key, hashes.SHA256()))
     folder.mkdir(parents=True, exist_ok=True)
     chain = cert.public_bytes(serialization.Encoding.PEM) + ca_cert.public_bytes(serialization.Encoding.PEM)
-    _write(folder / f"{name}.pem", chain, 0o644)
-    _write(folder / f"{name}.key", _pem_key(key))
+    write_file(folder / f"{name}.pem", chain, 0o644)
+    write_file(folder / f"{name}.key", _pem_key(key))
     return folder / f"{name}.pem"
 
 
 def ensure_tls(folder: Path, names: Iterable[str], hostnames: Iterable[str] = ()) -> None:
-    """A CA in ``folder`` (made if missing) and a certificate for each name that has none;
-    ``hostnames`` (addresses clients use, e.g. ``robot.example``) go into every new one."""
-    ca = load_ca(folder) if (folder / "ca.pem").exists() and (folder / "ca.key").exists() else make_ca(folder)
-    for name in names:
-        if not (folder / f"{name}.pem").exists() or not (folder / f"{name}.key").exists():
-            make_certificate(folder, name, ca, hostnames=hostnames)
+    """A certificate in ``folder`` for each name that has none, signed by the CA there
+    (made with the first certificate when ``folder`` has no ``ca.pem``); ``hostnames``
+    (addresses clients use, e.g. ``robot.example``) go into every new one.
+
+    The CA key is read only when a certificate is missing; :class:`SkinetError` when
+    one is and ``folder`` holds ``ca.pem`` without ``ca.key`` (a router's or a
+    client's handed-out files, or an operator's own CA): a new CA would silently
+    replace the one every other party trusts.
+    """
+    names = list(names)
+    missing = [n for n in names if not (folder / f"{n}.pem").exists() or not (folder / f"{n}.key").exists()]
+    for key in [folder / "ca.key", *(folder / f"{n}.key" for n in names if n not in missing)]:
+        if key.exists():
+            private(key)
+    if not missing:
+        return
+    if (folder / "ca.pem").exists() and not (folder / "ca.key").exists():
+        raise SkinetError(f"{folder} has ca.pem but no ca.key: cannot make the certificate of "
+                          f"{', '.join(missing)} (make it where the CA key is: docs/deployment.md, TLS)")
+    ca = load_ca(folder) if (folder / "ca.pem").exists() else make_ca(folder)
+    for name in missing:
+        make_certificate(folder, name, ca, hostnames=hostnames)
 
 
 def tls_listen_config(folder: Path, name: str) -> dict:
@@ -198,7 +231,8 @@ def ensure_fleet(folder: Path) -> str:
     ensure_tls(fleet, ["hub"])
     path = fleet / "hub.password"
     if not path.exists():
-        _write(path, secrets.token_urlsafe(24).encode() + b"\n")
+        write_file(path, secrets.token_urlsafe(24).encode() + b"\n")
+    private(path)
     return path.read_text().strip()
 
 
@@ -240,8 +274,8 @@ def join_fleet(folder: Path, invitation: str) -> str:
         raise FleetError(f"{own} does not exist: start the robot's router once (it makes its CA), then join")
     joined = folder / JOINED
     joined.mkdir(parents=True, exist_ok=True)
-    _write(joined / "ca.pem", ca.encode(), 0o644)
-    _write(joined / "hub.password", password.encode() + b"\n")
+    write_file(joined / "ca.pem", ca.encode(), 0o644)
+    write_file(joined / "hub.password", password.encode() + b"\n")
     return own.read_text()
 
 
@@ -258,7 +292,7 @@ def add_robot(folder: Path, name: str, ca_pem: str) -> Path:
     _ca_pem(ca_pem, f"the CA given for robot '{name}'")
     path = folder / ROBOTS / f"{name}.pem"
     path.parent.mkdir(parents=True, exist_ok=True)
-    _write(path, ca_pem.encode(), 0o644)
+    write_file(path, ca_pem.encode(), 0o644)
     return path
 
 
@@ -274,7 +308,7 @@ def robot_fleet(folder: Path) -> tuple[Path | None, dict[str, str]]:
     if not own.exists():  # users only (ensure_tls comes later)
         return None, fixed
     bundle = folder / "tls" / "trusted.pem"
-    _write(bundle, own.read_bytes() + (joined / "ca.pem").read_bytes(), 0o644)
+    write_file(bundle, own.read_bytes() + (joined / "ca.pem").read_bytes(), 0o644)
     return bundle, fixed
 
 

@@ -15,7 +15,7 @@ from services.monitor.check import add_policy_arg
 from services.monitor.service import start_monitor
 from services.monitor.sync import add_lost_after_arg
 from skinet_cli.options import (
-    ArgumentParser, add_no_properties_arg, key_name, load_live_system, require_properties, seconds,
+    ArgumentParser, add_no_properties_arg, budget, key_name, load_live_system, require_properties, seconds,
 )
 
 
@@ -27,7 +27,8 @@ def build_parser() -> ArgumentParser:
     )
     p.add_argument("system", help="system file (.toml), e.g. skillsets/spot_arm.toml")
     p.add_argument("--id", dest="instance_id", type=key_name("instance id"), help="instance id in the liveliness token (default: random)")
-    p.add_argument("--budget", type=seconds(), default=1.0, help="predictor exploration budget, seconds (default: 1)")
+    p.add_argument("--budget", type=budget(), default=1.0,
+                   help="predictor exploration budget, seconds, at least 0.05 (default: 1)")
     p.add_argument("--query-timeout", type=seconds(),
                    help="predict query timeout, seconds (default: 1.25 x budget + 3: the predictor answers within "
                         "its budget, the first query also waits for the model bundle)")
@@ -47,7 +48,11 @@ def build_parser() -> ArgumentParser:
 
 @one_line_errors("python -m services.monitor")
 def main(argv: Sequence[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.query_timeout is not None and args.query_timeout <= args.budget:
+        parser.error(f"argument --query-timeout: {args.query_timeout:g} s is not above --budget {args.budget:g} s: "
+                     "no prediction could ever arrive in time")
     setup_logging(args)
     system, warnings = load_live_system(args.system)
     require_properties(system, args.system, args.no_properties)

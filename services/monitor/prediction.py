@@ -38,10 +38,10 @@ from skinet.system import Marking, System
 from skinet.wire import keys
 from skinet.wire.codec import DecodeError, decode, encode
 from skinet.wire.convert import statuses
+from skinet.wire.limits import MIN_BUDGET
 from skinet.wire.messages import PredictReply, PredictRequest
 
 log = logging.getLogger("skinet.monitor")
-MIN_BUDGET = 0.05  # a retry with less exploration time left is not worth sending
 
 
 @dataclass
@@ -74,6 +74,20 @@ def query_timeout(budget: float) -> float:
     loaded machine, so an answer within budget is never reported as a timeout.
     """
     return 1.25 * budget + 3.0
+
+
+def check_budget(budget: float, timeout: float | None = None) -> None:
+    """Refuse a budget no predictor accepts, or a timeout no answer can meet (ValueError, one line).
+
+    Below :data:`~skinet.wire.messages.MIN_BUDGET` the monitor would never query,
+    and every prediction would stay stale without a word.
+    """
+    if not budget >= MIN_BUDGET:
+        raise ValueError(f"budget {budget:g} s is below the predictor's minimum of {MIN_BUDGET:g} s: "
+                         "no prediction could ever be asked for")
+    if timeout is not None and not timeout > budget:
+        raise ValueError(f"query timeout {timeout:g} s is not above the budget {budget:g} s: "
+                         "no prediction could ever arrive in time")
 
 
 Key = tuple[int, ...]
@@ -111,6 +125,7 @@ class PredictionClient:
     def __init__(self, session: zenoh.Session, system: System, digest: str, on_reply: OnReply, *,
                  budget: float = 1.0, timeout: float | None = None, retry: float = 0.5, stall: float = 0.5,
                  client: str = keys.LOCAL_CLIENT):
+        check_budget(budget, timeout)
         self.session, self.system, self.digest, self.on_reply = session, system, digest, on_reply
         self.client = client  # the client chunk of the keys queried: this session's router login
         self.budget, self.timeout, self.retry = budget, timeout if timeout is not None else query_timeout(budget), retry
@@ -239,7 +254,7 @@ class PredictionClient:
             instance = self.pool.pick(exclude=q.tried)
             remaining = q.deadline - time.monotonic()
             budget = self.budget if first else min(self.budget, remaining - (self.timeout - self.budget))
-            if (instance is None and not (first and not self.pool)) or budget < MIN_BUDGET:
+            if (instance is None and not (first and not self.pool)) or budget < MIN_BUDGET:  # not worth a retry
                 if q.attempt is not None:
                     q.attempt.done = True  # nothing left to try: _run finishes the query
                 else:

@@ -12,8 +12,9 @@ from services.common.zenoh_config import add_zenoh_args, config_from_args, open_
 from services.common.ratelimit import add_rate_args
 from services.predictor.service import start_predictor
 from skinet_cli.memory import memory_size
-from skinet_cli.options import ArgumentParser, count, number, seconds
+from skinet_cli.options import ArgumentParser, budget, count, number, seconds
 from skinet.verify.explore import DEFAULT_MEMORY_LIMIT
+from skinet.wire.limits import MAX_PREDICT_REQUEST
 
 log = logging.getLogger("skinet.predictor")
 
@@ -34,13 +35,16 @@ def build_parser() -> ArgumentParser:
     parser.add_argument("--cache", type=count(), default=4, help="systems kept in the LRU cache (default: 4)")
     parser.add_argument("--fetch-timeout", type=seconds(), default=2.0,
                         help="seconds to wait for a model bundle (default: 2)")
-    parser.add_argument("--max-budget", type=seconds(), default=10.0,
-                        help="cap on a request's budget, seconds (default: 10)")
+    parser.add_argument("--max-budget", type=budget(), default=10.0,
+                        help="cap on a request's budget, seconds, at least 0.05 (default: 10)")
     parser.add_argument("--memory-limit", type=memory_size, default=DEFAULT_MEMORY_LIMIT, metavar="SIZE",
                         help="peak memory of the process, shared by the workers, e.g. 2GiB (default: 1GiB); "
                              "beyond it answers are truncated, never refused")
     parser.add_argument("--memory-mb", type=count(64), default=2048,
                         help="address-space limit of each worker process, MB (default: 2048)")
+    parser.add_argument("--max-request", type=memory_size, default=MAX_PREDICT_REQUEST, metavar="SIZE",
+                        help="largest request payload decoded, e.g. 64KiB (default: 64KiB; a request carries "
+                             "the live marking, a few KB); a larger one is refused unread, counted and logged")
     parser.add_argument("--grace", type=seconds(), default=1.0,
                         help="seconds past a request's budget before its worker is killed (default: 1)")
     add_log_arg(parser)
@@ -60,7 +64,7 @@ def main(argv: list[str] | None = None) -> int:
     predictor = start_predictor(session, args.instance, workers=args.workers, max_pending=args.max_pending,
                                 cache_size=args.cache, fetch_timeout=args.fetch_timeout, max_budget=args.max_budget,
                                 memory_limit=args.memory_limit, memory_mb=args.memory_mb, grace=args.grace,
-                                rate_limit=args.rate_limit, rate_burst=args.rate_burst)
+                                max_request=args.max_request, rate_limit=args.rate_limit, rate_burst=args.rate_burst)
     while not stop.wait(0.2):
         pass
     # Withdraw the queryable and answer what was admitted, then retire the whole

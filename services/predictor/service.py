@@ -53,6 +53,7 @@ from skinet.verify.explore import DEFAULT_MEMORY_LIMIT
 from skinet.wire import keys
 from skinet.wire.codec import DecodeError, decode, encode
 from skinet.wire.convert import bundle_digest
+from skinet.wire.limits import MAX_PREDICT_REQUEST
 from skinet.wire.messages import ModelBundle, PredictReply, PredictRequest
 
 log = logging.getLogger("skinet.predictor")
@@ -88,6 +89,7 @@ class Predictor:
         memory_mb: int = 2048,
         grace: float = 1.0,
         max_bundle: int = 1 << 20,
+        max_request: int = MAX_PREDICT_REQUEST,
         rate_limit: float = RATE_LIMIT,
         rate_burst: float | None = None,
     ):
@@ -100,7 +102,8 @@ class Predictor:
         self.cache_size = cache_size
         self.grace = grace
         self.max_bundle = max_bundle
-        self.counts: Counter[str] = Counter()  # ok, failed, busy, limited, fetched, killed
+        self.max_request = max_request
+        self.counts: Counter[str] = Counter()  # ok, failed, refused, busy, limited, fetched, killed
         self.limiter = RateLimiter(rate_limit, rate_burst)
         self._cache: OrderedDict[str, bytes] = OrderedDict()  # digest -> checked bundle
         self._failed: OrderedDict[str, tuple[float, str]] = OrderedDict()  # digest -> (when, why) of a failed fetch
@@ -148,7 +151,7 @@ class Predictor:
             request = self._decode(query, key)
             if isinstance(request, PredictReply):
                 with query:
-                    self._reply(query, request)
+                    self._reply(query, request, "refused")
                 return
             reason = "busy: too many pending requests"
             if not self._admit(client):
@@ -180,6 +183,9 @@ class Predictor:
         system = key.split("/")[1] if "*" not in key.split("/")[1] else keys.ANY_SYSTEM
         if query.payload is None:
             return self._failure(system, "", 0, "empty payload")
+        size = len(query.payload)
+        if size > self.max_request:  # before anything is copied or decoded
+            return self._failure(system, "", 0, f"request of {size} bytes exceeds the limit of {self.max_request}")
         try:
             request = decode(query.payload.to_bytes(), PredictRequest)
         except DecodeError as exc:
@@ -338,9 +344,10 @@ class Predictor:
         kind = "ok" if reply.ok else failure
         self._count(kind)
         n = self.counts[kind]
-        if not reply.ok and (kind != "limited" or n in (1, 10, 100) or n % 1000 == 0):  # a flood: a few lines
-            log.warning("predictor %s: %s request %s/%s: %s",
-                        self.instance_id, kind, reply.system, reply.seq, reply.error)
+        flood = kind in ("limited", "refused")  # cheap for a client to send by the thousand: a few lines
+        if not reply.ok and (not flood or n in (1, 10, 100) or n % 1000 == 0):
+            log.warning("predictor %s: %s request %s/%s%s: %s", self.instance_id, kind, reply.system, reply.seq,
+                        f" (#{n})" if flood else "", reply.error)
         key = self._reply_key(str(query.key_expr), reply.system)
         # A reply travels with its query's congestion control (Zenoh 1.10 ignores one given
         # here): the monitor asks instance keys with DROP (schemas/README.md).
@@ -389,6 +396,7 @@ def start_predictor(
     memory_limit: int = DEFAULT_MEMORY_LIMIT,
     memory_mb: int = 2048,
     grace: float = 1.0,
+    max_request: int = MAX_PREDICT_REQUEST,
     rate_limit: float = RATE_LIMIT,
     rate_burst: float | None = None,
 ) -> Predictor:
@@ -404,11 +412,12 @@ def start_predictor(
             beyond it answers are truncated.
         memory_mb: address-space limit of each worker process, MB (killed beyond it).
         grace: seconds past a request's budget before its worker is killed.
+        max_request: largest request payload decoded, bytes; a larger one is refused unread.
         rate_limit: requests per second per client (the key's client chunk), 0: no limit;
             beyond it a request is answered ``rate limited`` at once.
         rate_burst: requests a client may send at once (default: one second's worth).
     """
     return Predictor(session, instance_id, workers=workers, max_pending=max_pending,
                      cache_size=cache_size, fetch_timeout=fetch_timeout, max_budget=max_budget,
-                     memory_limit=memory_limit, memory_mb=memory_mb, grace=grace, rate_limit=rate_limit,
-                     rate_burst=rate_burst)
+                     memory_limit=memory_limit, memory_mb=memory_mb, grace=grace, max_request=max_request,
+                     rate_limit=rate_limit, rate_burst=rate_burst)

@@ -1,4 +1,5 @@
-"""``python -m services.simulator SCENARIO.toml``: play a scenario on simulated managers (SPEC §7)."""
+"""``python -m services.simulator SCENARIO.toml``: play a scenario on simulated managers (SPEC §7), or on the
+simulated action servers, lifecycle nodes and topics of a system bound to plain ROS 2 interfaces (SPEC §9)."""
 
 from __future__ import annotations
 
@@ -14,7 +15,7 @@ from services.common.zenoh_config import add_zenoh_args, config_from_args, open_
 from services.simulator.driver import StepRun
 from services.simulator.service import Simulator
 from skinet_cli.options import ArgumentParser, count, key_prefix, load_live_system, number, seconds
-from skinet.files import load_typemap, read_text
+from skinet.files import load_bindings, load_typemap, read_text
 from skinet.mission import check_scenario, parse_scenario
 from skinet.ros.keys import KeyStyle
 
@@ -23,7 +24,9 @@ def build_parser() -> ArgumentParser:
     parser = ArgumentParser(
         prog="python -m services.simulator",
         description="Simulate the skillset managers of a scenario's system on Zenoh (ROS 2 topic keys, CDR) "
-                    "and play the scenario's steps as operator requests and skill outcomes.",
+                    "and play the scenario's steps as operator requests and skill outcomes. A system whose "
+                    "skillsets name bindings gets their action servers, lifecycle nodes and topics instead "
+                    "(goals sent and cancelled as a client would, results, transition events, topic samples).",
     )
     parser.add_argument("scenario", help="scenario TOML file (its [scenario] system names the system file)")
     parser.add_argument("--speed", type=number(0, env="SKINET_SPEED"), default=os.environ.get("SKINET_SPEED", "1"),
@@ -69,6 +72,11 @@ def main(argv: list[str] | None = None) -> int:
     system, _ = load_live_system(system_path)
     check_scenario(scenario, system, str(path))
     typemap = load_typemap(system_path)
+    bindings, _ = load_bindings(system)
+    if bindings and len(bindings) != len(system.components):
+        raise ValueError("the simulator plays systems of managers or of bindings, not both in one system yet")
+    if bindings and args.dds:
+        parser.error("--dds simulates skillset managers only (bound action servers: tests/dds)")
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
     session = open_session(config_from_args(args))
     try:
@@ -81,9 +89,15 @@ def main(argv: list[str] | None = None) -> int:
                 return 2
             sim = DdsSimulator(session, system, typemap, domain=args.domain, distro=args.ros_distro,
                                config=os.environ.get("CYCLONEDDS_URI"), style=style)
+        elif bindings:
+            from services.simulator.bound import BoundSimulator
+
+            sim = BoundSimulator(session, system, bindings, style=style)
         else:
             sim = Simulator(session, system, typemap, style=style)
         time.sleep(max(0.0, args.start_delay))
+        if bindings:  # the robot's first samples, once a bridge had time to connect
+            sim.publish_topics(scenario.topics)
         sim.drive(scenario, args.speed, on_step=lambda run: print(_line(run), flush=True))  # errors: one line
         time.sleep(max(0.0, args.linger))
         sim.close()

@@ -34,7 +34,7 @@ from typing import Any
 from rosbags.typesys.base import normalize_fieldname
 
 from skinet.lang.dnf import dnf
-from skinet.lang.expr import And, Const, Expr, Implies, Not, Or, StateAtom
+from skinet.lang.expr import Expr, holds
 from skinet.lang.model import Effect, Mode, Skill, Skillset
 from skinet.ros.interfaces import (
     EVENT_RESULTS, RESULTS, SKILL_STATES, event_response_topic, skill_topic, skill_type, status_field, status_topic,
@@ -51,25 +51,6 @@ class Message:
     topic: str
     typename: str
     msg: Any
-
-
-def holds(expr: Expr | None, resources: dict[str, str]) -> bool:
-    """Truth of a skillset guard on resource states (``None``: no guard, true)."""
-    if expr is None:
-        return True
-    if isinstance(expr, Const):
-        return expr.value
-    if isinstance(expr, StateAtom):
-        return resources.get(expr.resource) == expr.state
-    if isinstance(expr, Not):
-        return not holds(expr.arg, resources)
-    if isinstance(expr, And):
-        return holds(expr.left, resources) and holds(expr.right, resources)
-    if isinstance(expr, Or):
-        return holds(expr.left, resources) or holds(expr.right, resources)
-    if isinstance(expr, Implies):
-        return not holds(expr.left, resources) or holds(expr.right, resources)
-    raise TypeError(f"not a skillset guard: {expr!r}")
 
 
 @dataclass

@@ -7,6 +7,7 @@ the property language uses its own atoms.  Precedence in both languages is
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Union
 
@@ -69,6 +70,25 @@ def atoms(expr: Expr) -> list[object]:
     if isinstance(expr, (And, Or, Implies)):
         return atoms(expr.left) + atoms(expr.right)
     return [expr]
+
+
+def holds(expr: Expr | None, resources: Mapping[str, str]) -> bool:
+    """Truth of a skillset guard on resource states (``None``: no guard, true); one pass over the expression."""
+    if expr is None:
+        return True
+    if isinstance(expr, Const):
+        return expr.value
+    if isinstance(expr, StateAtom):
+        return resources.get(expr.resource) == expr.state
+    if isinstance(expr, Not):
+        return not holds(expr.arg, resources)
+    if isinstance(expr, And):
+        return holds(expr.left, resources) and holds(expr.right, resources)
+    if isinstance(expr, Or):
+        return holds(expr.left, resources) or holds(expr.right, resources)
+    if isinstance(expr, Implies):
+        return not holds(expr.left, resources) or holds(expr.right, resources)
+    raise TypeError(f"not a skillset guard: {expr!r}")
 
 
 def to_text(expr: Expr) -> str:

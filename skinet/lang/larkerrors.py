@@ -13,7 +13,8 @@ from lark.exceptions import UnexpectedCharacters, UnexpectedInput, UnexpectedTok
 from skinet.errors import Diagnostic, Pos, SourceError
 
 _MAX_EXPECTED = 10
-_DISPLAY = {"$END": "end of input", "NAME": "identifier", "NUMBER": "number", "_NL": "end of line"}
+_DISPLAY = {"$END": "end of input", "NAME": "identifier", "NUMBER": "number", "_NL": "end of line",
+            "REACH": "'reach'", "RUN": "'run'", "FORMULA": "a formula"}  # the last three: goals (skinet/plan)
 # Accepted but not suggested: `parameter` sections and `include` only exist in old
 # ONERA dialects (robot_language 2022, rl_model 2023), and listing them would push the keywords
 # every file uses past the cap of an expected list.
@@ -62,13 +63,21 @@ def check_nesting(tree: Tree, operators: frozenset[str], source: str) -> None:
         stack.extend((child, depth) for child in node.children if isinstance(child, Tree))
 
 
+# Said instead of the offending text where the text must not be shown (an included file).
+UNQUOTED = "text (not quoted from an included file)"
+
+
 def syntax_error(parser: Lark, exc: UnexpectedInput, text: str, source: str) -> SourceError:
     """:func:`syntax_diagnostic` wrapped in a :class:`SourceError`."""
     return SourceError([syntax_diagnostic(parser, exc, text, source)])
 
 
-def syntax_diagnostic(parser: Lark, exc: UnexpectedInput, text: str, source: str) -> Diagnostic:
-    """A readable ``unexpected 'X', expected one of: ...`` diagnostic."""
+def syntax_diagnostic(parser: Lark, exc: UnexpectedInput, text: str, source: str, quote: bool = True) -> Diagnostic:
+    """A readable ``unexpected 'X', expected one of: ...`` diagnostic.
+
+    Without ``quote`` the offending token or character is not shown, only its
+    position (an included file may be anything: a secret must not be echoed).
+    """
     if isinstance(exc, UnexpectedToken):
         expected = _expected_before(parser, text, exc.token) or exc.accepts or exc.expected
         if exc.token.type == "$END":
@@ -77,7 +86,7 @@ def syntax_diagnostic(parser: Lark, exc: UnexpectedInput, text: str, source: str
             column = len(stripped) - (stripped.rfind("\n") + 1) + 1
             found = "end of input"
             return Diagnostic(source, Pos(line, column), "error", f"unexpected {found}, expected {_expected_text(parser, expected)}")
-        found = "end of line" if exc.token.type == "_NL" else f"'{exc.token}'"
+        found = "end of line" if exc.token.type == "_NL" else f"'{exc.token}'" if quote else UNQUOTED
         return Diagnostic(
             source, Pos(exc.line, exc.column), "error", f"unexpected {found}, expected {_expected_text(parser, expected)}"
         )
@@ -85,9 +94,10 @@ def syntax_diagnostic(parser: Lark, exc: UnexpectedInput, text: str, source: str
         if text.startswith("/*", exc.pos_in_stream):
             return Diagnostic(source, Pos(exc.line, exc.column), "error", "unterminated comment '/*'")
         char = text[exc.pos_in_stream] if exc.pos_in_stream < len(text) else ""
+        found = f"character '{char}'" if quote else UNQUOTED
         return Diagnostic(
             source, Pos(exc.line, exc.column), "error",
-            f"unexpected character '{char}', expected {_expected_text(parser, exc.allowed)}",
+            f"unexpected {found}, expected {_expected_text(parser, exc.allowed)}",
         )
     return Diagnostic(  # pragma: no cover - lark's LALR raises only the two above
         source, Pos(exc.line, exc.column), "error", "syntax error"

@@ -82,15 +82,16 @@ Unit = tuple[Model, list[Diagnostic]]
 def parse_unit(text: str, source: str, library: bool = False) -> Unit:
     """The syntax and structure of one file, not yet validated (see :func:`link`).
 
-    A ``library`` (a file named by an ``include``) may declare no skillset.
-    Raises :class:`SourceError` on a syntax error.  Cost: linear in the text.
+    A ``library`` (a file named by an ``include``) may declare no skillset, and
+    its syntax errors quote none of its text.  Raises :class:`SourceError` on a
+    syntax error.  Cost: linear in the text.
     """
     check_size(text, source)
     parser = _parser("library" if library else "start")
     try:
         tree = parser.parse(text)
     except UnexpectedInput as exc:
-        raise SourceError([syntax_diagnostic(parser, exc, text, source)]) from None
+        raise SourceError([syntax_diagnostic(parser, exc, text, source, quote=not library)]) from None
     check_nesting(tree, _OPERATORS, source)
     builder = _Builder(source)
     try:

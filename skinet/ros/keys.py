@@ -131,6 +131,16 @@ class KeyStyle:
         hash_ = self.type_hash(store, topic.typename) if store is not None else "*"
         return rmw_zenoh_key(manager, topic.topic, topic.typename, hash_, self.domain)
 
+    def name_key(self, name: str, typename: str, store: Typestore | None = None) -> str:
+        """Key of any ROS 2 topic or service ``name`` (``/navigate_to_pose/_action/status``) of type
+        ``typename`` (a service: ``lifecycle_msgs/srv/GetState``); the type hash is ``*`` without ``store``."""
+        fqn = "/" + name.strip("/")
+        if not self.rmw_zenoh:
+            ns = self.namespace.strip("/")
+            return f"{ns}{fqn}" if ns else fqn[1:]
+        hash_ = self.type_hash(store, typename) if store is not None else "*"
+        return f"{self.domain}{fqn}/{dds_type_name(typename)}/{hash_}"
+
     def _node(self, manager: str) -> str:
         node = topic_fqn(manager, "")[1:].rstrip("/")
         if self.rmw_zenoh:
@@ -244,6 +254,15 @@ def rmw_attachment(sequence: int, timestamp_ns: int, gid: bytes) -> bytes:
     return struct.pack("<qqB", sequence, timestamp_ns, GID_SIZE) + gid
 
 
+ADVANCED_CACHE = "@adv/**"  # zenoh-ext: where an AdvancedPublisher's cache answers (transient local topics)
+
+
+def history_selector(key: str) -> str:
+    """The selector that asks the caches of the advanced publishers on ``key`` for their samples
+    (``zenoh-bridge-ros2dds`` and ``rmw_zenoh`` keep a transient local topic's last samples there)."""
+    return f"{key}/{ADVANCED_CACHE}"
+
+
 def parse_rmw_attachment(data: bytes) -> tuple[int, int, bytes]:
     """``(sequence, timestamp_ns, gid)`` of an ``rmw_zenoh`` attachment; ``ValueError`` if malformed."""
     if len(data) != ATTACHMENT_SIZE or data[16] != GID_SIZE:
@@ -253,7 +272,7 @@ def parse_rmw_attachment(data: bytes) -> tuple[int, int, bytes]:
 
 
 __all__ = [
-    "ATTACHMENT_SIZE", "DEFAULT_QOS", "EMPTY_TYPE", "EntityKind", "KeyStyle", "LIVELINESS_PREFIX", "ManagerTopic",
+    "ADVANCED_CACHE", "ATTACHMENT_SIZE", "DEFAULT_QOS", "history_selector", "EMPTY_TYPE", "EntityKind", "KeyStyle", "LIVELINESS_PREFIX", "ManagerTopic",
     "NO_TYPE_HASH",
     "RosEntity", "TopicKind", "bridge_key", "dds_type_name", "liveliness_key_expr", "manager_topics", "node_entity",
     "parse_liveliness_token", "parse_rmw_attachment", "rmw_attachment", "rmw_zenoh_key", "topic_entity", "topic_fqn",

@@ -456,14 +456,49 @@ class Result:
     rank: np.ndarray | None = None
 
 
+def constant(formula: Expr) -> bool | None:
+    """The value ``formula`` takes at every marking of every system, when it needs no exploration.
+
+    Every marking has a successor (deadlocks loop on themselves), so a
+    temporal operator of a constant is that constant (``AG true``, ``EX true``,
+    ``AF false``), and ``E[f U g]``/``A[f U g]`` take ``g``'s constant value.
+    ``None`` when the value depends on the marking.  Cost: linear in the formula.
+    """
+    if isinstance(formula, Const):
+        return formula.value
+    if isinstance(formula, Not):
+        c = constant(formula.arg)
+        return None if c is None else not c
+    if isinstance(formula, (And, Or, Implies)):
+        left, right = constant(formula.left), constant(formula.right)
+        if isinstance(formula, Implies):
+            left = None if left is None else not left
+        if isinstance(formula, And):
+            return False if False in (left, right) else (True if left is right is True else None)
+        return True if True in (left, right) else (False if left is right is False else None)
+    if isinstance(formula, Temporal):
+        return constant(formula.arg)
+    if isinstance(formula, Until):
+        return constant(formula.right)
+    return None
+
+
 def check(kripke: Kripke, formula: Expr) -> Result:
     """Evaluate ``formula`` (state formulas, EX AX EF AF EG AG EU AU) on ``kripke``.
 
     On a complete exploration ``lower`` and ``upper`` are one array unless the
-    deadline cut a fixpoint.
+    deadline cut a fixpoint.  A formula that needs no exploration
+    (:func:`constant`) is answered exactly whatever was explored; once the
+    deadline has passed, a formula with a temporal operator is answered
+    undecided at once (no fixpoint is started), so nested operators cost
+    nothing more past the budget.  Cost: one fixpoint per temporal operator,
+    each linear in the stored markings and edges.
     """
     s = kripke.space
     st = kripke.stored
+    value = constant(formula)
+    if value is not None:
+        return _constant_result(kripke, formula, value)
     if isinstance(formula, (PlaceAtom, Const)) or not is_temporal(formula):
         if s.codes is None:  # on the box, atoms broadcast along their component's axis: one array at the end
             v = evaluate(formula, lambda a: place_values(s, a, flat=False))
@@ -472,10 +507,10 @@ def check(kripke: Kripke, formula: Expr) -> Result:
             v = evaluate(formula, lambda a: place_values(s, a))
             v = np.broadcast_to(np.asarray(v, dtype=bool), (s.size,)) & st
         return Result(v, v)
+    if kripke._expired():
+        return _undecided(kripke)
     if isinstance(formula, Not):
-        r = check(kripke, formula.arg)
-        lo = ~r.upper & st
-        return Result(lo, lo if r.upper is r.lower else ~r.lower & st)
+        return _negate(kripke, check(kripke, formula.arg))
     if isinstance(formula, (And, Or, Implies)):
         a, b = check(kripke, formula.left), check(kripke, formula.right)
         same = a.lower is a.upper and b.lower is b.upper
@@ -500,16 +535,43 @@ def check(kripke: Kripke, formula: Expr) -> Result:
         if op == "AX":
             return _pair(kripke, a, a, lambda _, z, up: (kripke.ax(z, up), None))
         if op == "EF":
-            return _pair(kripke, a, a, lambda _, z, up: (kripke.eu(st, z, up), None))
+            return _ef(kripke, a)
         if op == "AF":
             return af(kripke, a)
         if op == "EG":
             return _pair(kripke, a, a, lambda _, z, up: (kripke.eg(z, up), None))
-        if op == "AG":  # AG f = not EF not f
-            r = check(kripke, Temporal("EF", Not(formula.arg)))
-            lo = ~r.upper & st
-            return Result(lo, lo if r.upper is r.lower else ~r.lower & st)
+        if op == "AG":  # AG f = not EF not f, from f's result (checking f again would double the work per level)
+            return _negate(kripke, _ef(kripke, _negate(kripke, a)))
     raise TypeError(f"not a CTL formula: {formula!r}")
+
+
+def _constant_result(kripke: Kripke, formula: Expr, value: bool) -> Result:
+    """``value`` at every stored marking (read-only arrays), ranked 0 (AF/AU of true) where asked."""
+    v = kripke.stored.view() if value else np.zeros(kripke.space.size, dtype=bool)
+    v.flags.writeable = False
+    rank = None
+    if isinstance(formula, Until) and formula.quantifier == "A" or isinstance(formula, Temporal) and formula.op == "AF":
+        rank = np.full(kripke.space.size, 0 if value else np.iinfo(np.uint8).max, dtype=np.uint8)
+    return Result(v, v, rank)
+
+
+def _undecided(kripke: Kripke) -> Result:
+    """Nothing proven, everything stored possible (read-only arrays; no pass over the space)."""
+    lower = np.zeros(kripke.space.size, dtype=bool)  # calloc: pages only touched if read
+    upper = kripke.stored.view()
+    lower.flags.writeable = upper.flags.writeable = False
+    return Result(lower, upper)
+
+
+def _negate(kripke: Kripke, r: Result) -> Result:
+    st = kripke.stored
+    lo = ~r.upper & st
+    return Result(lo, lo if r.upper is r.lower else ~r.lower & st)
+
+
+def _ef(kripke: Kripke, a: Result) -> Result:
+    st = kripke.stored
+    return _pair(kripke, a, a, lambda _, z, up: (kripke.eu(st, z, up), None))
 
 
 def af(kripke: Kripke, g: Result, ranks: bool = True) -> Result:

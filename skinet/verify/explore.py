@@ -201,6 +201,18 @@ class StateSpace:
                 idx = idx[self.stored_mask[idx]]
             yield lo, idx, depths(self.components, self.strides, self.code_of(idx))
 
+    def explored(self) -> str:
+        """What was explored, in words, for a truncation message (``depth -1`` means nothing to a user)."""
+        stored = f"{self.markings} marking{'' if self.markings == 1 else 's'} stored"
+        if self.complete:
+            return f"every layer expanded, {stored}"
+        if self.expanded_depth < 0:
+            if self.markings <= 1:
+                return "only the live marking stored, no layer expanded" if self.markings else "nothing stored"
+            return f"{stored}, no layer expanded"
+        depths = f"depths 0 to {self.expanded_depth}" if self.expanded_depth else "depth 0"
+        return f"{depths} expanded, {stored}"
+
     def transfer(self, values: np.ndarray, other: StateSpace, fill: object = False) -> np.ndarray:
         """``values`` over this space's index space, moved to ``other``'s (``fill`` elsewhere).
 

@@ -32,7 +32,7 @@ Examples:
 from __future__ import annotations
 
 from collections import OrderedDict
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from itertools import product
 
@@ -228,38 +228,55 @@ def forced(system: System, marking: Mapping[str, int], prop: Property, events: b
     return oracle(system, events).verdict(prop, marking)
 
 
+def forced_boxes(
+    system: System, graphs: Sequence[ComponentGraph], prop: Property, events: bool = False,
+) -> list[list[tuple[int, np.ndarray]]]:
+    """forced(``prop``) over the product of ``graphs``, as a union of boxes.
+
+    Each box is a list of ``(position in graphs, boolean mask over that
+    component's local states)``; a marking of the product is forced when, for
+    some box, every listed component's local state is in its mask (components
+    not listed are free).  A constant property gives one empty box (every
+    marking forced) or none.  ``graphs`` are component graphs whose local
+    states are markings of the eventless nets, which share the full nets'
+    places.  Cost: one uncontrollable reach per local state of each component
+    the property mentions, then one box per violating combination of the
+    valuations of its atoms.
+    """
+    per = oracle(system, events).atoms_of(prop)
+    position = {g.name: i for i, g in enumerate(graphs)}
+    names = list(per)
+    if not names:  # a constant property
+        return [] if evaluate(prop.expr, lambda a: False) else [[]]
+    reached: list[list[set[tuple[bool, ...]]]] = []  # per mentioned component, per local state
+    for c in names:
+        g = graphs[position[c]]
+        net = system.component(c).net
+        bits = _bits(net, per[c])
+        reached.append([{_valuation(s, bits) for s in uncontrollable_reach(net, m, events).states} for m in g.states])
+    boxes = []
+    for combo in product(*(sorted(set().union(*rows)) for rows in reached)):
+        if _violated(prop, per, names, combo):
+            boxes.append([(position[c], np.array([valuation in r for r in rows], dtype=bool))
+                          for c, valuation, rows in zip(names, combo, reached)])
+    return boxes
+
+
 def forced_mask(
     system: System, graphs: Iterable[ComponentGraph], local: Callable[[np.ndarray, int], np.ndarray],
     prop: Property, events: bool = False,
 ) -> np.ndarray:
     """forced(``prop``) over an explored state space, as one boolean array.
 
-    ``graphs`` are the space's component graphs (local states are markings of
-    the eventless nets, which share the full nets' places); ``local(values, i)``
+    ``graphs`` are the space's component graphs; ``local(values, i)``
     broadcasts a per-local-state array of component ``i`` over the space.
-    Cost: one reach per local state, then one array operation per component and
-    violating combination of valuations.
+    Cost: :func:`forced_boxes`, then one array operation per component of each box.
     """
     graphs = list(graphs)
-    per = oracle(system, events).atoms_of(prop)
-    position = {g.name: i for i, g in enumerate(graphs)}
-    names = list(per)
-    if not names:  # a constant property
-        return local(np.full(graphs[0].size, not evaluate(prop.expr, lambda a: False)), 0).copy()
-    reached: list[list[set[tuple[bool, ...]]]] = []  # per mentioned component, per local state
-    for c in names:
-        g = graphs[position[c]]
-        net = system.component(c).net
-        bits = _bits(net, per[c])
-        rows = [{_valuation(s, bits) for s in uncontrollable_reach(net, m, events).states} for m in g.states]
-        reached.append(rows)
     out = local(np.zeros(graphs[0].size, dtype=bool), 0).copy()
-    options = [sorted(set().union(*rows)) for rows in reached]
-    for combo in product(*options):
-        if not _violated(prop, per, names, combo):
-            continue
+    for box in forced_boxes(system, graphs, prop, events):
         mask = out | True
-        for c, valuation, rows in zip(names, combo, reached):
-            mask &= local(np.array([valuation in r for r in rows], dtype=bool), position[c])
+        for i, values in box:
+            mask &= local(values, i)
         out |= mask
     return out

@@ -91,6 +91,22 @@ def variables(graphs: Sequence[ComponentGraph]) -> tuple[list[list[str]], list[l
     return x, y, order
 
 
+def cube(bdd: Any, names: Sequence[str], value: int) -> Function:
+    """The binary variables ``names`` (least significant first) equal to ``value``."""
+    f = bdd.true
+    for b, n in enumerate(names):
+        f &= bdd.var(n) if value >> b & 1 else ~bdd.var(n)
+    return f
+
+
+def cubes(bdd: Any, names: Sequence[str], values: Iterable[int]) -> Function:
+    """The binary variables ``names`` equal to one of ``values``."""
+    f = bdd.false
+    for v in values:
+        f |= cube(bdd, names, v)
+    return f
+
+
 class SymbolicProduct:
     """The asynchronous product of ``graphs`` as BDDs."""
 
@@ -114,17 +130,11 @@ class SymbolicProduct:
     # ------------------------------------------------------------------ sets
 
     def _code(self, names: Sequence[str], value: int) -> Function:
-        f = self.bdd.true
-        for b, n in enumerate(names):
-            f &= self.bdd.var(n) if value >> b & 1 else ~self.bdd.var(n)
-        return f
+        return cube(self.bdd, names, value)
 
     def states(self, i: int, indices: Iterable[int], primed: bool = False) -> Function:
         """Component ``i`` in one of the local states ``indices``, the others anywhere."""
-        f = self.bdd.false
-        for s in indices:
-            f |= self._code(self.y[i] if primed else self.x[i], s)
-        return f
+        return cubes(self.bdd, self.y[i] if primed else self.x[i], indices)
 
     def _relation(self, i: int) -> Function:
         g = self.graphs[i]

@@ -17,6 +17,8 @@ from typing import ClassVar, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from skinet.wire.limits import MIN_BUDGET
+
 SCHEMA_VERSION = 1
 MAX_CHECK_WAIT = 30.0  # seconds a check request may wait for a synced state and a fresh prediction
 
@@ -158,11 +160,14 @@ class ModelBundle(_Message):
 
 
 class PredictRequest(_Message):
+    # Strict: a budget sent as "1.0" or true, or a seq as 1.0, is refused, not converted.
+    model_config = ConfigDict(extra="forbid", frozen=True, strict=True)
     system: str
     digest: str
     seq: int = Field(ge=0, description="monitor query counter")
     skillsets: dict[str, SkillsetStatus] = Field(description="the live marking")
-    budget: float = Field(1.0, gt=0, description="exploration time budget, seconds")
+    budget: float = Field(1.0, ge=MIN_BUDGET, allow_inf_nan=False,
+                          description="exploration time budget, seconds (a number; at least 0.05)")
     af: dict[str, Literal["fair", "literal"]] = Field(
         default_factory=dict, description="AF per property (SPEC §6.2); properties not listed use fair AF")
 

@@ -231,6 +231,24 @@ def test_ctl_several_formulas_share_one_exploration(capsys: pytest.CaptureFixtur
     assert code == 1 and err.startswith("<formula 2>:1:14: error: unexpected end of input")
 
 
+def test_ctl_cut_by_the_budget_says_what_was_explored(capsys: pytest.CaptureFixture[str]) -> None:
+    """What needs no exploration is answered; the rest is undecided; the last line says what was explored."""
+    code, out, _ = run(capsys, "ctl", SYSTEM, "AG true", "AG AG AG AG AG AG AG AG not spot:Busy", "EF false",
+                       "--budget", "0.000001")
+    assert code == 0
+    assert out.splitlines() == [
+        "formula: AG true", "satisfied by 1 of 1 markings", "at the start marking: holds", "",
+        "formula: AG AG AG AG AG AG AG AG not spot:Busy", "satisfied by 0 of 1 markings (1 undecided)",
+        "at the start marking: undecided", "",
+        "formula: EF false", "satisfied by 0 of 1 markings", "at the start marking: fails",
+        "truncated by budget (only the live marking stored, no layer expanded): answers are three-valued"]
+    code, out, _ = run(capsys, "ctl", SYSTEM, "AG not spot:i_go_to_waypoint", "--max-depth", "2")
+    assert out.splitlines()[-1] == ("truncated by depth (depths 0 to 1 expanded, 7 markings stored): "
+                                    "answers are three-valued")
+    code, out, _ = run(capsys, "explore", SYSTEM, "--max-depth", "1")
+    assert "  complete   no (truncated by depth: depth 0 expanded, 3 markings stored)" in out.splitlines()
+
+
 def test_ctl_syntax_error(capsys: pytest.CaptureFixture[str]) -> None:
     code, _, err = run(capsys, "ctl", SYSTEM, "AG (spot:Busy")
     assert code == 1
@@ -285,7 +303,8 @@ def test_lazy_commands_list_their_modules_own_help() -> None:
     assert build_parser("").format_help() == full.format_help()  # skinet --help without importing them
     assert build_parser("unsafe").format_help() == full.format_help()
     names = [name for _, _, helps in LAZY_COMMANDS for name in helps]
-    assert names == ["demo", "record", "timeline", "replay", "run", "router", "fleet", "dashboard", "watch", "check"]
+    assert names == ["demo", "record", "timeline", "replay", "conform", "run", "router", "fleet", "plan", "dashboard",
+                     "watch", "check", "client-config"]
     for name in names:
         lazy = build_parser(name)
         assert lazy.format_help() == full.format_help()
@@ -349,10 +368,11 @@ def test_max_depth_zero_says_no_layer_was_expanded(capsys: pytest.CaptureFixture
     _, out, _ = run(capsys, "explore", SYSTEM, "--max-depth", "0")
     assert "  depth      none (no layer expanded)" in out.splitlines()
     _, out, _ = run(capsys, "unsafe", SYSTEM, "--max-depth", "0")
-    assert out.splitlines()[-1].startswith("prediction: TRUNCATED by depth before expanding any layer (unknown "
-                                           "constraints possible), 1 marking in ")
+    assert out.splitlines()[-1].startswith("prediction: TRUNCATED by depth (only the live marking stored, no layer "
+                                           "expanded; unknown constraints possible), 1 marking in ")
     _, out, _ = run(capsys, "ctl", SYSTEM, "EF spot:Busy", "--max-depth", "0")
-    assert out.splitlines()[-1] == "truncated by depth before expanding any layer: answers are three-valued"
+    assert out.splitlines()[-1] == ("truncated by depth (only the live marking stored, no layer expanded): "
+                                    "answers are three-valued")
     assert "-1" not in out
 
 

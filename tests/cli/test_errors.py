@@ -96,6 +96,7 @@ def _cases() -> list[Case]:
     bad_name = ("{tmp}/badname.toml:2:8: error: system name 'has space/slash' cannot be used in a Zenoh key "
                 "(letters, digits, _ - . only)")
     seconds = "expected a number of seconds > 0, got '{}'"
+    budget = "expected a number of seconds >= 0.05 (the predictor's minimum budget), got '{}'"
 
     # skinet parse / net
     add("skinet", "file", ("parse", "{tmp}/missing.rl"), 1,
@@ -135,6 +136,72 @@ def _cases() -> list[Case]:
             "<state>:1:10: error: invalid JSON: Expecting value")
     add("skinet", "formulas", ("ctl", SYSTEM, "EF spot:Busy", "EF spot:Bussy"), 1,
         "<formula 2>:1:4: error: unknown name 'spot:Bussy' (candidates: spot:Busy)")
+
+    # skinet plan (issue 23): bad goals, goal files, inputs and states, each one line with its place
+    add("skinet", "system", ("plan", "{tmp}/missing.toml", "reach spot:Busy"), 1, missing)
+    add("skinet", "system", ("plan", "{tmp}/badname.toml", "reach spot:Busy"), 1, bad_name)
+    for goal, error in (
+        ("run spt:teleop", "<goal>:1:5: error: unknown skillset 'spt' (candidates: spot)"),
+        ("run spot:telop", "<goal>:1:10: error: unknown skill 'telop' of 'spot' (candidates: teleop)"),
+        ("run spot:teleop.success.finished", "<goal>:1:25: error: unknown success mode 'finished' of 'spot:teleop' "
+                                             "(expected one of: done)"),
+        ("run spot:teleop.failure.link_lost", "<goal>:1:17: error: unexpected 'failure', expected 'success'"),
+        ("reach spot:Stnding", "<goal>:1:7: error: unknown name 'spot:Stnding' (candidates: spot:Standing, "
+                               "spot:Sitting, spot:posture.Standing)"),
+        ("reach (spot:Busy and", "<goal>:1:21: error: unexpected end of input, expected one of: '(', 'false', "
+                                 "'not', 'true', identifier"),
+        ("reach EF spot:Busy", "<goal>:1:7: error: reach takes a state formula (atoms, not, and, or, =>), "
+                               "not a temporal operator"),
+        ("fly spot:Busy", "<goal>:1:1: error: unexpected 'fly', expected one of: 'reach', 'run'"),
+        ("run spot:go_to_waypoint", "<goal>:1:5: error: run spot:go_to_waypoint needs input 'target' (GeoPoint): "
+                                    "give it in the goal's inputs, e.g. inputs = { go_to_waypoint = { target = ... } }"),
+    ):
+        add("skinet", "goals", ("plan", SYSTEM, goal), 1, error)
+    add("skinet", "goals", ("plan", SYSTEM, "reach spot:Busy", "reach manipulator:Bussy"), 1,
+        "<goal 2>:1:7: error: unknown name 'manipulator:Bussy' (candidates: manipulator:Busy)")
+    add("skinet", "goals", ("plan", SYSTEM), 1,
+        'skinet: error: no goals: give GOAL arguments (e.g. "reach spot:Standing") or --goals FILE')
+    add("skinet", "--goals", ("plan", SYSTEM, "--goals", "{tmp}/missing.toml"), 1, missing)
+    for name, error in (
+        ("empty", "1:1: error: no goals: a goals file lists [[goals]] tables, each with reach = \"FORMULA\" or "
+                  "run = \"SKILLSET:SKILL\""),
+        ("syntax", "3:4: error: invalid TOML: Expected '=' after a key in a key/value pair"),
+        ("top_key", "1:1: error: unknown key 'goal' at the top level (keys belong in a table) (candidates: [[goals]])"),
+        ("goal_key", "6:1: error: unknown key 'input' in [[goals]] (candidates: inputs)"),
+        ("both", "3:1: error: goal 1 has both reach and run"),
+        ("neither", "1:1: error: goal 1 needs reach = \"FORMULA\" or run = \"SKILLSET:SKILL\""),
+        ("formula", "5:28: error: unknown name 'spot:Bussy' (candidates: spot:Busy)"),
+        ("not_string", "2:1: error: goal 1: reach must be a string"),
+        ("input_type", "3:31: error: input 'target' of spot:go_to_waypoint (GeoPoint): expected a table of the fields "
+                       "of geometry_msgs/msg/Point, got a string"),
+        ("input_field", "3:31: error: input 'target' of spot:go_to_waypoint (GeoPoint): expected float64 at y, "
+                        "got a string"),
+        ("input_name", "3:31: error: unknown input 'goal' of spot:go_to_waypoint (expected one of: target)"),
+        ("input_skill", "3:12: error: unknown skill 'go_to_waypont' (candidates: go_to_waypoint, spot:go_to_waypoint)"),
+        ("input_missing", "2:8: error: run spot:go_to_waypoint needs input 'target' (GeoPoint): give it in the goal's "
+                          "inputs, e.g. inputs = { go_to_waypoint = { target = ... } }"),
+    ):
+        add("skinet", "--goals", ("plan", SYSTEM, "--goals", f"{{tmp}}/goals_{name}.toml"), 1,
+            f"{{tmp}}/goals_{name}.toml:{error}")
+    add("skinet", "--inputs", ("plan", SYSTEM, "run spot:go_to_waypoint", "--inputs", "go_to_waypoint.target = {x = \"far\"}"),
+        1, "<--inputs>:1:16: error: input 'target' of spot:go_to_waypoint (GeoPoint): expected float64 at x, got a string")
+    add("skinet", "--inputs", ("plan", SYSTEM, "reach spot:Busy", "--inputs", "target ="), 1,
+        "<--inputs>:1:9: error: invalid TOML: Invalid value")
+    add("skinet", "--state", ("plan", SYSTEM, "reach spot:Busy", "--state", "{tmp}/missing.json"), 1,
+        "{tmp}/missing.json: error: cannot read file: No such file or directory")
+    add("skinet", "--state", ("plan", SYSTEM, "reach spot:Busy", "--state", "{tmp}/impossible.json"), 1,
+        "{tmp}/impossible.json: error: impossible state: 'spot' is not stable: invariant violated (stand_up.inv.powered);"
+        " the manager never publishes such a state")
+    add("skinet", "--state", ("plan", SYSTEM, "reach spot:Busy", "--state", '{"spot": {"running": ["stand_up"]}}'), 1,
+        "<state>: error: impossible state: 'spot' is not stable: invariant violated (stand_up.inv.powered); the manager "
+        "never publishes such a state")
+    for bad in ("0", "-1", "never"):
+        usage("skinet", "--budget", ("plan", SYSTEM, "reach spot:Busy", "--budget", bad),
+              "argument --budget: " + seconds.format(bad))
+    usage("skinet", "--memory-limit", ("plan", SYSTEM, "reach spot:Busy", "--memory-limit", "much"),
+          "argument --memory-limit: not a size: 'much' (e.g. 1GiB, 512MiB, 2GB)")
+    usage("skinet", "--engine", ("plan", SYSTEM, "reach spot:Busy", "--engine", "fast"),
+          "argument --engine: invalid choice: 'fast' (choose from 'auto', 'explicit', 'symbolic')")
 
     # skinet demo
     add("skinet", "scenarios", ("demo", "{tmp}/missing.toml"), 1, missing)
@@ -216,7 +283,9 @@ def _cases() -> list[Case]:
     usage("skinet", "--duration", ("run", SYSTEM, "--duration", "-1"), "argument --duration: " + seconds.format("-1"))
     usage("skinet", "--mode", ("run", SYSTEM, "--mode", "router"),
           "argument --mode/-m: invalid choice: 'router' (choose from 'peer', 'client')")
-    usage("skinet", "--budget", ("run", SYSTEM, "--budget", "0"), "argument --budget: " + seconds.format("0"))
+    usage("skinet", "--budget", ("run", SYSTEM, "--budget", "0"), "argument --budget: " + budget.format("0"))
+    # Below the predictor's minimum the monitor would never ask, and every check would look fresh (issue 25).
+    usage("skinet", "--budget", ("run", SYSTEM, "--budget", "0.01"), "argument --budget: " + budget.format("0.01"))
     usage("skinet", "--memory-limit", ("run", SYSTEM, "--memory-limit", "tiny"),
           "argument --memory-limit: not a size: 'tiny' (e.g. 1GiB, 512MiB, 2GB)")
 
@@ -306,8 +375,11 @@ def _cases() -> list[Case]:
         add(program, "system", ("{tmp}/missing.toml",), 1, missing)
         add(program, "system", ("{tmp}/badname.toml",), 1, bad_name)
     usage(mon, "--id", (SYSTEM, "--id", "a b"), f"argument --id: instance id 'a b' {not_a_key}")
-    usage(mon, "--budget", (SYSTEM, "--budget", "-1"), "argument --budget: " + seconds.format("-1"))
+    usage(mon, "--budget", (SYSTEM, "--budget", "-1"), "argument --budget: " + budget.format("-1"))
+    usage(mon, "--budget", (SYSTEM, "--budget", "0.049"), "argument --budget: " + budget.format("0.049"))
     usage(mon, "--query-timeout", (SYSTEM, "--query-timeout", "0"), "argument --query-timeout: " + seconds.format("0"))
+    usage(mon, "--query-timeout", (SYSTEM, "--budget", "2", "--query-timeout", "1.5"),
+          "argument --query-timeout: 1.5 s is not above --budget 2 s: no prediction could ever arrive in time")
     usage(mon, "--stall", (SYSTEM, "--stall", "-2"), "argument --stall: " + seconds.format("-2"))
     usage(mon, "--check-policy", (SYSTEM, "--check-policy", "lax"), policy)
     usage(mon, "--check-rate-limit", (SYSTEM, "--check-rate-limit", "-3"),
@@ -324,10 +396,12 @@ def _cases() -> list[Case]:
     usage(pred, "--instance", (), f"argument --instance: instance id 'a b' {not_a_key}", SKINET_INSTANCE="a b")
     for option in ("--workers", "--max-pending", "--cache"):
         usage(pred, option, (option, "0"), f"argument {option}: expected an integer >= 1, got '0'")
-    for option in ("--fetch-timeout", "--max-budget"):
-        usage(pred, option, (option, "-2"), f"argument {option}: " + seconds.format("-2"))
+    usage(pred, "--fetch-timeout", ("--fetch-timeout", "-2"), "argument --fetch-timeout: " + seconds.format("-2"))
+    usage(pred, "--max-budget", ("--max-budget", "0.01"), "argument --max-budget: " + budget.format("0.01"))
     usage(pred, "--memory-limit", ("--memory-limit", "1 GiBi"),
           "argument --memory-limit: not a size: '1 GiBi' (e.g. 1GiB, 512MiB, 2GB)")
+    usage(pred, "--max-request", ("--max-request", "lots"),
+          "argument --max-request: not a size: 'lots' (e.g. 1GiB, 512MiB, 2GB)")
     usage(pred, "--memory-mb", ("--memory-mb", "8"), "argument --memory-mb: expected an integer >= 64, got '8'")
     usage(pred, "--grace", ("--grace", "-2"), "argument --grace: " + seconds.format("-2"))
     usage(br, "--instance", (SYSTEM, "--instance", "*"), f"argument --instance: instance id '*' {not_a_key}")
@@ -350,6 +424,11 @@ def _cases() -> list[Case]:
     usage(br, "--namespace", (SYSTEM,), "argument --namespace: namespace 'a b' (from $SKINET_ROS_NAMESPACE) cannot "
           "be used in a Zenoh key (/-separated names of letters, digits, _ - .)", SKINET_ROS_NAMESPACE="a b")
     usage(br, "--hold", (SYSTEM, "--hold", "-1"), "argument --hold: expected a number of seconds >= 0, got '-1'")
+    usage(br, "--settle", (SYSTEM, "--settle", "soon"), "argument --settle: expected a number of seconds >= 0, "
+                                                          "got 'soon'")
+    add("skinet", "system", ("conform", "{tmp}/missing.toml", "{tmp}/run.mcap"), 1, missing)
+    add("skinet", "bags", ("conform", SYSTEM, "{tmp}/missing.db3"), 1,
+        "{tmp}/missing.db3: error: cannot read file: No such file or directory")
     add(br, "--replay", (SYSTEM, "--replay", "{tmp}/missing.db3"), 1,
         "{tmp}/missing.db3: error: cannot read file: No such file or directory")
     add(br, "--replay", (SYSTEM, "--no-multicast-scouting", "--replay", SPOT), 1,
@@ -373,6 +452,16 @@ def _cases() -> list[Case]:
         "skinet: error: robot endpoint 'tcp/robot2:7447' must be tls/HOST:PORT (a robot's router accepts TLS only)")
     add("skinet", "host", ("fleet", "--secrets", "{tmp}/fleet", "add", "bad host/x"), 1,
         "skinet: error: robot name 'bad host/x' must be the host of its endpoint (letters, digits, '.', '-')")
+    # skinet client-config
+    add("skinet", "--secrets", ("client-config", "--secrets", "{tmp}/no/such/dir"), 1,
+        "skinet: error: secrets folder {tmp}/no/such/dir does not exist")
+    usage("skinet", "--user", ("client-config", "--user", "bad/name"),
+          "argument --user: user name 'bad/name' cannot be used in a Zenoh key (letters, digits, _ - . only)")
+    add("skinet", "--connect", ("client-config", "--connect", "tcp/127.0.0.1:7447"), 1,
+        "skinet: error: --connect 'tcp/127.0.0.1:7447': the router checks certificates on a tls/ endpoint only, "
+        "e.g. tls/127.0.0.1:7447")
+    add("skinet", "-o", ("client-config", "-o", "{tmp}/observer.txt"), 1,
+        "skinet: error: {tmp}/observer.txt: the name must end with .json5 or .json (Zenoh reads the format from it)")
     return cases
 
 
@@ -395,6 +484,25 @@ def files(tmp_path_factory: pytest.TempPathFactory) -> Path:
     (tmp / "unknown_skillset.toml").write_text(head + 't = 1.0\nskillset = "spott"\ntransition = "init_power.start"\n')
     (tmp / "unknown_transition.toml").write_text(head + 't = 1.0\nskillset = "spot"\ntransition = "init_power.strat"\n')
     (tmp / "bad_time.toml").write_text(head + 't = "soon"\nskillset = "spot"\ntransition = "init_power.start"\n')
+    (tmp / "impossible.json").write_text('{"spot": {"running": ["stand_up"]}}')
+    goals = {
+        "empty": "# nothing\n",
+        "syntax": "[[goals]]\nreach = \"spot:Busy\"\nrun\n",
+        "top_key": "goal = 3\n",
+        "goal_key": '[[goals]]\nreach = "spot:Busy"\n\n[[goals]]\nreach = "spot:Idle"\ninput = {}\n',
+        "both": '[[goals]]\nreach = "spot:Busy"\nrun = "spot:teleop"\n',
+        "neither": "[[goals]]\ninputs = {}\n",
+        "formula": '[[goals]]\nreach = "spot:Busy"\n\n[[goals]]\nreach = "spot:Standing and spot:Bussy"\n',
+        "not_string": "[[goals]]\nreach = 3\n",
+        "input_type": '[[goals]]\nrun = "spot:go_to_waypoint"\ninputs = { go_to_waypoint = { target = "home" } }\n',
+        "input_field": '[[goals]]\nrun = "spot:go_to_waypoint"\ninputs = { go_to_waypoint = { target = { x = 1.0, '
+                       'y = "north" } } }\n',
+        "input_name": '[[goals]]\nrun = "spot:go_to_waypoint"\ninputs = { go_to_waypoint = { goal = 1 } }\n',
+        "input_skill": '[[goals]]\nrun = "spot:go_to_waypoint"\ninputs = { go_to_waypont = { target = {} } }\n',
+        "input_missing": '[[goals]]\nrun = "spot:go_to_waypoint"\n',
+    }
+    for name, text in goals.items():
+        (tmp / f"goals_{name}.toml").write_text(text)
     assert skinet_main.main(["demo", "--core", "--no-predict", "--log", str(tmp), SCENARIO]) == 0
     (tmp / "unassisted.jsonl").rename(tmp / "run.jsonl")
     event = next(line for line in (tmp / "run.jsonl").read_text().splitlines() if '"CanonicalEvent"' in line)

@@ -66,13 +66,14 @@ def snapshot(url: str) -> dict:
 def test_help_has_the_examples_of_every_kind() -> None:
     found = sections(EPILOG)
     assert len(found) == 3
-    assert [len(s) for s in found] == [7, 7, 3]
+    assert [len(s) for s in found] == [8, 7, 3]
     assert '{"spot": {"resources": {"power_status": "PowerOn", "posture": "Standing", "control_mode": "Busy"}, ' \
            '"running": ["teleop"]}}' in EPILOG  # a state the robot can be in (teleop.inv.powered holds)
 
 
 def test_every_help_example_works_as_written(tmp_path: Path) -> None:
     (tmp_path / "skillsets").symlink_to(ROOT / "skillsets")
+    (tmp_path / "examples").symlink_to(ROOT / "examples")
     env = {k: v for k, v in os.environ.items() if not k.startswith("SKINET_")}
     env["HOME"] = str(tmp_path)
     ports = {p: str(free_port()) for p in PORTS}

@@ -15,15 +15,13 @@ from __future__ import annotations
 import subprocess
 import sys
 import time
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 import zenoh
 
 from event_watch import Events
-from gateway import Gateway, free_domain, free_port
-from native_build import native_binary
+from gateway import free_domain, free_port
 from services.bridge_ros2 import start_bridge
 from services.chain import run_chain
 from services.common.zenoh_config import session_config
@@ -41,11 +39,6 @@ MISSIONS = REPO / "skillsets" / "missions"
 
 
 @pytest.fixture(scope="module")
-def plugin() -> Path:
-    return native_binary("skinet-ros2dds-bridge")
-
-
-@pytest.fixture(scope="module")
 def unassisted() -> tuple:
     scenario = parse_scenario(read_text(MISSIONS / "unassisted.toml"), "unassisted")
     path = MISSIONS / scenario.system
@@ -56,20 +49,6 @@ def unassisted() -> tuple:
 def comparable(records: list[StepRecord]) -> list[tuple]:
     return [(r.index, r.holds, r.violations, [(w.skillset, w.transition, w.property, w.constraint)
                                               for w in r.warnings], r.unsafe_count, r.divergence) for r in records]
-
-
-@pytest.fixture
-def gateway_factory(plugin: Path, tmp_path: Path) -> Iterator:
-    gateways: list[Gateway] = []
-
-    def start(**options) -> Gateway:
-        gateways.append(Gateway(plugin, tmp_path, **options))
-        return gateways[-1]
-
-    yield start
-    for g in gateways:
-        g.close()
-        print(f"--- zenoh-plugin-ros2dds (exit {g.proc.returncode}) ---\n{g.output()}")
 
 
 def client(endpoint: str) -> zenoh.Session:

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import zenoh
 
-from services.common.security import ensure_users
+from services.common.security import USERS, ensure_tls, ensure_users, tls_connect_config, tls_listen_config
 from skinet.files import load_system, read_text
 from tests.processes import stop_and_show
 from skinet.mission import Scenario, parse_scenario, replay
@@ -36,6 +36,7 @@ ROUTER_CONFIG = ZENOH_DIR / "router.json5"
 # No password is in the repository: the tests make their own, as an operator would.
 SECRETS = Path(tempfile.mkdtemp(prefix="skinet-test-secrets-"))
 USERS_FILE = SECRETS / "users.txt"
+TLS = SECRETS / "tls"  # the tests' CA, with a certificate for the router and each user
 UNASSISTED = REPO / "skillsets" / "missions" / "unassisted.toml"
 SYSTEM = "spot_arm"
 
@@ -48,13 +49,19 @@ def free_port() -> int:
 
 
 def passwords() -> dict[str, str]:
-    """The users of a test run (made at first use in ``SECRETS``): user -> password."""
+    """The users of a test run (made at first use in ``SECRETS``, with their certificates): user -> password."""
+    ensure_tls(TLS, ["router", *USERS])
     return ensure_users(SECRETS)
 
 
-def acl_router_config(endpoint: str, askers: tuple[str, ...] = ()) -> zenoh.Config:
+def acl_router_config(endpoint: str, askers: tuple[str, ...] = (), tcp_twins: bool = True) -> zenoh.Config:
     """``docker/zenoh/router.json5`` as shipped, listening on ``endpoint``, users made by the tests.
 
+    On a ``tls/`` endpoint the router serves the tests' certificate of ``router`` and the
+    access control is the shipped one.  On ``tcp/`` (tests of the rules, and clients built
+    without TLS) no client has a certificate for the shipped subjects to check, so with
+    ``tcp_twins`` each subject gets a twin matching its user names on tcp links alone
+    (``test_acl.py`` checks the binding of certificates to users over TLS).
     ``askers``: extra users who may ask predictions and checks under their own name,
     as an operator adds them (docs/deployment.md, "Rate limits").
     """
@@ -62,6 +69,15 @@ def acl_router_config(endpoint: str, askers: tuple[str, ...] = ()) -> zenoh.Conf
     passwords()
     for user in askers:
         add_asker(config, user)
+    if endpoint.startswith("tcp/") and tcp_twins:
+        acl = json.loads(config.get_json("access_control"))
+        acl["subjects"] += [{"id": f"{s['id']} over tcp", "usernames": s["usernames"], "link_protocols": ["tcp"]}
+                            for s in acl["subjects"]]
+        for policy in acl["policies"]:
+            policy["subjects"] = [*policy["subjects"], *(f"{s} over tcp" for s in policy["subjects"])]
+        config.insert_json5("access_control", json.dumps(acl))
+    if endpoint.startswith("tls/"):
+        config.insert_json5("transport/link/tls", json.dumps(tls_listen_config(TLS, "router")))
     config.insert_json5("transport/auth/usrpwd/dictionary_file", json.dumps(str(USERS_FILE)))
     config.insert_json5("listen/endpoints", json.dumps([endpoint]))
     config.insert_json5("scouting/delay", "0")
@@ -69,20 +85,27 @@ def acl_router_config(endpoint: str, askers: tuple[str, ...] = ()) -> zenoh.Conf
 
 
 def add_asker(config: zenoh.Config, user: str) -> None:
-    """Let ``user`` (made in ``SECRETS``) read, and ask checks and predictions under its own name only."""
+    """Let ``user`` (made in ``SECRETS``, with its certificate) read, and ask checks and
+    predictions under its own name only."""
     ensure_users(SECRETS, [user])
+    ensure_tls(TLS, [user])
     acl = json.loads(config.get_json("access_control"))
     acl["rules"].append({"id": f"{user} asks", "permission": "allow", "flows": ["ingress"], "messages": ["query"],
                          "key_exprs": [f"skinet/*/check/{user}", f"skinet/*/predict/{user}",
                                        f"skinet/*/predict/{user}/*"]})
-    acl["subjects"].append({"id": user, "usernames": [user]})
-    next(s for s in acl["subjects"] if s["id"] == "users")["usernames"].append(user)
+    acl["subjects"].append({"id": user, "usernames": [user], "cert_common_names": [user]})
+    next(p for p in acl["policies"] if p["id"] == "everybody reads")["subjects"].append(user)
     acl["policies"].append({"id": f"{user} asks", "rules": [f"{user} asks"], "subjects": [user]})
     config.insert_json5("access_control", json.dumps(acl))
 
 
-def login_config(endpoint: str, user: str | None, password: str | None = None) -> zenoh.Config:
-    """A client configuration for ``endpoint``; ``user`` None: no credentials at all."""
+def login_config(endpoint: str, user: str | None, password: str | None = None,
+                 certificate: str | None = None) -> zenoh.Config:
+    """A client configuration for ``endpoint``; ``user`` None: no credentials at all.
+
+    On a ``tls/`` endpoint the client presents the tests' certificate of ``certificate``
+    (default: ``user``'s; none when both are None).
+    """
     config = zenoh.Config()
     config.insert_json5("mode", '"client"')
     config.insert_json5("connect/endpoints", json.dumps([endpoint]))
@@ -91,11 +114,16 @@ def login_config(endpoint: str, user: str | None, password: str | None = None) -
         config.insert_json5("transport/auth/usrpwd/user", json.dumps(user))
         config.insert_json5("transport/auth/usrpwd/password",
                             json.dumps(passwords()[user] if password is None else password))
+    name = certificate or user
+    if endpoint.startswith("tls/"):
+        passwords()  # the certificates
+        tls = tls_connect_config(TLS, name) if name else {"root_ca_certificate": str(TLS / "ca.pem")}
+        config.insert_json5("transport/link/tls", json.dumps(tls))
     return config
 
 
-def login(endpoint: str, user: str | None, password: str | None = None) -> zenoh.Session:
-    return zenoh.open(login_config(endpoint, user, password))
+def login(endpoint: str, user: str | None, password: str | None = None, certificate: str | None = None) -> zenoh.Session:
+    return zenoh.open(login_config(endpoint, user, password, certificate))
 
 
 class Services:
@@ -126,8 +154,11 @@ class Services:
 
 
 def write_login_file(path: Path, user: str) -> Path:
-    """A JSON5 file with ``user``'s credentials, for a service's ``--zenoh-config``."""
-    path.write_text(json.dumps({"transport": {"auth": {"usrpwd": {"user": user, "password": passwords()[user]}}}}))
+    """A JSON5 file with ``user``'s credentials (password; certificate for ``tls/`` routers),
+    for a service's ``--zenoh-config``."""
+    password = passwords()[user]
+    path.write_text(json.dumps({"transport": {"auth": {"usrpwd": {"user": user, "password": password}},
+                                              "link": {"tls": tls_connect_config(TLS, user)}}}))
     return path
 
 

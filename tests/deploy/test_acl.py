@@ -1,8 +1,10 @@
-"""Access control and user/password authentication of ``docker/zenoh/router.json5`` (SPEC §7).
+"""Access control and authentication of ``docker/zenoh/router.json5`` (SPEC §7).
 
 The router is the Python wheel in router mode with the shipped configuration (only
-the users file path and the listening port changed); clients log in with users
-whose passwords the tests make (none is in the repository).  No containers: real sockets on 127.0.0.1.
+the users file path, the listening port and its certificate changed), on a ``tls/``
+endpoint with mutual TLS; clients log in with users whose passwords and certificates
+the tests make (none is in the repository), each presenting its own certificate.
+No containers: real sockets on 127.0.0.1.
 """
 
 from __future__ import annotations
@@ -33,8 +35,8 @@ USERS = ("bridge", "monitor", "predictor", "robot", "observer")
 
 @pytest.fixture(scope="module")
 def acl_router() -> Iterator[str]:
-    """The shipped router configuration on a free loopback port; yields the endpoint."""
-    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    """The shipped router configuration on a free loopback TLS port; yields the endpoint."""
+    endpoint = f"tls/127.0.0.1:{free_port()}"
     router = zenoh.open(acl_router_config(endpoint))
     try:
         yield endpoint
@@ -175,11 +177,74 @@ def test_only_predictors_answer_prediction_queries(sessions: dict[str, zenoh.Ses
             q.undeclare()
 
 
-@pytest.mark.parametrize("user, password", [(None, None), ("observer", "not-the-password"), ("nobody", "x")])
-def test_sessions_without_valid_credentials_are_refused(acl_router: str, user: str | None,
-                                                        password: str | None) -> None:
+@pytest.mark.parametrize("user, password, certificate", [
+    (None, None, None), ("observer", "not-the-password", None), ("nobody", "x", None),
+    (None, None, "bridge"),  # a certificate stolen alone
+    ("bridge", "not-the-password", "bridge"),
+])
+def test_sessions_without_valid_credentials_are_refused(acl_router: str, user: str | None, password: str | None,
+                                                        certificate: str | None) -> None:
     with pytest.raises(zenoh.ZError):
-        login(acl_router, user, password)
+        login(acl_router, user, password, certificate)
+
+
+# A password and a certificate of two different users (each valid alone): the router's
+# subjects pair each user's name with its certificate's common name, so these match none.
+MISMATCHED = [("bridge", "observer"),  # the bridge's password with the dashboard's certificate
+              ("observer", "bridge"),  # the observer's own login with a certificate stolen from the bridge
+              ("monitor", "predictor")]
+
+
+@pytest.mark.parametrize("user, certificate", MISMATCHED)
+def test_a_certificate_with_another_users_password_is_refused_everything(
+        acl_router: str, sessions: dict[str, zenoh.Session], user: str, certificate: str) -> None:
+    impostor = login(acl_router, user, certificate=certificate)  # the TLS and login steps pass
+    events = Inbox(sessions["reader"], keys.events(SYSTEM, "*"))
+    seen = Inbox(impostor, "**")
+    token = impostor.liveliness().declare_token(f"skinet/{SYSTEM}/alive/bridge_ros2/impostor")
+    answering = impostor.declare_queryable(keys.predict(SYSTEM, "*"), lambda q: q.reply(q.key_expr, "impostor"),
+                                           complete=True)
+    checks = sessions["monitor"].declare_queryable(keys.check(SYSTEM, "*"), lambda q: q.reply(q.key_expr, "monitor"),
+                                                   complete=True)
+    try:
+        time.sleep(0.3)
+        own = f"impostor {user} with {certificate}'s certificate"
+        impostor.put(EVENTS, own)
+        sessions["bridge"].put(EVENTS, "bridge")  # what the impostor's subscription would receive
+        events.wait_for("bridge")
+        time.sleep(0.3)
+        assert events.received() == {"bridge"}
+        assert seen.received() == {own}  # its own publication only, delivered inside its session
+        assert _replies(sessions[user], keys.check(SYSTEM, user)) == ["monitor"]  # the user's own session asks
+        assert _replies(impostor, keys.check(SYSTEM, user)) == []
+        assert [str(r.ok.key_expr) for r in sessions["reader"].liveliness().get("skinet/**/impostor", timeout=1.0)
+                if r.ok is not None] == []
+        assert _replies(sessions["asker"]) == []  # its prediction queryable never reached the router
+    finally:
+        checks.undeclare()
+        answering.undeclare()
+        token.undeclare()
+        seen.close()
+        events.close()
+        impostor.close()
+
+
+def test_a_link_without_a_certificate_is_refused_everything() -> None:
+    """The shipped subjects on a tcp/ endpoint (which it does not serve): a correct password
+    alone matches no subject, since no certificate names its user."""
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    router = zenoh.open(acl_router_config(endpoint, tcp_twins=False))
+    bridge, reader = login(endpoint, "bridge"), login(endpoint, "observer")
+    inbox = Inbox(reader, "**")
+    try:
+        time.sleep(0.3)
+        bridge.put(EVENTS, "bridge over tcp")
+        time.sleep(0.5)
+        assert inbox.received() == set()
+    finally:
+        inbox.close()
+        for s in (bridge, reader, router):
+            s.close()
 
 
 def test_the_services_run_the_mission_through_the_acl_router(acl_router: str, tmp_path: Path) -> None:

@@ -10,13 +10,12 @@ off-board network cut, router restart.
 
 from __future__ import annotations
 
-import io
 import json
 import os
+import shlex
 import shutil
 import subprocess
 import sys
-import tarfile
 import threading
 import time
 from collections.abc import Iterator
@@ -26,19 +25,19 @@ import pytest
 import zenoh
 
 from services.common.events import event_publisher
-from services.common.security import tls_connect_config
 from skinet.wire import keys
 from skinet.wire.codec import decode, encode
 from skinet.wire.messages import CanonicalEvent, LiveState
 from deploy_support import (
-    REPO, MissionObserver, Tokens, answering_predictor, expected_violations, free_port, load_scenario, login_config,
-    wait_until,
+    REPO, MissionObserver, Tokens, answering_predictor, expected_violations, free_port, load_scenario, wait_until,
 )
 
 pytestmark = pytest.mark.slow
 
 IMAGE = os.environ.get("SKINET_TEST_IMAGE", "skinet-live:local")  # own tag per checkout under test
-SECRETS_IN_IMAGE = "/var/lib/skinet/secrets"
+SECRETS_IN_IMAGE = "/var/lib/skinet/secrets"  # each service's own files (the job's vault, in its container)
+USER_SERVICE = {"bridge": "bridge", "monitor": "monitor", "predictor": "predictor", "robot": "simulator",
+                "observer": "dashboard"}  # the compose service holding each user's files
 BUILD_TIMEOUT = 2400  # a first build (debootstrap, wheels, image) took 20 min on a loaded 2-core machine
 
 
@@ -109,31 +108,43 @@ class Stack:
         return self.start_compose("run", "-T", "--rm", "--no-deps", "simulator",
                                   SKINET_SPEED=str(speed), SKINET_START_DELAY="0")
 
-    def secrets(self, folder: Path, users: tuple[str, ...]) -> Path:
-        """The passwords and certificates the router made at its first start, copied to ``folder``."""
-        names = ["tls/ca.pem"] + [f"{u}.password" for u in users] + [f"tls/{u}.{x}" for u in users for x in ("pem", "key")]
-        # One `exec` for all of them: each compose exec costs about a second (compose v1 is a Python program).
-        r = subprocess.run([*self.command, "exec", "-T", "router", "tar", "-C", SECRETS_IN_IMAGE, "-c", *names],
-                           cwd=REPO, env=self.env, capture_output=True, timeout=120)
-        assert r.returncode == 0, r.stderr.decode(errors="replace")
-        with tarfile.open(fileobj=io.BytesIO(r.stdout)) as tar:  # extractall's filter= needs Python >= 3.11.4
-            for member in tar.getmembers():
-                if member.isfile():
-                    (folder / member.name).parent.mkdir(parents=True, exist_ok=True)
-                    (folder / member.name).write_bytes(tar.extractfile(member).read())  # type: ignore[union-attr]
-        return folder
+    def credentials(self, user: str, folder: Path) -> Path:
+        """``user``'s own files, copied out of the container of the service that uses them into
+        ``folder/<user>`` as docs/deployment.md ("Host access") does it: a shell pipeline from
+        ``compose run`` of that service (``exec`` when it runs: each compose command costs
+        about a second, compose v1 being a Python program)."""
+        service = USER_SERVICE[user]
+        target = folder / user
+        target.mkdir(parents=True, exist_ok=True)
+        how = ["exec", "-T"] if self.containers(service) else ["run", "--rm", "--no-deps", "-T"]
+        compose = " ".join(shlex.quote(a) for a in self.command)
+        r = subprocess.run(f"{compose} {' '.join(how)} {service} tar -C {SECRETS_IN_IMAGE} -c . "
+                           f"| tar -x --no-same-owner -C {shlex.quote(str(target))}", shell=True, cwd=REPO,
+                           env=self.env, capture_output=True, text=True, timeout=120)
+        assert r.returncode == 0 and (target / f"{user}.password").exists(), r
+        return target
+
+    def client_config(self, user: str, folder: Path, endpoint: str) -> Path:
+        """``skinet client-config`` on the host for ``user``'s files (:meth:`credentials`)."""
+        secrets = self.credentials(user, folder)
+        output = folder / f"{user}.json5"
+        r = subprocess.run([sys.executable, "-m", "skinet_cli.main", "client-config", "--secrets", str(secrets),
+                            "--user", user, "--connect", endpoint, "-o", str(output)], cwd=REPO, capture_output=True,
+                           text=True, timeout=60)
+        assert r.returncode == 0, r
+        return output
 
     def logs(self) -> str:
         r = self.compose("logs", "--no-color", "--tail", "300", check=False, timeout=60)
         return r.stdout + r.stderr
 
     def down(self) -> None:
-        self.compose("down", "-t", "2", "--remove-orphans", check=False, timeout=120)
+        self.compose("down", "-v", "-t", "2", "--remove-orphans", check=False, timeout=120)
         left = subprocess.run(["docker", "ps", "-aq", "--filter", f"label=com.docker.compose.project={self.project}"],
                               capture_output=True, text=True).stdout.split()
         if left:  # one-off containers of `compose run -d`
             subprocess.run(["docker", "rm", "-f", *left], capture_output=True)
-            self.compose("down", "-t", "2", check=False, timeout=120)
+            self.compose("down", "-v", "-t", "2", check=False, timeout=120)
 
 
 @pytest.fixture(scope="module")
@@ -169,17 +180,17 @@ def stack(image: str, tmp_path_factory: pytest.TempPathFactory) -> Iterator[tupl
 
 @pytest.fixture(scope="module")
 def secrets(stack: tuple[Stack, str], tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """What the host needs to log in as observer, monitor or bridge (made by the router)."""
-    s = stack[0]
-    wait_until(lambda: s.compose("exec", "-T", "router", "test", "-e", f"{SECRETS_IN_IMAGE}/tls/robot.key",
-                                 check=False).returncode == 0, 60, "the router's secrets")
-    return s.secrets(tmp_path_factory.mktemp("secrets"), ("observer", "monitor", "bridge"))
+    """The host's Zenoh configurations of observer, monitor and bridge (``skinet client-config``
+    on each user's files, copied out of its service's container)."""
+    folder = tmp_path_factory.mktemp("secrets")
+    for user in ("observer", "monitor", "bridge"):
+        stack[0].client_config(user, folder, stack[1])
+    return folder
 
 
 def host_login(stack: tuple[Stack, str], secrets: Path, user: str) -> zenoh.Session:
-    """A host session of ``user`` over TLS with the router's certificates."""
-    config = login_config(stack[1], user, (secrets / f"{user}.password").read_text().strip())
-    config.insert_json5("transport/link/tls", json.dumps(tls_connect_config(secrets / "tls", user)))
+    """A host session of ``user`` with the configuration ``skinet client-config`` wrote."""
+    config = zenoh.Config.from_file(str(secrets / f"{user}.json5"))
     config.insert_json5("connect/timeout_ms", "30000")  # the router may still be starting
     return zenoh.open(config)
 
@@ -231,6 +242,51 @@ def _finish(sim: subprocess.Popen, timeout: float = 120) -> None:
 
 def _settle(obs: MissionObserver) -> None:
     wait_until(lambda: obs.quiet_for(1.5), 30, "the monitor to settle")
+
+
+# Every file under /var/lib/skinet and every ca.key anywhere (but /proc, /sys, /dev), with mode and owner.
+FILES = """
+import os
+for root, dirs, files in os.walk('/'):
+    if root == '/':
+        dirs[:] = [d for d in dirs if d not in ('proc', 'sys', 'dev')]
+    for f in files:
+        p = os.path.join(root, f)
+        if p.startswith('/var/lib/skinet/') or f == 'ca.key':
+            st = os.lstat(p)
+            print(p, oct(st.st_mode & 0o777), st.st_uid)
+"""
+
+
+def _own_files(user: str) -> set[str]:
+    names = ({"users.txt": "600", "tls/router.pem": "644", "tls/router.key": "600"} if user == "router" else
+             {f"{user}.password": "600", f"tls/{user}.pem": "644", f"tls/{user}.key": "600"})
+    return {f"{SECRETS_IN_IMAGE}/{n} 0o{m} 10001" for n, m in {**names, "tls/ca.pem": "644"}.items()}
+
+
+def test_each_service_holds_only_its_own_credentials(stack: tuple[Stack, str], observer: zenoh.Session) -> None:
+    """Issue 25 item 7: a volume per service with its own password, certificate and key (0600
+    for secrets), the CA key in the vault alone, which only the one-shot job mounts."""
+    s = stack[0]
+    for service, user in [("router", "router"), *((svc, u) for u, svc in USER_SERVICE.items())]:
+        running = s.containers(service)
+        if running:
+            listings = [subprocess.run(["docker", "exec", c, "python3", "-c", FILES], capture_output=True, text=True,
+                                       check=True, timeout=60).stdout for c in running]
+        else:
+            listings = [s.compose("run", "--rm", "--no-deps", "-T", service, "python3", "-c", FILES).stdout]
+        for listing in listings:
+            assert set(listing.splitlines()) == _own_files(user), (service, listing)
+    vault = f"{s.project}_secrets"
+    mounted = set()
+    for container in s.containers("secrets", running=False) + [c for svc in ("router", *USER_SERVICE)
+                                                                for c in s.containers(svc, running=False)]:
+        info = json.loads(subprocess.run(["docker", "inspect", container], capture_output=True, text=True,
+                                         check=True).stdout)[0]
+        if any(m.get("Name") == vault for m in info["Mounts"]):
+            mounted.add((info["Config"]["Labels"]["com.docker.compose.service"], info["HostConfig"]["NetworkMode"],
+                         info["State"]["Status"], info["State"]["ExitCode"]))
+    assert mounted == {("secrets", "none", "exited", 0)}
 
 
 def test_unassisted_mission_gives_the_in_process_verdicts(stack: tuple[Stack, str], observer: zenoh.Session) -> None:

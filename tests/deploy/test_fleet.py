@@ -9,14 +9,13 @@ join, the routers under the alias the hub connects to (``docker network connect
 robot's router.  Events come from the host, logged in as ``bridge`` on the robot's
 published port; an observer per robot reads its reports.
 
-Every link is mutual TLS with the secrets the routers make at their first start:
-the robots join the hub with the commands of docs/deployment.md ("Fleet": ``skinet
+Every link is mutual TLS with the secrets each deployment's job made at its first
+start (the robots' ``secrets``, the hub's ``fleet-secrets``): the robots join the hub with the commands of docs/deployment.md ("Fleet": ``skinet
 fleet invite``, ``join``, ``add`` through ``compose exec``, then restarts).
 """
 
 from __future__ import annotations
 
-import json
 import os
 import re
 import subprocess
@@ -28,8 +27,7 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from deploy_support import Tokens, free_port, login_config, wait_until
-from services.common.security import tls_connect_config
+from deploy_support import Tokens, free_port, wait_until
 from skinet.wire import keys
 from skinet.wire.codec import decode
 from skinet.wire.messages import UnsafeReport, Verdicts
@@ -55,17 +53,16 @@ class Robot:
         self.items: list[tuple[float, object]] = []
         self.session: zenoh.Session | None = None
 
-    def login(self, secrets: Path, user: str) -> zenoh.Session:
-        """A host session of ``user`` with the password and certificate this robot's router made."""
-        config = login_config(self.endpoint, user, (secrets / f"{user}.password").read_text().strip())
-        config.insert_json5("transport/link/tls", json.dumps(tls_connect_config(secrets / "tls", user)))
+    def login(self, folder: Path, user: str) -> zenoh.Session:
+        """A host session of ``user`` with the password and certificate of this robot's secrets
+        (``skinet client-config`` on the files of the service that uses them)."""
+        config = zenoh.Config.from_file(str(self.stack.client_config(user, folder, self.endpoint)))
         config.insert_json5("connect/timeout_ms", "60000")  # the router may still be restarting
         return zenoh.open(config)
 
     def connect(self, folder: Path) -> None:
-        secrets = self.stack.secrets(folder, ("observer", "bridge"))
-        self.session = self.login(secrets, "observer")
-        self.bridge = self.login(secrets, "bridge")
+        self.session = self.login(folder, "observer")
+        self.bridge = self.login(folder, "bridge")
         system = self.skills / f"{self.name}.toml"  # the bridge's side, the monitor syncs from (SPEC §7)
         self.events = BridgeSide(self.bridge, self.name, model=load_system(system)[0] if system.exists() else None,
                                  wait=False)
@@ -114,7 +111,8 @@ def _entries(report: UnsafeReport) -> list[tuple]:
 
 
 def _secrets_made(stack: Stack, service: str) -> bool:
-    return stack.compose("exec", "-T", service, "test", "-e", f"{SECRETS_IN_IMAGE}/tls/robot.key",
+    """Whether the router (or hub) has its certificate, handed out by the compose job."""
+    return stack.compose("exec", "-T", service, "test", "-e", f"{SECRETS_IN_IMAGE}/tls/router.key",
                          check=False).returncode == 0
 
 

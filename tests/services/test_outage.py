@@ -10,6 +10,7 @@ get back and resyncs.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -17,12 +18,19 @@ from pathlib import Path
 import pytest
 import zenoh
 
+from services.bridge_ros2 import start_bridge
+from services.common.events import event_subscriber
+from services.common.zenoh_config import undeclare
 from services.monitor import start_monitor
+from services.simulator import Simulator
+from skinet.mission import parse_scenario
+from skinet.ros.keys import KeyStyle
 from skinet.files import load_system
 from skinet.wire import keys
 from skinet.wire.codec import decode
-from skinet.wire.messages import LiveState
+from skinet.wire.messages import CanonicalEvent, LiveState
 from tests.services.conftest import free_port, open_client, open_router
+from tests.services.test_bridge import CHAIN
 from tests.services.test_monitor import Events, wait_until
 
 REPO = Path(__file__).resolve().parents[2]
@@ -140,3 +148,60 @@ def test_a_late_monitor_does_not_replay_the_cache(outage: Outage, stamp: float) 
         events.close()
         pub_s.close()
         mon_s.close()
+
+
+# -- between the managers and the bridge (issue 25, item 8) ---------------------------------
+
+CHAIN_STEPS = parse_scenario(CHAIN, "chain.toml")
+FIRST_STEPS = dataclasses.replace(CHAIN_STEPS, steps=CHAIN_STEPS.steps[:3])  # init_power (start, success), stand_up
+NEXT_STEP = dataclasses.replace(CHAIN_STEPS, steps=CHAIN_STEPS.steps[3:4])  # stand_up.success.standing
+
+
+@pytest.mark.parametrize("style", [KeyStyle(), KeyStyle(rmw_zenoh=True, domain=8)], ids=["ros2dds", "rmw_zenoh"])
+def test_router_restart_between_managers_and_bridge_is_resynced(outage: Outage, spot_arm: tuple,
+                                                                 style: KeyStyle) -> None:
+    """The router is down 3 s while Spot's manager runs three steps: their messages are lost (a
+    manager's topics are volatile, nothing can recover them). The bridge notices its link was cut,
+    asks every manager again once it is back, counts one resync per manager, and the next event of
+    each skillset says so, with the status the manager really has; then events flow as before.
+    With rmw_zenoh the managers' tokens leave and come back with the link: no restart is reported."""
+    system, typemap = spot_arm
+    sim_s, bridge_s, obs_s = outage.login("simulator"), outage.login("bridge"), outage.login("observer")
+    got: list[CanonicalEvent] = []
+    missed: list[int] = []
+    sub, listener = event_subscriber(obs_s, keys.events(system.name, "*"), zenoh.handlers.Callback(
+        lambda s: got.append(decode(s.payload.to_bytes(), CanonicalEvent))), missed.append)
+    sim = Simulator(sim_s, system, typemap, style=style)
+    time.sleep(0.3)
+    bridge = start_bridge(bridge_s, system, typemap, style=style, source="bridge_ros2/test")
+    try:
+        wait_until(lambda: len(got) == 2, 5, "the initial statuses")
+        outage.down()
+        down = time.monotonic()
+        assert [r.ok for r in sim.drive(FIRST_STEPS, speed=0)] == [True, True, True]
+        time.sleep(max(0.0, 3.0 - (time.monotonic() - down)))
+        outage.up()
+        wait_until(lambda: {e.skillset for e in got if e.info.startswith("resync")} == {"spot", "manipulator"},
+                   15, "a resync event per skillset")
+        spot = [e for e in got if e.skillset == "spot"]
+        arm = [e for e in got if e.skillset == "manipulator"]
+        assert [e.seq for e in arm] == [0, 1]
+        assert arm[1].info == "resync after the link to the managers was cut; same state as before"
+        assert arm[1].status == arm[0].status
+        assert spot[0].info == "initial status" and spot[-1].info.startswith(
+            "resync after the link to the managers was cut; state now differs: power_status PowerOff -> PowerOn, "
+            "control_mode Idle -> Busy, stand_up running")
+        assert spot[-1].status is not None and (spot[-1].status.resources, spot[-1].status.running) == (
+            {"power_status": "PowerOn", "posture": "Sitting", "control_mode": "Busy"}, ["stand_up"])
+        assert (bridge.counters.resyncs, bridge.counters.restarts) == (2, 0)
+        n = len(got)
+        assert [r.ok for r in sim.drive(NEXT_STEP, speed=0)] == [True]
+        wait_until(lambda: len(got) == n + 1, 5, "the next step")
+        assert (got[-1].transition, got[-1].info, got[-1].seq) == ("stand_up.success.standing", "", spot[-1].seq + 1)
+        assert missed == []
+    finally:
+        bridge.close()
+        sim.close()
+        undeclare(listener, sub)
+        for s in (sim_s, bridge_s, obs_s):
+            s.close()

@@ -20,6 +20,7 @@ import pytest
 import zenoh
 
 from services.common.zenoh_config import session_config
+from services.monitor import start_monitor
 from services.predictor import start_predictor
 from skinet.files import load_system
 from skinet.system import System
@@ -330,6 +331,83 @@ def test_lru_cache_of_systems(peer: zenoh.Session, system: System, model: ModelB
     assert sum(s.queries for s in servers) == 5
 
 
+
+
+# -- bounded requests (issue 25, item 6) ---------------------------------------------------
+
+
+def test_oversized_and_ill_typed_requests_are_refused(peer: zenoh.Session, system: System, model: ModelBundle,
+                                                      caplog: pytest.LogCaptureFixture) -> None:
+    """Refused with a one-line error, counted and logged (a few lines for a flood), nothing computed."""
+    server = ModelServer(peer, model)
+    handle = start_predictor(peer, "strict", workers=1, max_request=4096, rate_limit=0)
+    try:
+        good = request(system, model.digest).model_dump(mode="json")
+        # A well-formed request, its marking padded past the limit: refused by its size, unread.
+        padded = {**good, "skillsets": {**good["skillsets"],
+                                        "spot": {"resources": {f"r{i}": "x" * 64 for i in range(80)}, "running": []}}}
+        big = msgpack.packb(padded)
+        cases: list[tuple[bytes, str]] = [
+            (big, f"request of {len(big)} bytes exceeds the limit of 4096"),
+            (msgpack.packb({**good, "budget": "1.0"}), "invalid PredictRequest: budget: Input should be a valid number"),
+            (msgpack.packb({**good, "budget": True}), "invalid PredictRequest: budget: Input should be a valid number"),
+            (msgpack.packb({**good, "seq": 1.0}), "invalid PredictRequest: seq: Input should be a valid integer"),
+            (msgpack.packb({**good, "budget": float("nan")}),
+             "invalid PredictRequest: budget: Input should be a finite number"),
+            (msgpack.packb({**good, "budget": 0.01}),
+             "invalid PredictRequest: budget: Input should be greater than or equal to 0.05"),
+        ]
+        with caplog.at_level("WARNING", logger="skinet.predictor"):
+            for payload, error in cases:
+                reply = ask_one(peer, payload)
+                assert (reply.ok, reply.error, reply.instance) == (False, error, "strict")
+            for _ in range(12):  # a flood: counted, logged at the 1st, 10th, 100th, then every 1000th
+                assert ask_one(peer, big).error.startswith("request of ")
+            assert ask_one(peer, encode(request(system, model.digest))).ok  # still serving
+        assert (handle.counts["refused"], handle.counts["ok"], server.queries) == (18, 1, 1)
+        lines = [r.getMessage() for r in caplog.records if "refused request" in r.getMessage()]
+        assert lines == [f"predictor strict: refused request spot_arm/0 (#1): request of {len(big)} bytes exceeds "
+                         "the limit of 4096",
+                         "predictor strict: refused request spot_arm/0 (#10): request of "
+                         f"{len(big)} bytes exceeds the limit of 4096"]
+    finally:
+        handle.close()
+        server.close()
+
+
+def test_monitor_refuses_a_budget_below_the_predictors_minimum(peer: zenoh.Session, system: System) -> None:
+    """It would never ask (every answer needs at least MIN_BUDGET), and its checks would never know why."""
+    with pytest.raises(ValueError) as info:
+        start_monitor(peer, system, budget=0.01)
+    assert str(info.value) == ("budget 0.01 s is below the predictor's minimum of 0.05 s: "
+                               "no prediction could ever be asked for")
+    with pytest.raises(ValueError) as info:
+        start_monitor(peer, system, budget=1.0, query_timeout=1.0)
+    assert str(info.value) == "query timeout 1 s is not above the budget 1 s: no prediction could ever arrive in time"
+
+
+def test_model_bundle_includes_are_never_read(peer: zenoh.Session, system: System,
+                                              monkeypatch: pytest.MonkeyPatch) -> None:
+    """A bundle carries its texts: an ``include`` in it names no file the predictor opens (issue 25, item 6)."""
+    monkeypatch.setenv("BUNDLE_TEST_SECRET", "s3cr3t-value")  # in /proc/self/environ of the workers
+    spot = (REPO / "skillsets" / "spot.rl").read_text()
+    hostile = model_of(system, 'include "/proc/self/environ"\ninclude "../../etc/shadow"\n' + spot)
+    server = ModelServer(peer, hostile)
+    handle = start_predictor(peer, "bundles", workers=1)
+    try:
+        reply = ask_one(peer, encode(request(system, hostile.digest, ARM_READY)))
+        assert reply.ok and reply.risks, reply.error  # answered from the texts alone
+        assert b"s3cr3t" not in encode(reply)
+    finally:
+        handle.close()
+        server.close()
+
+
+def model_of(system: System, spot_text: str) -> ModelBundle:
+    """The system's bundle with spot.rl's text replaced (digest recomputed)."""
+    b = bundle(system)
+    entries = [(n, spot_text if n == "spot.rl" else t, m) for n, t, m in b.skillsets]
+    return bundle(system_from_bundle(b.model_copy(update={"skillsets": entries, "digest": ""})))
 
 
 # -- per-client rate limit (issue 14) ----------------------------------------------------

@@ -24,6 +24,7 @@ from services.common.security import (
     USERS, ensure_tls, ensure_users, load_ca, make_ca, make_certificate, tls_connect_config,
 )
 from services.common.zenoh_config import session_config
+from skinet.errors import SkinetError
 from tests.services.conftest import free_port, start_skinet
 
 REPO = Path(__file__).resolve().parents[2]
@@ -38,17 +39,84 @@ def test_peers_listen_on_loopback_without_scouting_by_default() -> None:
                       .get_json("scouting/multicast/enabled")) is True
 
 
+def modes(folder: Path) -> dict[str, int]:
+    """Every file under ``folder`` (relative path) with its permission bits."""
+    return {str(p.relative_to(folder)): p.stat().st_mode & 0o777 for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
 def test_secrets_are_made_once_and_kept(tmp_path: Path) -> None:
     first = ensure_users(tmp_path)
     assert sorted(first) == sorted(USERS) and len(set(first.values())) == len(USERS)
     assert all(len(p) >= 32 for p in first.values())
     assert ensure_users(tmp_path) == first
-    assert (tmp_path / "users.txt").stat().st_mode & 0o077 == 0
     assert (tmp_path / "monitor.password").read_text().strip() == first["monitor"]
     ensure_tls(tmp_path / "tls", ["router"])
     ca = (tmp_path / "tls" / "ca.pem").read_bytes()
     ensure_tls(tmp_path / "tls", ["router", "monitor"])
     assert (tmp_path / "tls" / "ca.pem").read_bytes() == ca and (tmp_path / "tls" / "monitor.key").exists()
+    # Secret files are 0600 (observer.password was 0644), certificates 0644.
+    assert modes(tmp_path) == {"users.txt": 0o600, **{f"{u}.password": 0o600 for u in USERS},
+                               **{f"tls/{n}.{x}": 0o600 if x == "key" else 0o644
+                                  for n in ("ca", "router", "monitor") for x in ("key", "pem")}}
+
+
+def test_looser_secret_files_of_older_versions_are_made_0600(tmp_path: Path) -> None:
+    ensure_users(tmp_path)
+    ensure_tls(tmp_path / "tls", ["router"])
+    for name in ("observer.password", "users.txt", "tls/ca.key", "tls/router.key"):
+        (tmp_path / name).chmod(0o644)
+    ensure_users(tmp_path)
+    ensure_tls(tmp_path / "tls", ["router"])
+    assert {n: m for n, m in modes(tmp_path).items() if m != 0o600} == {"tls/ca.pem": 0o644, "tls/router.pem": 0o644}
+
+
+def test_no_certificate_is_made_without_the_ca_key(tmp_path: Path) -> None:
+    """A folder with ca.pem but no ca.key (a hand-out, an operator's own CA) keeps its CA:
+    what it has is used, a missing certificate is a one-line error, never a new CA."""
+    ensure_tls(tmp_path, ["router", "observer"])
+    (tmp_path / "ca.key").unlink()
+    ca = (tmp_path / "ca.pem").read_bytes()
+    ensure_tls(tmp_path, ["router", "observer"])  # nothing missing: the CA key is not needed
+    with pytest.raises(SkinetError) as err:
+        ensure_tls(tmp_path, ["router", "bridge", "monitor"])
+    assert str(err.value) == (f"{tmp_path} has ca.pem but no ca.key: cannot make the certificate of bridge, monitor "
+                              "(make it where the CA key is: docs/deployment.md, TLS)")
+    assert (tmp_path / "ca.pem").read_bytes() == ca and not (tmp_path / "bridge.pem").exists()
+
+
+def test_each_service_is_handed_its_own_files_only(tmp_path: Path) -> None:
+    vault, out = tmp_path / "vault", tmp_path / "out"
+    for name in ("router", "observer", "bridge"):
+        (out / name).mkdir(parents=True)
+    (out / "observer" / "stale.password").write_text("x")  # not the observer's: removed
+    (out / "router" / "hub").mkdir()
+    (out / "router" / "hub" / "ca.pem").write_text("kept")  # the router's own (a fleet it joined)
+    r = subprocess.run([sys.executable, "-m", "services.secrets", "--vault", str(vault), "--out", str(out)], cwd=REPO,
+                       capture_output=True, text=True, timeout=60)
+    assert (r.returncode, r.stderr) == (0, ""), r
+    assert r.stdout.splitlines() == [
+        "secrets: bridge: bridge.password tls/ca.pem tls/bridge.pem tls/bridge.key",
+        "secrets: observer: observer.password tls/ca.pem tls/observer.pem tls/observer.key",
+        "secrets: router: users.txt tls/ca.pem tls/router.pem tls/router.key"]
+    assert modes(out) == {
+        **{f"{u}/{u}.password": 0o600 for u in ("bridge", "observer")},
+        **{f"{u}/tls/{n}.pem": 0o644 for u in ("bridge", "observer", "router") for n in ("ca", u)},
+        **{f"{u}/tls/{u}.key": 0o600 for u in ("bridge", "observer", "router")},
+        "router/users.txt": 0o600, "router/hub/ca.pem": 0o644}
+    assert (out / "router" / "users.txt").read_bytes() == (vault / "users.txt").read_bytes()
+    assert (vault / "tls" / "ca.key").exists() and not list(out.rglob("ca.key"))
+    # A fleet's hub: its router also gets the fleet's link files, never the fleet CA's key.
+    r = subprocess.run([sys.executable, "-m", "services.secrets", "--vault", str(vault), "--out", str(out),
+                        "--fleet-hub"], cwd=REPO, capture_output=True, text=True, timeout=60)
+    assert r.stdout.splitlines()[-1] == ("secrets: router: users.txt tls/ca.pem tls/router.pem tls/router.key "
+                                         "fleet/ca.pem fleet/hub.pem fleet/hub.key fleet/hub.password")
+    assert (vault / "fleet" / "ca.key").exists() and not list(out.rglob("ca.key"))
+    (out / "nobody").mkdir()
+    r = subprocess.run([sys.executable, "-m", "services.secrets", "--vault", str(vault), "--out", str(out)], cwd=REPO,
+                       capture_output=True, text=True, timeout=60)
+    assert (r.returncode, r.stderr) == (1, f"python -m services.secrets: error: {out / 'nobody'}: a service's folder "
+                                           "is named router or for its user (bridge, monitor, predictor, robot, "
+                                           "observer, hub)\n")
 
 
 class Router:

@@ -27,7 +27,7 @@ from skinet.props.parser import parse_formula
 from skinet.system import build_system
 from skinet.verify.component import ComponentGraph
 from skinet.verify.ctl import Kripke, Result, check
-from skinet.verify.explore import StateSpace, explore, explore_graphs
+from skinet.verify.explore import Deadline, StateSpace, explore, explore_graphs
 
 State = tuple[int, ...]
 PLACES = ("p0", "p1", "p2", "x3", "x4", "x5", "x6")
@@ -382,3 +382,70 @@ def test_parsed_formulas_on_a_skillset() -> None:
     assert as_set(holds("A[deadend:Full U deadend:i_drive]").lower) == {0, 1}
     assert as_set(holds("not EX true").lower) == set()
     assert holds("AG AF deadend:Empty").lower.all()
+
+
+# --- what needs no exploration, and what the budget stops (issue 25, item 5) -----------------
+
+
+def test_constant_formulas_are_answered_on_a_cut_exploration() -> None:
+    """Every marking has a successor, so a temporal operator of a constant is that constant."""
+    graphs = [make_graph("c", [1, 2, 4], [{1}, {2}, set()], [False] * 3, [0], [])]
+    part = explore_graphs(graphs, budget=0.0)
+    assert not part.complete and part.markings == 1
+    k = Kripke(part)
+    p0 = PlaceAtom("c", "p0")
+    true, false = Const(True), Const(False)
+    for f, value in [(Temporal("AG", true), True), (Temporal("AG", Temporal("AG", true)), True),
+                     (Temporal("EX", true), True), (Not(Temporal("AX", false)), True),
+                     (Until("A", p0, true), True), (Or(p0, Temporal("EF", true)), True),
+                     (Temporal("EF", false), False), (Temporal("AF", false), False),
+                     (Until("E", true, false), False), (And(p0, Temporal("EG", false)), False),
+                     (Implies(Temporal("AG", false), p0), True)]:
+        r = check(k, f)
+        assert as_set(r.lower) == as_set(r.upper) == ({0} if value else set()), f
+    assert check(k, Temporal("AF", true)).rank[k.stored].tolist() == [0]
+    assert as_set(check(k, Temporal("AG", p0)).upper) == {0}  # not a constant: still undecided
+    assert not check(k, Temporal("AG", p0)).lower.any()
+
+
+def count_fixpoints(monkeypatch: pytest.MonkeyPatch) -> list[str]:
+    calls: list[str] = []
+    for name in ("ex", "ax", "eu", "au", "eg", "af"):
+        original = getattr(Kripke, name)
+
+        def counted(self, *args, _original=original, _name=name, **kwargs):  # type: ignore[no-untyped-def]
+            calls.append(_name)
+            return _original(self, *args, **kwargs)
+
+        monkeypatch.setattr(Kripke, name, counted)
+    return calls
+
+
+def test_nested_operators_cost_one_fixpoint_each(monkeypatch: pytest.MonkeyPatch) -> None:
+    """``AG f`` reuses f's result: 8 nested AGs are 8 fixpoints, not 2^8 - 1 (it was 6.5 s on 3+3 copies)."""
+    graphs = [make_graph("a", [1, 2, 0], [{1}, {2}, {0}], [False] * 3, [0], []),
+              make_graph("b", [1, 2], [{1}, {0}], [True, False], [0], [])]
+    k = Kripke(explore_graphs(graphs))
+    p = Not(PlaceAtom("a", "p2"))
+    nested: Expr = p
+    for _ in range(8):
+        nested = Temporal("AG", nested)
+    calls = count_fixpoints(monkeypatch)
+    result = check(k, nested)
+    assert calls == ["eu"] * 8  # complete and exact: one run per operator
+    assert np.array_equal(result.lower, check(k, Temporal("AG", p)).lower)
+
+
+def test_past_the_deadline_no_fixpoint_starts(monkeypatch: pytest.MonkeyPatch) -> None:
+    graphs = [make_graph("a", [1, 2, 0], [{1}, {2}, {0}], [False] * 3, [0], [])]
+    k = Kripke(explore_graphs(graphs))
+    k.deadline = Deadline(0.0)  # the budget ran out after the exploration
+    calls = count_fixpoints(monkeypatch)
+    nested: Expr = PlaceAtom("a", "p0")
+    for op in ("AG", "EF", "AF", "EG", "AX", "EX", "AG", "AG"):
+        nested = Temporal(op, nested)
+    result = check(k, Or(nested, Until("A", nested, PlaceAtom("a", "p1"))))
+    assert calls == []
+    assert not result.lower.any() and result.upper.all()
+    assert k.truncated_by == "budget"
+    assert as_set(check(k, Temporal("AG", Const(True))).lower) == {0, 1, 2}  # constants still answered

@@ -98,7 +98,10 @@ def test_wrong_version(samples: dict[str, BaseModel], version: object, error: st
         ("PredictRequest", {"seq": _DELETE}, "invalid PredictRequest: seq: Field required"),
         ("PredictRequest", {"digest": _DELETE}, "invalid PredictRequest: digest: Field required"),
         ("PredictRequest", {"seq": -1}, "invalid PredictRequest: seq: Input should be greater than or equal to 0"),
-        ("PredictRequest", {"budget": 0}, "invalid PredictRequest: budget: Input should be greater than 0"),
+        ("PredictRequest", {"budget": 0}, "invalid PredictRequest: budget: Input should be greater than or equal to 0.05"),
+        # Strict: no conversion of a string, a boolean or a float where the contract says otherwise (issue 25).
+        ("PredictRequest", {"budget": "2.0"}, "invalid PredictRequest: budget: Input should be a valid number"),
+        ("PredictRequest", {"seq": "3"}, "invalid PredictRequest: seq: Input should be a valid integer"),
         ("PredictRequest", {"skillsets": {"spot": {"resources": []}}},
          "invalid PredictRequest: skillsets.spot.resources: Input should be a valid dictionary"),
         ("PredictRequest", {"colour": "red"}, "invalid PredictRequest: colour: Extra inputs are not permitted"),

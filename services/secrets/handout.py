@@ -1,0 +1,155 @@
+"""Each service's own credentials out of the vault, and a user's files checked (issue 25 item 7; SPEC §7).
+
+The *vault* is the folder :mod:`services.common.security` fills: every password,
+the CA with its key, one certificate per name and, on a fleet's hub, ``fleet/``.
+No running service mounts it.  :func:`hand_out` copies into each service's own
+folder only what that service presents or checks:
+
+- ``router``: ``users.txt`` (its ``dictionary_file``), ``tls/ca.pem``,
+  ``tls/router.pem``, ``tls/router.key``; on a hub also ``fleet/ca.pem``,
+  ``fleet/hub.pem``, ``fleet/hub.key`` and ``fleet/hub.password`` (its links);
+- user ``U`` (a client): ``U.password``, ``tls/ca.pem``, ``tls/U.pem``, ``tls/U.key``.
+
+Never ``ca.key``.  A client's folder holds nothing else (other files there are
+removed); the router's keeps what it writes itself (a fleet's ``hub/``,
+``tls/trusted.pem``).  :func:`client_files` checks a user's files (a hand-out
+or a vault) before ``skinet client-config`` names them in a Zenoh configuration.
+Cost: a few kilobytes read and compared per service.
+"""
+
+from __future__ import annotations
+
+import datetime
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+from cryptography import x509
+from cryptography.exceptions import InvalidSignature
+from cryptography.hazmat.primitives import serialization
+from cryptography.x509.oid import NameOID
+
+from services.common.security import FLEET, USERS, write_file
+from skinet.errors import SkinetError
+
+ROUTER = "router"
+CLIENT_LAYOUT = "<user>.password, tls/ca.pem, tls/<user>.pem and tls/<user>.key"
+
+
+def service_files(vault: Path, name: str) -> list[str]:
+    """The files (relative to the vault) that service ``name`` gets: ``router`` or a user."""
+    if name == ROUTER:
+        files = ["users.txt", "tls/ca.pem", "tls/router.pem", "tls/router.key"]
+        if (vault / FLEET / "hub.pem").exists():
+            files += [f"{FLEET}/ca.pem", f"{FLEET}/hub.pem", f"{FLEET}/hub.key", f"{FLEET}/hub.password"]
+        return files
+    return [f"{name}.password", "tls/ca.pem", f"tls/{name}.pem", f"tls/{name}.key"]
+
+
+def _copy(source: Path, target: Path) -> None:
+    """``target`` with ``source``'s bytes, 0644 for certificates and 0600 for the rest."""
+    mode = 0o644 if target.suffix == ".pem" else 0o600
+    data = source.read_bytes()
+    if not target.exists() or target.read_bytes() != data:
+        write_file(target, data, mode)
+    os.chmod(target, mode)
+
+
+def hand_out(vault: Path, out: Path) -> dict[str, list[str]]:
+    """Copy each service's files from ``vault`` into ``out/<service>`` for every folder
+    already in ``out`` (compose mounts one volume there per service); returns what each got."""
+    handed: dict[str, list[str]] = {}
+    for folder in sorted(p for p in out.iterdir() if p.is_dir()):
+        if folder.name != ROUTER and folder.name not in USERS:
+            raise SkinetError(f"{folder}: a service's folder is named {ROUTER} or for its user ({', '.join(USERS)})")
+        files = service_files(vault, folder.name)
+        missing = [f for f in files if not (vault / f).is_file()]
+        if missing:
+            raise SkinetError(f"{vault} has no {', '.join(missing)} for {folder.name}")
+        for name in files:
+            target = folder / name
+            target.parent.mkdir(mode=0o700, exist_ok=True)
+            _copy(vault / name, target)
+        if folder.name != ROUTER:
+            for stray in [p for p in folder.rglob("*") if p.is_file() and str(p.relative_to(folder)) not in files]:
+                stray.unlink()
+        handed[folder.name] = files
+    return handed
+
+
+@dataclass(frozen=True)
+class ClientFiles:
+    """What a client of user ``user`` presents to the router: password, CA, certificate, key."""
+
+    user: str
+    password: str
+    ca: Path
+    certificate: Path
+    key: Path
+
+
+def _read(path: Path, user: str) -> bytes:
+    if not path.is_file():
+        raise SkinetError(f"{path} is missing (the secrets of user '{user}' are {CLIENT_LAYOUT.replace('<user>', user)})")
+    try:
+        return path.read_bytes()
+    except OSError as exc:
+        raise SkinetError(f"cannot read {path}: {exc.strerror}") from None
+
+
+def _certificate(path: Path, user: str) -> x509.Certificate:
+    try:
+        return x509.load_pem_x509_certificate(_read(path, user))
+    except ValueError:
+        raise SkinetError(f"{path} is not a PEM certificate") from None
+
+
+def client_files(folder: Path, user: str, now: datetime.datetime | None = None) -> ClientFiles:
+    """``user``'s files in ``folder``, checked as the router will: the certificate names
+    ``user`` (the router's access control binds certificates to users), is signed by
+    ``tls/ca.pem``, is valid now and matches its key.  :class:`SkinetError` (one line) otherwise."""
+    if not folder.is_dir():
+        raise SkinetError(f"secrets folder {folder} does not exist")
+    tls = folder / "tls"
+    password = _read(folder / f"{user}.password", user).decode(errors="replace").strip()
+    if not password or "\n" in password:
+        raise SkinetError(f"{folder / f'{user}.password'} must hold the password on one line")
+    ca = _certificate(tls / "ca.pem", user)
+    cert_path = tls / f"{user}.pem"
+    cert = _certificate(cert_path, user)
+    names = [a.value for a in cert.subject.get_attributes_for_oid(NameOID.COMMON_NAME)]
+    if names != [user]:
+        raise SkinetError(f"{cert_path} is the certificate of {', '.join(map(repr, names)) or 'nobody'}, not of "
+                          f"user '{user}': the router accepts each user with its own certificate only")
+    try:
+        cert.verify_directly_issued_by(ca)
+    except (ValueError, TypeError, InvalidSignature):
+        raise SkinetError(f"{cert_path} is not signed by the CA of {tls / 'ca.pem'}") from None
+    now = now or datetime.datetime.now(datetime.timezone.utc)
+    if not cert.not_valid_before_utc <= now <= cert.not_valid_after_utc:
+        raise SkinetError(f"{cert_path} is valid from {cert.not_valid_before_utc:%Y-%m-%d} to "
+                          f"{cert.not_valid_after_utc:%Y-%m-%d} only (a new one: docs/deployment.md, TLS)")
+    key_path = tls / f"{user}.key"
+    try:
+        key = serialization.load_pem_private_key(_read(key_path, user), None)
+    except (ValueError, TypeError):
+        raise SkinetError(f"{key_path} is not an unencrypted PEM private key") from None
+    spki = serialization.Encoding.DER, serialization.PublicFormat.SubjectPublicKeyInfo
+    if key.public_key().public_bytes(*spki) != cert.public_key().public_bytes(*spki):
+        raise SkinetError(f"{key_path} is not the key of {cert_path}")
+    return ClientFiles(user, password, (tls / "ca.pem").resolve(), cert_path.resolve(), key_path.resolve())
+
+
+def client_config(files: ClientFiles, endpoint: str) -> dict:
+    """The Zenoh configuration of a client logging in as ``files.user`` at ``endpoint`` over mutual TLS."""
+    return {
+        "mode": "client",
+        "connect": {"endpoints": [endpoint]},
+        "scouting": {"multicast": {"enabled": False}},
+        "transport": {
+            "auth": {"usrpwd": {"user": files.user, "password": files.password}},
+            "link": {"tls": {"root_ca_certificate": str(files.ca), "enable_mtls": True,
+                             "connect_certificate": str(files.certificate),
+                             "connect_private_key": str(files.key)}},
+        },
+    }

@@ -1,0 +1,170 @@
+"""The planner: a goal, or a mission goal after goal, from a marking (SPEC §8).
+
+:class:`Planner` builds what does not depend on the goal once per start
+marking and keeps it (the arena, the explored graph or its BDDs), so that the
+pilot may ask at every marking change.  Per question: strong first, then
+strong cyclic (:mod:`skinet.plan.solve`); ``none`` only after a complete search
+(:mod:`skinet.plan.diagnose` says why); ``unknown`` when the budget or the
+memory limit cut the search and no plan lies within what was searched.
+
+Engines: ``explicit`` on the explored graph (:mod:`skinet.plan.explicit`),
+``symbolic`` on BDDs of the whole product (:mod:`skinet.plan.symbolic`); both
+give the same answers and the same policies.  ``auto`` takes the explicit one
+up to :data:`EXPLICIT_UP_TO` markings in the product of the component graphs
+and the symbolic one beyond (the explicit engine where dd's CUDD extension is
+missing).  Cost: see the engines; the goal-independent part is paid once per
+start marking.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import OrderedDict
+from collections.abc import Hashable, Mapping, Sequence
+from typing import Any
+
+from skinet.errors import SkinetError
+from skinet.plan.arena import Arena
+from skinet.plan.diagnose import _forced_words, diagnose
+from skinet.plan.goal import Goal
+from skinet.plan.policy import Plan, Stats
+from skinet.plan.solve import cyclic, strong
+from skinet.system import System, marking_problems
+from skinet.verify.explore import DEFAULT_MEMORY_LIMIT, Deadline
+
+ENGINES = ("auto", "explicit", "symbolic")
+# Up to this many markings in the product, the explicit engine answers faster than the BDDs.
+# Warm plans of a goal over every component (benchmarks/bench_plan.py and corpus copies,
+# thread CPU time): the paper's system, 63 markings, 0.18 ms against 0.53 ms; 1 + 1, 496,
+# 0.54 against 3.1 ms; 1 + 3, 7 936, 14 against 24 ms; 2 + 1, 61 504, 99 against 24 ms;
+# 2 + 2, 246 016, 522 against 23 ms.
+EXPLICIT_UP_TO = 1 << 14
+CACHE_SIZE = 8  # start markings whose goal-independent structures are kept
+
+
+class Planner:
+    """Plans goals on one system; see the package docstring (:mod:`skinet.plan`) for the pilot's use.
+    Not thread-safe: one planner per thread (it keeps the structures of recent start markings)."""
+
+    def __init__(self, system: System, engine: str = "auto", memory_limit: int | None = DEFAULT_MEMORY_LIMIT):
+        if engine not in ENGINES:
+            raise SkinetError(f"unknown engine '{engine}' (engines: {', '.join(ENGINES)})")
+        if engine == "symbolic" and not _cudd():
+            raise SkinetError("the symbolic engine needs dd's CUDD extension (dd.cudd), which is not installed here")
+        self.system = system
+        self.engine = engine
+        self.memory_limit = memory_limit
+        opts = system.prediction
+        self.events = opts.default.events_uncontrollable or any(o.events_uncontrollable for o in opts.overrides.values())
+        self._cache: OrderedDict[Hashable, dict[str, Any]] = OrderedDict()
+
+    def arena(self, marking: Mapping[str, int]) -> Arena:
+        """The arena from ``marking`` (kept for the next questions from the same marking)."""
+        return self._entry(marking)["arena"]
+
+    def _entry(self, marking: Mapping[str, int]) -> dict[str, Any]:
+        key = tuple(marking[c.name] for c in self.system.components)
+        entry = self._cache.get(key)
+        if entry is None:
+            problems = marking_problems(self.system, marking)
+            if problems:
+                raise SkinetError("impossible state: " + "; ".join(problems))
+            entry = {"arena": Arena(self.system, marking, self.events)}
+            self._cache[key] = entry
+            while len(self._cache) > CACHE_SIZE:
+                self._cache.popitem(last=False)
+        self._cache.move_to_end(key)
+        return entry
+
+    def engine_for(self, arena: Arena) -> str:
+        """The engine ``auto`` takes for ``arena`` (or the one forced)."""
+        if self.engine != "auto":
+            return self.engine
+        return "explicit" if arena.box <= EXPLICIT_UP_TO or not _cudd() else "symbolic"
+
+    def plan(self, goal: Goal, marking: Mapping[str, int] | None = None, budget: float | None = None) -> Plan:
+        """The answer to ``goal`` from ``marking`` (default: initial) within ``budget`` seconds."""
+        started = time.perf_counter()
+        deadline = Deadline.after(budget, started)
+        marking = dict(marking or self.system.initial_marking())
+        entry = self._entry(marking)
+        arena: Arena = entry["arena"]
+        engine = self.engine_for(arena)
+        if engine == "explicit":
+            from skinet.plan.explicit import ExplicitGame, ExplicitSpace
+
+            space = entry.get("explicit")
+            if space is None:
+                space = ExplicitSpace(arena, deadline, self.memory_limit)
+                if space.space.complete:  # a cut exploration depends on this budget: not kept
+                    entry["explicit"] = space
+            game = ExplicitGame(space, goal)
+            relaxed = lambda r: ExplicitGame(space, goal, r)  # noqa: E731
+            markings, complete, cut = space.space.markings, space.space.complete, space.space.truncated_by
+        else:
+            from skinet.plan.symbolic import SymbolicGame, SymbolicSpace
+
+            space = entry.get("symbolic")
+            if space is None:
+                space = entry["symbolic"] = SymbolicSpace(arena)
+            game = SymbolicGame(space, goal)
+            relaxed = lambda r: SymbolicGame(space, goal, r)  # noqa: E731
+            markings, complete, cut = arena.box, True, None
+
+        def stats() -> Stats:
+            return Stats(engine, markings, complete, cut, time.perf_counter() - started)
+
+        start = arena.root
+        if not arena.safe_at(start):
+            return Plan(goal, arena, start, "none",
+                        f"the robot is in a marking forced for {_forced_words(arena, start)}: "
+                        "no plan can promise safety from here", stats())
+        for answer, solve in (("strong", strong), ("cyclic", cyclic)):
+            layers = solve(game, deadline.expired)
+            if layers is None:
+                return Plan(goal, arena, start, "unknown", _cut_short(markings, complete, cut), stats())
+            if game.member(layers[-1], start):
+                return Plan(goal, arena, start, answer, None, stats(), game, layers)  # type: ignore[arg-type]
+        if not complete:
+            return Plan(goal, arena, start, "unknown",
+                        f"no plan within the {markings} markings explored: the exploration was cut by the "
+                        f"{'memory limit' if cut == 'memory' else cut}", stats())
+        return Plan(goal, arena, start, "none", diagnose(arena, goal, game, relaxed, deadline.expired), stats())
+
+    def admissible(self, marking: Mapping[str, int]) -> list[tuple[str, str]]:
+        """The commands at ``marking`` after which every result is in Safe, ``(skillset, transition)``
+        in the fixed order: those the ``strict`` check allows wherever no property is violated
+        (SPEC §8; where one is, the check judges only the others, SPEC §5: tests/plan/test_answers.py)."""
+        arena = self.arena(marking)
+        local = arena.root
+        out = []
+        for action in arena.actions(local, None):
+            if action.component is not None and action.move is not None and all(
+                    arena.safe_at(r) for _, r in arena.post(local, action, None) if r is not None):
+                out.append((arena.names[action.component], action.move.name))
+        return out
+
+    def mission(self, goals: Sequence[Goal], marking: Mapping[str, int] | None = None,
+                budget: float | None = None) -> list[Plan]:
+        """Plans for ``goals`` one after another, each from where the previous one's favourable
+        path ends; stops after the first goal without a plan.  ``budget`` is per goal."""
+        plans: list[Plan] = []
+        here = dict(marking or self.system.initial_marking())
+        for goal in goals:
+            plan = self.plan(goal, here, budget)
+            plans.append(plan)
+            if plan.answer not in ("strong", "cyclic"):
+                break
+            here = plan.end or here
+        return plans
+
+
+def _cut_short(markings: int, complete: bool, cut: str | None) -> str:
+    searched = f"{markings} markings, complete" if complete else f"{markings} markings, exploration cut by the {cut}"
+    return f"the budget ran out before the fixpoints ended ({searched})"
+
+
+def _cudd() -> bool:
+    from skinet.verify.symbolic import available
+
+    return available()

@@ -1,0 +1,242 @@
+"""Conditions on the fields of a ROS 2 message, as a binding writes them (SPEC §9).
+
+``percentage < 0.2``, ``error_code == FAILED_TO_CHARGE``,
+``power_supply_status != POWER_SUPPLY_STATUS_CHARGING and present``: comparisons
+(``== != < <= > >=``) of field paths (``header.frame_id``), numbers, ``'strings'``,
+``true``/``false`` and the message's constants, joined by ``and``, ``or``, ``not``
+and parentheses (grammar: ``condition.lark``); a boolean field alone is a
+condition too.  :func:`parse_condition` checks every path and constant against the
+message type (an unknown name is an error listing close names) and that both sides
+of a comparison are of one kind (number, text, boolean), then compiles the
+condition into nested closures over the plain dicts of
+:func:`skinet.ros.typestore.to_plain`.
+
+Errors point into the file that holds the condition: ``at`` is the position of its
+first character there.  Cost: parsing linear in the text; evaluation one dict
+lookup per path element and one comparison per atom.
+
+Examples:
+    >>> from skinet.ros.definitions import build_store
+    >>> c = parse_condition("percentage < 0.2 and present", "sensor_msgs/msg/BatteryState", build_store())
+    >>> c.holds({"percentage": 0.1, "present": True}), c.holds({"percentage": 0.5, "present": True})
+    (True, False)
+"""
+
+from __future__ import annotations
+
+import operator
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from functools import cache
+from pathlib import Path
+from typing import Any
+
+from lark import Lark, Token, Tree
+from lark.exceptions import UnexpectedInput
+from rosbags.interfaces import Nodetype
+from rosbags.typesys.base import normalize_fieldname
+from rosbags.typesys.store import Typestore
+
+from skinet.closenames import unknown
+from skinet.errors import Pos, SourceError
+from skinet.lang.larkcache import cached_lark
+from skinet.lang.larkerrors import check_nesting, check_size, syntax_error
+
+MAX_CONDITION_CHARS = 4096
+NUMBERS = frozenset({"int8", "uint8", "int16", "uint16", "int32", "uint32", "int64", "uint64", "float32",
+                     "float64", "byte", "char", "octet"})
+_COMPARE: dict[str, Callable[[Any, Any], bool]] = {
+    "==": operator.eq, "!=": operator.ne, "<": operator.lt, "<=": operator.le, ">": operator.gt, ">=": operator.ge,
+}
+_OPERATORS = frozenset({"or_", "and_", "not_"})
+
+Plain = Mapping[str, Any]
+Getter = Callable[[Plain], Any]
+
+
+@cache
+def _lark() -> Lark:
+    return cached_lark(Path(__file__).with_name("condition.lark"), parser="lalr", propagate_positions=True,
+                       maybe_placeholders=False)
+
+
+@dataclass(frozen=True)
+class Condition:
+    """A compiled condition on messages of ``typename``."""
+
+    text: str
+    typename: str
+    fields: tuple[str, ...]  # the field paths it reads, for messages showing what it saw
+    _test: Callable[[Plain], bool] = field(repr=False, compare=False)
+
+    def holds(self, msg: Plain) -> bool:
+        """Whether the condition holds on a message (plain dicts); a missing field raises ``KeyError``."""
+        return self._test(msg)
+
+    def shown(self, msg: Plain) -> str:
+        """The values the condition reads in ``msg``: ``percentage=0.15, present=True``."""
+        out = []
+        for path in self.fields:
+            try:
+                value: Any = msg
+                for part in path.split("."):
+                    value = value[normalize_fieldname(part)]
+            except (KeyError, TypeError):
+                value = "?"
+            out.append(f"{path}={value!r}" if isinstance(value, str) and value != "?" else f"{path}={value}")
+        return ", ".join(out)
+
+
+@dataclass(frozen=True)
+class _Operand:
+    kind: str  # "number", "text", "bool"
+    get: Getter
+    path: str = ""  # a field path, else ''
+    owner: str = ""  # the type holding the field (constants are looked up there first)
+
+
+class _Compiler:
+    def __init__(self, typename: str, store: Typestore, source: str, at: Pos, text: str):
+        self.typename = typename
+        self.store = store
+        self.source = source
+        self.at = at
+        self.text = text
+        self.paths: list[str] = []
+
+    def error(self, node: Tree | Token, message: str) -> SourceError:
+        column = node.column if isinstance(node, Token) else node.meta.column
+        return SourceError.at(self.source, _shift(self.at, column), message)
+
+    def build(self, node: Tree) -> Callable[[Plain], bool]:
+        kind = node.data
+        if kind == "or_":
+            a, b = (self.build(c) for c in node.children)
+            return lambda m: a(m) or b(m)
+        if kind == "and_":
+            a, b = (self.build(c) for c in node.children)
+            return lambda m: a(m) and b(m)
+        if kind == "not_":
+            a = self.build(node.children[0])
+            return lambda m: not a(m)
+        if kind == "truth":
+            inner = node.children[0]
+            operand = self.operand(inner, None)
+            if operand.kind != "bool":
+                what = operand.path or self.text[inner.meta.start_pos:inner.meta.end_pos]
+                raise self.error(inner, f"'{what}' is a {operand.kind}, not a condition: compare it (e.g. "
+                                        f"{what} == ...)")
+            get = operand.get
+            return lambda m: bool(get(m))
+        left_node, op, right_node = node.children
+        left = self.operand(left_node, right_node)
+        right = self.operand(right_node, left_node, left)
+        if left.kind != right.kind:
+            raise self.error(op, f"'{op}' compares a {left.kind} with a {right.kind}")
+        if left.kind != "number" and str(op) not in ("==", "!="):
+            raise self.error(op, f"'{op}' orders numbers only; {left.kind}s compare with == or !=")
+        compare, lget, rget = _COMPARE[str(op)], left.get, right.get
+        return lambda m: compare(lget(m), rget(m))
+
+    def operand(self, node: Tree, other: Tree | None, resolved: _Operand | None = None) -> _Operand:
+        kind = node.data
+        if kind == "number":
+            value = float(node.children[0]) if any(c in node.children[0] for c in ".eE") else int(node.children[0])
+            return _Operand("number", lambda m: value)
+        if kind == "negative":
+            text = str(node.children[0])
+            value = -(float(text) if any(c in text for c in ".eE") else int(text))
+            return _Operand("number", lambda m: value)
+        if kind == "string":
+            text = str(node.children[0])[1:-1]
+            return _Operand("text", lambda m: text)
+        if kind in ("true", "false"):
+            value = kind == "true"
+            return _Operand("bool", lambda m: value)
+        return self.path(node, other, resolved)
+
+    def path(self, node: Tree, other: Tree | None, resolved: _Operand | None) -> _Operand:
+        names = [str(t) for t in node.children]
+        owners = [resolved.owner] if resolved is not None and resolved.owner else []
+        if len(names) == 1:
+            for owner in [*owners, self.typename]:
+                const = _constant(self.store, owner, names[0])
+                if const is not None:
+                    kind, value = const
+                    return _Operand(kind, lambda m: value)
+        current, keys = self.typename, []
+        for i, (name, token) in enumerate(zip(names, node.children)):
+            consts, fielddefs = self.store.fielddefs[current]
+            found = dict(fielddefs).get(name)
+            if found is None:
+                known = [f for f, _ in fielddefs] + ([c[0] for c in consts] if i == 0 else [])
+                raise self.error(token, unknown("field" if i else "field or constant", name, known, f" of {current}"))
+            keys.append(normalize_fieldname(name))
+            desc = found
+            if desc[0] == Nodetype.NAME and i < len(names) - 1:
+                current = desc[1]
+                continue
+            if i < len(names) - 1:
+                raise self.error(names_token(node, i + 1), f"'{'.'.join(names[:i + 1])}' has no fields")
+            if desc[0] != Nodetype.BASE:
+                what = "a message" if desc[0] == Nodetype.NAME else "an array"
+                raise self.error(token, f"'{'.'.join(names)}' is {what}; a condition compares single values "
+                                        "(numbers, text, booleans)")
+            base = desc[1][0]
+            kind = "number" if base in NUMBERS else "text" if base == "string" else "bool"
+            self.paths.append(".".join(names))
+            return _Operand(kind, _getter(keys), ".".join(names), current)
+        raise AssertionError("unreachable")
+
+
+def names_token(node: Tree, i: int) -> Token:
+    return node.children[i]  # type: ignore[return-value]
+
+
+def _getter(keys: list[str]) -> Getter:
+    if len(keys) == 1:
+        return operator.itemgetter(keys[0])
+
+    def get(m: Plain) -> Any:
+        for k in keys:
+            m = m[k]
+        return m
+
+    return get
+
+
+def _constant(store: Typestore, typename: str, name: str) -> tuple[str, Any] | None:
+    for const, base, value in store.fielddefs[typename][0]:
+        if const == name:
+            return ("number" if base in NUMBERS else "text" if base == "string" else "bool"), value
+    return None
+
+
+def _shift(at: Pos, column: int) -> Pos:
+    return Pos(at.line, at.column + column - 1)
+
+
+def parse_condition(text: str, typename: str, store: Typestore, source: str = "<condition>",
+                    at: Pos = Pos(1, 1)) -> Condition:
+    """Compile ``text`` as a condition on messages of ``typename`` (module docstring).
+
+    Raises :class:`SourceError` at ``source``, positions shifted to ``at`` (where the
+    condition's first character is in that file).
+    """
+    if typename not in store.fielddefs:
+        raise SourceError.at(source, at, f"unknown message type '{typename}'")
+    check_size(text, source, MAX_CONDITION_CHARS)
+    if "\n" in text:
+        raise SourceError.at(source, at, "a condition is one line")
+    try:
+        tree = _lark().parse(text)
+    except UnexpectedInput as exc:
+        error = syntax_error(_lark(), exc, text, source).diagnostics[0]
+        raise SourceError.at(source, _shift(at, error.pos.column if error.pos else 1), error.message) from None
+    check_nesting(tree, _OPERATORS, source)
+    compiler = _Compiler(typename, store, source, at, text)
+    test = compiler.build(tree if isinstance(tree, Tree) else Tree("truth", [tree]))
+    return Condition(text, typename, tuple(dict.fromkeys(compiler.paths)), test)
+
+
+__all__ = ["Condition", "MAX_CONDITION_CHARS", "parse_condition"]

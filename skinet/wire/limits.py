@@ -1,0 +1,15 @@
+"""Numeric limits of the Zenoh contract (schemas/README.md), importable without pydantic.
+
+``skinet_cli`` checks its options against them before anything heavy is imported.
+"""
+
+from __future__ import annotations
+
+# The least exploration budget a predictor accepts, seconds: below it an answer could
+# only be "undecided" everywhere, so a monitor refuses to start with a smaller one.
+MIN_BUDGET = 0.05
+
+# The largest PredictRequest payload a predictor decodes, bytes.  A request carries the
+# live marking only: the paper's system takes about 300 bytes, 8 corpus skillsets about
+# 3 KB, so 64 KiB leaves room for a few hundred skillsets.
+MAX_PREDICT_REQUEST = 1 << 16

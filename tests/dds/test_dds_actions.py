@@ -1,0 +1,141 @@
+"""Bound skillsets over real DDS and the real zenoh-plugin-ros2dds (slow: cargo build; SPEC §9).
+
+A CycloneDDS participant plays the Nav2 example's robot as rmw_cyclonedds lays it out
+(:class:`services.simulator.dds_bound.DdsBoundRobot`: action servers as rq/rr service
+topics with rmw_cyclonedds' request header and a transient-local status writer, a
+lifecycle node with get_state and transition_event, the battery topic, and
+``ros_discovery_info``).  The plugin routes them: action server routes (AS tokens,
+send_goal/cancel_goal/get_result queryables, the status cached for late joiners),
+service routes, topics.  The test's operator sends goals and cancels through the
+plugin, as a remote client would; the bridge derives the model's transitions.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from pathlib import Path
+
+import pytest
+import zenoh
+
+from event_watch import Events
+from gateway import free_domain
+from services.bridge_ros2.bound_live import start_bound_bridge
+from services.common.zenoh_config import session_config
+from services.simulator.dds_bound import DdsBoundRobot
+from skinet.files import load_bindings, load_system
+from skinet.ros.actions import cancel_goal_reply, cancel_goal_request, send_goal_reply, send_goal_request
+from skinet.ros.keys import KeyStyle
+
+pytestmark = pytest.mark.slow
+
+REPO = Path(__file__).resolve().parents[2]
+NAVIGATE = "nav2_msgs/action/NavigateToPose"
+
+
+@pytest.fixture(scope="module")
+def nav2():
+    system, _ = load_system(REPO / "examples" / "nav2" / "nav2.toml")
+    bindings, _ = load_bindings(system)
+    return system, bindings
+
+
+def client(endpoint: str) -> zenoh.Session:
+    return zenoh.open(session_config("client", connect=[endpoint], multicast_scouting=False))
+
+
+def initial_status(robot: DdsBoundRobot, events: Events, battery: dict) -> object:
+    """The battery publishes until the bridge's route exists (a volatile topic: samples before it are lost);
+    the first event is then the initial status."""
+    deadline = time.monotonic() + 20
+    while not events.items and time.monotonic() < deadline:
+        robot.publish("nav2", "/battery_state", battery)
+        time.sleep(0.3)
+    return events.wait(lambda items: len(items) >= 1)[0]
+
+
+def call(session: zenoh.Session, key: str, payload: bytes, timeout: float = 10.0) -> bytes:
+    """One service call through the plugin (retried until its route exists)."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        for reply in session.get(key, payload=payload, timeout=2.0):
+            if reply.ok is not None:
+                return reply.ok.payload.to_bytes()
+        time.sleep(0.2)
+    raise AssertionError(f"no reply on {key}")
+
+
+@pytest.mark.parametrize("distro,namespace", [("jazzy", ""), ("humble", "/robot1")], ids=["jazzy", "humble-namespace"])
+def test_a_nav2_run_on_dds_action_servers(gateway_factory, nav2, distro: str, namespace: str) -> None:
+    system, bindings = nav2
+    store = bindings["nav2"].store
+    domain = free_domain()
+    gateway = gateway_factory(domain=domain, distro=distro, namespace=namespace or "/")
+    style = KeyStyle(namespace=namespace)
+    robot = DdsBoundRobot(system, bindings, domain=domain, distro=distro)
+    session = client(gateway.endpoint)
+    events = Events(session, system.name)
+    bridge = start_bound_bridge(session, system, bindings, style=style, settle=0.5, retry=0.3)
+    try:
+        first = initial_status(robot, events, {"percentage": 0.9, "power_supply_status": 1})
+        assert (first.transition, first.info, first.status.running) == (None, "initial status", [])
+        robot.lifecycle("nav2", "navigator", "Inactive")
+        robot.lifecycle("nav2", "navigator", "Active")
+        send = style.name_key("/undock_robot/_action/send_goal", "")
+        goal = os.urandom(16)
+        reply = call(session, send, send_goal_request(store, "opennav_docking_msgs/action/UndockRobot", goal))
+        assert send_goal_reply(store, "opennav_docking_msgs/action/UndockRobot", reply)[0] is True
+        assert robot.finish("nav2", "undock_robot", "success")
+        robot.publish("nav2", "/battery_state", {"percentage": 0.9, "power_supply_status": 2})
+        goal = os.urandom(16)
+        nav = style.name_key("/navigate_to_pose/_action/send_goal", "")
+        reply = call(session, nav, send_goal_request(store, NAVIGATE, goal, {"behavior_tree": "bt.xml"}))
+        assert send_goal_reply(store, NAVIGATE, reply)[0] is True
+        events.wait(lambda items: [e.transition for e in items][-1:] == ["navigate.start"], timeout=10)
+        code, canceling = cancel_goal_reply(store, call(session, style.name_key(
+            "/navigate_to_pose/_action/cancel_goal", ""), cancel_goal_request(store, goal)))
+        assert (code, canceling) == ("ERROR_NONE", [goal])
+        reply = call(session, nav, send_goal_request(store, NAVIGATE, os.urandom(16)))
+        events.wait(lambda items: [e.transition for e in items][-1:] == ["navigate.start"], timeout=10)
+        assert robot.finish("nav2", "navigate", "failure", {"error_code": 9003})  # get_result names the mode
+        got = events.wait(lambda items: len(items) == 10, timeout=15)
+    finally:
+        bridge.close()
+        robot.close()
+        session.close()
+    assert [e.transition for e in got] == [
+        None, "navigator_configured", "navigator_activated", "undock_robot.start", "undock_robot.success.undocked",
+        "charging_stopped", "navigate.start", "navigate.interrupt", "navigate.start", "navigate.failure.timed_out"]
+    assert bridge.counters.drifts == 0 and bridge.counters.malformed == 0 and not bridge.counters.bad
+
+
+def test_the_bridge_reads_a_busy_robot_at_start_up(gateway_factory, nav2) -> None:
+    """A goal runs and the navigator is active before SkiNet starts: the last status comes from the
+    plugin's cache of the transient-local topic, the navigator's state from get_state, through DDS."""
+    system, bindings = nav2
+    store = bindings["nav2"].store
+    domain = free_domain()
+    gateway = gateway_factory(domain=domain, distro="jazzy")
+    robot = DdsBoundRobot(system, bindings, domain=domain, distro="jazzy")
+    operator = client(gateway.endpoint)
+    try:
+        robot.lifecycle("nav2", "navigator", "Inactive")
+        robot.lifecycle("nav2", "navigator", "Active")
+        reply = call(operator, "navigate_to_pose/_action/send_goal", send_goal_request(store, NAVIGATE, os.urandom(16)))
+        assert send_goal_reply(store, NAVIGATE, reply)[0]
+        session = client(gateway.endpoint)
+        events = Events(session, system.name)
+        bridge = start_bound_bridge(session, system, bindings, settle=0.5, retry=0.3)
+        try:
+            first = initial_status(robot, events, {"percentage": 0.5, "power_supply_status": 2})
+        finally:
+            bridge.close()
+            session.close()
+    finally:
+        robot.close()
+        operator.close()
+    assert first.info == "initial status"
+    assert first.status.model_dump() == {
+        "resources": {"navigator": "Active", "motion": "Still", "dock": "Docked", "battery": "Ok",
+                      "charging": "NotCharging"}, "running": ["navigate"]}

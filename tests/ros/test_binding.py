@@ -1,0 +1,238 @@
+"""Binding files, message conditions and type definitions (SPEC §9; skinet.ros.binding, condition, definitions).
+
+Every bad binding gives one error at the file, line and column of the key or value
+at fault, with close names where a name is unknown.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from skinet.errors import Pos, SourceError
+from skinet.files import load_bindings, load_system
+from skinet.ros.binding import LIFECYCLE_STATES, parse_binding
+from skinet.ros.condition import parse_condition
+from skinet.ros.definitions import action_types, build_store, rihs01
+
+REPO = Path(__file__).resolve().parents[2]
+NAV2 = REPO / "examples" / "nav2"
+
+FIBONACCI = "int32 order\n---\nint32[] sequence\n---\nint32[] partial_sequence\n"
+
+
+@pytest.fixture(scope="module")
+def nav2():
+    system, _ = load_system(NAV2 / "nav2.toml")
+    bindings, warnings = load_bindings(system)
+    return system, bindings["nav2"], warnings
+
+
+def error(call, *args, **kwargs) -> str:  # type: ignore[no-untyped-def]
+    with pytest.raises(SourceError) as info:
+        call(*args, **kwargs)
+    assert len(info.value.diagnostics) == 1
+    return str(info.value)
+
+
+# ---- definitions -------------------------------------------------------------------------------
+
+
+def test_service_and_action_hashes_are_those_ros_publishes() -> None:
+    """REP 2011 hashes of services and action protocol types, against values published by ROS 2 Jazzy
+    (rmw_zenoh keys carry them): AddTwoInts, CancelGoal, Fibonacci's SendGoal, GetResult, FeedbackMessage."""
+    action = "action_tutorials_interfaces/action/Fibonacci"
+    store = build_store({action: FIBONACCI, "example_interfaces/srv/AddTwoInts": "int64 a\nint64 b\n---\nint64 sum\n"})
+    assert {n: rihs01(store, n)[7:15] for n in (
+        "example_interfaces/srv/AddTwoInts", "action_msgs/srv/CancelGoal", f"{action}_SendGoal",
+        f"{action}_GetResult", f"{action}_FeedbackMessage", "action_msgs/msg/GoalStatusArray")} == {
+        "example_interfaces/srv/AddTwoInts": "e118de6b", "action_msgs/srv/CancelGoal": "573d8b0a",
+        f"{action}_SendGoal": "a0603060", f"{action}_GetResult": "8b47e383", f"{action}_FeedbackMessage": "50fc26b9",
+        "action_msgs/msg/GoalStatusArray": "6c1684b0"}
+    assert action_types(store) == [action]
+    assert [f for f, _ in store.fielddefs[f"{action}_SendGoal_Request"][1]] == ["goal_id", "goal"]
+    assert [f for f, _ in store.fielddefs[f"{action}_GetResult_Response"][1]] == ["status", "result"]
+    # An empty part (GetState's request, a feedback-less action) holds rosidl's placeholder field.
+    assert store.fielddefs["lifecycle_msgs/srv/GetState_Request"][1][0][0] == "structure_needs_at_least_one_member"
+
+
+@pytest.mark.parametrize("name,text,message", [
+    ("pkg/action/Bad", "int32 a\n---\nint32 b\n", "a .action definition has 3 part(s) separated by '---' lines, "
+                                                 "this one has 2"),
+    ("pkg/srv/Bad", "int32 a\n", "a .srv definition has 2 part(s) separated by '---' lines, this one has 1"),
+    ("pkg/action/lower", "---\n---\n", "'pkg/action/lower' is not a ROS 2 type name (package/msg|srv|action/Name)"),
+    ("pkg/msg/Bad", "int32\n", "cannot read the definition of pkg/msg/Bad: Could not parse:"),
+])
+def test_bad_definitions(name: str, text: str, message: str) -> None:
+    assert error(build_store, {name: text}, {name: "defs/x"}).startswith(f"defs/x: error: {message}")
+
+
+# ---- conditions --------------------------------------------------------------------------------
+
+BATTERY = "sensor_msgs/msg/BatteryState"
+
+
+@pytest.mark.parametrize("text,msg,expected", [
+    ("percentage < 0.2", {"percentage": 0.19}, True),
+    ("percentage < 0.2", {"percentage": 0.2}, False),
+    ("percentage >= .2 and present", {"percentage": 0.5, "present": False}, False),
+    ("not present or percentage == 1", {"percentage": 1, "present": True}, True),
+    ("power_supply_status == POWER_SUPPLY_STATUS_CHARGING", {"power_supply_status": 1}, True),
+    ("power_supply_status != POWER_SUPPLY_STATUS_CHARGING", {"power_supply_status": 1}, False),
+    ("header.frame_id == 'base_link'", {"header": {"frame_id": "base_link"}}, True),
+    ("(temperature > -5.5) and (temperature <= 40)", {"temperature": -5.0}, True),
+])
+def test_conditions(text: str, msg: dict, expected: bool) -> None:
+    assert parse_condition(text, BATTERY, build_store()).holds(msg) is expected
+
+
+@pytest.mark.parametrize("text,message", [
+    ("percentag < 0.2", "2:7: error: unknown field or constant 'percentag' of sensor_msgs/msg/BatteryState "
+                        "(candidates: percentage, present)"),
+    ("percentage", "2:7: error: 'percentage' is a number, not a condition: compare it (e.g. percentage == ...)"),
+    ("header < 3", "2:7: error: 'header' is a message; a condition compares single values"),
+    ("cell_voltage == 1", "2:7: error: 'cell_voltage' is an array; a condition compares single values"),
+    ("location < 'x'", "2:16: error: '<' orders numbers only; texts compare with == or !="),
+    ("percentage == 'x'", "2:18: error: '==' compares a number with a text"),
+    ("percentage <", "2:19: error: unexpected end of input, expected one of:"),
+    ("header.frame_id.x == 1", "2:23: error: 'header.frame_id' has no fields"),
+])
+def test_condition_errors_point_into_the_file(text: str, message: str) -> None:
+    assert error(parse_condition, text, BATTERY, build_store(), "b.toml", Pos(2, 7)).startswith(f"b.toml:{message}")
+
+
+# ---- bindings ----------------------------------------------------------------------------------
+
+
+def test_the_nav2_binding(nav2) -> None:  # type: ignore[no-untyped-def]
+    system, binding, warnings = nav2
+    assert warnings == []
+    assert [(s.skill, s.action, s.type, s.success.default, s.failure.default, [m for m, _ in s.failure.when])
+            for s in binding.skills] == [
+        ("navigate", "/navigate_to_pose", "nav2_msgs/action/NavigateToPose", "arrived", "failed", ["timed_out"]),
+        ("dock_robot", "/dock_robot", "opennav_docking_msgs/action/DockRobot", "docked", "failed", ["not_charging"]),
+        ("undock_robot", "/undock_robot", "opennav_docking_msgs/action/UndockRobot", "undocked", "failed", []),
+    ]
+    navigator = binding.resources[0]
+    assert (navigator.lifecycle, navigator.states) == ("/bt_navigator", tuple(
+        (s.capitalize(), i) for s, i in LIFECYCLE_STATES.items()))
+    assert binding.topics() == {
+        "/navigate_to_pose/_action/status": "action_msgs/msg/GoalStatusArray",
+        "/dock_robot/_action/status": "action_msgs/msg/GoalStatusArray",
+        "/undock_robot/_action/status": "action_msgs/msg/GoalStatusArray",
+        "/bt_navigator/transition_event": "lifecycle_msgs/msg/TransitionEvent",
+        "/battery_state": BATTERY, "/emergency_stop": "std_msgs/msg/Bool"}
+    timed_out = binding.skills[0].failure
+    assert timed_out.mode({"error_code": 9003}) == "timed_out" and timed_out.mode({"error_code": 9000}) == "failed"
+    assert timed_out.mode(None) == "failed"
+
+
+NAV2_MODEL = (NAV2 / "nav2.rl").read_text()
+GOOD = """\
+[binding]
+definitions = "interfaces"
+
+[skills.navigate]
+action = "/navigate_to_pose"
+type = "nav2_msgs/action/NavigateToPose"
+failure = "failed"
+"""
+
+
+def check(tmp_path: Path, binding: str, files: dict[str, str] | None = None) -> str:
+    """The one-line error of ``skinet parse``-like loading of a nav2 system with this binding."""
+    (tmp_path / "nav2.rl").write_text(NAV2_MODEL)
+    (tmp_path / "nav2.props").write_text("")
+    (tmp_path / "s.toml").write_text('[system]\nname = "s"\nproperties = "nav2.props"\n'
+                                     '[[skillsets]]\nmodel = "nav2.rl"\nbinding = "b.toml"\n')
+    for name, text in {"interfaces/nav2_msgs/action/NavigateToPose.action":
+                       (NAV2 / "interfaces/nav2_msgs/action/NavigateToPose.action").read_text(), **(files or {})}.items():
+        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / name).write_text(text)
+    (tmp_path / "b.toml").write_text(binding)
+    system, _ = load_system(tmp_path / "s.toml")
+    return error(load_bindings, system).replace(str(tmp_path) + "/", "")
+
+
+@pytest.mark.parametrize("text,message", [
+    (GOOD.replace('type = "nav2_msgs/action/NavigateToPose"', 'type = "nav2_msgs/action/NavigateToPoze"'),
+     "b.toml:6:9: error: unknown action type 'nav2_msgs/action/NavigateToPoze' (candidates: "
+     "nav2_msgs/action/NavigateToPose); put its .action file in the binding's definitions folder as "
+     "<package>/action/<Name>.action"),
+    (GOOD.replace("[skills.navigate]", "[skills.navigat]"),
+     "b.toml:4:1: error: unknown skill 'navigat' of skillset 'nav2' (candidates: navigate)"),
+    (GOOD.replace("action = ", "actoin = "),
+     "b.toml:5:1: error: unknown key 'actoin' in [skills.navigate] (candidates: action)"),
+    (GOOD.replace('failure = "failed"', 'failure = "fail"'),
+     "b.toml:7:12: error: unknown failure mode 'fail' of skill 'navigate' (candidates: failed)"),
+    (GOOD.replace('failure = "failed"\n', ''),
+     "b.toml:4:1: error: skill 'navigate' has several failure modes ('failed', 'timed_out'): name the mode of an "
+     'ABORTED goal with failure = "..."'),
+    (GOOD + 'failure_when = { timed_out = "error_code == TIMEOUTS" }\n',
+     "b.toml:8:45: error: unknown field or constant 'TIMEOUTS' of nav2_msgs/action/NavigateToPose_Result "
+     "(candidates: TIMEOUT)"),
+    (GOOD + 'failure_when = { blocked = "error_code == 1" }\n',
+     "b.toml:8:18: error: unknown failure mode 'blocked' of skill 'navigate' (expected one of: failed, timed_out)"),
+    (GOOD + '[resources.battery]\ntopic = "/battery_state"\ntype = "sensor_msgs/msg/BatteryState"\n'
+            'states = { Lo = "percentage < 0.2" }\n',
+     "b.toml:11:12: error: unknown state 'Lo' of resource 'battery' (candidates: Low)"),
+    (GOOD + '[resources.battery]\ntopic = "/battery_state"\ntype = "sensor_msgs/msg/BatteryStat"\n'
+            'states = { Low = "percentage < 0.2" }\n',
+     "b.toml:10:9: error: unknown message type 'sensor_msgs/msg/BatteryStat' (candidates: "
+     "sensor_msgs/msg/BatteryState, "),
+    (GOOD + '[resources.battery]\ntopic = "/battery_state"\ntype = "sensor_msgs/msg/BatteryState"\n'
+            'states = { Low = "percent < 0.2" }\n',
+     "b.toml:11:19: error: unknown field or constant 'percent' of sensor_msgs/msg/BatteryState "
+     "(candidates: percentage, present)"),
+    (GOOD + '[resources.navigator]\nlifecycle = "/bt_navigator"\nstates = { Active = "activ" }\n',
+     "b.toml:10:22: error: unknown lifecycle state 'activ' (candidates: active, inactive)"),
+    (GOOD + '[resources.dock]\nlifecycle = "/docking_server"\n',
+     "b.toml:8:1: error: [resources.dock] needs 'states': model state = lifecycle state "
+     "(unconfigured, inactive, active, finalized)"),
+    (GOOD + '[resources.navigator]\ntopic = "/x"\nlifecycle = "/bt_navigator"\n',
+     "b.toml:8:1: error: [resources.navigator] needs either 'lifecycle' (a lifecycle node) or 'topic'"),
+    (GOOD + '[events.estop]\ntopic = "/emergency_stop"\ntype = "std_msgs/msg/Bool"\nwhen = "data"\n',
+     "b.toml:8:1: error: unknown event 'estop' of skillset 'nav2' (expected one of: navigator_configured, "
+     "navigator_activated, navigator_deactivated, navigator_cleaned_up, navigator_shut_down, battery_low, "
+     "battery_recharged, charging_started, charging_stopped, emergency_stop)"),
+    (GOOD + '[events.emergency_stop]\ntopic = "/battery_state"\ntype = "std_msgs/msg/Bool"\nwhen = "data"\n'
+            '[resources.battery]\ntopic = "/battery_state"\ntype = "sensor_msgs/msg/BatteryState"\n'
+            'states = { Low = "percentage < 0.2" }\n',
+     "b.toml:10:9: error: topic /battery_state is bound as sensor_msgs/msg/BatteryState in [resources.battery] and "
+     "as std_msgs/msg/Bool here"),
+    (GOOD.replace('action = "/navigate_to_pose"', 'action = "navigate to pose"'),
+     "b.toml:5:11: error: 'navigate to pose' is not a ROS 2 name (e.g. /navigate_to_pose)"),
+    ("[binding]\nskillset = \"base\"\n", "b.toml:2:13: error: this binding is for skillset 'base', the system file "
+                                         "gives it to 'nav2'"),
+    ("[binding]\n", "b.toml: error: the binding binds nothing: add [skills.<skill>], [resources.<resource>] or "
+                    "[events.<event>] tables"),
+    ('[binding]\ndefinitions = "nowhere"\n', "b.toml: error: definitions folder nowhere is not a folder"),
+    ("[skills]\nnavigate = 3\n", "b.toml:2:12: error: [skills.navigate] must be a table"),
+    ("[skills.navigate\n", "b.toml:1:17: error: invalid TOML: Expected ']' at the end of a table declaration"),
+])
+def test_bad_bindings_give_one_line_at_the_fault(tmp_path: Path, text: str, message: str) -> None:
+    assert check(tmp_path, text).startswith(message)
+
+
+def test_a_skill_without_a_binding_is_a_warning(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    (tmp_path / "nav2.rl").write_text(NAV2_MODEL)
+    (tmp_path / "b.toml").write_text('[resources.navigator]\nlifecycle = "/bt_navigator"\n')
+    system, _ = load_system(_system_file(tmp_path))
+    binding = parse_binding((tmp_path / "b.toml").read_text(), "b.toml", system.component("nav2").skillset)
+    assert [str(w) for w in binding.warnings] == [
+        f"b.toml: warning: skill '{k}' has no binding: the bridge never sees it run"
+        for k in ("navigate", "dock_robot", "undock_robot")]
+
+
+def _system_file(tmp_path: Path) -> Path:
+    path = tmp_path / "s.toml"
+    path.write_text('[system]\nname = "s"\n[[skillsets]]\nmodel = "nav2.rl"\nbinding = "b.toml"\n')
+    return path
+
+
+def test_docstring_examples() -> None:
+    import doctest
+
+    import skinet.ros.condition
+    assert doctest.testmod(skinet.ros.condition).failed == 0

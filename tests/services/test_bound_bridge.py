@@ -1,0 +1,277 @@
+"""The bridge on bound skillsets, live on Zenoh (SPEC §9; services/bridge_ros2/bound_live.py, simulator/bound.py).
+
+The Nav2 example's simulated robot speaks the real action and lifecycle protocols
+(CDR requests and replies on send_goal / cancel_goal / get_result / get_state
+queryables, GoalStatusArray in a transient-local cache, TransitionEvent and
+BatteryState topics) on zenoh-bridge-ros2dds keys and on rmw_zenoh keys (type
+hashes, attachments).  The chain (bridge, monitor, predictor) must give, step by
+step, what the core replay gives, and the command check must warn before the two
+unsafe commands of the run.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from pathlib import Path
+
+import pytest
+import zenoh
+
+from event_watch import Events
+from services.bridge_ros2.bound_live import start_bound_bridge
+from services.chain import run_bound_chain
+from services.common.zenoh_config import session_config
+from services.simulator.bound import BoundSimulator
+from skinet.files import load_bindings, load_system, read_text
+from skinet.mission import StepRecord, parse_scenario, replay
+from skinet.ros.keys import KeyStyle
+from skinet.wire import keys
+from skinet.wire.codec import decode, encode
+from skinet.wire.messages import CheckReply, CheckRequest
+
+REPO = Path(__file__).resolve().parents[2]
+NAV2 = REPO / "examples" / "nav2"
+FIRST = {"/battery_state": {"percentage": 0.9, "power_supply_status": 1}}
+
+
+@pytest.fixture(scope="module")
+def nav2():
+    system, _ = load_system(NAV2 / "nav2.toml")
+    bindings, _ = load_bindings(system)
+    scenario = parse_scenario(read_text(NAV2 / "missions" / "nav2_run.toml"), "nav2_run.toml")
+    return system, bindings, scenario
+
+
+@pytest.fixture
+def session():
+    s = zenoh.open(session_config("peer", multicast_scouting=False))
+    yield s
+    s.close()
+
+
+def comparable(records: list[StepRecord]) -> list[tuple]:
+    return [(r.index, r.step.transition, r.holds, r.violations,
+             [(w.skillset, w.transition, w.property, w.constraint) for w in r.warnings], r.unsafe_count, r.divergence)
+            for r in records]
+
+
+@pytest.mark.parametrize("style", [KeyStyle(), KeyStyle(namespace="/robot1"), KeyStyle(rmw_zenoh=True, domain=7)],
+                         ids=["zenoh-bridge-ros2dds", "namespace", "rmw_zenoh"])
+def test_the_nav2_run_through_the_chain(nav2, session, style: KeyStyle) -> None:
+    """Every step as the core replay gives it, and the check (asked over Zenoh) warns before both commands."""
+    system, bindings, scenario = nav2
+    checks: list[tuple[int, str, list[tuple[str, str]]]] = []
+
+    def on_record(record: StepRecord) -> None:
+        if record.step.consider:
+            replies = list(session.get(keys.check(system.name, keys.LOCAL_CLIENT), payload=encode(
+                CheckRequest(skillset="nav2", transition=record.step.consider)), timeout=5))
+            reply = decode(replies[0].ok.payload.to_bytes(), CheckReply)
+            checks.append((record.index, reply.decision, [(r.property, r.constraint) for r in reply.reasons]))
+
+    records = run_bound_chain(system, bindings, scenario, session=session, style=style, on_record=on_record)
+    assert comparable(records) == comparable(replay(system, scenario))
+    assert [(r.index, r.step.consider) for r in records if r.warnings] == [(3, "navigate.start"),
+                                                                          (13, "navigate.start")]
+    assert checks == [(3, "warn", [("stay_on_charger", "explicit")]), (13, "warn", [("dock_when_low", "explicit")])]
+    assert all(r.divergence is None for r in records)
+
+
+def test_start_up_reads_the_last_status_and_the_lifecycle_state(nav2, session) -> None:
+    """The robot is busy before the bridge starts: its initial status shows the running goal (from the
+    status cache), the active navigator (get_state) and the battery (its first sample).  Until the battery
+    speaks, nothing is published: the skillset is syncing."""
+    system, bindings, _ = nav2
+    robot = BoundSimulator(session, system, bindings)
+    events = Events(session, system.name)
+    try:
+        for transition in ("navigator_configured", "navigator_activated", "undock_robot.start",
+                           "undock_robot.success.undocked"):
+            assert robot.play("nav2", transition, None)
+        assert robot.send_goal("nav2", "navigate", {"behavior_tree": "bt.xml"})
+        bridge = start_bound_bridge(session, system, bindings, settle=0.1, retry=0.1)
+        try:
+            time.sleep(1.0)
+            assert events.items == [] and bridge.feed.missing() == {
+                "nav2": ["a first /battery_state message"]}
+            robot.publish("nav2", "/battery_state", {"percentage": 0.1, "power_supply_status": 2})
+            first = events.wait(lambda items: len(items) == 1)[0]
+            assert (first.seq, first.transition, first.info) == (0, None, "initial status")
+            assert first.status.model_dump() == {
+                "resources": {"navigator": "Active", "motion": "Still", "dock": "Docked", "battery": "Low",
+                              "charging": "NotCharging"}, "running": ["navigate"]}
+            # The model did not see the undocking (it happened before): the monitor gets the robot as it is.
+            robot.finish("nav2", "navigate", "success")
+            got = events.wait(lambda items: len(items) == 2)[1]
+            assert (got.transition, got.status.running) == ("navigate.success.arrived", [])
+            # A monitor that missed events resyncs from the bridge's last status.
+            replies = list(session.get(keys.resync(system.name, "nav2"), timeout=2))
+            assert [decode(r.ok.payload.to_bytes(), type(first)).status.running for r in replies] == [[]]
+        finally:
+            bridge.close()
+    finally:
+        robot.close()
+
+
+def test_an_action_server_that_never_had_a_goal_reads_as_idle_only_once_present(nav2, session) -> None:
+    """An empty status cache says nothing until the server is known to be there (its route token)."""
+    system, bindings, _ = nav2
+    events = Events(session, system.name)
+    bridge = start_bound_bridge(session, system, bindings, settle=0.1, retry=0.1)
+    try:
+        time.sleep(0.8)
+        assert events.items == [] and "the status of /navigate_to_pose" in bridge.feed.missing()["nav2"]
+        robot = BoundSimulator(session, system, bindings)
+        try:
+            robot.publish_topics(FIRST)
+            got = events.wait(lambda items: len(items) == 1, timeout=5)[0]
+            assert got.info == "initial status" and got.status.running == []
+        finally:
+            robot.close()
+    finally:
+        bridge.close()
+
+
+def test_the_status_may_come_before_the_reply_to_send_goal(nav2, session) -> None:
+    system, bindings, _ = nav2
+    robot = BoundSimulator(session, system, bindings, status_first=True)
+    events = Events(session, system.name)
+    bridge = start_bound_bridge(session, system, bindings, settle=0.1, retry=0.1)
+    try:
+        robot.publish_topics(FIRST)
+        events.wait(lambda items: len(items) == 1)
+        for t in ("navigator_configured", "navigator_activated", "undock_robot.start", "undock_robot.success.undocked"):
+            assert robot.play("nav2", t, None)
+        assert robot.send_goal("nav2", "navigate")  # the reply came after the status: still accepted
+        got = events.wait(lambda items: len(items) == 6)
+        assert [e.transition for e in got] == [None, "navigator_configured", "navigator_activated",
+                                               "undock_robot.start", "undock_robot.success.undocked", "navigate.start"]
+    finally:
+        bridge.close()
+        robot.close()
+
+
+def test_no_result_in_time_gives_the_default_mode_and_says_so(nav2, session, caplog) -> None:
+    """The get_result server does not answer when the goal aborts: after --hold the binding's default mode,
+    with a warning; the later lifecycle event still comes, after it."""
+    system, bindings, _ = nav2
+    robot = BoundSimulator(session, system, bindings)
+    events = Events(session, system.name)
+    bridge = start_bound_bridge(session, system, bindings, settle=0.1, retry=0.1, hold=0.3)
+    try:
+        robot.publish_topics(FIRST)
+        events.wait(lambda items: len(items) == 1)
+        for t in ("navigator_configured", "navigator_activated", "undock_robot.start", "undock_robot.success.undocked",
+                  "navigate.start"):
+            assert robot.play("nav2", t, None)
+        events.wait(lambda items: len(items) == 6)
+        robot.actions[("nav2", "navigate")].queryables[2].undeclare()  # get_result, replaced by a silent one
+        held: list[zenoh.Query] = []
+        silent = session.declare_queryable("navigate_to_pose/_action/get_result", held.append)
+        with caplog.at_level(logging.INFO, logger="skinet.bridge_ros2"):
+            started = time.monotonic()
+            assert robot.finish("nav2", "navigate", "failure", {"error_code": 9003})
+            robot.play("nav2", "navigator_deactivated", None)
+            got = events.wait(lambda items: len(items) == 8)
+        assert time.monotonic() - started >= 0.3 and len(held) == 1
+        silent.undeclare()
+        held.clear()
+        assert [e.transition for e in got[6:]] == ["navigate.failure.failed", "navigator_deactivated"]
+        assert "no reply from /navigate_to_pose/_action/get_result within 0.30 s" in caplog.text
+        assert "result not received in time: mode 'failed' (the binding's default)" in caplog.text
+    finally:
+        bridge.close()
+        robot.close()
+
+
+def test_bad_payloads_are_counted_and_logged_once_and_the_bridge_goes_on(nav2, session, caplog) -> None:
+    system, bindings, _ = nav2
+    robot = BoundSimulator(session, system, bindings)
+    events = Events(session, system.name)
+    bridge = start_bound_bridge(session, system, bindings, settle=0.1, retry=0.1)
+    try:
+        robot.publish_topics(FIRST)
+        events.wait(lambda items: len(items) == 1)
+        with caplog.at_level(logging.WARNING, logger="skinet.bridge_ros2"):
+            for _ in range(3):
+                session.put("navigate_to_pose/_action/status", b"\x00\x01\x00\x00\xff")
+                session.put("battery_state", b"not cdr")
+            robot.play("nav2", "navigator_configured", None)
+            got = events.wait(lambda items: len(items) == 2)
+        assert got[1].transition == "navigator_configured"
+        assert bridge.counters.malformed == 6
+        lines = [r.getMessage() for r in caplog.records if "does not decode" in r.getMessage()]
+        assert len(lines) == 2 and all("reported once per kind" in line for line in lines)
+    finally:
+        bridge.close()
+        robot.close()
+
+
+def test_the_bridge_command_replays_a_bag_of_a_bound_robot(nav2, session, tmp_path: Path, router, client,
+                                                            zenoh_args) -> None:
+    """``python -m services.bridge_ros2 nav2.toml --replay BAG`` publishes the events of the run, then exits."""
+    import subprocess
+    import sys
+
+    from rosbags.rosbag2 import StoragePlugin
+
+    from bound_bags import BagRecorder
+
+    system, bindings, scenario = nav2
+    recorder = BagRecorder(session, bindings)
+    robot = BoundSimulator(session, system, bindings)
+    robot.publish_topics(scenario.topics)
+    robot.drive(scenario, speed=0, on_step=lambda _: time.sleep(0.02))
+    time.sleep(0.2)
+    recorder.close()
+    robot.close()
+    bag = recorder.write(tmp_path / "run", StoragePlugin.MCAP)
+    events = Events(client, system.name)
+    time.sleep(0.3)
+    done = subprocess.run([sys.executable, "-m", "services.bridge_ros2", str(NAV2 / "nav2.toml"), "--replay", str(bag),
+                           *zenoh_args], cwd=REPO, capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    got = events.wait(lambda items: len(items) == 16)
+    assert [e.transition for e in got] == [s.transition.replace("timed_out", "failed") for s in scenario.steps
+                                           if s.transition]  # no result in a bag: the default failure mode
+    assert "bound skillsets: 26 messages, 16 events, 0 model divergences, 0 malformed, 1 result not recorded" \
+        in done.stderr
+
+
+def test_a_bad_binding_stops_the_bridge_command_with_one_line(tmp_path: Path) -> None:
+    import subprocess
+    import sys
+
+    (tmp_path / "nav2.rl").write_text((NAV2 / "nav2.rl").read_text())
+    (tmp_path / "s.toml").write_text('[system]\nname = "s"\n[[skillsets]]\nmodel = "nav2.rl"\nbinding = "b.toml"\n')
+    (tmp_path / "b.toml").write_text('[skills.navigate]\naction = "/navigate_to_pose"\n'
+                                     'type = "nav2_msgs/action/NavigateToPose"\n')
+    done = subprocess.run([sys.executable, "-m", "services.bridge_ros2", str(tmp_path / "s.toml")], cwd=REPO,
+                          capture_output=True, text=True, timeout=60)
+    assert done.returncode == 1
+    assert done.stderr.strip().splitlines() == [
+        f"{tmp_path / 'b.toml'}:3:9: error: unknown action type 'nav2_msgs/action/NavigateToPose' (expected one of: "
+        "none); put its .action file in the binding's definitions folder as <package>/action/<Name>.action"]
+
+
+def test_simulator_and_bridge_commands_on_rmw_zenoh_keys(nav2, client, zenoh_args, spawn, tmp_path: Path) -> None:
+    """``python -m services.simulator nav2_run.toml --rmw-zenoh`` and ``python -m services.bridge_ros2 nav2.toml
+    --rmw-zenoh`` as separate processes through a router: every transition of the run, in order."""
+    import subprocess
+    import sys
+
+    system, _, scenario = nav2
+    events = Events(client, system.name)
+    ros = ["--rmw-zenoh", "--domain", "5"]
+    spawn("services.bridge_ros2", str(NAV2 / "nav2.toml"), *ros, "--settle", "0.2", *zenoh_args)
+    sim = subprocess.run([sys.executable, "-m", "services.simulator", str(NAV2 / "missions" / "nav2_run.toml"), *ros,
+                          "--speed", "0", "--start-delay", "2", "--linger", "1", *zenoh_args], cwd=REPO,
+                         capture_output=True, text=True, timeout=120)
+    assert sim.returncode == 0, sim.stdout + sim.stderr
+    steps = [line for line in sim.stdout.splitlines() if line.startswith("step ")]
+    assert len(steps) == len(scenario.steps) and not any(line.endswith("(no effect)") for line in steps)
+    assert steps[3].split()[4:6] == ["start", "nav2:undock_robot.start"] and " goal " in steps[3]
+    got = events.wait(lambda items: len(items) == 17, timeout=20)
+    assert [e.transition for e in got] == [None] + [s.transition for s in scenario.steps if s.transition]
+    assert got[0].info == "initial status"
