@@ -41,7 +41,9 @@ from skinet.verify.algorithm1 import analyse  # noqa: E402
 from skinet.verify.predict import forecast  # noqa: E402
 from skinet.wire import keys  # noqa: E402
 from skinet.wire.codec import decode, encode  # noqa: E402
-from skinet.wire.messages import CanonicalEvent, CheckReply, CheckRequest  # noqa: E402
+from skinet.system import System  # noqa: E402
+from skinet.wire.messages import CheckReply, CheckRequest  # noqa: E402
+from tests.bridge_side import BridgeSide  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 SYSTEM_FILE = ROOT / "skillsets" / "spot_arm.toml"
@@ -76,13 +78,13 @@ def get_once(session: zenoh.Session, key: str, payload: bytes) -> bytes:
     raise RuntimeError(f"no reply on {key}")
 
 
-def send_events(session: zenoh.Session, system: str) -> None:
-    seq: dict[str, int] = {}
+def send_events(session: zenoh.Session, system: System) -> BridgeSide:
+    """The bridge's side (the monitor syncs from it), then the events up to the warning."""
+    side = BridgeSide(session, system.name, source="bench", model=system)
+    side.synced()
     for skillset, transition in TO_WARNING:
-        seq[skillset] = seq.get(skillset, -1) + 1
-        ev = CanonicalEvent(system=system, skillset=skillset, seq=seq[skillset], stamp=time.time(), source="bench",
-                            transition=transition)
-        session.put(keys.events(system, skillset), encode(ev), congestion_control=zenoh.CongestionControl.BLOCK)
+        side.send(skillset, transition)
+    return side
 
 
 def wait(predicate: Callable[[], bool], what: str, timeout: float = 20.0) -> None:
@@ -99,7 +101,7 @@ def in_process(n: int) -> list[list[object]]:
     predictor = start_predictor(session, "bench")
     monitor = start_monitor(session, system, check_rate_limit=0)  # one client asking as fast as it can
     try:
-        send_events(session, system.name)
+        side = send_events(session, system)
         wait(lambda: monitor.counters.applied == len(TO_WARNING) and not monitor.snapshot().unsafe.prediction_stale,
              "the warning marking with a fresh prediction")
         reply = monitor.check(REQUEST)
@@ -127,6 +129,7 @@ def in_process(n: int) -> list[list[object]]:
                 lambda: get_once(session, "bench/echo", b"x"), n), None),
         ]
         echo.undeclare()
+        side.close()
         return rows
     finally:
         monitor.close()
@@ -152,7 +155,7 @@ def through_router(n: int) -> list[list[object]]:
         sub = client.liveliness().declare_subscriber(keys.alive(system, "monitor", "*"),
                                                      lambda s: tokens.add(str(s.key_expr)), history=True)
         wait(lambda: bool(tokens), "the monitor process")
-        send_events(client, system)
+        side = send_events(client, load_system(SYSTEM_FILE)[0])
         payload, key = encode(REQUEST), keys.check(system, keys.LOCAL_CLIENT)
         wait(lambda: decode(get_once(client, key, payload), CheckReply).seq == len(TO_WARNING), "the events applied")
         echo = other.declare_queryable("bench/echo", lambda q: (q.reply("bench/echo", b"y"), q.drop()))
@@ -165,6 +168,7 @@ def through_router(n: int) -> list[list[object]]:
         ]
         echo.undeclare()
         sub.undeclare()
+        side.close()
         return rows
     finally:
         monitor.terminate()

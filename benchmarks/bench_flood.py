@@ -43,6 +43,7 @@ import zenoh  # noqa: E402
 
 from bench_latency import events  # noqa: E402
 from services.monitor import start_monitor  # noqa: E402
+from tests.bridge_side import BridgeSide  # noqa: E402
 from services.predictor import start_predictor  # noqa: E402
 from skinet.files import load_system  # noqa: E402
 from skinet.wire import keys  # noqa: E402
@@ -139,6 +140,7 @@ def main() -> None:
     predictor = start_predictor(sessions["predictor"], "bench")
     monitor = start_monitor(sessions["monitor"], system, budget=0.3, prediction_cache=1, client="monitor")
     fresh = Fresh(sessions["observer"])
+    side = BridgeSide(sessions["bridge"], "spot_arm", source="bench", model=system)  # the monitor syncs from it
     feed = events(int(4 * args.seconds * 10) + 20)
     position = [0]
 
@@ -177,6 +179,7 @@ def main() -> None:
             rows.append([phase, f"{got}/{steps}", out["sent"], answered if flooder else "-"])
     finally:
         monitor.close()
+        side.close()
         predictor.close()
         for s in sessions.values():
             s.close()

@@ -56,6 +56,7 @@ from skinet.wire import keys  # noqa: E402
 from skinet.wire.codec import DecodeError, decode  # noqa: E402
 from skinet.wire.convert import bundle, statuses, system_from_bundle  # noqa: E402
 from skinet.wire.messages import CheckReply, PredictReply, PredictRequest  # noqa: E402
+from tests.bridge_side import BridgeSide  # noqa: E402
 from tests.services.hostile import Attacker, hostile_bundle  # noqa: E402
 
 GRACE = 1.0
@@ -176,6 +177,7 @@ def main() -> None:
     predictor = start_predictor(session, "bench", memory_mb=args.memory_mb, grace=GRACE)
     startup = time.monotonic() - t0
     monitor = start_monitor(session, system, budget=0.5)
+    side = BridgeSide(session, "spot_arm", source="bench", model=system)  # the monitor syncs from it first
     rows = []
     feed = Feed(int(5 * args.seconds / 0.005) + 100)  # the events of every phase
     try:
@@ -224,6 +226,7 @@ def main() -> None:
         rows.append(row("in-process peer (the same model built on a thread)", inproc))
     finally:
         monitor.close()
+        side.close()
         predictor.close()
         session.close()
 

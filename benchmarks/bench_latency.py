@@ -44,6 +44,7 @@ import zenoh  # noqa: E402
 
 from services.common.zenoh_config import session_config  # noqa: E402
 from services.monitor import start_monitor  # noqa: E402
+from tests.bridge_side import BridgeSide  # noqa: E402
 from skinet.files import load_system  # noqa: E402
 from skinet.live import LiveSystem  # noqa: E402
 from skinet.system import marking_to_json  # noqa: E402
@@ -68,7 +69,7 @@ def events(n: int) -> list[tuple[str, bytes]]:
     """``n`` encoded CanonicalEvents cycling through the mission, with observed statuses."""
     system = load_system(SYSTEM_FILE)[0]
     live = LiveSystem(system)
-    seq = {"spot": -1, "manipulator": -1}
+    seq = {"spot": 0, "manipulator": 0}  # #0 is the initial status the monitor syncs from (BridgeSide)
     out = []
     for i in range(n):
         skillset, transition = MISSION[i % len(MISSION)]
@@ -176,6 +177,7 @@ def in_process(n: int, profile: bool) -> list[list[object]]:
         pong.close()
         for indirect in (True, False):
             monitor = start_monitor(session, system, indirect=indirect)
+            side = BridgeSide(session, "spot_arm", source="bench", model=system)  # the monitor syncs first
             payloads = events(n + 200)
             publishers = {k: session.declare_publisher(k, **BLOCK) for k in {k for k, _ in payloads}}
             reports = Arrivals(session, keys.unsafe("spot_arm"))
@@ -193,6 +195,7 @@ def in_process(n: int, profile: bool) -> list[list[object]]:
                          verdict(p99 <= 1e-3)])
             reports.close()
             monitor.close()
+            side.close()
             for p in publishers.values():
                 p.undeclare()
             if profiler:
@@ -259,12 +262,14 @@ def across_processes(n: int, burst: int) -> list[list[object]]:
                          *stats(ping_pong(lambda i: ping.put(b"x"), pong, n)), "", ""])
             rows.append(["router", "Zenoh get -> reply", *stats(get_reply(a, "bench/query", n)), "", ""])
             pong.close()
+            side = BridgeSide(a, "spot_arm", source="bench", model=load_system(SYSTEM_FILE)[0])
             for flags in ([], ["--no-express"]):
                 name = "monitor" + (" " + " ".join(flags) if flags else "")
                 monitor = spawn(["-m", "services.monitor", str(SYSTEM_FILE), *client, "--id", "bench",
                                  "--log-level", "WARNING", *flags])
                 procs.append(monitor)
                 wait_token(a, keys.alive("spot_arm", "monitor", "bench"))
+                side.synced()
                 payloads = events(n + 200 + burst)
                 publishers = {k: a.declare_publisher(k, **BLOCK) for k in {k for k, _ in payloads}}
                 reports = Arrivals(a, keys.unsafe("spot_arm"))
@@ -285,6 +290,7 @@ def across_processes(n: int, burst: int) -> list[list[object]]:
                                                           lambda s: gone.set(), history=False)
                 gone.wait(1.0)  # its token's deletion, so the next monitor's token is not confused with it
                 watch.undeclare()
+            side.close()
         finally:
             a.close()
             b.close()

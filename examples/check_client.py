@@ -11,6 +11,10 @@ such a client: before each start it asks the monitor's command check
 - ``warn``: asks ``confirm(reply)`` (here: refuse unless ``--force``), then sends or not;
 - ``deny`` (the monitor's strict policy), no answer or an error: does not send.
 
+It asks the monitor to wait up to ``--wait`` seconds (default 2) for a synced state
+and a fresh prediction: without them the answer is at least ``warn``
+(``state_unknown``, ``prediction_pending``; SPEC §7).
+
     python examples/check_client.py skillsets/spot_arm.toml spot:init_power.start spot:teleop.start \\
         --connect tcp/127.0.0.1:7447 --user observer --password observer-demo-password
 
@@ -76,14 +80,15 @@ class GuardedSkillClient:
     """:class:`SkillManagerClient` that asks ``skinet/<system>/check`` before every start."""
 
     def __init__(self, client: SkillManagerClient, confirm: Callable[[CheckReply], bool], timeout: float = 1.0,
-                 login: str = keys.LOCAL_CLIENT):
-        """``login``: the session's router user, the client chunk of the check key."""
-        self.client, self.confirm, self.timeout, self.login = client, confirm, timeout, login
+                 login: str = keys.LOCAL_CLIENT, wait: float = 2.0):
+        """``login``: the session's router user, the client chunk of the check key; ``wait``: seconds the
+        monitor may wait for a synced state and a fresh prediction."""
+        self.client, self.confirm, self.timeout, self.login, self.wait = client, confirm, timeout, login, wait
 
     def check(self, skillset: str, transition: str) -> CheckReply | None:
-        request = encode_message(CheckRequest(skillset=skillset, transition=transition))
+        request = encode_message(CheckRequest(skillset=skillset, transition=transition, wait=self.wait))
         for reply in self.client.session.get(keys.check(self.client.system.name, self.login), payload=request,
-                                             timeout=self.timeout):
+                                             timeout=self.timeout + self.wait):
             if reply.ok is not None:
                 try:
                     return decode(reply.ok.payload.to_bytes(), CheckReply)
@@ -104,7 +109,7 @@ class GuardedSkillClient:
 
 
 def explain(reply: CheckReply) -> str:
-    parts = [f"{r.property} {r.constraint}" + (f" within {r.steps} steps" if r.steps else "")
+    parts = [f"{r.property} {r.constraint}".strip() + (f" within {r.steps} steps" if r.steps else "")
              + (f" via {' -> '.join(r.witness)}" if r.witness else "") for r in reply.reasons]
     return "; ".join(parts) or "no property at risk"
 
@@ -114,6 +119,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("system", help="system file (.toml)")
     parser.add_argument("commands", nargs="+", metavar="SKILLSET:SKILL.start", help="skills to start, in order")
     parser.add_argument("--force", action="store_true", help="send warned commands anyway (never denied ones)")
+    parser.add_argument("--wait", type=float, default=2.0,
+                        help="seconds the monitor may wait for a synced state and a fresh prediction (default: 2)")
     add_zenoh_args(parser)
     args = parser.parse_args(argv)
     try:
@@ -127,7 +134,7 @@ def main(argv: list[str] | None = None) -> int:
     status = 0
     try:
         guarded = GuardedSkillClient(SkillManagerClient(session, system, typemap), lambda _reply: args.force,
-                                     login=client_name(config))
+                                     login=client_name(config), wait=args.wait)
         for command in args.commands:
             skillset, _, transition = command.partition(":")
             skill, _, kind = transition.partition(".")

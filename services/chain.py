@@ -75,7 +75,7 @@ def run_chain(
             services.append(simulator)
         bridge = start_bridge(session, system, typemap, style=style)
         services.append(bridge)
-        _wait(lambda: monitor.counters.applied >= len(system.components), settle, "initial statuses")
+        _wait(monitor.synced, settle, "initial statuses")  # SPEC §7: every skillset live
         lost = {name: 0 for name in simulator.nodes}
         if external:
             # Behind a gateway, statuses answering the first requests are lost until its
@@ -87,7 +87,8 @@ def run_chain(
             expected = {name: n - lost[name] for name, n in simulator.statuses_published().items()}
             if not bridge.wait_statuses(expected):
                 raise ChainError(f"step {run.index}: the bridge did not receive every status")
-            _wait(lambda: monitor.counters.applied >= bridge.counters.events, settle, f"step {run.index} applied")
+            _wait(lambda: _handled(monitor, bridge.feed.source, {n: m.seq for n, m in bridge.feed.managers.items()}),
+                  settle, f"step {run.index} applied")
 
         records, on_step = _recorder(system, monitor, caught_up, predict, settle, on_record)
         simulator.drive(scenario, speed=speed, on_step=on_step)
@@ -122,7 +123,7 @@ def run_bound_chain(
         bridge = start_bound_bridge(session, system, bindings, style=style, settle=0.2, retry=0.2)
         services.append(bridge)
         robot.publish_topics(scenario.topics)
-        _wait(lambda: monitor.counters.applied >= len(system.components), settle, "initial statuses")
+        _wait(monitor.synced, settle, "initial statuses")  # SPEC §7: every skillset live
         watched = set(bridge.feed.routes)
 
         def caught_up() -> bool:
@@ -132,7 +133,8 @@ def run_bound_chain(
         def step_done(run: StepRun) -> None:
             _wait(caught_up, settle, f"step {run.index}: the bridge's messages")
             bridge.wait_idle(settle)
-            _wait(lambda: monitor.counters.applied >= bridge.counters.events, settle, f"step {run.index} applied")
+            _wait(lambda: _handled(monitor, bridge.feed.source, {n: s.seq for n, s in bridge.feed.skillsets.items()}),
+                  settle, f"step {run.index} applied")
 
         records, on_step = _recorder(system, monitor, step_done, predict, settle, on_record)
         robot.drive(scenario, speed=speed, on_step=on_step)
@@ -189,6 +191,16 @@ def _recorder(system: System, monitor: Any, caught_up: Callable[[StepRun], None]
             on_record(record)
 
     return records, on_step
+
+
+def _handled(monitor: Any, source: str, next_seq: Mapping[str, int]) -> bool:
+    """Whether the monitor handled every event ``source`` published (``next_seq``: per skillset, the seq
+    its next event will have): applied, or covered by the resync it synced from."""
+    for name, n in next_seq.items():
+        last = monitor.last_seq(name, source)
+        if n and (last is None or last < n - 1):
+            return False
+    return True
 
 
 def unsafe_transition(u: UnsafeEntry) -> UnsafeTransition:

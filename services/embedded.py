@@ -45,18 +45,42 @@ if TYPE_CHECKING:
 CLEAR = "\x1b[H\x1b[J"  # cursor home, clear to end of screen
 
 
-def render(view: MonitorView | Observed) -> list[str]:
+RED, YELLOW, PLAIN = "\x1b[1;37;41m", "\x1b[1;30;43m", "\x1b[0m"  # ANSI: white on red, black on yellow, reset
+
+
+def stale_lines(state: LiveState, colour: bool = False) -> list[str]:
+    """The banner of a state the monitor cannot vouch for (SPEC §7): one line per skillset that is not
+    live, with since when and why; none when every skillset is live.  ``colour``: ANSI red for lost,
+    yellow for syncing (terminals)."""
+    if not state.sync:
+        return ["  STATE NOT VOUCHED FOR: this monitor does not say whether it is synced (older than this view)"]
+    out = []
+    for name, s in state.sync.items():
+        if s.state != "live":
+            line = f"  STATE {s.state.upper()}: {name} since {_clock(s.since)}: {s.reason}"
+            out.append(f"{RED if s.state == 'lost' else YELLOW}{line}{PLAIN}" if colour else line)
+    return out
+
+
+def _clock(t: float) -> str:
+    return time.strftime("%H:%M:%S", time.localtime(t))
+
+
+def render(view: MonitorView | Observed, colour: bool = False) -> list[str]:
     """The operator view: skillsets, properties, unsafe transitions, predictor, counters
-    (the last two only from the embedded monitor)."""
+    (the last two only from the embedded monitor); a stale state first (``colour``: on a terminal)."""
     st, u = view.state, view.unsafe
     out = [f"SkiNet Live  system {st.system}  step {st.seq}  last event {st.event or '-'}"]
+    out += stale_lines(st, colour)
     if st.divergence:
         out.append(f"  MODEL DIVERGENCE: {st.divergence}")
     out.append("skillsets")
     width = max(len(n) for n in st.skillsets)
     for name, s in st.skillsets.items():
         res = " ".join(f"{r}={v}" for r, v in s.resources.items())
-        out.append(f"  {name.ljust(width)}  {res}; running: {', '.join(s.running) or '-'}")
+        sync = st.sync.get(name)
+        mark = f"  [{sync.state.upper()} since {_clock(sync.since)}]" if sync and sync.state != "live" else ""
+        out.append(f"  {name.ljust(width)}  {res}; running: {', '.join(s.running) or '-'}{mark}")
     out.append("properties")
     for v in view.verdicts.properties:
         line = f"  {v.name}: {'holds' if v.holds else 'VIOLATED'}"
@@ -109,8 +133,11 @@ def summary(view: MonitorView | Observed) -> str:
     props = " ".join(f"{v.name}={'ok' if v.holds else 'VIOLATED'}" for v in view.verdicts.properties)
     unsafe = ", ".join(f"{e.skillset}:{e.transition}({e.property} {e.constraint})" for e in u.unsafe) or "none"
     div = f" DIVERGENCE: {view.state.divergence}" if view.state.divergence else ""
+    sync = view.state.sync
+    stale = ", ".join(f"{n} {s.state} since {_clock(s.since)}" for n, s in sync.items() if s.state != "live")
+    state = f" | STATE STALE: {stale}" if stale else "" if sync else " | state not vouched for"
     return (f"[{view.state.seq}] {view.state.event or 'start'} | {props} | unsafe: {unsafe} | "
-            f"prediction {'stale' if u.prediction_stale else 'fresh'}{div}")
+            f"prediction {'stale' if u.prediction_stale else 'fresh'}{div}{state}")
 
 
 def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
@@ -141,7 +168,8 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
         predictor = start_predictor(session, f"embedded-{os.getpid()}",  # before the monitor: it asks at once
                                     memory_limit=memory_limit(args), rate_limit=args.rate_limit)
         monitor = start_monitor(session, system, budget=args.budget, check_policy=args.check_policy,
-                                client=client_name(config), check_rate_limit=args.check_rate_limit)
+                                client=client_name(config), check_rate_limit=args.check_rate_limit,
+                                lost_after=args.lost_after)
         print("\n".join(connect_lines(args, system, mode, listening)), file=sys.stderr, flush=True)
         if args.once:
             deadline = time.monotonic() + args.budget + 2.0  # the first prediction, if any comes
@@ -235,7 +263,7 @@ def _follow(monitor: Monitor, stop: threading.Event, duration: float | None, out
         stats = dataclasses.astuple(view.predictor)
         if shown is None or view.version != shown[0] or (tty and stats != shown[1]):
             if tty:
-                out.write(CLEAR + "\n".join(render(view)) + "\n")
+                out.write(CLEAR + "\n".join(render(view, colour=True)) + "\n")
             else:
                 out.write(summary(view) + "\n")
             out.flush()

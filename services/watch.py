@@ -3,7 +3,10 @@
 A read-only observer (:class:`~services.dashboard.observer.Observer`) follows the
 monitor's messages through Zenoh; the view is the one ``skinet run`` draws
 (:func:`services.embedded.render`), plus the services alive and the violations
-seen: redrawn in place on a terminal, one line per step otherwise (:class:`StepLines`).  With no
+seen: redrawn in place on a terminal, one line per step otherwise (:class:`StepLines`); a
+state the monitor cannot vouch for (a skillset syncing or lost, SPEC §7) is a banner on top,
+red or yellow on a terminal, and ``STATE STALE`` in a pipe's line (a skillset lost is a line at
+once, one still syncing after a second too).  With no
 monitor of the system alive within ``--wait`` seconds it says so, naming the
 systems it can see, and exits 1.
 """
@@ -28,13 +31,13 @@ from services.replay import INSTANCE_PREFIX as REPLAY
 from skinet.errors import SkinetError
 
 
-def view_lines(board: Board) -> list[str]:
+def view_lines(board: Board, colour: bool = False) -> list[str]:
     """The operator view of what ``board`` holds; empty until the three messages of the
-    monitor's last step are all there."""
+    monitor's last step are all there.  A stale state comes first, in colour on a terminal."""
     st, v, u = board.state, board.verdicts, board.unsafe
     if st is None or v is None or u is None or not st.seq == v.seq == u.seq:
         return []
-    out = render(Observed(board.state, board.verdicts, board.unsafe, board.state_space))
+    out = render(Observed(board.state, board.verdicts, board.unsafe, board.state_space), colour)
     alive = board.alive
     out.append("services  " + ", ".join(f"{s}: {len(alive.get(s, ()))}" for s in ("monitor", "bridge_ros2", "predictor")))
     if not alive.get("monitor"):
@@ -47,36 +50,51 @@ def view_lines(board: Board) -> list[str]:
     return out
 
 
-def _look(board: Board) -> tuple[list[str], str, tuple, bool]:
-    """(view lines, one-line summary, what changed, prediction fresh) of ``board``."""
-    lines = view_lines(board)
+def _look(board: Board, colour: bool = False) -> tuple[list[str], str, tuple, bool]:
+    """(view lines, one-line summary, what changed, prediction fresh and every skillset live) of ``board``;
+    what changed starts with (epoch, step, the skillsets not live with their states)."""
+    lines = view_lines(board, colour)
     if not lines:
         return [], "", (), False
     line = summary(Observed(board.state, board.verdicts, board.unsafe, board.state_space))  # type: ignore[arg-type]
-    key = (board.epoch, board.state.seq, board.unsafe.stamp,  # type: ignore[union-attr]
+    sync = tuple((n, s.state) for n, s in board.state.sync.items())  # type: ignore[union-attr]
+    stale = tuple((n, state) for n, state in sync if state != "live")
+    key = (board.epoch, board.state.seq, stale, board.unsafe.stamp,  # type: ignore[union-attr]
            board.state_space and board.state_space.stamp,
            tuple(sorted((s, len(ids)) for s, ids in board.alive.items())), len(board.violations))
-    fresh = not board.unsafe.prediction_stale and board.state_space is not None  # type: ignore[union-attr]
+    fresh = not board.unsafe.prediction_stale and board.state_space is not None and \
+        not board.unsafe.state_stale  # type: ignore[union-attr]
     return lines, line, key, fresh
 
 
 class StepLines:
     """One line per monitor step for a pipe: a step's line is written once, when its prediction is
-    fresh (or no predictor is alive to make it so), when the next step comes, or at the end; the
-    monitor publishes a step several times (its prediction pending, then fresh)."""
+    fresh and every skillset live (or no predictor is alive to make it so), when the next step
+    comes, or at the end; the monitor publishes a step several times (its prediction pending, then
+    fresh; its sync states changed).  A step whose skillsets are not all live (SPEC §7) is a line of
+    its own per set of sync states: at once when one is lost, after ``settle`` seconds otherwise
+    (the seconds' syncing at start is no line), and the step's line is due again once they are
+    all live.  A step here is (epoch, seq, the skillsets not live with their states)."""
 
-    def __init__(self, out: TextIO):
-        self.out = out
-        self.step: tuple[int, int] | None = None  # (epoch, seq) of the step last seen
+    def __init__(self, out: TextIO, settle: float = 1.0):
+        self.out, self.settle = out, settle
+        self.step: tuple | None = None  # (epoch, seq, states not live) of the step last seen
         self.line = ""
         self.written = True
+        self.since = 0.0  # monotonic time the step was first seen
 
-    def see(self, step: tuple[int, int], line: str, final: bool) -> None:
+    def see(self, step: tuple, line: str, final: bool) -> None:
         if step != self.step:
-            self.flush()
-            self.step, self.written = step, False
+            if self.step is None or step[:2] != self.step[:2]:
+                self.flush()  # a new step: the last one's line, if not written yet
+            self.step, self.written, self.since = step, False, time.monotonic()  # else it was superseded
         self.line = line
         if final:
+            self.flush()
+
+    def due(self, now: float) -> None:
+        """Write the line of a step whose skillsets have not all been live for ``settle`` seconds."""
+        if self.step is not None and self.step[2] and now - self.since >= self.settle:
             self.flush()
 
     def flush(self) -> None:
@@ -94,13 +112,16 @@ def watch(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     changed = threading.Event()
     observer = Observer(session, args.system, client=client_name(config))
     tty = out.isatty()
-    seen: deque[tuple[tuple[int, int], str, bool]] = deque()  # a pipe's (step, line, final), every update
+    seen: deque[tuple[tuple, str, bool]] = deque()  # a pipe's (step, line, final), every update
 
     def on_update(_updates: object) -> None:  # on Zenoh's thread, the observer's lock held
         if not tty and not args.once:
             lines, line, key, fresh = _look(observer.board)
             if lines:
-                seen.append((key[:2], line, fresh or not observer.board.alive.get("predictor")))
+                live = not observer.board.unsafe.state_stale
+                lost = any(state == "lost" for _, state in key[2])
+                final = lost or fresh or (live and not observer.board.alive.get("predictor"))
+                seen.append((key[:3], line, final))
         changed.set()
 
     try:
@@ -115,7 +136,7 @@ def watch(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
         steps = StepLines(out)
         while True:
             changed.clear()
-            lines, line, key, fresh = observer.read(_look)  # type: ignore[misc]
+            lines, line, key, fresh = observer.read(lambda b: _look(b, tty))  # type: ignore[misc]
             done = stop.is_set() or (end is not None and time.monotonic() >= end)
             if args.once:
                 if lines and (fresh or done):
@@ -127,6 +148,7 @@ def watch(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
                 shown = key
             while seen:
                 steps.see(*seen.popleft())
+            steps.due(time.monotonic())
             if done:
                 steps.flush()
                 return 0

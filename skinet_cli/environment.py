@@ -128,6 +128,7 @@ VARIABLES: dict[str, Variable] = {
     "SKINET_INSTANCE": Variable("--instance of the bridge and the predictor"),
     "SKINET_CHECK_POLICY": Variable("--check-policy of the monitor and skinet run, compose.yaml"),
     "SKINET_CHECK_RATE_LIMIT": Variable("--check-rate-limit of the monitor and skinet run"),
+    "SKINET_LOST_AFTER": Variable("--lost-after of the monitor and skinet run, compose.yaml"),
     "SKINET_RATE_LIMIT": Variable("--rate-limit of the predictor and skinet run"),
     "SKINET_ROS_NAMESPACE": Variable("--namespace of the bridge, compose.yaml"),
     "SKINET_SPEED": Variable("--speed of the simulator, compose.yaml"),

@@ -7,7 +7,8 @@ from __future__ import annotations
 import argparse
 
 from services.common.zenoh_config import add_zenoh_args
-from skinet_cli.options import key_name, seconds
+from skinet.wire.messages import MAX_CHECK_WAIT
+from skinet_cli.options import key_name, seconds, seconds_within
 
 
 def add_parsers(sub: argparse._SubParsersAction) -> None:
@@ -35,14 +36,23 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
 
     c = sub.add_parser("check", help="ask a running monitor whether a command is safe now (skinet/<system>/check)",
                        description="Ask the monitor's command check about SKILLSET:TRANSITION at the live "
-                                   "marking: allow, warn or deny (the monitor's policy) with the reasons. "
+                                   "marking: allow, warn or deny (the monitor's policy, or --policy) with the "
+                                   "reasons. While the monitor cannot vouch for the live marking (a skillset "
+                                   "syncing or lost) or the prediction is pending, the answer is at least warn "
+                                   "(state_unknown, prediction_pending); --wait lets it wait for them first. "
                                    "Exit status: 0 allow, 3 warn, 4 deny, 1 error (unknown name, no monitor, "
                                    "no router).")
     c.add_argument("system", metavar="SYSTEM_NAME", type=key_name("system name"),
                    help="system name, as in skinet/<system>/... keys")
     c.add_argument("command", metavar="SKILLSET:TRANSITION", help="e.g. spot:go_to_waypoint.start")
     c.add_argument("--json", action="store_true", help="print the CheckReply as JSON")
-    c.add_argument("--timeout", type=seconds(), default=2.0, help="seconds to wait for the monitor (default: 2)")
+    c.add_argument("--timeout", type=seconds(), default=2.0,
+                   help="seconds to wait for the monitor's answer, beyond --wait (default: 2)")
+    c.add_argument("--wait", type=seconds_within(0, MAX_CHECK_WAIT), default=0.0, metavar="S",
+                   help="let the monitor wait up to S seconds for a synced state and a fresh prediction before it "
+                        f"answers (default: 0, answer at once; at most {MAX_CHECK_WAIT:g})")
+    c.add_argument("--policy", metavar="P",
+                   help="answer under this policy instead of the monitor's: warn, strict, or KIND=ACTION,...")
     add_zenoh_args(c)
     c.set_defaults(func=cmd_check)
 
@@ -71,14 +81,16 @@ def cmd_check(args: argparse.Namespace) -> int:
         check_connected, client_name, config_from_args, open_session, wait_connected, warn_on_stderr,
     )
     from services.dashboard.observer import monitored_systems
-    from services.monitor.check import parse_command
+    from services.monitor.check import parse_command, parse_policy
     from skinet.errors import SkinetError
     from skinet.wire import keys
     from skinet.wire.codec import DecodeError, decode, encode
     from skinet.wire.messages import CheckReply
 
     try:
-        request = parse_command(args.command)
+        request = parse_command(args.command).model_copy(update={"wait": args.wait, "policy": args.policy})
+        if args.policy is not None:
+            parse_policy(args.policy)
     except ValueError as exc:
         raise SkinetError(str(exc)) from None
     config = config_from_args(args)
@@ -87,7 +99,7 @@ def cmd_check(args: argparse.Namespace) -> int:
     try:
         deadline = time.monotonic() + args.timeout
         wait_connected(session, config, args.timeout)  # an endpoint Zenoh still tries may come up in time
-        left = max(0.1, deadline - time.monotonic())
+        left = max(0.1, deadline - time.monotonic()) + args.wait  # the monitor may keep it that long
         replies = [r for r in session.get(key, payload=encode(request), timeout=left) if r.ok is not None]
         if not replies:
             check_connected(session, config)
@@ -108,12 +120,13 @@ def cmd_check(args: argparse.Namespace) -> int:
     else:
         state = "" if reply.enabled else " (not firable now)"
         print(f"{args.command}: {reply.decision.upper() if reply.decision else '?'} at step {reply.seq}{state}"
+              + (" (STATE NOT LIVE: about the last marking known)" if reply.state_stale else "")
               + (" (prediction stale: explicit and forced constraints only)" if reply.prediction_stale else ""))
         for r in reply.reasons:
             steps = "" if not r.steps else f", within {r.steps} steps"
             via = f" via {' -> '.join(r.witness)}" if r.witness else ""
             why = f" — {r.reason}" if r.reason else ""
-            print(f"  {r.property}: {r.constraint} ({r.action}){steps}{via}{why}")
+            print(f"  {r.property + ': ' if r.property else ''}{r.constraint} ({r.action}){steps}{via}{why}")
         for p in reply.recovers:
             print(f"  restores {p} (violated now)")
     return EXIT.get(reply.decision or "", 1) if reply.ok else 1

@@ -66,6 +66,11 @@ def seconds(env: str | None = None, zero: bool = False) -> Callable[[str], float
     return _number(float, what, 0.0, not zero, None, env)
 
 
+def seconds_within(low: float, high: float, env: str | None = None) -> Callable[[str], float]:
+    """A duration in seconds in ``[low, high]``."""
+    return _number(float, f"a number of seconds from {low:g} to {high:g}", low, False, high, env)
+
+
 def budget(env: str | None = None) -> Callable[[str], float]:
     """A prediction budget in seconds: at least the predictor's minimum (SPEC §6.1)."""
     return _number(float, f"a number of seconds >= {MIN_BUDGET:g} (the predictor's minimum budget)",

@@ -8,6 +8,7 @@ import os
 from services.common.ratelimit import add_rate_args
 from services.common.zenoh_config import add_login_args
 from services.monitor.check import add_policy_arg
+from services.monitor.sync import add_lost_after_arg
 from skinet_cli.memory import add_memory_arg
 from skinet_cli.options import add_no_properties_arg, budget, count, seconds
 
@@ -34,6 +35,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     c.add_argument("--dashboard-host", default="127.0.0.1", help="address of --dashboard (default: 127.0.0.1)")
     add_no_properties_arg(c)
     add_policy_arg(c)
+    add_lost_after_arg(c)
     add_rate_args(c)
     add_memory_arg(c)
     _zenoh_args(c, "endpoint on which a bridge, watch, dashboard or check in another process can connect "

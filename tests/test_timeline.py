@@ -72,7 +72,7 @@ def test_log_line_rejects_what_is_not_a_message() -> None:
 
 
 GOOD_BODY = '{"v":1,"system":"s","seq":0,"stamp":0,"skillsets":{}}'
-TYPES = ("CanonicalEvent, CheckReply, CheckRequest, LiveState, ModelBundle, PredictReply, PredictRequest, "
+TYPES = ("CanonicalEvent, CheckReply, CheckRequest, Heartbeat, LiveState, ModelBundle, PredictReply, PredictRequest, "
          "StateSpaceReport, UnsafeReport, Verdicts")
 
 

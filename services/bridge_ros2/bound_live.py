@@ -41,6 +41,7 @@ import zenoh.ext as zext
 from services.bridge_ros2.bound import BoundCounters, BoundFeed
 from services.common.cli import default_instance_id
 from services.common.events import event_publisher
+from services.common.heartbeat import HeartbeatPublisher
 from services.common.zenoh_config import undeclare
 from skinet.ros import bound
 from skinet.ros.actions import get_result_request, get_state_request
@@ -49,6 +50,7 @@ from skinet.ros.keys import KeyStyle, history_selector, parse_liveliness_token, 
 from skinet.system import System
 from skinet.wire import keys
 from skinet.wire.codec import encode as wire_encode
+from skinet.wire.messages import HeartbeatSkillset
 
 log = logging.getLogger("skinet.bridge_ros2")
 
@@ -88,7 +90,11 @@ class BoundBridge:
             f"@ros2_lv/{style.domain}/**" if style.rmw_zenoh else PLUGIN_SERVERS, self._on_token, history=True))
         self._resync = [session.declare_queryable(keys.resync(system.name, name), self._on_resync)
                         for name in bindings]
-        self._token = session.liveliness().declare_token(keys.alive(system.name, "bridge_ros2", self.instance_id))
+        token = keys.alive(system.name, "bridge_ros2", self.instance_id)
+        self._token = session.liveliness().declare_token(token)
+        self._heartbeat = HeartbeatPublisher(  # SPEC §7: the monitor loses what a silent bridge publishes
+            session, system.name, self.feed.source, self.feed.epoch, token,
+            lambda: {n: HeartbeatSkillset(seq=s.seq - 1 if s.seq else None) for n, s in self.feed.skillsets.items()})
         self._worker = threading.Thread(target=self._run, name="bridge_ros2-bound", daemon=True)
         self._worker.start()
         self._asker = threading.Thread(target=self._start_up, name="bridge_ros2-bound-start", daemon=True)
@@ -236,6 +242,7 @@ class BoundBridge:
         if self._stop.is_set():
             return
         self._stop.set()
+        self._heartbeat.close()
         undeclare(self._token, *self._resync, *self._subscribers)
         self._queue.put(None)
         self._worker.join(5.0)

@@ -17,12 +17,16 @@ with its sequence number going back (``rmw_zenoh`` attachments), or skill ids re
 to '' mean the manager restarted: the bridge asks again and the next status is a new
 initial status whose ``info`` says how it differs from the last one (SPEC §7).  With
 ``rmw_zenoh`` the bridge declares its own node, subscription and publisher tokens.
-A monitor that missed events asks ``keys.resync(system, skillset)``: the bridge
-answers with the skillset's last status (numbered as its last event) and asks
-the manager for a fresh one.  What managers publish while the bridge's session
+A monitor that missed events, or that starts, asks ``keys.resync(system, skillset)``:
+the bridge answers with the skillset's last status (numbered as its last event) and
+asks the manager for a fresh one.  What managers publish while the bridge's session
 has lost every router is lost (their topics are volatile): the first status after
 such a cut is a counted resync whose event says so, and every manager is asked
-again when the link is back (:meth:`Bridge._watch_link`).
+again when the link is back (:meth:`Bridge._watch_link`).  Every 0.5 s it publishes a
+:class:`~skinet.wire.messages.Heartbeat` (:mod:`services.common.heartbeat`): its
+token, and per skillset its last event's number and whether the manager is present
+(its token seen, gone, or never announced), so that a monitor can tell a silent
+bridge from a quiet robot (SPEC §7).
 
 One subscriber per manager covers all its topics (``.../<skillset>_skillset/**``):
 separate subscribers per key would run their callbacks on different threads and
@@ -47,6 +51,7 @@ import zenoh
 from services.bridge_ros2.feed import Counters, Feed
 from services.common.cli import default_instance_id
 from services.common.events import event_publisher
+from services.common.heartbeat import HeartbeatPublisher
 from services.common.zenoh_config import undeclare
 from services.common.ros_liveliness import declare_node
 from skinet.ros.keys import (
@@ -57,6 +62,7 @@ from skinet.ros.typestore import default_instance, encode
 from skinet.system import System
 from skinet.wire import keys
 from skinet.wire.codec import encode as wire_encode
+from skinet.wire.messages import HeartbeatSkillset
 
 log = logging.getLogger("skinet.bridge_ros2")
 
@@ -92,6 +98,7 @@ class Bridge:
         self._requests: dict[str, tuple[str, ManagerTopic, bytes]] = {}  # skillset -> (manager, topic, CDR)
         self._hashes: dict[str, str] = {}  # skillset -> status_request type hash learned from the manager's token
         self._present: dict[str, str] = {}  # skillset -> token of its manager's status_request subscription
+        self._gone: set[str] = set()  # skillsets whose manager's token went away (and has not come back)
         self._cuts = 0  # times the link to every router was lost (see _watch_link)
         self._cuts_seen: dict[str, int] = {}  # skillset -> _cuts when its manager's token last appeared
         self._sequence = 0
@@ -112,7 +119,9 @@ class Bridge:
                     for t in m.topics]
             own.append(("MP", topic_fqn(manager, req.topic), req.typename, style.type_hash(m.store, req.typename)))
         self._resync = session.declare_queryable(keys.resync(system.name, "*"), self._on_resync)
-        self._token = session.liveliness().declare_token(keys.alive(system.name, "bridge_ros2", self.instance_id))
+        token = keys.alive(system.name, "bridge_ros2", self.instance_id)
+        self._token = session.liveliness().declare_token(token)
+        self._heartbeat = HeartbeatPublisher(session, system.name, self.feed.source, self.feed.epoch, token, self._beat)
         self._ros_tokens: list[Any] = []
         self.graph: list[RosEntity] = []  # rmw_zenoh: the bridge's node and topics as ROS tools see them
         if style.rmw_zenoh:
@@ -214,6 +223,7 @@ class Bridge:
             if sample.kind != zenoh.SampleKind.PUT:
                 if self._present.get(name) == key:
                     del self._present[name]
+                    self._gone.add(name)
                     log.warning("%s: manager %s left (its status_request subscription is gone)", name,
                                 self._requests[name][0])
                 return
@@ -228,12 +238,21 @@ class Bridge:
             back = name not in self._present and self._cuts_seen.get(name) == self._cuts and \
                 self.feed.managers[name].deriver.last is not None
             self._present[name] = key
+            self._gone.discard(name)
             self._cuts_seen[name] = self._cuts
         if back:
             with self._fed:
                 self.feed.restarted(name, "the manager (or its gateway) came back")
             self._queue.put(())  # a status it held is released: the worker publishes its events
         self.request_status(name)
+
+    def _beat(self) -> dict[str, HeartbeatSkillset]:
+        """Per skillset, the seq of its last event and whether its manager is present (the heartbeat)."""
+        with self._lock:
+            present, gone = set(self._present), set(self._gone)
+        return {name: HeartbeatSkillset(seq=m.seq - 1 if m.seq else None,
+                                        manager=True if name in present else False if name in gone else None)
+                for name, m in self.feed.managers.items()}
 
     def _watch_link(self) -> None:
         """Resync every manager after the session lost every router.
@@ -310,6 +329,7 @@ class Bridge:
         if self._stop.is_set():
             return
         self._stop.set()
+        self._heartbeat.close()
         undeclare(self._token, self._resync, *self._ros_tokens, *self._subscribers)
         self._queue.put(None)
         self._worker.join(5.0)

@@ -14,8 +14,11 @@ Measured on loopback (router killed for 3 s while 40 events/s flowed): every
 event delivered in order about 2 s after the router came back.  A subscriber
 history of N samples also bounds recovery to N, so none is asked for.  A
 subscriber that starts late still gets the whole cache (it recovers everything
-before the first heartbeat's sequence number): the monitor counts events stamped
-before it started as ``history`` and does not apply them.
+before the first heartbeat's sequence number): the monitor counts the events its
+resync answer covers as ``history`` and does not apply them
+(:mod:`services.monitor.sync`; never by their stamps).  These heartbeats are
+internal to zenoh.ext; the monitor hears the bridge's own
+(:mod:`services.common.heartbeat`).
 """
 
 from __future__ import annotations

@@ -8,7 +8,8 @@ monitor step for the timeline (paper Fig. 3/4); and the violations, each with
 the step and event where its property went from holding to failing.
 
 A monitor restart shows as a step counter going back: a new *epoch* starts, the
-timeline keeps the previous points.  Messages older than what is shown (a late
+timeline keeps the previous points.  The same step published again with a later
+stamp (its skillsets' sync states changed, SPEC §7) replaces the shown state.  Messages older than what is shown (a late
 reply to the start-up query) are ignored.  Every :meth:`Board.feed` returns the
 updates to send to views, as JSON-able dicts ``{"kind": ..., ...}``; applying
 them twice is harmless (points and violations carry their index).  Cost: O(1)
@@ -98,6 +99,10 @@ class Board:
         out: list[Update] = []
         if self.state is not None and (msg.seq, msg.stamp) == (self.state.seq, self.state.stamp):
             return []  # the same step again (the start-up query)
+        if self.state is not None and (msg.seq, msg.event) == (self.state.seq, self.state.event) and \
+                msg.stamp > self.state.stamp:
+            self.state = msg  # the step published again: its sync state changed (SPEC §7)
+            return [{"kind": "state", "message": _json(msg)}]
         if msg.seq <= self._last_seq:
             if initial:
                 return []  # an older copy than what is shown

@@ -13,6 +13,7 @@ from services.common.zenoh_config import add_zenoh_args, client_name, config_fro
 from services.common.ratelimit import add_rate_args
 from services.monitor.check import add_policy_arg
 from services.monitor.service import start_monitor
+from services.monitor.sync import add_lost_after_arg
 from skinet_cli.options import (
     ArgumentParser, add_no_properties_arg, budget, key_name, load_live_system, require_properties, seconds,
 )
@@ -38,6 +39,7 @@ def build_parser() -> ArgumentParser:
                    help="let Zenoh batch publications (higher burst throughput; default: express)")
     add_no_properties_arg(p)
     add_policy_arg(p)
+    add_lost_after_arg(p)
     add_rate_args(p, predict=False)
     add_log_arg(p)
     add_zenoh_args(p)
@@ -66,16 +68,18 @@ def main(argv: Sequence[str] | None = None) -> int:
         monitor = start_monitor(session, system, instance_id=args.instance_id, budget=args.budget,
                                 query_timeout=args.query_timeout, stall=args.stall, express=args.express,
                                 check_policy=args.check_policy, client=client_name(config),
-                                check_rate_limit=args.check_rate_limit)
+                                check_rate_limit=args.check_rate_limit, lost_after=args.lost_after)
         log.info("monitoring %s (model %s) as %s", system.name, monitor.digest, monitor.instance_id)
         while not stop.wait(0.5):
             pass
         monitor.close()
         c = monitor.counters
+        k = monitor.check_counters
         log.info("stopped: %d received, %d applied, %d malformed, %d duplicates, %d out of order, %d lost, "
-                 "%d divergences; %d unrecovered, %d jumps, %d restarts, %d resyncs", c.received, c.applied,
+                 "%d divergences; %d unrecovered, %d jumps, %d restarts, %d resyncs, %d history; checks: %d "
+                 "answered, %d errors, %d oversized, %d rate limited, %d waited", c.received, c.applied,
                  c.malformed, c.duplicates, c.out_of_order, c.lost, c.divergences, c.unrecovered, c.jumps,
-                 c.restarts, c.resyncs)
+                 c.restarts, c.resyncs, c.history, k.answered, k.errors, k.oversized, k.rate_limited, k.waited)
     finally:
         session.close()
     return 0

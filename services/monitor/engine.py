@@ -8,25 +8,31 @@ The work per event is compiled once per marking, in the spirit of rosbags'
 generated deserialisers: the result of ``LiveSystem.apply`` is cached per
 (skillset marking, transition, observed status), and the msgpack bytes of the
 three messages per (combined marking, prediction) with holes for the fields of
-a step (seq, stamp, event, divergence).  Both caches are bounded and exact (the
-core functions are pure); a step packs four small values and joins bytes.
+a step (seq, stamp, event, divergence, and the sync states of SPEC §7, left out
+while they hold their default).  Both caches are bounded and exact (the core
+functions are pure); a step packs a few small values and joins bytes.
+
+A resync answer adopted while a skillset was not live (:meth:`Engine.adopt`) sets
+its marking without judging how the robot got there, and the events of its
+stream up to the answer's seq become history (:meth:`Engine.check_seq`).
 """
 
 from __future__ import annotations
 
 import time
 from collections import OrderedDict
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
 import msgpack
 
 from skinet.live import LiveSystem
-from skinet.system import Marking, System
+from skinet.system import Marking, System, marking_from_json
 from skinet.verify.algorithm1 import Analysis, analyse
 from skinet.wire.convert import RiskTable, analysis_bodies, statuses
 from skinet.wire.messages import (
-    CanonicalEvent, LiveState, UnsafeReport, Verdicts,
+    CanonicalEvent, LiveState, SkillsetSync, UnsafeReport, Verdicts,
 )
 
 MarkingKey = tuple[int, ...]
@@ -46,9 +52,12 @@ class Counters:
     restarts: int = 0  # a stream begun anew: new epoch, or seq far behind (a wrap)
     resyncs: int = 0  # status resyncs applied
     unrecovered: int = 0  # events an outage took that the bridge's cache could not give back (also in lost)
-    history: int = 0  # events stamped before the monitor started (the cache replayed to a late monitor)
+    history: int = 0  # events a resync answer covered (the bridge's cache replayed them to a late monitor)
     divergences: int = 0  # events the model could not explain (SPEC §7)
     errors: int = 0  # unexpected exceptions while handling a payload (bugs)
+
+
+OMIT = object()  # a hole's value that leaves its field out (a later field at its default, skinet/wire/messages.py)
 
 
 class Template:
@@ -56,20 +65,28 @@ class Template:
 
     def __init__(self, body: dict[str, Any], holes: tuple[str, ...]):
         packer = msgpack.Packer(use_bin_type=True)
-        self.pairs: list[tuple[bytes, str]] = []  # constant bytes, then the field to pack after them
-        const = packer.pack_map_header(len(body))
+        self.size = len(body)
+        self.pairs: list[tuple[bytes, bytes, str]] = []  # constant bytes, then the field to pack after them
+        const = b""
         for name, value in body.items():
-            const += packer.pack(name)
+            key = packer.pack(name)
             if name in holes:
-                self.pairs.append((const, name))
+                self.pairs.append((const, key, name))
                 const = b""
             else:
-                const += packer.pack(value)
+                const += key + packer.pack(value)
         self.tail = const
 
     def fill(self, packer: msgpack.Packer, values: dict[str, Any]) -> bytes:
-        pack = packer.pack
-        return b"".join([const + pack(values[name]) for const, name in self.pairs]) + self.tail
+        pack, size, parts = packer.pack, self.size, []
+        for const, key, name in self.pairs:
+            value = values[name]
+            if value is OMIT:
+                size -= 1
+                parts.append(const)
+            else:
+                parts.append(const + key + pack(value))
+        return packer.pack_map_header(size) + b"".join(parts) + self.tail
 
 
 @dataclass(frozen=True)
@@ -119,6 +136,9 @@ class Engine:
         self.names = tuple(c.name for c in self.system.components)
         self.seq = -1  # monitor step counter; the initial state is step 0
         self.last_seq: OrderedDict[tuple[str, str], tuple[int, int]] = OrderedDict()  # -> (epoch, seq)
+        self.covered: dict[tuple[str, str], tuple[int, int]] = {}  # -> (epoch, seq) of the last adopted resync
+        self.sync: dict[str, Any] = {"sync": OMIT, "state_stale": OMIT, "state_reason": OMIT, "stale_since": OMIT}
+        self._last: dict[str, Any] = {"event": "", "divergence": None}  # of the last step
         self.predictions: OrderedDict[MarkingKey, Prediction] = OrderedDict()
         self._applied: dict[tuple, tuple[int | None, bool, str | None]] = {}
         self._frames: dict[tuple[MarkingKey, int], Frame] = {}
@@ -154,10 +174,15 @@ class Engine:
         prev = streams.get(stream)
         if ev.skillset not in self.live.marking:  # unknown skillsets are not tracked
             return True, None, False
+        covered = self.covered.get(stream)
+        if covered is not None and covered[0] == ev.epoch and ev.seq <= covered[1] and prev is not None and \
+                prev[0] == ev.epoch and -self.window < ev.seq - prev[1] <= 0:
+            self.counters.history += 1  # before the status a resync adopted: already in the marking
+            return False, None, False
         streams[stream] = (ev.epoch, ev.seq)
         streams.move_to_end(stream)
         if len(streams) > self.max_streams:
-            streams.popitem(last=False)
+            self.covered.pop(streams.popitem(last=False)[0], None)
         if prev is None:
             return True, None, False
         epoch, last = prev
@@ -194,6 +219,28 @@ class Engine:
             return False  # a later event of this run already arrived (it carries its own status)
         self.last_seq[(ev.skillset, ev.source)] = (ev.epoch, ev.seq)
         return True
+
+    def status_marking(self, ev: CanonicalEvent) -> int:
+        """The marking of ``ev.skillset`` its status gives; raises :class:`~skinet.errors.SourceError` when the
+        model cannot read it (a status naming what the model lacks)."""
+        if ev.status is None:
+            raise ValueError("an event without a status")
+        return marking_from_json(self.system, {ev.skillset: ev.status.model_dump()}, "resync")[ev.skillset]
+
+    def adopt(self, ev: CanonicalEvent) -> Step | None:
+        """Take a resync answer's status as ``ev.skillset``'s marking without judging how the robot got
+        there (the monitor did not know: SPEC §7 syncing), and count later events of its stream up to
+        ``ev.seq`` as history (:meth:`check_seq`).  A step when the marking changed, else None.
+        Raises :class:`~skinet.errors.SourceError` for a status the model cannot read."""
+        target = self.status_marking(ev)
+        stream = (ev.skillset, ev.source)
+        self.last_seq[stream] = self.covered[stream] = (ev.epoch, ev.seq)
+        self.last_seq.move_to_end(stream)
+        self.counters.resyncs += 1
+        if self.live.marking[ev.skillset] == target:
+            return None
+        self.live.marking[ev.skillset] = target
+        return self._step(f"{ev.skillset}:resync#{ev.seq}", True, None)
 
     def apply(self, ev: CanonicalEvent) -> Step | None:
         """Advance the live marking by ``ev`` (already seq-checked) and build its step.
@@ -235,6 +282,13 @@ class Engine:
             self.predictions.popitem(last=False)
         return key == self.key
 
+    def set_sync(self, sync: Mapping[str, SkillsetSync], stale: tuple[str, float] | None) -> None:
+        """The sync fields of the next messages: LiveState.sync, UnsafeReport.state_stale and why (SPEC §7)."""
+        self.sync = {"sync": {n: s.model_dump(mode="json") for n, s in sync.items()},
+                     "state_stale": OMIT if stale is None else True,
+                     "state_reason": OMIT if stale is None else stale[0],
+                     "stale_since": OMIT if stale is None else stale[1]}
+
     def analysis(self) -> tuple[Analysis, MarkingKey, bool]:
         """Algorithm 1 at the live marking, the marking's key, and whether its prediction is stale."""
         key = self.key
@@ -242,13 +296,21 @@ class Engine:
 
     def refresh(self) -> bytes:
         """The UnsafeReport of the current step again, with the current prediction."""
-        return self._frame(self.key).unsafe.fill(self._packer, {"seq": self.seq, "stamp": time.time()})
+        return self._frame(self.key).unsafe.fill(self._packer, {"seq": self.seq, "stamp": time.time(), **self.sync})
+
+    def republish(self) -> Step:
+        """The messages of the current step again (same seq, a new stamp), e.g. with a new sync state."""
+        return self._fill(False, self._last["event"], self._last["divergence"])
 
     def _step(self, event: str, changed: bool, divergence: str | None) -> Step:
         self.seq += 1
+        self._last = {"event": event, "divergence": divergence}
+        return self._fill(changed, event, divergence)
+
+    def _fill(self, changed: bool, event: str, divergence: str | None) -> Step:
         key = self.key
         frame = self._frame(key)
-        values = {"seq": self.seq, "stamp": time.time(), "event": event, "divergence": divergence}
+        values = {"seq": self.seq, "stamp": time.time(), "event": event, "divergence": divergence, **self.sync}
         fill = self._packer
         return Step(self.seq, key, changed, divergence, frame.live.fill(fill, values),
                     frame.verdicts.fill(fill, values), frame.unsafe.fill(fill, values))
@@ -272,10 +334,11 @@ class Engine:
         step = ("seq", "stamp")
         return Frame(
             Template(LiveState(system=name, seq=0, stamp=0.0, skillsets=statuses(self.system, marking))
-                     .model_dump(mode="json"), (*step, "event", "divergence")),
+                     .model_dump(mode="json"), (*step, "event", "divergence", "sync")),
             Template(Verdicts(system=name, seq=0, stamp=0.0, properties=props).model_dump(mode="json"), step),
             Template(UnsafeReport(system=name, seq=0, stamp=0.0, unsafe=unsafe, recovery=recovery,
                                   violated=analysis.violated, literal_count=len(analysis.unsafe),
-                                  prediction_stale=pred is None).model_dump(mode="json"), step),
+                                  prediction_stale=pred is None).model_dump(mode="json"),
+                     (*step, "state_stale", "state_reason", "stale_since")),
             analysis,
         )

@@ -16,6 +16,17 @@ fresh at once and not queried again.  A gap, a jump, a restarted bridge or event
 that could not be recovered make it ask the bridge for the skillset's last status
 (``keys.resync``) and apply it (see :meth:`Engine.check_seq`).  Bad payloads are counted and logged,
 never raised (SPEC §7).
+
+Honest live state (SPEC §7, :mod:`services.monitor.sync`): at start every
+skillset is ``syncing`` and the monitor asks the bridge for its last status; its
+events wait until the answer is applied.  The bridge's heartbeats
+(``keys.heartbeat``), its liveliness token and its events keep a skillset
+``live``; silence past ``lost_after`` seconds makes it ``lost``, and it resyncs
+when its source is heard again.  Every change of these states publishes the
+current step again (same ``seq``) with ``LiveState.sync`` and
+``UnsafeReport.state_stale``.  A watchdog thread measures the silences and
+answers the check requests that asked to ``wait`` (their queries are kept, never
+a Zenoh callback thread blocked).
 """
 
 from __future__ import annotations
@@ -26,27 +37,53 @@ import threading
 import time
 import uuid
 from dataclasses import dataclass
+from typing import TypeVar
 
 import zenoh
+from pydantic import BaseModel
 
 from services.common.events import event_subscriber
 from services.common.ratelimit import CHECK_RATE_LIMIT, RateLimiter
 from services.common.zenoh_config import undeclare
-from services.monitor.check import Checker, Policy, request_from
+from services.monitor.check import MAX_REQUEST, Checker, Policy, request_from
 from services.monitor.engine import Counters, Engine, MarkingKey, Step
 from services.monitor.prediction import PredictionClient, PredictorStats
+from services.monitor.sync import BOUND, SYNCING, SyncTracker
+from skinet.errors import SourceError
 from skinet.system import System
 from skinet.wire import keys
 from skinet.wire.codec import DecodeError, decode, encode
 from skinet.wire.convert import RiskTable, bundle
 from skinet.wire.messages import (
-    CanonicalEvent, CheckReply, CheckRequest, LiveState, PredictReply, StateSpaceReport, UnsafeReport, Verdicts,
+    CanonicalEvent, CheckReply, CheckRequest, Heartbeat, LiveState, PredictReply, SkillsetSync, StateSpaceReport,
+    UnsafeReport, Verdicts,
 )
 
 log = logging.getLogger("skinet.monitor")
 _LOG_FIRST = 10  # log the first occurrences of each problem, then every 1000th
-MAX_EVENT = 64 << 10  # bytes; a canonical event is a few hundred
-HISTORY_SLACK = 2.0  # seconds: events stamped this long before the monitor started are history
+MAX_EVENT = 64 << 10  # bytes; a canonical event or a heartbeat is a few hundred
+MAX_WAITING = 256  # check requests waiting at once; more are answered at once
+TICK = 0.1  # seconds between the watchdog's looks at silences and waiting checks
+M = TypeVar("M", bound=BaseModel)
+
+
+@dataclass
+class CheckCounters:
+    """What happened to the queries on the check key."""
+
+    answered: int = 0  # replies with a decision
+    errors: int = 0  # requests that could not be judged (bad payload, unknown name, bad policy)
+    oversized: int = 0  # payloads or parameters over MAX_REQUEST bytes, refused before decoding
+    rate_limited: int = 0  # refused by the per-client budget
+    waited: int = 0  # answered after waiting for a synced state or a fresh prediction
+
+
+@dataclass
+class _Waiting:
+    deadline: float  # monotonic
+    query: zenoh.Query
+    request: CheckRequest
+    client: str
 
 
 @dataclass(frozen=True)
@@ -60,6 +97,7 @@ class MonitorView:
     state_space: StateSpaceReport | None
     counters: Counters
     predictor: PredictorStats
+    checks: CheckCounters
 
 
 class Monitor:
@@ -69,7 +107,7 @@ class Monitor:
                  budget: float = 1.0, query_timeout: float | None = None, retry: float = 0.5, stall: float = 0.5,
                  prediction_cache: int = 256, indirect: bool = True, express: bool = True,
                  check_policy: Policy | None = None, resync_timeout: float = 2.0, client: str = keys.LOCAL_CLIENT,
-                 check_rate_limit: float = CHECK_RATE_LIMIT):
+                 check_rate_limit: float = CHECK_RATE_LIMIT, lost_after: float = BOUND):
         self.session, self.system = session, system
         self.instance_id = keys.check_chunk(instance_id or uuid.uuid4().hex[:8], "instance id")
         name = keys.check_chunk(system.name, "system name")
@@ -91,9 +129,15 @@ class Monitor:
         self._closed = False
         self._last: dict[str, bytes] = {}
         self._waiters = 0  # threads in wait_change: notify only when someone listens
-        self._resyncing: set[str] = set()  # skillsets with a resync query in flight
-        self._started = time.time()
-        self.resync_timeout = resync_timeout
+        self._sync = SyncTracker((c.name for c in system.components), bound=lost_after, system=name)
+        self._sync_seen = -1  # the tracker's version the engine's next messages carry
+        self._sync_published = -1  # the version the last published step carries
+        self._sync_shown: dict[str, SkillsetSync] = {}
+        self.check_counters = CheckCounters()
+        self._waiting: list[_Waiting] = []  # check requests waiting for a synced state or a fresh prediction
+        self._wake = threading.Event()  # something changed that a waiting check may want
+        self._behind: dict[str, tuple[float, CanonicalEvent]] = {}  # skillset -> (deadline, resync answer ahead)
+        self.resync_timeout, self.lost_after = resync_timeout, lost_after
         opts = dict(congestion_control=zenoh.CongestionControl.BLOCK, express=express)
         self._pub = {k: session.declare_publisher(key, **opts) for k, key in (
             ("state", keys.state(name)), ("verdicts", keys.verdicts(name)),
@@ -101,6 +145,7 @@ class Monitor:
         self._predict = PredictionClient(session, system, self.digest, self._on_prediction, client=self.client,
                                          budget=budget, timeout=query_timeout, retry=retry, stall=stall)
         with self._lock:
+            self._sync_fields()
             self._publish(self._engine.initial())
         self._queryable = session.declare_queryable(keys.model(name, self.digest), self._on_model_query)
         self._check = session.declare_queryable(keys.check(name, "*"), self._on_check)
@@ -115,10 +160,17 @@ class Monitor:
             self._predict.instance(token, True)
         self._sub, self._misses = event_subscriber(
             session, keys.events(name, "*"), zenoh.handlers.Callback(self._on_event, indirect=indirect), self._on_miss)
+        self._heartbeats = session.declare_subscriber(keys.heartbeat(name), self._on_heartbeat)
+        self._sources = session.liveliness().declare_subscriber(keys.alive(name, "*", "*"), self._on_source_token,
+                                                                history=True)
         # Declared last: whoever sees the token also sees the declarations above.
         self._token = session.liveliness().declare_token(keys.alive(name, "monitor", self.instance_id))
         self._twins = session.liveliness().declare_subscriber(keys.alive(name, "monitor", "*"), self._on_monitor_token)
         self._predict.want(self._engine.key, self._engine.marking())
+        self._watchdog = threading.Thread(target=self._watch, name="skinet-monitor-watchdog", daemon=True)
+        self._watchdog.start()
+        for c in system.components:  # what happened before we started: the bridge's last statuses
+            self._ask_resync(c.name)
 
     # -- public API -----------------------------------------------------------------
 
@@ -135,9 +187,22 @@ class Monitor:
         """The latest published messages, counters and predictor statistics (thread-safe)."""
         with self._lock:
             last, version, counters = dict(self._last), self._version, dataclasses.replace(self._engine.counters)
+            checks = dataclasses.replace(self.check_counters)
         space = decode(last["state_space"], StateSpaceReport) if "state_space" in last else None
         return MonitorView(version, decode(last["state"], LiveState), decode(last["verdicts"], Verdicts),
-                           decode(last["unsafe"], UnsafeReport), space, counters, self.predictor_stats)
+                           decode(last["unsafe"], UnsafeReport), space, counters, self.predictor_stats, checks)
+
+    def synced(self) -> bool:
+        """Whether every skillset is ``live`` (SPEC §7)."""
+        with self._lock:
+            return self._sync.all_live()
+
+    def last_seq(self, skillset: str, source: str) -> int | None:
+        """The seq of the last event of ``skillset`` from ``source`` that was handled (applied, covered by a
+        resync, or ignored as a duplicate); None before any."""
+        with self._lock:
+            last = self._engine.last_seq.get((skillset, source))
+        return None if last is None else last[1]
 
     def wait_change(self, version: int, timeout: float | None = None) -> bool:
         """Block until something newer than ``version`` was published; False on timeout."""
@@ -155,53 +220,65 @@ class Monitor:
                 return
             self._closed = True  # callbacks still running return at once
             self._changed.notify_all()
-        undeclare(self._misses, self._sub, self._predictors, self._twins, self._queryable, self._check, *self._latest,
-                  self._token)
+        self._wake.set()
+        self._watchdog.join(2.0)
+        self._answer_waiting(everyone=True)
+        undeclare(self._misses, self._sub, self._heartbeats, self._sources, self._predictors, self._twins,
+                  self._queryable, self._check, *self._latest, self._token)
         self._predict.close()
         with self._lock:
             undeclare(*self._pub.values())
 
     # -- callbacks --------------------------------------------------------------------
 
-    def _on_event(self, sample: zenoh.Sample) -> None:
+    def _read(self, sample: zenoh.Sample, kind: type[M], what: str) -> M | None:
+        """``sample``'s payload as a ``kind`` of this system; None, counted in ``malformed`` and logged, else."""
         try:
             if len(sample.payload) > MAX_EVENT:
-                raise DecodeError(f"event payload of {len(sample.payload)} bytes (limit {MAX_EVENT})")
-            ev = decode(sample.payload.to_bytes(), CanonicalEvent)
-            if ev.system != self.system.name:
-                raise DecodeError(f"event of system '{ev.system}' on {sample.key_expr}")
+                raise DecodeError(f"{what} payload of {len(sample.payload)} bytes (limit {MAX_EVENT})")
+            message = decode(sample.payload.to_bytes(), kind)
+            if message.system != self.system.name:  # type: ignore[attr-defined]
+                raise DecodeError(f"{what} of system '{message.system}' on {sample.key_expr}")  # type: ignore[attr-defined]
+            return message
         except DecodeError as exc:
             with self._lock:
                 c = self._engine.counters
-                c.received += 1
                 c.malformed += 1
-                self._warn(c.malformed, "malformed event payload: %s", exc)
-            return
-        if 0 < ev.stamp < self._started - HISTORY_SLACK:
-            # The bridge's cache replayed to a monitor that starts late (zenoh.ext recovers
-            # everything before a heartbeat's seq): history, not what happens now.
+                self._warn(c.malformed, "malformed %s payload: %s", what, exc)
+            return None
+
+    def _on_event(self, sample: zenoh.Sample) -> None:
+        ev = self._read(sample, CanonicalEvent, "event")
+        if ev is None:
             with self._lock:
                 self._engine.counters.received += 1
-                self._engine.counters.history += 1
             return
         try:
             with self._lock:
                 if self._closed:
                     return
-                engine = self._engine
-                engine.counters.received += 1
-                fresh, problem, resync = engine.check_seq(ev)
-                c = engine.counters
-                if problem:
-                    self._warn(c.duplicates + c.out_of_order + c.lost + c.jumps + c.restarts, "%s", problem)
-                if fresh:
-                    self._step(ev)
+                self._engine.counters.received += 1
+                # A skillset that is not live keeps its events until its resync answers (SPEC §7: what
+                # its answer covers is history, whatever the events' stamps say).
+                resync = self._sync.hold(ev) or self._handle(ev)
+                self._settle()
             if resync:
                 self._ask_resync(ev.skillset)
         except Exception:  # a bug must not stop the monitor
             with self._lock:
                 self._engine.counters.errors += 1
             log.exception("error while handling an event")
+
+    def _handle(self, ev: CanonicalEvent) -> bool:
+        """Check ``ev``'s seq and apply it (lock held); whether to ask for a resync."""
+        engine = self._engine
+        fresh, problem, resync = engine.check_seq(ev)
+        c = engine.counters
+        if problem:
+            self._warn(c.duplicates + c.out_of_order + c.lost + c.jumps + c.restarts, "%s", problem)
+        if fresh:
+            self._step(ev)
+        return resync
 
     def _on_miss(self, count: int) -> None:
         """Events an outage took that no cache could give back: counted, then every skillset resynced."""
@@ -211,45 +288,133 @@ class Monitor:
         for c in self.system.components:
             self._ask_resync(c.name)
 
+    def _on_heartbeat(self, sample: zenoh.Sample) -> None:
+        hb = self._read(sample, Heartbeat, "heartbeat")
+        if hb is None:
+            return
+        with self._lock:
+            if self._closed:
+                return
+            self._sync.heartbeat(hb)
+            self._settle()
+            due = [n for n, b in hb.skillsets.items() if b.seq is not None and n in self._sync.skillsets
+                   and self._sync.skillsets[n].state == SYNCING]
+        for name in due:  # it has a status to give: ask at once rather than at the next retry
+            self._ask_resync(name)
+
+    def _on_source_token(self, sample: zenoh.Sample) -> None:
+        with self._lock:
+            if self._closed:
+                return
+            self._sync.token(str(sample.key_expr), sample.kind == zenoh.SampleKind.PUT)
+            self._settle()
+            due = [n for n, s in self._sync.skillsets.items() if s.state == SYNCING]
+        for name in due:
+            self._ask_resync(name)
+
     def _ask_resync(self, skillset: str) -> None:
         """Ask the bridge for ``skillset``'s last status (one query in flight per skillset)."""
         with self._lock:
-            if skillset in self._resyncing or self._closed:
+            if self._closed or not self._sync.asking(skillset):
                 return
-            self._resyncing.add(skillset)
-        done = lambda: self._resync_done(skillset)  # noqa: E731
+        replied = [False]
+
+        def on_reply(reply: zenoh.Reply) -> None:
+            replied[0] = self._on_resync(reply) or replied[0]
+
+        def done() -> None:
+            with self._lock:
+                self._sync.answered(skillset, replied[0])
+                if not self._closed:
+                    self._settle()
+
         try:
-            self.session.get(keys.resync(self.system.name, skillset),
-                             zenoh.handlers.Callback(self._on_resync, done), timeout=self.resync_timeout)
+            self.session.get(keys.resync(self.system.name, skillset), zenoh.handlers.Callback(on_reply, done),
+                             timeout=self.resync_timeout)
         except zenoh.ZError as exc:  # session closed under us
             log.warning("cannot ask for a resync of %s: %s", skillset, exc)
             done()
 
-    def _resync_done(self, skillset: str) -> None:
-        with self._lock:
-            self._resyncing.discard(skillset)
-
-    def _on_resync(self, reply: zenoh.Reply) -> None:
+    def _on_resync(self, reply: zenoh.Reply) -> bool:
+        """Apply a resync answer; whether one was (a live skillset's answer older than its events counts too)."""
         try:
             if reply.ok is None:
-                return
+                return False
             ev = decode(reply.ok.payload.to_bytes(), CanonicalEvent)
-            if ev.system != self.system.name:
-                return
+            if ev.system != self.system.name or ev.status is None or ev.skillset not in self._sync.skillsets:
+                return False
+            resync = False
             with self._lock:
-                if self._closed or not self._engine.resync(ev):
-                    return
-                self._engine.counters.resyncs += 1
-                log.info("resync of %s from '%s' at #%d", ev.skillset, ev.source, ev.seq)
-                self._step(ev)
+                if self._closed:
+                    return False
+                if self._sync.live(ev.skillset):  # a gap's or a new run's resync: the stream goes on
+                    if self._engine.resync(ev):
+                        log.info("resync of %s from '%s' at #%d", ev.skillset, ev.source, ev.seq)
+                        self._take_status(ev)
+                    return True
+                resync = self._adopt(ev)
+                self._settle()
+            if resync:
+                self._ask_resync(ev.skillset)
+            return True
         except DecodeError as exc:
             log.warning("bad resync reply: %s", exc)
+        except SourceError as exc:
+            log.warning("resync reply with a status the model cannot read: %s", exc.diagnostics[0].message)
         except Exception:
             log.exception("error while applying a resync")
+        return False
+
+    def _adopt(self, ev: CanonicalEvent) -> bool:
+        """A skillset that was not live is synced from ``ev`` (lock held; SPEC §7): its status becomes the
+        marking, then its buffered events follow (those the answer covers are history); whether to resync."""
+        engine = self._engine
+        prev = engine.last_seq.get((ev.skillset, ev.source))
+        continuing = prev is not None and prev[0] == ev.epoch  # the same run we followed before it went quiet
+        engine.status_marking(ev)  # raises SourceError before anything changes
+        buffered = self._sync.synced(ev.skillset, ev.source, ev.epoch)
+        log.info("%s synced from '%s' at #%d (%d events waited)", ev.skillset, ev.source, ev.seq, len(buffered))
+        resync = False
+        if continuing:  # what it missed meanwhile is real: apply it (the cache gives it back, in order)
+            for b in buffered:
+                resync = self._handle(b) or resync
+            last = engine.last_seq.get((ev.skillset, ev.source))
+            if last is not None and last[0] == ev.epoch and last[1] < ev.seq:
+                # Events up to the answer's are still on their way, or lost: the watchdog applies the
+                # answer if they have not come within the bound.
+                self._behind[ev.skillset] = (time.monotonic() + self._sync.bound, ev)
+        else:
+            self._take_status(ev)
+            for b in buffered:
+                resync = self._handle(b) or resync
+        return resync
+
+    def _catch_up(self) -> None:
+        """Apply the resync answers whose events have not come within the bound (lock held)."""
+        now = time.monotonic()
+        for name, (deadline, ev) in list(self._behind.items()):
+            last = self._engine.last_seq.get((ev.skillset, ev.source))
+            if last is not None and last[0] == ev.epoch and last[1] >= ev.seq:
+                del self._behind[name]
+            elif now >= deadline:
+                del self._behind[name]
+                if self._engine.resync(ev):
+                    log.warning("%s: events up to #%d from '%s' did not come: resynced", name, ev.seq, ev.source)
+                    self._take_status(ev)
+
+    def _take_status(self, ev: CanonicalEvent) -> None:
+        """Adopt a resync answer's status (:meth:`Engine.adopt`) and publish the step it makes, if any."""
+        self._sync_fields()  # before the step's messages are built
+        step = self._engine.adopt(ev)
+        if step is not None:
+            self._publish(step)
+            if self._engine.prediction(step.key) is None:
+                self._predict.want(step.key, self._engine.marking())
 
     def _step(self, ev: CanonicalEvent) -> None:
         """Apply a checked event and publish its step (lock held)."""
         engine = self._engine
+        self._sync_fields()  # before the step's messages are built
         step = engine.apply(ev)
         if step is None:  # a status confirming the live marking
             return
@@ -284,30 +449,120 @@ class Monitor:
             query.reply(keys.model(self.system.name, self.digest), self._model_payload)
 
     def check(self, request: CheckRequest) -> CheckReply:
-        """The command check at the live marking (SPEC §7; :mod:`services.monitor.check`)."""
+        """The command check at the live marking (SPEC §7; :mod:`services.monitor.check`).
+
+        Names and the request's policy are checked before the lock is taken (suggestions cost
+        difflib's time, never the events')."""
+        bad = self.checker.unknown(request)
+        if bad is not None:
+            return bad
+        policy = self.checker.policy_for(request)
+        if isinstance(policy, CheckReply):
+            return policy
         with self._lock:
             analysis, key, stale = self._engine.analysis()
-            return self.checker.answer(request, analysis, key, seq=self._engine.seq, stale=stale)
+            return self.checker.answer(request, analysis, key, seq=self._engine.seq, stale=stale,
+                                       state=self._sync.stale(), policy=policy)
 
     def _on_check(self, query: zenoh.Query) -> None:
-        with query:
-            try:
-                client = keys.client_of(str(query.key_expr))
-                if client is None:
-                    query.reply_err(f"key '{query.key_expr}': the client chunk must be a name "
-                                    "(skinet/<system>/check/<client>)")
+        kept = False
+        try:
+            client = keys.client_of(str(query.key_expr))
+            if client is None:
+                query.reply_err(f"key '{query.key_expr}': the client chunk must be a name "
+                                "(skinet/<system>/check/<client>)")
+                return
+            reply, request = self._judge(query, client)
+            if request is not None and request.wait > 0 and reply.ok and (reply.state_stale or reply.prediction_stale):
+                kept = self._keep(query, request, client)
+                if kept:
                     return
-                if not self.check_limiter.allow(client):  # before decoding: a refusal stays cheap
-                    reply = CheckReply(system=self.system.name, skillset="", transition="", ok=False,
-                                       error=self.check_limiter.refusal(client))
-                else:
-                    payload = query.payload.to_bytes() if query.payload is not None else None
-                    request = request_from(self.system.name, payload, str(query.parameters))
-                    reply = request if isinstance(request, CheckReply) else self.check(request)
-                query.reply(keys.check(self.system.name, client), encode(reply))
-            except Exception:  # a bug must not stop the monitor; the client gets an error reply
+            query.reply(keys.check(self.system.name, client), encode(reply))
+        except Exception:  # a bug must not stop the monitor; the client gets an error reply
+            log.exception("error while answering a check query")
+            query.reply_err("internal error in the monitor's check (see its log)")
+        finally:
+            if not kept:
+                query.drop()
+
+    def _judge(self, query: zenoh.Query, client: str) -> tuple[CheckReply, CheckRequest | None]:
+        """The reply to a check query at once, and its request when it could be read (counted)."""
+        c = self.check_counters
+        size = 0 if query.payload is None else len(query.payload)
+        parameters = str(query.parameters)
+        if size > MAX_REQUEST or len(parameters) > MAX_REQUEST:  # before decoding: a refusal stays cheap
+            with self._lock:
+                c.oversized += 1
+                self._warn(c.oversized, "check request of %d bytes from '%s' refused (limit %d)",
+                           max(size, len(parameters)), client, MAX_REQUEST)
+            return self._refusal(f"check request of {max(size, len(parameters))} bytes refused (limit "
+                                 f"{MAX_REQUEST} bytes)"), None
+        if not self.check_limiter.allow(client):
+            with self._lock:
+                c.rate_limited += 1
+                self._warn(c.rate_limited, "check requests of '%s' over its rate limit refused", client)
+            return self._refusal(self.check_limiter.refusal(client)), None
+        payload = query.payload.to_bytes() if query.payload is not None else None
+        request = request_from(self.system.name, payload, parameters)
+        reply = request if isinstance(request, CheckReply) else self.check(request)
+        with self._lock:
+            if reply.ok:
+                c.answered += 1
+            else:
+                c.errors += 1
+                self._warn(c.errors, "check request from '%s' not judged: %s", client, reply.error)
+        return reply, None if isinstance(request, CheckReply) else request
+
+    def _refusal(self, error: str) -> CheckReply:
+        return CheckReply(system=self.system.name, skillset="", transition="", ok=False, error=error)
+
+    def _keep(self, query: zenoh.Query, request: CheckRequest, client: str) -> bool:
+        """Keep ``query`` until the state is synced and the prediction fresh, or ``request.wait`` s (the watchdog
+        answers it); False when too many wait already (answered at once)."""
+        with self._lock:
+            if len(self._waiting) >= MAX_WAITING or self._closed:
+                return False
+            self._waiting.append(_Waiting(time.monotonic() + request.wait, query, request, client))
+        self._wake.set()
+        return True
+
+    def _answer_waiting(self, everyone: bool = False) -> None:
+        """Answer the waiting checks whose state is synced and prediction fresh, or whose wait is over."""
+        with self._lock:
+            if not self._waiting:
+                return
+            ready = everyone or (self._sync.all_live() and self._engine.prediction() is not None)
+            now = time.monotonic()
+            due = [w for w in self._waiting if ready or now >= w.deadline]
+            self._waiting = [w for w in self._waiting if w not in due]
+        for w in due:
+            try:
+                reply = self.check(w.request)
+                with self._lock:
+                    self.check_counters.waited += 1
+                w.query.reply(keys.check(self.system.name, w.client), encode(reply))
+            except Exception:
                 log.exception("error while answering a check query")
-                query.reply_err("internal error in the monitor's check (see its log)")
+            finally:
+                w.query.drop()
+
+    def _watch(self) -> None:
+        """The watchdog: silences past the bound (lost skillsets), resyncs due again, waiting checks."""
+        while not self._closed:
+            self._wake.wait(TICK)
+            self._wake.clear()
+            try:
+                with self._lock:
+                    if self._closed:
+                        return
+                    due = self._sync.tick()
+                    self._catch_up()
+                    self._settle()
+                for name in due:
+                    self._ask_resync(name)
+                self._answer_waiting()
+            except Exception:  # a bug must not stop the watchdog
+                log.exception("error in the monitor's watchdog")
 
     def _on_latest(self, name: str, key: str, query: zenoh.Query) -> None:
         with query:
@@ -336,15 +591,39 @@ class Monitor:
     # -- helpers (call with the lock held) --------------------------------------------
 
     def _publish(self, step: Step) -> None:
+        """Publish a step built after :meth:`_sync_fields` (it carries the sync states of ``_sync_seen``)."""
         for name, payload in (("state", step.live), ("verdicts", step.verdicts), ("unsafe", step.unsafe)):
             self._pub[name].put(payload)
             self._last[name] = payload
+        self._sync_published = self._sync_seen
         self._bump()
+
+    def _sync_fields(self) -> None:
+        """Give the engine the tracker's sync states for the next messages (and log what changed)."""
+        if self._sync.version == self._sync_seen:
+            return
+        self._sync_seen = self._sync.version
+        sync = self._sync.message()
+        for name, s in sync.items():
+            before = self._sync_shown.get(name)
+            if before is None or (before.state, before.reason) != (s.state, s.reason):
+                log.log(logging.WARNING if s.state == "lost" else logging.INFO, "%s %s%s", name, s.state,
+                        f": {s.reason}" if s.reason else f" (from '{s.source}')")
+        self._sync_shown = sync
+        self._engine.set_sync(sync, self._sync.stale())
+
+    def _settle(self) -> None:
+        """Publish the current step again when the sync states changed since it was published."""
+        self._sync_fields()
+        if self._sync_published != self._sync_seen:
+            self._publish(self._engine.republish())
 
     def _bump(self) -> None:
         self._version += 1
         if self._waiters:
             self._changed.notify_all()
+        if self._waiting:
+            self._wake.set()
 
     @staticmethod
     def _warn(count: int, fmt: str, *args: object) -> None:
@@ -375,6 +654,7 @@ def start_monitor(session: zenoh.Session, system: System, **options: object) -> 
     (a :class:`~services.monitor.check.Policy` for ``skinet/<system>/check``; default: warn,
     never deny), ``client`` (the client chunk of its predict queries: its router login,
     default ``local``), ``check_rate_limit`` (check requests per second per client, 0: no
-    limit; default 20).
+    limit; default 20), ``lost_after`` (seconds of silence from a skillset's source after
+    which it is lost, default 2; SPEC §7).
     """
     return Monitor(session, system, **options)  # type: ignore[arg-type]

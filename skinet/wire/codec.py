@@ -17,7 +17,14 @@ class DecodeError(ValueError):
 
 
 def encode(message: BaseModel) -> bytes:
-    return msgpack.packb(message.model_dump(mode="json"), use_bin_type=True)
+    """msgpack of ``message``'s JSON form, without the later fields that hold their default
+    (``OMIT_AT_DEFAULT``, :mod:`skinet.wire.messages`)."""
+    data = message.model_dump(mode="json")
+    fields = type(message).model_fields
+    for name in getattr(message, "OMIT_AT_DEFAULT", ()):
+        if getattr(message, name) == fields[name].get_default(call_default_factory=True):
+            del data[name]
+    return msgpack.packb(data, use_bin_type=True)
 
 
 def decode(payload: bytes, kind: type[M]) -> M:

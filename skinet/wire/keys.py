@@ -13,6 +13,7 @@ key                                       publisher           payload
 ``skinet/<system>/model/<digest>``        monitor (query)     -> :class:`ModelBundle`
 ``skinet/<system>/check/<client>``        monitor (query)     :class:`CheckRequest` -> :class:`CheckReply`
 ``skinet/<system>/resync/<skillset>``     bridge_ros2 (query) -> :class:`CanonicalEvent` (last status)
+``skinet/<system>/heartbeat/<source>``    bridge_ros2         :class:`Heartbeat` (every 0.5 s)
 ``skinet/<system>/alive/<service>/<id>``  every instance      liveliness token
 ========================================  ==================  ==========================
 
@@ -95,6 +96,14 @@ def client_of(key: str) -> str | None:
 
 def resync(system: str, skillset: str = "*") -> str:
     return f"{ROOT}/{system}/resync/{skillset}"
+
+
+def heartbeat(system: str, source: str = "**") -> str:
+    """Where the publisher ``source`` of a system's events says it is alive (``**``: every one)."""
+    if source != "**":
+        for chunk in source.split("/"):
+            check_chunk(chunk, "source")
+    return f"{ROOT}/{system}/heartbeat/{source}"
 
 
 def alive(system: str, service: str = "*", instance: str = "*") -> str:

@@ -3,21 +3,29 @@
 Every message carries ``v``, the schema version; a receiver rejects other
 versions.  JSON Schemas in ``schemas/`` are generated from these models
 (``python -m skinet.wire.schemas``) and a test fails when they drift.
+
+Fields added to a message after its first version are listed in its
+``OMIT_AT_DEFAULT``: senders leave them out while they hold their default
+(:func:`skinet.wire.codec.encode`), so a receiver that predates them (and
+rejects unknown fields) still reads every message that has nothing new to tell
+it, and refuses, rather than misreads, one that has (schemas/README.md).
 """
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import ClassVar, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
 from skinet.wire.limits import MIN_BUDGET
 
 SCHEMA_VERSION = 1
+MAX_CHECK_WAIT = 30.0  # seconds a check request may wait for a synced state and a fresh prediction
 
 
 class _Message(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
+    OMIT_AT_DEFAULT: ClassVar[tuple[str, ...]] = ()
     v: Literal[1] = Field(SCHEMA_VERSION, description="schema version")
 
 
@@ -50,15 +58,31 @@ class PropertyVerdict(BaseModel):
     holds: bool
 
 
+class SkillsetSync(BaseModel):
+    """How far the monitor vouches for one skillset's marking (SPEC §7, honest live state)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    state: Literal["live", "syncing", "lost"] = Field(
+        description="live: synced from its source, which is heard; syncing: waiting for the source's resync "
+                    "answer (the monitor started, or the source came back); lost: the source went quiet")
+    since: float = Field(description="when this state began, the monitor's clock (seconds since the epoch)")
+    reason: str = Field("", description="why it is not live, in the operator's words (empty when live)")
+    source: str = Field("", description="the publisher of its events the monitor follows ('' before the first sync)")
+
+
 class LiveState(_Message):
     """The monitor's live marking after an event."""
 
+    OMIT_AT_DEFAULT = ("sync",)
     system: str
     seq: int = Field(ge=0, description="monitor publication counter")
     stamp: float
     skillsets: dict[str, SkillsetStatus]
     event: str = Field("", description="the event that led here, 'skillset:transition#seq'")
     divergence: str | None = Field(None, description="why the model could not explain the event")
+    sync: dict[str, SkillsetSync] = Field(
+        default_factory=dict, description="per skillset, whether the monitor can vouch for its marking; every "
+                                          "skillset is listed (absent: a monitor older than this field)")
 
 
 class Verdicts(_Message):
@@ -105,6 +129,12 @@ class UnsafeReport(_Message):
     violated: list[str] = Field(default_factory=list)
     literal_count: int = Field(0, description="size of the literal algorithm's list (paper Fig. 3)")
     prediction_stale: bool = Field(description="True when implicit constraints are not up to date")
+    state_stale: bool = Field(False, description="True when a skillset is not live (LiveState.sync): the "
+                                                 "marking judged is the last one known")
+    state_reason: str = Field("", description="why the state is stale, in the operator's words")
+    stale_since: float | None = Field(None, description="since when it is stale (the monitor's clock)")
+
+    OMIT_AT_DEFAULT = ("state_stale", "state_reason", "stale_since")
 
 
 class StateSpaceReport(_Message):
@@ -168,8 +198,14 @@ class PredictReply(_Message):
 class CheckRequest(_Message):
     """Is ``skillset:transition`` safe to fire now?  Asked on ``skinet/<system>/check``."""
 
+    OMIT_AT_DEFAULT = ("wait", "policy")
     skillset: str
     transition: str = Field(description="logical transition, e.g. 'go_to_waypoint.start'")
+    wait: float = Field(0.0, ge=0, le=MAX_CHECK_WAIT,
+                        description="seconds the monitor may wait for a synced state and a fresh prediction "
+                                    "before it answers (0: answer at once)")
+    policy: str | None = Field(None, description="answer under this policy ('warn', 'strict' or "
+                                                 "'KIND=ACTION,...') instead of the monitor's own")
 
 
 class CheckReason(BaseModel):
@@ -199,13 +235,39 @@ class CheckReply(_Message):
     recovers: list[str] = Field(default_factory=list, description="violated properties it restores")
     prediction_stale: bool = False
     seq: int = Field(0, ge=0, description="the monitor step the answer is about")
-    policy: str = Field("", description="the monitor's policy, e.g. 'explicit=warn,forced=warn,...'")
+    policy: str = Field("", description="the policy that answered, e.g. 'explicit=warn,forced=warn,...'")
     error: str = ""
     candidates: list[str] = Field(default_factory=list, description="close names, on an unknown name")
+    state_stale: bool = Field(False, description="True when a skillset is not live: the answer is about the last "
+                                                 "marking known (decision at least warn, reason state_unknown)")
+    state_reason: str = Field("", description="why the state is stale, in the operator's words")
+
+    OMIT_AT_DEFAULT = ("state_stale", "state_reason")
+
+
+class HeartbeatSkillset(BaseModel):
+    """What a heartbeat says of one skillset."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    seq: int | None = Field(None, ge=0, description="seq of its last event (None: none published yet)")
+    manager: bool | None = Field(None, description="its manager is present (true), left (false), or not announced "
+                                                   "(null: the gateway declares no liveliness for it)")
+
+
+class Heartbeat(_Message):
+    """A publisher of canonical events is alive (SPEC §7): every ``period`` seconds on
+    ``skinet/<system>/heartbeat/<source>``."""
+
+    system: str
+    source: str = Field(description="the publisher, as in its events' source")
+    epoch: int = Field(ge=0, description="its run, as in its events' epoch")
+    period: float = Field(gt=0, description="seconds between heartbeats")
+    token: str = Field("", description="the liveliness token it holds, e.g. 'skinet/spot_arm/alive/bridge_ros2/x'")
+    skillsets: dict[str, HeartbeatSkillset] = Field(description="the skillsets whose events it publishes")
 
 
 MESSAGES: dict[str, type[BaseModel]] = {
     m.__name__: m
     for m in (CanonicalEvent, LiveState, Verdicts, UnsafeReport, StateSpaceReport, ModelBundle, PredictRequest, PredictReply,
-              CheckRequest, CheckReply)
+              CheckRequest, CheckReply, Heartbeat)
 }

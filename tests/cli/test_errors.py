@@ -301,6 +301,8 @@ def _cases() -> list[Case]:
           "argument --rate-limit: expected a number >= 0, got '-1'")
     usage("skinet", "--check-rate-limit", ("run", SYSTEM, "--check-rate-limit", "fast"),
           "argument --check-rate-limit: expected a number >= 0, got 'fast'")
+    usage("skinet", "--lost-after", ("run", SYSTEM, "--lost-after", "0.5"),
+          "argument --lost-after: expected a number of seconds >= 1 (two heartbeat periods), got '0.5'")
     usage("skinet", "--format", ("record", "spot_arm", "-o", "{tmp}/rec.csv", "--format", "csv"),
           "argument --format: invalid choice: 'csv' (choose from 'jsonl', 'mcap')")
 
@@ -314,6 +316,11 @@ def _cases() -> list[Case]:
         "skinet: error: command 'teleop' is not of the form skillset:transition (e.g. spot:teleop.start)")
     usage("skinet", "--timeout", ("check", "spot_arm", "x:y", "--timeout", "soon"),
           "argument --timeout: " + seconds.format("soon"))
+    usage("skinet", "--wait", ("check", "spot_arm", "x:y", "--wait", "60"),
+          "argument --wait: expected a number of seconds from 0 to 30, got '60'")
+    add("skinet", "--policy", ("check", "spot_arm", "x:y", "--policy", "prediction_pending=allow"), 1,
+        "skinet: error: check policy 'prediction_pending=allow': prediction_pending can only be warn or deny (the "
+        "monitor never allows what it cannot vouch for)")
     add("skinet", "system", ("dashboard", "a/b"), 1,
         "skinet: error: system name 'a/b' cannot be used in a Zenoh key (letters, digits, _ - . only)")
     add("skinet", "system", ("dashboard", "{tmp}/missing.toml"), 1, missing)
@@ -379,6 +386,10 @@ def _cases() -> list[Case]:
           "argument --check-rate-limit: expected a number >= 0, got '-3'")
     usage(mon, "--check-rate-limit", (SYSTEM,), "argument --check-rate-limit: expected a number >= 0, got 'x' "
           "(from $SKINET_CHECK_RATE_LIMIT)", SKINET_CHECK_RATE_LIMIT="x")
+    usage(mon, "--lost-after", (SYSTEM, "--lost-after", "nan"),
+          "argument --lost-after: expected a number of seconds >= 1 (two heartbeat periods), got 'nan'")
+    usage(mon, "--lost-after", (SYSTEM,), "argument --lost-after: expected a number of seconds >= 1 (two heartbeat "
+          "periods), got '0' (from $SKINET_LOST_AFTER)", SKINET_LOST_AFTER="0")
     usage(pred, "--rate-limit", ("--rate-limit", "inf"), "argument --rate-limit: expected a number >= 0, got 'inf'")
     usage(pred, "--rate-burst", ("--rate-burst", "0"), "argument --rate-burst: expected a number >= 1, got '0'")
     usage(pred, "--instance", ("--instance", "a/b"), f"argument --instance: instance id 'a/b' {not_a_key}")

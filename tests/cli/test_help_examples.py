@@ -107,8 +107,12 @@ def test_every_help_example_works_as_written(tmp_path: Path) -> None:
                 code = proc.stop()
                 assert code == 0, f"{name} exited {code} on SIGTERM:\n{proc.text}"
                 if name == "skinet watch":  # in a pipe: one line per step, up to the mission's last
+                    # (and one per set of sync states while the monitor waits for the bridge: SPEC §7)
+                    lines = re.findall(r"^\[(\d+)\] .*$", proc.text, re.M)
                     steps = [int(m) for m in re.findall(r"^\[(\d+)\] ", proc.text, re.M)]
-                    assert steps == sorted(set(steps)) and steps[-1] == MISSION_STEPS, proc.text
+                    live = [int(m) for m in re.findall(r"^\[(\d+)\] (?!.*STATE STALE).*$", proc.text, re.M)]
+                    assert lines and steps == sorted(steps) and live == sorted(set(live)), proc.text
+                    assert steps[-1] == MISSION_STEPS, proc.text
             background.clear()
     finally:
         for _, proc in background:

@@ -26,6 +26,7 @@ from skinet.wire import keys
 from tests.services.test_outage import Outage, run
 
 EVENTS = keys.events(SYSTEM, "spot")
+HEARTBEAT = keys.heartbeat(SYSTEM, "bridge_ros2/robot1")
 PREDICT = keys.predict(SYSTEM, "monitor")  # the monitor asks under its login (issue 14)
 ROS_STATUS = "spot/spot_skillset_manager/spot_skillset/status"
 STATUS_REQUEST = "spot/spot_skillset_manager/spot_skillset/status_request"
@@ -111,7 +112,7 @@ def test_only_the_bridge_user_publishes_canonical_events(sessions: dict[str, zen
 
 def test_each_user_publishes_only_its_own_keys(sessions: dict[str, zenoh.Session]) -> None:
     allowed = {
-        "bridge": {EVENTS, STATUS_REQUEST},
+        "bridge": {EVENTS, HEARTBEAT, STATUS_REQUEST},
         "monitor": {keys.state(SYSTEM), keys.verdicts(SYSTEM), keys.unsafe(SYSTEM), keys.state_space(SYSTEM)},
         "predictor": set(),
         "robot": {ROS_STATUS, STATUS_REQUEST},

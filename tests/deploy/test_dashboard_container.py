@@ -53,8 +53,11 @@ def test_dashboard_container_shows_the_monitor_and_checks(onboard: tuple[Stack, 
     snap = get(port, "/api/snapshot")
     assert snap["system"] == "spot_arm" and snap["state"]["seq"] == 0
     assert [v["name"] for v in snap["verdicts"]["properties"]] == ["action_guard", "safety_guard"]
+    # Neither bridge nor predictor in this stack: the monitor vouches for nothing (SPEC §7), and says so.
+    assert {n: s["state"] for n, s in snap["state"]["sync"].items()} == {"spot": "syncing", "manipulator": "syncing"}
     reply = get(port, "/api/check?command=spot:init_power.start")
-    assert (reply["ok"], reply["decision"], reply["enabled"]) == (True, "allow", True)
+    assert (reply["ok"], reply["decision"], reply["enabled"], reply["state_stale"]) == (True, "warn", True, True)
+    assert [r["constraint"] for r in reply["reasons"]] == ["state_unknown", "prediction_pending"]
     with urllib.request.urlopen(f"http://127.0.0.1:{port}/static/app.js", timeout=3) as r:
         assert r.headers["Content-Type"].startswith("text/javascript")
     (container,) = stack.containers("dashboard")

@@ -32,7 +32,9 @@ from skinet.wire import keys
 from skinet.wire.codec import decode
 from skinet.wire.messages import UnsafeReport, Verdicts
 from test_containers import SECRETS_IN_IMAGE, Stack, image  # noqa: F401  (the image fixture; skips without Docker)
-from test_fleet_links import Events, fleet_skillsets
+from test_fleet_links import fleet_skillsets
+from skinet.files import load_system
+from tests.bridge_side import BridgeSide
 
 pytestmark = pytest.mark.slow
 ROBOTS = ("robot1", "robot2")
@@ -45,8 +47,9 @@ LEFT_OUT = ("skinet router: robot {0} (tls/{0}:7447) left out: no /var/lib/skine
 class Robot:
     """One robot's compose project, its observer session and an event source on its router."""
 
-    def __init__(self, name: str, stack: Stack, port: int):
-        self.name, self.stack, self.endpoint = name, stack, f"tls/127.0.0.1:{port}"
+    def __init__(self, name: str, stack: Stack, port: int, skills: Path):
+        self.name, self.stack, self.endpoint, self.skills = name, stack, f"tls/127.0.0.1:{port}", skills
+        self.synced = False
         self.items: list[tuple[float, object]] = []
         self.session: zenoh.Session | None = None
 
@@ -60,7 +63,9 @@ class Robot:
     def connect(self, folder: Path) -> None:
         self.session = self.login(folder, "observer")
         self.bridge = self.login(folder, "bridge")
-        self.events = Events(self.bridge, self.name)
+        system = self.skills / f"{self.name}.toml"  # the bridge's side, the monitor syncs from (SPEC §7)
+        self.events = BridgeSide(self.bridge, self.name, model=load_system(system)[0] if system.exists() else None,
+                                 wait=False)
         self.tokens = Tokens(self.session)
         self._subs = [self.session.declare_subscriber(keys.unsafe(self.name), self._on(UnsafeReport)),
                       self.session.declare_subscriber(keys.verdicts(self.name), self._on(Verdicts))]
@@ -69,7 +74,13 @@ class Robot:
         return lambda s: self.items.append((time.monotonic(), decode(s.payload.to_bytes(), kind)))
 
     def send(self, skillset: str, transition: str) -> float:
-        return self.events.send(skillset, transition)
+        """Send one event once the monitor has synced; returns when it was sent."""
+        if not self.synced:
+            self.events.synced(60)
+            self.synced = True
+        sent = time.monotonic()
+        self.events.send(skillset, transition)
+        return sent
 
     def report(self, seq: int, fresh: bool | None = None) -> tuple[float, UnsafeReport] | None:
         for t, m in list(self.items):
@@ -145,7 +156,7 @@ def fleet(image: str, tmp_path_factory: pytest.TempPathFactory) -> Iterator[tupl
             "SKINET_TLS_HOSTNAMES": name,  # the name the hub reaches it by, in its router's certificate
             "SKINET_DASHBOARD_PORT": str(free_port()),  # each robot its own dashboard port
             # robot3 is a twin: it runs robot1's system file (its monitor started by its test)
-            "SKINET_SYSTEM": f"skillsets/{'robot1' if name == 'robot3' else name}.toml"}), port)
+            "SKINET_SYSTEM": f"skillsets/{'robot1' if name == 'robot3' else name}.toml"}), port, skills)
     t0 = time.monotonic()
     try:
         side_by_side([*(lambda n=n: robots[n].stack.compose("up", "-d", "--no-build", timeout=180) for n in ROBOTS),

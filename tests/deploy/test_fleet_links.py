@@ -27,8 +27,10 @@ from deploy_support import (
     REPO, USERS_FILE, ZENOH_DIR, Services, Tokens, acl_router_config, free_port, login, passwords, wait_until,
 )
 from skinet.wire import keys
-from skinet.wire.codec import decode, encode
-from skinet.wire.messages import CanonicalEvent, UnsafeReport
+from skinet.files import load_system
+from skinet.wire.codec import decode
+from skinet.wire.messages import UnsafeReport
+from tests.services.test_monitor import Events
 
 
 class FreezableLink:
@@ -153,27 +155,9 @@ class Reports:
         return next((t for t, r in list(self.items) if predicate(r)), None)
 
 
-class Events:
-    """CanonicalEvents of one robot, published as the bridge user on its router, once the
-    monitor's subscriber is known to the publisher (a client drops puts nobody matches)."""
-
-    def __init__(self, session: zenoh.Session, system: str):
-        self.session, self.system = session, system
-        self.seq: dict[str, int] = {}  # per skillset stream
-        self._pubs: dict[str, zenoh.Publisher] = {}
-
-    def send(self, skillset: str, transition: str) -> float:
-        if skillset not in self._pubs:
-            pub = self.session.declare_publisher(keys.events(self.system, skillset),
-                                                 congestion_control=zenoh.CongestionControl.BLOCK)
-            wait_until(lambda: pub.matching_status.matching, 30, f"the monitor of {self.system} subscribed")
-            self._pubs[skillset] = pub
-        seq = self.seq[skillset] = self.seq.get(skillset, -1) + 1
-        ev = CanonicalEvent(system=self.system, skillset=skillset, seq=seq, stamp=0.0, source="test",
-                            transition=transition)
-        sent = time.monotonic()
-        self._pubs[skillset].put(encode(ev))
-        return sent
+def robot_events(fleet: Fleet, session: zenoh.Session, robot: str) -> Events:
+    """The bridge's side of one robot (events, heartbeats, resync answers), as the bridge user on its router."""
+    return Events(session, robot, model=load_system(fleet.skillsets / f"{robot}.toml")[0], wait=False)
 
 
 def test_two_robots_share_the_offboard_pool_and_a_twin_name_is_refused(fleet: Fleet) -> None:
@@ -193,7 +177,9 @@ def test_two_robots_share_the_offboard_pool_and_a_twin_name_is_refused(fleet: Fl
             wait_until(lambda r=r: reports[r].has(lambda m: m.seq == 0 and not m.prediction_stale), 30,
                        f"a fresh prediction for {r}")
         # robot1 moves: its prediction of the new marking comes from the shared pool too.
-        Events(bridge, "robot1").send("manipulator", "arm_ready.start")
+        events = robot_events(fleet, bridge, "robot1")
+        events.synced(30)
+        events.send("manipulator", "arm_ready.start")
         wait_until(lambda: reports["robot1"].has(lambda m: m.seq == 1 and not m.prediction_stale), 15,
                    "robot1's fresh prediction after its event")
         assert not reports["robot2"].has(lambda m: m.seq == 1), "robot1's events stay on robot1"
@@ -218,12 +204,13 @@ def test_a_cut_robot_link_leaves_the_other_robot_fresh_and_recovers_within_2_s(f
     tokens = {r: Tokens(s[0]) for r, s in sessions.items()}
     try:
         reports = {r: Reports(s[0], r) for r, s in sessions.items()}
-        events = {r: Events(s[1], r) for r, s in sessions.items()}
+        events = {r: robot_events(fleet, s[1], r) for r, s in sessions.items()}
         for r in fleet.robots:
             wait_until(lambda r=r: len(tokens[r].of("predictor")) == 2, 30, f"the pool's tokens on {r}")
             fleet.monitor(r)
             wait_until(lambda r=r: tokens[r].of("monitor"), 30, f"{r}'s monitor")
         for r in fleet.robots:
+            events[r].synced(30)
             events[r].send("spot", "init_power.start")
         for r in fleet.robots:
             wait_until(lambda r=r: reports[r].has(lambda m: m.seq == 1 and not m.prediction_stale), 30,
@@ -232,7 +219,8 @@ def test_a_cut_robot_link_leaves_the_other_robot_fresh_and_recovers_within_2_s(f
         cut = time.monotonic()
         for step, transition in ((2, "init_power.success.powered_on"), (3, "stand_up.start")):
             for r in fleet.robots:
-                sent = events[r].send("spot", transition)
+                sent = time.monotonic()
+                events[r].send("spot", transition)
                 wait_until(lambda r=r, s=step: reports[r].has(lambda m: m.seq == s), 2, f"{r}: step {step}")
                 assert reports[r].first(lambda m, s=step: m.seq == s) - sent < 1.0, "verdicts on time"
             # robot2 is not affected; robot1 keeps its explicit constraints, predictions stale

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import subprocess
 import sys
 import time
@@ -22,7 +23,8 @@ from services.monitor import start_monitor
 from skinet.files import load_system
 from skinet.wire import keys
 from skinet.wire.codec import decode, encode
-from skinet.wire.messages import CanonicalEvent, CheckReply, CheckRequest
+from skinet.wire.messages import CheckReply, CheckRequest
+from tests.services.test_monitor import Events
 
 SG_AT_RD = "violates it at once: spot go_to_waypoint runs while manipulator arm_status at RD"  # skinet.explain
 TO_ARM_AT_RD = [("spot", "init_power.start"), ("spot", "init_power.success.powered_on"), ("spot", "stand_up.start"),
@@ -30,9 +32,13 @@ TO_ARM_AT_RD = [("spot", "init_power.start"), ("spot", "init_power.success.power
                 ("manipulator", "arm_ready.success.ready")]
 
 
+STAND_IN: dict[str, Events] = {}  # the deployment's bridge side, for the test that moves it on
+
+
 @pytest.fixture(scope="module")
 def deployment() -> Iterator[str]:
-    """ACL router, a monitor logged in as ``monitor``, events from ``bridge`` up to the arm at RD."""
+    """ACL router, a monitor logged in as ``monitor``, events from ``bridge`` up to the arm at RD
+    (no predictor: every check answer is at least warn, prediction_pending)."""
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     router = zenoh.open(acl_router_config(endpoint))
     monitor_session, bridge = login(endpoint, "monitor"), login(endpoint, "bridge")
@@ -40,11 +46,9 @@ def deployment() -> Iterator[str]:
     tokens = Tokens(bridge)
     try:  # the monitor's token is declared last: once seen, its event subscriber is known too
         wait_until(lambda: bool(tokens.of("monitor")), 10, "the monitor's liveliness token")
-        seq: dict[str, int] = {}
+        events = STAND_IN["bridge"] = Events(bridge)  # returns once the monitor has synced from it
         for skillset, transition in TO_ARM_AT_RD:
-            seq[skillset] = seq.get(skillset, -1) + 1
-            bridge.put(keys.events(SYSTEM, skillset), encode(CanonicalEvent(
-                system=SYSTEM, skillset=skillset, seq=seq[skillset], stamp=time.time(), transition=transition)))
+            events.send(skillset, transition)
         wait_until(lambda: monitor.counters.applied == len(TO_ARM_AT_RD), 10, "the events applied")
         yield endpoint
     finally:
@@ -67,14 +71,32 @@ def zenoh_flags(endpoint: str, user: str | None = "observer", password: str | No
     return flags
 
 
+PENDING = "  prediction_pending (warn) — implicit constraints at step 6 are not known yet: its prediction is pending"
+
+
 def test_check_as_observer(deployment: str) -> None:
     out = skinet("check", SYSTEM, "spot:go_to_waypoint.start", *zenoh_flags(deployment))
     assert out.returncode == 3, out  # warn
-    assert out.stdout.splitlines()[:2] == ["spot:go_to_waypoint.start: WARN at step 6 (prediction stale: explicit "
-                                           "and forced constraints only)",
-                                           "  safety_guard: explicit (warn) — " + SG_AT_RD]
-    out = skinet("check", SYSTEM, "spot:sit_down.start", "--json", *zenoh_flags(deployment))
-    assert out.returncode == 0 and json.loads(out.stdout)["decision"] == "allow"
+    assert out.stdout.splitlines() == ["spot:go_to_waypoint.start: WARN at step 6 (prediction stale: explicit "
+                                       "and forced constraints only)",
+                                       "  safety_guard: explicit (warn) — " + SG_AT_RD, PENDING]
+    out = skinet("check", SYSTEM, "spot:go_to_waypoint.start", "--policy", "strict", *zenoh_flags(deployment))
+    assert out.returncode == 4 and out.stdout.splitlines()[1:] == [
+        "  safety_guard: explicit (deny) — " + SG_AT_RD, PENDING]
+    # Nothing else at risk, but no predictor answers: never a plain allow, even after waiting.
+    t0 = time.monotonic()
+    out = skinet("check", SYSTEM, "spot:sit_down.start", "--json", "--wait", "1", *zenoh_flags(deployment))
+    reply = json.loads(out.stdout)
+    assert out.returncode == 3 and time.monotonic() - t0 >= 1.0
+    assert (reply["decision"], [r["constraint"] for r in reply["reasons"]]) == ("warn", ["prediction_pending"])
+    assert (reply["prediction_stale"], reply["state_stale"]) == (True, False)
+    out = skinet("check", SYSTEM, "spot:sit_down.start", "--wait", "31", *zenoh_flags(deployment))
+    assert (out.returncode, out.stderr.strip()) == (2, "skinet check: error: argument --wait: expected a number of "
+                                                       "seconds from 0 to 30, got '31' (see skinet check --help)")
+    out = skinet("check", SYSTEM, "spot:sit_down.start", "--policy", "state_unknown=allow", *zenoh_flags(deployment))
+    assert (out.returncode, out.stderr.strip()) == (1, "skinet: error: check policy 'state_unknown=allow': "
+                                                       "state_unknown can only be warn or deny (the monitor never "
+                                                       "allows what it cannot vouch for)")
     out = skinet("check", SYSTEM, "arm:x.start", *zenoh_flags(deployment))
     assert (out.returncode, out.stdout.strip()) == (1, "arm:x.start: error: unknown skillset 'arm' (candidates: "
                                                        "manipulator, spot)")
@@ -102,9 +124,9 @@ def test_check_flood_is_limited_per_user(deployment: str) -> None:
         refused = [a for a in answers if not a.ok]
         assert 20 <= len(allowed) <= 20 + 20 * elapsed + 1, (len(allowed), elapsed)
         assert {a.error for a in refused} == {"rate limited: client 'observer' exceeds 20 requests/s (burst 20)"}
-        assert all(a.decision == "allow" for a in allowed)
+        assert all(a.decision == "warn" for a in allowed)  # no predictor: prediction_pending
         other = ask(robot, "robot")
-        assert (other.ok, other.decision) == (True, "allow")
+        assert (other.ok, other.decision) == (True, "warn")
     finally:
         observer.close()
         robot.close()
@@ -119,7 +141,7 @@ def test_watch_logs_in_from_the_environment(deployment: str) -> None:
     assert lines[0].startswith("SkiNet Live  system spot_arm  step 6  last event manipulator:arm_ready.success.ready")
     assert "  manipulator  mutex=Free arm_status=RD; running: -" in lines
     assert "unsafe transitions (1), prediction STALE (explicit and forced constraints only)" in lines  # no predictor here
-    assert "services  monitor: 1, bridge_ros2: 0, predictor: 0" in lines and lines[-1] == "violations (0)"
+    assert "services  monitor: 1, bridge_ros2: 1, predictor: 0" in lines and lines[-1] == "violations (0)"
     out = skinet("watch", "nope", "--wait", "1", *zenoh_flags(deployment))
     assert (out.returncode, out.stderr.strip()) == (1, "skinet: error: no monitor of system 'nope' is alive "
                                                        "(systems with a monitor: spot_arm)")
@@ -159,7 +181,7 @@ def test_dashboard_joins_late_as_observer(deployment: str, tmp_path) -> None:
         assert snap["state"]["skillsets"]["manipulator"]["resources"]["arm_status"] == "RD"
         assert [(e["transition"], e["property"]) for e in snap["unsafe"]["unsafe"]] == [
             ("go_to_waypoint.start", "safety_guard")]
-        assert snap["alive"] == {"monitor": snap["alive"]["monitor"]} and len(snap["alive"]["monitor"]) == 1
+        assert sorted(snap["alive"]) == ["bridge_ros2", "monitor"] and len(snap["alive"]["monitor"]) == 1
         # An observer may not fetch model bundles (issue 14's ACL): given a name, the page
         # draws its lanes from what the monitor publishes, and knows no digest.
         assert snap["model"]["digest"] is None
@@ -188,8 +210,8 @@ def test_watch_on_a_terminal_redraws_the_view(deployment: str) -> None:
     assert proc.wait(15) == 0
     text = out.decode()
     assert text.startswith("\x1b[H\x1b[JSkiNet Live  system spot_arm  step 6  last event "
-                           "manipulator:arm_ready.success.ready#1"), text[:200]
-    assert "services  monitor: 1, bridge_ros2: 0, predictor: 0" in text
+                           "manipulator:arm_ready.success.ready#2"), text[:200]
+    assert "services  monitor: 1, bridge_ros2: 1, predictor: 0" in text
 
 
 def test_watch_in_a_pipe_prints_one_line_per_step(deployment: str) -> None:
@@ -197,16 +219,21 @@ def test_watch_in_a_pipe_prints_one_line_per_step(deployment: str) -> None:
     proc = subprocess.Popen([sys.executable, "-m", "skinet_cli.main", "watch", SYSTEM, "--duration", "60",
                              *zenoh_flags(deployment)], cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True)
-    bridge = login(deployment, "bridge")
+    events = STAND_IN["bridge"]
     try:
         first = proc.stdout.readline().strip()
-        assert first.startswith("[6] manipulator:arm_ready.success.ready#1 | action_guard=ok safety_guard=ok | "
+        assert first.startswith("[6] manipulator:arm_ready.success.ready#2 | action_guard=ok safety_guard=ok | "
                                 "unsafe: spot:go_to_waypoint.start(safety_guard explicit)")
-        bridge.put(keys.events(SYSTEM, "spot"), encode(CanonicalEvent(
-            system=SYSTEM, skillset="spot", seq=4, stamp=time.time(), transition="go_to_waypoint.start")))
+        assert first.endswith("prediction stale"), first  # every skillset live: nothing more said
+        events.send("spot", "go_to_waypoint.start")
         line = proc.stdout.readline().strip()
-        assert line.startswith("[7] spot:go_to_waypoint.start#4 | action_guard=ok safety_guard=VIOLATED | "), line
+        assert line.startswith("[7] spot:go_to_waypoint.start#5 | action_guard=ok safety_guard=VIOLATED | "), line
+        events.close()  # the bridge goes: the same step again, with the state stale
+        line = proc.stdout.readline().strip()
+        if "STATE STALE" not in line:  # the bridge's token went first (services alive: one line more)
+            line = proc.stdout.readline().strip()
+        assert re.fullmatch(r"\[7\] spot:go_to_waypoint.start#5 \| .* \| STATE STALE: spot lost since "
+                            r"\d\d:\d\d:\d\d, manipulator lost since \d\d:\d\d:\d\d", line), line
     finally:
-        bridge.close()
         proc.terminate()
         assert proc.wait(15) == 0

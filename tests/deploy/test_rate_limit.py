@@ -29,6 +29,7 @@ from skinet.wire import keys
 from skinet.wire.codec import decode, encode
 from skinet.wire.convert import bundle, statuses
 from skinet.wire.messages import CanonicalEvent, PredictReply, PredictRequest, SkillsetStatus
+from tests.bridge_side import BridgeSide
 
 USERS = ("bridge", "monitor", "predictor", "robot", "observer", "hub")
 FLOODER = "flooder"  # a second user allowed to ask predictions, as an operator adds one
@@ -44,7 +45,7 @@ MISSION = [  # the paper's mission, as a cycle: every step a new marking
 def mission_events(system: System, n: int) -> list[tuple[str, bytes]]:
     """``n`` canonical events cycling through the mission, with observed statuses."""
     live = LiveSystem(system)
-    seq = {"spot": -1, "manipulator": -1}
+    seq = {"spot": 0, "manipulator": 0}  # #0: the initial status the monitor syncs from (BridgeSide)
     out = []
     for i in range(n):
         skillset, transition = MISSION[i % len(MISSION)]
@@ -167,6 +168,7 @@ def test_a_flooding_client_is_limited_while_another_gets_fresh_predictions(route
         wait_until(lambda: tokens.of("predictor"), 30, "the predictor's token")
         # Every new marking needs a query (prediction_cache=1); events at 4/s, under the limit.
         monitor = start_monitor(sessions["monitor"], system, client="monitor", budget=0.3, prediction_cache=1)
+        side = BridgeSide(sessions["bridge"], SYSTEM, source="test", model=system)  # the monitor syncs from it
         feed = mission_events(system, 40)
         request = PredictRequest(system=SYSTEM, digest=bundle(system).digest, seq=1, budget=0.3,
                                  skillsets=statuses(system, system.initial_marking()))

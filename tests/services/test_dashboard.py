@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 import socket
 import time
@@ -246,6 +247,7 @@ def test_page_follows_monitor_and_router_restarts_and_its_own_server_restart(bro
         until(browser, lambda d: css(d, "#services [data-service=monitor][data-alive='0']"), "the link lost", 30)
         router = open_router(endpoint)
         until(browser, lambda d: css(d, "#services [data-service=monitor][data-alive='1']"), "the link back", 30)
+        events.synced()  # the monitor resynced after the outage (SPEC §7): the next event is live
         events.send("spot", "init_power.success.powered_on")
         until(browser, lambda d: "init_power.success.powered_on" in css(d, "#step")[0]["text"], "the next event", 20)
 
@@ -260,6 +262,42 @@ def test_page_follows_monitor_and_router_restarts_and_its_own_server_restart(bro
         monitor.close()
         session.close()
         router.close()
+
+
+def test_a_lost_bridge_is_shown_plainly_until_it_is_back(browser, dashboard, router, tmp_path) -> None:
+    """SPEC §7: with the bridge gone, the page says in red which skillsets are lost, since when and
+    why; while they resync, in yellow; once live again, nothing."""
+    session = open_client(router)
+    system, _ = load_system(SYSTEM_FILE)
+    monitor = start_monitor(session, system)
+    try:
+        browser.get(dashboard())
+        events = Events(session)
+        events.send("spot", "init_power.start")
+        until(browser, lambda d: css(d, "body")[0]["data-seq"] == "1", "step 1")
+        assert "hidden" in css(browser, "#stale")[0]
+        assert {c["data-skillset"]: c["data-sync"] for c in css(browser, "#skillsets .card")} == {
+            "spot": "live", "manipulator": "live"}
+        events.close()  # the bridge stops: its token goes at once
+        banner = until(browser, lambda d: [b for b in css(d, "#stale") if "hidden" not in b], "the banner")[0]
+        assert banner["data-state"] == "lost" and banner["text"].startswith("STATE NOT LIVE: ")
+        assert re.search(r"spot LOST since \d\d:\d\d:\d\d: the liveliness token of 'test' is gone", banner["text"])
+        color = browser.execute_script("return getComputedStyle(document.getElementById('stale')).backgroundColor")
+        assert color == "rgb(198, 40, 40)"  # --bad
+        cards = {c["data-skillset"]: c for c in css(browser, "#skillsets .card")}
+        assert cards["spot"]["data-sync"] == "lost" and "LOST since" in cards["spot"]["text"]
+        screenshot(browser, tmp_path, "dashboard-lost.png")
+        # The page's check box: never a plain allow on a lost state.
+        browser.execute_script("document.getElementById('check-command').value = 'spot:init_power.interrupt';"
+                               "document.querySelector('#check-form button').click();")
+        verdict = until(browser, lambda d: css(d, "#check-result [data-decision]"), "the check's answer")
+        assert verdict[0]["data-decision"] == "warn" and "state_unknown (warn)" in css(browser, "#check-result")[0]["text"]
+        Events(session)  # the bridge is back: resynced, then live
+        until(browser, lambda d: "hidden" in css(d, "#stale")[0], "the banner gone")
+        assert {c["data-sync"] for c in css(browser, "#skillsets .card")} == {"live"}
+    finally:
+        monitor.close()
+        session.close()
 
 
 def test_port_in_use_and_unknown_system_are_one_line_errors(router, tmp_path) -> None:
@@ -308,6 +346,9 @@ def test_board_joins_steps_in_any_order_and_counts_violations_once() -> None:
     assert board.feed(verdicts(1, False), 0, initial=True) == []
     board.feed(state(2, "a:y#1"), 0)
     board.feed(verdicts(2, False), 0)  # still violated: no new onset
+    # The same step published again (its sync state changed, SPEC §7): shown in place, no restart.
+    assert [u["kind"] for u in board.feed(state(2, "a:y#1", stamp=150.0), 0)] == ["state"]
+    assert board.state.stamp == 150.0 and board.epoch == 0
     restart = board.feed(state(0, stamp=200.0), 0)  # a restarted monitor
     assert restart[0] == {"kind": "restart", "epoch": 1, "t": 0}
     board.feed(verdicts(0, False, stamp=200.0), 0)  # violated from the start of the new epoch
@@ -337,9 +378,12 @@ def test_skinet_run_serves_the_dashboard_beside_its_monitor(tmp_path) -> None:
             time.sleep(0.1)
         assert snap["state"]["seq"] == 0 and snap["state_space"]["markings"] > 0  # the embedded predictor answered
         assert len(snap["alive"]["monitor"]) == 1 and len(snap["alive"]["predictor"]) == 1
+        # No bridge connected: the monitor cannot vouch for the marking, so the check warns (SPEC §7).
+        assert {n: s["state"] for n, s in snap["state"]["sync"].items()} == {"spot": "syncing", "manipulator": "syncing"}
         with urllib.request.urlopen(f"http://127.0.0.1:{port}/api/check?command=spot:init_power.start",
                                     timeout=2) as r:
-            assert json.load(r)["decision"] == "allow"
+            reply = json.load(r)
+        assert (reply["decision"], [x["constraint"] for x in reply["reasons"]]) == ("warn", ["state_unknown"])
         busy = subprocess.run([sys.executable, "-m", "skinet_cli.main", "run", str(SYSTEM_FILE), "--once",
                                "--no-multicast-scouting", "--dashboard", str(port)], cwd=REPO, capture_output=True,
                               text=True, timeout=60)

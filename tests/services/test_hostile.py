@@ -22,9 +22,10 @@ from services.monitor import start_monitor
 from services.predictor import start_predictor
 from skinet.files import load_system
 from skinet.wire import keys
-from skinet.wire.codec import decode, encode
-from skinet.wire.messages import CanonicalEvent, LiveState, PredictReply
+from skinet.wire.codec import decode
+from skinet.wire.messages import LiveState, PredictReply
 from tests.services.conftest import LivelinessWatch, free_port, open_client, start_skinet
+from tests.services.test_monitor import Events
 from tests.services.test_predictor import peer  # noqa: F401  (one session for monitor, predictor and attacker)
 from tests.services.hostile import Attacker, hostile_bundle
 
@@ -55,6 +56,7 @@ def test_hostile_bundle_costs_at_most_the_limits_and_the_monitor_keeps_up(peer: 
     predictor = start_predictor(peer, "embedded", memory_mb=MEMORY_MB, grace=GRACE)
     startup = time.monotonic() - t0  # its workers' start-up, which a replacement needs again
     monitor = start_monitor(peer, system, budget=0.2)
+    events = Events(peer, system.name, source="t", model=system)  # the bridge's side: the monitor syncs
     attacker = Attacker(peer)
     states: list[int] = []
     sub = peer.declare_subscriber(keys.state(system.name),
@@ -66,12 +68,8 @@ def test_hostile_bundle_costs_at_most_the_limits_and_the_monitor_keeps_up(peer: 
         sent = []
 
         def feed() -> None:
-            seq = 0
-            while not stop.is_set() and seq < 64:
-                seq += 1
-                ev = CanonicalEvent(system=system.name, skillset="spot", seq=seq, stamp=time.time(), source="t")
-                peer.put(keys.events(system.name, "spot"), encode(ev))
-                sent.append(seq)
+            while not stop.is_set() and len(sent) < 64:
+                sent.append(events.send("spot", None))
                 time.sleep(0.05)
 
         feeder = threading.Thread(target=feed)
@@ -101,6 +99,7 @@ def test_hostile_bundle_costs_at_most_the_limits_and_the_monitor_keeps_up(peer: 
     finally:
         sub.undeclare()
         attacker.close()
+        events.close()
         monitor.close()
         predictor.close()
 

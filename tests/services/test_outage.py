@@ -19,7 +19,7 @@ import pytest
 import zenoh
 
 from services.bridge_ros2 import start_bridge
-from services.common.events import event_publisher, event_subscriber
+from services.common.events import event_subscriber
 from services.common.zenoh_config import undeclare
 from services.monitor import start_monitor
 from services.simulator import Simulator
@@ -27,11 +27,11 @@ from skinet.mission import parse_scenario
 from skinet.ros.keys import KeyStyle
 from skinet.files import load_system
 from skinet.wire import keys
-from skinet.wire.codec import decode, encode
+from skinet.wire.codec import decode
 from skinet.wire.messages import CanonicalEvent, LiveState
 from tests.services.conftest import free_port, open_client, open_router
 from tests.services.test_bridge import CHAIN
-from tests.services.test_monitor import wait_until
+from tests.services.test_monitor import Events, wait_until
 
 REPO = Path(__file__).resolve().parents[2]
 SYSTEM = load_system(REPO / "skillsets" / "spot_arm.toml")[0]
@@ -73,29 +73,31 @@ def outage() -> Iterator[Outage]:
 def run(outage: Outage, cache: int, seconds: float, total: int = 200, rate: float = 40.0) -> tuple:
     """Publish ``total`` status events at ``rate``/s, with the router down ``seconds`` from the 40th."""
     pub_s, mon_s, obs_s = outage.login("bridge"), outage.login("monitor"), outage.login("observer")
-    states: list[str] = []
-    sub = obs_s.declare_subscriber(keys.state("spot_arm"), lambda s: states.append(
-        decode(s.payload.to_bytes(), LiveState).event))
+    states: list[LiveState] = []
+    # On the monitor's own session: what it publishes during the outage too.
+    sub = mon_s.declare_subscriber(keys.state("spot_arm"), lambda s: states.append(
+        decode(s.payload.to_bytes(), LiveState)))
     monitor = start_monitor(mon_s, SYSTEM)
-    publisher = event_publisher(pub_s, keys.events("spot_arm", "spot"), cache=cache)
+    events = Events(pub_s, source="bridge", advanced=True, cache=cache, model=SYSTEM)
     try:
+        events.synced()
         time.sleep(0.5)  # the monitor's subscription reaches the publisher
         down_at = 40
         up_at = down_at + int(seconds * rate)
-        for seq in range(total):
-            if seq == down_at:
+        for n in range(total):
+            if n == down_at:
                 outage.down()
-            if seq == up_at:
+            if n == up_at:
                 outage.up()
-            ev = CanonicalEvent(system="spot_arm", skillset="spot", seq=seq, stamp=time.time(), source="bridge")
-            publisher.put(encode(ev))
+            events.send("spot", None)
             time.sleep(1 / rate)
         wait_until(lambda: monitor.counters.received + monitor.counters.unrecovered >= total, 20,
                    f"the events after recovery ({monitor.counters})")
+        wait_until(monitor.synced, 10, "live again")
         time.sleep(1.0)  # anything late arrives now
         return monitor.counters, list(states)
     finally:
-        publisher.undeclare()
+        events.close()
         monitor.close()
         sub.undeclare()
         for s in (pub_s, mon_s, obs_s):
@@ -103,9 +105,15 @@ def run(outage: Outage, cache: int, seconds: float, total: int = 200, rate: floa
 
 
 def test_router_restart_loses_nothing(outage: Outage) -> None:
-    counters, _ = run(outage, cache=4096, seconds=3.0)
+    counters, states = run(outage, cache=4096, seconds=3.0)
     assert (counters.received, counters.applied, counters.lost, counters.unrecovered, counters.out_of_order,
-            counters.duplicates) == (200, 200, 0, 0, 0, 0)
+            counters.duplicates, counters.history) == (200, 200, 0, 0, 0, 0, 0)
+    # The outage showed: the skillset was lost, then syncing, then live again (SPEC §7).
+    seen = [s.sync["spot"].state for s in states]
+    changes = [a for a, b in zip(seen, [None, *seen]) if a != b]
+    assert changes == ["syncing", "live", "lost", "syncing", "live"], changes
+    assert "the liveliness token of 'bridge' is gone" in next(s.sync["spot"].reason for s in states
+                                                              if s.sync["spot"].state == "lost")
 
 
 def test_outage_longer_than_the_cache_is_counted_exactly(outage: Outage) -> None:
@@ -115,27 +123,29 @@ def test_outage_longer_than_the_cache_is_counted_exactly(outage: Outage) -> None
     assert counters.out_of_order == counters.duplicates == 0
 
 
-def test_a_late_monitor_does_not_replay_the_cache(outage: Outage) -> None:
-    """zenoh.ext gives a new subscriber everything cached before the publisher's heartbeat:
-    a monitor started late counts that as history and follows from the next event."""
+@pytest.mark.parametrize("stamp", [0.0, -1.0, 4e9], ids=["1970", "wall-clock", "future"])
+def test_a_late_monitor_does_not_replay_the_cache(outage: Outage, stamp: float) -> None:
+    """zenoh.ext gives a new subscriber everything cached before the publisher's heartbeat: a monitor
+    started late counts what its resync answer covers as history, whatever the events' stamps
+    (here from 1970, now or 2096), and follows from the next event."""
     pub_s, mon_s = outage.login("bridge"), outage.login("monitor")
-    publisher = event_publisher(pub_s, keys.events("spot_arm", "spot"))
+    events = Events(pub_s, source="bridge", advanced=True, model=SYSTEM, wait=False)
+    stamp = time.time() if stamp < 0 else stamp
     try:
-        stamp = time.time() - 10  # published before the monitor starts
-        for seq in range(50):
-            publisher.put(encode(CanonicalEvent(system="spot_arm", skillset="spot", seq=seq, stamp=stamp,
-                                                source="bridge")))
+        for _ in range(50):
+            events.send("spot", None, stamp=stamp)  # #1..#50, before the monitor starts
         monitor = start_monitor(mon_s, SYSTEM)
         try:
+            events.synced()
             wait_until(lambda: monitor.counters.history == 50, 10, f"the cache's replay ({monitor.counters})")
-            publisher.put(encode(CanonicalEvent(system="spot_arm", skillset="spot", seq=50, stamp=time.time(),
-                                                source="bridge")))
+            events.send("spot", "init_power.start", stamp=stamp)
             wait_until(lambda: monitor.counters.applied == 1, 5, "the live event")
             assert (monitor.counters.received, monitor.counters.lost) == (51, 0)
+            assert monitor.snapshot().state.skillsets["spot"].running == ["init_power"]
         finally:
             monitor.close()
     finally:
-        publisher.undeclare()
+        events.close()
         pub_s.close()
         mon_s.close()
 

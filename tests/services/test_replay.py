@@ -114,7 +114,9 @@ def recording(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     entries = {fmt: load_log(str(path)) for fmt, path in logs.items()}
     assert published(entries["jsonl"]) == published(entries["mcap"]), outputs
     for found in entries.values():
-        assert [e.message.seq for e in found if isinstance(e.message, LiveState)] == list(range(LAST_STEP + 1))
+        seqs = [e.message.seq for e in found if isinstance(e.message, LiveState)]
+        # Every step, in order; a step is published again when its skillsets' sync states change (SPEC §7).
+        assert seqs == sorted(seqs) and sorted(set(seqs)) == list(range(LAST_STEP + 1)), seqs
         assert sum(isinstance(e.message, ModelBundle) for e in found) == 1
     return logs
 
@@ -187,9 +189,11 @@ def test_replay_publishes_the_recorded_run_as_its_monitor_did(recording: dict[st
         out = stop(replay, tmp_path / "replay.out") if replay is not None else ""
         stop(recorder, tmp_path / "record.out")
     events = sum(e.type == "CanonicalEvent" for e in original)
+    beats = sum(e.type == "Heartbeat" for e in original)  # the bridge's (SPEC §7): never replayed either
     lines = out.splitlines()
-    assert lines[0] == (f"skinet replay: {log}: system {NAME}, {len(expected)} monitor messages over "
-                        f"{recorded[-1]:.1f} s recorded, at speed 4; not published: {events} CanonicalEvent")
+    assert beats > 0 and lines[0] == (f"skinet replay: {log}: system {NAME}, {len(expected)} monitor messages over "
+                                      f"{recorded[-1]:.1f} s recorded, at speed 4; not published: {events} "
+                                      f"CanonicalEvent, {beats} Heartbeat")
     assert re.fullmatch(rf"skinet replay: {len(expected)} messages published in \d+\.\d s; still answering late "
                         r"joiners \(Ctrl-C stops\)", lines[1]), lines[1]
     # Recorded again, the replay is the same run; skinet timeline draws it.

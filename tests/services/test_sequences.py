@@ -119,7 +119,7 @@ def test_forged_event_and_restarted_bridge_on_zenoh(client_factory, spot_arm, tm
     chain = parse_scenario(CHAIN, "chain.toml")
     scenario = chain.__class__(chain.name, chain.system, chain.steps[:3])  # powered on, stand_up running
     try:
-        wait_until(lambda: monitor.counters.applied >= 2, 10, "the initial statuses")
+        wait_until(monitor.synced, 10, "the initial statuses")
         forged = ev(TOP, "init_power.start", epoch=bridge.feed.epoch)
         attacker.put(keys.events("spot_arm", "spot"), encode(forged))
         wait_until(lambda: monitor.counters.jumps == 1, 5, "the forged event")
@@ -132,10 +132,13 @@ def test_forged_event_and_restarted_bridge_on_zenoh(client_factory, spot_arm, tm
         assert sim.terminate("spot", "stand_up", "success", "standing")
         wait_until(lambda: states[-1].skillsets["spot"].resources["posture"] == "Standing", 10,
                    "the monitor following the restarted bridge")
-        # The bridge's resync answer took the stream back from the forged seq; the restarted
-        # bridge is a new run of both skillsets' streams.
-        wait_until(lambda: monitor.counters.restarts == 2, 5, "both new runs")
+        # The bridge's resync answer took the stream back from the forged seq.  The restarted bridge
+        # is a new run: its token went away (both skillsets lost), and both were resynced from the
+        # new run before they counted as live again (SPEC §7).
+        wait_until(monitor.synced, 5, "both skillsets live again")
+        assert {n for st in states for n, x in st.sync.items() if x.state == "lost"} == {"spot", "manipulator"}
         assert (monitor.counters.jumps, monitor.counters.lost, monitor.counters.out_of_order) == (1, 0, 0)
+        assert {monitor.snapshot().state.sync[n].source for n in ("spot", "manipulator")} == {BRIDGE}
     finally:
         sub.undeclare()
         bridge.close()

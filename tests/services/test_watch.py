@@ -32,6 +32,7 @@ def test_watch_in_a_pipe_prints_one_line_per_step(router: str, client: zenoh.Ses
     session = open_client(router)
     predictor = start_predictor(session, "watched")
     monitor = start_monitor(session, system, budget=1.0)
+    events = Events(client)  # the bridge's side: the monitor is synced (a monitor still syncing is a line too)
     alive = LivelinessWatch(client, keys.alive("spot_arm", "monitor", "*"))
     proc = subprocess.Popen([sys.executable, "-m", "skinet_cli.main", "watch", "spot_arm", "--duration", "60",
                              *client_args(router)], cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
@@ -40,7 +41,6 @@ def test_watch_in_a_pipe_prints_one_line_per_step(router: str, client: zenoh.Ses
         alive.wait(lambda names: bool(names))
         wait_until(lambda: monitor.snapshot().state_space is not None, 20, "the first prediction")
         time.sleep(2.0)  # the watcher's session is up and has read step 0 (its line waits for the next step)
-        events = Events(client)
         for skillset, transition in STEPS:
             events.send(skillset, transition)
             wait_until(lambda: not monitor.snapshot().unsafe.prediction_stale, 20, f"the prediction after {transition}")
@@ -56,4 +56,4 @@ def test_watch_in_a_pipe_prints_one_line_per_step(router: str, client: zenoh.Ses
     lines = out.splitlines()
     assert [int(re.match(r"\[(\d+)\]", line).group(1)) for line in lines] == [0, 1, 2, 3, 4], out + err
     assert all(line.endswith("prediction fresh") for line in lines), out
-    assert [line.split(" | ")[0] for line in lines[1:]] == [f"[{n}] {s}:{t}#{n - 1}" for n, (s, t) in enumerate(STEPS, 1)]
+    assert [line.split(" | ")[0] for line in lines[1:]] == [f"[{n}] {s}:{t}#{n}" for n, (s, t) in enumerate(STEPS, 1)]

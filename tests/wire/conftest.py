@@ -9,8 +9,8 @@ from skinet.system import System
 from skinet.verify.predict import forecast
 from skinet.wire.convert import bundle, marking_of, risks, state_space_report, statuses
 from skinet.wire.messages import (
-    CanonicalEvent, CheckReason, CheckReply, CheckRequest, LiveState, PredictReply, PredictRequest, PropertyVerdict, RecoveryEntry, SkillsetStatus,
-    UnsafeEntry, UnsafeReport, Verdicts,
+    CanonicalEvent, CheckReason, CheckReply, CheckRequest, Heartbeat, HeartbeatSkillset, LiveState, PredictReply,
+    PredictRequest, PropertyVerdict, RecoveryEntry, SkillsetStatus, SkillsetSync, UnsafeEntry, UnsafeReport, Verdicts,
 )
 
 # Arm moving (mutex Busy): starting Spot would break action_guard in one step.
@@ -32,7 +32,10 @@ def sample_messages(system: System) -> dict[str, BaseModel]:
             system=system.name, skillset="manipulator", seq=7, stamp=1700000000.25, source="bridge-1",
             transition="arm_ready.start", status=skillsets["manipulator"], info="ok id=3"),
         "LiveState": LiveState(system=system.name, seq=8, stamp=1700000000.3, skillsets=skillsets,
-                               event="manipulator:arm_ready.start#7", divergence="no transition explains it"),
+                               event="manipulator:arm_ready.start#7", divergence="no transition explains it",
+                               sync={"spot": SkillsetSync(state="live", since=1700000000.1, source="bridge_ros2/b1"),
+                                     "manipulator": SkillsetSync(state="lost", since=1700000000.2,
+                                                                 reason="its manager left", source="bridge_ros2/b1")}),
         "Verdicts": Verdicts(system=system.name, seq=8, stamp=1700000000.3,
                              properties=[PropertyVerdict(name="action_guard", holds=True)]),
         "UnsafeReport": UnsafeReport(
@@ -42,20 +45,26 @@ def sample_messages(system: System) -> dict[str, BaseModel]:
                                 witness=["spot:init_power.start"])],
             recovery=[RecoveryEntry(property="action_guard", skillset="manipulator", transition="arm_ready.end",
                                     controllable=False)],
-            violated=["safety_guard"], literal_count=12, prediction_stale=False),
+            violated=["safety_guard"], literal_count=12, prediction_stale=False, state_stale=True,
+            state_reason="manipulator lost since 22:13:20: its manager left", stale_since=1700000000.2),
         "StateSpaceReport": report,
         "ModelBundle": b,
         "PredictRequest": PredictRequest(system=system.name, digest=b.digest, seq=3, skillsets=skillsets, budget=0.5),
         "PredictReply": PredictReply(system=system.name, digest=b.digest, seq=3, ok=True, instance="p1",
                                      report=report, risks=found),
-        "CheckRequest": CheckRequest(skillset="spot", transition="init_power.start"),
+        "CheckRequest": CheckRequest(skillset="spot", transition="init_power.start", wait=2.5, policy="strict"),
         "CheckReply": CheckReply(
             system=system.name, skillset="spot", transition="init_power.start", ok=True, decision="deny",
             reasons=[CheckReason(property="action_guard", constraint="forced", action="deny", controllable=True,
                                  steps=2, witness=["spot:init_power.success.powered_on"],
                                  reason="init_power may succeed")],
             enabled=True, violated=["safety_guard"], recovers=["safety_guard"], prediction_stale=False, seq=8,
-            policy="explicit=deny,implicit=warn,forced=deny,unknown=warn", error="", candidates=["x"]),
+            policy="explicit=deny,implicit=warn,forced=deny,unknown=warn", error="", candidates=["x"],
+            state_stale=True, state_reason="manipulator lost since 22:13:20: its manager left"),
+        "Heartbeat": Heartbeat(system=system.name, source="bridge_ros2/b1", epoch=1700000000000, period=0.5,
+                               token="skinet/spot_arm/alive/bridge_ros2/b1",
+                               skillsets={"spot": HeartbeatSkillset(seq=12, manager=True),
+                                          "manipulator": HeartbeatSkillset()}),
     }
 
 

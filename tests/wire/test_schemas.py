@@ -68,3 +68,28 @@ def test_samples_validate_against_schemas(samples: dict[str, BaseModel]) -> None
         without_v = {k: v for k, v in message.model_dump(mode="json").items() if k != "v"}
         with pytest.raises(jsonschema.ValidationError):
             jsonschema.validate(without_v, schema, cls=jsonschema.Draft202012Validator)
+
+
+def test_readme_examples_are_valid_messages() -> None:
+    """Every JSON example of schemas/README.md is a message the codec accepts, read back as written."""
+    import json
+    import re
+
+    import msgpack
+
+    from skinet.wire.codec import decode, encode
+    from skinet.wire.messages import CheckReply, Heartbeat
+
+    readme = (SCHEMAS / "README.md").read_text(encoding="utf-8")
+    examples = [json.loads(block) for block in re.findall(r"```json\n(.*?)```", readme, re.S)]
+    kinds = [Heartbeat if "period" in e else CheckReply for e in examples]
+    assert kinds == [Heartbeat, CheckReply]
+    def within(part: object, whole: object) -> bool:  # ``part`` as written, ``whole`` with the defaults too
+        if isinstance(part, dict):
+            return isinstance(whole, dict) and all(k in whole and within(v, whole[k]) for k, v in part.items())
+        if isinstance(part, list):
+            return isinstance(whole, list) and len(part) == len(whole) and all(map(within, part, whole))
+        return part == whole
+
+    for example, kind in zip(examples, kinds):
+        assert within(example, msgpack.unpackb(encode(decode(msgpack.packb(example), kind))))

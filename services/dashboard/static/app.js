@@ -112,6 +112,16 @@ function renderHeader() {
   fill("services", ...services);
   const s = view.state;
   fill("step", s ? `step ${s.seq} \u00b7 ${s.event || "start"} \u00b7 ${clock(s.stamp)}` : "no monitor message yet");
+  // SPEC §7: a marking the monitor cannot vouch for is said plainly, with since when and why.
+  const stale = document.getElementById("stale");
+  const sync = s && s.sync ? Object.entries(s.sync) : [];
+  const notLive = sync.filter(([, x]) => x.state !== "live");
+  stale.hidden = !s || (sync.length > 0 && !notLive.length);
+  stale.dataset.state = notLive.some(([, x]) => x.state === "lost") ? "lost" : "syncing";
+  stale.textContent = !s ? "" : notLive.length
+    ? "STATE NOT LIVE: the marking shown may not be the robot's. " + notLive.map(([n, x]) =>
+      `${n} ${x.state.toUpperCase()} since ${clock(x.since)}: ${x.reason}`).join("; ")
+    : "STATE NOT VOUCHED FOR: this monitor does not say whether it is synced (older than this dashboard)";
   const div = document.getElementById("divergence");
   div.hidden = !(s && s.divergence);
   div.textContent = s && s.divergence ? `MODEL DIVERGENCE at step ${s.seq}: ${s.divergence}` : "";
@@ -132,7 +142,11 @@ function renderSkillsets() {
     const running = ss.running.length
       ? ss.running.map((k) => el("span", { class: "skill", "data-skill": k }, k))
       : [el("span", { class: "muted" }, "no skill running")];
-    return el("div", { class: "card", "data-skillset": name }, el("h3", {}, name),
+    const sync = s.sync && s.sync[name];
+    const state = sync ? sync.state : "unknown";
+    return el("div", { class: "card", "data-skillset": name, "data-sync": state }, el("h3", {}, name,
+      state === "live" ? "" : el("span", { class: "sync", title: sync ? sync.reason : "" },
+        ` ${state.toUpperCase()}${sync ? " since " + clock(sync.since) : ""}`)),
       el("table", {}, el("tbody", {}, ...rows)), el("div", { class: "running" }, "running: ", ...running));
   });
   fill("skillsets", ...cards);
@@ -326,7 +340,7 @@ async function check(event) {
         r.candidates && r.candidates.length ? el("p", {}, "did you mean: " + r.candidates.join(", ")) : "");
       return;
     }
-    const reasons = r.reasons.map((x) => el("li", {}, `${x.property}: ${x.constraint} (${x.action})`,
+    const reasons = r.reasons.map((x) => el("li", {}, `${x.property ? x.property + ": " : ""}${x.constraint} (${x.action})`,
       x.steps ? `, within ${x.steps} steps` : "", x.witness.length ? ` via ${x.witness.join(" \u2192 ")}` : "",
       x.reason ? ` \u2014 ${x.reason}` : ""));
     out.replaceChildren(el("p", { class: `decision decision-${r.decision}`, "data-decision": r.decision },
