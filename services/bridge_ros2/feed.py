@@ -340,6 +340,17 @@ class Feed:
         return CanonicalEvent(system=self.system.name, skillset=skillset, seq=max(m.seq - 1, 0), stamp=last.stamp,
                               source=self.source, epoch=self.epoch, status=last.wire(), info="resync")
 
+    def outdated(self, skillset: str) -> str:
+        """Why ``skillset``'s last status is known not to be its manager's current one ('' when it is not
+        known to be): a restart or a cut link whose next status has not come yet (SPEC §7: nobody may
+        vouch for it meanwhile)."""
+        m = self.managers[skillset]
+        if m.restart:
+            return f"its manager restarted ({m.restart}): waiting for its new status"
+        if m.resync:
+            return f"{m.resync}: waiting for the status that closes the gap"
+        return ""
+
     def has_status(self, skillset: str) -> bool:
         """Whether a status of ``skillset`` was received (since its manager restarted or the link
         to it was cut, if either happened)."""

@@ -19,7 +19,10 @@ initial status whose ``info`` says how it differs from the last one (SPEC §7). 
 ``rmw_zenoh`` the bridge declares its own node, subscription and publisher tokens.
 A monitor that missed events, or that starts, asks ``keys.resync(system, skillset)``:
 the bridge answers with the skillset's last status (numbered as its last event) and
-asks the manager for a fresh one.  What managers publish while the bridge's session
+asks the manager for a fresh one; while it knows that status to be outdated (its
+manager restarted or left, or the link was cut, and no new status came yet) it
+answers an error saying so instead, and its heartbeat lists the skillset as
+``pending`` (sent at once), so that no monitor vouches for the old status.  What managers publish while the bridge's session
 has lost every router is lost (their topics are volatile): the first status after
 such a cut is a counted resync whose event says so, and every manager is asked
 again when the link is back (:meth:`Bridge._watch_link`).  Every 0.5 s it publishes a
@@ -51,7 +54,7 @@ import zenoh
 from services.bridge_ros2.feed import Counters, Feed
 from services.common.cli import default_instance_id
 from services.common.events import event_publisher
-from services.common.heartbeat import HeartbeatPublisher
+from services.common.heartbeat import HeartbeatPublisher, refusal
 from services.common.zenoh_config import undeclare
 from services.common.ros_liveliness import declare_node
 from skinet.ros.keys import (
@@ -121,7 +124,9 @@ class Bridge:
         self._resync = session.declare_queryable(keys.resync(system.name, "*"), self._on_resync)
         token = keys.alive(system.name, "bridge_ros2", self.instance_id)
         self._token = session.liveliness().declare_token(token)
-        self._heartbeat = HeartbeatPublisher(session, system.name, self.feed.source, self.feed.epoch, token, self._beat)
+        self._pending_seen: dict[str, str] = {}  # what the last heartbeat said was pending (see _notice)
+        self._heartbeat = HeartbeatPublisher(session, system.name, self.feed.source, self.feed.epoch, token, self._beat,
+                                             pending=self._pending)
         self._ros_tokens: list[Any] = []
         self.graph: list[RosEntity] = []  # rmw_zenoh: the bridge's node and topics as ROS tools see them
         if style.rmw_zenoh:
@@ -178,8 +183,17 @@ class Bridge:
                     self._events[ev.skillset].put(wire_encode(ev))
             except Exception:  # a bug must not stop the bridge (SPEC §7)
                 log.exception("failed to handle a message of %s", item[0] if item else "a held status")
+            self._notice()
             with self._fed:
                 self._fed.notify_all()
+
+    def _notice(self) -> None:
+        """Send a heartbeat at once when the skillsets whose status is outdated changed (a monitor
+        must stop vouching for them now, not up to a period later)."""
+        pending = self._pending()
+        if pending != self._pending_seen:
+            self._pending_seen = pending
+            self._heartbeat.poke()
 
     def _on_resync(self, query: zenoh.Query) -> None:
         with query:
@@ -187,10 +201,26 @@ class Bridge:
             if skillset not in self.feed.managers:
                 return
             with self._fed:
-                ev = self.feed.last_status(skillset)
-            if ev is not None:
+                why = self._outdated(skillset)
+                ev = None if why else self.feed.last_status(skillset)
+            if why:  # never vouch for a status known to be outdated (SPEC §7)
+                query.reply_err(refusal(self.feed.source, skillset, why))
+            elif ev is not None:
                 query.reply(keys.resync(self.system.name, skillset), wire_encode(ev))
             self.request_status(skillset)
+
+    def _outdated(self, skillset: str) -> str:
+        """Why ``skillset``'s last status is not its manager's current one ('' when it may be)."""
+        with self._lock:
+            gone = skillset in self._gone
+        if gone:
+            return f"its manager {self._requests[skillset][0]} left"
+        return self.feed.outdated(skillset)
+
+    def _pending(self) -> dict[str, str]:
+        """The heartbeat's ``pending``: skillsets whose last status is outdated, with why."""
+        with self._fed:
+            return {n: why for n in self.feed.managers if (why := self._outdated(n))}
 
     # -- status requests ------------------------------------------------------------------
 
@@ -226,7 +256,10 @@ class Bridge:
                     self._gone.add(name)
                     log.warning("%s: manager %s left (its status_request subscription is gone)", name,
                                 self._requests[name][0])
-                return
+        if sample.kind != zenoh.SampleKind.PUT:
+            self._notice()
+            return
+        with self._lock:
             if hash_:
                 self._hashes[name] = hash_
             # Only a manager seen before can come back.  The tokens present at start-up come as
@@ -244,6 +277,7 @@ class Bridge:
             with self._fed:
                 self.feed.restarted(name, "the manager (or its gateway) came back")
             self._queue.put(())  # a status it held is released: the worker publishes its events
+        self._notice()
         self.request_status(name)
 
     def _beat(self) -> dict[str, HeartbeatSkillset]:

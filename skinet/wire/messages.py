@@ -264,6 +264,12 @@ class Heartbeat(_Message):
     period: float = Field(gt=0, description="seconds between heartbeats")
     token: str = Field("", description="the liveliness token it holds, e.g. 'skinet/spot_arm/alive/bridge_ros2/x'")
     skillsets: dict[str, HeartbeatSkillset] = Field(description="the skillsets whose events it publishes")
+    pending: dict[str, str] = Field(
+        default_factory=dict, description="skillsets whose last status the publisher knows to be outdated, with "
+                                          "why (a restarted manager not heard yet, a link cut, an interface not "
+                                          "read yet or gone): a monitor must not vouch for it (SPEC §7)")
+
+    OMIT_AT_DEFAULT = ("pending",)
 
 
 MESSAGES: dict[str, type[BaseModel]] = {

@@ -64,7 +64,9 @@ def sample_messages(system: System) -> dict[str, BaseModel]:
         "Heartbeat": Heartbeat(system=system.name, source="bridge_ros2/b1", epoch=1700000000000, period=0.5,
                                token="skinet/spot_arm/alive/bridge_ros2/b1",
                                skillsets={"spot": HeartbeatSkillset(seq=12, manager=True),
-                                          "manipulator": HeartbeatSkillset()}),
+                                          "manipulator": HeartbeatSkillset()},
+                               pending={"spot": "its manager restarted (the manager (or its gateway) came back): "
+                                                "waiting for its new status"}),
     }
 
 
