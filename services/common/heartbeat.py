@@ -36,15 +36,20 @@ def refusal(source: str, skillset: str, why: str) -> str:
     return f"'{source}' has no current status of {skillset}: {why}"
 
 
+Beat = Callable[[], dict[str, HeartbeatSkillset]]
+Pending = Callable[[], dict[str, str]]
+
+
 class HeartbeatPublisher:
     """Publishes ``beat()`` (skillset -> :class:`HeartbeatSkillset`) and ``pending()`` (skillset -> why its
-    last status is outdated) every ``period`` seconds from a thread, and at once on :meth:`poke`."""
+    last status is outdated) every ``period`` seconds from a thread, and at once on :meth:`poke`.  Several
+    publishers of one source (the managers' and the bound skillsets' bridges of one process) share one
+    heartbeat: each :meth:`add` its own skillsets."""
 
     def __init__(self, session: zenoh.Session, system: str, source: str, epoch: int, token: str,
-                 beat: Callable[[], dict[str, HeartbeatSkillset]], period: float = PERIOD,
-                 pending: Callable[[], dict[str, str]] = dict):
+                 beat: Beat, period: float = PERIOD, pending: Pending = dict):
         self.system, self.source, self.epoch, self.token, self.period = system, source, epoch, token, period
-        self._beat, self._pending = beat, pending
+        self._parts: list[tuple[Beat, Pending]] = [(beat, pending)]
         self._poked = threading.Event()
         # DROP: a heartbeat stuck behind a dead link is worth nothing; the next one replaces it.
         self._pub = session.declare_publisher(keys.heartbeat(system, source), express=True)
@@ -52,9 +57,22 @@ class HeartbeatPublisher:
         self._thread = threading.Thread(target=self._run, name="skinet-heartbeat", daemon=True)
         self._thread.start()
 
+    def add(self, beat: Beat, pending: Pending = dict) -> None:
+        """More skillsets of the same source and epoch in each heartbeat."""
+        self._parts = [*self._parts, (beat, pending)]
+        self.poke()
+
+    def remove(self, beat: Beat) -> None:
+        self._parts = [p for p in self._parts if p[0] != beat]  # bound methods: equal, not identical
+
     def message(self) -> Heartbeat:
+        skillsets: dict[str, HeartbeatSkillset] = {}
+        pending: dict[str, str] = {}
+        for beat, outdated in self._parts:
+            skillsets |= beat()
+            pending |= outdated()
         return Heartbeat(system=self.system, source=self.source, epoch=self.epoch, period=self.period,
-                         token=self.token, skillsets=self._beat(), pending=self._pending())
+                         token=self.token, skillsets=skillsets, pending=pending)
 
     def poke(self) -> None:
         """Publish a heartbeat now (what it says changed), then go on every ``period`` seconds."""
