@@ -362,3 +362,124 @@ def test_messages_of_a_manager_and_a_bound_skillset_keep_their_arrival_order(cli
         seqs = [e.seq for e in got if e.skillset == name]
         assert seqs == list(range(first_seq, first_seq + len(seqs)))
     assert len({e.epoch for e in got}) == 1
+
+
+def test_a_bound_skillset_waiting_for_a_result_holds_the_later_events_of_a_manager(tmp_path: Path) -> None:
+    """One order for both kinds: a dock goal ABORTED waits for its result (its mode depends on it), and Spot's
+    status that came after waits behind it, at most until the result (or its timeout) comes."""
+    from services.bridge_ros2.bound import BoundFeed
+    from services.bridge_ros2.feed import Feed
+    from services.bridge_ros2.order import Order
+    from services.simulator.manager import Manager
+    from services.simulator.protocols import ABORTED, ACCEPTED, SUCCEEDED, ActionLogic, Goal
+    from skinet.files import load_typemap
+    from skinet.ros.bound import ResultRequest
+    from skinet.ros.typestore import encode as cdr
+
+    path = mixed_system(tmp_path)
+    system, _ = load_system(path)
+    bindings, _ = load_bindings(system)
+    order = Order()
+    feed = Feed(system, load_typemap(path), "bridge_ros2/m", order=order)
+    bound = BoundFeed(system, bindings, "bridge_ros2/m", synced=True, order=order)
+    store = bindings["nav2"].store
+    servers = {skill: ActionLogic(store, bindings["nav2"].skill(skill).type) for skill in ("undock_robot", "dock_robot")}
+
+    def status(skill: str, goal: bytes, code: int) -> list[tuple[str, str | None]]:
+        servers[skill].goals[goal] = Goal(goal, 1.0, code)
+        return [(e.skillset, e.transition) for e in bound.feed(f"/{skill}/_action/status",
+                                                               servers[skill].status_array(), 1.0)]
+
+    assert status("undock_robot", b"a" * 16, ACCEPTED) == [("nav2", "undock_robot.start")]
+    assert status("undock_robot", b"a" * 16, SUCCEEDED) == [("nav2", "undock_robot.success.undocked")]
+    assert status("dock_robot", b"b" * 16, ACCEPTED) == [("nav2", "dock_robot.start")]
+    assert status("dock_robot", b"b" * 16, ABORTED) == []  # its result names the mode: it waits
+    assert bound.take_requests() == [("nav2", ResultRequest("dock_robot", "/dock_robot",
+                                                            "opennav_docking_msgs/action/DockRobot", b"b" * 16))]
+    spot = Manager(system.component("spot").skillset, feed.managers["spot"].store, info="spot")
+    initial = spot.status_request()[0]
+    topic = next(t for t in feed.managers["spot"].topics if t.kind == "status")
+    assert feed.feed("spot", topic, cdr(feed.managers["spot"].store, initial.typename, initial.msg)) == []
+    got = bound.result("nav2", ResultRequest("dock_robot", "/dock_robot", "opennav_docking_msgs/action/DockRobot",
+                                             b"b" * 16), None, 2.0)  # no reply in time: the default mode
+    assert [(e.skillset, e.transition) for e in got] == [("nav2", "dock_robot.failure.failed"), ("spot", None)]
+
+
+def _resync(session: zenoh.Session, system: str, skillset: str) -> tuple[str, object]:
+    """('ok', the status) or ('err', the reason) of a resync query, as a monitor gets it."""
+    from skinet.wire.messages import CanonicalEvent
+
+    replies = list(session.get(keys.resync(system, skillset), timeout=2))
+    assert len(replies) == 1, replies
+    if replies[0].ok is None:
+        return "err", replies[0].err.payload.to_bytes().decode()
+    return "ok", decode(replies[0].ok.payload.to_bytes(), CanonicalEvent).status
+
+
+def _pending(session: zenoh.Session, system: str, timeout: float = 3.0) -> dict[str, str]:
+    """The ``pending`` of the next heartbeat on ``system``."""
+    from skinet.wire.messages import Heartbeat
+
+    got: list[Heartbeat] = []
+    sub = session.declare_subscriber(keys.heartbeat(system), lambda s: got.append(decode(s.payload.to_bytes(),
+                                                                                           Heartbeat)))
+    deadline = time.monotonic() + timeout
+    while not got and time.monotonic() < deadline:
+        time.sleep(0.01)
+    sub.undeclare()
+    assert got, "no heartbeat"
+    return got[0].pending
+
+
+def test_a_bound_skillset_is_pending_until_every_interface_is_read_again(nav2, session) -> None:
+    """SPEC §7 for bindings: before its first readings, and after an action server or a lifecycle node left,
+    the bridge refuses to vouch for the skillset's status (heartbeat ``pending``, resync queries refused) until
+    the interface is read again; that reading shows what the restart did (the goal forgotten, the node
+    unconfigured: divergences), and an event closes the gap."""
+    from skinet.ros.bound import goal_text
+
+    system, bindings, _ = nav2
+    robot = BoundSimulator(session, system, bindings)
+    events = Events(session, system.name)
+    bridge = start_bound_bridge(session, system, bindings, settle=0.8, retry=0.1, source="bridge_ros2/b")
+    try:
+        time.sleep(1.5)  # the servers settled and their caches were read; the battery has not spoken
+        waiting = ("'bridge_ros2/b' has no current status of nav2: waiting for a first /battery_state message")
+        assert _resync(session, "nav2", "nav2") == ("err", waiting)  # (no reply at all, before)
+        assert _pending(session, "nav2") == {"nav2": waiting[len("'bridge_ros2/b' has no current status of nav2: "):]}
+        robot.publish_topics(FIRST)
+        events.wait(lambda items: len(items) == 1)
+        for transition in ("navigator_configured", "navigator_activated", "undock_robot.start",
+                           "undock_robot.success.undocked", "navigate.start"):
+            assert robot.play("nav2", transition, {"behavior_tree": "bt.xml"} if transition == "navigate.start"
+                              else None)
+        events.wait(lambda items: len(items) == 6)
+        assert _pending(session, "nav2") == {} and _resync(session, "nav2", "nav2")[0] == "ok"
+        robot.restart_server("nav2", "navigate")  # it forgets the running goal
+        left = "the action server of /navigate_to_pose left: waiting for the status of /navigate_to_pose"
+        deadline = time.monotonic() + 0.5
+        while _pending(session, "nav2") != {"nav2": left}:
+            assert time.monotonic() < deadline, "not pending at once"
+        assert _resync(session, "nav2", "nav2") == ("err", f"'bridge_ros2/b' has no current status of nav2: {left}")
+        got = events.wait(lambda items: len(items) == 8)[6:]
+        assert [(e.transition, e.status.running, e.info.split(":")[0]) for e in got] == [
+            (None, [], "model divergence"), (None, [], "resync after the action server of /navigate_to_pose left; "
+                                                       "state now differs")]
+        goal = goal_text(robot.sent[("nav2", "navigate")])
+        assert [e.info for e in got] == [
+            f"model divergence: /navigate_to_pose/_action/status: goal {goal} absent: navigate no longer runs it, but "
+            "no outcome of it was seen (did the action server restart?)",
+            "resync after the action server of /navigate_to_pose left; state now differs: navigate no longer running"]
+        assert _pending(session, "nav2") == {} and _resync(session, "nav2", "nav2")[0] == "ok"
+        robot.restart_node("nav2", "navigator")  # unconfigured again
+        got = events.wait(lambda items: len(items) == 10)[8:]
+        assert [e.status.resources["navigator"] for e in got] == ["Unconfigured", "Unconfigured"]
+        assert got[0].info == ("model divergence: /bt_navigator/get_state: unconfigured (navigator Active -> "
+                               "Unconfigured): navigator became Unconfigured, but no event of the model takes "
+                               "navigator from Active to Unconfigured here")
+        assert got[1].info == "resync after the lifecycle node /bt_navigator left; state now differs: navigator " \
+                              "Active -> Unconfigured"
+        assert bridge.counters.resyncs == 2 and _pending(session, "nav2") == {}
+    finally:
+        bridge.close()
+        robot.close()

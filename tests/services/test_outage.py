@@ -205,3 +205,49 @@ def test_router_restart_between_managers_and_bridge_is_resynced(outage: Outage, 
         undeclare(listener, sub)
         for s in (sim_s, bridge_s, obs_s):
             s.close()
+
+
+def test_router_restart_between_a_bound_robot_and_the_bridge_is_read_again(outage: Outage) -> None:
+    """The router is down 3 s while the Nav2 base's navigator is configured and its battery runs low: those
+    messages are lost (lifecycle events and topics are volatile).  Once the link is back, the bridge says its
+    status is not current (heartbeat ``pending``, resync refused) until it has read every interface again:
+    the action statuses' caches, the node's state, the battery's next sample; then it publishes what changed
+    and an event closing the gap."""
+    from event_watch import Events
+    from services.bridge_ros2.bound_live import start_bound_bridge
+    from services.simulator.bound import BoundSimulator
+    from skinet.files import load_bindings
+    from tests.services.test_bound_bridge import FIRST, NAV2, _pending, _resync
+
+    system = load_system(NAV2 / "nav2.toml")[0]
+    bindings, _ = load_bindings(system)
+    sim_s, bridge_s, obs_s = outage.login("simulator"), outage.login("bridge"), outage.login("observer")
+    events = Events(obs_s, system.name)
+    robot = BoundSimulator(sim_s, system, bindings)
+    bridge = start_bound_bridge(bridge_s, system, bindings, settle=0.2, retry=0.2, source="bridge_ros2/b")
+    try:
+        time.sleep(0.5)
+        robot.publish_topics(FIRST)
+        events.wait(lambda items: len(items) == 1)
+        outage.down()
+        robot.lifecycle("nav2", "navigator", "Inactive")
+        robot.publish("nav2", "/battery_state", {"percentage": 0.1, "power_supply_status": 1})
+        time.sleep(3.0)
+        outage.up()
+        cut = "the link to the robot's interfaces was cut: waiting for a new /battery_state message"
+        wait_until(lambda: _pending(obs_s, "nav2", 10) == {"nav2": cut}, 15, "the node and the servers read again")
+        assert _resync(obs_s, "nav2", "nav2") == ("err", f"'bridge_ros2/b' has no current status of nav2: {cut}")
+        assert [e.transition for e in events.items] == [None, "navigator_configured"]
+        robot.publish("nav2", "/battery_state", {"percentage": 0.1, "power_supply_status": 1})
+        got = events.wait(lambda items: len(items) == 4, timeout=5)[2:]
+        assert [(e.transition, e.info) for e in got] == [
+            ("battery_low", "/battery_state: percentage=0.10000000149011612 (battery Ok -> Low)"),
+            (None, "resync after the link to the robot's interfaces was cut; state now differs: navigator "
+                   "Unconfigured -> Inactive, battery Ok -> Low")]
+        assert [e.seq for e in events.items] == [0, 1, 2, 3]
+        assert _pending(obs_s, "nav2") == {} and bridge.counters.resyncs == 1
+    finally:
+        bridge.close()
+        robot.close()
+        for s in (sim_s, bridge_s, obs_s):
+            s.close()
