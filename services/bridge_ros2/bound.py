@@ -249,16 +249,21 @@ class BoundFeed:
             log.info("%s", note)
         for kind, message in out.bad:
             self._bad(ss, kind, message)
+        derived = list(out.events)
+        carried = {d.divergence for d in derived}
         for drift in out.drifts:
             self.counters.drifts += 1
             self.drifts.append(drift)
             log.warning("%s: model divergence: %s", skillset, drift)
+            status = ss.deriver.status()
+            if str(drift) not in carried and status is not None:  # nothing moved: published all the same
+                derived.append(Derived(None, status, drift.stamp, f"model divergence: {drift}", str(drift)))
         self.requests += [(skillset, r) for r in out.results]
         events = []
-        for d in out.events:
+        for d in derived:
             events.append(CanonicalEvent(system=self.system.name, skillset=skillset, seq=ss.seq, stamp=d.stamp,
                                          source=self.source, epoch=self.epoch, transition=d.transition,
-                                         status=d.status, info=d.info))
+                                         status=d.status, info=d.info, divergence=d.divergence))
             ss.seq += 1
         self.counters.events += len(events)
         if ss.slot is not None:

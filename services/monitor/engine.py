@@ -120,6 +120,16 @@ class Prediction:
     table: RiskTable
 
 
+def _divergence(reason: str | None, ev: CanonicalEvent) -> str | None:
+    """What a step reports as a model divergence (SPEC §7, §9), with the message that showed it: the bridge's
+    own finding (a binding's drift names its message), else the live nets' reason with the event's info."""
+    if ev.divergence:
+        return f"{ev.divergence} ({reason})" if reason else ev.divergence
+    if reason is not None and ev.info:
+        return f"{reason} (message: {ev.info})"
+    return reason
+
+
 @dataclass
 class Engine:
     """Sequence check, live marking, Algorithm 1 and message bodies (not thread-safe)."""
@@ -263,11 +273,12 @@ class Engine:
         elif before is not None:
             self.live.marking[ev.skillset] = hit[0]  # type: ignore[assignment]
         self.counters.applied += 1
-        if hit[2] is not None:
+        divergence = _divergence(hit[2], ev)
+        if divergence is not None:
             self.counters.divergences += 1
-        if ev.transition is None and not hit[1] and hit[2] is None:
+        if ev.transition is None and not hit[1] and divergence is None:
             return None
-        return self._step(f"{ev.skillset}:{ev.transition or 'status'}#{ev.seq}", hit[1], hit[2])
+        return self._step(f"{ev.skillset}:{ev.transition or 'status'}#{ev.seq}", hit[1], divergence)
 
     def prediction(self, key: MarkingKey | None = None) -> Prediction | None:
         """The prediction for the live marking (``key`` when known), if any (SPEC §5)."""

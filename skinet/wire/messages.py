@@ -50,6 +50,11 @@ class CanonicalEvent(_Message):
     transition: str | None = Field(None, description="logical transition, e.g. 'teleop.start'; None: status only")
     status: SkillsetStatus | None = Field(None, description="status observed after the event, when known")
     info: str = Field("", description="free text from the manager (response name, ids)")
+    divergence: str = Field("", description="a model divergence the bridge found (a binding's drift, SPEC §9), "
+                                            "with the message that showed it; the monitor reports it even when "
+                                            "the status matches its marking")
+
+    OMIT_AT_DEFAULT = ("divergence",)
 
 
 class PropertyVerdict(BaseModel):

@@ -483,3 +483,47 @@ def test_a_bound_skillset_is_pending_until_every_interface_is_read_again(nav2, s
     finally:
         bridge.close()
         robot.close()
+
+
+def test_the_monitor_reports_each_drift_with_the_message_that_showed_it(nav2, session) -> None:
+    """SPEC §9: a drift is a model divergence, with the message that showed it.  The monitor's LiveState (the
+    dashboard's and ``skinet watch``'s list of divergences) used to say only that the transition was not
+    enabled, and a drift that moved nothing (a second goal, a value matching no state) never reached it."""
+    from services.monitor import start_monitor
+    from skinet.ros.bound import goal_text
+    from skinet.wire.messages import LiveState
+    from tests.services.test_monitor import wait_until
+
+    system, bindings, _ = nav2
+    robot = BoundSimulator(session, system, bindings)
+    bridge = start_bound_bridge(session, system, bindings, settle=0.1, retry=0.1)
+    monitor = start_monitor(session, system)
+    states: list[LiveState] = []
+    sub = session.declare_subscriber(keys.state("nav2"), lambda s: states.append(decode(s.payload.to_bytes(),
+                                                                                       LiveState)))
+    try:
+        robot.publish_topics(FIRST)
+        wait_until(monitor.synced, 10, "synced")
+        robot.send_goal("nav2", "navigate")  # the navigator is still unconfigured: the model forbids it
+        first = goal_text(robot.sent[("nav2", "navigate")])
+        robot.send_goal("nav2", "navigate")  # a second goal while the first runs
+        second = goal_text(robot.sent[("nav2", "navigate")])
+        robot.publish("nav2", "/battery_state", {"percentage": float("nan"), "power_supply_status": 1})
+        wait_until(lambda: monitor.counters.divergences == 3, 10, "three divergences")
+        time.sleep(0.2)
+        nav = "/navigate_to_pose/_action/status"
+        assert [(s.event.rsplit("#", 1)[0], s.divergence) for s in states if s.divergence] == [
+            ("nav2:navigate.start", f"{nav}: goal {first} ACCEPTED: navigate started, but the model says navigate "
+                                    "cannot start: precondition 'active' (navigator == Active) false (navigator is "
+                                    "Unconfigured, motion is Still, dock is Docked, battery is Ok, charging is "
+                                    "Charging) ('navigate.start' is not enabled in the live marking; observed "
+                                    "marking adopted)"),
+            ("nav2:status", f"{nav}: goal {second} ACCEPTED: a second goal of navigate, but navigate already runs "
+                            f"goal {first} (one goal at a time per skill)"),
+            ("nav2:status", "/battery_state: percentage=nan: battery observed, but no state of battery matches")]
+        assert monitor.snapshot().state.skillsets["nav2"].running == ["navigate"]
+    finally:
+        sub.undeclare()
+        monitor.close()
+        bridge.close()
+        robot.close()

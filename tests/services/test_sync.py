@@ -200,3 +200,20 @@ def test_an_answer_ahead_of_the_events_is_live_once_they_come() -> None:
     t.synced("spot", B1, 7, upto=9)
     t.caught_up("spot", B1, 7)  # the bound passed: the answer was adopted
     assert t.live("spot")
+
+
+def test_a_divergence_names_the_message_that_showed_it() -> None:
+    """The live nets' reason, with the event's info (a manager's: its response, or why the bridge says the
+    state changed); a bridge's own finding (a binding's drift) first, even when the marking does not move."""
+    engine = Engine(SYSTEM)
+    restarted = CanonicalEvent(system="spot_arm", skillset="manipulator", seq=0, stamp=0.0, source=B1, epoch=7,
+                               status=SkillsetStatus(resources={"mutex": "Free", "arm_status": "Away"}),
+                               info="manager restarted (new status publisher); state now differs: arm_status HP -> Away")
+    step = engine.apply(restarted)
+    assert step is not None and step.divergence == (
+        "no transition explains the observed status of 'manipulator'; observed marking adopted (message: manager "
+        "restarted (new status publisher); state now differs: arm_status HP -> Away)")
+    drift = restarted.model_copy(update={"seq": 1, "info": "model divergence: x", "divergence": "/arm: x, but y"})
+    step = engine.apply(drift)  # the status matches the marking: a step all the same
+    assert step is not None and step.divergence == "/arm: x, but y" and engine.counters.divergences == 2
+    assert engine.apply(drift.model_copy(update={"seq": 2, "info": "", "divergence": ""})) is None

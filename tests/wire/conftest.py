@@ -30,7 +30,8 @@ def sample_messages(system: System) -> dict[str, BaseModel]:
     return {
         "CanonicalEvent": CanonicalEvent(
             system=system.name, skillset="manipulator", seq=7, stamp=1700000000.25, source="bridge-1",
-            transition="arm_ready.start", status=skillsets["manipulator"], info="ok id=3"),
+            transition="arm_ready.start", status=skillsets["manipulator"], info="ok id=3",
+            divergence="/arm/_action/status: goal 1 ACCEPTED: arm_ready started, but the model says it cannot"),
         "LiveState": LiveState(system=system.name, seq=8, stamp=1700000000.3, skillsets=skillsets,
                                event="manipulator:arm_ready.start#7", divergence="no transition explains it",
                                sync={"spot": SkillsetSync(state="live", since=1700000000.1, source="bridge_ros2/b1"),
