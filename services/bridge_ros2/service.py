@@ -22,10 +22,11 @@ the bridge answers with the skillset's last status (numbered as its last event) 
 asks the manager for a fresh one; while it knows that status to be outdated (its
 manager restarted or left, or the link was cut, and no new status came yet) it
 answers an error saying so instead, and its heartbeat lists the skillset as
-``pending`` (sent at once), so that no monitor vouches for the old status.  What managers publish while the bridge's session
-has lost every router is lost (their topics are volatile): the first status after
-such a cut is a counted resync whose event says so, and every manager is asked
-again when the link is back (:mod:`services.bridge_ros2.link`).  Every 0.5 s it publishes a
+``pending`` (sent at once), so that no monitor vouches for the old status.  What
+managers publish while the bridge's session has lost every router is lost (their
+topics are volatile): the first status after such a cut is a counted resync whose
+event says so, and every manager is asked again when the link is back
+(:mod:`services.bridge_ros2.link`).  Every 0.5 s it publishes a
 :class:`~skinet.wire.messages.Heartbeat` (:mod:`services.common.heartbeat`): its
 token, and per skillset its last event's number and whether the manager is present
 (its token seen, gone, or never announced), so that a monitor can tell a silent
@@ -230,15 +231,14 @@ class Bridge:
         if found is None:
             return
         name, hash_ = found
-        with self._lock:
-            if sample.kind != zenoh.SampleKind.PUT:
+        if sample.kind != zenoh.SampleKind.PUT:
+            with self._lock:
                 if self._present.get(name) == key:
                     del self._present[name]
                     self._gone.add(name)
                     log.warning("%s: manager %s left (its status_request subscription is gone)", name,
                                 self._requests[name][0])
-        if sample.kind != zenoh.SampleKind.PUT:
-            self._notice()
+            self._notice()  # its last status is outdated now
             return
         with self._lock:
             if hash_:
@@ -247,7 +247,7 @@ class Bridge:
             # the subscriber's history, with no mark and no order against the topics' samples:
             # on a loaded start they arrive after the first status, and are no restart.  Nor is
             # a token that left with our link (cut since it last appeared): the resync after the
-            # cut covers it (_watch_link), and a manager that restarted meanwhile shows it in
+            # cut covers it (_on_cut), and a manager that restarted meanwhile shows it in
             # its status (skill ids reset, a new publisher).
             back = name not in self._present and self._cuts_seen.get(name) == self._cuts and \
                 self.feed.managers[name].deriver.last is not None
