@@ -437,13 +437,15 @@ def test_a_bound_skillset_is_pending_until_every_interface_is_read_again(nav2, s
     the interface is read again; that reading shows what the restart did (the goal forgotten, the node
     unconfigured: divergences), and an event closes the gap."""
     from skinet.ros.bound import goal_text
+    from skinet.wire.messages import Heartbeat
+    from tests.services.test_monitor import wait_until
 
     system, bindings, _ = nav2
     robot = BoundSimulator(session, system, bindings)
     events = Events(session, system.name)
-    bridge = start_bound_bridge(session, system, bindings, settle=0.8, retry=0.1, source="bridge_ros2/b")
+    bridge = start_bound_bridge(session, system, bindings, settle=1.0, retry=0.1, source="bridge_ros2/b")
     try:
-        time.sleep(1.5)  # the servers settled and their caches were read; the battery has not spoken
+        time.sleep(1.8)  # the servers settled and their caches were read; the battery has not spoken
         waiting = ("'bridge_ros2/b' has no current status of nav2: waiting for a first /battery_state message")
         assert _resync(session, "nav2", "nav2") == ("err", waiting)  # (no reply at all, before)
         assert _pending(session, "nav2") == {"nav2": waiting[len("'bridge_ros2/b' has no current status of nav2: "):]}
@@ -455,13 +457,18 @@ def test_a_bound_skillset_is_pending_until_every_interface_is_read_again(nav2, s
                               else None)
         events.wait(lambda items: len(items) == 6)
         assert _pending(session, "nav2") == {} and _resync(session, "nav2", "nav2")[0] == "ok"
+        beats: list[tuple[float, dict[str, str]]] = []  # (when, pending) of every heartbeat from now on
+        heard = session.declare_subscriber(keys.heartbeat("nav2"), lambda s: beats.append(
+            (time.monotonic(), decode(s.payload.to_bytes(), Heartbeat).pending)))
         robot.restart_server("nav2", "navigate")  # it forgets the running goal
+        restarted = time.monotonic()
         left = "the action server of /navigate_to_pose left: waiting for the status of /navigate_to_pose"
-        deadline = time.monotonic() + 0.5
-        while _pending(session, "nav2") != {"nav2": left}:
-            assert time.monotonic() < deadline, "not pending at once"
+        wait_until(lambda: any(p == {"nav2": left} for _, p in beats), 1.0, "pending")  # sent at once, not after 0.5 s
         assert _resync(session, "nav2", "nav2") == ("err", f"'bridge_ros2/b' has no current status of nav2: {left}")
         got = events.wait(lambda items: len(items) == 8)[6:]
+        wait_until(lambda: beats[-1][1] == {}, 1.0, "no longer pending, at once")
+        heard.undeclare()
+        assert next(t for t, p in beats if p) - restarted < 0.4
         assert [(e.transition, e.status.running, e.info.split(":")[0]) for e in got] == [
             (None, [], "model divergence"), (None, [], "resync after the action server of /navigate_to_pose left; "
                                                        "state now differs")]
