@@ -71,5 +71,5 @@ class DivergenceLog:
         head = b"".join(pack(k) + pack(v) for k, v in (("v", SCHEMA_VERSION), ("system", self.system),
                                                        ("monitor", self.monitor), ("stamp", stamp),
                                                        ("older", self.older)))
-        return (self._packer.pack_map_header(6) + head + pack("entries") + self._packer.pack_array_header(len(self.entries))
-                + b"".join(packed for _, packed in self.entries))
+        entries = self._packer.pack_array_header(len(self.entries)) + b"".join(packed for _, packed in self.entries)
+        return self._packer.pack_map_header(6) + head + pack("entries") + entries

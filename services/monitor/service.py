@@ -147,6 +147,7 @@ class Monitor:
         self._divergences = DivergenceLog(name, self.instance_id)
         self._divergences_due = False  # the list changed since it was published
         self._divergences_sent = float("-inf")  # monotonic time of its last publication
+        self._divergences_published = 0  # entries noted (listed or older) when it was last published
         self.resync_timeout, self.lost_after = resync_timeout, lost_after
         opts = dict(congestion_control=zenoh.CongestionControl.BLOCK, express=express)
         self._pub = {k: session.declare_publisher(key, **opts) for k, key in (
@@ -210,6 +211,13 @@ class Monitor:
         with self._lock:
             payload = self._last["divergences"]
         return decode(payload, Divergences)
+
+    @property
+    def divergences_published(self) -> int:
+        """How many divergences and restarts (listed or older) the last published list counts: cheap, to tell
+        whether :meth:`divergences` changed."""
+        with self._lock:
+            return self._divergences_published
 
     def synced(self) -> bool:
         """Whether every skillset is ``live`` (SPEC §7)."""
@@ -636,6 +644,7 @@ class Monitor:
         self._pub["divergences"].put(payload)
         self._last["divergences"] = payload
         self._divergences_due, self._divergences_sent = False, now
+        self._divergences_published = self._divergences.total
         self._bump()
 
     def _sync_fields(self) -> None:

@@ -356,7 +356,7 @@ def _cases() -> list[Case]:
         "{tmp}/bad.jsonl:1: error: invalid JSON: Expecting value (column 1)")
     add("skinet", "log", ("replay", "{tmp}/events.jsonl"), 1,
         "{tmp}/events.jsonl: error: no message of a monitor to replay (LiveState, Verdicts, UnsafeReport, "
-        "StateSpaceReport): the log holds 1 CanonicalEvent")
+        "StateSpaceReport, Divergences): the log holds 1 CanonicalEvent")
     for bad in ("-1", "fast"):
         usage("skinet", "--speed", ("replay", "{tmp}/run.jsonl", "--speed", bad),
               f"argument --speed: expected a number >= 0, got '{bad}'")

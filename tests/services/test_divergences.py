@@ -163,8 +163,8 @@ def test_a_manager_restart_seen_by_the_bridge_is_listed(router, client_factory, 
         sim.restart("spot")
         [entry] = lists.wait(1).entries
         assert (entry.kind, entry.skillset, entry.info) == (
-            "restart", "spot", "manager restarted (the manager (or its gateway) came back); state now differs: "
-                               "power_status PowerOn -> PowerOff, control_mode Busy -> Idle, stand_up no longer running")
+            "restart", "spot", "manager restarted (the manager (or its gateway) came back); state now differs: power_"
+                               "status PowerOn -> PowerOff, control_mode Busy -> Idle, stand_up no longer running")
         # The model explains the new state (power_switchoff, then stand_up's invariant fails): a restart, no
         # divergence, and the step it made.
         assert (entry.seq, entry.event, entry.reason) == (4, "spot:status#4", "")
@@ -175,3 +175,26 @@ def test_a_manager_restart_seen_by_the_bridge_is_listed(router, client_factory, 
         bridge.close()
         sim.close()
         monitor.close()
+
+
+def test_the_board_keeps_each_monitor_runs_list_and_ignores_older_copies() -> None:
+    from services.dashboard.board import Board
+
+    def listed(monitor: str, older: int, ns: range) -> Divergences:
+        return Divergences(system="s", monitor=monitor, stamp=1.0, older=older, entries=[
+            Divergence(n=n, kind="divergence", seq=n + 1, stamp=float(n), skillset="arm", event=f"arm:x#{n}",
+                       reason="why") for n in ns])
+
+    board = Board("s")
+    [u] = board.feed(listed("m1", 0, range(0, 2)), 0.0)
+    assert ([d["n"] for d in u["added"]], u["older"]) == ([0, 1], 0)
+    assert board.feed(listed("m1", 0, range(0, 2)), 0.0, initial=True) == []  # the start-up query's late copy
+    assert board.feed(listed("m1", 0, range(0, 1)), 0.0) == []  # an older list
+    [u] = board.feed(listed("m1", 1, range(1, 4)), 0.0)  # the monitor dropped entry 0: the board keeps it
+    assert ([d["n"] for d in u["added"]], u["older"]) == ([2, 3], 0)
+    [u] = board.feed(listed("m2", 5, range(5, 6)), 0.0)  # a restarted monitor that a late board meets mid-run
+    assert ([(d["monitor"], d["n"]) for d in u["added"]], u["older"]) == ([("m2", 5)], 5)
+    snap = board.snapshot()
+    assert [(d["monitor"], d["n"], d["seq"]) for d in snap["divergences"]] == [
+        ("m1", 0, 1), ("m1", 1, 2), ("m1", 2, 3), ("m1", 3, 4), ("m2", 5, 6)]
+    assert snap["divergences_older"] == 5

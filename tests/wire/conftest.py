@@ -9,8 +9,9 @@ from skinet.system import System
 from skinet.verify.predict import forecast
 from skinet.wire.convert import bundle, marking_of, risks, state_space_report, statuses
 from skinet.wire.messages import (
-    CanonicalEvent, CheckReason, CheckReply, CheckRequest, Divergence, Divergences, Heartbeat, HeartbeatSkillset, LiveState, PredictReply,
-    PredictRequest, PropertyVerdict, RecoveryEntry, SkillsetStatus, SkillsetSync, UnsafeEntry, UnsafeReport, Verdicts,
+    CanonicalEvent, CheckReason, CheckReply, CheckRequest, Divergence, Divergences, Heartbeat, HeartbeatSkillset,
+    LiveState, PredictReply, PredictRequest, PropertyVerdict, RecoveryEntry, SkillsetStatus, SkillsetSync, UnsafeEntry,
+    UnsafeReport, Verdicts,
 )
 
 # Arm moving (mutex Busy): starting Spot would break action_guard in one step.
