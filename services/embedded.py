@@ -235,15 +235,17 @@ def fix_free_ports(config: zenoh.Config) -> list[str]:
     return endpoints
 
 
-def connect_lines(args: argparse.Namespace, system: System, mode: str, listening: list[str]) -> list[str]:
-    """What ``skinet run`` prints at start: where it listens, and the exact commands that reach it."""
+def connect_lines(args: argparse.Namespace, system: System, mode: str, listening: list[str],
+                  prog: str = "skinet run", bridge: bool = True) -> list[str]:
+    """What ``skinet run`` (or ``prog``) prints at start: where it listens, and the exact commands that reach it
+    (``bridge``: the bridge's too, for the system file ``args.system``)."""
     if mode == "peer":
         endpoint = next((e for e in listening if e.startswith("tcp/")), listening[0] if listening else "")
         endpoint = re.sub(r"^tcp/0\.0\.0\.0:", "tcp/127.0.0.1:", re.sub(r"^tcp/\[::\]:", "tcp/[::1]:", endpoint))
-        head = f"skinet run: system {system.name}, listening on {', '.join(listening)}; connect with:"
+        head = f"{prog}: system {system.name}, listening on {', '.join(listening)}; connect with:"
     else:
         endpoint = (args.connect or ["(its --zenoh-config router)"])[0]
-        head = f"skinet run: system {system.name}, a client of the router at {endpoint}; connect with:"
+        head = f"{prog}: system {system.name}, a client of the router at {endpoint}; connect with:"
     folder = Path(args.password_file).parent if args.password_file else Path("~/.config/skinet/secrets")
 
     def flags(user: str) -> str:  # a router's users log in; a peer of skinet run takes no login
@@ -252,10 +254,12 @@ def connect_lines(args: argparse.Namespace, system: System, mode: str, listening
 
     first = system.components[0]
     command = f"{first.name}:{first.skillset.skills[0].name}.start" if first.skillset.skills else "SKILLSET:TRANSITION"
-    return [head, f"  skinet watch {system.name} {flags('observer')}",
-            f"  skinet dashboard {system.name} {flags('observer')}",
-            f"  skinet check {system.name} {command} {flags('observer')}",
-            f"  python -m services.bridge_ros2 {args.system} {flags('bridge')}   (the robot's side)"]
+    lines = [head, f"  skinet watch {system.name} {flags('observer')}",
+             f"  skinet dashboard {system.name} {flags('observer')}",
+             f"  skinet check {system.name} {command} {flags('observer')}"]
+    if bridge:
+        lines.append(f"  python -m services.bridge_ros2 {args.system} {flags('bridge')}   (the robot's side)")
+    return lines
 
 
 def start_dashboard(session: zenoh.Session, name: str, host: str, port: int, client: str,

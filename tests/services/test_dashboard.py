@@ -531,3 +531,47 @@ def test_the_timeline_zooms_and_pans_and_never_cuts_its_labels(browser, dashboar
     finally:
         monitor.close()
         session.close()
+
+
+# -- the one-command live demo (issue 27 item 5) -------------------------------------------------------------
+
+
+def test_live_demo_plays_the_mission_for_the_dashboard_and_watch(browser, tmp_path) -> None:
+    """``skinet demo --live --dashboard PORT``: the paper's unassisted run through the whole chain at ten times
+    real time; the page it serves shows the three violations appear, and the printed watch line reaches it."""
+    import subprocess
+    import sys
+
+    port = free_port()
+    proc = subprocess.Popen([sys.executable, "-m", "skinet_cli.main", "demo", "--live", "--dashboard", str(port),
+                             "--speed", "10", "--linger", "60"], cwd=REPO, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        head = [proc.stderr.readline().rstrip("\n") for _ in range(5)]
+        assert head[0] == f"dashboard on http://127.0.0.1:{port}/", head
+        endpoint = re.fullmatch(r"skinet demo: system spot_arm, listening on (tcp/127\.0\.0\.1:\d+); connect with:",
+                                head[1]).group(1)
+        assert head[2:] == [f"  skinet watch spot_arm -e {endpoint}", f"  skinet dashboard spot_arm -e {endpoint}",
+                            f"  skinet check spot_arm spot:init_power.start -e {endpoint}"]
+        browser.get(f"http://127.0.0.1:{port}/")
+        until(browser, lambda d: css(d, "#violations li[data-property]"), "the first violation", 60)
+        first = css(browser, "#violations li[data-property]")[0]
+        assert (first["data-property"], first["data-event"].split("#")[0]) == ("action_guard", "spot:teleop.start")
+        until(browser, lambda d: len(css(d, "#violations li[data-property]")) == 3, "the three violations", 60)
+        assert [v["data-property"] for v in css(browser, "#violations li[data-property]")] == [
+            p for p, _, _ in VIOLATIONS]
+        watch = subprocess.run([sys.executable, "-m", "skinet_cli.main", *head[2].split()[1:], "--once"], cwd=REPO,
+                               capture_output=True, text=True, timeout=60)
+        assert watch.returncode == 0 and watch.stdout.startswith("SkiNet Live  system spot_arm  step "), \
+            watch.stdout + watch.stderr
+        assert watch.stdout.splitlines()[-1] == "divergences and manager restarts (0)"
+        assert proc.stderr.readline().startswith("skinet demo: the run is over; the chain keeps running for the "
+                                                  "views for 60 s")
+    finally:
+        proc.terminate()
+        out, err = proc.communicate(timeout=30)
+    assert proc.returncode == 0, err
+    lines = out.splitlines()
+    assert lines[0] == f"== unassisted run ({MISSIONS / 'unassisted.toml'}), live at speed 10: 62 steps, system spot_arm"
+    assert "   violations: 3; action_guard at step 26; safety_guard at step 33; action_guard at step 38" in lines
+    assert sum(line.startswith("  step ") for line in lines) == 62  # every step, as it was played
