@@ -35,7 +35,6 @@ from tests.services.test_monitor import Events
 
 SYSTEM_FILE = REPO / "skillsets" / "spot_arm.toml"
 MISSIONS = REPO / "skillsets" / "missions"
-CHROMIUM, DRIVER = shutil.which("chromium"), shutil.which("chromedriver")
 # MISSION.md in `skinet demo` numbering: (property, step, the step's command).
 VIOLATIONS = [("action_guard", 26, "spot:teleop.start"), ("safety_guard", 33, "spot:go_to_waypoint.start"),
               ("action_guard", 38, "manipulator:arm_ready.start")]
@@ -47,21 +46,13 @@ WARNINGS = [(29, "spot", "go_to_waypoint.start", "safety_guard"), (36, "manipula
 
 @pytest.fixture(scope="module")
 def browser() -> Iterator[object]:
-    """Headless Chromium; skipped with the reason when Chromium or selenium is missing."""
-    if CHROMIUM is None or DRIVER is None:
-        pytest.skip("Chromium is not installed (Debian packages chromium and chromium-driver; "
-                    "scripts/install-test-deps.sh installs them)")
-    webdriver = pytest.importorskip("selenium.webdriver", reason="selenium is not installed (pip install -e '.[test]')")
-    from selenium.webdriver.chrome.options import Options
-    from selenium.webdriver.chrome.service import Service
+    """Headless Chromium (tests/screenshot.py's); skipped with the reason when Chromium or selenium is missing."""
+    from tests.screenshot import Unavailable, chromium
 
-    options = Options()
-    options.binary_location = CHROMIUM
-    for flag in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage",
-                 "--window-size=1500,1900", "--no-first-run", "--disable-extensions"):
-        options.add_argument(flag)
-    driver = webdriver.Chrome(service=Service(DRIVER), options=options)
-    driver.set_page_load_timeout(20)
+    try:
+        driver = chromium()
+    except Unavailable as exc:
+        pytest.skip(str(exc))
     try:
         yield driver
     finally:
@@ -575,3 +566,25 @@ def test_live_demo_plays_the_mission_for_the_dashboard_and_watch(browser, tmp_pa
     assert lines[0] == f"== unassisted run ({MISSIONS / 'unassisted.toml'}), live at speed 10: 62 steps, system spot_arm"
     assert "   violations: 3; action_guard at step 26; safety_guard at step 33; action_guard at step 38" in lines
     assert sum(line.startswith("  step ") for line in lines) == 62  # every step, as it was played
+
+
+def test_the_screenshot_target_photographs_the_live_dashboard(browser, tmp_path) -> None:
+    """``make screenshot`` (tests/screenshot.py) writes docs/dashboard.png: here into a temporary folder
+    (``browser``: skipped where Chromium is missing, as the script would fail)."""
+    import subprocess
+    import sys
+
+    from PIL import Image
+
+    out = tmp_path / "dashboard.png"
+    done = subprocess.run([sys.executable, "tests/screenshot.py", "-o", str(out), "--speed", "4"], cwd=REPO,
+                          capture_output=True, text=True, timeout=180)
+    assert (done.returncode, done.stderr) == (0, ""), done.stderr
+    assert done.stdout == (f"{out}: 1400x{Image.open(out).height} PNG of the live dashboard at step 37, 2 violations, "
+                           "violated now: none\n")
+    picture = Image.open(out).convert("RGB")
+    assert picture.width == 1400 and 1000 < picture.height < 2400
+    assert picture.getpixel((5, 5)) == (0x1D, 0x2B, 0x3A)  # the page's header
+    colours = set(picture.getdata())
+    assert (0xD6, 0x27, 0x28) in colours  # the violated-bar of the timeline (two violations so far)
+    assert (0xFB, 0xD3, 0xD0) in colours  # the badge of an explicit constraint: the warning on arm_ready.start

@@ -463,9 +463,11 @@ function renderTimeline() {
     plot.append(tick);
   }
   view.violations.filter(Boolean).forEach((v, n) => {  // labels on three staggered rows
-    const vx = x(v.t), ly = 12 + (n % 3) * 11;
+    const vx = x(v.t), ly = 12 + (n % 3) * 11, text = `${v.property} (step ${v.seq})`;
+    const before = vx + 3 + textWidth(text, 11) > left + plotW;  // left of its line at the right edge: never cut
     plot.append(svg("line", { x1: vx, x2: vx, y1: ly + 2, y2: cTop + chartH, class: "violation-line" }));
-    plot.append(svg("text", { x: vx + 3, y: ly, class: "violation-label" }, `${v.property} (step ${v.seq})`));
+    plot.append(svg("text", { x: before ? vx - 3 : vx + 3, y: ly, class: "violation-label",
+      "text-anchor": before ? "end" : "start" }, text));
   });
   drawDivergences(plot, x, v0, v1, top, cTop + chartH);
   for (let k = 1; k < pts.length; k++) {
