@@ -31,6 +31,7 @@ from skinet.files import load_system, load_typemap, read_text
 from skinet.mission import StepRecord, parse_scenario
 from skinet.wire.messages import LiveState, PropertyVerdict, UnsafeReport, Verdicts
 from tests.services.conftest import REPO, client_args, free_port, open_client, open_router
+from tests.services.test_divergences import TEN
 from tests.services.test_monitor import Events
 
 SYSTEM_FILE = REPO / "skillsets" / "spot_arm.toml"
@@ -398,60 +399,62 @@ def test_no_violation_reads_none_not_a_numbered_none(browser, dashboard) -> None
 # -- divergences and manager restarts stay listed; the timeline zooms and pans (issue 27 item 4) ------------
 
 NOT_ENABLED = "'init_power.success.powered_on' is not enabled in the live marking"
-TEN_STEPS = [("spot", "init_power.start"), ("spot", "init_power.success.powered_on"), ("spot", "stand_up.start"),
-             ("spot", "stand_up.success.standing"), ("spot", "go_to_waypoint.start"),
-             ("spot", "go_to_waypoint.success.arrived"), ("spot", "teleop.start"), ("spot", "teleop.success.done"),
-             ("spot", "sit_down.start"), ("spot", "sit_down.success.sitting")]
 RESTART_INFO = "manager restarted (the manager (or its gateway) came back); same state as before"
+
+
+@pytest.fixture
+def monitored(router: str) -> Iterator[tuple[object, object]]:
+    """A monitor of the paper's system on a client of ``router``: (its session, the monitor)."""
+    session = open_client(router)
+    monitor = start_monitor(session, load_system(SYSTEM_FILE)[0])
+    try:
+        yield session, monitor
+    finally:
+        monitor.close()
+        session.close()
 
 
 def divergence_items(driver) -> list[tuple[str, str, str]]:
     return [(d["data-kind"], d["data-seq"], d["text"]) for d in css(driver, "#divergences li[data-kind]")]
 
 
-def test_divergences_stay_listed_for_the_run_and_a_late_page_gets_them(browser, dashboard, router, tmp_path):
-    session = open_client(router)
-    system, _ = load_system(SYSTEM_FILE)
-    monitor = start_monitor(session, system)
-    try:
-        browser.get(dashboard())
-        until(browser, lambda d: css(d, "#status[data-connected=true]"), "the live status")
-        assert css(browser, "#divergences li.none") and css(browser, "#divergence-count")[0]["text"] == "(0)"
-        events = Events(session)
-        events.send("spot", "init_power.success.powered_on")  # step 1: init_power never started
-        items = until(browser, lambda d: divergence_items(d), "the divergence listed")
-        assert re.fullmatch(r"model divergence at monitor step 1 \(\d\d:\d\d:\d\d\): "
-                            rf"spot:init_power.success.powered_on#1 \u2014 {NOT_ENABLED}", items[0][2]), items
-        assert "hidden" not in css(browser, "#divergence")[0]  # the step's own banner, as before
-        for skillset, transition in TEN_STEPS:  # steps 2 to 11
-            events.send(skillset, transition)
-        until(browser, lambda d: css(d, "body")[0]["data-seq"] == "11", "ten more steps")
-        assert "hidden" in css(browser, "#divergence")[0]  # the banner lasted its step ...
-        assert divergence_items(browser) == items  # ... the list did not
-        marks = css(browser, "#timeline .divergence-mark")
-        assert [(m["data-n"], m["data-kind"], m["data-seq"]) for m in marks] == [("0", "divergence", "1")]
-        assert NOT_ENABLED in marks[0]["text"]  # its tooltip
-        # A manager restart (the bridge says so in its event) in the same state: no step, listed at the step
-        # shown, with the bridge's words.
-        events.send("spot", None, restart=True, info=RESTART_INFO,
-                    status={"resources": {"power_status": "PowerOn", "posture": "Sitting", "control_mode": "Idle"},
-                            "running": []})
-        until(browser, lambda d: len(divergence_items(d)) == 2, "the restart listed")
-        kind, seq, text = divergence_items(browser)[1]
-        assert (kind, seq) == ("restart", "11") and text.endswith(f"spot:status#12 \u2014 {RESTART_INFO}"), text
-        screenshot(browser, tmp_path, "dashboard-divergences.png")
+def test_divergences_stay_listed_for_the_run_and_a_late_page_gets_them(browser, dashboard, monitored, tmp_path):
+    session, _ = monitored
+    browser.get(dashboard())
+    until(browser, lambda d: css(d, "#status[data-connected=true]"), "the live status")
+    assert css(browser, "#divergences li.none") and css(browser, "#divergence-count")[0]["text"] == "(0)"
+    events = Events(session)
+    events.send("spot", "init_power.success.powered_on")  # step 1: init_power never started
+    items = until(browser, lambda d: divergence_items(d), "the divergence listed")
+    assert re.fullmatch(r"model divergence at monitor step 1 \(\d\d:\d\d:\d\d\): "
+                        rf"spot:init_power.success.powered_on#1 \u2014 {NOT_ENABLED}", items[0][2]), items
+    assert "hidden" not in css(browser, "#divergence")[0]  # the step's own banner, as before
+    for skillset, transition in TEN:  # steps 2 to 11
+        events.send(skillset, transition)
+    until(browser, lambda d: css(d, "body")[0]["data-seq"] == "11", "ten more steps")
+    assert "hidden" in css(browser, "#divergence")[0]  # the banner lasted its step ...
+    assert divergence_items(browser) == items  # ... the list did not
+    marks = css(browser, "#timeline .divergence-mark")
+    assert [(m["data-n"], m["data-kind"], m["data-seq"]) for m in marks] == [("0", "divergence", "1")]
+    assert NOT_ENABLED in marks[0]["text"]  # its tooltip
+    # A manager restart (the bridge says so in its event) in the same state: no step, listed at the step
+    # shown, with the bridge's words.
+    events.send("spot", None, restart=True, info=RESTART_INFO,
+                status={"resources": {"power_status": "PowerOn", "posture": "Sitting", "control_mode": "Idle"},
+                        "running": []})
+    until(browser, lambda d: len(divergence_items(d)) == 2, "the restart listed")
+    kind, seq, text = divergence_items(browser)[1]
+    assert (kind, seq) == ("restart", "11") and text.endswith(f"spot:status#12 \u2014 {RESTART_INFO}"), text
+    screenshot(browser, tmp_path, "dashboard-divergences.png")
 
-        # A page of a dashboard started now (it joined late) gets the list so far from the monitor.
-        browser.get(dashboard())
-        until(browser, lambda d: len(divergence_items(d)) == 2, "the list on a late page")
-        assert divergence_items(browser) == items + [(kind, seq, text)]
-        assert css(browser, "#divergence-count")[0]["text"] == "(2)"
-        # Its timeline starts at the step it joined at (11): the restart is marked, the earlier divergence only
-        # listed.
-        assert [m["data-kind"] for m in css(browser, "#timeline .divergence-mark")] == ["restart"]
-    finally:
-        monitor.close()
-        session.close()
+    # A page of a dashboard started now (it joined late) gets the list so far from the monitor.
+    browser.get(dashboard())
+    until(browser, lambda d: len(divergence_items(d)) == 2, "the list on a late page")
+    assert divergence_items(browser) == items + [(kind, seq, text)]
+    assert css(browser, "#divergence-count")[0]["text"] == "(2)"
+    # Its timeline starts at the step it joined at (11): the restart is marked, the earlier divergence only
+    # listed.
+    assert [m["data-kind"] for m in css(browser, "#timeline .divergence-mark")] == ["restart"]
 
 
 def window(driver) -> tuple[float, float, str]:
@@ -459,69 +462,63 @@ def window(driver) -> tuple[float, float, str]:
     return float(box["data-t0"]), float(box["data-t1"]), box["data-zoomed"]
 
 
-def test_the_timeline_zooms_and_pans_and_never_cuts_its_labels(browser, dashboard, router, tmp_path):
+def test_the_timeline_zooms_and_pans_and_never_cuts_its_labels(browser, dashboard, monitored, tmp_path):
     from selenium.webdriver.common.action_chains import ActionChains
     from selenium.webdriver.common.actions.wheel_input import ScrollOrigin
 
-    session = open_client(router)
-    system, _ = load_system(SYSTEM_FILE)
-    monitor = start_monitor(session, system)
-    try:
-        browser.get(dashboard())
-        until(browser, lambda d: css(d, "body")[0]["data-seq"] == "0", "the start")
-        events = Events(session)
-        for skillset, transition in TEN_STEPS:  # a run of about 8 s
-            events.send(skillset, transition)
-            time.sleep(0.8)
-        until(browser, lambda d: css(d, "body")[0]["data-seq"] == "10", "the run")
-        first = float(browser.execute_script("return view.points[0].t"))
-        t0, t1, zoomed = window(browser)
-        assert (t0, zoomed) == (round(first, 3), "false") and t1 - t0 > 8
-        # Lane names are whole (none starts left of the picture); a state's name stays inside its shape.
-        overflow = browser.execute_script("""
-            const out = [];
-            for (const t of document.querySelectorAll('#timeline .lane-label'))
-              if (t.getBBox().x < 0) out.push('lane ' + t.textContent);
-            for (const t of document.querySelectorAll('#timeline .state-label')) {
-              const r = t.previousElementSibling.getBBox(), b = t.getBBox();
-              if (b.x + b.width > r.x + r.width + 0.5) out.push('state ' + t.textContent);
-            }
-            return out;""")
-        assert overflow == []
-        assert css(browser, "#timeline .lane-label")  # drawn
+    session, _ = monitored
+    browser.get(dashboard())
+    until(browser, lambda d: css(d, "body")[0]["data-seq"] == "0", "the start")
+    events = Events(session)
+    for skillset, transition in TEN:  # a run of about 8 s
+        events.send(skillset, transition)
+        time.sleep(0.8)
+    until(browser, lambda d: css(d, "body")[0]["data-seq"] == "10", "the run")
+    first = float(browser.execute_script("return view.points[0].t"))
+    t0, t1, zoomed = window(browser)
+    assert (t0, zoomed) == (round(first, 3), "false") and t1 - t0 > 8
+    # Lane names are whole (none starts left of the picture); a state's name stays inside its shape.
+    overflow = browser.execute_script("""
+        const out = [];
+        for (const t of document.querySelectorAll('#timeline .lane-label'))
+          if (t.getBBox().x < 0) out.push('lane ' + t.textContent);
+        for (const t of document.querySelectorAll('#timeline .state-label')) {
+          const r = t.previousElementSibling.getBBox(), b = t.getBBox();
+          if (b.x + b.width > r.x + r.width + 0.5) out.push('state ' + t.textContent);
+        }
+        return out;""")
+    assert overflow == []
+    assert css(browser, "#timeline .lane-label")  # drawn
 
-        browser.find_element("id", "zoom-in").click()  # half the span, at the live edge
-        until(browser, lambda d: window(d)[2] == "true", "the zoomed window")
-        z0, z1, _ = window(browser)
-        assert abs((z1 - z0) - (t1 - t0) / 2) < 1.0 and z1 >= t1 - 0.01
+    browser.find_element("id", "zoom-in").click()  # half the span, at the live edge
+    until(browser, lambda d: window(d)[2] == "true", "the zoomed window")
+    z0, z1, _ = window(browser)
+    assert abs((z1 - z0) - (t1 - t0) / 2) < 1.0 and z1 >= t1 - 0.01
 
-        svg = browser.find_element("id", "timeline")
-        left = float(browser.execute_script("return frame.left"))
-        plot_w = float(browser.execute_script("return frame.plotW"))
-        width = float(svg.get_attribute("width"))
-        at = left + plot_w / 2  # the wheel at the middle of the plot: the time there stays put
-        middle = z0 + (z1 - z0) / 2
-        ActionChains(browser).scroll_from_origin(ScrollOrigin.from_element(svg, int(at - width / 2), 0), 0, -100) \
-            .perform()
-        until(browser, lambda d: window(d)[1] - window(d)[0] < (z1 - z0) * 0.9, "the wheel's zoom")
-        w0, w1, _ = window(browser)
-        assert abs((w1 - w0) - 0.8 * (z1 - z0)) < 0.5 and abs((w0 + w1) / 2 - middle) < 0.5
+    svg = browser.find_element("id", "timeline")
+    left = float(browser.execute_script("return frame.left"))
+    plot_w = float(browser.execute_script("return frame.plotW"))
+    width = float(svg.get_attribute("width"))
+    at = left + plot_w / 2  # the wheel at the middle of the plot: the time there stays put
+    middle = z0 + (z1 - z0) / 2
+    ActionChains(browser).scroll_from_origin(ScrollOrigin.from_element(svg, int(at - width / 2), 0), 0, -100) \
+        .perform()
+    until(browser, lambda d: window(d)[1] - window(d)[0] < (z1 - z0) * 0.9, "the wheel's zoom")
+    w0, w1, _ = window(browser)
+    assert abs((w1 - w0) - 0.8 * (z1 - z0)) < 0.5 and abs((w0 + w1) / 2 - middle) < 0.5
 
-        # A drag of 200 px to the right shows earlier times, the same span.
-        ActionChains(browser).move_to_element_with_offset(svg, int(at - width / 2), 0).click_and_hold() \
-            .move_by_offset(200, 0).release().perform()
-        until(browser, lambda d: window(d)[0] < w0 - 0.1, "the pan")
-        p0, p1, _ = window(browser)
-        shift = 200 / plot_w * (w1 - w0)
-        assert abs((p1 - p0) - (w1 - w0)) < 0.01 and abs((w0 - p0) - shift) < 0.3 * shift
-        screenshot(browser, tmp_path, "dashboard-zoomed.png")
+    # A drag of 200 px to the right shows earlier times, the same span.
+    ActionChains(browser).move_to_element_with_offset(svg, int(at - width / 2), 0).click_and_hold() \
+        .move_by_offset(200, 0).release().perform()
+    until(browser, lambda d: window(d)[0] < w0 - 0.1, "the pan")
+    p0, p1, _ = window(browser)
+    shift = 200 / plot_w * (w1 - w0)
+    assert abs((p1 - p0) - (w1 - w0)) < 0.01 and abs((w0 - p0) - shift) < 0.3 * shift
+    screenshot(browser, tmp_path, "dashboard-zoomed.png")
 
-        browser.find_element("id", "zoom-all").click()  # the whole run again, following it
-        until(browser, lambda d: window(d)[2] == "false", "the whole run")
-        assert window(browser)[0] == round(first, 3)
-    finally:
-        monitor.close()
-        session.close()
+    browser.find_element("id", "zoom-all").click()  # the whole run again, following it
+    until(browser, lambda d: window(d)[2] == "false", "the whole run")
+    assert window(browser)[0] == round(first, 3)
 
 
 # -- the one-command live demo (issue 27 item 5) -------------------------------------------------------------
