@@ -12,8 +12,9 @@ that follows a restart of the skillset's manager (``CanonicalEvent.restart``, se
 bridge), whether or not the model explains the manager's new state.  A restart event is
 noted when it arrives even if it is never applied (it waited while its skillset was
 syncing and the resync answer covered it); each event (skillset, source, epoch, seq) is
-noted once.  Cost: O(1) per event; each entry is packed once, so a message joins bytes
-(O(entries) copies, no validation per publication).
+noted once.  Texts are cut at :data:`MAX_TEXT` characters, so a list holds at most
+about 400 000 characters whatever the events carry.  Cost: O(1) per event; each entry is packed
+once, so a message joins bytes (O(entries) copies, no validation per publication).
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ import msgpack
 from skinet.wire.messages import MAX_DIVERGENCES, SCHEMA_VERSION, CanonicalEvent, Divergence
 
 REMEMBERED = 1024  # events already noted, kept to note each once
+MAX_TEXT = 500  # characters of an entry's event, reason and info (an event may carry 64 KiB of text)
 
 
 def event_name(ev: CanonicalEvent) -> str:
@@ -59,7 +61,8 @@ class DivergenceLog:
         if len(self._noted) > REMEMBERED:
             self._noted.popitem(last=False)
         entry = Divergence(n=self.total, kind="restart" if ev.restart else "divergence", seq=seq, stamp=stamp,
-                           skillset=ev.skillset, event=event_name(ev), reason=divergence or "", info=ev.info)
+                           skillset=_cut(ev.skillset), event=_cut(event_name(ev)), reason=_cut(divergence or ""),
+                           info=_cut(ev.info))
         self.entries.append((entry, self._packer.pack(entry.model_dump(mode="json"))))
         self.total += 1
         return entry
@@ -73,3 +76,7 @@ class DivergenceLog:
                                                        ("older", self.older)))
         entries = self._packer.pack_array_header(len(self.entries)) + b"".join(packed for _, packed in self.entries)
         return self._packer.pack_map_header(6) + head + pack("entries") + entries
+
+
+def _cut(text: str) -> str:
+    return text if len(text) <= MAX_TEXT else text[:MAX_TEXT - 1] + "\u2026"

@@ -83,6 +83,9 @@ def test_the_log_keeps_the_last_entries_and_packs_what_the_codec_encodes() -> No
                                             event="arm:pick.start#4", reason="why 4")
     assert msgpack.unpackb(DivergenceLog("s", "m2").payload(1.0)) == {
         "v": 1, "system": "s", "monitor": "m2", "stamp": 1.0, "older": 0, "entries": []}
+    # A forged event's texts are cut: a full list stays small whatever the events carry.
+    huge = log.note(event(7, "x" * 60_000, restart=True, info="y" * 60_000), "z" * 60_000, 6, 18.0)
+    assert [len(t) for t in (huge.event, huge.reason, huge.info)] == [500, 500, 500] and huge.info.endswith("\u2026")
 
 
 def test_a_divergence_outlives_its_step_and_late_joiners_get_the_list(router, client_factory) -> None:
