@@ -27,6 +27,7 @@ from typing import Any
 
 import msgpack
 
+from services.monitor.divergences import event_name
 from skinet.live import LiveSystem
 from skinet.system import Marking, System, marking_from_json
 from skinet.verify.algorithm1 import Analysis, analyse
@@ -267,7 +268,7 @@ class Engine:
             self.counters.divergences += 1
         if ev.transition is None and not hit[1] and hit[2] is None:
             return None
-        return self._step(f"{ev.skillset}:{ev.transition or 'status'}#{ev.seq}", hit[1], hit[2])
+        return self._step(event_name(ev), hit[1], hit[2])
 
     def prediction(self, key: MarkingKey | None = None) -> Prediction | None:
         """The prediction for the live marking (``key`` when known), if any (SPEC §5)."""
