@@ -2,6 +2,8 @@
 # Both create .venv and install the project with its test dependencies first.
 # `make test-quick` skips the tests marked slow (Docker images and containers,
 # cargo and other native builds): for development, not a replacement of `make test`.
+# `make screenshot` photographs the live dashboard for the README (docs/dashboard.png):
+# `skinet demo --live` in headless Chromium (tests/screenshot.py; needs chromium).
 # Both run pytest on every core (pytest-xdist, at most 4 workers); a module of slow
 # tests, or of tests sharing a module-scoped fixture, runs whole on one worker, in
 # file order (tests/conftest.py), while the other tests are spread one by one.
@@ -17,7 +19,7 @@ PYTEST := -m pytest -q -n auto --maxprocesses 4 --dist loadgroup --durations 15
 VENV ?= .venv
 STAMP := $(VENV)/.installed-stamp
 
-.PHONY: demo test test-quick test-deps bench clean
+.PHONY: demo test test-quick test-deps bench screenshot clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -36,6 +38,9 @@ test: $(STAMP) test-deps
 
 test-quick: $(STAMP)
 	$(VENV)/bin/python $(PYTEST) -m "not slow"
+
+screenshot: $(STAMP)
+	$(VENV)/bin/python tests/screenshot.py -o docs/dashboard.png
 
 bench: $(STAMP)
 	for b in benchmarks/bench_*.py; do $(VENV)/bin/python $$b || exit 1; done

@@ -56,6 +56,7 @@ def run_chain(
     simulator: Simulator | None = None,
     style: KeyStyle = KeyStyle(),
     on_record: Callable[[StepRecord], None] | None = None,
+    after: Callable[[list[StepRecord]], None] | None = None,
 ) -> list[StepRecord]:
     """Drive ``scenario`` through the whole chain and record what the monitor published.
 
@@ -66,7 +67,8 @@ def run_chain(
     router, so that other processes can watch) and its own ``simulator`` (for
     instance managers on DDS behind a gateway whose keys are ``style``), which it
     then closes itself.  ``on_record`` is called after each step with what the
-    monitor showed then.
+    monitor showed then, ``after`` with the records once the run is over, while
+    every service still runs (``skinet demo --live`` keeps serving the views then).
     """
     with _embedded(session, system, predict) as (session, monitor, services):
         external = simulator is not None
@@ -92,6 +94,8 @@ def run_chain(
 
         records, on_step = _recorder(system, monitor, caught_up, predict, settle, on_record)
         simulator.drive(scenario, speed=speed, on_step=on_step)
+        if after is not None:
+            after(records)
         return records
 
 
@@ -106,6 +110,7 @@ def run_bound_chain(
     session: zenoh.Session | None = None,
     style: KeyStyle = KeyStyle(),
     on_record: Callable[[StepRecord], None] | None = None,
+    after: Callable[[list[StepRecord]], None] | None = None,
 ) -> list[StepRecord]:
     """:func:`run_chain` for a system whose skillsets are all bound to plain ROS 2 interfaces (SPEC §9).
 
@@ -138,6 +143,8 @@ def run_bound_chain(
 
         records, on_step = _recorder(system, monitor, step_done, predict, settle, on_record)
         robot.drive(scenario, speed=speed, on_step=on_step)
+        if after is not None:
+            after(records)
         return records
 
 
@@ -145,7 +152,8 @@ def run_bound_chain(
 def _embedded(session: zenoh.Session | None, system: System,
               predict: bool) -> Iterator[tuple[zenoh.Session, Any, list[Any]]]:
     """A session (a new peer one unless given), the monitor and a predictor on it, and the list of
-    services to close in reverse order at the end (the session too, if it is ours)."""
+    services to close at the end: the monitor first, then the others in reverse order (the session too, if it
+    is ours)."""
     own = session is None
     if session is None:
         session = zenoh.open(session_config("peer", multicast_scouting=False))
@@ -157,7 +165,8 @@ def _embedded(session: zenoh.Session | None, system: System,
             services.append(start_predictor(session, "embedded"))
         yield session, monitor, services
     finally:
-        for service in reversed(services):
+        # The monitor first: it would report the bridge's leaving as a lost link on standard error.
+        for service in [services[0], *reversed(services[1:])] if services else []:
             service.close()
         if own:
             session.close()

@@ -22,9 +22,9 @@ import socket
 import sys
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, TextIO
+from typing import TYPE_CHECKING, Any, TextIO
 
 from services.common.zenoh_config import (
     ZenohSetupError, client_name, login, open_session, session_config, session_mode, warn_on_stderr,
@@ -140,6 +140,28 @@ def summary(view: MonitorView | Observed) -> str:
             f"prediction {'stale' if u.prediction_stale else 'fresh'}{div}{state}")
 
 
+def divergence_line(d: Mapping[str, Any], loud: bool = False) -> str:
+    """One model divergence or manager restart (a :class:`~skinet.wire.messages.Divergence` as JSON), in the
+    operator's words: what (in capitals when ``loud``: a line of its own in a pipe), the monitor step and time,
+    the event, why."""
+    if d["kind"] == "restart":
+        what, words = "manager restart", [d["info"], d["reason"] and f"model divergence: {d['reason']}"]
+    else:
+        what, words = "model divergence", [d["reason"], d["info"]]
+    why = "; ".join(w for w in words if w)
+    return f"{what.upper() if loud else what} at step {d['seq']} ({_clock(d['stamp'])}): {d['event']}: {why}"
+
+
+def divergence_lines(entries: Sequence[Mapping[str, Any]], older: int, last: int = 10) -> list[str]:
+    """The view's list of model divergences and manager restarts: a count, then the ``last`` ones."""
+    total = older + len(entries)
+    shown = list(entries[-last:]) if last else []
+    out = [f"divergences and manager restarts ({total})"]
+    if total > len(shown):
+        out.append(f"  ({total - len(shown)} earlier not shown)")
+    return out + ["  " + divergence_line(d) for d in shown]
+
+
 def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     """``skinet run``: see the module docstring; returns the exit status."""
     from services.predictor.service import start_predictor
@@ -213,15 +235,17 @@ def fix_free_ports(config: zenoh.Config) -> list[str]:
     return endpoints
 
 
-def connect_lines(args: argparse.Namespace, system: System, mode: str, listening: list[str]) -> list[str]:
-    """What ``skinet run`` prints at start: where it listens, and the exact commands that reach it."""
+def connect_lines(args: argparse.Namespace, system: System, mode: str, listening: list[str],
+                  prog: str = "skinet run", bridge: bool = True) -> list[str]:
+    """What ``skinet run`` (or ``prog``) prints at start: where it listens, and the exact commands that reach it
+    (``bridge``: the bridge's too, for the system file ``args.system``)."""
     if mode == "peer":
         endpoint = next((e for e in listening if e.startswith("tcp/")), listening[0] if listening else "")
         endpoint = re.sub(r"^tcp/0\.0\.0\.0:", "tcp/127.0.0.1:", re.sub(r"^tcp/\[::\]:", "tcp/[::1]:", endpoint))
-        head = f"skinet run: system {system.name}, listening on {', '.join(listening)}; connect with:"
+        head = f"{prog}: system {system.name}, listening on {', '.join(listening)}; connect with:"
     else:
         endpoint = (args.connect or ["(its --zenoh-config router)"])[0]
-        head = f"skinet run: system {system.name}, a client of the router at {endpoint}; connect with:"
+        head = f"{prog}: system {system.name}, a client of the router at {endpoint}; connect with:"
     folder = Path(args.password_file).parent if args.password_file else Path("~/.config/skinet/secrets")
 
     def flags(user: str) -> str:  # a router's users log in; a peer of skinet run takes no login
@@ -230,10 +254,12 @@ def connect_lines(args: argparse.Namespace, system: System, mode: str, listening
 
     first = system.components[0]
     command = f"{first.name}:{first.skillset.skills[0].name}.start" if first.skillset.skills else "SKILLSET:TRANSITION"
-    return [head, f"  skinet watch {system.name} {flags('observer')}",
-            f"  skinet dashboard {system.name} {flags('observer')}",
-            f"  skinet check {system.name} {command} {flags('observer')}",
-            f"  python -m services.bridge_ros2 {args.system} {flags('bridge')}   (the robot's side)"]
+    lines = [head, f"  skinet watch {system.name} {flags('observer')}",
+             f"  skinet dashboard {system.name} {flags('observer')}",
+             f"  skinet check {system.name} {command} {flags('observer')}"]
+    if bridge:
+        lines.append(f"  python -m services.bridge_ros2 {args.system} {flags('bridge')}   (the robot's side)")
+    return lines
 
 
 def start_dashboard(session: zenoh.Session, name: str, host: str, port: int, client: str,
@@ -254,18 +280,26 @@ def start_dashboard(session: zenoh.Session, name: str, host: str, port: int, cli
 
 
 def _follow(monitor: Monitor, stop: threading.Event, duration: float | None, out: TextIO) -> None:
-    """Redraw (terminal) or log (pipe) the view whenever it changes, until stopped."""
+    """Redraw (terminal) or log (pipe) the view whenever it changes, until stopped; the divergences and
+    manager restarts are listed below the view, or a line each in a pipe."""
     tty = out.isatty()
     end = None if duration is None else time.monotonic() + duration
     shown: tuple | None = None
+    listed, noted = 0, monitor.divergences()
     while not stop.is_set() and (end is None or time.monotonic() < end):
         view = monitor.snapshot()
         stats = dataclasses.astuple(view.predictor)
         if shown is None or view.version != shown[0] or (tty and stats != shown[1]):
+            if monitor.divergences_published != noted.older + len(noted.entries):
+                noted = monitor.divergences()
+            entries = [d.model_dump(mode="json") for d in noted.entries]
             if tty:
-                out.write(CLEAR + "\n".join(render(view, colour=True)) + "\n")
+                lines = render(view, colour=True) + divergence_lines(entries, noted.older)
+                out.write(CLEAR + "\n".join(lines) + "\n")
             else:
                 out.write(summary(view) + "\n")
+                out.writelines(divergence_line(d, loud=True) + "\n" for d in entries if d["n"] >= listed)
+                listed = noted.older + len(noted.entries)
             out.flush()
             shown = (view.version, stats)
         monitor.wait_change(view.version, 0.25)

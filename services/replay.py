@@ -2,11 +2,11 @@
 
 A monitor log (``skinet record``, ``skinet demo --log``: :mod:`skinet.wire.log`,
 :mod:`skinet.wire.mcap_log`) holds what the monitor published on
-``skinet/<system>/{state,verdicts,unsafe,state_space}``.  :class:`Replay`
+``skinet/<system>/{state,verdicts,unsafe,state_space,divergences}``.  :class:`Replay`
 publishes those messages again, unchanged (their stamps too), on the same keys
 and at the recorded pace divided by ``speed``, so that ``skinet dashboard``,
 ``skinet watch`` and ``skinet record`` (then ``skinet timeline``) follow it as
-they follow a live run.  Like the monitor it answers ``get`` on the four keys
+they follow a live run.  Like the monitor it answers ``get`` on the five keys
 with the last message published so far (late joiners), serves the log's model
 bundle on ``skinet/<system>/model/<digest>`` and holds a liveliness token,
 ``skinet/<system>/alive/monitor/replay-<id>``, so that observers find it.
@@ -42,7 +42,7 @@ from skinet.wire.messages import CheckReply, ModelBundle
 # The monitor's publications: message type -> its key.
 RESULTS: dict[str, Callable[[str], str]] = {
     "LiveState": keys.state, "Verdicts": keys.verdicts, "UnsafeReport": keys.unsafe,
-    "StateSpaceReport": keys.state_space,
+    "StateSpaceReport": keys.state_space, "Divergences": keys.divergences,
 }
 INSTANCE_PREFIX = "replay-"  # of the liveliness token's instance id: observers show who publishes
 
@@ -72,8 +72,8 @@ def recording(entries: Sequence[Entry], source: str) -> Recording:
     messages = tuple(e for e in entries if e.type in RESULTS)
     if not messages:
         kinds = ", ".join(f"{n} {t}" for t, n in sorted(Counter(e.type for e in entries).items())) or "nothing"
-        raise SourceError.at(source, None, f"no message of a monitor to replay (LiveState, Verdicts, UnsafeReport, "
-                                           f"StateSpaceReport): the log holds {kinds}")
+        raise SourceError.at(source, None, f"no message of a monitor to replay ({', '.join(RESULTS)}): "
+                                           f"the log holds {kinds}")
     model = next((e.message for e in entries if isinstance(e.message, ModelBundle)), None)
     left_out = Counter(e.type for e in entries if e.type not in RESULTS and e.type != "ModelBundle")
     return Recording(systems[0], messages, model, dict(sorted(left_out.items())))

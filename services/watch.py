@@ -2,8 +2,10 @@
 
 A read-only observer (:class:`~services.dashboard.observer.Observer`) follows the
 monitor's messages through Zenoh; the view is the one ``skinet run`` draws
-(:func:`services.embedded.render`), plus the services alive and the violations
-seen: redrawn in place on a terminal, one line per step otherwise (:class:`StepLines`); a
+(:func:`services.embedded.render`), plus the services alive, the violations
+seen and the model divergences and manager restarts of the run (the monitor's list so
+far, for a watch that joins late too): redrawn in place on a terminal, one line per step
+otherwise (:class:`StepLines`) and one per divergence or restart; a
 state the monitor cannot vouch for (a skillset syncing or lost, SPEC §7) is a banner on top,
 red or yellow on a terminal, and ``STATE STALE`` in a pipe's line (a skillset lost is a line at
 once, one still syncing after a second too).  With no
@@ -26,7 +28,7 @@ from services.common.zenoh_config import (
 from services.dashboard.board import Board
 from services.dashboard.observer import Observer
 from services.dashboard.app import no_monitor_message
-from services.embedded import CLEAR, Observed, render, stop_on_signals, summary
+from services.embedded import CLEAR, Observed, divergence_line, divergence_lines, render, stop_on_signals, summary
 from services.replay import INSTANCE_PREFIX as REPLAY
 from skinet.errors import SkinetError
 
@@ -47,7 +49,7 @@ def view_lines(board: Board, colour: bool = False) -> list[str]:
     out.append(f"violations ({len(board.violations)})" + "".join(
         f"\n  {v['property']} at step {v['seq']}" + (f" by {v['event']}" if v["event"] else "")
         for v in board.violations[-10:]))
-    return out
+    return out + divergence_lines(list(board.divergences.values()), board.divergences_older)
 
 
 def _look(board: Board, colour: bool = False) -> tuple[list[str], str, tuple, bool]:
@@ -61,7 +63,8 @@ def _look(board: Board, colour: bool = False) -> tuple[list[str], str, tuple, bo
     stale = tuple((n, state) for n, state in sync if state != "live")
     key = (board.epoch, board.state.seq, stale, board.unsafe.stamp,  # type: ignore[union-attr]
            board.state_space and board.state_space.stamp,
-           tuple(sorted((s, len(ids)) for s, ids in board.alive.items())), len(board.violations))
+           tuple(sorted((s, len(ids)) for s, ids in board.alive.items())), len(board.violations),
+           len(board.divergences) + board.divergences_older)
     fresh = not board.unsafe.prediction_stale and board.state_space is not None and \
         not board.unsafe.state_stale  # type: ignore[union-attr]
     return lines, line, key, fresh
@@ -113,9 +116,22 @@ def watch(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     observer = Observer(session, args.system, client=client_name(config))
     tty = out.isatty()
     seen: deque[tuple[tuple, str, bool]] = deque()  # a pipe's (step, line, final), every update
+    noted: deque[str] = deque()  # a pipe's lines of divergences and restarts not written yet
+    first = [True]  # the first list: a watch that joined late says how many it cannot list
+    in_order = threading.Lock()  # the lines of the snapshot before those of later updates
 
-    def on_update(_updates: object) -> None:  # on Zenoh's thread, the observer's lock held
+    def note(added: list[dict], older: int) -> None:
+        if first[0] and older:
+            noted.append(f"({older} earlier divergences and manager restarts not listed)")
+        first[0] = False
+        noted.extend(divergence_line(d, loud=True) for d in added)
+
+    def on_update(updates: list[dict]) -> None:  # on Zenoh's thread, the observer's lock held
         if not tty and not args.once:
+            with in_order:
+                for u in updates:
+                    if u["kind"] == "divergences":
+                        note(u["added"], u["older"])
             lines, line, key, fresh = _look(observer.board)
             if lines:
                 live = not observer.board.unsafe.state_stale
@@ -125,7 +141,10 @@ def watch(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
         changed.set()
 
     try:
-        observer.listen(on_update)
+        with in_order:
+            start = observer.listen(on_update)
+            if not tty and not args.once and (start["divergences"] or start["divergences_older"]):
+                note(start["divergences"], start["divergences_older"])  # what the observer got before we listened
         if not observer.wait_monitor(args.wait):
             check_connected(session, config)
             raise SkinetError(no_monitor_message(session, args.system).replace("; waiting for one", ""))
@@ -149,6 +168,9 @@ def watch(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
             while seen:
                 steps.see(*seen.popleft())
             steps.due(time.monotonic())
+            if noted:
+                out.writelines(noted.popleft() + "\n" for _ in range(len(noted)))
+                out.flush()
             if done:
                 steps.flush()
                 return 0

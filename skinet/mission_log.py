@@ -5,7 +5,8 @@
 during the run: the model bundle, then per step the bridge's
 :class:`CanonicalEvent` and the monitor's :class:`LiveState`,
 :class:`Verdicts`, :class:`UnsafeReport` (and :class:`StateSpaceReport` when
-predicting), stamped with the step time.  Steps where the operator only
+predicting), stamped with the step time, and after a step the model does not
+allow the monitor's :class:`Divergences` list so far.  Steps where the operator only
 *considers* a command publish nothing.  Pure: no I/O.
 """
 
@@ -22,10 +23,11 @@ from skinet.wire import keys
 from skinet.wire.convert import analysis_bodies, bundle, state_space_report, statuses
 from skinet.wire.log import Entry
 from skinet.wire.messages import (
-    CanonicalEvent, LiveState, UnsafeReport, Verdicts,
+    CanonicalEvent, Divergence, Divergences, LiveState, UnsafeReport, Verdicts,
 )
 
 SOURCE = "replay"
+MONITOR = "demo"  # the monitor instance id of the log's divergence list
 
 
 def records_to_log(
@@ -46,6 +48,7 @@ def records_to_log(
     out += _monitor_step(system, live.marking, 0, 0.0, "", None, predict, budget)
     seqs: dict[str, int] = {}
     step_seq = 0
+    diverged: list[Divergence] = []
     for r in records:
         s = r.step
         if s.transition is None:
@@ -59,6 +62,12 @@ def records_to_log(
         step_seq += 1
         published = _monitor_step(system, live.marking, step_seq, s.t, f"{s.skillset}:{s.transition}#{seq}",
                                   r.divergence, predict, budget)
+        if r.divergence:
+            diverged.append(Divergence(n=len(diverged), kind="divergence", seq=step_seq, stamp=s.t,
+                                       skillset=s.skillset, event=f"{s.skillset}:{s.transition}#{seq}",
+                                       reason=r.divergence, info=s.note))
+            published.append(Entry(s.t, keys.divergences(name), "Divergences", Divergences(
+                system=name, monitor=MONITOR, stamp=s.t, entries=list(diverged))))
         verdicts = next(e.message for e in published if isinstance(e.message, Verdicts))
         if {v.name: v.holds for v in verdicts.properties} != r.holds:
             raise ValueError(f"step {r.index}: verdicts differ from the record (not a replay of this scenario?)")

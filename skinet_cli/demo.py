@@ -7,7 +7,8 @@ import re
 import sys
 from pathlib import Path
 
-from skinet.errors import SourceError
+from skinet.errors import SkinetError, SourceError
+from skinet_cli.live_demo import add_live_args, live_options_misused, play_live
 from skinet_cli.options import add_no_properties_arg, load_live_system, require_properties
 from skinet.explain import plural, warning_line
 from skinet.files import load_bindings, load_typemap, read_text
@@ -29,7 +30,9 @@ DESCRIPTION = (
     "plays a Nav2 base that has no skillset manager, bound to its action servers, lifecycle node and topics "
     "(examples/nav2). A step the model does not allow then is shown as a model divergence. Exit status: 0; 3 when "
     "a run diverged at a step its scenario does not mark expect_divergence = true, or a marked step did not "
-    "diverge; 1 on bad input.")
+    "diverge; 1 on bad input. With --live it plays one run (the paper's unassisted run by default) in real time, "
+    "served on Zenoh for skinet watch, skinet dashboard and skinet check (it prints their lines), and with "
+    "--dashboard PORT serves the dashboard itself.")
 
 
 def default_scenarios() -> list[Path]:
@@ -61,11 +64,17 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     c.add_argument("--all-steps", action="store_true", help="print every step, not only the notable ones")
     c.add_argument("--log", metavar="DIR", help="write each run as a monitor log DIR/<run>.jsonl (see skinet timeline)")
     c.add_argument("--timeline", metavar="DIR", help="draw each run as an operator timeline DIR/<run>.png")
+    add_live_args(c)
     c.set_defaults(func=cmd_demo)
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
-    paths = [example_scenario(p) if p in EXAMPLES else Path(p) for p in args.scenarios] or default_scenarios()
+    misused = live_options_misused(args)
+    if misused or (args.live and (args.core or len(args.scenarios) > 1)):
+        raise SkinetError(misused or ("--live plays the whole chain, not --core" if args.core else
+                                      f"--live plays one run at a time (got {len(args.scenarios)} scenarios)"))
+    paths = [example_scenario(p) if p in EXAMPLES else Path(p) for p in args.scenarios] or (
+        default_scenarios()[:1] if args.live else default_scenarios())
     for folder in {args.log, args.timeline} - {None}:  # before the runs, not after the first one
         try:
             Path(folder).mkdir(parents=True, exist_ok=True)
@@ -79,6 +88,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
         check_scenario(scenario, system, str(path))
         runs.append((path, scenario, system))
     surprises: list[str] = []
+    if args.live:
+        return _live(args, *runs[0])
     for path, scenario, system in runs:
         if args.core:
             records = replay(system, scenario, predict=not args.no_predict)
@@ -108,6 +119,24 @@ def cmd_demo(args: argparse.Namespace) -> int:
         print()
     for line in surprises:
         print(f"skinet demo: {line}", file=sys.stderr)
+    return UNEXPECTED if surprises else 0
+
+
+def _live(args: argparse.Namespace, path: Path, scenario: Scenario, system: System) -> int:
+    """``--live``: each step printed as the monitor showed it, the summary at the end (skinet_cli.live_demo)."""
+    header = (f"== {scenario.name} run ({path}), live at speed {1.0 if args.speed is None else args.speed:g}: "
+              f"{sum(s.transition is not None for s in scenario.steps)} steps, system {system.name}")
+    surprises: list[str] = []
+
+    def after(records: list[StepRecord]) -> None:
+        print(_summary(records), flush=True)
+        surprises.extend(f"{path}: {s}" for s in unexpected(records))
+        for line in surprises:
+            print(f"skinet demo: {line}", file=sys.stderr, flush=True)
+        if args.log or args.timeline:
+            _write_run(args, system, scenario, records)
+
+    play_live(args, path, scenario, system, header, lambda r: print(_line(r), flush=True), after)
     return UNEXPECTED if surprises else 0
 
 

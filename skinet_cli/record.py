@@ -31,12 +31,12 @@ from skinet.wire.codec import DecodeError, decode
 from skinet.wire.log import log_line
 from skinet.wire.mcap_log import McapLogWriter
 from skinet.wire.messages import (
-    MESSAGES, CanonicalEvent, LiveState, ModelBundle, StateSpaceReport, UnsafeReport, Verdicts,
+    MESSAGES, CanonicalEvent, Divergences, LiveState, ModelBundle, StateSpaceReport, UnsafeReport, Verdicts,
 )
 
 BY_KEY: dict[str, type[BaseModel]] = {
     "events": CanonicalEvent, "state": LiveState, "verdicts": Verdicts, "unsafe": UnsafeReport,
-    "state_space": StateSpaceReport, "model": ModelBundle,
+    "state_space": StateSpaceReport, "model": ModelBundle, "divergences": Divergences,
 }
 SHOW_SKIPPED = 5  # undecodable payloads reported on standard error, then only counted
 MODEL_RETRY = 2.0  # seconds between model queries while none answered

@@ -85,7 +85,7 @@ class BridgeSide:
             time.sleep(0.02)
 
     def send(self, skillset: str, transition: str | None, status: dict | None = None, seq: int | None = None,
-             stamp: float | None = None) -> int:
+             stamp: float | None = None, info: str = "", restart: bool = False) -> int:
         last = self.seq.get(skillset, 0)
         if seq is None:
             seq = last + 1
@@ -94,7 +94,8 @@ class BridgeSide:
             self.live.apply(skillset, transition, status)  # what a bridge's last status would say
         ev = CanonicalEvent(system=self.system, skillset=skillset, seq=seq,
                             stamp=time.time() if stamp is None else stamp, source=self.source, epoch=self.epoch,
-                            transition=transition, status=None if status is None else SkillsetStatus(**status))
+                            transition=transition, status=None if status is None else SkillsetStatus(**status),
+                            info=info, restart=restart)
         self.raw(skillset, encode(ev))
         return seq
 

@@ -72,8 +72,8 @@ def test_log_line_rejects_what_is_not_a_message() -> None:
 
 
 GOOD_BODY = '{"v":1,"system":"s","seq":0,"stamp":0,"skillsets":{}}'
-TYPES = ("CanonicalEvent, CheckReply, CheckRequest, Heartbeat, LiveState, ModelBundle, PredictReply, PredictRequest, "
-         "StateSpaceReport, UnsafeReport, Verdicts")
+TYPES = ("CanonicalEvent, CheckReply, CheckRequest, Divergences, Heartbeat, LiveState, ModelBundle, PredictReply, "
+         "PredictRequest, StateSpaceReport, UnsafeReport, Verdicts")
 
 
 @pytest.mark.parametrize("line, error", [
@@ -197,6 +197,19 @@ def test_records_to_log_publishes_what_the_monitor_would() -> None:
     assert [(t, p) for t, p in violations(entries)] == [(52.0, "action_guard"), (66.0, "safety_guard"),
                                                       (76.0, "action_guard")]
     assert violations(_run("assisted")[1]) == []
+
+
+def test_records_to_log_lists_the_divergences_as_the_monitor_does() -> None:
+    """Issue 27 item 4: a log's divergence list, so that skinet replay shows it in the views."""
+    _, entries = _run("mobile_divergence")
+    [listed] = [e for e in entries if e.type == "Divergences"]
+    state = next(e.message for e in entries if isinstance(e.message, LiveState) and e.message.divergence)
+    assert (listed.key, listed.t, listed.message.older) == (keys.divergences("mobile_manip"), 6.0, 0)
+    [d] = listed.message.entries
+    assert (d.n, d.kind, d.seq, d.stamp, d.skillset, d.event, d.reason, d.info) == (
+        0, "divergence", state.seq, 6.0, "arm", state.event, "'pick.success.picked' is not enabled in the live marking",
+        "pick reported done, never started")
+    assert not any(e.type == "Divergences" for e in _run("unassisted")[1])
 
 
 def test_assisted_run_shows_the_paper_warnings() -> None:

@@ -288,7 +288,7 @@ class Feed:
         log.warning("%s: %s", m.component.name, info)
         out.events = [replace(d, info=info) for d in out.events]
         m.restart = ""
-        return self._emit(m, out)
+        return self._emit(m, out, restart=True)
 
     def _resynced(self, m: _Manager, status: derive.Status) -> derive.Output:
         """The status after a gap, derived from the last one; every event says so, and an
@@ -305,7 +305,8 @@ class Feed:
             out.events = [replace(d, info="; ".join(x for x in (info, d.info) if x)) for d in out.events]
         return out
 
-    def _emit(self, m: _Manager, out: derive.Output) -> list[CanonicalEvent]:
+    def _emit(self, m: _Manager, out: derive.Output, restart: bool = False) -> list[CanonicalEvent]:
+        """``out``'s events numbered and stamped for the wire; ``restart``: they follow a restart of the manager."""
         for note in out.notes:
             log.info("%s", note)
         events = []
@@ -313,7 +314,7 @@ class Feed:
             events.append(CanonicalEvent(system=self.system.name, skillset=m.component.name, seq=m.seq,
                                          stamp=d.stamp, source=self.source, epoch=self.epoch,
                                          transition=d.transition,
-                                         status=d.status, info=d.info))
+                                         status=d.status, info=d.info, restart=restart))
             m.seq += 1
             self.counters.unexplained += d.transition is None
         self.counters.events += len(events)

@@ -4,21 +4,24 @@
 (no I/O here) and keeps: the last :class:`LiveState`, :class:`Verdicts`,
 :class:`UnsafeReport` and :class:`StateSpaceReport`; the model bundle; the live
 service instances (liveliness tokens); one :class:`StepRecord`-like point per
-monitor step for the timeline (paper Fig. 3/4); and the violations, each with
-the step and event where its property went from holding to failing.
+monitor step for the timeline (paper Fig. 3/4); the violations, each with
+the step and event where its property went from holding to failing; and the
+model divergences and manager restarts of every monitor run it saw
+(:class:`Divergences`, kept by monitor instance and entry number, the last
+:data:`KEPT_DIVERGENCES`; issue 27 item 4).
 
 A monitor restart shows as a step counter going back: a new *epoch* starts, the
 timeline keeps the previous points.  The same step published again with a later
 stamp (its skillsets' sync states changed, SPEC §7) replaces the shown state.  Messages older than what is shown (a late
 reply to the start-up query) are ignored.  Every :meth:`Board.feed` returns the
 updates to send to views, as JSON-able dicts ``{"kind": ..., ...}``; applying
-them twice is harmless (points and violations carry their index).  Cost: O(1)
-per message, O(H) memory for H timeline points (bounded).
+them twice is harmless (points, violations and divergences carry their index).  Cost: O(1)
+per message (O(E) for a divergence list of E entries), O(H) memory for H timeline points (bounded).
 """
 
 from __future__ import annotations
 
-from collections import deque
+from collections import OrderedDict, deque
 from typing import Any
 
 from pydantic import BaseModel
@@ -27,11 +30,13 @@ from skinet.errors import SkinetError
 from skinet.system import System
 from skinet.wire.convert import system_from_bundle
 from skinet.wire.messages import (
-    CanonicalEvent, LiveState, ModelBundle, StateSpaceReport, UnsafeReport, Verdicts,
+    CanonicalEvent, Divergences, LiveState, ModelBundle, StateSpaceReport, UnsafeReport, Verdicts,
 )
 
 Update = dict[str, Any]
 MAX_PENDING = 8  # verdicts and reports kept while their step's state is on its way
+KEPT_DIVERGENCES = 1024  # divergences and restarts kept, over every monitor run seen
+MAX_RUNS = 64  # monitor runs whose divergence counts are kept
 
 
 class Board:
@@ -55,6 +60,9 @@ class Board:
         self._last_seq = -1
         self._holds: dict[str, bool] = {}
         self._pending: list[tuple[Verdicts | UnsafeReport, bool]] = []
+        self.divergences: OrderedDict[tuple[str, int], dict[str, Any]] = OrderedDict()  # (monitor, n) -> entry
+        self._noted: OrderedDict[str, int] = OrderedDict()  # monitor run -> entries it noted (listed or older)
+        self._forgotten = 0  # entries noted by runs no longer in _noted
 
     # -- feeding ------------------------------------------------------------------------
 
@@ -81,6 +89,8 @@ class Board:
         if isinstance(message, CanonicalEvent):
             self.events += 1
             return []
+        if isinstance(message, Divergences):
+            return self._divergences(message)
         return []
 
     def token(self, key: str, alive: bool) -> list[Update]:
@@ -175,6 +185,35 @@ class Board:
                 return None
         return None
 
+    # -- divergences and manager restarts (issue 27 item 4) ---------------------------------
+
+    def _divergences(self, msg: Divergences) -> list[Update]:
+        """A monitor's list: its entries not seen yet are added (an older copy adds nothing)."""
+        noted = msg.older + len(msg.entries)
+        if noted <= self._noted.get(msg.monitor, 0):
+            return []
+        self._noted[msg.monitor] = noted
+        self._noted.move_to_end(msg.monitor)
+        if len(self._noted) > MAX_RUNS:  # its entries go with it, counted as older
+            run, count = self._noted.popitem(last=False)
+            self._forgotten += count
+            for key in [k for k in self.divergences if k[0] == run]:
+                del self.divergences[key]
+        added = []
+        for entry in msg.entries:
+            key = (msg.monitor, entry.n)
+            if key not in self.divergences:
+                self.divergences[key] = {"monitor": msg.monitor, **entry.model_dump(mode="json")}
+                added.append(self.divergences[key])
+        while len(self.divergences) > KEPT_DIVERGENCES:
+            self.divergences.popitem(last=False)
+        return [{"kind": "divergences", "added": added, "older": self.divergences_older}]
+
+    @property
+    def divergences_older(self) -> int:
+        """Divergences and restarts known to have happened and not kept."""
+        return self._forgotten + sum(self._noted.values()) - len(self.divergences)
+
     # -- reading ------------------------------------------------------------------------
 
     def _alive_json(self) -> dict[str, list[str]]:
@@ -191,6 +230,7 @@ class Board:
             "state_space": _json(self.state_space), "state_space_t": self.state_space_t,
             "model": self._model_json(),
             "alive": self._alive_json(), "points": list(self.points), "violations": list(self.violations),
+            "divergences": list(self.divergences.values()), "divergences_older": self.divergences_older,
         }
 
 

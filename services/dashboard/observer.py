@@ -1,6 +1,6 @@
 """A read-only Zenoh observer of one system, feeding a :class:`Board` (SPEC §7).
 
-Subscribes to the monitor's four result keys and to the liveliness tokens of the
+Subscribes to the monitor's five result keys and to the liveliness tokens of the
 system's services and of the predictors; when a monitor appears (at start, or
 after a restart) it fetches the model bundle and the last publications (the
 monitor answers ``get`` on its result keys), so a view opened mid-mission is
@@ -24,12 +24,14 @@ from services.monitor.check import parse_command
 from skinet.system import System
 from skinet.wire import keys
 from skinet.wire.codec import DecodeError, decode, encode
-from skinet.wire.messages import CheckReply, LiveState, ModelBundle, StateSpaceReport, UnsafeReport, Verdicts
+from skinet.wire.messages import (
+    CheckReply, Divergences, LiveState, ModelBundle, StateSpaceReport, UnsafeReport, Verdicts,
+)
 
 Listener = Callable[[list[Update]], None]
 RESULTS: tuple[tuple[Callable[[str], str], type[BaseModel]], ...] = (
     (keys.state, LiveState), (keys.verdicts, Verdicts), (keys.unsafe, UnsafeReport),
-    (keys.state_space, StateSpaceReport),
+    (keys.state_space, StateSpaceReport), (keys.divergences, Divergences),
 )
 QUERY_TIMEOUT = 2.0
 

@@ -22,11 +22,12 @@ from __future__ import annotations
 import time
 from collections import OrderedDict
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import msgpack
 
+from services.monitor.divergences import event_name
 from skinet.live import LiveSystem
 from skinet.system import Marking, System, marking_from_json
 from skinet.verify.algorithm1 import Analysis, analyse
@@ -106,10 +107,11 @@ class Step:
     seq: int
     key: MarkingKey
     changed: bool
-    divergence: str | None
+    divergence: str | None  # as LiveState.divergence says it: with the message that showed it
     live: bytes
     verdicts: bytes
     unsafe: bytes
+    reason: str | None = None  # the divergence alone (the live nets' reason, or the bridge's drift): the list's
 
 
 @dataclass
@@ -278,7 +280,7 @@ class Engine:
             self.counters.divergences += 1
         if ev.transition is None and not hit[1] and divergence is None:
             return None
-        return self._step(f"{ev.skillset}:{ev.transition or 'status'}#{ev.seq}", hit[1], divergence)
+        return self._step(event_name(ev), hit[1], divergence, hit[2] or ev.divergence or None)
 
     def prediction(self, key: MarkingKey | None = None) -> Prediction | None:
         """The prediction for the live marking (``key`` when known), if any (SPEC §5)."""
@@ -313,10 +315,11 @@ class Engine:
         """The messages of the current step again (same seq, a new stamp), e.g. with a new sync state."""
         return self._fill(False, self._last["event"], self._last["divergence"])
 
-    def _step(self, event: str, changed: bool, divergence: str | None) -> Step:
+    def _step(self, event: str, changed: bool, divergence: str | None, reason: str | None = None) -> Step:
         self.seq += 1
         self._last = {"event": event, "divergence": divergence}
-        return self._fill(changed, event, divergence)
+        step = self._fill(changed, event, divergence)
+        return step if reason is None else replace(step, reason=reason)
 
     def _fill(self, changed: bool, event: str, divergence: str | None) -> Step:
         key = self.key

@@ -6,7 +6,7 @@ the bridge's cache (:mod:`services.common.events`); per event it publishes
 the three share the step's ``seq``).  It answers the model queryable, the command
 check (``skinet/<system>/check/<client>``, :mod:`services.monitor.check`, with a request budget
 per client: :class:`~services.common.ratelimit.RateLimiter`, issue 14) and ``get`` on its
-four result keys (the last publication, for late joiners), holds a
+five result keys (the last publication, for late joiners), holds a
 liveliness token and asks the predictor for the live marking without ever
 waiting for it (:mod:`services.monitor.prediction`); when a prediction for the
 live marking arrives, the UnsafeReport of the same step is published again with
@@ -27,6 +27,11 @@ current step again (same ``seq``) with ``LiveState.sync`` and
 ``UnsafeReport.state_stale``.  A watchdog thread measures the silences and
 answers the check requests that asked to ``wait`` (their queries are kept, never
 a Zenoh callback thread blocked).
+
+Model divergences and manager restarts are kept for the whole run
+(:mod:`services.monitor.divergences`, the last 256): published on
+``keys.divergences`` when the list changes (at most every ``DIVERGENCES_PERIOD``
+seconds, the watchdog sending what a burst left) and answered on ``get``.
 """
 
 from __future__ import annotations
@@ -46,6 +51,7 @@ from services.common.events import event_subscriber
 from services.common.ratelimit import CHECK_RATE_LIMIT, RateLimiter
 from services.common.zenoh_config import undeclare
 from services.monitor.check import MAX_REQUEST, Checker, Policy, request_from
+from services.monitor.divergences import DivergenceLog
 from services.monitor.engine import Counters, Engine, MarkingKey, Step
 from services.monitor.prediction import PredictionClient, PredictorStats
 from services.monitor.sync import BOUND, SYNCING, SyncTracker
@@ -55,8 +61,8 @@ from skinet.wire import keys
 from skinet.wire.codec import DecodeError, decode, encode
 from skinet.wire.convert import RiskTable, bundle
 from skinet.wire.messages import (
-    CanonicalEvent, CheckReply, CheckRequest, Heartbeat, LiveState, PredictReply, SkillsetSync, StateSpaceReport,
-    UnsafeReport, Verdicts,
+    CanonicalEvent, CheckReply, CheckRequest, Divergences, Heartbeat, LiveState, PredictReply, SkillsetSync,
+    StateSpaceReport, UnsafeReport, Verdicts,
 )
 
 log = logging.getLogger("skinet.monitor")
@@ -65,6 +71,7 @@ MAX_EVENT = 64 << 10  # bytes; a canonical event or a heartbeat is a few hundred
 MAX_WAITING = 256  # check requests waiting at once; more are answered at once
 MAX_REASON = 512  # bytes of a resync error reply kept as the skillset's reason
 TICK = 0.1  # seconds between the watchdog's looks at silences and waiting checks
+DIVERGENCES_PERIOD = 0.1  # seconds between publications of the divergence list (a burst is one message)
 M = TypeVar("M", bound=BaseModel)
 
 
@@ -138,23 +145,30 @@ class Monitor:
         self._waiting: list[_Waiting] = []  # check requests waiting for a synced state or a fresh prediction
         self._wake = threading.Event()  # something changed that a waiting check may want
         self._behind: dict[str, tuple[float, CanonicalEvent]] = {}  # skillset -> (deadline, resync answer ahead)
+        self._divergences = DivergenceLog(name, self.instance_id)
+        self._divergences_due = False  # the list changed since it was published
+        self._divergences_sent = float("-inf")  # monotonic time of its last publication
+        self._divergences_published = 0  # entries noted (listed or older) when it was last published
         self.resync_timeout, self.lost_after = resync_timeout, lost_after
         opts = dict(congestion_control=zenoh.CongestionControl.BLOCK, express=express)
         self._pub = {k: session.declare_publisher(key, **opts) for k, key in (
             ("state", keys.state(name)), ("verdicts", keys.verdicts(name)),
-            ("unsafe", keys.unsafe(name)), ("state_space", keys.state_space(name)))}
+            ("unsafe", keys.unsafe(name)), ("state_space", keys.state_space(name)),
+            ("divergences", keys.divergences(name)))}
         self._predict = PredictionClient(session, system, self.digest, self._on_prediction, client=self.client,
                                          budget=budget, timeout=query_timeout, retry=retry, stall=stall)
         with self._lock:
             self._sync_fields()
             self._publish(self._engine.initial())
+            self._last["divergences"] = self._divergences.payload(time.time())  # none yet, for late joiners
         self._queryable = session.declare_queryable(keys.model(name, self.digest), self._on_model_query)
         self._check = session.declare_queryable(keys.check(name, "*"), self._on_check)
         # Late joiners (dashboards, watch) get the last publications with a get on their keys.
         self._latest = [session.declare_queryable(key, lambda q, n=name, k=key: self._on_latest(n, k, q))
                         for name, key in (("state", keys.state(system.name)), ("verdicts", keys.verdicts(system.name)),
                                           ("unsafe", keys.unsafe(system.name)),
-                                          ("state_space", keys.state_space(system.name)))]
+                                          ("state_space", keys.state_space(system.name)),
+                                          ("divergences", keys.divergences(system.name)))]
         self._predictors = session.liveliness().declare_subscriber(
             keys.alive("*", "predictor", "*"), self._on_predictor_token)
         for token in _tokens(session, keys.alive("*", "predictor", "*")):  # the pool before the first query
@@ -192,6 +206,19 @@ class Monitor:
         space = decode(last["state_space"], StateSpaceReport) if "state_space" in last else None
         return MonitorView(version, decode(last["state"], LiveState), decode(last["verdicts"], Verdicts),
                            decode(last["unsafe"], UnsafeReport), space, counters, self.predictor_stats, checks)
+
+    def divergences(self) -> Divergences:
+        """The model divergences and manager restarts of this run as last published (thread-safe)."""
+        with self._lock:
+            payload = self._last["divergences"]
+        return decode(payload, Divergences)
+
+    @property
+    def divergences_published(self) -> int:
+        """How many divergences and restarts (listed or older) the last published list counts: cheap, to tell
+        whether :meth:`divergences` changed."""
+        with self._lock:
+            return self._divergences_published
 
     def synced(self) -> bool:
         """Whether every skillset is ``live`` (SPEC §7)."""
@@ -262,6 +289,7 @@ class Monitor:
                 # A skillset that is not live keeps its events until its resync answers (SPEC §7: what
                 # its answer covers is history, whatever the events' stamps say).
                 resync = self._sync.hold(ev) or self._handle(ev)
+                self._note(ev, None, self._engine.seq)  # a restart is news even when its event is held or history
                 self._settle()
             if resync:
                 self._ask_resync(ev.skillset)
@@ -441,6 +469,7 @@ class Monitor:
         self._publish(step)
         if step.divergence:
             self._warn(engine.counters.divergences, "divergence at %s#%d: %s", ev.skillset, ev.seq, step.divergence)
+        self._note(ev, step.reason, step.seq)  # the list shows the bridge's info beside it
         if engine.prediction(step.key) is None:
             self._predict.want(step.key, engine.marking())
 
@@ -578,6 +607,7 @@ class Monitor:
                     due = self._sync.tick()
                     self._catch_up()
                     self._settle()
+                    self._publish_divergences()
                 for name in due:
                     self._ask_resync(name)
                 self._answer_waiting()
@@ -616,6 +646,25 @@ class Monitor:
             self._pub[name].put(payload)
             self._last[name] = payload
         self._sync_published = self._sync_seen
+        self._bump()
+
+    def _note(self, ev: CanonicalEvent, divergence: str | None, seq: int) -> None:
+        """Keep ``ev`` in the divergence list if it diverged or follows a manager restart (lock held)."""
+        if self._divergences.note(ev, divergence, seq, time.time()) is not None:
+            self._divergences_due = True
+            self._publish_divergences()
+
+    def _publish_divergences(self) -> None:
+        """Publish the divergence list if it changed, at most every DIVERGENCES_PERIOD seconds (lock held; the
+        watchdog publishes what is left)."""
+        now = time.monotonic()
+        if not self._divergences_due or now - self._divergences_sent < DIVERGENCES_PERIOD:
+            return
+        payload = self._divergences.payload(time.time())
+        self._pub["divergences"].put(payload)
+        self._last["divergences"] = payload
+        self._divergences_due, self._divergences_sent = False, now
+        self._divergences_published = self._divergences.total
         self._bump()
 
     def _sync_fields(self) -> None:

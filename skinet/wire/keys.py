@@ -8,6 +8,7 @@ key                                       publisher           payload
 ``skinet/<system>/verdicts``              monitor             :class:`Verdicts`
 ``skinet/<system>/unsafe``                monitor             :class:`UnsafeReport`
 ``skinet/<system>/state_space``           monitor             :class:`StateSpaceReport`
+``skinet/<system>/divergences``           monitor             :class:`Divergences`
 ``skinet/<system>/predict/<client>``      predictor (query)   :class:`PredictRequest` -> :class:`PredictReply`
 ``skinet/<system>/predict/<client>/<i>``  one predictor ``i`` the same, after empty "working" replies
 ``skinet/<system>/model/<digest>``        monitor (query)     -> :class:`ModelBundle`
@@ -64,6 +65,10 @@ def unsafe(system: str) -> str:
 
 def state_space(system: str) -> str:
     return f"{ROOT}/{system}/state_space"
+
+
+def divergences(system: str) -> str:
+    return f"{ROOT}/{system}/divergences"
 
 
 def predict(system: str, client: str) -> str:

@@ -21,6 +21,7 @@ from skinet.wire.limits import MIN_BUDGET
 
 SCHEMA_VERSION = 1
 MAX_CHECK_WAIT = 30.0  # seconds a check request may wait for a synced state and a fresh prediction
+MAX_DIVERGENCES = 256  # entries a Divergences message lists (the monitor's last ones)
 
 
 class _Message(BaseModel):
@@ -50,11 +51,13 @@ class CanonicalEvent(_Message):
     transition: str | None = Field(None, description="logical transition, e.g. 'teleop.start'; None: status only")
     status: SkillsetStatus | None = Field(None, description="status observed after the event, when known")
     info: str = Field("", description="free text from the manager (response name, ids)")
+    restart: bool = Field(False, description="the skillset's manager restarted: this status starts afresh, "
+                                             "and info says why and how its state differs")
     divergence: str = Field("", description="a model divergence the bridge found (a binding's drift, SPEC §9), "
                                             "with the message that showed it; the monitor reports it even when "
                                             "the status matches its marking")
 
-    OMIT_AT_DEFAULT = ("divergence",)
+    OMIT_AT_DEFAULT = ("restart", "divergence")
 
 
 class PropertyVerdict(BaseModel):
@@ -277,8 +280,35 @@ class Heartbeat(_Message):
     OMIT_AT_DEFAULT = ("pending",)
 
 
+class Divergence(BaseModel):
+    """One model divergence or manager restart the monitor met (SPEC §7), as operator views list it."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    n: int = Field(ge=0, description="its number in the monitor's run, from 0")
+    kind: Literal["divergence", "restart"] = Field(
+        description="divergence: the model could not explain the event; restart: the skillset's manager "
+                    "restarted (reason then says whether the model could explain its new state)")
+    seq: int = Field(ge=0, description="the monitor step it made, or the step shown when it made none")
+    stamp: float = Field(description="when the monitor met it (its clock, seconds since the epoch)")
+    skillset: str
+    event: str = Field(description="the event, 'skillset:transition#seq' as in LiveState.event")
+    reason: str = Field("", description="why the model could not explain it ('' when it could)")
+    info: str = Field("", description="what the bridge said (CanonicalEvent.info)")
+
+
+class Divergences(_Message):
+    """The model divergences and manager restarts of the monitor's run so far, the last ``MAX_DIVERGENCES``
+    (SPEC §7): published on ``skinet/<system>/divergences`` when the list changes, and answered on ``get``."""
+
+    system: str
+    monitor: str = Field(description="the monitor's instance id: a new one starts a new list")
+    stamp: float
+    older: int = Field(0, ge=0, description="entries of this run left out before the first one listed")
+    entries: list[Divergence] = Field(default_factory=list, description="oldest first, numbered n = older, ...")
+
+
 MESSAGES: dict[str, type[BaseModel]] = {
     m.__name__: m
     for m in (CanonicalEvent, LiveState, Verdicts, UnsafeReport, StateSpaceReport, ModelBundle, PredictRequest, PredictReply,
-              CheckRequest, CheckReply, Heartbeat)
+              CheckRequest, CheckReply, Heartbeat, Divergences)
 }

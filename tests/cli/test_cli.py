@@ -364,6 +364,24 @@ def test_demo_help_says_how_many_runs_it_plays(capsys: pytest.CaptureFixture[str
     assert code == 0 and len([line for line in out.splitlines() if line.startswith("== ")]) == len(MISSIONS) == 4
 
 
+def test_live_demo_options_are_checked_before_anything_runs(capsys: pytest.CaptureFixture[str]) -> None:
+    """``skinet demo --live`` plays one run of the whole chain; its options mean nothing without it."""
+    missions = "skillsets/missions/"
+    for argv, error in [
+        (["--dashboard", "8080"], "--dashboard needs --live"),
+        (["--speed", "10"], "--speed needs --live"),
+        (["--connect", "tcp/127.0.0.1:7447"], "--connect needs --live"),
+        (["--live", "--core"], "--live plays the whole chain, not --core"),
+        (["--live", missions + "unassisted.toml", missions + "assisted.toml"],
+         "--live plays one run at a time (got 2 scenarios)"),
+    ]:
+        assert run(capsys, "demo", *argv) == (1, "", f"skinet: error: {error}\n"), argv
+    with pytest.raises(SystemExit):
+        main(["demo", "--live", "--speed", "-1"])
+    assert capsys.readouterr().err == ("skinet demo: error: argument --speed: expected a number >= 0, got '-1' "
+                                       "(see skinet demo --help)\n")
+
+
 def test_max_depth_zero_says_no_layer_was_expanded(capsys: pytest.CaptureFixture[str]) -> None:
     _, out, _ = run(capsys, "explore", SYSTEM, "--max-depth", "0")
     assert "  depth      none (no layer expanded)" in out.splitlines()

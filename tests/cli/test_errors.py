@@ -51,6 +51,7 @@ FREE_TEXT = {
     ("python -m services.simulator", "--ros-distro"): "only humble changes the keys; any other name is a later one",
     **{(program, option): "any user name and password is sent; the router judges them (tests/deploy/test_operator_acl.py)"
        for program in ("skinet record", "skinet replay", "skinet run", "skinet router", "skinet watch", "skinet check",
+                       "skinet demo",
                        "skinet dashboard", "python -m services.monitor", "python -m services.predictor",
                        "python -m services.bridge_ros2", "python -m services.simulator")
        for option in ("--user", "--password")},
@@ -217,6 +218,16 @@ def _cases() -> list[Case]:
     for option in ("--log", "--timeline"):
         add("skinet", option, ("demo", "--core", option, "{tmp}/list.json"), 1,
             "{tmp}/list.json: error: cannot create folder: File exists")
+    for bad in ("-1", "fast"):
+        usage("skinet", "--speed", ("demo", "--live", "--speed", bad),
+              f"argument --speed: expected a number >= 0, got '{bad}'")
+    usage("skinet", "--linger", ("demo", "--live", "--linger", "-1"),
+          "argument --linger: expected a number of seconds >= 0, got '-1'")
+    usage("skinet", "--dashboard", ("demo", "--live", "--dashboard", "65536"),
+          "argument --dashboard: expected an integer from 0 to 65535, got '65536'")
+    add("skinet", "--dashboard-host", ("demo", "--live", "--no-multicast-scouting", "--dashboard", "0",
+                                       "--dashboard-host", "999.0.0.1"), 1,
+        "skinet: error: cannot listen on 999.0.0.1:0: Name or service not known")
 
     # skinet record, run, router, and every service: the Zenoh options
     zenoh_programs = {
@@ -224,7 +235,7 @@ def _cases() -> list[Case]:
                    ("run", SYSTEM, "--once"), ("router",), ("watch", "spot_arm", "--wait", "0.5"),
                    ("check", "spot_arm", "spot:teleop.start", "--timeout", "0.5"),
                    ("dashboard", "spot_arm", "--port", "0", "--wait", "0"),
-                   ("replay", "{tmp}/run.jsonl", "--linger", "0")),
+                   ("replay", "{tmp}/run.jsonl", "--linger", "0"), ("demo", "--live", "--linger", "0")),
         "python -m services.monitor": ((SYSTEM,),),
         "python -m services.predictor": ((),),
         "python -m services.bridge_ros2": ((SYSTEM,),),
@@ -356,7 +367,7 @@ def _cases() -> list[Case]:
         "{tmp}/bad.jsonl:1: error: invalid JSON: Expecting value (column 1)")
     add("skinet", "log", ("replay", "{tmp}/events.jsonl"), 1,
         "{tmp}/events.jsonl: error: no message of a monitor to replay (LiveState, Verdicts, UnsafeReport, "
-        "StateSpaceReport): the log holds 1 CanonicalEvent")
+        "StateSpaceReport, Divergences): the log holds 1 CanonicalEvent")
     for bad in ("-1", "fast"):
         usage("skinet", "--speed", ("replay", "{tmp}/run.jsonl", "--speed", bad),
               f"argument --speed: expected a number >= 0, got '{bad}'")

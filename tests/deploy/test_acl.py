@@ -113,7 +113,8 @@ def test_only_the_bridge_user_publishes_canonical_events(sessions: dict[str, zen
 def test_each_user_publishes_only_its_own_keys(sessions: dict[str, zenoh.Session]) -> None:
     allowed = {
         "bridge": {EVENTS, HEARTBEAT, STATUS_REQUEST},
-        "monitor": {keys.state(SYSTEM), keys.verdicts(SYSTEM), keys.unsafe(SYSTEM), keys.state_space(SYSTEM)},
+        "monitor": {keys.state(SYSTEM), keys.verdicts(SYSTEM), keys.unsafe(SYSTEM), keys.state_space(SYSTEM),
+                    keys.divergences(SYSTEM)},
         "predictor": set(),
         "robot": {ROS_STATUS, STATUS_REQUEST},
         "observer": set(),

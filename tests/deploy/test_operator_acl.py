@@ -23,7 +23,7 @@ from services.monitor import start_monitor
 from skinet.files import load_system
 from skinet.wire import keys
 from skinet.wire.codec import decode, encode
-from skinet.wire.messages import CheckReply, CheckRequest
+from skinet.wire.messages import CheckReply, CheckRequest, Divergences
 from tests.services.test_monitor import Events
 
 SG_AT_RD = "violates it at once: spot go_to_waypoint runs while manipulator arm_status at RD"  # skinet.explain
@@ -141,7 +141,8 @@ def test_watch_logs_in_from_the_environment(deployment: str) -> None:
     assert lines[0].startswith("SkiNet Live  system spot_arm  step 6  last event manipulator:arm_ready.success.ready")
     assert "  manipulator  mutex=Free arm_status=RD; running: -" in lines
     assert "unsafe transitions (1), prediction STALE (explicit and forced constraints only)" in lines  # no predictor here
-    assert "services  monitor: 1, bridge_ros2: 1, predictor: 0" in lines and lines[-1] == "violations (0)"
+    assert "services  monitor: 1, bridge_ros2: 1, predictor: 0" in lines
+    assert lines[-2:] == ["violations (0)", "divergences and manager restarts (0)"]
     out = skinet("watch", "nope", "--wait", "1", *zenoh_flags(deployment))
     assert (out.returncode, out.stderr.strip()) == (1, "skinet: error: no monitor of system 'nope' is alive "
                                                        "(systems with a monitor: spot_arm)")
@@ -214,6 +215,32 @@ def test_watch_on_a_terminal_redraws_the_view(deployment: str) -> None:
     assert "services  monitor: 1, bridge_ros2: 1, predictor: 0" in text
 
 
+RESTARTED = "manager restarted (the manager (or its gateway) came back); same state as before"
+
+
+def test_observers_receive_the_divergence_list_and_get_it_late(deployment: str) -> None:
+    """Issue 27 item 4 through the shipped ACL: the monitor publishes its list of divergences and manager
+    restarts, an observer receives it, and one that asks later gets the list so far."""
+    observer = login(deployment, "observer")
+    lists: list[Divergences] = []
+    sub = observer.declare_subscriber(keys.divergences(SYSTEM),
+                                      lambda s: lists.append(decode(s.payload.to_bytes(), Divergences)))
+    try:
+        time.sleep(0.3)  # the subscription reaches the router
+        standing = {"resources": {"power_status": "PowerOn", "posture": "Standing", "control_mode": "Idle"},
+                    "running": []}
+        STAND_IN["bridge"].send("spot", None, status=standing, restart=True, info=RESTARTED)  # same state: no step
+        wait_until(lambda: bool(lists), 10, "the list")
+        [entry] = lists[-1].entries
+        assert (entry.kind, entry.seq, entry.skillset, entry.reason, entry.info) == ("restart", 6, "spot", "", RESTARTED)
+        late = [decode(r.ok.payload.to_bytes(), Divergences) for r in observer.get(keys.divergences(SYSTEM), timeout=5)
+                if r.ok is not None]
+        assert late == [lists[-1]]
+    finally:
+        sub.undeclare()
+        observer.close()
+
+
 def test_watch_in_a_pipe_prints_one_line_per_step(deployment: str) -> None:
     """Last in this file: it moves the deployment on (the transfer with the arm at RD)."""
     proc = subprocess.Popen([sys.executable, "-m", "skinet_cli.main", "watch", SYSTEM, "--duration", "60",
@@ -225,14 +252,18 @@ def test_watch_in_a_pipe_prints_one_line_per_step(deployment: str) -> None:
         assert first.startswith("[6] manipulator:arm_ready.success.ready#2 | action_guard=ok safety_guard=ok | "
                                 "unsafe: spot:go_to_waypoint.start(safety_guard explicit)")
         assert first.endswith("prediction stale"), first  # every skillset live: nothing more said
+        restart = proc.stdout.readline().strip()  # the monitor's list so far: the watch joined late
+        assert re.fullmatch(rf"MANAGER RESTART at step 6 \(\d\d:\d\d:\d\d\): spot:status#\d+: {re.escape(RESTARTED)}",
+                            restart), restart
         events.send("spot", "go_to_waypoint.start")
         line = proc.stdout.readline().strip()
-        assert line.startswith("[7] spot:go_to_waypoint.start#5 | action_guard=ok safety_guard=VIOLATED | "), line
+        # spot#6: the restart of the test above was spot#5
+        assert line.startswith("[7] spot:go_to_waypoint.start#6 | action_guard=ok safety_guard=VIOLATED | "), line
         events.close()  # the bridge goes: the same step again, with the state stale
         line = proc.stdout.readline().strip()
         if "STATE STALE" not in line:  # the bridge's token went first (services alive: one line more)
             line = proc.stdout.readline().strip()
-        assert re.fullmatch(r"\[7\] spot:go_to_waypoint.start#5 \| .* \| STATE STALE: spot lost since "
+        assert re.fullmatch(r"\[7\] spot:go_to_waypoint.start#6 \| .* \| STATE STALE: spot lost since "
                             r"\d\d:\d\d:\d\d, manipulator lost since \d\d:\d\d:\d\d", line), line
     finally:
         proc.terminate()

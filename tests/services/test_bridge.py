@@ -362,6 +362,7 @@ def test_a_restarted_manager_is_asked_again_and_reported(client_factory, spot_ar
             style.rmw_zenoh else \
             "power_status PowerOn -> PowerOff, control_mode Busy -> Idle, stand_up no longer running"
         assert last.info == f"manager restarted ({why}); state now differs: {diverged}"
+        assert last.restart and not any(e.restart for e in got[:-1])  # the monitor lists it (issue 27 item 4)
         assert bridge.counters.restarts == 1
     finally:
         bridge.close()
@@ -396,6 +397,7 @@ def test_a_late_history_token_is_no_restart(client_factory, spot_arm, monkeypatc
         sim.restart("spot")  # the manager's own token leaves and comes back
         last = events.wait(lambda items: len(items) == 3)[-1]
         assert last.info == "manager restarted (the manager (or its gateway) came back); same state as before"
+        assert last.restart
         assert bridge.counters.restarts == 1
     finally:
         bridge.close()

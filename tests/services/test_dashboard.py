@@ -31,11 +31,11 @@ from skinet.files import load_system, load_typemap, read_text
 from skinet.mission import StepRecord, parse_scenario
 from skinet.wire.messages import LiveState, PropertyVerdict, UnsafeReport, Verdicts
 from tests.services.conftest import REPO, client_args, free_port, open_client, open_router
+from tests.services.test_divergences import TEN
 from tests.services.test_monitor import Events
 
 SYSTEM_FILE = REPO / "skillsets" / "spot_arm.toml"
 MISSIONS = REPO / "skillsets" / "missions"
-CHROMIUM, DRIVER = shutil.which("chromium"), shutil.which("chromedriver")
 # MISSION.md in `skinet demo` numbering: (property, step, the step's command).
 VIOLATIONS = [("action_guard", 26, "spot:teleop.start"), ("safety_guard", 33, "spot:go_to_waypoint.start"),
               ("action_guard", 38, "manipulator:arm_ready.start")]
@@ -47,21 +47,13 @@ WARNINGS = [(29, "spot", "go_to_waypoint.start", "safety_guard"), (36, "manipula
 
 @pytest.fixture(scope="module")
 def browser() -> Iterator[object]:
-    """Headless Chromium; skipped with the reason when Chromium or selenium is missing."""
-    if CHROMIUM is None or DRIVER is None:
-        pytest.skip("Chromium is not installed (Debian packages chromium and chromium-driver; "
-                    "scripts/install-test-deps.sh installs them)")
-    webdriver = pytest.importorskip("selenium.webdriver", reason="selenium is not installed (pip install -e '.[test]')")
-    from selenium.webdriver.chrome.options import Options
-    from selenium.webdriver.chrome.service import Service
+    """Headless Chromium (tests/screenshot.py's); skipped with the reason when Chromium or selenium is missing."""
+    from tests.screenshot import Unavailable, chromium
 
-    options = Options()
-    options.binary_location = CHROMIUM
-    for flag in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage",
-                 "--window-size=1500,1900", "--no-first-run", "--disable-extensions"):
-        options.add_argument(flag)
-    driver = webdriver.Chrome(service=Service(DRIVER), options=options)
-    driver.set_page_load_timeout(20)
+    try:
+        driver = chromium()
+    except Unavailable as exc:
+        pytest.skip(str(exc))
     try:
         yield driver
     finally:
@@ -402,3 +394,194 @@ def test_no_violation_reads_none_not_a_numbered_none(browser, dashboard) -> None
         "return getComputedStyle(document.querySelector('#violations li.none')).listStyleType")
     assert marker == "none"
     assert browser.execute_script("return document.getElementById('violations').innerText").strip() == "none"
+
+
+# -- divergences and manager restarts stay listed; the timeline zooms and pans (issue 27 item 4) ------------
+
+NOT_ENABLED = "'init_power.success.powered_on' is not enabled in the live marking"
+RESTART_INFO = "manager restarted (the manager (or its gateway) came back); same state as before"
+
+
+@pytest.fixture
+def monitored(router: str) -> Iterator[tuple[object, object]]:
+    """A monitor of the paper's system on a client of ``router``: (its session, the monitor)."""
+    session = open_client(router)
+    monitor = start_monitor(session, load_system(SYSTEM_FILE)[0])
+    try:
+        yield session, monitor
+    finally:
+        monitor.close()
+        session.close()
+
+
+def divergence_items(driver) -> list[tuple[str, str, str]]:
+    return [(d["data-kind"], d["data-seq"], d["text"]) for d in css(driver, "#divergences li[data-kind]")]
+
+
+def test_divergences_stay_listed_for_the_run_and_a_late_page_gets_them(browser, dashboard, monitored, tmp_path):
+    session, _ = monitored
+    browser.get(dashboard())
+    until(browser, lambda d: css(d, "#status[data-connected=true]"), "the live status")
+    assert css(browser, "#divergences li.none") and css(browser, "#divergence-count")[0]["text"] == "(0)"
+    events = Events(session)
+    events.send("spot", "init_power.success.powered_on")  # step 1: init_power never started
+    items = until(browser, lambda d: divergence_items(d), "the divergence listed")
+    assert re.fullmatch(r"model divergence at monitor step 1 \(\d\d:\d\d:\d\d\): "
+                        rf"spot:init_power.success.powered_on#1 \u2014 {NOT_ENABLED}", items[0][2]), items
+    assert "hidden" not in css(browser, "#divergence")[0]  # the step's own banner, as before
+    for skillset, transition in TEN:  # steps 2 to 11
+        events.send(skillset, transition)
+    until(browser, lambda d: css(d, "body")[0]["data-seq"] == "11", "ten more steps")
+    assert "hidden" in css(browser, "#divergence")[0]  # the banner lasted its step ...
+    assert divergence_items(browser) == items  # ... the list did not
+    marks = css(browser, "#timeline .divergence-mark")
+    assert [(m["data-n"], m["data-kind"], m["data-seq"]) for m in marks] == [("0", "divergence", "1")]
+    assert NOT_ENABLED in marks[0]["text"]  # its tooltip
+    # A manager restart (the bridge says so in its event) in the same state: no step, listed at the step
+    # shown, with the bridge's words.
+    events.send("spot", None, restart=True, info=RESTART_INFO,
+                status={"resources": {"power_status": "PowerOn", "posture": "Sitting", "control_mode": "Idle"},
+                        "running": []})
+    until(browser, lambda d: len(divergence_items(d)) == 2, "the restart listed")
+    kind, seq, text = divergence_items(browser)[1]
+    assert (kind, seq) == ("restart", "11") and text.endswith(f"spot:status#12 \u2014 {RESTART_INFO}"), text
+    screenshot(browser, tmp_path, "dashboard-divergences.png")
+
+    # A page of a dashboard started now (it joined late) gets the list so far from the monitor.
+    browser.get(dashboard())
+    until(browser, lambda d: len(divergence_items(d)) == 2, "the list on a late page")
+    assert divergence_items(browser) == items + [(kind, seq, text)]
+    assert css(browser, "#divergence-count")[0]["text"] == "(2)"
+    # Its timeline starts at the step it joined at (11): the restart is marked, the earlier divergence only
+    # listed.
+    assert [m["data-kind"] for m in css(browser, "#timeline .divergence-mark")] == ["restart"]
+
+
+def window(driver) -> tuple[float, float, str]:
+    box = css(driver, "#timeline")[0]
+    return float(box["data-t0"]), float(box["data-t1"]), box["data-zoomed"]
+
+
+def test_the_timeline_zooms_and_pans_and_never_cuts_its_labels(browser, dashboard, monitored, tmp_path):
+    from selenium.webdriver.common.action_chains import ActionChains
+    from selenium.webdriver.common.actions.wheel_input import ScrollOrigin
+
+    session, _ = monitored
+    browser.get(dashboard())
+    until(browser, lambda d: css(d, "body")[0]["data-seq"] == "0", "the start")
+    events = Events(session)
+    for skillset, transition in TEN:  # a run of about 8 s
+        events.send(skillset, transition)
+        time.sleep(0.8)
+    until(browser, lambda d: css(d, "body")[0]["data-seq"] == "10", "the run")
+    first = float(browser.execute_script("return view.points[0].t"))
+    t0, t1, zoomed = window(browser)
+    assert (t0, zoomed) == (round(first, 3), "false") and t1 - t0 > 8
+    # Lane names are whole (none starts left of the picture); a state's name stays inside its shape.
+    overflow = browser.execute_script("""
+        const out = [];
+        for (const t of document.querySelectorAll('#timeline .lane-label'))
+          if (t.getBBox().x < 0) out.push('lane ' + t.textContent);
+        for (const t of document.querySelectorAll('#timeline .state-label')) {
+          const r = t.previousElementSibling.getBBox(), b = t.getBBox();
+          if (b.x + b.width > r.x + r.width + 0.5) out.push('state ' + t.textContent);
+        }
+        return out;""")
+    assert overflow == []
+    assert css(browser, "#timeline .lane-label")  # drawn
+
+    browser.find_element("id", "zoom-in").click()  # half the span, at the live edge
+    until(browser, lambda d: window(d)[2] == "true", "the zoomed window")
+    z0, z1, _ = window(browser)
+    assert abs((z1 - z0) - (t1 - t0) / 2) < 1.0 and z1 >= t1 - 0.01
+
+    svg = browser.find_element("id", "timeline")
+    left = float(browser.execute_script("return frame.left"))
+    plot_w = float(browser.execute_script("return frame.plotW"))
+    width = float(svg.get_attribute("width"))
+    at = left + plot_w / 2  # the wheel at the middle of the plot: the time there stays put
+    middle = z0 + (z1 - z0) / 2
+    ActionChains(browser).scroll_from_origin(ScrollOrigin.from_element(svg, int(at - width / 2), 0), 0, -100) \
+        .perform()
+    until(browser, lambda d: window(d)[1] - window(d)[0] < (z1 - z0) * 0.9, "the wheel's zoom")
+    w0, w1, _ = window(browser)
+    assert abs((w1 - w0) - 0.8 * (z1 - z0)) < 0.5 and abs((w0 + w1) / 2 - middle) < 0.5
+
+    # A drag of 200 px to the right shows earlier times, the same span.
+    ActionChains(browser).move_to_element_with_offset(svg, int(at - width / 2), 0).click_and_hold() \
+        .move_by_offset(200, 0).release().perform()
+    until(browser, lambda d: window(d)[0] < w0 - 0.1, "the pan")
+    p0, p1, _ = window(browser)
+    shift = 200 / plot_w * (w1 - w0)
+    assert abs((p1 - p0) - (w1 - w0)) < 0.01 and abs((w0 - p0) - shift) < 0.3 * shift
+    screenshot(browser, tmp_path, "dashboard-zoomed.png")
+
+    browser.find_element("id", "zoom-all").click()  # the whole run again, following it
+    until(browser, lambda d: window(d)[2] == "false", "the whole run")
+    assert window(browser)[0] == round(first, 3)
+
+
+# -- the one-command live demo (issue 27 item 5) -------------------------------------------------------------
+
+
+def test_live_demo_plays_the_mission_for_the_dashboard_and_watch(browser, tmp_path) -> None:
+    """``skinet demo --live --dashboard PORT``: the paper's unassisted run through the whole chain at ten times
+    real time; the page it serves shows the three violations appear, and the printed watch line reaches it."""
+    import subprocess
+    import sys
+
+    port = free_port()
+    proc = subprocess.Popen([sys.executable, "-m", "skinet_cli.main", "demo", "--live", "--dashboard", str(port),
+                             "--speed", "10", "--linger", "60"], cwd=REPO, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        head = [proc.stderr.readline().rstrip("\n") for _ in range(5)]
+        assert head[0] == f"dashboard on http://127.0.0.1:{port}/", head
+        endpoint = re.fullmatch(r"skinet demo: system spot_arm, listening on (tcp/127\.0\.0\.1:\d+); connect with:",
+                                head[1]).group(1)
+        assert head[2:] == [f"  skinet watch spot_arm -e {endpoint}", f"  skinet dashboard spot_arm -e {endpoint}",
+                            f"  skinet check spot_arm spot:init_power.start -e {endpoint}"]
+        browser.get(f"http://127.0.0.1:{port}/")
+        until(browser, lambda d: css(d, "#violations li[data-property]"), "the first violation", 60)
+        first = css(browser, "#violations li[data-property]")[0]
+        assert (first["data-property"], first["data-event"].split("#")[0]) == ("action_guard", "spot:teleop.start")
+        until(browser, lambda d: len(css(d, "#violations li[data-property]")) == 3, "the three violations", 60)
+        assert [v["data-property"] for v in css(browser, "#violations li[data-property]")] == [
+            p for p, _, _ in VIOLATIONS]
+        watch = subprocess.run([sys.executable, "-m", "skinet_cli.main", *head[2].split()[1:], "--once"], cwd=REPO,
+                               capture_output=True, text=True, timeout=60)
+        assert watch.returncode == 0 and watch.stdout.startswith("SkiNet Live  system spot_arm  step "), \
+            watch.stdout + watch.stderr
+        assert watch.stdout.splitlines()[-1] == "divergences and manager restarts (0)"
+        assert proc.stderr.readline().startswith("skinet demo: the run is over; the chain keeps running for the "
+                                                  "views for 60 s")
+    finally:
+        proc.terminate()
+        out, err = proc.communicate(timeout=30)
+    assert proc.returncode == 0, err
+    lines = out.splitlines()
+    assert lines[0] == f"== unassisted run ({MISSIONS / 'unassisted.toml'}), live at speed 10: 62 steps, system spot_arm"
+    assert "   violations: 3; action_guard at step 26; safety_guard at step 33; action_guard at step 38" in lines
+    assert sum(line.startswith("  step ") for line in lines) == 62  # every step, as it was played
+
+
+def test_the_screenshot_target_photographs_the_live_dashboard(browser, tmp_path) -> None:
+    """``make screenshot`` (tests/screenshot.py) writes docs/dashboard.png: here into a temporary folder
+    (``browser``: skipped where Chromium is missing, as the script would fail)."""
+    import subprocess
+    import sys
+
+    from PIL import Image
+
+    out = tmp_path / "dashboard.png"
+    done = subprocess.run([sys.executable, "tests/screenshot.py", "-o", str(out), "--speed", "4"], cwd=REPO,
+                          capture_output=True, text=True, timeout=180)
+    assert (done.returncode, done.stderr) == (0, ""), done.stderr
+    assert done.stdout == (f"{out}: 1400x{Image.open(out).height} PNG of the live dashboard at step 37, 2 violations, "
+                           "violated now: none\n")
+    picture = Image.open(out).convert("RGB")
+    assert picture.width == 1400 and 1000 < picture.height < 2400
+    assert picture.getpixel((5, 5)) == (0x1D, 0x2B, 0x3A)  # the page's header
+    colours = set(picture.getdata())
+    assert (0xD6, 0x27, 0x28) in colours  # the violated-bar of the timeline (two violations so far)
+    assert (0xFB, 0xD3, 0xD0) in colours  # the badge of an explicit constraint: the warning on arm_ready.start

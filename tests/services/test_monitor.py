@@ -9,6 +9,7 @@ Every wait has a deadline; nothing relies on a blind sleep.
 from __future__ import annotations
 
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -474,6 +475,15 @@ def test_skinet_run_listens_for_a_bridge_and_logs_changes(tmp_path):
             if line.startswith("[9] spot:teleop.start#"):
                 break
         assert "unsafe: manipulator:arm_ready.start(action_guard explicit)" in lines[-1]
+        # A model divergence: its step's line says so, and a line of its own lists it (issue 27 item 4).
+        events.send("spot", "init_power.success.powered_on")
+        for line in proc.stdout:
+            lines.append(line)
+            if line.startswith("MODEL DIVERGENCE"):
+                break
+        assert re.fullmatch(r"MODEL DIVERGENCE at step 10 \(\d\d:\d\d:\d\d\): spot:init_power.success.powered_on#\d+: "
+                            r"'init_power.success.powered_on' is not enabled in the live marking\n", lines[-1]), lines
+        assert lines[-2].startswith("[10] spot:init_power.success.powered_on#") and " DIVERGENCE: " in lines[-2]
         watch.close()
     finally:
         if bridge is not None:

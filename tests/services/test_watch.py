@@ -57,3 +57,46 @@ def test_watch_in_a_pipe_prints_one_line_per_step(router: str, client: zenoh.Ses
     assert [int(re.match(r"\[(\d+)\]", line).group(1)) for line in lines] == [0, 1, 2, 3, 4], out + err
     assert all(line.endswith("prediction fresh") for line in lines), out
     assert [line.split(" | ")[0] for line in lines[1:]] == [f"[{n}] {s}:{t}#{n}" for n, (s, t) in enumerate(STEPS, 1)]
+
+
+DIVERGENCE = r"MODEL DIVERGENCE at step {step} \(\d\d:\d\d:\d\d\): spot:init_power.success.powered_on#{seq}: " \
+             r"'init_power.success.powered_on' is not enabled in the live marking"
+
+
+def test_watch_lists_divergences_and_a_late_joiner_gets_the_list_so_far(router: str, client: zenoh.Session) -> None:
+    """Issue 27 item 4: a divergence is listed for the rest of the run, not only on its step's line; a watch
+    started after it (in a pipe, or --once) gets it from the monitor."""
+    system = load_system(SYSTEM_FILE)[0]
+    session = open_client(router)
+    monitor = start_monitor(session, system)
+    events = Events(client)
+    proc = None
+    try:
+        events.send("spot", "init_power.success.powered_on")  # step 1: init_power never started
+        for skillset, transition in STEPS:  # steps 2 to 5
+            events.send(skillset, transition)
+        wait_until(lambda: monitor.divergences().entries and monitor.snapshot().state.seq == 5, 10, "five steps")
+        once = subprocess.run([sys.executable, "-m", "skinet_cli.main", "watch", "spot_arm", "--once", "--wait", "3",
+                               *client_args(router)], cwd=REPO, capture_output=True, text=True, timeout=60)
+        view = once.stdout.splitlines()
+        assert view[-2] == "divergences and manager restarts (1)", once.stdout
+        assert re.fullmatch("  " + DIVERGENCE.replace("MODEL DIVERGENCE", "model divergence").format(step=1, seq=1),
+                            view[-1]), once.stdout
+        proc = subprocess.Popen([sys.executable, "-m", "skinet_cli.main", "watch", "spot_arm", "--duration", "60",
+                                 *client_args(router)], cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                text=True)
+        # The watch joined late: the last step's line (no predictor: its prediction stays stale), then the
+        # monitor's list so far.
+        first = [proc.stdout.readline().rstrip("\n") for _ in range(2)]
+        assert first[0].startswith("[5] spot:stand_up.success.standing#5 | ") and \
+            re.fullmatch(DIVERGENCE.format(step=1, seq=1), first[1]), first
+        events.send("spot", "init_power.success.powered_on")  # step 6: spot is powered on, init_power idle
+        lines = [proc.stdout.readline().rstrip("\n") for _ in range(2)]
+        diverged = [line for line in lines if line.startswith("MODEL DIVERGENCE")]
+        assert len(diverged) == 1 and re.fullmatch(DIVERGENCE.format(step=6, seq=6), diverged[0]), lines
+    finally:
+        if proc is not None:
+            proc.terminate()
+            proc.communicate(timeout=20)
+        monitor.close()
+        session.close()

@@ -9,8 +9,9 @@ from skinet.system import System
 from skinet.verify.predict import forecast
 from skinet.wire.convert import bundle, marking_of, risks, state_space_report, statuses
 from skinet.wire.messages import (
-    CanonicalEvent, CheckReason, CheckReply, CheckRequest, Heartbeat, HeartbeatSkillset, LiveState, PredictReply,
-    PredictRequest, PropertyVerdict, RecoveryEntry, SkillsetStatus, SkillsetSync, UnsafeEntry, UnsafeReport, Verdicts,
+    CanonicalEvent, CheckReason, CheckReply, CheckRequest, Divergence, Divergences, Heartbeat, HeartbeatSkillset,
+    LiveState, PredictReply, PredictRequest, PropertyVerdict, RecoveryEntry, SkillsetStatus, SkillsetSync, UnsafeEntry,
+    UnsafeReport, Verdicts,
 )
 
 # Arm moving (mutex Busy): starting Spot would break action_guard in one step.
@@ -30,7 +31,7 @@ def sample_messages(system: System) -> dict[str, BaseModel]:
     return {
         "CanonicalEvent": CanonicalEvent(
             system=system.name, skillset="manipulator", seq=7, stamp=1700000000.25, source="bridge-1",
-            transition="arm_ready.start", status=skillsets["manipulator"], info="ok id=3",
+            transition="arm_ready.start", status=skillsets["manipulator"], info="ok id=3", restart=True,
             divergence="/arm/_action/status: goal 1 ACCEPTED: arm_ready started, but the model says it cannot"),
         "LiveState": LiveState(system=system.name, seq=8, stamp=1700000000.3, skillsets=skillsets,
                                event="manipulator:arm_ready.start#7", divergence="no transition explains it",
@@ -68,6 +69,13 @@ def sample_messages(system: System) -> dict[str, BaseModel]:
                                           "manipulator": HeartbeatSkillset()},
                                pending={"spot": "its manager restarted (the manager (or its gateway) came back): "
                                                 "waiting for its new status"}),
+        "Divergences": Divergences(system=system.name, monitor="m1", stamp=1700000000.5, older=3, entries=[
+            Divergence(n=3, kind="divergence", seq=4, stamp=1700000000.4, skillset="manipulator",
+                       event="manipulator:arm_ready.success.ready#7",
+                       reason="'arm_ready.success.ready' is not enabled in the live marking"),
+            Divergence(n=4, kind="restart", seq=4, stamp=1700000000.45, skillset="spot", event="spot:status#9",
+                       info="manager restarted (skill ids reset: teleop); state now differs: power_status "
+                            "PowerOn -> PowerOff")]),
     }
 
 

@@ -78,12 +78,12 @@ def test_readme_examples_are_valid_messages() -> None:
     import msgpack
 
     from skinet.wire.codec import decode, encode
-    from skinet.wire.messages import CheckReply, Heartbeat
+    from skinet.wire.messages import CheckReply, Divergences, Heartbeat
 
     readme = (SCHEMAS / "README.md").read_text(encoding="utf-8")
     examples = [json.loads(block) for block in re.findall(r"```json\n(.*?)```", readme, re.S)]
-    kinds = [Heartbeat if "period" in e else CheckReply for e in examples]
-    assert kinds == [Heartbeat, CheckReply]
+    kinds = [Heartbeat if "period" in e else Divergences if "entries" in e else CheckReply for e in examples]
+    assert kinds == [Divergences, Heartbeat, CheckReply]
     def within(part: object, whole: object) -> bool:  # ``part`` as written, ``whole`` with the defaults too
         if isinstance(part, dict):
             return isinstance(whole, dict) and all(k in whole and within(v, whole[k]) for k, v in part.items())

@@ -6,6 +6,7 @@
 const view = {
   system: "", epoch: 0, state: null, verdicts: null, unsafe: null, stateSpace: null, stateSpaceT: null,
   model: { digest: null, lanes: {} }, alive: {}, points: [], violations: [], restarts: [],
+  divergences: [], divergencesOlder: 0,
   connected: false, lastMessage: null,
 };
 const NS = "http://www.w3.org/2000/svg";
@@ -54,8 +55,10 @@ function apply(u) {
       view.system = u.system; view.epoch = u.epoch; view.state = u.state; view.verdicts = u.verdicts;
       view.unsafe = u.unsafe; view.stateSpace = u.state_space; view.stateSpaceT = u.state_space_t;
       view.model = u.model; view.alive = u.alive; view.points = u.points; view.violations = u.violations;
+      view.divergences = u.divergences || []; view.divergencesOlder = u.divergences_older || 0;
       view.lastPointAt = Date.now() / 1000;
       break;
+    case "divergences": addDivergences(u.added, u.older); break;
     case "state": view.state = u.message; break;
     case "verdicts": view.verdicts = u.message; break;
     case "unsafe": view.unsafe = u.message; break;
@@ -94,6 +97,7 @@ function render() {
   renderUnsafe();
   renderSpace();
   renderViolations();
+  renderDivergences();
   renderTimeline();
 }
 
@@ -210,6 +214,131 @@ function renderViolations() {
   fill("violations", ...(items.length ? items : [el("li", { class: "muted none" }, "none")]));
 }
 
+// -- divergences and manager restarts (issue 27 item 4): the monitor's list of the run, kept --
+
+const KEPT_DIVERGENCES = 1024;  // as the server's board keeps
+
+function addDivergences(added, older) {
+  const have = new Set(view.divergences.map((d) => `${d.monitor}/${d.n}`));
+  for (const d of added) if (!have.has(`${d.monitor}/${d.n}`)) view.divergences.push(d);
+  if (view.divergences.length > KEPT_DIVERGENCES) view.divergences.splice(0, view.divergences.length - KEPT_DIVERGENCES);
+  view.divergencesOlder = older;
+}
+
+function divergenceText(d) {
+  const words = d.kind === "restart" ? [d.info, d.reason && `model divergence: ${d.reason}`] : [d.reason, d.info];
+  return words.filter(Boolean).join("; ");
+}
+
+function renderDivergences() {
+  const ds = view.divergences, total = ds.length + view.divergencesOlder;
+  document.getElementById("divergence-count").textContent = `(${total})`;
+  const items = ds.map((d) => el("li", { "data-kind": d.kind, "data-seq": d.seq, "data-skillset": d.skillset,
+    "data-event": d.event, "data-monitor": d.monitor, "data-n": d.n },
+    el("strong", {}, d.kind === "restart" ? "manager restart" : "model divergence"),
+    ` at monitor step ${d.seq} (${clock(d.stamp)}): `, el("span", { class: "mono" }, d.event), ` \u2014 ${divergenceText(d)}`));
+  if (view.divergencesOlder) items.unshift(el("li", { class: "muted older" }, `${view.divergencesOlder} earlier not listed`));
+  fill("divergences", ...(items.length ? items : [el("li", { class: "muted none" }, "none")]));
+}
+
+// Markers on the timeline: a triangle on top and a dashed line across the lanes, the words in its tooltip.
+function drawDivergences(plot, x, v0, v1, top, bottom) {
+  for (const d of view.divergences) {
+    if (d.stamp < v0 || d.stamp > v1) continue;
+    const dx = x(d.stamp);
+    const mark = svg("path", { d: `M${dx - 5},${top - 15}L${dx + 5},${top - 15}L${dx},${top - 8}Z`,
+      class: `divergence-mark divergence-${d.kind}`, "data-n": d.n, "data-kind": d.kind, "data-seq": d.seq });
+    mark.append(svg("title", {}, `${d.kind === "restart" ? "manager restart" : "model divergence"} at step ${d.seq}: `
+      + `${d.event} \u2014 ${divergenceText(d)}`));
+    plot.append(svg("line", { x1: dx, x2: dx, y1: top - 8, y2: bottom, class: `divergence-line divergence-${d.kind}` }), mark);
+  }
+}
+
+// -- timeline zoom and pan: the wheel zooms around the pointer, a drag pans, the buttons zoom or show the whole run --
+
+const MIN_SPAN = 2;  // seconds: the narrowest window
+const zoom = { span: null, end: null };  // span null: the whole run; end null: the window follows the live edge
+let frame = null;  // the last drawing's geometry: {left, plotW, v0, v1, t0, tEnd}
+
+function timelineWindow(t0, tEnd) {
+  if (zoom.span === null || zoom.span >= tEnd - t0) return [t0, tEnd];
+  const end = zoom.end === null ? tEnd : Math.min(tEnd, Math.max(t0 + zoom.span, zoom.end));
+  return [end - zoom.span, end];
+}
+
+function setWindow(v0, v1) {
+  const f = frame;
+  if (!f) return;
+  const span = Math.max(MIN_SPAN, v1 - v0);
+  if (span >= f.tEnd - f.t0) { zoom.span = null; zoom.end = null; schedule(); return; }
+  const end = Math.min(f.tEnd, Math.max(f.t0 + span, v0 + span));
+  zoom.span = span;
+  zoom.end = end >= f.tEnd ? null : end;  // at the live edge: follow it
+  schedule();
+}
+
+function zoomBy(factor, at) {  // around time ``at``; else around the live edge while following it, or the middle
+  const f = frame;
+  if (!f) return;
+  const centre = at !== undefined ? at : zoom.end === null ? f.v1 : (f.v0 + f.v1) / 2;
+  const span = Math.max(MIN_SPAN, (f.v1 - f.v0) * factor);
+  const v0 = centre - (centre - f.v0) * span / (f.v1 - f.v0);
+  setWindow(v0, v0 + span);
+}
+
+function timeAt(event) {
+  const f = frame, px = event.clientX - event.currentTarget.getBoundingClientRect().left;
+  return f.v0 + (px - f.left) / f.plotW * (f.v1 - f.v0);
+}
+
+function initZoom() {
+  const box = document.getElementById("timeline");
+  box.addEventListener("wheel", (e) => {
+    if (!frame) return;
+    e.preventDefault();
+    zoomBy(e.deltaY > 0 ? 1.25 : 0.8, timeAt(e));
+  }, { passive: false });
+  let drag = null;
+  box.addEventListener("pointerdown", (e) => {
+    if (!frame || e.button !== 0) return;
+    drag = { x: e.clientX, v0: frame.v0, v1: frame.v1, plotW: frame.plotW };
+    box.setPointerCapture(e.pointerId);
+    box.classList.add("dragging");
+  });
+  box.addEventListener("pointermove", (e) => {
+    if (!drag) return;
+    const dt = -(e.clientX - drag.x) / drag.plotW * (drag.v1 - drag.v0);
+    if (!dt) return;
+    const f = frame, lo = f.t0 - drag.v0, hi = f.tEnd - drag.v1;  // stay within the run
+    const shift = Math.min(hi, Math.max(lo, dt));
+    setWindow(drag.v0 + shift, drag.v1 + shift);
+  });
+  const end = () => { drag = null; box.classList.remove("dragging"); };
+  box.addEventListener("pointerup", end);
+  box.addEventListener("pointercancel", end);
+  document.getElementById("zoom-in").addEventListener("click", () => zoomBy(0.5));
+  document.getElementById("zoom-out").addEventListener("click", () => zoomBy(2));
+  document.getElementById("zoom-all").addEventListener("click", () => { zoom.span = null; zoom.end = null; schedule(); });
+}
+
+// -- label widths: lane names are never cut, state names only shown where they fit --
+
+const measurer = document.createElement("canvas").getContext("2d");
+
+function textWidth(text, px) {
+  measurer.font = `${px}px system-ui, -apple-system, "Segoe UI", sans-serif`;
+  return measurer.measureText(text).width;
+}
+
+function fitted(text, px, room) {  // text, or its start and an ellipsis, within room pixels; "" when not even that
+  if (textWidth(text, px) <= room) return text;
+  for (let n = text.length - 1; n >= 2; n--) {
+    const cut = text.slice(0, n) + "\u2026";
+    if (textWidth(cut, px) <= room) return cut;
+  }
+  return "";
+}
+
 // -- timeline (paper Fig. 3/4: lanes per resource, skill and property; unsafe count below) --
 
 function lanesOf() {
@@ -241,22 +370,38 @@ function renderTimeline() {
     for (const k of l.skills) rows.push({ type: "skill", ss, name: k, n });
   });
   for (const p of props) rows.push({ type: "property", name: p });
-  const laneH = 20, left = 190, right = 20, top = 52, chartH = 90;
+  for (const row of rows) row.label = row.type === "property" ? `property ${row.name}` : `${row.ss}.${row.name}`;
+  const laneH = 20, right = 20, top = 60, chartH = 90;
   const width = Math.max(600, box.parentNode.clientWidth - 4);
+  // The label column is as wide as the longest lane name (up to 40 % of the width): no name is cut.
+  const longest = Math.max(textWidth("unsafe transitions", 11), ...rows.map((row) => textWidth(row.label, 11)));
+  const left = Math.ceil(Math.min(width * 0.4, longest + 12));
   const height = top + rows.length * laneH + 20 + chartH + 30;
   box.setAttribute("width", width); box.setAttribute("height", height);
   box.replaceChildren();
-  if (!pts.length) { box.append(svg("text", { x: 10, y: 20, class: "muted" }, "no step yet")); return; }
+  if (!pts.length) { frame = null; box.append(svg("text", { x: 10, y: 20, class: "muted" }, "no step yet")); return; }
   // The right edge is now, measured on the browser's clock from the last step's arrival (no clock skew).
   const t0 = pts[0].t, tEnd = pts[pts.length - 1].t + Math.max(0, Date.now() / 1000 - (view.lastPointAt || 0));
-  const span = Math.max(1, tEnd - t0);
-  const x = (t) => left + (width - left - right) * (t - t0) / span;
+  const [v0, v1] = timelineWindow(t0, Math.max(tEnd, t0 + 1));
+  const span = Math.max(1e-3, v1 - v0), plotW = width - left - right;
+  frame = { left, plotW, v0, v1, t0, tEnd: Math.max(tEnd, t0 + 1) };
+  Object.assign(box.dataset, { t0: v0.toFixed(3), t1: v1.toFixed(3), zoomed: zoom.span !== null });
+  const x = (t) => left + plotW * (t - v0) / span;
   const y = (i) => top + i * laneH;
+  const cTop = y(rows.length) + 20;
+  // Everything drawn against time is clipped to the plot area, so a zoomed window never spills on the names.
+  const clip = svg("clipPath", { id: "timeline-plot" });
+  clip.append(svg("rect", { x: left, y: 0, width: plotW, height }));
+  const defs = svg("defs");
+  defs.append(clip);
+  const plot = svg("g", { "clip-path": "url(#timeline-plot)" });
+  box.append(defs);
   rows.forEach((row, i) => {
-    box.append(svg("text", { x: left - 6, y: y(i) + 14, class: "lane-label", "text-anchor": "end" },
-      row.type === "property" ? `property ${row.name}` : `${row.ss}.${row.name}`));
+    const label = svg("text", { x: left - 6, y: y(i) + 14, class: "lane-label", "text-anchor": "end" }, row.label);
+    box.append(label);
     box.append(svg("line", { x1: left, x2: width - right, y1: y(i) + laneH, y2: y(i) + laneH, class: "lane-line" }));
   });
+  box.append(plot);
   // One shape per run of equal values (a long mission stays a few hundred shapes).
   const end = (k) => (k + 1 < pts.length ? x(pts[k + 1].t) : x(tEnd));
   rows.forEach((row, i) => {
@@ -271,24 +416,32 @@ function renderTimeline() {
       const v = value(pts[k]);
       let j = k;
       while (j + 1 < pts.length && value(pts[j + 1]) === v && pts[j + 1].epoch === pts[k].epoch) j++;
-      const x0 = x(pts[k].t), w = Math.max(1, end(j) - x0);
+      const x0 = x(pts[k].t), x1 = end(j), w = Math.max(1, x1 - x0);
+      if (x1 < left || x0 > left + plotW) { k = j + 1; continue; }  // outside the window
       if (row.type === "resource" && v !== undefined) {
         const idx = Math.max(0, row.states.indexOf(v));
         const rect = svg("rect", { x: x0, y: y(i) + 2, width: w, height: laneH - 4, fill: FILLS[idx % FILLS.length] });
         rect.append(svg("title", {}, `${row.ss}.${row.name} = ${v} (steps ${pts[k].seq}-${pts[j].seq})`));
-        box.append(rect);
-        if (w > 8) box.append(svg("text", { x: x0 + 2, y: y(i) + 14, class: "state-label" }, v));
+        plot.append(rect);
+        // The state's name where the shown part of its shape holds it, shortened with an ellipsis, else none.
+        const from = Math.max(x0, left), room = Math.min(x1, left + plotW) - from - 4;
+        const text = fitted(v, 10, room);
+        if (text) {
+          const label = svg("text", { x: from + 2, y: y(i) + 14, class: "state-label" }, text);
+          label.append(svg("title", {}, v));
+          plot.append(label);
+        }
       } else if (row.type === "skill" && v === true) {
-        box.append(svg("rect", { x: x0, y: y(i) + 4, width: w, height: laneH - 8, fill: COLOURS[row.n % COLOURS.length],
+        plot.append(svg("rect", { x: x0, y: y(i) + 4, width: w, height: laneH - 8, fill: COLOURS[row.n % COLOURS.length],
           class: "skill-bar" }));
       } else if (row.type === "property" && v !== undefined) {
-        box.append(svg("rect", { x: x0, y: y(i) + 2, width: w, height: laneH - 4, class: v ? "holds-bar" : "violated-bar" }));
+        plot.append(svg("rect", { x: x0, y: y(i) + 2, width: w, height: laneH - 4, class: v ? "holds-bar" : "violated-bar" }));
       }
       k = j + 1;
     }
   });
   // Unsafe transitions per step (operator view, literal algorithm dashed).
-  const cTop = y(rows.length) + 20, maxU = Math.max(1, ...pts.map((p) => Math.max(p.unsafe || 0, p.literal || 0)));
+  const maxU = Math.max(1, ...pts.map((p) => Math.max(p.unsafe || 0, p.literal || 0)));
   const cy = (n) => cTop + chartH - chartH * n / maxU;
   box.append(svg("text", { x: left - 6, y: cTop + chartH / 2, class: "lane-label", "text-anchor": "end" }, "unsafe transitions"));
   box.append(svg("line", { x1: left, x2: width - right, y1: cTop + chartH, y2: cTop + chartH, class: "axis" }));
@@ -300,30 +453,33 @@ function renderTimeline() {
       const x1 = k + 1 < pts.length ? x(pts[k + 1].t) : x(tEnd);
       d += `${d ? "L" : "M"}${x(p.t).toFixed(1)},${cy(p[field]).toFixed(1)}L${x1.toFixed(1)},${cy(p[field]).toFixed(1)}`;
     });
-    if (d) box.append(svg("path", { d, class: cls }));
+    if (d) plot.append(svg("path", { d, class: cls }));
   }
   // Events along the top, violations and monitor restarts as vertical lines.
   for (const p of pts) {
-    if (!p.event) continue;
-    const tick = svg("line", { x1: x(p.t), x2: x(p.t), y1: top - 8, y2: top - 2, class: "event-tick" });
+    if (!p.event || p.t < v0 || p.t > v1) continue;
+    const tick = svg("line", { x1: x(p.t), x2: x(p.t), y1: top - 6, y2: top - 1, class: "event-tick" });
     tick.append(svg("title", {}, `step ${p.seq}: ${p.event}`));
-    box.append(tick);
+    plot.append(tick);
   }
   view.violations.filter(Boolean).forEach((v, n) => {  // labels on three staggered rows
-    const vx = x(v.t), ly = 12 + (n % 3) * 11;
-    box.append(svg("line", { x1: vx, x2: vx, y1: ly + 2, y2: cTop + chartH, class: "violation-line" }));
-    box.append(svg("text", { x: vx + 3, y: ly, class: "violation-label" }, `${v.property} (step ${v.seq})`));
+    const vx = x(v.t), ly = 12 + (n % 3) * 11, text = `${v.property} (step ${v.seq})`;
+    const before = vx + 3 + textWidth(text, 11) > left + plotW;  // left of its line at the right edge: never cut
+    plot.append(svg("line", { x1: vx, x2: vx, y1: ly + 2, y2: cTop + chartH, class: "violation-line" }));
+    plot.append(svg("text", { x: before ? vx - 3 : vx + 3, y: ly, class: "violation-label",
+      "text-anchor": before ? "end" : "start" }, text));
   });
+  drawDivergences(plot, x, v0, v1, top, cTop + chartH);
   for (let k = 1; k < pts.length; k++) {
     if (pts[k].epoch !== pts[k - 1].epoch) {
       const rx = x(pts[k].t);
-      box.append(svg("line", { x1: rx, x2: rx, y1: top, y2: cTop + chartH, class: "restart-line" }));
-      box.append(svg("text", { x: rx + 3, y: cTop + chartH + 14, class: "tick" }, "monitor restarted"));
+      plot.append(svg("line", { x1: rx, x2: rx, y1: top, y2: cTop + chartH, class: "restart-line" }));
+      plot.append(svg("text", { x: rx + 3, y: cTop + chartH + 14, class: "tick" }, "monitor restarted"));
     }
   }
-  box.append(svg("text", { x: left, y: height - 6, class: "tick" }, clock(t0)));
+  box.append(svg("text", { x: left, y: height - 6, class: "tick" }, clock(v0)));
   box.append(svg("text", { x: width - right, y: height - 6, class: "tick", "text-anchor": "end" },
-    `${clock(tEnd)} (${span.toFixed(0)} s)`));
+    `${clock(v1)} (${span.toFixed(0)} s${zoom.span === null ? "" : ` of ${(tEnd - t0).toFixed(0)} s`})`));
 }
 
 // -- command check ------------------------------------------------------------------
@@ -374,6 +530,7 @@ function connect() {
 }
 
 document.getElementById("check-form").addEventListener("submit", check);
+initZoom();
 window.addEventListener("resize", schedule);
 setInterval(schedule, 1000);  // ages and the timeline's right edge move on
 connect();

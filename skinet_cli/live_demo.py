@@ -1,0 +1,106 @@
+"""``skinet demo --live``: one run played in real time through the whole chain, for the views to follow.
+
+The run goes through simulated managers, CDR, the bridge, the monitor and a predictor
+on one Zenoh session that listens (a peer on ``tcp/127.0.0.1`` and a free port, or
+``--listen``, or a client of a router with ``--connect``), at the scenario's times
+divided by ``--speed``.  It prints where it listens and the exact ``skinet watch``,
+``skinet dashboard`` and ``skinet check`` lines that reach it, serves the dashboard
+itself with ``--dashboard PORT``, prints each step as the monitor showed it, then keeps
+every service running until Ctrl-C (or ``--linger`` seconds) so that the views stay.
+As everywhere: an explicit ``--connect`` endpoint that does not answer stops it with
+the reason; a dashboard port in use stops it before the run starts.  Zenoh and the web
+server are imported when it runs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Callable
+from pathlib import Path
+
+from services.common.zenoh_config import add_zenoh_args
+from skinet.files import load_bindings, load_typemap
+from skinet.mission import Scenario, StepRecord
+from skinet.system import System
+from skinet_cli.options import count, number, seconds
+
+CONNECT_WAIT = 2.0  # seconds for an explicit --connect endpoint to answer before the demo gives up
+# Options that only --live takes, whose default is None (the login's and --mode's come from the environment).
+LIVE_OPTIONS = ("speed", "linger", "dashboard", "connect", "listen")
+
+
+def add_live_args(c: argparse.ArgumentParser) -> None:
+    """``--live`` and the options that go with it."""
+    g = c.add_argument_group("live (with --live)")
+    g.add_argument("--live", action="store_true",
+                   help="play one run (default: the paper's unassisted run) in real time through the whole chain, "
+                        "served to other processes: prints the skinet watch, dashboard and check lines that reach "
+                        "it, then keeps running until Ctrl-C")
+    g.add_argument("--speed", type=number(0), metavar="X",
+                   help="time scale of --live: a step at t seconds is played at t/X; 0: as fast as the chain "
+                        "settles (default: 1, real time)")
+    g.add_argument("--dashboard", type=count(0, 65535), metavar="PORT",
+                   help="serve the live web dashboard of --live on this port (0: a free one)")
+    g.add_argument("--dashboard-host", default="127.0.0.1", help="address of --dashboard (default: 127.0.0.1)")
+    g.add_argument("--linger", type=seconds(zero=True), metavar="S",
+                   help="after the run, keep the chain and the dashboard running this many seconds (default: "
+                        "until Ctrl-C or SIGTERM)")
+    add_zenoh_args(c)
+
+
+def live_options_misused(args: argparse.Namespace) -> str | None:
+    """The first option given that only ``--live`` takes, when ``--live`` is not given."""
+    if args.live:
+        return None
+    given = [name for name in LIVE_OPTIONS if getattr(args, name, None) not in (None, [])]
+    return f"--{given[0].replace('_', '-')} needs --live" if given else None
+
+
+def play_live(args: argparse.Namespace, path: Path, scenario: Scenario, system: System, header: str,
+              on_record: Callable[[StepRecord], None], after: Callable[[list[StepRecord]], None]) -> list[StepRecord]:
+    """Play ``scenario`` as the module docstring says: ``header`` printed once the session and the dashboard
+    are up, ``on_record`` after each step, ``after`` once the run is over (then the chain keeps running until
+    Ctrl-C or ``--linger``).  Raises one-line
+    :class:`~skinet.errors.SkinetError` (unreachable endpoint, refused login, port in use)."""
+    from services.chain import run_bound_chain, run_chain
+    from services.common.zenoh_config import (
+        check_connected, client_name, config_from_args, open_session, wait_connected, warn_on_stderr,
+    )
+    from services.embedded import connect_lines, fix_free_ports, start_dashboard, stop_on_signals
+
+    config = config_from_args(args)
+    mode = json.loads(config.get_json("mode"))
+    listening = fix_free_ports(config) if mode == "peer" else []
+    session = open_session(config, warn_on_stderr("skinet demo"))
+    dashboard = None
+    try:
+        if not wait_connected(session, config, CONNECT_WAIT):  # a run nobody asked for where it was asked
+            check_connected(session, config)
+        if args.dashboard is not None:  # first: a port in use stops the demo before the run starts
+            dashboard = start_dashboard(session, system.name, args.dashboard_host, args.dashboard,
+                                        client_name(config), system)
+            print(f"dashboard on {dashboard.url}", file=sys.stderr, flush=True)
+        print("\n".join(connect_lines(args, system, mode, listening, prog="skinet demo", bridge=False)),
+              file=sys.stderr, flush=True)
+        print(header, flush=True)
+
+        def linger(records: list[StepRecord]) -> None:
+            stop = stop_on_signals()  # during the run Ctrl-C interrupts it (KeyboardInterrupt), SIGTERM ends it
+            after(records)
+            print("skinet demo: the run is over; the chain keeps running for the views "
+                  + ("(Ctrl-C stops it)" if args.linger is None else f"for {args.linger:g} s"),
+                  file=sys.stderr, flush=True)
+            stop.wait(args.linger)
+
+        speed = 1.0 if args.speed is None else args.speed
+        options = dict(session=session, speed=speed, on_record=on_record, after=linger)
+        if any(c.binding for c in system.components):
+            return run_bound_chain(system, load_bindings(system)[0], scenario, **options)  # type: ignore[arg-type]
+        return run_chain(system, load_typemap(path.parent / scenario.system), scenario, **options)  # type: ignore[arg-type]
+    finally:
+        if dashboard is not None:
+            dashboard.close()
+            dashboard.observer.close()
+        session.close()
