@@ -237,7 +237,7 @@ def test_router_restart_between_a_bound_robot_and_the_bridge_is_read_again(outag
         cut = "the link to the robot's interfaces was cut: waiting for a new /battery_state message"
         wait_until(lambda: _pending(obs_s, "nav2", 10) == {"nav2": cut}, 15, "the node and the servers read again")
         assert _resync(obs_s, "nav2", "nav2") == ("err", f"'bridge_ros2/b' has no current status of nav2: {cut}")
-        assert [e.transition for e in events.items] == [None, "navigator_configured"]
+        assert [e.transition for e in events.wait(lambda items: len(items) == 2)] == [None, "navigator_configured"]
         robot.publish("nav2", "/battery_state", {"percentage": 0.1, "power_supply_status": 1})
         got = events.wait(lambda items: len(items) == 4, timeout=5)[2:]
         assert [(e.transition, e.info) for e in got] == [
