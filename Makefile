@@ -30,6 +30,12 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	$(VENV)/bin/skinet demo
 
+# The one-command live demo: the paper's unassisted run in real time through the whole chain,
+# the dashboard on http://127.0.0.1:$(PORT)/ (LIVE_ARGS adds options, e.g. --speed 4 --linger 0).
+PORT ?= 8080
+live: $(STAMP)
+	$(VENV)/bin/skinet demo --live --dashboard $(PORT) $(LIVE_ARGS)
+
 test-deps:
 	scripts/install-test-deps.sh
 

@@ -1,8 +1,8 @@
-"""The README's examples reproduce as written.
+"""The README's and docs/'s examples reproduce as written, and their links resolve.
 
-Every ``$ skinet ...`` line of a code block is run from the repository root and
-its output compared with the lines that follow it in the README (up to the next
-``$`` line or the end of the block).  ``...`` on a line of its own stands for
+Every ``$ skinet ...`` line of a code block of README.md or of a page of docs/ is
+run from the repository root and its output compared with the lines that follow it
+(up to the next ``$`` line or the end of the block).  ``...`` on a line of its own stands for
 any number of lines, inside a line for any text; otherwise lines must match
 exactly and in order, the first at the start and the last at the end of the
 output.  The expectations are read from the README itself, so a changed output
@@ -29,30 +29,33 @@ from skinet_cli.main import build_parser, main
 
 ROOT = Path(__file__).resolve().parents[1]
 README = (ROOT / "README.md").read_text(encoding="utf-8")
+PAGES = {p.relative_to(ROOT).as_posix(): p.read_text(encoding="utf-8")
+         for p in [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]}
 ELLIPSIS = "..."
 
 
 @dataclass(frozen=True)
 class Example:
-    line: int  # of the ``$`` line in README.md
+    line: int  # of the ``$`` line in its page
     command: str
     expected: tuple[str, ...]
+    page: str = "README.md"
 
 
-def examples(text: str) -> list[Example]:
-    """The ``$ skinet`` commands of the README's code blocks with their expected output."""
+def examples(text: str, page: str = "README.md") -> list[Example]:
+    """The ``$ skinet`` commands of a page's code blocks with their expected output."""
     found: list[Example] = []
     in_block = False
     current: tuple[int, str, list[str]] | None = None
     for n, line in enumerate(text.splitlines(), 1):
         if line.startswith("```"):
             if current is not None:
-                found.append(Example(current[0], current[1], tuple(current[2])))
+                found.append(Example(current[0], current[1], tuple(current[2]), page))
                 current = None
             in_block = not in_block
         elif in_block and line.startswith("$ "):
             if current is not None:
-                found.append(Example(current[0], current[1], tuple(current[2])))
+                found.append(Example(current[0], current[1], tuple(current[2]), page))
             current = (n, line[2:], [])
         elif current is not None:
             current[2].append(line)
@@ -77,23 +80,25 @@ def matches(expected: tuple[str, ...], actual: list[str]) -> bool:
     return at(0, 0)
 
 
-EXAMPLES = examples(README)
+EXAMPLES = [e for page, text in PAGES.items() for e in examples(text, page)]
 
 
-def test_the_readme_has_examples() -> None:
+def test_the_docs_have_examples() -> None:
     assert len(EXAMPLES) >= 5
     assert all(e.command.startswith("skinet ") for e in EXAMPLES)
+    assert {e.page for e in EXAMPLES} >= {"docs/commands.md", "docs/how-it-works.md", "docs/planning.md"}
 
 
-@pytest.mark.parametrize("example", EXAMPLES, ids=lambda e: f"README.md:{e.line}")
+@pytest.mark.parametrize("example", EXAMPLES, ids=lambda e: f"{e.page}:{e.line}")
 def test_readme_example(example: Example, capsys: pytest.CaptureFixture[str],
                         monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.chdir(ROOT)
     code = main(shlex.split(example.command)[1:])
     out, err = capsys.readouterr()
-    assert code == 0, f"README.md:{example.line}: {example.command}\n{err}"
+    where = f"{example.page}:{example.line}"
+    assert code == 0, f"{where}: {example.command}\n{err}"
     assert matches(example.expected, out.splitlines()), (
-        f"README.md:{example.line}: {example.command}\n--- README shows:\n" + "\n".join(example.expected)
+        f"{where}: {example.command}\n--- the page shows:\n" + "\n".join(example.expected)
         + "\n--- the command prints:\n" + out)
 
 
@@ -127,7 +132,7 @@ def _table_commands(text: str) -> list[str]:
     return re.findall(r"^\| (?:[a-z_0-9]+ \| )?`((?:skinet|python -m services\.[a-z_0-9]+) [^`]*)`", text, re.M)
 
 
-TABLE = _table_commands(README)
+TABLE = [u for text in PAGES.values() for u in _table_commands(text)]
 
 
 def test_the_tables_name_every_command() -> None:
@@ -142,3 +147,53 @@ def test_table_options_exist(usage: str) -> None:
     options = re.findall(r"(?<![\w-])(--?[a-z][a-z0-9-]*)", usage)
     missing = [o for o in options if not re.search(rf"(?<![\w-]){re.escape(o)}(?![\w-])", text)]
     assert missing == [], f"README names {missing} for `{usage}`, which its --help does not list"
+
+
+# -- links --------------------------------------------------------------------------------------
+
+def _slug(heading: str) -> str:
+    """The anchor GitHub gives a heading."""
+    return re.sub(r"[^\w\- ]", "", heading.strip().lower()).replace(" ", "-")
+
+
+def _anchors(text: str) -> set[str]:
+    found, fence = set(), False
+    for line in text.splitlines():
+        if line.startswith("```"):
+            fence = not fence
+        elif not fence and line.startswith("#"):
+            found.add(_slug(line.lstrip("#")))
+    return found
+
+
+def broken_links(pages: dict[str, str], root: Path) -> list[str]:
+    """``page: target`` for every relative link of ``pages`` whose file or heading does not exist."""
+    broken = []
+    for page, text in pages.items():
+        for target in re.findall(r"\]\(([^)\s]+)\)", text):
+            if target.startswith(("http://", "https://")):
+                continue
+            path, _, anchor = target.partition("#")
+            if not path:
+                if anchor not in _anchors(text):
+                    broken.append(f"{page}: {target} (no such heading)")
+                continue
+            file = (root / page).parent / path
+            if not file.exists():
+                broken.append(f"{page}: {target} (no such file)")
+            elif anchor and file.suffix == ".md" and anchor not in _anchors(file.read_text(encoding="utf-8")):
+                broken.append(f"{page}: {target} (no such heading)")
+    return broken
+
+
+def test_every_link_of_the_docs_resolves() -> None:
+    assert broken_links(PAGES, ROOT) == []
+
+
+def test_a_broken_link_is_found(tmp_path: Path) -> None:
+    (tmp_path / "docs").mkdir()
+    (tmp_path / "docs" / "a.md").write_text("# A page\n\n## Its part\n", encoding="utf-8")
+    pages = {"README.md": "[ok](docs/a.md#its-part) [gone](docs/b.md) [typo](docs/a.md#its-prat) [here](#a-page)"}
+    assert broken_links(pages, tmp_path) == ["README.md: docs/b.md (no such file)",
+                                             "README.md: docs/a.md#its-prat (no such heading)",
+                                             "README.md: #a-page (no such heading)"]
