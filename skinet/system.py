@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from functools import cached_property
 
 from skinet.errors import SourceError
 from skinet.lang.model import Resource, Skillset
@@ -31,10 +32,16 @@ class Component:
     eventless: PetriNet
     manager: str = ""  # ROS 2 node of the skillset manager, e.g. /spot/spot_skillset_manager
     binding: str = ""  # binding file (SPEC §9), when plain ROS 2 interfaces stand for a manager
+    commanded: frozenset[str] = frozenset()  # events its binding says are commanded (controllable, SPEC §9)
 
     @property
     def name(self) -> str:
         return self.skillset.name
+
+    @cached_property
+    def uncommanded(self) -> PetriNet:
+        """The full net without its commanded events: what may happen with no command (SPEC §8, §9)."""
+        return build_net(self.skillset, without=self.commanded) if self.commanded else self.net
 
 
 @dataclass(frozen=True)
@@ -72,16 +79,20 @@ def build_system(
     properties_source: str = "<properties>",
     sources: Mapping[str, str] | None = None,
     prediction: PredictionOptions | None = None,
+    commanded: Mapping[str, frozenset[str]] | None = None,
 ) -> System:
     """Assemble a system from parsed skillsets (each with its manager node, and its binding file
-    if it has one) and properties text."""
+    if it has one) and properties text; ``commanded``: per skillset, the events its binding says
+    are commanded (controllable, SPEC §9)."""
     seen: set[str] = set()
     components = []
     for ss, manager, *binding in skillsets:
         if ss.name in seen:
             raise SourceError.at(ss.source, ss.pos, f"skillset '{ss.name}' appears twice in system '{name}'")
         seen.add(ss.name)
-        components.append(Component(ss, build_net(ss), build_net(ss, eventless=True), manager, *binding))
+        events = (commanded or {}).get(ss.name, frozenset())
+        components.append(Component(ss, build_net(ss, commanded=events), build_net(ss, eventless=True), manager,
+                                    *binding, commanded=events))
     props = parse_properties(properties_text, {s[0].name: s[0] for s in skillsets}, properties_source)
     return System(name, tuple(components), tuple(props), dict(sources or {}), prediction or PredictionOptions())
 

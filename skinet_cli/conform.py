@@ -75,7 +75,7 @@ def _conform(bag: str, system: System, typemap: Mapping[str, str], bindings: Map
         out = live.apply(ev.skillset, ev.transition, ev.status.model_dump() if ev.status else None)
         # A bound skillset's drifts come with the message that showed them (below); the live nets
         # only add what the derivation did not see.
-        if out.divergence and not ev.info.startswith("model divergence"):
+        if out.divergence and not ev.divergence:
             what = f"{ev.transition or 'status'}: {out.divergence}" + (f" ({ev.info})" if ev.info else "")
             found.append((ev.stamp, ev.skillset, what))
 

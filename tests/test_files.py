@@ -70,6 +70,9 @@ def test_a_skillset_bound_to_plain_ros2_names_its_binding_file(tmp_path: Path) -
     write(tmp_path, "two.rl", TWO)
     path = write(tmp_path, "b.toml", '[system]\nname = "b"\n[[skillsets]]\nmodel = "two.rl"\nname = "alpha"\n'
                  'binding = "alpha.binding.toml"\n[[skillsets]]\nmodel = "two.rl"\nname = "beta"\nmanager = "/m"\n')
+    assert error(load_system, path) == f"{tmp_path / 'alpha.binding.toml'}: error: cannot read file: No such file or " \
+                                       "directory"  # it says which events are commanded (SPEC §9)
+    write(tmp_path, "alpha.binding.toml", "")
     system, _ = load_system(path)
     assert [(c.name, c.manager, c.binding) for c in system.components] == [
         ("alpha", "", str(tmp_path / "alpha.binding.toml")), ("beta", "/m", "")]

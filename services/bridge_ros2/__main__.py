@@ -22,6 +22,7 @@ from services.bridge_ros2.bound import replay_bags
 from services.bridge_ros2.bound_live import start_bound_bridge
 from services.bridge_ros2.replay import monitor_log, replay_bag
 from services.bridge_ros2.service import default_source, start_bridge
+from services.bridge_ros2.worker import Worker
 from services.common.cli import add_instance_arg, add_log_arg, one_line_errors, setup_logging
 from services.common.events import event_publisher
 from services.common.zenoh_config import add_zenoh_args, config_from_args, open_session
@@ -93,22 +94,26 @@ def main(argv: list[str] | None = None) -> int:
         style = KeyStyle(args.rmw_zenoh, args.namespace, args.domain, args.ros_distro == "humble")
         bridge = None
         managed = [c.name for c in system.components if not c.binding]
+        # One derivation thread, epoch and heartbeat for both kinds: their events leave in arrival order.
+        worker = Worker()
         if managed:
             bridge = start_bridge(session, system, typemap, source=source, instance_id=args.instance, hold=args.hold,
-                                  style=style)  # errors: one line
+                                  style=style, worker=worker)  # errors: one line
             log.info("bridging the managers of %s (%s) as %s", system.name, ", ".join(managed), args.instance)
         bound = start_bound_bridge(session, system, bindings, source=source, instance_id=args.instance,
-                                   hold=args.hold, settle=args.settle, style=style) if bindings else None
+                                   hold=args.hold, settle=args.settle, style=style, worker=worker) if bindings else None
         while not stop.wait(0.5):
             pass
+        if bound is not None:
+            bound.close()
         if bridge is not None:
             bridge.close()
             c = bridge.counters
             log.info("stopped: %d messages, %d events (%d unnamed), %d malformed, %d statuses not matching the "
                      "model, %d manager restarts, %d resyncs after a cut link", c.messages, c.events, c.unexplained,
                      c.malformed, c.mismatched, c.restarts, c.resyncs)
+        worker.close()
         if bound is not None:
-            bound.close()
             _log_bound(bound.counters)
         return 0
     finally:
@@ -117,8 +122,8 @@ def main(argv: list[str] | None = None) -> int:
 
 def _log_bound(c) -> None:  # type: ignore[no-untyped-def]
     bad = ", ".join(f"{n} {kind}" for kind, n in sorted(c.bad.items())) or "no other bad input"
-    log.info("bound skillsets: %d messages, %d events, %d model divergences, %d malformed, %s", c.messages,
-             c.events, c.drifts, c.malformed, bad)
+    log.info("bound skillsets: %d messages, %d events, %d model divergences, %d malformed, %d resyncs after a gap, "
+             "%s", c.messages, c.events, c.drifts, c.malformed, c.resyncs, bad)
 
 
 def _replay(session: zenoh.Session, system, typemap, bindings, args: argparse.Namespace, source: str) -> int:

@@ -7,7 +7,18 @@ epoch, as :class:`~services.bridge_ros2.feed.Feed` does for managers.  Drifts ar
 logged with the message that showed them, counted and kept (``drifts``, for
 ``skinet conform``); bad input (a payload that does not decode, a goal never seen
 accepted, a status code that is no GoalStatus, ...) is counted per kind and logged
-once per kind; the feed never raises on a message.
+once per kind; the feed never raises on a message.  Events leave in the order their
+messages came (:class:`~services.bridge_ros2.order.Order`, shared with the managers'
+feed of the same bridge): while a skillset waits for a goal's result, the events of
+every other skillset that come later wait behind it (at most the result's timeout).
+
+What the bridge can vouch for (SPEC §7, §9): until every bound interface of a
+skillset has been read once, and again after the link to the robot was cut or an
+action server or lifecycle node left (:meth:`BoundFeed.unread`: the robot's topics
+are volatile, what happened meanwhile is lost), the skillset's status is *pending*
+(:meth:`BoundFeed.pending` says why); the reading that completes a gap publishes a
+status event saying so (``resync after ...; state now differs: ...``), as the
+managers' feed does.
 
 :func:`replay_bags` reads a rosbag2 file (sqlite3 or mcap) once and feeds every
 manager topic to a :class:`~services.bridge_ros2.feed.Feed` and every bound topic
@@ -22,15 +33,17 @@ from collections import Counter
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
+from services.bridge_ros2.feed import Feed, differences
+from services.bridge_ros2.order import Order, Slot
 from skinet.errors import SourceError
 from skinet.ros import bound
 from skinet.ros.actions import get_result_reply, get_state_reply
 from skinet.ros.binding import STATUS_TYPE, TRANSITION_EVENT_TYPE, Binding
+from skinet.ros.derive import Derived
 from skinet.ros.typestore import decode, to_plain
 from skinet.system import System
-from skinet.wire.messages import CanonicalEvent
+from skinet.wire.messages import CanonicalEvent, SkillsetStatus
 
 log = logging.getLogger("skinet.bridge_ros2")
 
@@ -43,6 +56,7 @@ class Route:
     kind: str
     typename: str
     owner: str = ""  # the skill (status) or resource (lifecycle)
+    reads: str = ""  # the interface a message of it reads (BoundFeed.interfaces), if any
 
 
 @dataclass
@@ -51,6 +65,7 @@ class BoundCounters:
     malformed: int = 0  # payloads that did not decode
     events: int = 0  # canonical events produced
     drifts: int = 0  # model divergences found (SPEC §9)
+    resyncs: int = 0  # gaps after which every interface of a skillset was read again (link cut, server gone)
     bad: Counter[str] = field(default_factory=Counter)  # other bad input, per kind
 
 
@@ -60,6 +75,9 @@ class _Skillset:
     deriver: bound.BoundDeriver
     seq: int = 0
     reported: set[str] = field(default_factory=set)
+    slot: Slot | None = None  # its place in the order while it waits for a result
+    unread: dict[str, str] = field(default_factory=dict)  # interface -> why it must be read again
+    gap: tuple[str, SkillsetStatus | None] | None = None  # why the first went unread, and the status then
 
 
 class BoundFeed:
@@ -70,9 +88,10 @@ class BoundFeed:
     """
 
     def __init__(self, system: System, bindings: Mapping[str, Binding], source: str, *, synced: bool = False,
-                 results: bool = True, epoch: int | None = None):
+                 results: bool = True, epoch: int | None = None, order: Order | None = None):
         self.system = system
         self.source = source
+        self.order = Order() if order is None else order  # shared with the managers' feed, if any
         self.epoch = time.time_ns() // 1_000_000 if epoch is None else epoch
         self.counters = BoundCounters()
         self.drifts: list[bound.Drift] = []
@@ -81,23 +100,31 @@ class BoundFeed:
                                                                 results=results))
                           for name, b in bindings.items()}
         self.routes: dict[str, list[Route]] = {}  # ROS topic name -> what it feeds
+        # skillset -> interface (status topic, lifecycle node, resource topic) -> what reading it means
+        self.interfaces: dict[str, dict[str, str]] = {}
         for name, b in bindings.items():
+            reads = self.interfaces[name] = {}
             for s in b.skills:
-                self._route(s.name("status"), Route(name, "status", STATUS_TYPE, s.skill))
+                self._route(s.name("status"), Route(name, "status", STATUS_TYPE, s.skill, s.name("status")))
+                reads[s.name("status")] = f"the status of {s.action}"
             for r in b.resources:
                 if r.lifecycle:
-                    self._route(r.transition_event, Route(name, "lifecycle", TRANSITION_EVENT_TYPE, r.resource))
+                    self._route(r.transition_event, Route(name, "lifecycle", TRANSITION_EVENT_TYPE, r.resource,
+                                                          r.lifecycle))
+                    reads[r.lifecycle] = f"the state of {r.lifecycle}"
+                else:
+                    reads[r.topic] = f"a new {r.topic} message"
             for topic, typename in b.topics().items():
                 if not any(r.skillset == name for r in self.routes.get(topic, [])):
-                    self._route(topic, Route(name, "topic", typename))
+                    self._route(topic, Route(name, "topic", typename, reads=topic if topic in reads else ""))
 
     def _route(self, topic: str, route: Route) -> None:
         self.routes.setdefault(topic, []).append(route)
 
     def feed(self, topic: str, payload: bytes, stamp: float) -> list[CanonicalEvent]:
-        """Canonical events caused by one CDR message of a bound topic (its ROS name)."""
+        """Canonical events caused by one CDR message of a bound topic (its ROS name): those whose turn
+        has come (:meth:`Order.drain`), of any skillset of the order."""
         self.counters.messages += 1
-        events: list[CanonicalEvent] = []
         for route in self.routes.get(topic, []):
             ss = self.skillsets[route.skillset]
             try:
@@ -114,8 +141,11 @@ class BoundFeed:
                 self._bad(ss, f"malformed {topic}", f"{topic}: message dropped, it does not decode as "
                                                     f"{route.typename} ({type(exc).__name__}: {exc})", count=False)
                 continue
-            events += self._emit(route.skillset, out)
-        return events
+            self._emit(route.skillset, out)
+            settled = route.kind != "lifecycle" or 1 <= int(msg["goal_state"]["id"]) <= 4
+            if route.reads and settled:
+                self._read(route.skillset, route.reads, stamp)
+        return self.order.drain()
 
     def result(self, skillset: str, request: bound.ResultRequest, payload: bytes | None,
                stamp: float) -> list[CanonicalEvent]:
@@ -134,7 +164,8 @@ class BoundFeed:
                     self._bad(ss, "result not terminal", f"{request.action}/_action/get_result: goal "
                                                          f"{bound.goal_text(request.goal)} answered with status "
                                                          f"{bound.STATUS_NAMES.get(status, status)}")
-        return self._emit(skillset, ss.deriver.on_result(request.skill, request.goal, result, stamp))
+        self._emit(skillset, ss.deriver.on_result(request.skill, request.goal, result, stamp))
+        return self.order.drain()
 
     def lifecycle_state(self, skillset: str, resource: str, payload: bytes, stamp: float) -> list[CanonicalEvent]:
         """The reply of a lifecycle node's ``get_state``."""
@@ -144,12 +175,62 @@ class BoundFeed:
         except Exception as exc:
             self._bad(ss, "malformed get_state", f"get_state of {resource}: reply does not decode "
                                                  f"({type(exc).__name__}: {exc})")
-            return []
-        return self._emit(skillset, ss.deriver.on_lifecycle_state(resource, state, stamp))
+            return self.order.drain()
+        self._emit(skillset, ss.deriver.on_lifecycle_state(resource, state, stamp))
+        self._read(skillset, next(r.lifecycle for r in ss.binding.resources if r.resource == resource), stamp)
+        return self.order.drain()
 
     def no_status(self, skillset: str, skill: str, stamp: float) -> list[CanonicalEvent]:
-        """``skill``'s action server is up and its status cache is empty: no goal yet."""
-        return self._emit(skillset, self.skillsets[skillset].deriver.no_status(skill, stamp))
+        """``skill``'s action server is up and its status cache is empty: no goal yet (once synced: the
+        server forgot every goal, it restarted)."""
+        ss = self.skillsets[skillset]
+        d = ss.deriver
+        self._emit(skillset, d.on_status(skill, [], stamp) if d.synced else d.no_status(skill, stamp))
+        self._read(skillset, d.actions[skill].binding.name("status"), stamp)
+        return self.order.drain()
+
+    # -- what the bridge can vouch for ------------------------------------------------------
+
+    def unread(self, skillset: str, why: str, interfaces: list[str] | None = None) -> None:
+        """The readings of ``interfaces`` (default: all) of ``skillset`` may be outdated, because ``why``
+        (the link was cut, a server or node left): each must be read again before its status is current.
+        Nothing to do before the first status (start-up reads everything anyway)."""
+        ss = self.skillsets[skillset]
+        if not ss.deriver.synced:
+            return
+        for i in self.interfaces[skillset] if interfaces is None else interfaces:
+            if interfaces is None or i not in ss.unread:  # a cut link is the stronger news
+                ss.unread[i] = why
+        if ss.gap is None and ss.unread:
+            ss.gap = (why, ss.deriver.status())
+        elif ss.gap is not None and interfaces is None:
+            ss.gap = (why, ss.gap[1])
+            log.warning("%s: %s; waiting for %s", skillset, why, ", ".join(self.interfaces[skillset][i]
+                                                                          for i in ss.unread))
+
+    def _read(self, skillset: str, interface: str, stamp: float) -> None:
+        """``interface`` was read: the gap it was part of closes with the last one (an event says so)."""
+        ss = self.skillsets[skillset]
+        if ss.unread.pop(interface, None) is None or ss.unread or ss.gap is None:
+            return
+        (why, before), ss.gap = ss.gap, None
+        self.counters.resyncs += 1
+        now = ss.deriver.status()
+        diverged = differences(before, now) if before is not None and now is not None else ""
+        info = f"resync after {why}; " + (f"state now differs: {diverged}" if diverged else "same state as before")
+        log.warning("%s: %s", skillset, info)
+        self._emit(skillset, bound.BoundOutput([Derived(None, now, stamp, info)]))
+
+    def pending(self, skillset: str) -> str:
+        """Why ``skillset``'s status is not current ('' when it is): start-up readings still missing, or
+        interfaces to read again (SPEC §7: nobody may vouch for it meanwhile)."""
+        ss = self.skillsets[skillset]
+        if not ss.deriver.synced:
+            return f"waiting for {', '.join(ss.deriver.missing())}"
+        reasons: dict[str, list[str]] = {}
+        for interface, why in ss.unread.items():
+            reasons.setdefault(why, []).append(self.interfaces[skillset][interface])
+        return "; ".join(f"{why}: waiting for {', '.join(what)}" for why, what in reasons.items())
 
     def pending_results(self) -> list[tuple[str, bound.ResultRequest]]:
         """Results the derivation waits for (skillset, request)."""
@@ -160,25 +241,41 @@ class BoundFeed:
                 out.append((name, waiting))
         return out
 
-    def _emit(self, skillset: str, out: bound.BoundOutput) -> list[CanonicalEvent]:
+    def _emit(self, skillset: str, out: bound.BoundOutput) -> None:
+        """Number ``out``'s events and place them in the order: in the skillset's slot while it waits for a
+        result (opened when the wait begins, closed when it ends)."""
         ss = self.skillsets[skillset]
         for note in out.notes:
             log.info("%s", note)
         for kind, message in out.bad:
             self._bad(ss, kind, message)
+        derived = list(out.events)
+        carried = {d.divergence for d in derived}
         for drift in out.drifts:
             self.counters.drifts += 1
             self.drifts.append(drift)
             log.warning("%s: model divergence: %s", skillset, drift)
+            status = ss.deriver.status()
+            if str(drift) not in carried and status is not None:  # nothing moved: published all the same
+                derived.append(Derived(None, status, drift.stamp, f"model divergence: {drift}", str(drift)))
         self.requests += [(skillset, r) for r in out.results]
         events = []
-        for d in out.events:
+        for d in derived:
             events.append(CanonicalEvent(system=self.system.name, skillset=skillset, seq=ss.seq, stamp=d.stamp,
                                          source=self.source, epoch=self.epoch, transition=d.transition,
-                                         status=d.status, info=d.info))
+                                         status=d.status, info=d.info, divergence=d.divergence))
             ss.seq += 1
         self.counters.events += len(events)
-        return events
+        if ss.slot is not None:
+            ss.slot.events += events
+        else:
+            self.order.place(events)
+        waiting = ss.deriver.waiting is not None
+        if waiting and ss.slot is None:
+            ss.slot = self.order.open()
+        elif not waiting and ss.slot is not None:
+            self.order.close(ss.slot)
+            ss.slot = None
 
     def take_requests(self) -> list[tuple[str, bound.ResultRequest]]:
         """Results asked for since the last call (the live bridge fetches them with ``get_result``)."""
@@ -215,7 +312,7 @@ class Replayed:
     """What a replay went through: the feeds (counters, drifts) and the bag's first and last times."""
 
     bound: BoundFeed | None
-    managers: Any  # services.bridge_ros2.feed.Feed | None
+    managers: Feed | None
     start: float | None = None
     end: float | None = None
     unrecorded: list[str] = field(default_factory=list)  # bound topics the bag lacks
@@ -232,11 +329,10 @@ def replay_bags(path: str | Path, system: System, typemap: Mapping[str, str], bi
     """
     from rosbags.highlevel import AnyReader
 
-    from services.bridge_ros2.feed import Feed
-
     managed = [c for c in system.components if not c.binding]
-    feed = Feed(system, typemap, source, hold=hold) if managed else None
-    bound_feed = BoundFeed(system, bindings, source, synced=True, results=False) if bindings else None
+    order = Order()  # both kinds in the order of the bag
+    feed = Feed(system, typemap, source, hold=hold, order=order) if managed else None
+    bound_feed = BoundFeed(system, bindings, source, synced=True, results=False, order=order) if bindings else None
     manager_routes = feed.by_fqn() if feed is not None else {}
     bound_routes = bound_feed.routes if bound_feed is not None else {}
     out = Replayed(bound_feed, feed)

@@ -21,15 +21,25 @@ When a terminal goal's mode depends on its result, the bridge asks
 ``<action>/_action/get_result`` and holds that skillset's later observations until
 the reply (at most ``hold`` seconds: then the binding's default mode, said so).
 
-The callbacks only queue; one worker thread derives, in arrival order.  The bridge
-never stops on bad input (counted, logged once per kind: :class:`BoundFeed`).
+Honest status (SPEC §7): while a skillset's status is pending (start-up readings
+missing; after the link to the routers was cut, every interface; after an action
+server or a lifecycle node left, as its token shows (``SS`` route token of its
+``get_state`` service, or the ``rmw_zenoh`` service token), its own), the heartbeat
+lists it as ``pending`` with why (sent at once when that changes) and resync
+queries get an error reply saying so.  The reader thread reads each such interface
+again once it can (its server back and settled, its node asked ``get_state``, the
+link back); a bound topic is read again by its next sample.
+
+The callbacks only queue; one worker thread derives, in arrival order
+(:class:`~services.bridge_ros2.worker.Worker`, shared with the managers' bridge of
+the same process).  The bridge never stops on bad input (counted, logged once per
+kind: :class:`BoundFeed`).
 """
 
 from __future__ import annotations
 
 import logging
 import os
-import queue
 import threading
 import time
 from collections.abc import Callable, Mapping
@@ -39,9 +49,11 @@ import zenoh
 import zenoh.ext as zext
 
 from services.bridge_ros2.bound import BoundCounters, BoundFeed
+from services.bridge_ros2.link import watch_link
+from services.bridge_ros2.worker import Worker
 from services.common.cli import default_instance_id
 from services.common.events import event_publisher
-from services.common.heartbeat import HeartbeatPublisher
+from services.common.heartbeat import refusal
 from services.common.zenoh_config import undeclare
 from skinet.ros import bound
 from skinet.ros.actions import get_result_request, get_state_request
@@ -55,14 +67,17 @@ from skinet.wire.messages import HeartbeatSkillset
 log = logging.getLogger("skinet.bridge_ros2")
 
 PLUGIN_SERVERS = "@/*/@ros2_lv/AS/**"  # zenoh-bridge-ros2dds: one token per route to a DDS action server
+PLUGIN_SERVICES = "@/*/@ros2_lv/SS/**"  # ... and per route to a DDS service server (a lifecycle node's get_state)
+CUT = "the link to the robot's interfaces was cut"
 
 
 class BoundBridge:
-    """A running bridge for the bound skillsets of ``system``; see the module docstring."""
+    """A running bridge for the bound skillsets of ``system``; see the module docstring.  ``worker``: the
+    derivation thread to share with the managers' bridge of the same process; by default its own."""
 
     def __init__(self, session: zenoh.Session, system: System, bindings: Mapping[str, Binding], *,
                  style: KeyStyle = KeyStyle(), instance_id: str | None = None, source: str | None = None,
-                 hold: float = 0.5, settle: float = 0.5, retry: float = 1.0):
+                 hold: float = 0.5, settle: float = 0.5, retry: float = 1.0, worker: Worker | None = None):
         self.session = session
         self.system = system
         self.style = style
@@ -70,13 +85,19 @@ class BoundBridge:
         self.settle = settle
         self.retry = retry
         self.instance_id = keys.check_chunk(instance_id or default_instance_id(), "instance id")
-        self.feed = BoundFeed(system, bindings, source or f"bridge_ros2/{self.instance_id}")
-        self._queue: queue.SimpleQueue[Callable[[], list] | None] = queue.SimpleQueue()
+        self.worker = Worker("bridge_ros2-bound") if worker is None else worker
+        self._own_worker = worker is None
+        self.feed = BoundFeed(system, bindings, source or f"bridge_ros2/{self.instance_id}", epoch=self.worker.epoch,
+                              order=self.worker.order)
         self._stop = threading.Event()
+        self._link = threading.Event()  # set while the session reaches a router (reads go nowhere else)
+        self._link.set()
         self._sequence = 0
         self._gid = os.urandom(16)
         self._present: dict[tuple[str, str], float] = {}  # (skillset, skill) -> when its server was seen
+        self._nodes: dict[tuple[str, str], str] = {}  # (skillset, resource) -> token of its node's get_state
         self._events = {name: event_publisher(session, keys.events(system.name, name)) for name in bindings}
+        self.worker.publishers.update(self._events)
         self._subscribers: list[Any] = []
         for topic, routes in self.feed.routes.items():
             key = style.name_key(topic, routes[0].typename)
@@ -86,19 +107,21 @@ class BoundBridge:
                     session, key, handler, history=zext.HistoryConfig(detect_late_publishers=True)))
             else:
                 self._subscribers.append(session.declare_subscriber(key, handler))
-        self._subscribers.append(session.liveliness().declare_subscriber(
-            f"@ros2_lv/{style.domain}/**" if style.rmw_zenoh else PLUGIN_SERVERS, self._on_token, history=True))
+        for tokens in [f"@ros2_lv/{style.domain}/**"] if style.rmw_zenoh else [PLUGIN_SERVERS, PLUGIN_SERVICES]:
+            self._subscribers.append(session.liveliness().declare_subscriber(tokens, self._on_token, history=True))
         self._resync = [session.declare_queryable(keys.resync(system.name, name), self._on_resync)
                         for name in bindings]
-        token = keys.alive(system.name, "bridge_ros2", self.instance_id)
-        self._token = session.liveliness().declare_token(token)
-        self._heartbeat = HeartbeatPublisher(  # SPEC §7: the monitor loses what a silent bridge publishes
-            session, system.name, self.feed.source, self.feed.epoch, token,
-            lambda: {n: HeartbeatSkillset(seq=s.seq - 1 if s.seq else None) for n, s in self.feed.skillsets.items()})
-        self._worker = threading.Thread(target=self._run, name="bridge_ros2-bound", daemon=True)
-        self._worker.start()
-        self._asker = threading.Thread(target=self._start_up, name="bridge_ros2-bound-start", daemon=True)
+        self._pending_seen: dict[str, str] = {}  # what the last heartbeat said was pending (see _notice)
+        # SPEC §7: the monitor loses what a silent bridge publishes.
+        self._heartbeat = self.worker.beacon(session, system.name, self.feed.source, self.instance_id, self._beat,
+                                             self._pending)
+        self.worker.add_follow_up(self._ask_results)
+        self.worker.add_follow_up(self._notice)
+        self._asker = threading.Thread(target=self._read_again, name="bridge_ros2-bound-read", daemon=True)
         self._asker.start()
+        self._linker = threading.Thread(target=watch_link, args=(session, self._stop, self._on_cut, self._link.set),
+                                        name="bridge_ros2-bound-link", daemon=True)
+        self._linker.start()
         log.info("bound skillsets of %s (%s keys): %s; waiting for %s", system.name,
                  "rmw_zenoh" if style.rmw_zenoh else "zenoh-bridge-ros2dds", ", ".join(bindings),
                  "; ".join(f"{n}: {', '.join(m)}" for n, m in self.feed.missing().items() if m) or "nothing")
@@ -109,31 +132,49 @@ class BoundBridge:
 
     # -- work on the worker thread ----------------------------------------------------------
 
-    def _run(self) -> None:
-        while True:
-            item = self._queue.get()
-            if item is None:
-                return
-            try:
-                for ev in item():
-                    self._events[ev.skillset].put(wire_encode(ev))
-                for skillset, request in self.feed.take_requests():
-                    self._ask_result(skillset, request)
-            except Exception:  # a bug must not stop the bridge (SPEC §7)
-                log.exception("failed to handle a bound message")
+    def _ask_results(self) -> None:
+        for skillset, request in self.feed.take_requests():
+            self._ask_result(skillset, request)
 
     def _on_sample(self, topic: str) -> Callable[[zenoh.Sample], None]:
         def on_sample(sample: zenoh.Sample) -> None:
             payload, stamp = sample.payload.to_bytes(), time.time()
-            self._queue.put(lambda: self.feed.feed(topic, payload, stamp))
+            self.worker.put(lambda: self.feed.feed(topic, payload, stamp))
 
         return on_sample
 
     def wait_idle(self, timeout: float = 5.0) -> bool:
         """Wait until every queued message has been handled (tests, the embedded demo)."""
-        marker = threading.Event()
-        self._queue.put(lambda: marker.set() or [])
-        return marker.wait(timeout)
+        return self.worker.wait_idle(timeout)
+
+    # -- what it can vouch for (SPEC §7) -----------------------------------------------------
+
+    def _beat(self) -> dict[str, HeartbeatSkillset]:
+        """Per skillset, the seq of its last event (the heartbeat)."""
+        return {n: HeartbeatSkillset(seq=s.seq - 1 if s.seq else None) for n, s in self.feed.skillsets.items()}
+
+    def _pending(self) -> dict[str, str]:
+        """The heartbeat's ``pending``: skillsets whose status is not current, with why."""
+        with self.worker.lock:
+            return {n: why for n in self.feed.skillsets if (why := self.feed.pending(n))}
+
+    def _notice(self) -> None:
+        """Send a heartbeat at once when what is pending changed."""
+        pending = self._pending()
+        if pending != self._pending_seen:
+            self._pending_seen = pending
+            self._heartbeat.poke()
+
+    def _unread(self, skillset: str, why: str, interfaces: list[str] | None = None) -> None:
+        """Queue :meth:`BoundFeed.unread` behind the messages received so far (and tell the monitors)."""
+        self.worker.put(lambda: self.feed.unread(skillset, why, interfaces) or [])
+
+    def _on_cut(self) -> None:
+        """The session lost every router: every reading may be outdated, each is read again once it is back."""
+        self._link.clear()
+        log.warning("link to the router(s) lost: messages of the bound interfaces may be lost until it is back")
+        for name in self.feed.skillsets:
+            self._unread(name, CUT)
 
     # -- services: get_result, get_state ----------------------------------------------------
 
@@ -163,38 +204,39 @@ class BoundBridge:
                 log.warning("%s: no reply from %s/_action/get_result within %.2f s", skillset, request.action,
                             self.hold)
             stamp = time.time()
-            self._queue.put(lambda: self.feed.result(skillset, request, reply, stamp))
+            self.worker.put(lambda: self.feed.result(skillset, request, reply, stamp))
 
         self._service_get(f"{request.action}/_action/get_result", f"{request.type}_GetResult", payload, done,
                           max(self.hold, 0.01))
 
-    def _start_up(self) -> None:
-        """Until every bound skillset is synced: ask lifecycle nodes their state, and read the status
-        cache of each action whose server is present."""
+    def _read_again(self) -> None:
+        """Until the bridge stops: read what a skillset waits for (at start-up, or after a gap): ask
+        lifecycle nodes their state, read the status cache of each action whose server is present and
+        settled; nothing while the link is cut (the reads would go nowhere)."""
         while not self._stop.is_set():
-            try:  # read from this thread while the worker derives: a snapshot is enough to decide what to ask
-                missing = self.feed.missing()
-            except RuntimeError:  # a dict changed size meanwhile
+            if not self._link.is_set():
+                self._stop.wait(self.retry)
                 continue
-            if not any(missing.values()):
-                return
-            for name, ss in self.feed.skillsets.items():
-                if not missing.get(name):
-                    continue
-                for r in ss.binding.resources:
-                    if r.lifecycle and r.resource not in ss.deriver.readings:
-                        self._ask_state(name, r.resource, r.get_state, ss.binding)
-                for skill, action in ss.deriver.actions.items():
-                    seen = self._present.get((name, skill))
-                    if not action.read and seen is not None and time.monotonic() - seen >= self.settle:
-                        self._read_cache(name, skill, action.binding.name("status"))
+            with self.worker.lock:  # a snapshot of what to read; the reads are asynchronous
+                todo = [(name, ss.binding, set(ss.unread), {r for r in ss.deriver.readings},
+                         {k for k, a in ss.deriver.actions.items() if a.read}, ss.deriver.synced)
+                        for name, ss in self.feed.skillsets.items()]
+            for name, binding, unread, readings, read, synced in todo:
+                for r in binding.resources:
+                    if r.lifecycle and (r.lifecycle in unread if synced else r.resource not in readings):
+                        self._ask_state(name, r.resource, r.get_state, binding)
+                for s in binding.skills:
+                    seen = self._present.get((name, s.skill))
+                    wanted = s.name("status") in unread if synced else s.skill not in read
+                    if wanted and seen is not None and time.monotonic() - seen >= self.settle:
+                        self._read_cache(name, s.skill, s.name("status"))
             self._stop.wait(self.retry)
 
     def _ask_state(self, skillset: str, resource: str, service: str, binding: Binding) -> None:
         def done(reply: bytes | None) -> None:
             if reply is not None:
                 stamp = time.time()
-                self._queue.put(lambda: self.feed.lifecycle_state(skillset, resource, reply, stamp))
+                self.worker.put(lambda: self.feed.lifecycle_state(skillset, resource, reply, stamp))
 
         self._service_get(service, GET_STATE_TYPE, get_state_request(binding.store), done, self.retry)
 
@@ -205,36 +247,50 @@ class BoundBridge:
             history_selector(key), accept_replies=zenoh.ReplyKeyExpr.ANY, timeout=self.retry) if r.ok is not None]
         stamp = time.time()
         if samples:
-            self._queue.put(lambda: [ev for s in samples for ev in self.feed.feed(topic, s, stamp)])
+            self.worker.put(lambda: [ev for s in samples for ev in self.feed.feed(topic, s, stamp)])
         else:
-            self._queue.put(lambda: self.feed.no_status(skillset, skill, stamp))
+            self.worker.put(lambda: self.feed.no_status(skillset, skill, stamp))
 
     def _on_token(self, sample: zenoh.Sample) -> None:
-        """An action server appeared (or left): its status cache may be read after ``settle`` seconds."""
-        key = str(sample.key_expr)
+        """An action server appeared (its status cache may be read after ``settle`` seconds) or left (its
+        status must be read again once it is back); a lifecycle node appeared or left (likewise)."""
+        key, put = str(sample.key_expr), sample.kind == zenoh.SampleKind.PUT
         for name, ss in self.feed.skillsets.items():
             for s in ss.binding.skills:
-                if self._serves(key, s.action):
-                    if sample.kind == zenoh.SampleKind.PUT:
+                if self._serves(key, s.action, "_action/send_goal", "AS"):
+                    if put:
                         self._present.setdefault((name, s.skill), time.monotonic())
-                    else:
-                        self._present.pop((name, s.skill), None)
+                    elif self._present.pop((name, s.skill), None) is not None:
+                        self._unread(name, f"the action server of {s.action} left", [s.name("status")])
+            for r in ss.binding.resources:
+                if r.lifecycle and self._serves(key, r.get_state, "", "SS"):
+                    if put:
+                        self._nodes[(name, r.resource)] = key
+                    elif self._nodes.get((name, r.resource)) == key:
+                        del self._nodes[(name, r.resource)]
+                        self._unread(name, f"the lifecycle node {r.lifecycle} left", [r.lifecycle])
 
-    def _serves(self, token: str, action: str) -> bool:
+    def _serves(self, token: str, name: str, service: str, plugin_kind: str) -> bool:
+        """Whether ``token`` announces the server of ``name`` (an action: its ``service``; a service)."""
         if self.style.rmw_zenoh:
             entity = parse_liveliness_token(token)
-            return entity is not None and entity.kind == "SS" and entity.topic == f"{action}/_action/send_goal"
-        parts = token.split("/")  # @/<zid>/@ros2_lv/AS/<key with / as §>/<type>
-        return len(parts) >= 5 and parts[3] == "AS" and \
-            parts[4].replace("§", "/") == self.style.name_key(action, "")
+            return entity is not None and entity.kind == "SS" and \
+                entity.topic == (f"{name}/{service}" if service else name)
+        parts = token.split("/")  # @/<zid>/@ros2_lv/<AS|SS>/<key with / as §>/<type>
+        return len(parts) >= 5 and parts[3] == plugin_kind and \
+            parts[4].replace("§", "/") == self.style.name_key(name, "")
 
     def _on_resync(self, query: zenoh.Query) -> None:
         with query:
             skillset = str(query.key_expr).rsplit("/", 1)[-1]
             if skillset not in self.feed.skillsets:
                 return
-            ev = self.feed.last_status(skillset)  # a snapshot; the worker may move on meanwhile
-            if ev is not None:
+            with self.worker.lock:
+                why = self.feed.pending(skillset)
+                ev = None if why else self.feed.last_status(skillset)
+            if why:  # never vouch for a status it knows is not current (SPEC §7)
+                query.reply_err(refusal(self.feed.source, skillset, why))
+            elif ev is not None:
                 query.reply(keys.resync(self.system.name, skillset), wire_encode(ev))
 
     def close(self) -> None:
@@ -242,11 +298,16 @@ class BoundBridge:
         if self._stop.is_set():
             return
         self._stop.set()
-        self._heartbeat.close()
-        undeclare(self._token, *self._resync, *self._subscribers)
-        self._queue.put(None)
-        self._worker.join(5.0)
+        self.worker.release(self._beat)
+        undeclare(*self._resync, *self._subscribers)
+        if self._own_worker:
+            self.worker.close()
+        else:
+            self.worker.wait_idle()
         self._asker.join(5.0)
+        self._linker.join(5.0)
+        for name in self._events:
+            self.worker.publishers.pop(name, None)
         undeclare(*self._events.values())
 
 

@@ -7,24 +7,26 @@ an epoch, the feed's start time in milliseconds, so that a monitor recognises a
 restarted bridge (issue 14).  A payload that does not decode is logged and dropped
 (SPEC §7).  A status that overtook one of its responses waits for it (bounded), and
 the events of other skillsets that arrive meanwhile wait behind it: the bridge emits
-events in the order their messages arrived, across skillsets too, so that the monitor
-follows the interleaving the robot went through.
+events in the order their messages arrived, across skillsets too (and across the
+bound skillsets of the same bridge process, which share its
+:class:`~services.bridge_ros2.order.Order`), so that the monitor follows the
+interleaving the robot went through.
 """
 
 from __future__ import annotations
 
 import logging
 import time
-from collections import deque
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 
+from services.bridge_ros2.order import Order, Slot
 from skinet.ros import derive
 from skinet.ros.interfaces import status_field
 from skinet.ros.keys import ManagerTopic, manager_topics, parse_rmw_attachment, topic_fqn
 from skinet.ros.typestore import Typestore, build_typestore, decode, to_plain
 from skinet.system import Component, System
-from skinet.wire.messages import CanonicalEvent
+from skinet.wire.messages import CanonicalEvent, SkillsetStatus
 
 log = logging.getLogger("skinet.bridge_ros2")
 
@@ -43,21 +45,13 @@ class Counters:
 
 
 @dataclass
-class _Slot:
-    """Events in arrival order; an open slot waits for a held status (and takes its skillset's events)."""
-
-    events: list[CanonicalEvent] = field(default_factory=list)
-    open: bool = True
-
-
-@dataclass
 class _Held:
     """A status waiting for the responses it overtook."""
 
     status: derive.Status
     since: float  # clock time it arrived
     awaits: str  # what it waits for (for the log)
-    slot: _Slot = field(default_factory=_Slot)  # its place in the feed's order
+    slot: Slot  # its place in the order (it takes its skillset's events from responses)
 
 
 @dataclass
@@ -88,7 +82,7 @@ class Feed:
 
     def __init__(self, system: System, typemap: Mapping[str, str], source: str,
                  extra_types: Mapping[str, str] | None = None, *, hold: float = 0.5,
-                 clock: Callable[[], float] = time.monotonic, epoch: int | None = None):
+                 clock: Callable[[], float] = time.monotonic, epoch: int | None = None, order: Order | None = None):
         self.system = system
         self.source = source
         self.hold = hold
@@ -97,7 +91,7 @@ class Feed:
         self.counters = Counters()
         self.statuses: dict[str, int] = {c.name: 0 for c in system.components if not c.binding}  # statuses derived
         self.managers: dict[str, _Manager] = {}
-        self._order: deque[_Slot] = deque()
+        self.order = Order() if order is None else order  # shared with the bound skillsets' feed, if any
         for c in system.components:
             if c.binding:  # bound to plain ROS 2 interfaces: services.bridge_ros2.bound
                 continue
@@ -149,8 +143,7 @@ class Feed:
         # A new initial status needs nothing; after a gap, what it awaits was lost.
         awaits = None if m.restart or m.resync else m.deriver.awaits(status)
         if awaits is not None and self.hold > 0:
-            m.held = _Held(status, self.clock(), awaits)
-            self._order.append(m.held.slot)
+            m.held = _Held(status, self.clock(), awaits, self.order.open())
         else:
             self._place(m, self._status(m, status))
         return self._drain()
@@ -158,7 +151,7 @@ class Feed:
     def deadline(self) -> float | None:
         """Clock time when :meth:`expire` is due: a held status must be released, or events
         released outside :meth:`feed` wait to be taken (``None``: nothing to do)."""
-        if self._order and not self._order[0].open:
+        if self.order.due():
             return self.clock()
         return min((m.held.since + self.hold for m in self.managers.values() if m.held), default=None)
 
@@ -184,22 +177,18 @@ class Feed:
         """Events of ``m`` that are not its held status: before that status, else after everything."""
         if m.held is not None:
             m.held.slot.events += events
-        elif events:
-            self._order.append(_Slot(events, open=False))
+        else:
+            self.order.place(events)
 
     def _release(self, m: _Manager) -> None:
         """Derive ``m``'s held status in its place."""
         assert m.held is not None
         held, m.held = m.held, None
-        held.slot.events += self._status(m, held.status)
-        held.slot.open = False
+        self.order.close(held.slot, self._status(m, held.status))
 
     def _drain(self) -> list[CanonicalEvent]:
-        """The events whose turn has come: up to the first held status."""
-        out: list[CanonicalEvent] = []
-        while self._order and not self._order[0].open:
-            out += self._order.popleft().events
-        return out
+        """The events whose turn has come: up to the first held status (or bound skillset waiting)."""
+        return self.order.drain()
 
     def restarted(self, skillset: str, why: str) -> None:
         """``skillset``'s manager restarted: its next status is a new initial status (SPEC §7).
@@ -293,7 +282,7 @@ class Feed:
             return self._emit(m, m.deriver.on_status(status))
         last, m.deriver = m.deriver.last, derive.Deriver(m.component.skillset, m.component.net)
         out = m.deriver.on_status(status)
-        diverged = _differences(last, status) if last is not None else "nothing known before"
+        diverged = differences(last.wire(), status.wire()) if last is not None else "nothing known before"
         info = f"manager restarted ({m.restart}); state now differs: {diverged}" if diverged else \
             f"manager restarted ({m.restart}); same state as before"
         log.warning("%s: %s", m.component.name, info)
@@ -306,7 +295,7 @@ class Feed:
         unchanged status is published too, so the gap always leaves a trace."""
         last = m.deriver.last
         out = m.deriver.on_status(status)
-        diverged = _differences(last, status) if last is not None else ""
+        diverged = differences(last.wire(), status.wire()) if last is not None else ""
         info = f"resync after {m.resync}; " + (f"state now differs: {diverged}" if diverged else "same state as before")
         log.warning("%s: %s", m.component.name, info)
         m.resync = ""
@@ -341,6 +330,17 @@ class Feed:
         return CanonicalEvent(system=self.system.name, skillset=skillset, seq=max(m.seq - 1, 0), stamp=last.stamp,
                               source=self.source, epoch=self.epoch, status=last.wire(), info="resync")
 
+    def outdated(self, skillset: str) -> str:
+        """Why ``skillset``'s last status is known not to be its manager's current one ('' when it is not
+        known to be): a restart or a cut link whose next status has not come yet (SPEC §7: nobody may
+        vouch for it meanwhile)."""
+        m = self.managers[skillset]
+        if m.restart:
+            return f"its manager restarted ({m.restart}): waiting for its new status"
+        if m.resync:
+            return f"{m.resync}: waiting for the status that closes the gap"
+        return ""
+
     def has_status(self, skillset: str) -> bool:
         """Whether a status of ``skillset`` was received (since its manager restarted or the link
         to it was cut, if either happened)."""
@@ -348,14 +348,13 @@ class Feed:
         return (m.deriver.last is not None or m.held is not None) and not m.restart and not m.resync
 
 
-def _differences(before: derive.Status, now: derive.Status) -> str:
-    """What changed between two statuses, for a divergence report: resources, then running skills."""
+def differences(before: SkillsetStatus, now: SkillsetStatus) -> str:
+    """What changed between two statuses, for a divergence or resync report: resources, then running skills."""
     out = [f"{r} {before.resources.get(r, '?')} -> {s}" for r, s in now.resources.items()
            if before.resources.get(r) != s]
-    stopped = [k for k in before.running() if k not in now.running()]
-    started = [k for k in now.running() if k not in before.running()]
-    out += [f"{k} no longer running" for k in stopped] + [f"{k} running" for k in started]
+    out += [f"{k} no longer running" for k in before.running if k not in now.running]
+    out += [f"{k} running" for k in now.running if k not in before.running]
     return ", ".join(out)
 
 
-__all__ = ["Counters", "Feed"]
+__all__ = ["Counters", "Feed", "differences"]

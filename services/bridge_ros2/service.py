@@ -19,10 +19,14 @@ initial status whose ``info`` says how it differs from the last one (SPEC §7). 
 ``rmw_zenoh`` the bridge declares its own node, subscription and publisher tokens.
 A monitor that missed events, or that starts, asks ``keys.resync(system, skillset)``:
 the bridge answers with the skillset's last status (numbered as its last event) and
-asks the manager for a fresh one.  What managers publish while the bridge's session
-has lost every router is lost (their topics are volatile): the first status after
-such a cut is a counted resync whose event says so, and every manager is asked
-again when the link is back (:meth:`Bridge._watch_link`).  Every 0.5 s it publishes a
+asks the manager for a fresh one; while it knows that status to be outdated (its
+manager restarted or left, or the link was cut, and no new status came yet) it
+answers an error saying so instead, and its heartbeat lists the skillset as
+``pending`` (sent at once), so that no monitor vouches for the old status.  What
+managers publish while the bridge's session has lost every router is lost (their
+topics are volatile): the first status after such a cut is a counted resync whose
+event says so, and every manager is asked again when the link is back
+(:mod:`services.bridge_ros2.link`).  Every 0.5 s it publishes a
 :class:`~skinet.wire.messages.Heartbeat` (:mod:`services.common.heartbeat`): its
 token, and per skillset its last event's number and whether the manager is present
 (its token seen, gone, or never announced), so that a monitor can tell a silent
@@ -31,15 +35,15 @@ bridge from a quiet robot (SPEC §7).
 One subscriber per manager covers all its topics (``.../<skillset>_skillset/**``):
 separate subscribers per key would run their callbacks on different threads and
 lose the order between a response and the status that follows it.  The callback
-only queues the samples; one worker thread feeds them in arrival order, so
-derivation never runs on Zenoh's threads.
+only queues the samples; one worker thread (:class:`~services.bridge_ros2.worker.Worker`,
+shared with the bound skillsets' bridge of the same process) feeds them in arrival
+order, so derivation never runs on Zenoh's threads.
 """
 
 from __future__ import annotations
 
 import logging
 import os
-import queue
 import re
 import threading
 import time
@@ -49,9 +53,11 @@ from typing import Any
 import zenoh
 
 from services.bridge_ros2.feed import Counters, Feed
+from services.bridge_ros2.link import watch_link
+from services.bridge_ros2.worker import Worker
 from services.common.cli import default_instance_id
 from services.common.events import event_publisher
-from services.common.heartbeat import HeartbeatPublisher
+from services.common.heartbeat import refusal
 from services.common.zenoh_config import undeclare
 from services.common.ros_liveliness import declare_node
 from skinet.ros.keys import (
@@ -62,12 +68,11 @@ from skinet.ros.typestore import default_instance, encode
 from skinet.system import System
 from skinet.wire import keys
 from skinet.wire.codec import encode as wire_encode
-from skinet.wire.messages import HeartbeatSkillset
+from skinet.wire.messages import CanonicalEvent, HeartbeatSkillset
 
 log = logging.getLogger("skinet.bridge_ros2")
 
 PLUGIN_TOKENS = "@/*/@ros2_lv/MS/**"  # zenoh-bridge-ros2dds: one token per route to a DDS subscription
-LINK_POLL = 0.2  # seconds between looks at the session's routers (a client reconnects about 2 s after a restart)
 
 
 def default_source(instance: str | None = None) -> str:
@@ -76,21 +81,23 @@ def default_source(instance: str | None = None) -> str:
 
 
 class Bridge:
-    """A running bridge; see :func:`start_bridge`."""
+    """A running bridge; see :func:`start_bridge`.  ``worker``: the derivation thread to share with the
+    bound skillsets' bridge of the same process (their events then keep their arrival order with the
+    managers'); by default its own."""
 
     def __init__(self, session: zenoh.Session, system: System, typemap: Mapping[str, str], *,
                  style: KeyStyle = KeyStyle(), instance_id: str | None = None, source: str | None = None,
                  request_status: bool = True, retry: float = 0.5, extra_types: Mapping[str, str] | None = None,
-                 hold: float = 0.5):
+                 hold: float = 0.5, worker: Worker | None = None):
         self.session = session
         self.system = system
         self.style = style
         self.instance_id = keys.check_chunk(instance_id or default_instance_id(), "instance id")
-        self.feed = Feed(system, typemap, source or default_source(self.instance_id), extra_types, hold=hold)
-        # Samples, () when a held status is due, a resync's reason (str) in its place among them, None: stop.
-        self._queue: queue.SimpleQueue[tuple[str, ManagerTopic, bytes, bytes | None] | tuple[()] | str | None] = \
-            queue.SimpleQueue()
-        self._fed = threading.Condition()
+        self.worker = Worker() if worker is None else worker
+        self._own_worker = worker is None
+        self.feed = Feed(system, typemap, source or default_source(self.instance_id), extra_types, hold=hold,
+                         epoch=self.worker.epoch, order=self.worker.order)
+        self._fed = self.worker.lock  # held while the worker derives
         self._stop = threading.Event()
         self._lock = threading.Lock()  # request sequence numbers, learned type hashes, live tokens
         self._subscribers: list[Any] = []
@@ -99,7 +106,7 @@ class Bridge:
         self._hashes: dict[str, str] = {}  # skillset -> status_request type hash learned from the manager's token
         self._present: dict[str, str] = {}  # skillset -> token of its manager's status_request subscription
         self._gone: set[str] = set()  # skillsets whose manager's token went away (and has not come back)
-        self._cuts = 0  # times the link to every router was lost (see _watch_link)
+        self._cuts = 0  # times the link to every router was lost (see _on_cut)
         self._cuts_seen: dict[str, int] = {}  # skillset -> _cuts when its manager's token last appeared
         self._sequence = 0
         self._gid = os.urandom(16)  # rmw_zenoh attachments of the status requests
@@ -119,22 +126,24 @@ class Bridge:
                     for t in m.topics]
             own.append(("MP", topic_fqn(manager, req.topic), req.typename, style.type_hash(m.store, req.typename)))
         self._resync = session.declare_queryable(keys.resync(system.name, "*"), self._on_resync)
-        token = keys.alive(system.name, "bridge_ros2", self.instance_id)
-        self._token = session.liveliness().declare_token(token)
-        self._heartbeat = HeartbeatPublisher(session, system.name, self.feed.source, self.feed.epoch, token, self._beat)
+        self._pending_seen: dict[str, str] = {}  # what the last heartbeat said was pending (see _notice)
+        self._heartbeat = self.worker.beacon(session, system.name, self.feed.source, self.instance_id, self._beat,
+                                             self._pending)
         self._ros_tokens: list[Any] = []
         self.graph: list[RosEntity] = []  # rmw_zenoh: the bridge's node and topics as ROS tools see them
         if style.rmw_zenoh:
             node = "/skinet_bridge_" + re.sub(r"[^A-Za-z0-9_]", "_", self.instance_id)
             self.graph, self._ros_tokens = declare_node(session, style.domain, node, own)
-        self._worker = threading.Thread(target=self._run, name="bridge_ros2", daemon=True)
-        self._worker.start()
+        self.worker.publishers.update(self._events)
+        self.worker.add_timer(self.feed.deadline, self.feed.expire)
+        self.worker.add_follow_up(self._notice)
         # Managers (or the gateway's routes to them) announce themselves by liveliness tokens:
         # ask a manager for its status as soon as it can hear us, and again when it comes back.
         self._subscribers.append(session.liveliness().declare_subscriber(
             liveliness_key_expr(style.domain) if style.rmw_zenoh else PLUGIN_TOKENS, self._on_token, history=True))
         self._request = request_status
-        self._linker = threading.Thread(target=self._watch_link, name="bridge_ros2-link", daemon=True)
+        self._linker = threading.Thread(target=watch_link, args=(session, self._stop, self._on_cut, self._on_back),
+                                        name="bridge_ros2-link", daemon=True)
         self._linker.start()
         self._asker = None
         if request_status:
@@ -155,31 +164,18 @@ class Bridge:
             topic = watched.get(self.style.topic(manager, str(sample.key_expr)) or "")
             if topic is not None:
                 attachment = sample.attachment.to_bytes() if sample.attachment is not None else None
-                self._queue.put((skillset, topic, sample.payload.to_bytes(), attachment))
+                payload = sample.payload.to_bytes()
+                self.worker.put(lambda: self.feed.feed(skillset, topic, payload, attachment))
 
         return on_sample
 
-    def _run(self) -> None:
-        while True:
-            deadline = self.feed.deadline()
-            try:
-                item = self._queue.get(timeout=None if deadline is None else max(0.0, deadline - time.monotonic()))
-            except queue.Empty:
-                item = ()  # a held status is due
-            if item is None:
-                return
-            try:
-                with self._fed:
-                    if isinstance(item, str):
-                        for name in self.feed.managers:
-                            self.feed.resync(name, item)
-                    events = self.feed.feed(*item) if item and not isinstance(item, str) else self.feed.expire()
-                for ev in events:
-                    self._events[ev.skillset].put(wire_encode(ev))
-            except Exception:  # a bug must not stop the bridge (SPEC §7)
-                log.exception("failed to handle a message of %s", item[0] if item else "a held status")
-            with self._fed:
-                self._fed.notify_all()
+    def _notice(self) -> None:
+        """Send a heartbeat at once when the skillsets whose status is outdated changed (a monitor
+        must stop vouching for them now, not up to a period later)."""
+        pending = self._pending()
+        if pending != self._pending_seen:
+            self._pending_seen = pending
+            self._heartbeat.poke()
 
     def _on_resync(self, query: zenoh.Query) -> None:
         with query:
@@ -187,10 +183,26 @@ class Bridge:
             if skillset not in self.feed.managers:
                 return
             with self._fed:
-                ev = self.feed.last_status(skillset)
-            if ev is not None:
+                why = self._outdated(skillset)
+                ev = None if why else self.feed.last_status(skillset)
+            if why:  # never vouch for a status known to be outdated (SPEC §7)
+                query.reply_err(refusal(self.feed.source, skillset, why))
+            elif ev is not None:
                 query.reply(keys.resync(self.system.name, skillset), wire_encode(ev))
             self.request_status(skillset)
+
+    def _outdated(self, skillset: str) -> str:
+        """Why ``skillset``'s last status is not its manager's current one ('' when it may be)."""
+        with self._lock:
+            gone = skillset in self._gone
+        if gone:
+            return f"its manager {self._requests[skillset][0]} left"
+        return self.feed.outdated(skillset)
+
+    def _pending(self) -> dict[str, str]:
+        """The heartbeat's ``pending``: skillsets whose last status is outdated, with why."""
+        with self._fed:
+            return {n: why for n in self.feed.managers if (why := self._outdated(n))}
 
     # -- status requests ------------------------------------------------------------------
 
@@ -219,21 +231,23 @@ class Bridge:
         if found is None:
             return
         name, hash_ = found
-        with self._lock:
-            if sample.kind != zenoh.SampleKind.PUT:
+        if sample.kind != zenoh.SampleKind.PUT:
+            with self._lock:
                 if self._present.get(name) == key:
                     del self._present[name]
                     self._gone.add(name)
                     log.warning("%s: manager %s left (its status_request subscription is gone)", name,
                                 self._requests[name][0])
-                return
+            self._notice()  # its last status is outdated now
+            return
+        with self._lock:
             if hash_:
                 self._hashes[name] = hash_
             # Only a manager seen before can come back.  The tokens present at start-up come as
             # the subscriber's history, with no mark and no order against the topics' samples:
             # on a loaded start they arrive after the first status, and are no restart.  Nor is
             # a token that left with our link (cut since it last appeared): the resync after the
-            # cut covers it (_watch_link), and a manager that restarted meanwhile shows it in
+            # cut covers it (_on_cut), and a manager that restarted meanwhile shows it in
             # its status (skill ids reset, a new publisher).
             back = name not in self._present and self._cuts_seen.get(name) == self._cuts and \
                 self.feed.managers[name].deriver.last is not None
@@ -243,7 +257,8 @@ class Bridge:
         if back:
             with self._fed:
                 self.feed.restarted(name, "the manager (or its gateway) came back")
-            self._queue.put(())  # a status it held is released: the worker publishes its events
+            self.worker.put(lambda: [])  # a status it held is released: the worker publishes its events
+        self._notice()
         self.request_status(name)
 
     def _beat(self) -> dict[str, HeartbeatSkillset]:
@@ -254,40 +269,25 @@ class Bridge:
                                         manager=True if name in present else False if name in gone else None)
                 for name, m in self.feed.managers.items()}
 
-    def _watch_link(self) -> None:
-        """Resync every manager after the session lost every router.
+    def _on_cut(self) -> None:
+        """The session lost every router: what a manager publishes meanwhile is lost (its topics are
+        volatile).  Each skillset's next status closes the gap (counted, and said by its event)."""
+        with self._lock:
+            self._cuts += 1
+        log.warning("link to the router(s) lost: manager messages may be lost until it is back")
+        # Queued behind every sample received before the cut, ahead of every one after it.
+        self.worker.put(self._cut)
 
-        What a manager publishes meanwhile is lost (its topics are volatile): the bridge
-        marks a resync (counted, and said by the next event of each skillset: the first
-        status after the cut closes the gap) and, when the link is back, asks every
-        manager for its status.  A link replaced by another router at once (a restart
-        faster than a poll) counts as a cut too.  Cost: one look at the session's
-        routers every :data:`LINK_POLL` seconds.
-        """
-        routers: set[str] = set()
-        cut = False
-        while True:  # a first look at once: the link may be cut within the first poll
-            try:
-                now = {str(z) for z in self.session.info.routers_zid()}
-            except zenoh.ZError:  # the session is closing
-                return
-            if routers and not cut and (not now or not now & routers):
-                cut = True
-                with self._lock:
-                    self._cuts += 1
-                log.warning("link to the router(s) lost: manager messages may be lost until it is back")
-                # Queued behind every sample received before the cut, ahead of every one after it.
-                self._queue.put("the link to the managers was cut")
-            if now and cut:
-                cut = False
-                log.warning("link to the router(s) back: asking every manager for its status")
-                if self._request:
-                    for name in self.feed.managers:
-                        self.request_status(name)
-            if now:
-                routers = now
-            if self._stop.wait(LINK_POLL):
-                return
+    def _cut(self) -> list[CanonicalEvent]:
+        for name in self.feed.managers:
+            self.feed.resync(name, "the link to the managers was cut")
+        return []
+
+    def _on_back(self) -> None:
+        log.warning("link to the router(s) back: asking every manager for its status")
+        if self._request:
+            for name in self.feed.managers:
+                self.request_status(name)
 
     def request_status(self, skillset: str) -> None:
         """Ask ``skillset``'s manager to publish its status."""
@@ -329,13 +329,17 @@ class Bridge:
         if self._stop.is_set():
             return
         self._stop.set()
-        self._heartbeat.close()
-        undeclare(self._token, self._resync, *self._ros_tokens, *self._subscribers)
-        self._queue.put(None)
-        self._worker.join(5.0)
+        self.worker.release(self._beat)
+        undeclare(self._resync, *self._ros_tokens, *self._subscribers)
+        if self._own_worker:
+            self.worker.close()
+        else:
+            self.worker.wait_idle()
         if self._asker is not None:
             self._asker.join(5.0)
         self._linker.join(5.0)
+        for name in self._events:
+            self.worker.publishers.pop(name, None)
         undeclare(*self._events.values())
 
 

@@ -22,7 +22,7 @@ from __future__ import annotations
 import time
 from collections import OrderedDict
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import msgpack
@@ -107,10 +107,11 @@ class Step:
     seq: int
     key: MarkingKey
     changed: bool
-    divergence: str | None
+    divergence: str | None  # as LiveState.divergence says it: with the message that showed it
     live: bytes
     verdicts: bytes
     unsafe: bytes
+    reason: str | None = None  # the divergence alone (the live nets' reason, or the bridge's drift): the list's
 
 
 @dataclass
@@ -119,6 +120,16 @@ class Prediction:
 
     token: int  # identifies the table in the frame cache
     table: RiskTable
+
+
+def _divergence(reason: str | None, ev: CanonicalEvent) -> str | None:
+    """What a step reports as a model divergence (SPEC §7, §9), with the message that showed it: the bridge's
+    own finding (a binding's drift names its message), else the live nets' reason with the event's info."""
+    if ev.divergence:
+        return f"{ev.divergence} ({reason})" if reason else ev.divergence
+    if reason is not None and ev.info:
+        return f"{reason} (message: {ev.info})"
+    return reason
 
 
 @dataclass
@@ -264,11 +275,12 @@ class Engine:
         elif before is not None:
             self.live.marking[ev.skillset] = hit[0]  # type: ignore[assignment]
         self.counters.applied += 1
-        if hit[2] is not None:
+        divergence = _divergence(hit[2], ev)
+        if divergence is not None:
             self.counters.divergences += 1
-        if ev.transition is None and not hit[1] and hit[2] is None:
+        if ev.transition is None and not hit[1] and divergence is None:
             return None
-        return self._step(event_name(ev), hit[1], hit[2])
+        return self._step(event_name(ev), hit[1], divergence, hit[2] or ev.divergence or None)
 
     def prediction(self, key: MarkingKey | None = None) -> Prediction | None:
         """The prediction for the live marking (``key`` when known), if any (SPEC §5)."""
@@ -303,10 +315,11 @@ class Engine:
         """The messages of the current step again (same seq, a new stamp), e.g. with a new sync state."""
         return self._fill(False, self._last["event"], self._last["divergence"])
 
-    def _step(self, event: str, changed: bool, divergence: str | None) -> Step:
+    def _step(self, event: str, changed: bool, divergence: str | None, reason: str | None = None) -> Step:
         self.seq += 1
         self._last = {"event": event, "divergence": divergence}
-        return self._fill(changed, event, divergence)
+        step = self._fill(changed, event, divergence)
+        return step if reason is None else replace(step, reason=reason)
 
     def _fill(self, changed: bool, event: str, divergence: str | None) -> Step:
         key = self.key

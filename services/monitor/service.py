@@ -69,6 +69,7 @@ log = logging.getLogger("skinet.monitor")
 _LOG_FIRST = 10  # log the first occurrences of each problem, then every 1000th
 MAX_EVENT = 64 << 10  # bytes; a canonical event or a heartbeat is a few hundred
 MAX_WAITING = 256  # check requests waiting at once; more are answered at once
+MAX_REASON = 512  # bytes of a resync error reply kept as the skillset's reason
 TICK = 0.1  # seconds between the watchdog's looks at silences and waiting checks
 DIVERGENCES_PERIOD = 0.1  # seconds between publications of the divergence list (a burst is one message)
 M = TypeVar("M", bound=BaseModel)
@@ -306,6 +307,9 @@ class Monitor:
             self._warn(c.duplicates + c.out_of_order + c.lost + c.jumps + c.restarts, "%s", problem)
         if fresh:
             self._step(ev)
+        last = engine.last_seq.get((ev.skillset, ev.source))
+        if last is not None and last[0] == ev.epoch:
+            self._sync.caught_up(ev.skillset, ev.source, ev.epoch, last[1])
         return resync
 
     def _on_miss(self, count: int) -> None:
@@ -323,12 +327,20 @@ class Monitor:
         with self._lock:
             if self._closed:
                 return
-            self._sync.heartbeat(hb)
+            self._sync.heartbeat(hb, [n for n in hb.pending if self._applied_after(n, hb)])
             self._settle()
             due = [n for n, b in hb.skillsets.items() if b.seq is not None and n in self._sync.skillsets
-                   and self._sync.skillsets[n].state == SYNCING]
+                   and self._sync.skillsets[n].state == SYNCING and not self._sync.outdated(n, hb.source)]
         for name in due:  # it has a status to give: ask at once rather than at the next retry
             self._ask_resync(name)
+
+    def _applied_after(self, skillset: str, hb: Heartbeat) -> bool:
+        """Whether an event of ``skillset`` newer than ``hb`` says was handled (lock held): a heartbeat
+        sent before it may arrive after it."""
+        last = self._engine.last_seq.get((skillset, hb.source))
+        beat = hb.skillsets.get(skillset)
+        return last is not None and last[0] == hb.epoch and beat is not None and \
+            last[1] > (-1 if beat.seq is None else beat.seq)
 
     def _on_source_token(self, sample: zenoh.Sample) -> None:
         with self._lock:
@@ -345,14 +357,16 @@ class Monitor:
         with self._lock:
             if self._closed or not self._sync.asking(skillset):
                 return
-        replied = [False]
+        replied, refused = [False], [""]
 
         def on_reply(reply: zenoh.Reply) -> None:
+            if reply.err is not None:  # the bridge knows its last status is outdated: still syncing
+                refused[0] = reply.err.payload.to_bytes()[:MAX_REASON].decode("utf-8", "replace")
             replied[0] = self._on_resync(reply) or replied[0]
 
         def done() -> None:
             with self._lock:
-                self._sync.answered(skillset, replied[0])
+                self._sync.answered(skillset, replied[0], refused[0])
                 if not self._closed:
                     self._settle()
 
@@ -400,17 +414,22 @@ class Monitor:
         prev = engine.last_seq.get((ev.skillset, ev.source))
         continuing = prev is not None and prev[0] == ev.epoch  # the same run we followed before it went quiet
         engine.status_marking(ev)  # raises SourceError before anything changes
-        buffered = self._sync.synced(ev.skillset, ev.source, ev.epoch)
+        upto = None
+        if continuing:
+            waited = [b.seq for b in self._sync.skillsets[ev.skillset].buffer if (b.source, b.epoch) == (ev.source,
+                                                                                                        ev.epoch)]
+            if max([prev[1], *waited]) < ev.seq:  # type: ignore[index]
+                # Events up to the answer's are still on their way (the bridge's cache gives them back
+                # after an outage), or lost: not live until they come, or the watchdog applies the
+                # answer after the bound.
+                upto = ev.seq
+                self._behind[ev.skillset] = (time.monotonic() + self._sync.bound, ev)
+        buffered = self._sync.synced(ev.skillset, ev.source, ev.epoch, upto)
         log.info("%s synced from '%s' at #%d (%d events waited)", ev.skillset, ev.source, ev.seq, len(buffered))
         resync = False
         if continuing:  # what it missed meanwhile is real: apply it (the cache gives it back, in order)
             for b in buffered:
                 resync = self._handle(b) or resync
-            last = engine.last_seq.get((ev.skillset, ev.source))
-            if last is not None and last[0] == ev.epoch and last[1] < ev.seq:
-                # Events up to the answer's are still on their way, or lost: the watchdog applies the
-                # answer if they have not come within the bound.
-                self._behind[ev.skillset] = (time.monotonic() + self._sync.bound, ev)
         else:
             self._take_status(ev)
             for b in buffered:
@@ -429,6 +448,7 @@ class Monitor:
                 if self._engine.resync(ev):
                     log.warning("%s: events up to #%d from '%s' did not come: resynced", name, ev.seq, ev.source)
                     self._take_status(ev)
+                self._sync.caught_up(name, ev.source, ev.epoch)
 
     def _take_status(self, ev: CanonicalEvent) -> None:
         """Adopt a resync answer's status (:meth:`Engine.adopt`) and publish the step it makes, if any."""
@@ -449,7 +469,7 @@ class Monitor:
         self._publish(step)
         if step.divergence:
             self._warn(engine.counters.divergences, "divergence at %s#%d: %s", ev.skillset, ev.seq, step.divergence)
-        self._note(ev, step.divergence, step.seq)
+        self._note(ev, step.reason, step.seq)  # the list shows the bridge's info beside it
         if engine.prediction(step.key) is None:
             self._predict.want(step.key, engine.marking())
 

@@ -5,10 +5,13 @@ Each skillset is
 - ``syncing`` from the start, and whenever its source comes back: the monitor has
   asked the bridge for the skillset's last status (``keys.resync``) and waits for
   the answer;
-- ``live`` once the answer is applied, for as long as its source is heard: a
-  :class:`~skinet.wire.messages.Heartbeat` or an event at least every ``bound``
-  seconds (2 s by default; heartbeats come every 0.5 s), its liveliness token
-  present and its manager not known to have left;
+- ``live`` once the answer is applied and the events up to it have come, for as
+  long as its source is heard: a :class:`~skinet.wire.messages.Heartbeat` or an
+  event at least every ``bound`` seconds (2 s by default; heartbeats come every
+  0.5 s), its liveliness token present, its manager not known to have left, and
+  its last status not known by the source to be outdated (``Heartbeat.pending``:
+  a restarted manager not heard yet, a cut link; the source then refuses the
+  resync query with the same reason until the new status comes);
 - ``lost`` when one of those fails, with since when and why.
 
 History is told from sources and sequence numbers, never from an event's stamp:
@@ -33,6 +36,7 @@ from collections import deque
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 
+from services.common.heartbeat import refusal
 from skinet.wire import keys
 from skinet.wire.messages import CanonicalEvent, Heartbeat, SkillsetSync
 
@@ -53,6 +57,7 @@ class _Source:
     epoch: int | None = None
     managers: dict[str, bool | None] = field(default_factory=dict)  # skillset -> present (heartbeat)
     seqs: dict[str, int | None] = field(default_factory=dict)  # skillset -> seq of its last event (heartbeat)
+    pending: dict[str, str] = field(default_factory=dict)  # skillset -> why its last status is outdated
 
 
 @dataclass
@@ -64,6 +69,7 @@ class _Skillset:
     buffer: deque[CanonicalEvent] = field(default_factory=lambda: deque(maxlen=BUFFER))
     asking: bool = False  # a resync query in flight
     asked: float = float("-inf")  # monotonic time of the last resync query
+    behind: tuple[str, int, int] | None = None  # (source, epoch, seq): events up to this one are on their way
 
 
 class SyncTracker:
@@ -106,10 +112,13 @@ class SyncTracker:
 
     def hold(self, ev: CanonicalEvent) -> bool:
         """Note ``ev``'s source as heard; True when ``ev`` must wait (its skillset is not live), and then
-        buffer it (a lost skillset whose events come again is syncing)."""
+        buffer it (a lost skillset whose events come again is syncing).  Events of the stream a skillset
+        catches up on (:meth:`synced` with ``upto``) do not wait: they are what it waits for."""
         self._heard(ev.source)
         s = self.skillsets.get(ev.skillset)
         if s is None or s.state == LIVE:
+            return False
+        if s.state == SYNCING and s.behind is not None and s.behind[:2] == (ev.source, ev.epoch):
             return False
         if len(s.buffer) == s.buffer.maxlen:
             self.overflow += 1
@@ -118,25 +127,41 @@ class SyncTracker:
             self._set(ev.skillset, SYNCING, f"events from '{ev.source}' again: waiting for its resync answer")
         return True
 
-    def heartbeat(self, hb: Heartbeat) -> None:
+    def heartbeat(self, hb: Heartbeat, superseded: Iterable[str] = ()) -> None:
         """A heartbeat of ``hb.source``: it is heard; a manager that left loses its skillset; a
-        lost skillset it publishes is syncing again."""
+        lost skillset it publishes is syncing again; a skillset whose last status it says is
+        outdated (``hb.pending``) is syncing until its resync answers.  ``superseded``: skillsets
+        for which an event newer than the heartbeat's ``seq`` was already applied (its ``pending``
+        is older news there)."""
         src = self._heard(hb.source)
         restarted = src.epoch is not None and src.epoch != hb.epoch
         src.token, src.epoch = hb.token, hb.epoch
         src.managers = {n: b.manager for n, b in hb.skillsets.items()}
         src.seqs = {n: b.seq for n, b in hb.skillsets.items()}
+        src.pending = {n: why for n, why in hb.pending.items() if n not in superseded}
         for name, beat in hb.skillsets.items():
             s = self.skillsets.get(name)
             if s is None:
                 continue
+            outdated = src.pending.get(name, "")
+            refused = refusal(hb.source, name, outdated)
             if beat.manager is False:
                 if s.state != LOST or s.source == hb.source:
                     self._set(name, LOST, f"its manager left (said '{hb.source}')", hb.source)
             elif s.state == LOST and (s.source in ("", hb.source) or not self._heard_recently(s.source)):
-                self._set(name, SYNCING, f"'{hb.source}' is heard again: waiting for its resync answer")
+                self._set(name, SYNCING, refused if outdated else
+                          f"'{hb.source}' is heard again: waiting for its resync answer")
             elif s.state == LIVE and s.source == hb.source and restarted:
                 self._set(name, SYNCING, f"'{hb.source}' restarted (epoch {hb.epoch}): waiting for its resync answer")
+            elif outdated and (s.state == LIVE and s.source == hb.source or
+                               s.state == SYNCING and s.source in ("", hb.source)):
+                s.behind = None
+                self._set(name, SYNCING, refused)
+
+    def outdated(self, name: str, source: str) -> bool:
+        """Whether ``source``'s last heartbeat says ``name``'s last status is outdated (no use asking it)."""
+        src = self.sources.get(source)
+        return src is not None and name in src.pending
 
     def token(self, key: str, alive: bool) -> None:
         """A liveliness token under ``skinet/<system>/alive/`` appeared or vanished."""
@@ -153,20 +178,43 @@ class SyncTracker:
             if s.state != LOST and src is not None and src.token == key:
                 self._set(name, LOST, f"the liveliness token of '{s.source}' is gone (it stopped, or its link did)")
 
-    def synced(self, name: str, source: str, epoch: int) -> list[CanonicalEvent]:
-        """The resync answer of ``source`` was applied: ``name`` is live; returns its buffered events."""
+    def synced(self, name: str, source: str, epoch: int, upto: int | None = None) -> list[CanonicalEvent]:
+        """The resync answer of ``source`` was applied: ``name`` is live; returns its buffered events.
+
+        ``upto``: the answer is the status after event ``upto`` of that stream, which has not been
+        applied yet (events still on their way, e.g. recovered from the bridge's cache after an
+        outage): ``name`` stays syncing, its events of that stream no longer wait (:meth:`hold`),
+        until :meth:`caught_up`."""
+        s = self.skillsets[name]
+        self._heard(source).epoch = epoch
+        self._vouch(name, source, epoch, upto)
+        out = list(s.buffer)
+        s.buffer.clear()
+        return out
+
+    def _vouch(self, name: str, source: str, epoch: int, upto: int | None = None) -> None:
+        """``name`` follows ``source``: live, unless the source is known gone or the answer is ahead."""
         s = self.skillsets[name]
         src = self._heard(source)
-        src.epoch = epoch
+        s.behind = None
         if src.managers.get(name) is False:
             self._set(name, LOST, f"its manager left (said '{source}')", source)
         elif src.token and src.token in self.gone:
             self._set(name, LOST, f"the liveliness token of '{source}' is gone (it stopped, or its link did)", source)
+        elif upto is not None:
+            s.behind = (source, epoch, upto)
+            self._set(name, SYNCING, f"catching up: events up to #{upto} from '{source}' are on their way", source)
         else:
             self._set(name, LIVE, "", source)
-        out = list(s.buffer)
-        s.buffer.clear()
-        return out
+
+    def caught_up(self, name: str, source: str, epoch: int, seq: int | None = None) -> None:
+        """``name`` applied the stream of ``source`` and ``epoch`` up to ``seq`` (None: the answer it waited
+        behind was adopted): live once that reaches the answer of :meth:`synced`."""
+        s = self.skillsets.get(name)
+        if s is None or s.behind is None or s.behind[:2] != (source, epoch) or \
+                (seq is not None and seq < s.behind[2]):
+            return
+        self._vouch(name, source, epoch)
 
     def asking(self, name: str) -> bool:
         """Whether to send a resync query for ``name`` now (none in flight); marks one in flight."""
@@ -176,16 +224,19 @@ class SyncTracker:
         s.asking, s.asked = True, self.clock()
         return True
 
-    def answered(self, name: str, replied: bool) -> None:
-        """The resync query of ``name`` ended; ``replied``: an answer was applied."""
+    def answered(self, name: str, replied: bool, refused: str = "") -> None:
+        """The resync query of ``name`` ended; ``replied``: an answer was applied; ``refused``: the error
+        a source answered instead (its status is outdated, and why)."""
         s = self.skillsets.get(name)
         if s is None:
             return
         s.asking = False
-        if replied or s.state == LIVE:
+        if replied or s.state == LIVE or s.behind is not None:
             return
         heard = [(n, src) for n, src in self.sources.items() if name in src.seqs and self._heard_recently(n)]
-        if not heard:
+        if refused:
+            why = refused
+        elif not heard:
             why = "no bridge answered the resync query"
         elif heard[0][1].seqs[name] is None:
             why = f"'{heard[0][0]}' has no status of {name} yet (its manager has not answered)"
@@ -204,7 +255,7 @@ class SyncTracker:
                 if src is None or now - src.heard > self.bound:
                     self._set(name, LOST, f"nothing heard from '{s.source}' for {self.bound:g} s (no heartbeat, "
                                           "no event)")
-            elif s.state == SYNCING and not s.asking and now - s.asked >= self.retry:
+            elif s.state == SYNCING and s.behind is None and not s.asking and now - s.asked >= self.retry:
                 due.append(name)
         return due
 
@@ -236,6 +287,8 @@ class SyncTracker:
 
     def _set(self, name: str, state: str, reason: str, source: str | None = None) -> None:
         s = self.skillsets[name]
+        if state != SYNCING:
+            s.behind = None
         source = s.source if source is None else source
         if (s.state, s.reason, s.source) == (state, reason, source):
             return

@@ -18,8 +18,12 @@ the real protocols with CDR payloads on the keys of :class:`~skinet.ros.keys.Key
 - every bound topic, published with the step's ``message`` fields.
 
 It announces its servers as the gateways do (``zenoh-bridge-ros2dds``: the route's
-``AS`` liveliness token; ``rmw_zenoh``: node, service and publisher tokens with
-type hashes).  :meth:`drive` plays a scenario: ``k.start`` sends a goal as an
+``AS`` liveliness token of an action server, ``SS`` of a lifecycle node's
+``get_state`` service; ``rmw_zenoh``: node, service and publisher tokens with type
+hashes).  :meth:`BoundSimulator.restart_server` and :meth:`~BoundSimulator.restart_node`
+restart one action server (it forgets its goals and its status cache) or one
+lifecycle node (back to unconfigured), their route tokens leaving and coming back
+(``zenoh-bridge-ros2dds`` keys).  :meth:`drive` plays a scenario: ``k.start`` sends a goal as an
 operator's client would, ``k.interrupt`` cancels it, outcomes end it, an event
 publishes the message that makes its binding fire (a bound event's topic, or the
 resource its effects set: a topic sample or a lifecycle transition).
@@ -182,6 +186,7 @@ class BoundSimulator:
         self.nodes: dict[tuple[str, str], _LifecycleNode] = {}  # (skillset, resource) -> lifecycle node
         self.sent: dict[tuple[str, str], bytes] = {}  # (skillset, skill) -> the goal the operator sent last
         self._tokens: list[Any] = []
+        self._routes: dict[str, Any] = {}  # zenoh-bridge-ros2dds: action or service name -> its route token
         entities: list[tuple[str, str, str, str]] = []
         for name, b in self.bindings.items():
             skillset = system.component(name).skillset
@@ -191,21 +196,45 @@ class BoundSimulator:
                     ("send_goal", f"{s.type}_SendGoal"), ("cancel_goal", CANCEL_TYPE),
                     ("get_result", f"{s.type}_GetResult"))]
                 entities += [("MP", s.name("status"), STATUS_TYPE, self._hash(b, STATUS_TYPE))]
-                if not style.rmw_zenoh:  # the gateway's route token for a DDS action server
-                    self._tokens.append(session.liveliness().declare_token(
-                        f"@/{session.zid()}/@ros2_lv/AS/{style.name_key(s.action, '').replace('/', '§')}/"
-                        f"{s.type.replace('/', '§')}"))
+                self._route("AS", s.action, s.type)
             for r in b.resources:
                 if r.lifecycle:
                     initial = dict(r.states).get(skillset.resource(r.resource).initial, 1)
                     self.nodes[(name, r.resource)] = _LifecycleNode(self, b, r, initial)
                     entities += [("SS", r.get_state, GET_STATE_TYPE, self._hash(b, GET_STATE_TYPE))]
+                    self._route("SS", r.get_state, GET_STATE_TYPE)
                 else:
                     self.publisher(r.topic, r.type, b.store)
             for e in b.events:
                 self.publisher(e.topic, e.type, b.store)
         if style.rmw_zenoh and entities:
             _, self._tokens = declare_node(session, style.domain, "/skinet_simulated_robot", entities)  # type: ignore[arg-type]
+
+    def _route(self, kind: str, name: str, typename: str) -> None:
+        """zenoh-bridge-ros2dds: the gateway's route token for a DDS action (``AS``) or service (``SS``) server."""
+        if not self.style.rmw_zenoh:
+            self._routes[name] = self.session.liveliness().declare_token(
+                f"@/{self.session.zid()}/@ros2_lv/{kind}/{self.style.name_key(name, '').replace('/', '§')}/"
+                f"{typename.replace('/', '§')}")
+
+    def restart_server(self, skillset: str, skill: str) -> None:
+        """``skill``'s action server restarts: its goals and status cache are gone, its token leaves and
+        comes back (zenoh-bridge-ros2dds keys)."""
+        server = self.actions[(skillset, skill)]
+        server.close()
+        undeclare(self._routes.pop(server.skill.action))
+        for topic in ("status", "feedback"):
+            undeclare(self.publishers.pop(server.skill.name(topic)).pub)
+        self.actions[(skillset, skill)] = _ActionServer(self, self.bindings[skillset], server.skill)
+        self._route("AS", server.skill.action, server.skill.type)
+
+    def restart_node(self, skillset: str, resource: str) -> None:
+        """``resource``'s lifecycle node restarts, unconfigured: its token leaves and comes back."""
+        node = self.nodes[(skillset, resource)]
+        node.close()
+        undeclare(self._routes.pop(node.resource.get_state), self.publishers.pop(node.resource.transition_event).pub)
+        self.nodes[(skillset, resource)] = _LifecycleNode(self, self.bindings[skillset], node.resource, 1)
+        self._route("SS", node.resource.get_state, GET_STATE_TYPE)
 
     def _hash(self, binding: Binding, typename: str) -> str:
         return self.style.type_hash(binding.store, typename) if binding.store is not None else "*"
@@ -348,7 +377,7 @@ class BoundSimulator:
             server.close()
         for node in self.nodes.values():
             node.close()
-        undeclare(*self._tokens, *(p.pub for p in self.publishers.values()))
+        undeclare(*self._tokens, *self._routes.values(), *(p.pub for p in self.publishers.values()))
 
 
 __all__ = ["BoundSimulator"]

@@ -44,12 +44,15 @@ class _Spec:
     apply_illegal: bool  # False: an illegal move voids the transition
 
 
-def build_net(skillset: Skillset, eventless: bool = False) -> PetriNet:
+def build_net(skillset: Skillset, eventless: bool = False, commanded: frozenset[str] = frozenset(),
+              without: frozenset[str] = frozenset()) -> PetriNet:
     """The full net ``SkN`` of ``skillset`` or, with ``eventless``, ``SkN^e``.
 
     Invariant transitions get priority over every other transition (one
     priority pair).  Variants of one logical transition are numbered in
-    generation order: ``name``, ``name#2``, ...
+    generation order: ``name``, ``name#2``, ...  The events named in
+    ``commanded`` are controllable (a binding's commanded resources, SPEC §9);
+    those named in ``without`` are left out.
     """
     states = {r.name: r.states for r in skillset.resources}
     places: list[str] = []
@@ -61,6 +64,8 @@ def build_net(skillset: Skillset, eventless: bool = False) -> PetriNet:
 
     transitions: list[Transition] = []
     for spec in _specs(skillset, states, eventless):
+        if spec.kind == "event" and spec.name in without:
+            continue
         seen: set[tuple[frozenset[int], frozenset[int]]] = set()
         for pre, post in _variants(spec, skillset, states):
             pre_i = frozenset(index[p] for p in pre)
@@ -70,7 +75,8 @@ def build_net(skillset: Skillset, eventless: bool = False) -> PetriNet:
             seen.add((pre_i, post_i))
             tid = spec.name if len(seen) == 1 else f"{spec.name}#{len(seen)}"
             transitions.append(
-                Transition(tid, spec.name, spec.kind, pre_i, post_i, skillset.name, spec.skill, spec.element)
+                Transition(tid, spec.name, spec.kind, pre_i, post_i, skillset.name, spec.skill, spec.element,
+                           spec.kind == "event" and spec.name in commanded)
             )
 
     initial = {resource_place(r.name, r.initial) for r in skillset.resources}

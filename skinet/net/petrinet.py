@@ -31,6 +31,7 @@ class Transition:
     skillset: str
     skill: str | None = None  # the skill, for start/invariant/interrupt/modes
     element: str | None = None  # event, invariant or mode name
+    commanded: bool = False  # an event someone commands (a binding's commanded resource, SPEC §9)
     pre_mask: int = field(default=0, compare=False, init=False)
     post_mask: int = field(default=0, compare=False, init=False)
 
@@ -40,8 +41,8 @@ class Transition:
 
     @property
     def controllable(self) -> bool:
-        """Skill starts and interrupts are operator commands (SPEC §5)."""
-        return self.kind in CONTROLLABLE_KINDS
+        """Skill starts and interrupts are operator commands (SPEC §5), and so are commanded events (SPEC §9)."""
+        return self.kind in CONTROLLABLE_KINDS or self.commanded
 
     @property
     def is_invariant(self) -> bool:

@@ -73,10 +73,11 @@ class LocalGame:
 def local_game(component: Component, marking: int, events: bool = False) -> LocalGame:
     """The local game of ``component`` from its ``marking`` (memoised on the net).
 
-    With ``events``, the graph is the full net's and events are outcomes;
-    otherwise it is the eventless net's (SPEC §8: the eventless union).
+    With ``events``, the graph is the full net's and events are outcomes, but for
+    the commanded ones (SPEC §9: they happen only when someone commands them, and a
+    plan never does); otherwise it is the eventless net's (SPEC §8: the eventless union).
     """
-    net = component.net if events else component.eventless
+    net = component.uncommanded if events else component.eventless
     cache: OrderedDict[int, LocalGame] = net.__dict__.setdefault("_local_games", OrderedDict())
     if marking in cache:
         cache.move_to_end(marking)

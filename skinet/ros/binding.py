@@ -16,6 +16,7 @@ entry) lets the bridge play the part of a skillset manager::
     [resources.navigator]                 # a resource <-> a lifecycle node
     lifecycle = "/bt_navigator"
     states = { Inactive = "inactive", Active = "active" }    # model state = lifecycle state
+    commanded = true                      # its changes are commands (someone activates it), not the robot's
 
     [resources.battery]                   # a resource <-> a topic, a condition per state
     topic = "/battery_state"
@@ -33,6 +34,14 @@ the type store of :mod:`skinet.ros.definitions` (rosbags' standard messages plus
 the binding's definitions) and every condition (:mod:`skinet.ros.condition`), and
 reports each error at the file, line and column of the key or value.  A skill
 without a binding is a warning: the bridge never sees it run.
+
+A bound resource's change is an event of the skillset (the model's event that
+explains it), uncontrollable unless the binding says the resource is
+``commanded`` (SPEC §9): then every event of the model that changes it is
+controllable (:attr:`Binding.commanded`, :func:`commanded_events`; SPEC §5, §6.3,
+§8: it never counts as an uncontrollable step, whatever ``events_uncontrollable``
+says).  An event bound to a topic condition is the robot's own, so it cannot change
+a commanded resource.
 
 Pure (the definitions come in as texts, read by :mod:`skinet.files`); cost linear
 in the file.
@@ -66,7 +75,7 @@ _KEYS: dict[str, tuple[str, ...]] = {
     "": ("binding", "events", "resources", "skills"),
     "binding": ("definitions", "skillset"),
     "skills": ("action", "failure", "failure_when", "success", "success_when", "type"),
-    "resources": ("lifecycle", "states", "topic", "type"),
+    "resources": ("commanded", "lifecycle", "states", "topic", "type"),
     "events": ("topic", "type", "when"),
 }
 
@@ -114,6 +123,7 @@ class ResourceBinding:
     lifecycle: str = ""  # the node: /bt_navigator
     topic: str = ""
     type: str = ""
+    commanded: bool = False  # its changes are commands (controllable events), not the robot's own
 
     @property
     def transition_event(self) -> str:
@@ -148,6 +158,7 @@ class Binding:
     store: Typestore | None = field(default=None, compare=False, repr=False)
     definitions: str = ""  # the folder named by [binding] definitions, as written
     warnings: tuple[Diagnostic, ...] = ()
+    commanded: frozenset[str] = frozenset()  # events of the model that change a commanded resource
 
     def topics(self) -> dict[str, str]:
         """Every topic the bridge reads (ROS name -> message type): action statuses, lifecycle
@@ -186,6 +197,20 @@ class _Parser:
         if pos is None and len(path) > 1:  # a key not written (missing): point at its table
             pos = locate_path(self.text, path[:-1])
         return SourceError.at(self.source, pos, message)
+
+    def commanded(self, name: str, table: dict[str, Any]) -> frozenset[str]:
+        """The events that change resource ``name`` when its table says ``commanded = true`` (else none)."""
+        path = ("resources", name, "commanded")
+        value = table.get("commanded", False)
+        if not isinstance(value, bool):
+            raise self.error(path, f"[resources.{name}] commanded must be true or false, not {value!r}", True)
+        if not value:
+            return frozenset()
+        events = changing(self.skillset, name)
+        if not events:
+            raise self.error(path, f"[resources.{name}] commanded = true, but no event of skillset "
+                                   f"'{self.skillset.name}' changes {name}: only events can be commanded", True)
+        return events
 
     def table(self, value: object, path: tuple[str, ...], what: str) -> dict[str, Any]:
         if not isinstance(value, dict):
@@ -295,6 +320,7 @@ class _Parser:
         resources = {r.name: r for r in self.skillset.resources}
         table = self.section("resource", name, table, list(resources))
         model = resources[name]
+        commanded = bool(self.commanded(name, table))
         if ("lifecycle" in table) == ("topic" in table):
             raise self.error(path, f"[resources.{name}] needs either 'lifecycle' (a lifecycle node) or 'topic'")
         states = table.get("states")
@@ -323,14 +349,14 @@ class _Parser:
                     raise self.error((*path, "states", state), f"lifecycle state '{label}' is bound twice", True)
                 seen.add(label)
                 pairs.append((state, LIFECYCLE_STATES[label]))
-            return ResourceBinding(name, tuple(pairs), lifecycle=node)
+            return ResourceBinding(name, tuple(pairs), lifecycle=node, commanded=commanded)
         topic = self.ros_name(table, path, "topic")
         typename = self.message_type(table, path, topic)
         if not states:
             raise self.error(path, f"[resources.{name}] needs 'states': a condition on {typename} per state, "
                                    "e.g. states = { Low = \"percentage < 0.2\" }")
         pairs = [(state, self.condition(text, typename, (*path, "states", state))) for state, text in states.items()]
-        return ResourceBinding(name, tuple(pairs), topic=topic, type=typename)
+        return ResourceBinding(name, tuple(pairs), topic=topic, type=typename, commanded=commanded)
 
     def event(self, name: str, table: object) -> EventBinding:
         path = ("events", name)
@@ -368,11 +394,39 @@ def parse_binding(text: str, source: str, skillset: Skillset, definitions: Mappi
     if not (skills or resources or events):
         raise SourceError.at(source, None, "the binding binds nothing: add [skills.<skill>], [resources.<resource>] "
                                            "or [events.<event>] tables")
+    commanded = frozenset(e for r in resources if r.commanded for e in changing(skillset, r.resource))
+    for e in events:
+        if e.event in commanded:
+            moved = next(r.resource for r in resources if r.commanded and e.event in changing(skillset, r.resource))
+            raise p.error(("events", e.event), f"[events.{e.event}] binds event '{e.event}' to a topic condition (the "
+                                               f"robot's own), but it changes {moved}, which [resources.{moved}] "
+                                               "says is commanded")
     bound = {s.skill for s in skills}
     warnings = tuple(Diagnostic(source, None, "warning", f"skill '{k.name}' has no binding: the bridge never sees "
                                                          "it run")
                      for k in skillset.skills if k.name not in bound)
-    return Binding(skillset.name, source, skills, resources, events, store, definition_folder_of(head), warnings)
+    return Binding(skillset.name, source, skills, resources, events, store, definition_folder_of(head), warnings,
+                   commanded)
+
+
+def changing(skillset: Skillset, resource: str) -> frozenset[str]:
+    """The events of ``skillset`` whose effects change ``resource``."""
+    return frozenset(e.name for e in skillset.events if any(f.resource == resource for f in e.effects))
+
+
+def commanded_events(text: str, source: str, skillset: Skillset) -> frozenset[str]:
+    """The events of ``skillset`` that a binding text makes controllable (its ``commanded`` resources), for the
+    system's nets (:func:`skinet.files.load_system`), without the binding's message types: only the
+    ``commanded`` keys are checked here (errors at their position); :func:`parse_binding` checks the rest."""
+    data = parse_toml(text, source)
+    p = _Parser(text, source, skillset, None)  # type: ignore[arg-type]
+    tables = data.get("resources")
+    names = {r.name for r in skillset.resources}
+    out: frozenset[str] = frozenset()
+    for name, table in (tables.items() if isinstance(tables, dict) else ()):
+        if name in names and isinstance(table, dict):
+            out |= p.commanded(name, table)
+    return out
 
 
 def definition_folder_of(head: Mapping[str, Any]) -> str:
@@ -382,5 +436,6 @@ def definition_folder_of(head: Mapping[str, Any]) -> str:
 
 __all__ = [
     "Binding", "CANCEL_TYPE", "EventBinding", "GET_STATE_TYPE", "LIFECYCLE_STATES", "Outcome", "ResourceBinding",
-    "STATUS_TYPE", "SkillBinding", "TRANSITION_EVENT_TYPE", "definitions_folder", "parse_binding",
+    "STATUS_TYPE", "SkillBinding", "TRANSITION_EVENT_TYPE", "changing", "commanded_events", "definitions_folder",
+    "parse_binding",
 ]

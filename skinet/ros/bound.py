@@ -23,7 +23,11 @@ and leading to the observed state); a start by ``k.start`` when it is enabled.
 start, a second concurrent goal, a resource state no event of the model reaches
 from here, a topic value that matches no state, an event whose guard is false) is
 reported with the message that showed it and what the model expected; the
-observed marking is then adopted, as the monitor does (SPEC §7).
+observed marking is then adopted, as the monitor does (SPEC §7).  An event that
+carries a drift says so (:attr:`~skinet.ros.derive.Derived.divergence`); a drift
+that changes nothing in the marking (a second goal, a value matching no state, an
+event whose guard is false) comes without an event (the bridge publishes it as a
+status event carrying the drift, so that the monitor reports it too).
 
 Start-up (live): until every bound interface has been read once (the last status
 of each action, transient local, or the knowledge that its server has none; the
@@ -322,7 +326,7 @@ class BoundDeriver:
         expected = self._why_not_start(self._skills[skill])
         self.marking = self._forced_start(self._skills[skill])
         drift = Drift(stamp, self.skillset.name, what, f"{skill} started", expected)
-        return BoundOutput([Derived(name, self.status(), stamp, f"model divergence: {drift}")], [drift])
+        return BoundOutput([Derived(name, self.status(), stamp, f"model divergence: {drift}", str(drift))], [drift])
 
     def _end(self, action: _Action, goal: bytes, status: int, stamp: float, what: str) -> BoundOutput:
         skill = action.binding
@@ -380,7 +384,7 @@ class BoundDeriver:
             self.marking = self._set_running(self.marking, skill, False)
             drift = Drift(stamp, self.skillset.name, what, f"{skill} ended", expected)
             out.drifts.append(drift)
-            out.events.append(Derived(name, self.status(), stamp, f"model divergence: {drift}"))
+            out.events.append(Derived(name, self.status(), stamp, f"model divergence: {drift}", str(drift)))
         if action.current is not None:  # a concurrent goal takes over: the skill starts again
             nxt, action.current = action.current, None
             out.add(self._start(action, nxt, stamp, f"{binding.name('status')}: goal {goal_text(nxt)} still active"))
@@ -397,7 +401,7 @@ class BoundDeriver:
         self.marking = self._set_running(self.marking, skill, action.current is not None)
         drift = Drift(stamp, self.skillset.name, f"{where}: goal {goal_text(goal)} absent",
                       f"{skill} no longer runs it", "no outcome of it was seen (did the action server restart?)")
-        return BoundOutput([Derived(None, self.status(), stamp, f"model divergence: {drift}")], [drift])
+        return BoundOutput([Derived(None, self.status(), stamp, f"model divergence: {drift}", str(drift))], [drift])
 
     def _why_not_start(self, skill: Skill) -> str:
         assert self.marking is not None
@@ -485,7 +489,7 @@ class BoundDeriver:
         self.marking = self._set_resource(self.marking, rb.resource, state)
         drift = Drift(stamp, self.skillset.name, what, f"{rb.resource} became {state}",
                       f"no event of the model takes {rb.resource} from {now} to {state} here")
-        return BoundOutput([Derived(None, self.status(), stamp, f"model divergence: {drift}")], [drift])
+        return BoundOutput([Derived(None, self.status(), stamp, f"model divergence: {drift}", str(drift))], [drift])
 
     def _event(self, name: str, stamp: float, what: str, target: tuple[str, str] | None = None) -> BoundOutput:
         assert self.marking is not None

@@ -107,6 +107,7 @@ class Derived:
     status: SkillsetStatus | None
     stamp: float
     info: str = ""
+    divergence: str = ""  # a model divergence found while deriving it, with the message that showed it (SPEC §9)
 
 
 @dataclass

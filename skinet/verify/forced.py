@@ -124,7 +124,7 @@ def _uncontrollable_transitions(net: PetriNet, events: bool) -> tuple[Transition
     cache: dict[bool, tuple[Transition, ...]] = net.__dict__.setdefault("_unc_transitions", {})
     if events not in cache:
         kinds = uncontrollable_kinds(events)
-        cache[events] = tuple(t for t in net.transitions if t.kind in kinds)
+        cache[events] = tuple(t for t in net.transitions if t.kind in kinds and not t.controllable)
     return cache[events]
 
 

@@ -53,8 +53,11 @@ class CanonicalEvent(_Message):
     info: str = Field("", description="free text from the manager (response name, ids)")
     restart: bool = Field(False, description="the skillset's manager restarted: this status starts afresh, "
                                              "and info says why and how its state differs")
+    divergence: str = Field("", description="a model divergence the bridge found (a binding's drift, SPEC §9), "
+                                            "with the message that showed it; the monitor reports it even when "
+                                            "the status matches its marking")
 
-    OMIT_AT_DEFAULT = ("restart",)
+    OMIT_AT_DEFAULT = ("restart", "divergence")
 
 
 class PropertyVerdict(BaseModel):
@@ -269,6 +272,12 @@ class Heartbeat(_Message):
     period: float = Field(gt=0, description="seconds between heartbeats")
     token: str = Field("", description="the liveliness token it holds, e.g. 'skinet/spot_arm/alive/bridge_ros2/x'")
     skillsets: dict[str, HeartbeatSkillset] = Field(description="the skillsets whose events it publishes")
+    pending: dict[str, str] = Field(
+        default_factory=dict, description="skillsets whose last status the publisher knows to be outdated, with "
+                                          "why (a restarted manager not heard yet, a link cut, an interface not "
+                                          "read yet or gone): a monitor must not vouch for it (SPEC §7)")
+
+    OMIT_AT_DEFAULT = ("pending",)
 
 
 class Divergence(BaseModel):

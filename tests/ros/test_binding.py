@@ -151,7 +151,10 @@ def check(tmp_path: Path, binding: str, files: dict[str, str] | None = None) -> 
         (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
         (tmp_path / name).write_text(text)
     (tmp_path / "b.toml").write_text(binding)
-    system, _ = load_system(tmp_path / "s.toml")
+    try:  # the system reads the binding's commanded resources (its TOML too); the bridge the rest
+        system, _ = load_system(tmp_path / "s.toml")
+    except SourceError as exc:
+        return str(exc).replace(str(tmp_path) + "/", "")
     return error(load_bindings, system).replace(str(tmp_path) + "/", "")
 
 
@@ -201,6 +204,18 @@ def check(tmp_path: Path, binding: str, files: dict[str, str] | None = None) -> 
             'states = { Low = "percentage < 0.2" }\n',
      "b.toml:10:9: error: topic /battery_state is bound as sensor_msgs/msg/BatteryState in [resources.battery] and "
      "as std_msgs/msg/Bool here"),
+    (GOOD + '[resources.navigator]\nlifecycle = "/bt_navigator"\ncommanded = "yes"\n',
+     "b.toml:10:14: error: [resources.navigator] commanded must be true or false, not 'yes'"),
+    (GOOD + '[resources.navigator]\nlifecycle = "/bt_navigator"\ncommandd = true\n',
+     "b.toml:10:1: error: unknown key 'commandd' in [resources.navigator] (candidates: commanded)"),
+    (GOOD + '[resources.dock]\ntopic = "/docked"\ntype = "std_msgs/msg/Bool"\n'
+            'states = { Docked = "data", Undocked = "not data" }\ncommanded = true\n',
+     "b.toml:12:13: error: [resources.dock] commanded = true, but no event of skillset 'nav2' changes dock: only "
+     "events can be commanded"),
+    (GOOD + '[resources.navigator]\nlifecycle = "/bt_navigator"\ncommanded = true\n'
+            '[events.navigator_activated]\ntopic = "/active"\ntype = "std_msgs/msg/Bool"\nwhen = "data"\n',
+     "b.toml:11:1: error: [events.navigator_activated] binds event 'navigator_activated' to a topic condition (the "
+     "robot's own), but it changes navigator, which [resources.navigator] says is commanded"),
     (GOOD.replace('action = "/navigate_to_pose"', 'action = "navigate to pose"'),
      "b.toml:5:11: error: 'navigate to pose' is not a ROS 2 name (e.g. /navigate_to_pose)"),
     ("[binding]\nskillset = \"base\"\n", "b.toml:2:13: error: this binding is for skillset 'base', the system file "

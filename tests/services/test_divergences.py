@@ -156,8 +156,9 @@ def test_a_manager_restart_seen_by_the_bridge_is_listed(router, client_factory, 
             "restart", "spot", "manager restarted (the manager (or its gateway) came back); state now differs: power_"
                                "status PowerOn -> PowerOff, control_mode Busy -> Idle, stand_up no longer running")
         # The model explains the new state (power_switchoff, then stand_up's invariant fails): a restart, no
-        # divergence, and the step it made.
-        assert (entry.seq, entry.event, entry.reason) == (4, "spot:status#4", "")
+        # divergence, and the step it made (4); or the step shown (3) when the event waited, spot syncing
+        # because the bridge's heartbeat said first that its manager restarted and was not heard yet.
+        assert (entry.seq in (3, 4), entry.event, entry.reason) == (True, "spot:status#4", "")
         wait_until(lambda: monitor.snapshot().state.skillsets["spot"].resources["power_status"] == "PowerOff", 10,
                    "the restarted manager's state followed")
         assert ask(observer, keys.divergences("spot_arm"), Divergences)[0].entries == [entry]

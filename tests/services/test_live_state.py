@@ -244,3 +244,94 @@ def test_terminal_views_show_a_stale_state_first_in_colour() -> None:
     assert summary(view).endswith(f" | STATE STALE: spot lost since {at}, manipulator syncing since {at}")
     live = state.model_copy(update={"sync": {n: SkillsetSync(state="live", since=0.0) for n in state.sync}})
     assert not [line for line in render(Observed(live, view.verdicts, view.unsafe, None)) if "STATE" in line]
+
+
+STANDING = [("spot", "init_power.start"), ("spot", "init_power.success.powered_on"), ("spot", "stand_up.start"),
+            ("spot", "stand_up.success.standing")]
+
+
+def _ask(session: zenoh.Session, command: str) -> CheckReply:
+    skillset, _, transition = command.partition(":")
+    replies = [r for r in session.get(keys.check("spot_arm", keys.LOCAL_CLIENT), timeout=5.0,
+                                      payload=encode(CheckRequest(skillset=skillset, transition=transition)))
+               if r.ok is not None]
+    assert len(replies) == 1, replies
+    return decode(replies[0].ok.payload.to_bytes(), CheckReply)
+
+
+def test_a_resync_while_a_manager_restart_is_pending_never_vouches_for_the_old_status(client_factory, spot_arm,
+                                                                                      monkeypatch) -> None:
+    """Spot's manager restarts (rmw_zenoh: its tokens leave and come back) and is slow to publish its new
+    status.  The bridge knows its last status is outdated: its heartbeat says so at once, and it answers the
+    resync queries of a running monitor and of one that starts meanwhile with an error, not with the old
+    status (which the monitor used to adopt, live, answering from a marking the robot had left).  Both stay
+    syncing, the check answers state_unknown, until the new status comes; then they follow it."""
+    from services.bridge_ros2 import start_bridge
+    from services.simulator.manager import Manager
+    from skinet.ros.keys import KeyStyle
+
+    system, typemap = spot_arm
+    slow, answer = threading.Event(), threading.Event()
+    status_request = Manager.status_request
+
+    def slow_to_answer(self):  # type: ignore[no-untyped-def]
+        if slow.is_set():
+            answer.wait(20)
+        return status_request(self)
+
+    monkeypatch.setattr(Manager, "status_request", slow_to_answer)
+    style = KeyStyle(rmw_zenoh=True, domain=12)
+    asker = client_factory()
+    simulator = Simulator(client_factory(), system, typemap, style=style)
+    bridge = start_bridge(client_factory(), system, typemap, style=style, source="bridge_ros2/restart")
+    first = start_monitor(client_factory(), system)
+    second = None
+    try:
+        wait_until(first.synced, 10, "synced")
+        simulator.drive(scenario(STANDING), speed=0)
+        wait_until(sees(first, "spot", "posture", "Standing"), 10, "spot standing")
+        reply = _ask(asker, "spot:sit_down.start")  # no predictor here: prediction_pending, never state_unknown
+        assert (reply.enabled, reply.state_stale, [k for _, k, _ in kinds(reply)]) == (True, False,
+                                                                                      ["prediction_pending"])
+        slow.set()
+        simulator.restart("spot")  # initial state: PowerOff, Sitting; its new status is slow to come
+        outdated = ("'bridge_ros2/restart' has no current status of spot: its manager restarted (the manager (or "
+                    "its gateway) came back): waiting for its new status")
+        wait_until(lambda: first.snapshot().state.sync["spot"].state == "syncing", 2, "syncing at once")
+        time.sleep(1.5)  # its resync queries (every second) are refused
+        sync = first.snapshot().state.sync
+        assert (sync["spot"].state, sync["spot"].reason, sync["manipulator"].state) == ("syncing", outdated, "live")
+        reply = _ask(asker, "spot:sit_down.start")
+        assert (reply.decision, reply.state_stale, ("", "state_unknown", "warn") in kinds(reply)) == ("warn", True,
+                                                                                                       True)
+        assert "spot syncing since" in reply.state_reason and outdated in reply.state_reason
+        answers = list(asker.get(keys.resync("spot_arm", "spot"), timeout=5.0))
+        assert [(a.ok, a.err.payload.to_bytes().decode()) for a in answers] == [(None, outdated)]
+        # A monitor that starts now (its predecessor gone) asks at once: refused too.
+        token = keys.alive("spot_arm", "monitor", first.instance_id)
+        gone = LivelinessWatch(asker, token)
+        first.close()
+        first.session.close()
+        gone.wait(lambda alive: token not in alive)
+        gone.close()
+        second = start_monitor(client_factory(), system, resync_timeout=0.5)
+        wait_until(lambda: second.snapshot().state.sync["manipulator"].state == "live", 5, "the arm synced")
+        time.sleep(1.0)
+        assert second.snapshot().state.sync["spot"].state == "syncing"
+        reply = _ask(asker, "spot:sit_down.start")
+        assert (reply.decision, reply.state_stale, ("", "state_unknown", "warn") in kinds(reply)) == ("warn", True,
+                                                                                                       True)
+        answer.set()  # the new status comes: followed
+        wait_until(second.synced, 5, "spot live again")
+        assert second.snapshot().state.skillsets["spot"].resources == {
+            "power_status": "PowerOff", "posture": "Sitting", "control_mode": "Idle"}
+        reply = _ask(asker, "spot:sit_down.start")
+        assert (reply.enabled, reply.state_stale, [k for _, k, _ in kinds(reply)]) == (False, False,
+                                                                                       ["prediction_pending"])
+    finally:
+        answer.set()
+        if second is not None:
+            second.close()
+        first.close()
+        bridge.close()
+        simulator.close()

@@ -205,3 +205,52 @@ def test_router_restart_between_managers_and_bridge_is_resynced(outage: Outage, 
         undeclare(listener, sub)
         for s in (sim_s, bridge_s, obs_s):
             s.close()
+
+
+def test_router_restart_between_a_bound_robot_and_the_bridge_is_read_again(outage: Outage) -> None:
+    """The router is down 3 s while the Nav2 base's navigator is configured and its battery runs low: those
+    messages are lost (lifecycle events and topics are volatile).  Once the link is back, the bridge says its
+    status is not current (heartbeat ``pending``, resync refused) until it has read every interface again:
+    the action statuses' caches, the node's state, the battery's next sample; then it publishes what changed
+    and an event closing the gap."""
+    from services.bridge_ros2.bound_live import start_bound_bridge
+    from services.simulator.bound import BoundSimulator
+    from skinet.files import load_bindings
+    from tests.services.test_bound_bridge import FIRST, NAV2, _pending, _resync
+
+    system = load_system(NAV2 / "nav2.toml")[0]
+    bindings, _ = load_bindings(system)
+    sim_s, bridge_s, obs_s = outage.login("simulator"), outage.login("bridge"), outage.login("observer")
+    got: list[CanonicalEvent] = []  # an observer that recovers what its own reconnection missed, as a monitor
+    sub, listener = event_subscriber(obs_s, keys.events(system.name, "*"), zenoh.handlers.Callback(
+        lambda s: got.append(decode(s.payload.to_bytes(), CanonicalEvent))), lambda n: None)
+    robot = BoundSimulator(sim_s, system, bindings)
+    bridge = start_bound_bridge(bridge_s, system, bindings, settle=0.2, retry=0.2, source="bridge_ros2/b")
+    try:
+        time.sleep(0.5)
+        robot.publish_topics(FIRST)
+        wait_until(lambda: len(got) == 1, 5, "the initial status")
+        outage.down()
+        robot.lifecycle("nav2", "navigator", "Inactive")
+        robot.publish("nav2", "/battery_state", {"percentage": 0.1, "power_supply_status": 1})
+        time.sleep(3.0)
+        outage.up()
+        cut = "the link to the robot's interfaces was cut: waiting for a new /battery_state message"
+        wait_until(lambda: _pending(obs_s, "nav2", 10) == {"nav2": cut}, 15, "the node and the servers read again")
+        assert _resync(obs_s, "nav2", "nav2") == ("err", f"'bridge_ros2/b' has no current status of nav2: {cut}")
+        wait_until(lambda: len(got) == 2, 5, "the navigator's event")
+        assert [e.transition for e in got] == [None, "navigator_configured"]
+        robot.publish("nav2", "/battery_state", {"percentage": 0.1, "power_supply_status": 1})
+        wait_until(lambda: len(got) == 4, 5, "the battery's event and the end of the gap")
+        assert [(e.transition, e.info) for e in got[2:]] == [
+            ("battery_low", "/battery_state: percentage=0.10000000149011612 (battery Ok -> Low)"),
+            (None, "resync after the link to the robot's interfaces was cut; state now differs: navigator "
+                   "Unconfigured -> Inactive, battery Ok -> Low")]
+        assert [e.seq for e in got] == [0, 1, 2, 3]
+        assert _pending(obs_s, "nav2") == {} and bridge.counters.resyncs == 1
+    finally:
+        bridge.close()
+        robot.close()
+        undeclare(listener, sub)
+        for s in (sim_s, bridge_s, obs_s):
+            s.close()

@@ -146,3 +146,74 @@ def test_what_the_resync_answer_covers_is_history_whatever_the_stamps() -> None:
     assert engine.check_seq(event(4)) == (False, None, False) and engine.counters.history == 4
     assert engine.check_seq(event(0, epoch=8))[0]  # another run of the source: not covered
     assert engine.adopt(event(9, epoch=8, status=ON)) is None  # the same marking: no step
+
+
+RESTARTED = "its manager restarted (the manager (or its gateway) came back): waiting for its new status"
+REFUSED = f"'bridge_ros2/b1' has no current status of spot: {RESTARTED}"
+
+
+def test_a_status_the_source_says_is_outdated_is_not_vouched_for() -> None:
+    """``Heartbeat.pending``: a live skillset is syncing at once, a syncing one says why, a lost one stays lost;
+    its resync queries are refused with the same words until the source's next status comes."""
+    clock = Clock()
+    t = tracker(clock)
+    t.synced("spot", B1, 7)
+    t.synced("manipulator", B1, 7)
+    pending = beat().model_copy(update={"pending": {"spot": RESTARTED}})
+    t.heartbeat(pending, superseded=["spot"])  # sent before an event already applied: older news
+    assert t.all_live()
+    t.heartbeat(pending)
+    assert states(t) == {"spot": ("syncing", REFUSED), "manipulator": ("live", "")}
+    assert t.outdated("spot", B1) and not t.outdated("manipulator", B1)
+    assert t.asking("spot")
+    t.answered("spot", replied=False, refused=REFUSED)
+    assert states(t)["spot"] == ("syncing", REFUSED)
+    t.heartbeat(beat(spot=4))  # its new status came (#4)
+    assert not t.outdated("spot", B1) and states(t)["spot"] == ("syncing", REFUSED)  # until its answer
+    t.synced("spot", B1, 7)
+    assert t.all_live()
+    clock.t += 5.0
+    t.tick()
+    t.heartbeat(pending)  # lost: stays lost until heard, then says why it waits
+    assert states(t)["spot"] == ("syncing", REFUSED)
+
+
+def test_an_answer_ahead_of_the_events_is_live_once_they_come() -> None:
+    """After an outage the bridge's cache gives back the events the answer covers, up to 2 s later: until
+    they are applied the marking is behind the answer, and the skillset is not live."""
+    t = tracker(Clock())
+    t.synced("spot", B1, 7)
+    t.heartbeat(beat(manager=False))
+    t.heartbeat(beat())
+    assert t.hold(event(4))  # another event of the same run waits for the answer
+    assert [e.seq for e in t.synced("spot", B1, 7, upto=6)] == [4]
+    assert states(t)["spot"] == ("syncing", "catching up: events up to #6 from 'bridge_ros2/b1' are on their way")
+    assert not t.hold(event(5))  # what it waits for is applied at once
+    assert t.tick() == ["manipulator"]  # nothing to ask: the answer is known
+    t.caught_up("spot", B1, 8, 6)  # another run: not what it waits for
+    t.caught_up("spot", B1, 7, 5)
+    assert states(t)["spot"][0] == "syncing"
+    t.caught_up("spot", B1, 7, 6)
+    assert t.live("spot")
+    t.heartbeat(beat(manager=False))
+    t.heartbeat(beat())
+    t.synced("spot", B1, 7, upto=9)
+    t.caught_up("spot", B1, 7)  # the bound passed: the answer was adopted
+    assert t.live("spot")
+
+
+def test_a_divergence_names_the_message_that_showed_it() -> None:
+    """The live nets' reason, with the event's info (a manager's: its response, or why the bridge says the
+    state changed); a bridge's own finding (a binding's drift) first, even when the marking does not move."""
+    engine = Engine(SYSTEM)
+    restarted = CanonicalEvent(system="spot_arm", skillset="manipulator", seq=0, stamp=0.0, source=B1, epoch=7,
+                               status=SkillsetStatus(resources={"mutex": "Free", "arm_status": "Away"}),
+                               info="manager restarted (new status publisher); state now differs: arm_status HP -> Away")
+    step = engine.apply(restarted)
+    assert step is not None and step.divergence == (
+        "no transition explains the observed status of 'manipulator'; observed marking adopted (message: manager "
+        "restarted (new status publisher); state now differs: arm_status HP -> Away)")
+    drift = restarted.model_copy(update={"seq": 1, "info": "model divergence: x", "divergence": "/arm: x, but y"})
+    step = engine.apply(drift)  # the status matches the marking: a step all the same
+    assert step is not None and step.divergence == "/arm: x, but y" and engine.counters.divergences == 2
+    assert engine.apply(drift.model_copy(update={"seq": 2, "info": "", "divergence": ""})) is None

@@ -31,7 +31,8 @@ def sample_messages(system: System) -> dict[str, BaseModel]:
     return {
         "CanonicalEvent": CanonicalEvent(
             system=system.name, skillset="manipulator", seq=7, stamp=1700000000.25, source="bridge-1",
-            transition="arm_ready.start", status=skillsets["manipulator"], info="ok id=3", restart=True),
+            transition="arm_ready.start", status=skillsets["manipulator"], info="ok id=3", restart=True,
+            divergence="/arm/_action/status: goal 1 ACCEPTED: arm_ready started, but the model says it cannot"),
         "LiveState": LiveState(system=system.name, seq=8, stamp=1700000000.3, skillsets=skillsets,
                                event="manipulator:arm_ready.start#7", divergence="no transition explains it",
                                sync={"spot": SkillsetSync(state="live", since=1700000000.1, source="bridge_ros2/b1"),
@@ -65,7 +66,9 @@ def sample_messages(system: System) -> dict[str, BaseModel]:
         "Heartbeat": Heartbeat(system=system.name, source="bridge_ros2/b1", epoch=1700000000000, period=0.5,
                                token="skinet/spot_arm/alive/bridge_ros2/b1",
                                skillsets={"spot": HeartbeatSkillset(seq=12, manager=True),
-                                          "manipulator": HeartbeatSkillset()}),
+                                          "manipulator": HeartbeatSkillset()},
+                               pending={"spot": "its manager restarted (the manager (or its gateway) came back): "
+                                                "waiting for its new status"}),
         "Divergences": Divergences(system=system.name, monitor="m1", stamp=1700000000.5, older=3, entries=[
             Divergence(n=3, kind="divergence", seq=4, stamp=1700000000.4, skillset="manipulator",
                        event="manipulator:arm_ready.success.ready#7",

@@ -19,7 +19,8 @@ places and transitions instead of indexing them::
     }
 
 A place in both ``pre`` and ``post`` is a test.  ``controllable`` is derived
-from ``kind`` and ignored on input.  :func:`from_json` rebuilds an equal
+from ``kind`` (an event is controllable when its binding says it is commanded,
+SPEC §9); on input it only marks an event as commanded.  :func:`from_json` rebuilds an equal
 :class:`~skinet.net.petrinet.PetriNet` with compiled bit masks.
 """
 
@@ -117,6 +118,7 @@ def from_json(data: Mapping[str, Any]) -> PetriNet:
                     skillset=str(t["skillset"]),
                     skill=t.get("skill"),
                     element=t.get("element"),
+                    commanded=t["kind"] == "event" and t.get("controllable") is True,
                 )
             )
         tr_index = _unique([t.id for t in transitions], "transition id")
