@@ -16,6 +16,8 @@ key                                       publisher           payload
 ``skinet/<system>/resync/<skillset>``     bridge_ros2 (query) -> :class:`CanonicalEvent` (last status)
 ``skinet/<system>/heartbeat/<source>``    bridge_ros2         :class:`Heartbeat` (every 0.5 s)
 ``skinet/<system>/alive/<service>/<id>``  every instance      liveliness token
+``skinet/<system>/pilot/goal/<client>``   pilot (query)       :class:`PilotGoalRequest` -> :class:`PilotGoalReply`
+``skinet/<system>/pilot/status``          pilot               :class:`PilotStatus` (and on ``get``)
 ========================================  ==================  ==========================
 
 Predictors are not tied to one system: they answer on ``skinet/*/predict/*`` (any
@@ -90,13 +92,24 @@ def check(system: str, client: str) -> str:
     return f"{ROOT}/{system}/check/{client}"
 
 
+def pilot_goal(system: str, client: str) -> str:
+    """The pilot's goal queryable asked by ``client``."""
+    return f"{ROOT}/{system}/pilot/goal/{client}"
+
+
+def pilot_status(system: str) -> str:
+    return f"{ROOT}/{system}/pilot/status"
+
+
 def client_of(key: str) -> str | None:
-    """The client chunk of a ``predict`` or ``check`` key (``skinet/<system>/<kind>/<client>[/...]``);
-    None when the key has none or it is not a plain name (a wildcard)."""
+    """The client chunk of a ``predict`` or ``check`` key (``skinet/<system>/<kind>/<client>[/...]``)
+    or of a pilot goal key (``skinet/<system>/pilot/goal/<client>``); None when the key has none or
+    it is not a plain name (a wildcard)."""
     parts = key.split("/")
-    if len(parts) < 4 or not _CHUNK.match(parts[3]):
+    at = 4 if len(parts) > 2 and parts[2] == "pilot" else 3
+    if len(parts) <= at or not _CHUNK.match(parts[at]):
         return None
-    return parts[3]
+    return parts[at]
 
 
 def resync(system: str, skillset: str = "*") -> str:

@@ -13,7 +13,7 @@ it, and refuses, rather than misreads, one that has (schemas/README.md).
 
 from __future__ import annotations
 
-from typing import ClassVar, Literal
+from typing import Any, ClassVar, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -307,8 +307,105 @@ class Divergences(_Message):
     entries: list[Divergence] = Field(default_factory=list, description="oldest first, numbered n = older, ...")
 
 
+class PlanBranch(BaseModel):
+    """Another result of a plan step (:class:`skinet.plan.Branch`): ``then`` is ``retry`` or ``continue``
+    (at ``step``), ``route`` (its own ``steps``, then on at ``step``) or ``reached``."""
+
+    skillset: str
+    transition: str = Field(description="the outcome; for a command with several results, the command itself")
+    then: Literal["retry", "continue", "route", "reached"]
+    step: str | None = Field(None, description="the step it goes on at, e.g. '2' or '2.1'")
+    steps: list[PlanStep] = Field(default_factory=list, description="its own steps (then = route)")
+
+
+class PlanStep(BaseModel):
+    """One step of a plan's favourable path (:class:`skinet.plan.Step`), as ``skinet plan --json`` shows it."""
+
+    number: str = Field(description="'2', or '2.1' inside the route of a branch of step 2")
+    skillset: str = Field(description="the command's skillset; for waiting, the expected outcome's")
+    action: str = Field(description="'SKILL.start', 'SKILL.interrupt' or 'wait'")
+    expect: str | None = Field(None, description="waiting: the favourable outcome, e.g. 'init_power.success.powered_on'")
+    inputs: dict[str, Any] | None = Field(None, description="a start's input values")
+    branches: list[PlanBranch] = Field(default_factory=list, description="the other outcomes of this step")
+
+
+PlanBranch.model_rebuild()
+
+
+class PilotCommand(BaseModel):
+    """A command of the pilot (SPEC §8): ``skillset:transition`` with a start's input values."""
+
+    skillset: str
+    transition: str = Field(description="'SKILL.start' or 'SKILL.interrupt'")
+    inputs: dict[str, Any] = Field(default_factory=dict)
+
+
+PILOT_STATES = ("idle", "waiting for monitor", "planning", "guiding", "driving", "waiting for outcome", "paused",
+                "reached", "failed", "cancelled")
+
+
+class PilotGoalRequest(_Message):
+    """Asked on ``skinet/<system>/pilot/goal/<client>`` (SPEC §8, the pilot): set a goal or a mission,
+    switch mode, cancel, pause or resume.  ``goals`` (goal texts) and ``mission`` (a goals file's TOML
+    text) are read as ``skinet plan`` reads them; errors come back with ``mission_name:line:col``."""
+
+    system: str
+    op: Literal["goal", "mode", "cancel", "pause", "resume"] = Field(
+        "goal", description="goal: set goals (or mission); mode: switch to `mode`; cancel, pause, resume the goal")
+    goals: list[str] = Field(default_factory=list, description="'reach FORMULA', 'run SKILLSET:SKILL[.success.MODE]'")
+    inputs: dict[str, dict[str, Any]] = Field(default_factory=dict, description="skill -> its input values "
+                                                                                "(for the goals given as text)")
+    mission: str = Field("", description="a goals file's text ([[goals]] with reach or run, and inputs): "
+                                         "planned after `goals`")
+    mission_name: str = Field("goals.toml", description="the goals file's name, for error positions")
+    mode: Literal["guide", "drive"] = Field("guide", description="guide: publish the next command; "
+                                                                 "drive: also send it to the robot")
+    replace: bool = Field(False, description="replace a goal that runs (otherwise such a request is rejected)")
+    max_retries: int = Field(3, ge=0, le=100, description="failures of one skill after which the goal fails")
+
+
+class PilotGoalReply(_Message):
+    """The pilot's answer to a :class:`PilotGoalRequest`."""
+
+    system: str
+    accepted: bool
+    reason: str = Field("", description="why it was rejected, in the operator's words ('' when accepted)")
+    goal_id: int = Field(0, ge=0, description="the pilot's number for the goal (0: none)")
+    answer: Literal["strong", "cyclic", "none", "unknown"] | None = Field(
+        None, description="the plan's answer for the first goal from the live marking (None: not planned)")
+    moves: int | None = None
+    steps: list[PlanStep] = Field(default_factory=list, description="the plan's first steps")
+
+
+class PilotStatus(_Message):
+    """The pilot's status (SPEC §8): published on ``skinet/<system>/pilot/status`` at every change, and
+    answered on ``get`` there."""
+
+    system: str
+    pilot: str = Field(description="the pilot's instance id")
+    seq: int = Field(ge=0, description="publication counter")
+    stamp: float
+    state: Literal[PILOT_STATES] = Field(  # type: ignore[valid-type]
+        description="'paused', 'failed' and 'waiting for monitor' give their `reason`")
+    reason: str = Field("", description="why paused, failed, cancelled or waiting, in the operator's words")
+    goal_id: int = Field(0, ge=0, description="the current or last goal (0: none yet)")
+    client: str = Field("", description="who set the goal (its router login)")
+    mode: Literal["guide", "drive"] = "guide"
+    goals: list[str] = Field(default_factory=list, description="the mission's goals, as text")
+    index: int = Field(0, ge=0, description="the position of the goal being followed in `goals`")
+    answer: Literal["strong", "cyclic", "none", "unknown"] | None = None
+    moves_left: int | None = Field(None, description="moves to the goal (strong: at most; cyclic: if favourable)")
+    next: PilotCommand | None = Field(None, description="the command the plan gives now (None: wait or none)")
+    steps: list[PlanStep] = Field(default_factory=list, description="the plan from the live marking")
+    retries: dict[str, int] = Field(default_factory=dict, description="'skillset:skill' -> its failures in this goal")
+    commands: int = Field(0, ge=0, description="commands sent to the robot for this goal")
+    denied: int = Field(0, ge=0, description="commands the check denied (a defect: never sent)")
+    state_seq: int = Field(0, ge=0, description="the monitor's LiveState.seq this status is about")
+
+
 MESSAGES: dict[str, type[BaseModel]] = {
     m.__name__: m
     for m in (CanonicalEvent, LiveState, Verdicts, UnsafeReport, StateSpaceReport, ModelBundle, PredictRequest, PredictReply,
-              CheckRequest, CheckReply, Heartbeat, Divergences)
+              CheckRequest, CheckReply, Heartbeat, Divergences, PilotGoalRequest, PilotGoalReply,
+              PilotStatus)
 }

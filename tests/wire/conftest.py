@@ -10,7 +10,7 @@ from skinet.verify.predict import forecast
 from skinet.wire.convert import bundle, marking_of, risks, state_space_report, statuses
 from skinet.wire.messages import (
     CanonicalEvent, CheckReason, CheckReply, CheckRequest, Divergence, Divergences, Heartbeat, HeartbeatSkillset,
-    LiveState, PredictReply, PredictRequest, PropertyVerdict, RecoveryEntry, SkillsetStatus, SkillsetSync, UnsafeEntry,
+    LiveState, PilotCommand, PilotGoalReply, PilotGoalRequest, PilotStatus, PlanBranch, PlanStep, PredictReply, PredictRequest, PropertyVerdict, RecoveryEntry, SkillsetStatus, SkillsetSync, UnsafeEntry,
     UnsafeReport, Verdicts,
 )
 
@@ -76,7 +76,21 @@ def sample_messages(system: System) -> dict[str, BaseModel]:
             Divergence(n=4, kind="restart", seq=4, stamp=1700000000.45, skillset="spot", event="spot:status#9",
                        info="manager restarted (skill ids reset: teleop); state now differs: power_status "
                             "PowerOn -> PowerOff")]),
+        "PilotGoalRequest": PilotGoalRequest(system=system.name, goals=["run spot:go_to_waypoint"],
+                                             inputs={"go_to_waypoint": {"target": {"x": 12.0, "y": 3.5, "z": 0.0}}},
+                                             mode="drive", max_retries=2),
+        "PilotGoalReply": PilotGoalReply(system=system.name, accepted=True, goal_id=1, answer="cyclic", moves=4,
+                                         steps=[_STEP]),
+        "PilotStatus": PilotStatus(system=system.name, pilot="p1", seq=3, stamp=1700000000.6, state="driving",
+                                   goal_id=1, client="operator", mode="drive", goals=["reach spot:Standing"],
+                                   answer="cyclic", moves_left=3, next=PilotCommand(skillset="spot",
+                                                                                    transition="init_power.start"),
+                                   steps=[_STEP], retries={"spot:init_power": 1}, commands=1, state_seq=7),
     }
+
+
+_STEP = PlanStep(number="1", skillset="spot", action="init_power.start", branches=[
+    PlanBranch(skillset="spot", transition="init_power.failure.power_failure", then="retry", step="1")])
 
 
 @pytest.fixture(scope="session")
