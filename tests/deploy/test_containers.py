@@ -380,29 +380,6 @@ def test_offboard_network_cut_leaves_stale_predictions_then_recovers(stack: tupl
         obs.close()
 
 
-def test_router_restart_clients_reconnect(stack: tuple[Stack, str], observer: zenoh.Session) -> None:
-    s = stack[0]
-    tokens = Tokens(observer)
-    try:
-        (router,) = s.containers("router")
-        restarted_at = time.monotonic()
-        subprocess.run(["docker", "restart", "-t", "1", router], check=True, capture_output=True)
-        # Each service announces itself anew through the new router.
-        wait_until(lambda: (tokens.of("bridge_ros2", restarted_at) and tokens.of("monitor", restarted_at)
-                            and len(tokens.of("predictor", restarted_at)) >= 2),
-                   60, f"every service back (got {sorted(tokens.alive)})")
-    finally:
-        tokens.close()
-    obs = MissionObserver(observer)
-    try:
-        _finish(s.run_simulator(speed=10))
-        _settle(obs)
-        assert obs.violations(load_scenario()) == expected_violations()
-        assert any(not r.prediction_stale for _, r in obs.unsafe)
-    finally:
-        obs.close()
-
-
 def _latest_state(session: zenoh.Session) -> LiveState | None:
     """The monitor's last published state, as a late joiner asks for it (None: no answer yet)."""
     for reply in session.get(keys.state("spot_arm"), timeout=2.0):
@@ -423,6 +400,44 @@ def _standby_robot(s: Stack) -> str:
     s.compose("run", "-d", "--no-deps", "simulator", SKINET_START_DELAY="3600")
     (robot,) = set(s.containers("simulator")) - before
     return robot
+
+
+def test_router_restart_clients_reconnect(stack: tuple[Stack, str], observer: zenoh.Session) -> None:
+    """Every service comes back after ``docker restart`` of the router, and the next mission gives
+    the in-process verdicts.
+
+    No robot runs across the restart: the bridge cannot tell what its managers did while its
+    link was cut, so the monitor vouches for no skillset (syncing, SPEC §7) until the mission's
+    managers answer the bridge; it then publishes its last step again with the new sync state,
+    which is no step of the mission (:class:`MissionObserver`'s ``after``)."""
+    s = stack[0]
+    tokens = Tokens(observer)
+    try:
+        (router,) = s.containers("router")
+        restarted_at = time.monotonic()
+        subprocess.run(["docker", "restart", "-t", "1", router], check=True, capture_output=True)
+        # Each service announces itself anew through the new router.
+        wait_until(lambda: (tokens.of("bridge_ros2", restarted_at) and tokens.of("monitor", restarted_at)
+                            and len(tokens.of("predictor", restarted_at)) >= 2),
+                   60, f"every service back (got {sorted(tokens.alive)})")
+    finally:
+        tokens.close()
+    latest: list[LiveState | None] = [None]
+
+    def unvouched() -> bool:
+        latest[0] = _latest_state(observer)
+        return latest[0] is not None and all(latest[0].sync[n].state == "syncing" for n in ("spot", "manipulator"))
+
+    wait_until(unvouched, 30, "spot and manipulator syncing after the restart")
+    assert latest[0] is not None
+    obs = MissionObserver(observer, after=latest[0].seq)  # no step can come before the mission's managers answer
+    try:
+        _finish(s.run_simulator(speed=10))
+        _settle(obs)
+        assert obs.violations(load_scenario()) == expected_violations(), (obs.events(), obs.event_trace())
+        assert any(not r.prediction_stale for _, r in obs.unsafe)
+    finally:
+        obs.close()
 
 
 def test_router_restart_loses_no_event(stack: tuple[Stack, str], observer: zenoh.Session, secrets: Path) -> None:
