@@ -393,6 +393,11 @@ def _sync_reason(st: LiveState | None, skillset: str) -> str:
     return st.sync[skillset].reason if st is not None and skillset in st.sync else ""
 
 
+def _all_in(st: LiveState | None, state: str) -> bool:
+    """Whether every skillset of ``st`` is in sync state ``state`` (live, syncing, lost)."""
+    return st is not None and bool(st.sync) and all(s.state == state for s in st.sync.values())
+
+
 def _standby_robot(s: Stack) -> str:
     """The simulator serving spot_arm's managers without playing anything (a start delay of an
     hour): a robot at rest, which answers the bridge's status requests.  Returns its container."""
@@ -426,7 +431,7 @@ def test_router_restart_clients_reconnect(stack: tuple[Stack, str], observer: ze
 
     def unvouched() -> bool:
         latest[0] = _latest_state(observer)
-        return latest[0] is not None and all(latest[0].sync[n].state == "syncing" for n in ("spot", "manipulator"))
+        return _all_in(latest[0], "syncing")
 
     wait_until(unvouched, 30, "spot and manipulator syncing after the restart")
     assert latest[0] is not None
@@ -479,12 +484,9 @@ def test_router_restart_loses_no_event(stack: tuple[Stack, str], observer: zenoh
             sent += 1
             time.sleep(1 / rate)
 
-    def vouched(st: LiveState | None) -> bool:
-        return st is not None and all(st.sync[n].state == "live" for n in ("spot", "manipulator"))
-
     try:
         # The bridge has a status of each skillset (from the robot at rest, or an earlier mission).
-        wait_until(lambda: vouched(_latest_state(observer)), 60, "spot and manipulator live")
+        wait_until(lambda: _all_in(_latest_state(observer), "live"), 60, "spot and manipulator live")
         publish(10)
         wait_until(lambda: any(st.event == name(sent - 1) for st in states), 30, "the first events")
         first = max(st.seq for st in states)
