@@ -381,6 +381,8 @@ class Pilot:
             return self._show(g.end, g.reason)
         why = self._paused(g, st)
         if why:
+            if flight is not None:  # its effect cannot be seen now: the manager's time starts again after
+                flight.deadline = time.monotonic() + self.response_timeout
             return self._show("paused", why)
         if flight is not None:
             return self._show("waiting for outcome", f"the effect of {flight.command.skillset}:"

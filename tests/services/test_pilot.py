@@ -4,11 +4,16 @@ sessions; the skills' outcomes come from :class:`~tests.services.pilot_robot.Imp
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable, Iterator
 
 import pytest
 import zenoh
 
+from services.bridge_ros2 import start_bridge
+from services.common.zenoh_config import undeclare
+from services.predictor.service import start_predictor
+from skinet.wire.messages import PilotGoalRequest
 from tests.services.pilot_robot import WALK, Gui, Implementations, Robot, ask_goal, goal
 
 
@@ -109,3 +114,88 @@ def test_max_retries_failures_of_one_skill_end_the_goal_with_skill_and_mode(robo
         assert (done.retries, done.next) == ({"spot:stand_up": 2}, None)
     finally:
         impl.close()
+
+
+@pytest.fixture
+def quick(client_factory: Callable[[], zenoh.Session], spot_arm: tuple) -> Iterator[Robot]:
+    """The robot with a monitor that calls a skillset lost after 0.5 s of silence."""
+    r = Robot(client_factory, *spot_arm, lost_after=0.5)
+    yield r
+    r.close()
+
+
+def test_a_skillset_not_live_pauses_the_pilot_until_it_is_live_again(quick: Robot, client_factory) -> None:
+    robot = quick
+    impl = Implementations(robot.sim, robot.system, hold=[("spot", "init_power")])
+    try:
+        reply = ask_goal(robot.observer, goal("run spot:go_to_waypoint", inputs=WALK, mode="drive"))
+        robot.statuses.wait(lambda s: s.reason == "the outcome of spot:init_power")
+        robot.bridge.close()  # the robot goes silent
+        paused = robot.statuses.wait(lambda s: s.state == "paused" and " is lost: " in s.reason, what="lost")
+        assert paused.reason.startswith(("spot is lost: the liveliness token of 'bridge_ros2/",
+                                         "manipulator is lost: the liveliness token of 'bridge_ros2/")), paused.reason
+        impl.release("spot", "init_power")  # spot powers on meanwhile: nobody sees it
+        time.sleep(0.3)
+        assert robot.actuator.sent == ["spot:init_power.start"]  # nothing from a state it cannot vouch for
+        robot.bridge = start_bridge(client_factory(), robot.system, robot.typemap)  # heard again: resync
+        done = robot.statuses.state("reached", reply.goal_id)
+        assert robot.actuator.sent == ["spot:init_power.start", "spot:stand_up.start", "spot:go_to_waypoint.start"]
+        assert (done.commands, done.denied) == (3, 0)
+    finally:
+        impl.close()
+
+
+def test_a_pending_prediction_pauses_the_pilot_until_it_comes(robot: Robot, client_factory) -> None:
+    impl = Implementations(robot.sim, robot.system, hold=[("spot", "init_power")])
+    try:
+        reply = ask_goal(robot.observer, goal("run spot:go_to_waypoint", inputs=WALK, mode="drive"))
+        robot.statuses.wait(lambda s: s.reason == "the outcome of spot:init_power")
+        robot.predictor.close()
+        impl.release("spot", "init_power")
+        paused = robot.statuses.wait(lambda s: s.state == "paused" and s.commands == 1, what="paused")
+        assert paused.reason == f"the prediction of step {paused.state_seq} is pending"
+        assert (paused.next.skillset, paused.next.transition) == ("spot", "stand_up.start")  # what it would send
+        time.sleep(0.3)
+        assert robot.actuator.sent == ["spot:init_power.start"]
+        robot.predictor = start_predictor(client_factory(), "pilot-test-2")
+        robot.statuses.state("reached", reply.goal_id)
+        assert robot.actuator.sent == ["spot:init_power.start", "spot:stand_up.start", "spot:go_to_waypoint.start"]
+    finally:
+        impl.close()
+
+
+def test_a_model_divergence_pauses_the_pilot_until_resumed(robot: Robot) -> None:
+    """The robot stands up with no skill (a model divergence): the pilot stops until the operator resumes,
+    then goes on from the state the monitor adopted."""
+    impl = Implementations(robot.sim, robot.system, hold=[("spot", "init_power")])
+    try:
+        reply = ask_goal(robot.observer, goal("run spot:go_to_waypoint", inputs=WALK, mode="drive"))
+        robot.statuses.wait(lambda s: s.reason == "the outcome of spot:init_power")
+        node = robot.sim.nodes["spot"]
+        with node.lock:
+            node.manager.resources["posture"] = "Standing"
+        impl.release("spot", "init_power")  # its status shows the posture the model cannot explain
+        paused = robot.statuses.wait(lambda s: s.state == "paused" and "divergence" in s.reason, what="diverged")
+        assert paused.reason.startswith(f"model divergence at step {paused.state_seq} (spot:"), paused.reason
+        assert paused.reason.endswith("; resume to go on from the state the monitor adopted")
+        time.sleep(0.3)
+        assert robot.actuator.sent == ["spot:init_power.start"]
+        assert ask_goal(robot.observer, PilotGoalRequest(system="spot_arm", op="resume")).accepted
+        robot.statuses.state("reached", reply.goal_id)
+        assert robot.actuator.sent == ["spot:init_power.start", "spot:go_to_waypoint.start"]  # standing already
+    finally:
+        impl.close()
+
+
+def test_a_manager_that_does_not_react_ends_the_goal(client_factory, spot_arm) -> None:
+    robot = Robot(client_factory, *spot_arm, response_timeout=1.0)
+    try:
+        undeclare(*robot.sim._subscribers)  # the managers no longer hear requests; the bridge still hears them
+        reply = ask_goal(robot.observer, goal("run spot:go_to_waypoint", inputs=WALK, mode="drive"))
+        failed = robot.statuses.state("failed", reply.goal_id)
+        assert failed.reason == "no response from /spot/spot_skillset_manager within 1 s to spot:init_power.start"
+        assert (robot.actuator.sent, failed.commands) == (["spot:init_power.start"], 1)
+        assert robot.pilot.status.state == "failed"  # and the service lives: it takes the next goal
+        assert ask_goal(robot.observer, goal("reach spot:PowerOff")).accepted
+    finally:
+        robot.close()
