@@ -13,6 +13,7 @@ import zenoh
 from services.bridge_ros2 import start_bridge
 from services.common.zenoh_config import undeclare
 from services.predictor.service import start_predictor
+from skinet.ros.keys import KeyStyle
 from skinet.wire.messages import PilotGoalRequest
 from tests.services.pilot_robot import WALK, Gui, Implementations, Robot, ask_goal, goal
 
@@ -197,5 +198,77 @@ def test_a_manager_that_does_not_react_ends_the_goal(client_factory, spot_arm) -
         assert (robot.actuator.sent, failed.commands) == (["spot:init_power.start"], 1)
         assert robot.pilot.status.state == "failed"  # and the service lives: it takes the next goal
         assert ask_goal(robot.observer, goal("reach spot:PowerOff")).accepted
+    finally:
+        robot.close()
+
+
+def test_bad_requests_get_a_clear_reason_and_never_a_command(robot: Robot) -> None:
+    ask = lambda request: ask_goal(robot.observer, request)  # noqa: E731
+    bad_goal = ask(goal("run spot:go_to_waypont", inputs=WALK, mode="drive"))
+    assert (bad_goal.accepted, bad_goal.goal_id) == (False, 0)
+    assert bad_goal.reason == "<goal>:1:10: error: unknown skill 'go_to_waypont' of 'spot' (candidates: go_to_waypoint)"
+    mission = ask(PilotGoalRequest(system="spot_arm", mission='[[goals]]\nreach = "manipulator:RD"\n\n[[goals]]\n'
+                                                              'reach = "spot:Standng"\n', mission_name="m.toml"))
+    assert mission.reason.startswith("m.toml:5:10: error: "), mission.reason
+    assert ask(b"\x93garbage").reason.startswith("malformed goal request: ")
+    assert ask(None).reason == "empty goal request: send a PilotGoalRequest (msgpack)"
+    assert ask(goal("reach spot:Standing", system="other")).reason == \
+        "unknown system 'other': this pilot serves 'spot_arm'"
+    unsafe = ask(goal("reach spot:Busy and manipulator:Busy", mode="drive"))
+    assert unsafe.reason.startswith("goal 'reach spot:Busy and manipulator:Busy' has no plan from the live state: "
+                                    "none: "), unsafe.reason
+    assert ask(goal()).reason.startswith("no goals: ")
+    assert ask(PilotGoalRequest(system="spot_arm", op="pause")).reason == "no goal is being followed: nothing to pause"
+    assert robot.pilot.status.state == "idle"
+    # One goal at a time, unless the new one says replace.
+    first = ask(goal("reach spot:Standing"))
+    assert (first.accepted, first.goal_id) == (True, 1)
+    busy = ask(goal("reach manipulator:RD"))
+    assert (busy.accepted, busy.reason) == (False, "goal 1 of operator1 is being followed (guiding): cancel it, or "
+                                                   "send the new goal with replace")
+    second = ask(goal("reach manipulator:RD", replace=True))
+    assert (second.accepted, second.goal_id) == (True, 2)
+    assert robot.statuses.wait(lambda s: s.goal_id == 1 and s.state == "cancelled").reason == \
+        "replaced by goal 2 of operator1"
+    guiding = robot.statuses.wait(lambda s: s.goal_id == 2 and s.state == "guiding")
+    assert (guiding.next.skillset, guiding.next.transition, guiding.client) == ("manipulator", "arm_ready.start",
+                                                                              "operator1")
+    assert ask_goal(robot.observer, PilotGoalRequest(system="spot_arm", op="cancel"), client="operator2").accepted
+    cancelled = robot.statuses.wait(lambda s: s.goal_id == 2 and s.state == "cancelled")
+    assert cancelled.reason == "cancelled by operator2"
+    assert robot.actuator.sent == []
+
+
+def test_no_monitor_means_waiting_then_the_goal_goes_on(client_factory, spot_arm) -> None:
+    robot = Robot(client_factory, *spot_arm, monitor=False)
+    impl = Implementations(robot.sim, robot.system)
+    try:
+        robot.wait_pilot("waiting for monitor")
+        assert robot.pilot.status.reason == ("no monitor of spot_arm is running (no token on "
+                                             "skinet/spot_arm/alive/monitor/*)")
+        reply = ask_goal(robot.observer, goal("reach spot:Standing", mode="drive"))
+        assert (reply.accepted, reply.answer, reply.steps) == (True, None, [])  # nothing to plan from yet
+        time.sleep(0.3)
+        assert (robot.pilot.status.state, robot.actuator.sent) == ("waiting for monitor", [])
+        robot.start_monitor()
+        robot.statuses.state("reached", reply.goal_id)
+        assert robot.actuator.sent == ["spot:init_power.start", "spot:stand_up.start"]
+    finally:
+        impl.close()
+        robot.close()
+
+
+def test_a_manager_that_is_gone_pauses_the_pilot_with_no_command(client_factory, spot_arm) -> None:
+    """rmw_zenoh keys: the managers' liveliness tokens say when they leave."""
+    robot = Robot(client_factory, *spot_arm, style=KeyStyle(rmw_zenoh=True, domain=23))
+    try:
+        robot.sim.close()
+        reply = ask_goal(robot.observer, goal("reach spot:Standing", mode="drive"))
+        paused = robot.statuses.wait(lambda s: s.goal_id == reply.goal_id and s.state == "paused" and
+                                     "manager left" in s.reason, what="its manager left")
+        assert "spot is lost: its manager left (said 'bridge_ros2/" in paused.reason, paused.reason
+        time.sleep(0.5)
+        assert robot.actuator.sent == []
+        assert ask_goal(robot.observer, PilotGoalRequest(system="spot_arm", op="cancel")).accepted
     finally:
         robot.close()
