@@ -105,12 +105,14 @@ def goal(*goals: str, **fields: Any) -> PilotGoalRequest:
 
 class Implementations:
     """The robot's skill implementations: each execution seen running ends after ``delay`` seconds (a
-    random one in ``[0, delay]`` with ``rng``) in the next mode of ``script[(skillset, skill)]``, else in its
-    first success mode; ``hold`` lists skills left running until :meth:`release`."""
+    random one in ``[0, delay]`` with ``rng``) in the next mode of ``script[(skillset, skill)]``, else (with ``rng``,
+    with probability ``fail``) in a random failure mode, else in its first success mode; ``hold`` lists skills
+    left running until :meth:`release`."""
 
     def __init__(self, simulator: Simulator, system: System, script: dict[tuple[str, str], list[str]] | None = None,
-                 delay: float = 0.05, rng: random.Random | None = None, hold: Iterable[tuple[str, str]] = ()):
-        self.sim, self.system = simulator, system
+                 delay: float = 0.05, rng: random.Random | None = None, hold: Iterable[tuple[str, str]] = (),
+                 fail: float = 0.0):
+        self.sim, self.system, self.fail = simulator, system, fail
         self.script = {k: list(v) for k, v in (script or {}).items()}
         self.delay, self.rng = delay, rng
         self.hold = set(hold)
@@ -132,7 +134,13 @@ class Implementations:
                         continue
                     self._seen.add((c.name, k.name, id_))
                     queue = self.script.get((c.name, k.name))
-                    mode = queue.pop(0) if queue else next(m for m in k.modes if m.kind == "success").name
+                    failures = [m.name for m in k.modes if m.kind == "failure"]
+                    if queue:
+                        mode = queue.pop(0)
+                    elif self.rng is not None and failures and self.rng.random() < self.fail:
+                        mode = self.rng.choice(failures)
+                    else:
+                        mode = next(m for m in k.modes if m.kind == "success").name
                     kind = next(m.kind for m in k.modes if m.name == mode)
                     wait = self.rng.uniform(0, self.delay) if self.rng else self.delay
                     threading.Timer(wait, self._end, (c.name, k.name, kind, mode)).start()

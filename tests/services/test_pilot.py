@@ -4,6 +4,7 @@ sessions; the skills' outcomes come from :class:`~tests.services.pilot_robot.Imp
 
 from __future__ import annotations
 
+import random
 import time
 from collections.abc import Callable, Iterator
 
@@ -14,7 +15,9 @@ from services.bridge_ros2 import start_bridge
 from services.common.zenoh_config import undeclare
 from services.predictor.service import start_predictor
 from skinet.ros.keys import KeyStyle
-from skinet.wire.messages import PilotGoalRequest
+from skinet.wire import keys
+from skinet.wire.codec import decode
+from skinet.wire.messages import PilotGoalRequest, Verdicts
 from tests.services.pilot_robot import WALK, Gui, Implementations, Robot, ask_goal, goal
 
 
@@ -272,3 +275,43 @@ def test_a_manager_that_is_gone_pauses_the_pilot_with_no_command(client_factory,
         assert ask_goal(robot.observer, PilotGoalRequest(system="spot_arm", op="cancel")).accepted
     finally:
         robot.close()
+
+
+class Violations:
+    """Every property the monitor reports violated, with its step."""
+
+    def __init__(self, session: zenoh.Session):
+        self.seen: list[tuple[int, str]] = []
+        self._sub = session.declare_subscriber(keys.verdicts("spot_arm"), self._on_sample)
+
+    def _on_sample(self, sample: zenoh.Sample) -> None:
+        v = decode(sample.payload.to_bytes(), Verdicts)
+        self.seen += [(v.seq, p.name) for p in v.properties if not p.holds]
+
+
+RACE_GOALS = ["reach manipulator:RD and spot:Standing", "reach manipulator:HP and spot:Sitting and spot:PowerOff",
+              "run spot:go_to_waypoint", "reach spot:Sitting and manipulator:RD"]
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_outcomes_at_random_moments_around_commands_never_lead_to_a_violation(robot: Robot, seed: int) -> None:
+    """SPEC §8, *Races*: both components' skills end at random moments (0 to 30 ms after they start,
+    a quarter of them in a failure mode), so outcomes arrive before, during and after the pilot's
+    commands to the other component; 12 goals per seed, every one reached, no command denied, no
+    property ever violated."""
+    violations = Violations(robot.observer)
+    impl = Implementations(robot.sim, robot.system, delay=0.03, rng=random.Random(seed), fail=0.25)
+    try:
+        commands = 0
+        for n in range(12):
+            reply = ask_goal(robot.observer, goal(RACE_GOALS[n % 4], inputs=WALK, mode="drive", max_retries=100))
+            assert reply.accepted, reply.reason
+            done = robot.statuses.wait(lambda s: s.goal_id == reply.goal_id and s.state in ("reached", "failed"),
+                                       timeout=60)
+            assert (done.state, done.reason, done.denied) == ("reached", "", 0)
+            commands += done.commands
+        assert violations.seen == []
+        assert any(e.split(".")[1] == "failure" for e in impl.ended)  # failures did come
+        assert len(robot.actuator.sent) == commands  # every command counted was sent, and only those
+    finally:
+        impl.close()
