@@ -32,6 +32,7 @@ from skinet.system import System
 from skinet.wire import keys
 from skinet.wire.codec import decode, encode
 from skinet.wire.messages import PilotCommand, PilotGoalReply, PilotGoalRequest, PilotStatus
+from tests.event_watch import Messages
 
 WALK = {"go_to_waypoint": {"target": {"x": 12.0, "y": 3.5, "z": 0.0}}}
 
@@ -54,31 +55,25 @@ class Recording:
         self.inner.close()
 
 
-class Statuses:
+class Statuses(Messages[PilotStatus]):
     """Every PilotStatus published, in arrival order, with a blocking wait."""
 
     def __init__(self, session: zenoh.Session, system: str = "spot_arm"):
-        self.items: list[PilotStatus] = []
-        self._cond = threading.Condition()
-        self._sub = session.declare_subscriber(keys.pilot_status(system), self._on_sample)
+        super().__init__(session, keys.pilot_status(system), PilotStatus)
 
-    def _on_sample(self, sample: zenoh.Sample) -> None:
-        with self._cond:
-            self.items.append(decode(sample.payload.to_bytes(), PilotStatus))
-            self._cond.notify_all()
-
-    def wait(self, predicate: Callable[[PilotStatus], bool], timeout: float = 20.0, what: str = "") -> PilotStatus:
+    def first(self, predicate: Callable[[PilotStatus], bool], timeout: float = 20.0, what: str = "") -> PilotStatus:
         """The first status (from now on or already received) for which ``predicate`` holds."""
-        with self._cond:
-            if not self._cond.wait_for(lambda: any(predicate(s) for s in self.items), timeout):
-                last = self.items[-1] if self.items else None
-                pytest.fail(f"no pilot status {what} within {timeout} s; last: "
-                            f"{None if last is None else (last.state, last.reason, last.next)}")
-            return next(s for s in self.items if predicate(s))
+        try:
+            items = super().wait(lambda items: any(predicate(s) for s in items), timeout)
+        except AssertionError:
+            last = self.items[-1] if self.items else None
+            pytest.fail(f"no pilot status {what} within {timeout} s; last: "
+                        f"{None if last is None else (last.state, last.reason, last.next)}")
+        return next(s for s in items if predicate(s))
 
     def state(self, state: str, goal: int | None = None, timeout: float = 20.0) -> PilotStatus:
-        return self.wait(lambda s: s.state == state and (goal is None or s.goal_id == goal), timeout,
-                         f"'{state}'")
+        return self.first(lambda s: s.state == state and (goal is None or s.goal_id == goal), timeout,
+                          f"'{state}'")
 
     def states(self, goal: int) -> list[str]:
         """The states of ``goal``'s statuses, repeats dropped."""

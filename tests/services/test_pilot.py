@@ -16,8 +16,8 @@ from services.common.zenoh_config import undeclare
 from services.predictor.service import start_predictor
 from skinet.ros.keys import KeyStyle
 from skinet.wire import keys
-from skinet.wire.codec import decode
 from skinet.wire.messages import PilotGoalRequest, Verdicts
+from tests.event_watch import Messages
 from tests.services.pilot_robot import WALK, Gui, Implementations, Robot, ask_goal, goal
 
 
@@ -58,15 +58,15 @@ def test_guide_sends_nothing_and_publishes_the_exact_next_command(robot: Robot) 
         assert (reply.accepted, reply.answer, reply.moves) == (True, "cyclic", 6)
         assert [(s.number, s.skillset, s.action, s.expect) for s in reply.steps[:2]] == [
             ("1", "spot", "init_power.start", None), ("2", "spot", "wait", "init_power.success.powered_on")]
-        first = robot.statuses.wait(lambda s: s.state == "guiding" and s.next is not None)
+        first = robot.statuses.first(lambda s: s.state == "guiding" and s.next is not None)
         assert (first.next.skillset, first.next.transition, first.next.inputs, first.mode) == (
             "spot", "init_power.start", {}, "guide")
         assert (first.answer, first.moves_left, first.goals) == ("cyclic", 6, ["run spot:go_to_waypoint"])
         gui.start("spot", "init_power")  # the operator follows the guide
-        after = robot.statuses.wait(lambda s: s.next is not None and s.next.transition == "stand_up.start")
+        after = robot.statuses.first(lambda s: s.next is not None and s.next.transition == "stand_up.start")
         assert (after.state, after.moves_left) == ("guiding", 4)
         gui.start("spot", "stand_up")
-        walk = robot.statuses.wait(lambda s: s.next is not None and s.next.transition == "go_to_waypoint.start")
+        walk = robot.statuses.first(lambda s: s.next is not None and s.next.transition == "go_to_waypoint.start")
         assert walk.next.inputs == WALK["go_to_waypoint"]
         gui.start("spot", "go_to_waypoint", WALK["go_to_waypoint"])
         done = robot.statuses.state("reached", reply.goal_id)
@@ -83,9 +83,9 @@ def test_the_operator_acts_and_the_pilot_plans_again_from_what_they_caused(robot
     gui = Gui(robot.observer, robot)
     try:
         reply = ask_goal(robot.observer, goal("run spot:go_to_waypoint", inputs=WALK, mode="drive"))
-        robot.statuses.wait(lambda s: s.reason == "the outcome of spot:stand_up")  # the pilot saw it start
+        robot.statuses.first(lambda s: s.reason == "the outcome of spot:stand_up")  # the pilot saw it start
         gui.interrupt("spot", "stand_up")
-        robot.statuses.wait(lambda s: s.commands == 3, what="a third command")
+        robot.statuses.first(lambda s: s.commands == 3, what="a third command")
         impl.release("spot", "stand_up")
         done = robot.statuses.state("reached", reply.goal_id)
         assert robot.actuator.sent == ["spot:init_power.start", "spot:stand_up.start", "spot:stand_up.start",
@@ -133,9 +133,9 @@ def test_a_skillset_not_live_pauses_the_pilot_until_it_is_live_again(quick: Robo
     impl = Implementations(robot.sim, robot.system, hold=[("spot", "init_power")])
     try:
         reply = ask_goal(robot.observer, goal("run spot:go_to_waypoint", inputs=WALK, mode="drive"))
-        robot.statuses.wait(lambda s: s.reason == "the outcome of spot:init_power")
+        robot.statuses.first(lambda s: s.reason == "the outcome of spot:init_power")
         robot.bridge.close()  # the robot goes silent
-        paused = robot.statuses.wait(lambda s: s.state == "paused" and " is lost: " in s.reason, what="lost")
+        paused = robot.statuses.first(lambda s: s.state == "paused" and " is lost: " in s.reason, what="lost")
         assert paused.reason.startswith(("spot is lost: the liveliness token of 'bridge_ros2/",
                                          "manipulator is lost: the liveliness token of 'bridge_ros2/")), paused.reason
         impl.release("spot", "init_power")  # spot powers on meanwhile: nobody sees it
@@ -153,10 +153,10 @@ def test_a_pending_prediction_pauses_the_pilot_until_it_comes(robot: Robot, clie
     impl = Implementations(robot.sim, robot.system, hold=[("spot", "init_power")])
     try:
         reply = ask_goal(robot.observer, goal("run spot:go_to_waypoint", inputs=WALK, mode="drive"))
-        robot.statuses.wait(lambda s: s.reason == "the outcome of spot:init_power")
+        robot.statuses.first(lambda s: s.reason == "the outcome of spot:init_power")
         robot.predictor.close()
         impl.release("spot", "init_power")
-        paused = robot.statuses.wait(lambda s: s.state == "paused" and s.commands == 1, what="paused")
+        paused = robot.statuses.first(lambda s: s.state == "paused" and s.commands == 1, what="paused")
         assert paused.reason == f"the prediction of step {paused.state_seq} is pending"
         assert (paused.next.skillset, paused.next.transition) == ("spot", "stand_up.start")  # what it would send
         time.sleep(0.3)
@@ -174,12 +174,12 @@ def test_a_model_divergence_pauses_the_pilot_until_resumed(robot: Robot) -> None
     impl = Implementations(robot.sim, robot.system, hold=[("spot", "init_power")])
     try:
         reply = ask_goal(robot.observer, goal("run spot:go_to_waypoint", inputs=WALK, mode="drive"))
-        robot.statuses.wait(lambda s: s.reason == "the outcome of spot:init_power")
+        robot.statuses.first(lambda s: s.reason == "the outcome of spot:init_power")
         node = robot.sim.nodes["spot"]
         with node.lock:
             node.manager.resources["posture"] = "Standing"
         impl.release("spot", "init_power")  # its status shows the posture the model cannot explain
-        paused = robot.statuses.wait(lambda s: s.state == "paused" and "divergence" in s.reason, what="diverged")
+        paused = robot.statuses.first(lambda s: s.state == "paused" and "divergence" in s.reason, what="diverged")
         assert paused.reason.startswith(f"model divergence at step {paused.state_seq} (spot:"), paused.reason
         assert paused.reason.endswith("; resume to go on from the state the monitor adopted")
         time.sleep(0.3)
@@ -231,13 +231,13 @@ def test_bad_requests_get_a_clear_reason_and_never_a_command(robot: Robot) -> No
                                                    "send the new goal with replace")
     second = ask(goal("reach manipulator:RD", replace=True))
     assert (second.accepted, second.goal_id) == (True, 2)
-    assert robot.statuses.wait(lambda s: s.goal_id == 1 and s.state == "cancelled").reason == \
+    assert robot.statuses.first(lambda s: s.goal_id == 1 and s.state == "cancelled").reason == \
         "replaced by goal 2 of operator1"
-    guiding = robot.statuses.wait(lambda s: s.goal_id == 2 and s.state == "guiding")
+    guiding = robot.statuses.first(lambda s: s.goal_id == 2 and s.state == "guiding")
     assert (guiding.next.skillset, guiding.next.transition, guiding.client) == ("manipulator", "arm_ready.start",
                                                                               "operator1")
     assert ask_goal(robot.observer, PilotGoalRequest(system="spot_arm", op="cancel"), client="operator2").accepted
-    cancelled = robot.statuses.wait(lambda s: s.goal_id == 2 and s.state == "cancelled")
+    cancelled = robot.statuses.first(lambda s: s.goal_id == 2 and s.state == "cancelled")
     assert cancelled.reason == "cancelled by operator2"
     assert robot.actuator.sent == []
 
@@ -267,7 +267,7 @@ def test_a_manager_that_is_gone_pauses_the_pilot_with_no_command(client_factory,
     try:
         robot.sim.close()
         reply = ask_goal(robot.observer, goal("reach spot:Standing", mode="drive"))
-        paused = robot.statuses.wait(lambda s: s.goal_id == reply.goal_id and s.state == "paused" and
+        paused = robot.statuses.first(lambda s: s.goal_id == reply.goal_id and s.state == "paused" and
                                      "manager left" in s.reason, what="its manager left")
         assert "spot is lost: its manager left (said 'bridge_ros2/" in paused.reason, paused.reason
         time.sleep(0.5)
@@ -275,18 +275,6 @@ def test_a_manager_that_is_gone_pauses_the_pilot_with_no_command(client_factory,
         assert ask_goal(robot.observer, PilotGoalRequest(system="spot_arm", op="cancel")).accepted
     finally:
         robot.close()
-
-
-class Violations:
-    """Every property the monitor reports violated, with its step."""
-
-    def __init__(self, session: zenoh.Session):
-        self.seen: list[tuple[int, str]] = []
-        self._sub = session.declare_subscriber(keys.verdicts("spot_arm"), self._on_sample)
-
-    def _on_sample(self, sample: zenoh.Sample) -> None:
-        v = decode(sample.payload.to_bytes(), Verdicts)
-        self.seen += [(v.seq, p.name) for p in v.properties if not p.holds]
 
 
 RACE_GOALS = ["reach manipulator:RD and spot:Standing", "reach manipulator:HP and spot:Sitting and spot:PowerOff",
@@ -299,18 +287,18 @@ def test_outcomes_at_random_moments_around_commands_never_lead_to_a_violation(ro
     a quarter of them in a failure mode), so outcomes arrive before, during and after the pilot's
     commands to the other component; 12 goals per seed, every one reached, no command denied, no
     property ever violated."""
-    violations = Violations(robot.observer)
+    verdicts = Messages(robot.observer, keys.verdicts("spot_arm"), Verdicts)
     impl = Implementations(robot.sim, robot.system, delay=0.03, rng=random.Random(seed), fail=0.25)
     try:
         commands = 0
         for n in range(12):
             reply = ask_goal(robot.observer, goal(RACE_GOALS[n % 4], inputs=WALK, mode="drive", max_retries=100))
             assert reply.accepted, reply.reason
-            done = robot.statuses.wait(lambda s: s.goal_id == reply.goal_id and s.state in ("reached", "failed"),
+            done = robot.statuses.first(lambda s: s.goal_id == reply.goal_id and s.state in ("reached", "failed"),
                                        timeout=60)
             assert (done.state, done.reason, done.denied) == ("reached", "", 0)
             commands += done.commands
-        assert violations.seen == []
+        assert [(v.seq, p.name) for v in verdicts.items for p in v.properties if not p.holds] == []
         assert any(e.split(".")[1] == "failure" for e in impl.ended)  # failures did come
         assert len(robot.actuator.sent) == commands  # every command counted was sent, and only those
     finally:
