@@ -110,12 +110,12 @@ class ManagerActuator:
         store = self._stores[skillset]
         if kind == "start":
             with self._lock:
+                id_ = f"{self.instance}-{self._count + 1}"
+                try:
+                    request = skill_request(store, c.skillset, skill, id_, command.inputs)
+                except (ValueError, KeyError, TypeError) as exc:
+                    raise ActError(f"cannot encode {skillset}:{command.transition}: {exc}") from None
                 self._count += 1
-                id_ = f"{self.instance}-{self._count}"
-            try:
-                request = skill_request(store, c.skillset, skill, id_, command.inputs)
-            except (ValueError, KeyError, TypeError) as exc:
-                raise ActError(f"cannot encode {skillset}:{command.transition}: {exc}") from None
             key = self._requests.put(skillset, *request)
             return f"{command.transition} (id '{id_}'{_inputs(command.inputs)}) on {key}"
         if kind == "interrupt":

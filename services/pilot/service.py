@@ -48,7 +48,8 @@ from skinet.wire import keys
 from skinet.wire.codec import DecodeError, decode, encode
 from skinet.wire.convert import marking_of, plan_steps
 from skinet.wire.messages import (
-    CheckReply, CheckRequest, LiveState, PilotCommand, PilotGoalReply, PilotGoalRequest, PilotStatus, UnsafeReport,
+    CheckReply, CheckRequest, LiveState, PilotCommand, PilotGoalReply, PilotGoalRequest, PilotStatus, PlanStep,
+    UnsafeReport,
 )
 
 log = logging.getLogger("skinet.pilot")
@@ -123,6 +124,7 @@ class Pilot:
         self._asked: tuple[int, int, UnsafeReport, float] | None = None  # goal, step, report, until: a refused check
         self._refusal = ""  # why that check did not allow
         self._seq = 0
+        self._steps: tuple[Plan | None, list[PlanStep]] = (None, [])  # a plan's steps as messages, made once
         self._status = PilotStatus(system=self.name, pilot=self.instance, seq=0, stamp=time.time(),
                                    state="waiting for monitor", reason=self._no_monitor())
         self._payload = encode(self._status)
@@ -516,7 +518,9 @@ class Pilot:
             fields.update(goal_id=g.id, client=g.client, mode=g.mode, goals=[x.text for x in g.goals], index=g.index,
                           retries=dict(g.retries), commands=g.commands, denied=g.denied)
             if plan is not None:
-                fields.update(answer=plan.answer, steps=plan_steps(plan.steps),
+                if self._steps[0] is not plan:
+                    self._steps = (plan, plan_steps(plan.steps))
+                fields.update(answer=plan.answer, steps=self._steps[1],
                               moves_left=plan.rank(marking) if marking is not None else plan.moves)
         status = PilotStatus(system=self.name, pilot=self.instance, seq=self._status.seq, stamp=self._status.stamp,
                              **fields)

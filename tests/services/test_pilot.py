@@ -13,11 +13,13 @@ import zenoh
 
 from services.bridge_ros2 import start_bridge
 from services.common.zenoh_config import undeclare
+from services.pilot import ActError
 from services.predictor.service import start_predictor
 from skinet.ros.keys import KeyStyle
 from skinet.wire import keys
-from skinet.wire.messages import PilotGoalRequest, Verdicts
+from skinet.wire.messages import PilotCommand, PilotGoalRequest, Verdicts
 from tests.event_watch import Messages
+from tests.services.test_monitor import wait_until
 from tests.services.pilot_robot import WALK, Gui, Implementations, Robot, ask_goal, goal
 
 
@@ -303,3 +305,47 @@ def test_outcomes_at_random_moments_around_commands_never_lead_to_a_violation(ro
         assert len(robot.actuator.sent) == commands  # every command counted was sent, and only those
     finally:
         impl.close()
+
+
+def test_switching_to_drive_and_pausing_by_the_operator(robot: Robot) -> None:
+    impl = Implementations(robot.sim, robot.system)
+    try:
+        reply = ask_goal(robot.observer, goal("reach spot:Standing"))
+        robot.statuses.first(lambda s: s.state == "guiding" and s.next is not None)
+        pause = ask_goal(robot.observer, PilotGoalRequest(system="spot_arm", op="pause"), client="operator2")
+        assert (pause.accepted, pause.goal_id) == (True, reply.goal_id)
+        assert robot.statuses.first(lambda s: s.state == "paused").reason == "paused by operator2"
+        assert ask_goal(robot.observer, PilotGoalRequest(system="spot_arm", op="mode", mode="drive")).accepted
+        time.sleep(0.3)
+        assert (robot.pilot.status.state, robot.pilot.status.mode, robot.actuator.sent) == ("paused", "drive", [])
+        assert ask_goal(robot.observer, PilotGoalRequest(system="spot_arm", op="resume")).accepted
+        robot.statuses.state("reached", reply.goal_id)
+        assert robot.actuator.sent == ["spot:init_power.start", "spot:stand_up.start"]
+    finally:
+        impl.close()
+
+
+def test_the_actuator_interrupts_with_the_running_id_its_manager_shows(robot: Robot) -> None:
+    """The running id comes from the manager's own status, whoever started the skill."""
+    gui = Gui(robot.observer, robot)
+    actuator = robot.actuator.inner
+    try:
+        gui.start("spot", "init_power")
+        wait_until(lambda: robot.sim.skill_status("spot", "init_power") == (True, "gui-1"), 5, "init_power runs")
+        interrupt = PilotCommand(skillset="spot", transition="init_power.interrupt")
+        sent = actuator.send(interrupt)
+        assert sent == "init_power.interrupt (running id 'gui-1') on spot/spot_skillset_manager/spot_skillset/skill/" \
+                       "init_power/interrupt"
+        wait_until(lambda: not robot.sim.skill_status("spot", "init_power")[0], 5, "init_power interrupted")
+        with pytest.raises(ActError, match=r"^spot:init_power is not running according to /spot/spot_skillset_"
+                                           r"manager's last status$"):
+            wait_until(lambda: actuator._ids["spot"]["init_power"].state == 0, 5, "the status seen")
+            actuator.send(interrupt)
+        with pytest.raises(ActError, match=r"^cannot encode spot:go_to_waypoint.start: spot:go_to_waypoint has no "
+                                           r"input 'goal' \(inputs: target\)$"):
+            actuator.send(PilotCommand(skillset="spot", transition="go_to_waypoint.start", inputs={"goal": 1.0}))
+        assert actuator.send(PilotCommand(skillset="spot", transition="init_power.start")) == \
+            "init_power.start (id 'p1-1') on spot/spot_skillset_manager/spot_skillset/skill/init_power/request"
+        wait_until(lambda: robot.sim.skill_status("spot", "init_power") == (True, "p1-1"), 5, "started by the pilot")
+    finally:
+        gui.close()
