@@ -369,22 +369,27 @@ class Pilot:
         """Publish what the pilot does now; the command to check and send, if one is due (lock held)."""
         g, st = self._goal, self._state
         if g is not None and g.end:
+            f = self._inflight
+            if f is not None and time.monotonic() >= f.deadline:  # a goal that ended: its command is forgotten
+                log.warning("no effect of %s:%s seen from %s", f.command.skillset, f.command.transition, f.manager)
+                self._inflight = None
             return self._show(g.end, g.reason)
-        if not self._monitors or st is None:
-            return self._show("waiting for monitor", self._no_monitor() if not self._monitors else
-                              f"no live state from the monitor of {self.name} yet")
+        waiting = self._no_monitor() if not self._monitors else \
+            f"no live state from the monitor of {self.name} yet" if st is None else ""
+        why = waiting or ("" if g is None or st is None else self._paused(g, st))
+        flight = self._inflight
+        if why and flight is not None:  # its effect cannot be seen now: the manager's time starts again after
+            flight.deadline = time.monotonic() + self.response_timeout
+        if waiting or st is None:
+            return self._show("waiting for monitor", waiting)
         if g is None:
             return self._show("idle")
-        flight = self._inflight
         if flight is not None and time.monotonic() >= flight.deadline:
             self._inflight = None
             self._end(g, "failed", f"no response from {flight.manager} within {self.response_timeout:g} s to "
                                    f"{flight.command.skillset}:{flight.command.transition}")
             return self._show(g.end, g.reason)
-        why = self._paused(g, st)
         if why:
-            if flight is not None:  # its effect cannot be seen now: the manager's time starts again after
-                flight.deadline = time.monotonic() + self.response_timeout
             return self._show("paused", why)
         if flight is not None:
             return self._show("waiting for outcome", f"the effect of {flight.command.skillset}:"
