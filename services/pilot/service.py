@@ -57,7 +57,7 @@ TICK = 0.1  # seconds between the worker's looks at timeouts
 CHECK_WAIT = 1.0  # seconds the check may wait for a synced state and a fresh prediction
 MAX_REQUEST = 256 << 10  # bytes of a goal request (a mission file's text)
 MAX_STATE = 1 << 20  # bytes of a LiveState or UnsafeReport read
-RETRY_REFUSED = 1.0  # seconds before a check that did not allow is asked again at the same step
+RETRY_REFUSED = 1.0  # seconds before a check that gave no decision is asked again at the same step
 
 
 @dataclass
@@ -476,7 +476,8 @@ class Pilot:
                 if reply.decision == "deny":
                     g.denied += 1
                     log.error("DEFECT: the check denied %s at step %d, which the plan gave: %s", what, due.seq, why)
-                self._refuse(g, due, f"the check answered {reply.decision} for {what} at step {due.seq}: {why}")
+                self._refuse(g, due, f"the check answered {reply.decision} for {what} at step {due.seq}: {why}",
+                             again=False)
                 return
             manager = self.system.component(c.skillset).manager or c.skillset
             self._inflight = _InFlight(c, due.seq, time.monotonic() + self.response_timeout, manager)
@@ -494,8 +495,10 @@ class Pilot:
                     self._end(g, "failed", f"cannot send {c.skillset}:{c.transition}: {exc.reason}")
                     self._decide()
 
-    def _refuse(self, g: _Goal, due: _Due, reason: str) -> None:
-        self._asked, self._refusal = (g.id, due.seq, due.unsafe, time.monotonic() + RETRY_REFUSED), reason
+    def _refuse(self, g: _Goal, due: _Due, reason: str, again: bool = True) -> None:
+        """Hold ``due`` back: asked again at the next step or report, or (``again``) after RETRY_REFUSED s."""
+        until = time.monotonic() + RETRY_REFUSED if again else float("inf")
+        self._asked, self._refusal = (g.id, due.seq, due.unsafe, until), reason
         self._decide()
 
     def _next_goal(self, g: _Goal) -> None:

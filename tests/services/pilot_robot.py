@@ -153,7 +153,8 @@ class Robot:
     """Simulator, bridge, monitor, predictor and pilot of the paper's system, each on its own client session."""
 
     def __init__(self, sessions: Callable[[], zenoh.Session], system: System, typemap: dict[str, str],
-                 monitor: bool = True, style: KeyStyle = KeyStyle(), lost_after: float = 2.0, **pilot: Any):
+                 monitor: bool = True, style: KeyStyle = KeyStyle(), lost_after: float = 2.0,
+                 pilot_system: System | None = None, **pilot: Any):
         self.system, self.typemap, self.sessions, self.lost_after = system, typemap, sessions, lost_after
         self.sim = Simulator(sessions(), system, typemap, style=style)
         self.bridge = start_bridge(sessions(), system, typemap, style=style)
@@ -163,7 +164,7 @@ class Robot:
             self.start_monitor()
         pilot_session = sessions()
         self.actuator = Recording(ManagerActuator(pilot_session, system, typemap, style, instance="p1"))
-        self.pilot: Pilot = start_pilot(pilot_session, system, instance="p1",
+        self.pilot: Pilot = start_pilot(pilot_session, pilot_system or system, instance="p1",
                                         actuator=pilot.pop("actuator", self.actuator), typemap=typemap, **pilot)
         self.observer = sessions()
         self.statuses = Statuses(self.observer)

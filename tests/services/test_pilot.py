@@ -4,6 +4,7 @@ sessions; the skills' outcomes come from :class:`~tests.services.pilot_robot.Imp
 
 from __future__ import annotations
 
+import dataclasses
 import random
 import time
 from collections.abc import Callable, Iterator
@@ -349,3 +350,29 @@ def test_the_actuator_interrupts_with_the_running_id_its_manager_shows(robot: Ro
         wait_until(lambda: robot.sim.skill_status("spot", "init_power") == (True, "p1-1"), 5, "started by the pilot")
     finally:
         gui.close()
+
+
+def test_a_command_the_check_denies_is_a_defect_never_sent(client_factory, spot_arm) -> None:
+    """A pilot whose model lacks safety_guard (the monitor's has it) plans to walk with the arm ready:
+    the monitor's strict check denies the walk, and the pilot counts the defect and sends nothing."""
+    system, typemap = spot_arm
+    weaker = dataclasses.replace(system, properties=tuple(p for p in system.properties if p.name != "safety_guard"))
+    robot = Robot(client_factory, system, typemap, pilot_system=weaker)
+    impl = Implementations(robot.sim, robot.system)
+    gui = Gui(robot.observer, robot)
+    try:
+        gui.start("manipulator", "arm_ready")
+        robot.statuses.first(lambda s: s.state == "idle" and s.state_seq == 2, what="the arm ready")
+        reply = ask_goal(robot.observer, goal("run spot:go_to_waypoint", inputs=WALK, mode="drive"))
+        paused = robot.statuses.first(lambda s: s.denied == 1, what="a denied command")
+        assert (paused.state, paused.next.transition) == ("paused", "go_to_waypoint.start")
+        assert paused.reason.startswith(f"the check answered deny for spot:go_to_waypoint.start at step "
+                                        f"{paused.state_seq}: safety_guard (explicit): "), paused.reason
+        time.sleep(0.5)
+        assert robot.actuator.sent == ["spot:init_power.start", "spot:stand_up.start"]
+        assert ask_goal(robot.observer, PilotGoalRequest(system="spot_arm", op="cancel")).accepted
+        assert robot.statuses.state("cancelled", reply.goal_id).denied == 1  # asked once at that step
+    finally:
+        gui.close()
+        impl.close()
+        robot.close()
