@@ -329,7 +329,7 @@ def test_switching_to_drive_and_pausing_by_the_operator(robot: Robot) -> None:
 def test_the_actuator_interrupts_with_the_running_id_its_manager_shows(robot: Robot) -> None:
     """The running id comes from the manager's own status, whoever started the skill."""
     gui = Gui(robot.observer, robot)
-    actuator = robot.actuator.inner
+    actuator = robot.actuator.inner.actuators["manager"]
     try:
         gui.start("spot", "init_power")
         wait_until(lambda: robot.sim.skill_status("spot", "init_power") == (True, "gui-1"), 5, "init_power runs")
