@@ -227,6 +227,8 @@ class Pilot:
                 self._state = self._unsafe = None  # a new monitor counts its steps from 0: ask it
                 if self._inflight is not None:
                     self._inflight.seq = -1
+                if self._goal is not None:
+                    self._goal.since = -1
             else:
                 self._monitors.discard(key)
                 if not self._monitors:
@@ -258,7 +260,10 @@ class Pilot:
             except Exception:  # a bug must not stop the pilot; the client gets a reason
                 log.exception("error while answering a goal request")
                 reply = self._reject("internal error in the pilot (see its log)")
-            query.reply(str(query.key_expr), encode(reply))
+            try:
+                query.reply(str(query.key_expr), encode(reply))
+            except zenoh.ZError:  # a key no reply can take (a wildcard): the reason as an error reply
+                query.reply_err(reply.reason or "reply refused by Zenoh")
         self._wake.set()
 
     def _reject(self, reason: str) -> PilotGoalReply:

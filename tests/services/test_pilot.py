@@ -218,6 +218,8 @@ def test_bad_requests_get_a_clear_reason_and_never_a_command(robot: Robot) -> No
     assert mission.reason.startswith("m.toml:5:10: error: "), mission.reason
     assert ask(b"\x93garbage").reason.startswith("malformed goal request: ")
     assert ask(None).reason == "empty goal request: send a PilotGoalRequest (msgpack)"
+    assert ask_goal(robot.observer, goal("reach spot:Standing"), client="*").reason == (
+        "key 'skinet/spot_arm/pilot/goal/*': the client chunk must be a name (skinet/spot_arm/pilot/goal/<client>)")
     assert ask(goal("reach spot:Standing", system="other")).reason == \
         "unknown system 'other': this pilot serves 'spot_arm'"
     unsafe = ask(goal("reach spot:Busy and manipulator:Busy", mode="drive"))
