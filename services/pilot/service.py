@@ -126,6 +126,7 @@ class Pilot:
         self._asked: tuple[int, int, UnsafeReport, float] | None = None  # goal, step, report, until: a refused check
         self._refusal = ""  # why that check did not allow
         self._seq = 0
+        self._marked: tuple[LiveState | None, dict[str, int] | None] = (None, None)  # a LiveState's marking
         self._pending = (-1, 0.0)  # the step whose prediction is awaited, since when (monotonic)
         self._steps: tuple[Plan | None, list[PlanStep]] = (None, [])  # a plan's steps as messages, made once
         self._status = PilotStatus(system=self.name, pilot=self.instance, seq=0, stamp=time.time(),
@@ -402,10 +403,9 @@ class Pilot:
         if flight is not None:
             return self._show("waiting for outcome", f"the effect of {flight.command.skillset}:"
                                                      f"{flight.command.transition}", next_=flight.command)
-        try:
-            marking = marking_of(self.system, st.skillsets)
-        except SkinetError as exc:
-            return self._show("paused", f"the live state of step {st.seq} is not understood: {exc}")
+        marking = self._marking()
+        if marking is None:
+            return self._show("paused", f"the live state of step {st.seq} names what {self.name} does not have")
         while True:
             if g.plan is None or g.plan.action(marking) is None:
                 self._show("planning")
@@ -422,21 +422,21 @@ class Pilot:
                 return self._show(g.end, g.reason)
         if not isinstance(action, Command):
             running = ", ".join(f"{n}:{k}" for n, ss in st.skillsets.items() for k in ss.running)
-            return self._show("waiting for outcome", f"the outcome of {running}", plan=g.plan, marking=marking)
+            return self._show("waiting for outcome", f"the outcome of {running}")
         command = PilotCommand(skillset=action.skillset, transition=action.transition, inputs=dict(action.inputs))
         if g.mode == "guide":
-            return self._show("guiding", next_=command, plan=g.plan, marking=marking)
+            return self._show("guiding", next_=command)
         u = self._unsafe
         if u is None or u.seq != st.seq or u.prediction_stale:
             if self._pending[0] != st.seq:
                 self._pending = (st.seq, time.monotonic())
             if time.monotonic() - self._pending[1] < PENDING_GRACE:  # the usual moment after every step
-                return self._show("driving", f"waiting for the prediction of step {st.seq}", command, g.plan, marking)
-            return self._show("paused", f"the prediction of step {st.seq} is pending", command, g.plan, marking)
+                return self._show("driving", f"waiting for the prediction of step {st.seq}", command)
+            return self._show("paused", f"the prediction of step {st.seq} is pending", command)
         a = self._asked
         if a is not None and a[:3] == (g.id, st.seq, u) and time.monotonic() < a[3]:
-            return self._show("paused", self._refusal, command, g.plan, marking)
-        self._show("driving", next_=command, plan=g.plan, marking=marking)
+            return self._show("paused", self._refusal, command)
+        self._show("driving", next_=command)
         return _Due(command, st.seq, g.id, u)
 
     def _paused(self, g: _Goal, st: LiveState) -> str:
@@ -494,8 +494,7 @@ class Pilot:
             manager = self.system.component(c.skillset).manager or c.skillset
             self._inflight = _InFlight(c, due.seq, time.monotonic() + self.response_timeout, manager)
             g.commands += 1
-            self._show("waiting for outcome", f"the effect of {what}", c, g.plan,
-                       marking_of(self.system, st.skillsets))
+            self._show("waiting for outcome", f"the effect of {what}", c)
         try:
             sent = self.actuator.send(c)
             log.info("goal %d: sent %s:%s", due.goal, c.skillset, sent)
@@ -529,19 +528,20 @@ class Pilot:
     def _no_monitor(self) -> str:
         return f"no monitor of {self.name} is running (no token on {keys.alive(self.name, 'monitor', '*')})"
 
-    def _show(self, state: str, reason: str = "", next_: PilotCommand | None = None, plan: Plan | None = None,
-              marking: Mapping[str, int] | None = None) -> None:
+    def _show(self, state: str, reason: str = "", next_: PilotCommand | None = None) -> None:
         """Publish the status if it changed (lock held); returns None for :meth:`_decide`."""
         g, st = self._goal, self._state
         fields: dict[str, Any] = dict(state=state, reason=reason, next=next_, state_seq=st.seq if st else 0)
         if g is not None:
             fields.update(goal_id=g.id, client=g.client, mode=g.mode, goals=[x.text for x in g.goals], index=g.index,
                           retries=dict(g.retries), commands=g.commands, denied=g.denied)
+            plan = g.plan
             if plan is not None:
                 if self._steps[0] is not plan:
                     self._steps = (plan, plan_steps(plan.steps))
+                marking = self._marking()
                 fields.update(answer=plan.answer, steps=self._steps[1],
-                              moves_left=plan.rank(marking) if marking is not None else plan.moves)
+                              moves_left=None if marking is None or g.end else plan.rank(marking))
         status = PilotStatus(system=self.name, pilot=self.instance, seq=self._status.seq, stamp=self._status.stamp,
                              **fields)
         if status == self._status:
@@ -553,6 +553,18 @@ class Pilot:
             self._pub.put(self._payload)
         log.debug("status %s%s", state, f": {reason}" if reason else "")
         return None
+
+    def _marking(self) -> dict[str, int] | None:
+        """The live marking (None when unknown or not understood), computed once per LiveState."""
+        st = self._state
+        if st is None:
+            return None
+        if self._marked[0] is not st:
+            try:
+                self._marked = (st, marking_of(self.system, st.skillsets))
+            except SkinetError:
+                self._marked = (st, None)
+        return self._marked[1]
 
 
 def start_pilot(session: zenoh.Session, system: System, instance: str | None = None,
