@@ -12,7 +12,9 @@ from services.embedded import stop_on_signals
 from services.pilot.service import start_pilot
 from skinet.files import load_typemap
 from skinet.wire import keys
-from skinet_cli.options import ArgumentParser, budget, load_live_system, seconds
+from skinet_cli.options import (
+    ArgumentParser, add_no_properties_arg, budget, load_live_system, require_properties, seconds,
+)
 
 
 def build_parser() -> ArgumentParser:
@@ -30,6 +32,7 @@ def build_parser() -> ArgumentParser:
                    help="planning budget per goal, seconds (default: 1); past it the plan is unknown and the goal fails")
     p.add_argument("--response-timeout", type=seconds(), default=5.0,
                    help="seconds a manager has to react to a command before the goal fails (default: 5)")
+    add_no_properties_arg(p)
     add_log_arg(p)
     add_zenoh_args(p)
     return p
@@ -40,6 +43,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     setup_logging(args)
     system, _ = load_live_system(args.system)
+    require_properties(system, args.system, args.no_properties)
     typemap = load_typemap(args.system)
     config = config_from_args(args)
     log = logging.getLogger("skinet.pilot")
