@@ -44,6 +44,7 @@ from services.common.zenoh_config import undeclare
 from services.pilot.act import ActError, Actuator, default_actuator
 from skinet.errors import SkinetError, SourceError
 from skinet.plan import Command, Goal, Plan, Planner, Reached, parse_goal, parse_goals
+from skinet.ros.keys import KeyStyle
 from skinet.system import System
 from skinet.wire import keys
 from skinet.wire.codec import DecodeError, decode, encode
@@ -104,7 +105,7 @@ class Pilot:
 
     def __init__(self, session: zenoh.Session, system: System, *, instance: str | None = None,
                  actuator: Actuator | None = None, response_timeout: float = 5.0, budget: float = 1.0,
-                 client: str | None = None, typemap: Mapping[str, str] | None = None):
+                 client: str | None = None, typemap: Mapping[str, str] | None = None, style: KeyStyle = KeyStyle()):
         self.session, self.system = session, system
         self.name = keys.check_chunk(system.name, "system name")
         self.instance = keys.check_chunk(instance or uuid.uuid4().hex[:8], "instance id")
@@ -112,7 +113,7 @@ class Pilot:
         self.response_timeout, self.budget = response_timeout, budget
         self.typemap = dict(typemap or {})
         self.actuator: Actuator = actuator if actuator is not None else default_actuator(
-            session, system, typemap, instance=f"pilot-{self.instance}")
+            session, system, typemap, style, instance=f"pilot-{self.instance}")
         self.planner = Planner(system)
         self._lock = threading.Lock()
         self._wake = threading.Event()
@@ -569,14 +570,15 @@ class Pilot:
 
 def start_pilot(session: zenoh.Session, system: System, instance: str | None = None,
                 actuator: Actuator | None = None, response_timeout: float = 5.0, budget: float = 1.0,
-                client: str | None = None, typemap: Mapping[str, str] | None = None) -> Pilot:
+                client: str | None = None, typemap: Mapping[str, str] | None = None,
+                style: KeyStyle = KeyStyle()) -> Pilot:
     """Start a pilot of ``system`` on ``session`` (which may be shared, SPEC §7).
 
     ``instance``: its id in the liveliness token and the status (default: random);
     ``actuator``: how it acts (default: :func:`~services.pilot.act.default_actuator`, the managers'
-    request topics, which needs the system's ``typemap``); ``response_timeout``: seconds a
+    request topics on the keys of ``style``, which needs the system's ``typemap``); ``response_timeout``: seconds a
     manager has to react to a command; ``budget``: planning seconds per goal; ``client``: its
     router login, the client chunk of its check queries (default ``local``).
     """
     return Pilot(session, system, instance=instance, actuator=actuator, response_timeout=response_timeout,
-                 budget=budget, client=client, typemap=typemap)
+                 budget=budget, client=client, typemap=typemap, style=style)

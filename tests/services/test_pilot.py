@@ -378,3 +378,17 @@ def test_a_command_the_check_denies_is_a_defect_never_sent(client_factory, spot_
         gui.close()
         impl.close()
         robot.close()
+
+
+def test_drive_through_rmw_zenoh_keys(client_factory, spot_arm) -> None:
+    """The pilot's requests on rmw_zenoh keys, with their attachments, reach the managers."""
+    robot = Robot(client_factory, *spot_arm, style=KeyStyle(rmw_zenoh=True, domain=31))
+    impl = Implementations(robot.sim, robot.system)
+    try:
+        reply = ask_goal(robot.observer, goal("reach spot:Standing", mode="drive"))
+        robot.statuses.state("reached", reply.goal_id)
+        assert robot.actuator.sent == ["spot:init_power.start", "spot:stand_up.start"]
+        assert robot.sim.skill_status("spot", "stand_up") == (False, "p1-2")  # the pilot's own request ids
+    finally:
+        impl.close()
+        robot.close()
