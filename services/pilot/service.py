@@ -58,6 +58,7 @@ log = logging.getLogger("skinet.pilot")
 TICK = 0.1  # seconds between the worker's looks at timeouts
 CHECK_WAIT = 1.0  # seconds the check may wait for a synced state and a fresh prediction
 MAX_REQUEST = 256 << 10  # bytes of a goal request (a mission file's text)
+MAX_GOALS = 32  # goals of one request
 MAX_STATE = 1 << 20  # bytes of a LiveState or UnsafeReport read
 PENDING_GRACE = 0.5  # seconds a step's prediction may take before the pilot says it is paused for it
 RETRY_REFUSED = 1.0  # seconds before a check that gave no decision is asked again at the same step
@@ -321,6 +322,8 @@ class Pilot:
             return self._reject(str(exc))
         if not goals:
             return self._reject("no goals: give goals ('reach FORMULA', 'run SKILLSET:SKILL') or a mission")
+        if len(goals) > MAX_GOALS:  # each is planned at once, within the budget
+            return self._reject(f"{len(goals)} goals: a mission has at most {MAX_GOALS}")
         with self._lock:
             g = self._goal
             if g is not None and not g.end and not request.replace:

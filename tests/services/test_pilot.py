@@ -226,6 +226,7 @@ def test_bad_requests_get_a_clear_reason_and_never_a_command(robot: Robot) -> No
     assert unsafe.reason.startswith("goal 'reach spot:Busy and manipulator:Busy' has no plan from the live state: "
                                     "none: "), unsafe.reason
     assert ask(goal()).reason.startswith("no goals: ")
+    assert ask(goal(*["reach spot:Standing"] * 33)).reason == "33 goals: a mission has at most 32"
     assert ask(PilotGoalRequest(system="spot_arm", op="pause")).reason == "no goal is being followed: nothing to pause"
     assert robot.pilot.status.state == "idle"
     # One goal at a time, unless the new one says replace.
