@@ -1,4 +1,4 @@
-"""Command-line pieces every service shares: instance ids, logging, one-line errors."""
+"""Command-line pieces every service shares: instance ids, logging, one-line errors, ROS 2 key styles."""
 
 from __future__ import annotations
 
@@ -30,9 +30,9 @@ def add_instance_arg(parser: argparse.ArgumentParser) -> None:
                         help="instance id in the liveliness token (default: $SKINET_INSTANCE or HOST-PID)")
 
 
-def add_ros_keys_args(parser: argparse.ArgumentParser) -> None:
-    """How ROS 2 topics reach Zenoh: ``zenoh-bridge-ros2dds`` keys (``--namespace``) or ``rmw_zenoh``'s
-    (``--rmw-zenoh``, ``--domain``, ``--ros-distro``); :func:`key_style` reads them."""
+def add_ros_key_args(parser: argparse.ArgumentParser) -> None:
+    """``--rmw-zenoh``, ``--namespace``, ``--domain``, ``--ros-distro``: how ROS 2 topics and services show on Zenoh
+    (:func:`key_style`), for the services that read or write them (the bridge, the pilot)."""
     parser.add_argument("--rmw-zenoh", action="store_true",
                         help="topics as rmw_zenoh carries them (default: zenoh-bridge-ros2dds keys)")
     parser.add_argument("--namespace", type=key_prefix("namespace", env="SKINET_ROS_NAMESPACE"),
@@ -46,7 +46,7 @@ def add_ros_keys_args(parser: argparse.ArgumentParser) -> None:
 
 
 def key_style(args: argparse.Namespace) -> KeyStyle:
-    """The :class:`KeyStyle` of :func:`add_ros_keys_args`' options."""
+    """The :class:`~skinet.ros.keys.KeyStyle` of :func:`add_ros_key_args`'s options."""
     return KeyStyle(args.rmw_zenoh, args.namespace, args.domain, args.ros_distro == "humble")
 
 

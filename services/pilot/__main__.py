@@ -7,7 +7,7 @@ import sys
 from collections.abc import Sequence
 
 from services.common.cli import (
-    add_instance_arg, add_log_arg, add_ros_keys_args, key_style, one_line_errors, setup_logging,
+    add_instance_arg, add_log_arg, add_ros_key_args, key_style, one_line_errors, setup_logging,
 )
 from services.common.zenoh_config import add_zenoh_args, client_name, config_from_args, open_session
 from services.embedded import stop_on_signals
@@ -34,7 +34,7 @@ def build_parser() -> ArgumentParser:
                    help="planning budget per goal, seconds (default: 1); past it the plan is unknown and the goal fails")
     p.add_argument("--response-timeout", type=seconds(), default=5.0,
                    help="seconds a manager has to react to a command before the goal fails (default: 5)")
-    add_ros_keys_args(p)
+    add_ros_key_args(p)
     add_no_properties_arg(p)
     add_log_arg(p)
     add_zenoh_args(p)
