@@ -413,7 +413,11 @@ class Pilot:
         while True:
             if g.plan is None or g.plan.action(marking) is None:
                 self._show("planning")
-                g.plan = self.planner.plan(g.goals[g.index], marking, self.budget)
+                try:
+                    g.plan = self.planner.plan(g.goals[g.index], marking, self.budget)
+                except SkinetError as exc:  # a marking the robot cannot be in (SPEC §3): nothing to plan from
+                    g.plan = None
+                    return self._show("paused", f"the live state of step {st.seq} cannot be planned from: {exc}")
                 if g.plan.answer not in ("strong", "cyclic"):
                     self._end(g, "failed", f"no plan for '{g.goals[g.index].text}' from step {st.seq}: "
                                            f"{g.plan.answer}: {g.plan.reason}")
