@@ -479,8 +479,9 @@ class Pilot:
                 problem = f"the check failed: {r.err.payload.to_string() if r.err is not None else '?'}"
         with self._lock:
             g, st = self._goal, self._state
-            if g is None or g.id != due.goal or g.end or st is None or st.seq != due.seq or self._inflight:
-                return  # things moved on while the check was asked: decide again
+            if g is None or g.id != due.goal or g.end or st is None or st.seq != due.seq or self._inflight or \
+                    not self._monitors or self._paused(g, st):
+                return  # things moved on while the check was asked (a step, a sync state, a pause): decide again
             what = f"{c.skillset}:{c.transition}"
             if reply is None or not reply.ok:
                 self._refuse(g, due, problem if reply is None else f"the check could not judge {what}: {reply.error}")
