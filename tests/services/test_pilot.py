@@ -164,7 +164,7 @@ def test_a_pending_prediction_pauses_the_pilot_until_it_comes(robot: Robot, clie
         assert (paused.next.skillset, paused.next.transition) == ("spot", "stand_up.start")  # what it would send
         time.sleep(0.3)
         assert robot.actuator.sent == ["spot:init_power.start"]
-        robot.predictor = start_predictor(client_factory(), "pilot-test-2")
+        robot.predictor = start_predictor(client_factory(), "pilot-test-2", workers=1)
         robot.statuses.state("reached", reply.goal_id)
         assert robot.actuator.sent == ["spot:init_power.start", "spot:stand_up.start", "spot:go_to_waypoint.start"]
     finally:
