@@ -172,7 +172,7 @@ class Robot:
             self.wait_synced()
             self.wait_pilot("idle")
 
-    def wait_pilot(self, state: str, timeout: float = 10.0) -> None:
+    def wait_pilot(self, state: str, timeout: float = 30.0) -> None:
         """Until the pilot's own last status is ``state``."""
         deadline = time.monotonic() + timeout
         while self.pilot.status.state != state:
@@ -183,7 +183,7 @@ class Robot:
     def start_monitor(self) -> None:
         self.monitor = start_monitor(self.sessions(), self.system, lost_after=self.lost_after)
 
-    def wait_synced(self, timeout: float = 10.0) -> None:
+    def wait_synced(self, timeout: float = 30.0) -> None:
         deadline = time.monotonic() + timeout
         while self.monitor is None or not self.monitor.synced():
             if time.monotonic() > deadline:
