@@ -1,0 +1,222 @@
+"""How the pilot acts on the robot (SPEC §8, *The pilot*; §9, *Acting*).
+
+An :class:`Actuator` sends one :class:`~skinet.wire.messages.PilotCommand`
+(``SKILL.start`` with its inputs, or ``SKILL.interrupt``) and says what it sent,
+for the log; it raises :class:`ActError` with the reason when it cannot.  Which
+protocol carries a skill is decided in one place, :func:`route`, and
+:class:`Routed` (the pilot's :func:`default_actuator`) sends each command
+through the actuator of its route: the :class:`ManagerActuator` speaks a
+generated skillset manager's request protocol, as an operator GUI does
+(:mod:`skinet.ros.requests`); skills bound to ROS 2 actions (SPEC §9) need a
+bound actuator.
+
+An interrupt needs the running execution's id.  The manager's own
+``SkillsetStatus`` says it: the actuator follows each manager's status topic and,
+when it has not seen one yet, asks for it (``status_request``) and waits a moment.
+A start waits (up to ``REACT_WAIT``) for the manager's answer: the status showing
+its id, or a refusal (``ALREADY_RUNNING``, ``PRECONDITION_FAILURE``...), raised as
+:class:`Refused` since such a refusal changes nothing the monitor could show.
+A pilot's start ids are ``<instance>-<n>``.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from collections.abc import Mapping
+from typing import Literal, Protocol
+
+import zenoh
+
+from services.common.requests import Requests
+from services.common.zenoh_config import undeclare
+from skinet.errors import SkinetError
+from skinet.ros.derive import SkillView
+from skinet.ros.keys import KeyStyle, manager_topics
+from skinet.ros.requests import (
+    skill_ids, skill_interrupt, skill_request, start_refusal, status_request,
+)
+from skinet.ros.typestore import Typestore, build_typestore
+from skinet.system import Component, System
+from skinet.wire.messages import PilotCommand
+
+log = logging.getLogger("skinet.pilot")
+STATUS_WAIT = 1.0  # seconds an interrupt waits for a manager's status when it has seen none
+REACT_WAIT = 1.0  # seconds a start waits for the manager's answer (its status, or a refusal) before it returns
+READY = 0  # SkillXStatus.state
+
+
+class ActError(Exception):
+    """The command could not be sent; ``reason`` says why, in the operator's words."""
+
+    def __init__(self, reason: str):
+        super().__init__(reason)
+        self.reason = reason
+
+
+class Refused(ActError):
+    """The robot answered the command with a refusal (a start the manager refused): nothing changed there."""
+
+
+class Actuator(Protocol):
+    """What the pilot needs to act."""
+
+    def send(self, command: PilotCommand) -> str:
+        """Send ``command``; returns what was sent (for the log); raises :class:`ActError`."""
+        ...
+
+    def close(self) -> None: ...
+
+
+def route(system: System, skillset: str, skill: str) -> Literal["manager", "binding"]:
+    """The protocol that carries ``skillset:skill``'s commands: ``binding`` when its skillset is bound to
+    plain ROS 2 interfaces (SPEC §9: the binding's action), else ``manager`` (the manager's requests)."""
+    return "binding" if system.component(skillset).binding else "manager"
+
+
+class ManagerActuator:
+    """Commands as ``Skill<K>Request`` and ``SkillInterrupt`` on the managers' topics (keys of ``style``).
+
+    ``typemap`` is the system's type map (``[system] types``): a skillset whose interface messages
+    cannot be built from it is refused at each command, with the type map's error as the reason."""
+
+    def __init__(self, session: zenoh.Session, system: System, typemap: Mapping[str, str] | None = None,
+                 style: KeyStyle = KeyStyle(), instance: str = "pilot"):
+        self.system, self.instance = system, instance
+        self._stores: dict[str, Typestore] = {}
+        self._problems: dict[str, str] = {}
+        for c in system.components:
+            if route(system, c.name, "") == "binding":
+                continue
+            if not c.manager:
+                self._problems[c.name] = f"skillset {c.name} names no manager node (manager = ... in the system file)"
+                continue
+            try:
+                self._stores[c.name] = build_typestore(c.skillset, typemap or {})
+            except SkinetError as exc:
+                self._problems[c.name] = f"the interface messages of {c.name} cannot be built: {exc}"
+        nodes = [(system.component(name), store) for name, store in self._stores.items()]
+        self._requests = Requests(session, nodes, style)
+        self._lock = threading.Condition()
+        self._ids: dict[str, dict[str, SkillView]] = {}  # skillset -> skill -> state and id, from its status
+        self._count = 0
+        self._starts: dict[str, tuple[str, str, str]] = {}  # start id -> (skillset, skill, refusal or "")
+        # One subscriber per manager keeps its messages in order: a refusal comes before the status after it.
+        self.style = style
+        self._topics = {c.name: {t.topic: t for t in manager_topics(c.skillset)} for c, _ in nodes}
+        self._subs = [session.declare_subscriber(style.all_topics(c.manager, c.skillset),
+                                                 lambda s, c=c: self._on_sample(c, s)) for c, _ in nodes]
+
+    def _on_sample(self, component: Component, sample: zenoh.Sample) -> None:
+        topic = self._topics[component.name].get(self.style.topic(component.manager, str(sample.key_expr)) or "")
+        if topic is None or topic.kind not in ("status", "skill_response"):
+            return  # requests (ours too) and the other outputs
+        store, skillset = self._stores[component.name], component.skillset
+        try:
+            if topic.kind == "status":
+                ids = skill_ids(store, skillset, sample.payload.to_bytes())
+                with self._lock:
+                    self._ids[component.name] = ids
+                    self._lock.notify_all()
+                return
+            refusal = start_refusal(store, skillset, topic.skill or "", sample.payload.to_bytes())
+        except Exception as exc:  # a malformed message must not stop the pilot (SPEC §7)
+            log.warning("%s of %s not understood: %s", topic.topic, component.manager, exc)
+            return
+        if refusal is None:
+            return
+        id_, why = refusal
+        with self._lock:
+            for start, (ss, skill, _) in self._starts.items():
+                # ALREADY_RUNNING names the running execution, not the refused one
+                if (ss, skill) == (component.name, topic.skill) and (start == id_ or why.startswith("ALREADY")):
+                    self._starts[start] = (ss, skill, why)
+            self._lock.notify_all()
+
+    def send(self, command: PilotCommand) -> str:
+        skillset, (skill, _, kind) = command.skillset, command.transition.partition(".")
+        if skillset not in self._stores:
+            raise ActError(self._problems.get(skillset) or f"{skillset}:{skill} is bound to a ROS 2 interface; "
+                                                            "this actuator speaks only the managers' protocol")
+        c = self.system.component(skillset)
+        store = self._stores[skillset]
+        if kind == "start":
+            with self._lock:
+                id_ = f"{self.instance}-{self._count + 1}"
+                try:
+                    request = skill_request(store, c.skillset, skill, id_, command.inputs)
+                except (ValueError, KeyError, TypeError) as exc:
+                    raise ActError(f"cannot encode {skillset}:{command.transition}: {exc}") from None
+                self._count += 1
+                self._starts[id_] = (skillset, skill, "")
+            key = self._requests.put(skillset, *request)
+            with self._lock:  # the manager's answer: its status with the new id, or a refusal before it
+                self._lock.wait_for(lambda: self._starts[id_][2] or self._shows(skillset, skill, id_), REACT_WAIT)
+                refusal = self._starts.pop(id_)[2]
+            if refusal:
+                raise Refused(f"{c.manager} refused {skillset}:{command.transition}: {refusal}")
+            return f"{command.transition} (id '{id_}'{_inputs(command.inputs)}) on {key}"
+        if kind == "interrupt":
+            id_ = self._running_id(c, store, skill)
+            key = self._requests.put(skillset, *skill_interrupt(store, c.skillset, skill, id_))
+            return f"{command.transition} (running id '{id_}') on {key}"
+        raise ActError(f"{skillset}:{command.transition} is not a command (SKILL.start or SKILL.interrupt)")
+
+    def _shows(self, skillset: str, skill: str, id_: str) -> bool:
+        """Whether the manager's last status shows ``id_`` as ``skill``'s execution (lock held)."""
+        view = self._ids.get(skillset, {}).get(skill)
+        return view is not None and view.id == id_
+
+    def _running_id(self, c: Component, store: Typestore, skill: str) -> str:
+        """The id of ``skill``'s running execution, as the manager's last status shows it."""
+        with self._lock:
+            if c.name not in self._ids:
+                self._requests.put(c.name, *status_request(store, c.skillset))
+                self._lock.wait_for(lambda: c.name in self._ids, STATUS_WAIT)
+            view = self._ids.get(c.name, {}).get(skill)
+        if view is None:
+            raise ActError(f"the running id of {c.name}:{skill} is unknown: no status from {c.manager} "
+                           f"within {STATUS_WAIT:g} s")
+        if view.state == READY:
+            raise ActError(f"{c.name}:{skill} is not running according to {c.manager}'s last status")
+        return view.id
+
+    def close(self) -> None:
+        undeclare(*self._subs)
+        self._requests.close()
+
+
+class Routed:
+    """Sends each command through the actuator of its :func:`route` (``manager`` or ``binding``)."""
+
+    def __init__(self, system: System, actuators: Mapping[str, Actuator]):
+        self.system, self.actuators = system, dict(actuators)
+
+    def send(self, command: PilotCommand) -> str:
+        skill = command.transition.partition(".")[0]
+        try:
+            way = route(self.system, command.skillset, skill)
+        except KeyError:
+            raise ActError(f"unknown skillset '{command.skillset}' of {self.system.name}") from None
+        actuator = self.actuators.get(way)
+        if actuator is None:
+            raise ActError(f"{command.skillset}:{skill} is bound to a ROS 2 interface (SPEC §9), and this pilot "
+                           "cannot act through bindings")
+        return actuator.send(command)
+
+    def close(self) -> None:
+        for actuator in self.actuators.values():
+            actuator.close()
+
+
+def default_actuator(session: zenoh.Session, system: System, typemap: Mapping[str, str] | None = None,
+                     style: KeyStyle = KeyStyle(), instance: str = "pilot") -> Actuator:
+    """The pilot's default: each skill through the protocol :func:`route` gives it."""
+    return Routed(system, {"manager": ManagerActuator(session, system, typemap, style, instance)})
+
+
+def _inputs(inputs: Mapping[str, object]) -> str:
+    return f", inputs {dict(inputs)}" if inputs else ""
+
+
+__all__ = ["ActError", "Actuator", "ManagerActuator", "Refused", "Routed", "default_actuator", "route"]
