@@ -1,0 +1,236 @@
+"""The pilot's and the operators' rights in ``docker/zenoh/router.json5`` (issue 24 item 2; SPEC §7, §8).
+
+The router is the Python wheel with the shipped configuration on a ``tls/`` endpoint
+(mutual TLS, each user with its own password and certificate, as in ``test_acl.py``);
+the robot is the simulator's managers (the real request protocol, CDR on the keys of
+both gateways) logged in as ``robot``.  The pilot login may drive the managers' skills
+and publish its own keys, never report for the robot or the bridge; only the
+``operator`` login reaches the pilot's goal queryable.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from collections.abc import Iterator
+
+import pytest
+import zenoh
+
+from deploy_support import REPO, SYSTEM, acl_router_config, free_port, login
+from services.simulator.bound import BoundSimulator
+from services.simulator.driver import Operator
+from services.simulator.service import Simulator
+from skinet.files import load_bindings, load_system, load_typemap
+from skinet.ros.actions import cancel_goal_reply, cancel_goal_request, send_goal_reply, send_goal_request
+from skinet.ros.binding import CANCEL_TYPE
+from skinet.ros.interfaces import skill_topic
+from skinet.ros.keys import KeyStyle, manager_topics, rmw_attachment
+from skinet.wire import keys
+from test_acl import Inbox, _replies
+
+SYSTEM_FILE = REPO / "skillsets" / "spot_arm.toml"
+NAV2_FILE = REPO / "examples" / "nav2" / "nav2.toml"
+# What a deployment of examples/nav2 adds to the rule "robot traffic": its robot's own keys.
+NAV2_ROBOT = ["navigate_to_pose/**", "dock_robot/**", "undock_robot/**", "bt_navigator/**", "battery_state",
+              "emergency_stop"]
+LOGINS = ("pilot", "operator", "observer", "robot", "bridge", "monitor")
+STYLES = {"zenoh-bridge-ros2dds": KeyStyle(), "its namespace": KeyStyle(namespace="robot1"),
+          "rmw_zenoh": KeyStyle(rmw_zenoh=True, domain=3)}
+
+
+@pytest.fixture(scope="module")
+def acl_router() -> Iterator[str]:
+    endpoint = f"tls/127.0.0.1:{free_port()}"
+    router = zenoh.open(acl_router_config(endpoint))
+    try:
+        yield endpoint
+    finally:
+        router.close()
+
+
+@pytest.fixture(scope="module")
+def sessions(acl_router: str) -> Iterator[dict[str, zenoh.Session]]:
+    """One client per login, and ``reader``, an observer that only listens (a session delivers its
+    own publications to itself without the router: what the router lets through is seen elsewhere)."""
+    opened = {user: login(acl_router, user) for user in LOGINS}
+    opened["reader"] = login(acl_router, "observer")
+    try:
+        yield opened
+    finally:
+        for s in opened.values():
+            s.close()
+
+
+def robot(sessions: dict[str, zenoh.Session], style: KeyStyle) -> Simulator:
+    system, _ = load_system(SYSTEM_FILE)
+    return Simulator(sessions["robot"], system, load_typemap(SYSTEM_FILE), style=style)
+
+
+@pytest.mark.parametrize("style", STYLES.values(), ids=STYLES.keys())
+def test_the_pilot_login_drives_the_managers_skills(sessions: dict[str, zenoh.Session], style: KeyStyle) -> None:
+    """A skill's request and interrupt from the pilot login reach the manager, as from an operator's
+    GUI; the same from the operator and observer logins (who set goals or watch) do not."""
+    sim = robot(sessions, style)
+    spot = sim.nodes["spot"].component.skillset
+    request, interrupt = skill_topic(spot, "init_power", "request"), skill_topic(spot, "init_power", "interrupt")
+    pilot, others = Operator(sessions["pilot"], sim), [Operator(sessions[u], sim) for u in ("operator", "observer")]
+    try:
+        time.sleep(0.3)  # the managers' subscriptions reach the router
+        for other in others:
+            assert not other.send("spot", request, timeout=0.5, id="stranger")
+        assert sim.skill_status("spot", "init_power") == (False, "")
+        assert pilot.send("spot", request, id="pilot-1")
+        assert sim.skill_status("spot", "init_power") == (True, "pilot-1")
+        for other in others:
+            assert not other.send("spot", interrupt, timeout=0.5, id="pilot-1")
+        assert sim.skill_status("spot", "init_power") == (True, "pilot-1")
+        assert pilot.send("spot", interrupt, id="pilot-1")
+        assert sim.skill_status("spot", "init_power") == (False, "pilot-1")  # interrupting true: over at once
+    finally:
+        for o in (pilot, *others):
+            o.close()
+        sim.close()
+
+
+def test_the_pilot_login_cannot_speak_for_the_robot_the_bridge_or_the_monitor(
+        sessions: dict[str, zenoh.Session]) -> None:
+    """Canonical events, heartbeats, the managers' statuses and responses (both gateways' keys),
+    status requests, the monitor's results: nothing the pilot puts there leaves the router; its
+    status and the skills' requests and interrupts do."""
+    system, _ = load_system(SYSTEM_FILE)
+    allowed, refused = {keys.pilot_status(SYSTEM)}, {
+        keys.events(SYSTEM, "spot"), keys.heartbeat(SYSTEM, "bridge_ros2/robot1"), keys.state(SYSTEM),
+        keys.verdicts(SYSTEM), keys.unsafe(SYSTEM), keys.divergences(SYSTEM), keys.pilot_goal(SYSTEM, "operator"),
+        keys.check(SYSTEM, "pilot"), keys.model(SYSTEM, "d1"), "**", "spot/**", "skinet/**", "elsewhere/key"}
+    for comp in system.components:
+        for style in STYLES.values():
+            for topic in manager_topics(comp.skillset):
+                key = style.key(comp.manager, topic).replace("*", "RIHS01_0")  # rmw_zenoh: any type hash
+                (allowed if topic.kind in ("skill_request", "skill_interrupt") else refused).add(key)
+    inbox = Inbox(sessions["reader"], "**")
+    try:
+        time.sleep(0.3)
+        for key in sorted(allowed | refused):
+            sessions["pilot"].put(key, f"pilot {key}")
+        sessions["pilot"].put(keys.pilot_status(SYSTEM), "marker")
+        inbox.wait_for("marker")
+        time.sleep(0.3)  # anything wrongly let through would have arrived by now
+        assert inbox.received() - {"marker"} == {f"pilot {key}" for key in allowed}
+        assert len(allowed) == 1 + 3 * 2 * sum(len(c.skillset.skills) for c in system.components)
+    finally:
+        inbox.close()
+
+
+def test_the_pilot_token_is_its_own(sessions: dict[str, zenoh.Session]) -> None:
+    """The pilot announces itself under alive/pilot and may not pose as the monitor or the bridge."""
+    tokens = [sessions["pilot"].liveliness().declare_token(keys.alive(SYSTEM, service, "p1"))
+              for service in ("pilot", "monitor", "bridge_ros2")]
+    try:
+        time.sleep(0.5)
+        seen = sorted(str(r.ok.key_expr) for r in sessions["reader"].liveliness().get(keys.alive(SYSTEM, "*", "p1"),
+                                                                                        timeout=1.0) if r.ok)
+        assert seen == [keys.alive(SYSTEM, "pilot", "p1")]
+    finally:
+        for t in tokens:
+            t.undeclare()
+
+
+def test_only_the_pilot_login_answers_goals_and_only_operators_ask(acl_router: str,
+                                                                  sessions: dict[str, zenoh.Session]) -> None:
+    """Impostors cannot serve the goal key (an operator's goal reaches the pilot alone), and only
+    the operator login, under its own name, gets the pilot's answer; everybody reads its status."""
+    def answer(text: str):
+        def on_query(query: zenoh.Query) -> None:
+            with query:
+                query.reply(query.key_expr, text)
+        return on_query
+
+    servers = {u: login(acl_router, u) for u in LOGINS}  # a session would answer its own queries itself
+    impostors = [servers[u].declare_queryable(keys.pilot_goal("*", "*"), answer(f"impostor {u}"), complete=True)
+                 for u in LOGINS if u != "pilot"]
+    status = [servers[u].declare_queryable(keys.pilot_status("*"), answer(f"{u} status"), complete=True)
+              for u in LOGINS]
+    try:
+        time.sleep(0.3)
+        assert _replies(sessions["reader"], keys.pilot_status(SYSTEM)) == ["pilot status"]
+        assert _replies(sessions["operator"], keys.pilot_goal(SYSTEM, "operator")) == []  # no impostor answers
+        pilot = servers["pilot"].declare_queryable(keys.pilot_goal("*", "*"), answer("pilot"), complete=True)
+        try:
+            time.sleep(0.3)
+            assert _replies(sessions["operator"], keys.pilot_goal(SYSTEM, "operator")) == ["pilot"]
+            for user in ("observer", "reader", "robot", "bridge", "monitor", "pilot"):
+                assert _replies(sessions[user], keys.pilot_goal(SYSTEM, user)) == [], user
+                assert _replies(sessions[user], keys.pilot_goal(SYSTEM, "operator")) == [], user
+            for key in (keys.pilot_goal(SYSTEM, "observer"), keys.pilot_goal(SYSTEM, "*"),
+                        f"skinet/{SYSTEM}/pilot/**", f"skinet/{SYSTEM}/**"):
+                assert _replies(sessions["operator"], key) == [], key
+        finally:
+            pilot.undeclare()
+    finally:
+        for q in (*impostors, *status):
+            q.undeclare()
+        for s in servers.values():
+            s.close()
+
+
+@pytest.fixture(scope="module")
+def nav2_router() -> Iterator[str]:
+    """The shipped configuration with examples/nav2's robot keys in "robot traffic", as its deployment has them."""
+    endpoint = f"tls/127.0.0.1:{free_port()}"
+    config = acl_router_config(endpoint)
+    acl = json.loads(config.get_json("access_control"))
+    rule = next(r for r in acl["rules"] if r["id"] == "robot traffic")
+    rule["key_exprs"] += [*NAV2_ROBOT, *(f"*/{k}" for k in NAV2_ROBOT)]
+    config.insert_json5("access_control", json.dumps(acl))
+    router = zenoh.open(config)
+    try:
+        yield endpoint
+    finally:
+        router.close()
+
+
+def _call(session: zenoh.Session, key: str, payload: bytes, style: KeyStyle) -> bytes | None:
+    attachment = rmw_attachment(1, time.time_ns(), os.urandom(16)) if style.rmw_zenoh else None
+    replies = [r.ok.payload.to_bytes() for r in session.get(key, payload=payload, attachment=attachment, timeout=1.5)
+               if r.ok is not None]
+    return replies[0] if replies else None
+
+
+@pytest.mark.parametrize("style", [KeyStyle(), KeyStyle(rmw_zenoh=True)], ids=["zenoh-bridge-ros2dds", "rmw_zenoh"])
+def test_the_pilot_login_sends_and_cancels_bound_action_goals(nav2_router: str, style: KeyStyle) -> None:
+    """Skills bound to actions (SPEC §9): the pilot's send_goal and cancel_goal reach the robot's action
+    server and are answered; the operator's and the observer's do not, nor the pilot's get_result."""
+    system, _ = load_system(NAV2_FILE)
+    bindings, _ = load_bindings(system)
+    binding = bindings["nav2"]
+    skill = next(s for s in binding.skills if s.skill == "navigate")
+    robot_session = login(nav2_router, "robot")
+    sim = BoundSimulator(robot_session, system, bindings, style=style)
+    clients = {u: login(nav2_router, u) for u in ("pilot", "operator", "observer")}
+    store, server = binding.store, sim.actions[("nav2", "navigate")]
+    send_goal = sim.key(skill.name("send_goal"), f"{skill.type}_SendGoal", store)
+    cancel_goal = sim.key(skill.name("cancel_goal"), CANCEL_TYPE, store)
+    try:
+        time.sleep(0.3)
+        for user in ("operator", "observer"):
+            goal = os.urandom(16)
+            assert _call(clients[user], send_goal, send_goal_request(store, skill.type, goal), style) is None, user
+        assert server.logic.current() is None
+        goal = os.urandom(16)
+        reply = _call(clients["pilot"], send_goal, send_goal_request(store, skill.type, goal), style)
+        assert reply is not None and send_goal_reply(store, skill.type, reply)[0]
+        assert server.logic.current().id == goal
+        get_result = sim.key(skill.name("get_result"), f"{skill.type}_GetResult", store)
+        assert [r for r in clients["pilot"].get(get_result, timeout=0.5) if r.ok is not None] == []
+        for user in ("operator", "observer"):
+            assert _call(clients[user], cancel_goal, cancel_goal_request(store, goal), style) is None, user
+        assert server.logic.current().id == goal
+        reply = _call(clients["pilot"], cancel_goal, cancel_goal_request(store, goal), style)
+        assert reply is not None and cancel_goal_reply(store, reply) == ("ERROR_NONE", [goal])
+        assert server.logic.current() is None
+    finally:
+        sim.close()
+        for s in (*clients.values(), robot_session):
+            s.close()
