@@ -1,4 +1,4 @@
-# SkiNet Live services in one image: router, bridge_ros2, monitor, predictor, simulator.
+# SkiNet Live services in one image: router, bridge_ros2, monitor, predictor, pilot, dashboard, simulator.
 #
 #   docker/build.sh               # wheels on the host, then this build
 #   docker/build.sh --local-base  # same, on a Debian base built without a registry
