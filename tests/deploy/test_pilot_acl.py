@@ -18,17 +18,22 @@ from collections.abc import Iterator
 import pytest
 import zenoh
 
-from deploy_support import REPO, SYSTEM, acl_router_config, free_port, login
+from deploy_support import REPO, SYSTEM, acl_router_config, free_port, login, wait_until
+from services.pilot import start_pilot
+from services.pilot.act import ManagerActuator
 from services.simulator.bound import BoundSimulator
 from services.simulator.driver import Operator
 from services.simulator.service import Simulator
 from skinet.files import load_bindings, load_system, load_typemap
 from skinet.ros.actions import cancel_goal_reply, cancel_goal_request, send_goal_reply, send_goal_request
 from skinet.ros.binding import CANCEL_TYPE
-from skinet.ros.interfaces import skill_topic
+from skinet.ros.interfaces import status_request_topic
+from skinet.ros.requests import event_request, skill_interrupt, skill_request
 from skinet.ros.keys import KeyStyle, manager_topics, rmw_attachment
 from skinet.wire import keys
-from test_acl import Inbox, _replies
+from skinet.wire.codec import decode, encode
+from skinet.wire.messages import PilotCommand, PilotGoalReply, PilotGoalRequest, PilotStatus
+from test_acl import Inbox
 
 SYSTEM_FILE = REPO / "skillsets" / "spot_arm.toml"
 NAV2_FILE = REPO / "examples" / "nav2" / "nav2.toml"
@@ -70,35 +75,45 @@ def robot(sessions: dict[str, zenoh.Session], style: KeyStyle) -> Simulator:
 
 @pytest.mark.parametrize("style", STYLES.values(), ids=STYLES.keys())
 def test_the_pilot_login_drives_the_managers_skills(sessions: dict[str, zenoh.Session], style: KeyStyle) -> None:
-    """A skill's request and interrupt from the pilot login reach the manager, as from an operator's
-    GUI; the same from the operator and observer logins (who set goals or watch) do not."""
+    """The pilot's actuator starts a skill and interrupts it (asking the manager's status first, for the
+    running id) through the router; the same requests from the operator and observer logins (who set
+    goals or watch) do not reach the manager, nor an event request from the pilot (events are the robot's)."""
     sim = robot(sessions, style)
-    spot = sim.nodes["spot"].component.skillset
-    request, interrupt = skill_topic(spot, "init_power", "request"), skill_topic(spot, "init_power", "interrupt")
-    pilot, others = Operator(sessions["pilot"], sim), [Operator(sessions[u], sim) for u in ("operator", "observer")]
+    system, spot, store = sim.system, sim.nodes["spot"].component.skillset, sim.nodes["spot"].store
+    others = [Operator(sessions[u], sim) for u in ("operator", "observer")]
+    pilot_gui = Operator(sessions["pilot"], sim)
+    actuators: list[ManagerActuator] = []
+
+    def actuator() -> ManagerActuator:
+        actuators.append(ManagerActuator(sessions["pilot"], system, load_typemap(SYSTEM_FILE), style, "p1"))
+        return actuators[-1]
+
     try:
         time.sleep(0.3)  # the managers' subscriptions reach the router
         for other in others:
-            assert not other.send("spot", request, timeout=0.5, id="stranger")
+            assert not other.send("spot", skill_request(store, spot, "init_power", "stranger"), timeout=0.5)
         assert sim.skill_status("spot", "init_power") == (False, "")
-        assert pilot.send("spot", request, id="pilot-1")
-        assert sim.skill_status("spot", "init_power") == (True, "pilot-1")
+        actuator().send(PilotCommand(skillset="spot", transition="init_power.start"))
+        wait_until(lambda: sim.skill_status("spot", "init_power") == (True, "p1-1"), 5, "the pilot's start")
         for other in others:
-            assert not other.send("spot", interrupt, timeout=0.5, id="pilot-1")
-        assert sim.skill_status("spot", "init_power") == (True, "pilot-1")
-        assert pilot.send("spot", interrupt, id="pilot-1")
-        assert sim.skill_status("spot", "init_power") == (False, "pilot-1")  # interrupting true: over at once
+            assert not other.send("spot", skill_interrupt(store, spot, "init_power", "p1-1"), timeout=0.5)
+        assert sim.skill_status("spot", "init_power") == (True, "p1-1")
+        asked = sim.handled("spot", status_request_topic(spot))
+        actuator().send(PilotCommand(skillset="spot", transition="init_power.interrupt"))  # it has seen no status
+        assert sim.handled("spot", status_request_topic(spot)) == asked + 1
+        wait_until(lambda: sim.skill_status("spot", "init_power") == (False, "p1-1"), 5, "the pilot's interrupt")
+        assert not pilot_gui.send("spot", event_request(store, spot, "e", "power_switchoff"), timeout=0.5)
     finally:
-        for o in (pilot, *others):
+        for o in (*actuators, pilot_gui, *others):
             o.close()
         sim.close()
 
 
 def test_the_pilot_login_cannot_speak_for_the_robot_the_bridge_or_the_monitor(
         sessions: dict[str, zenoh.Session]) -> None:
-    """Canonical events, heartbeats, the managers' statuses and responses (both gateways' keys),
-    status requests, the monitor's results: nothing the pilot puts there leaves the router; its
-    status and the skills' requests and interrupts do."""
+    """Canonical events, heartbeats, the managers' statuses, responses and event requests (both
+    gateways' keys), the monitor's results: nothing the pilot puts there leaves the router; its status,
+    the skills' requests and interrupts and the managers' status requests do."""
     system, _ = load_system(SYSTEM_FILE)
     allowed, refused = {keys.pilot_status(SYSTEM)}, {
         keys.events(SYSTEM, "spot"), keys.heartbeat(SYSTEM, "bridge_ros2/robot1"), keys.state(SYSTEM),
@@ -108,7 +123,7 @@ def test_the_pilot_login_cannot_speak_for_the_robot_the_bridge_or_the_monitor(
         for style in STYLES.values():
             for topic in manager_topics(comp.skillset):
                 key = style.key(comp.manager, topic).replace("*", "RIHS01_0")  # rmw_zenoh: any type hash
-                (allowed if topic.kind in ("skill_request", "skill_interrupt") else refused).add(key)
+                (allowed if topic.kind in ("skill_request", "skill_interrupt", "status_request") else refused).add(key)
     inbox = Inbox(sessions["reader"], "**")
     try:
         time.sleep(0.3)
@@ -118,7 +133,7 @@ def test_the_pilot_login_cannot_speak_for_the_robot_the_bridge_or_the_monitor(
         inbox.wait_for("marker")
         time.sleep(0.3)  # anything wrongly let through would have arrived by now
         assert inbox.received() - {"marker"} == {f"pilot {key}" for key in allowed}
-        assert len(allowed) == 1 + 3 * 2 * sum(len(c.skillset.skills) for c in system.components)
+        assert len(allowed) == 1 + 3 * sum(2 * len(c.skillset.skills) + 1 for c in system.components)
     finally:
         inbox.close()
 
@@ -139,8 +154,9 @@ def test_the_pilot_token_is_its_own(sessions: dict[str, zenoh.Session]) -> None:
 
 def test_only_the_pilot_login_answers_goals_and_only_operators_ask(acl_router: str,
                                                                   sessions: dict[str, zenoh.Session]) -> None:
-    """Impostors cannot serve the goal key (an operator's goal reaches the pilot alone), and only
-    the operator login, under its own name, gets the pilot's answer; everybody reads its status."""
+    """The real pilot, logged in as ``pilot``: only the operator login, under its own name, gets its
+    answers (a goal, a cancel); the other logins' goals and cancels stop at the router, and impostors
+    of the other logins cannot serve the goal key or the status.  Everybody reads the pilot's status."""
     def answer(text: str):
         def on_query(query: zenoh.Query) -> None:
             with query:
@@ -148,31 +164,52 @@ def test_only_the_pilot_login_answers_goals_and_only_operators_ask(acl_router: s
         return on_query
 
     servers = {u: login(acl_router, u) for u in LOGINS}  # a session would answer its own queries itself
-    impostors = [servers[u].declare_queryable(keys.pilot_goal("*", "*"), answer(f"impostor {u}"), complete=True)
-                 for u in LOGINS if u != "pilot"]
-    status = [servers[u].declare_queryable(keys.pilot_status("*"), answer(f"{u} status"), complete=True)
-              for u in LOGINS]
+    impostors = [q for u in LOGINS if u != "pilot"
+                 for q in (servers[u].declare_queryable(keys.pilot_goal("*", "*"), answer(f"impostor {u}")),
+                           servers[u].declare_queryable(keys.pilot_status("*"), answer(f"impostor {u}")))]
+    system, _ = load_system(SYSTEM_FILE)
+    goal = PilotGoalRequest(system=SYSTEM, goals=["run spot:init_power"])
+    cancel = PilotGoalRequest(system=SYSTEM, op="cancel")
+
+    def ask(user: str, request: PilotGoalRequest, client: str | None = None) -> list[str]:
+        return _replies(sessions[user], keys.pilot_goal(SYSTEM, client or user), encode(request))
+
     try:
         time.sleep(0.3)
-        assert _replies(sessions["reader"], keys.pilot_status(SYSTEM)) == ["pilot status"]
-        assert _replies(sessions["operator"], keys.pilot_goal(SYSTEM, "operator")) == []  # no impostor answers
-        pilot = servers["pilot"].declare_queryable(keys.pilot_goal("*", "*"), answer("pilot"), complete=True)
+        assert ask("operator", goal) == []  # no impostor answers
+        pilot = start_pilot(servers["pilot"], system, instance="p1", client="pilot",
+                            typemap=load_typemap(SYSTEM_FILE))
         try:
-            time.sleep(0.3)
-            assert _replies(sessions["operator"], keys.pilot_goal(SYSTEM, "operator")) == ["pilot"]
+            wait_until(lambda: _replies(sessions["reader"], keys.pilot_status(SYSTEM)) != [], 5, "the pilot's status")
             for user in ("observer", "reader", "robot", "bridge", "monitor", "pilot"):
-                assert _replies(sessions[user], keys.pilot_goal(SYSTEM, user)) == [], user
-                assert _replies(sessions[user], keys.pilot_goal(SYSTEM, "operator")) == [], user
+                assert ask(user, goal) == [] and ask(user, goal, "operator") == [], user
             for key in (keys.pilot_goal(SYSTEM, "observer"), keys.pilot_goal(SYSTEM, "*"),
                         f"skinet/{SYSTEM}/pilot/**", f"skinet/{SYSTEM}/**"):
-                assert _replies(sessions["operator"], key) == [], key
+                assert _replies(sessions["operator"], key, encode(goal)) == [], key
+            (reply,) = ask("operator", goal)
+            assert decode(reply, PilotGoalReply).model_dump(include={"accepted", "reason", "goal_id"}) == {
+                "accepted": True, "reason": "", "goal_id": 1}
+            (status,) = _replies(sessions["reader"], keys.pilot_status(SYSTEM))
+            got = decode(status, PilotStatus)
+            assert (got.pilot, got.goal_id, got.client, got.commands) == ("p1", 1, "operator", 0)
+            assert ask("observer", cancel) == [] and ask("observer", cancel, "operator") == []
+            (reply,) = ask("operator", cancel)
+            assert decode(reply, PilotGoalReply).accepted
+            wait_until(lambda: pilot.status.state == "cancelled", 5, "the goal cancelled")
+            assert pilot.status.reason == "cancelled by operator"
         finally:
-            pilot.undeclare()
+            pilot.close()
     finally:
-        for q in (*impostors, *status):
+        for q in impostors:
             q.undeclare()
         for s in servers.values():
             s.close()
+
+
+def _replies(session: zenoh.Session, key: str, payload: bytes | None = None) -> list[bytes]:
+    return [r.ok.payload.to_bytes() for r in session.get(key, payload=payload, target=zenoh.QueryTarget.ALL,
+                                                         consolidation=zenoh.ConsolidationMode.NONE, timeout=2.0)
+            if r.ok is not None]
 
 
 @pytest.fixture(scope="module")
