@@ -14,11 +14,12 @@ import json
 import os
 import time
 from collections.abc import Iterator
+from pathlib import Path
 
 import pytest
 import zenoh
 
-from deploy_support import REPO, SYSTEM, acl_router_config, free_port, login, wait_until
+from deploy_support import REPO, SYSTEM, Services, Tokens, acl_router_config, free_port, login, wait_until
 from services.pilot import start_pilot
 from services.pilot.act import ManagerActuator
 from services.simulator.bound import BoundSimulator
@@ -270,4 +271,43 @@ def test_the_pilot_login_sends_and_cancels_bound_action_goals(nav2_router: str, 
     finally:
         sim.close()
         for s in (*clients.values(), robot_session):
+            s.close()
+
+
+def test_an_operators_goal_is_driven_through_the_acl_router(acl_router: str, tmp_path: Path) -> None:
+    """The services as processes, each with its own login (``python -m services.pilot`` as ``pilot``), the
+    managers logged in as ``robot``: an operator's goal in drive mode is accepted, the pilot's request
+    starts the skill on the robot, and its outcome ends the goal reached with one command, none denied."""
+    system, _ = load_system(SYSTEM_FILE)
+    robot_session, operator, reader = (login(acl_router, u) for u in ("robot", "operator", "observer"))
+    sim = Simulator(robot_session, system, load_typemap(SYSTEM_FILE))
+    tokens, services = Tokens(reader), Services(tmp_path)
+    try:
+        services.start("services.predictor", "predictor", acl_router)
+        services.start("services.monitor", "monitor", acl_router, "skillsets/spot_arm.toml")
+        services.start("services.bridge_ros2", "bridge", acl_router, "skillsets/spot_arm.toml")
+        services.start("services.pilot", "pilot", acl_router, "skillsets/spot_arm.toml", "--instance", "p1")
+        wait_until(lambda: all(tokens.of(s) for s in ("predictor", "monitor", "bridge_ros2", "pilot")), 30,
+                   f"the services' liveliness tokens (got {sorted(tokens.alive)})")
+        request = PilotGoalRequest(system=SYSTEM, goals=["run spot:init_power"], mode="drive")
+        (reply,) = [decode(r, PilotGoalReply) for r in _replies(operator, keys.pilot_goal(SYSTEM, "operator"),
+                                                                 encode(request))]
+        assert (reply.accepted, reply.reason, reply.goal_id) == (True, "", 1), reply
+        wait_until(lambda: sim.skill_status("spot", "init_power")[0], 30, "the pilot's request on the robot")
+        assert sim.skill_status("spot", "init_power") == (True, "pilot-p1-1")  # the pilot's own execution id
+        assert sim.terminate("spot", "init_power", "success", "powered_on")
+
+        def status() -> PilotStatus:
+            (payload,) = _replies(reader, keys.pilot_status(SYSTEM))
+            return decode(payload, PilotStatus)
+
+        wait_until(lambda: status().state == "reached", 20, "the goal reached")
+        last = status()
+        assert (last.pilot, last.goal_id, last.client, last.mode, last.commands, last.denied) == (
+            "p1", 1, "operator", "drive", 1, 0)
+    finally:
+        tokens.close()
+        services.close()
+        sim.close()
+        for s in (robot_session, operator, reader):
             s.close()
