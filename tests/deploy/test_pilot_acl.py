@@ -34,7 +34,7 @@ from skinet.ros.keys import KeyStyle, manager_topics, rmw_attachment
 from skinet.wire import keys
 from skinet.wire.codec import decode, encode
 from skinet.wire.messages import PilotCommand, PilotGoalReply, PilotGoalRequest, PilotStatus
-from test_acl import Inbox
+from test_acl import Inbox, acl_router  # noqa: F401 (the shipped configuration's router)
 
 SYSTEM_FILE = REPO / "skillsets" / "spot_arm.toml"
 NAV2_FILE = REPO / "examples" / "nav2" / "nav2.toml"
@@ -44,16 +44,6 @@ NAV2_ROBOT = ["navigate_to_pose/**", "dock_robot/**", "undock_robot/**", "bt_nav
 LOGINS = ("pilot", "operator", "observer", "robot", "bridge", "monitor")
 STYLES = {"zenoh-bridge-ros2dds": KeyStyle(), "its namespace": KeyStyle(namespace="robot1"),
           "rmw_zenoh": KeyStyle(rmw_zenoh=True, domain=3)}
-
-
-@pytest.fixture(scope="module")
-def acl_router() -> Iterator[str]:
-    endpoint = f"tls/127.0.0.1:{free_port()}"
-    router = zenoh.open(acl_router_config(endpoint))
-    try:
-        yield endpoint
-    finally:
-        router.close()
 
 
 @pytest.fixture(scope="module")

@@ -16,7 +16,6 @@ import os
 import shlex
 import subprocess
 import sys
-import threading
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -29,6 +28,7 @@ from skinet.files import load_system, load_typemap
 from skinet.wire import keys
 from skinet.wire.codec import decode, encode
 from skinet.wire.messages import PilotGoalReply, PilotGoalRequest, PilotStatus
+from tests.services.pilot_robot import Statuses
 from test_containers import SECRETS_IN_IMAGE, Stack, host_login, image  # noqa: F401 (the image fixture)
 
 pytestmark = pytest.mark.slow
@@ -49,9 +49,7 @@ def onboard(image: str, tmp_path_factory: pytest.TempPathFactory) -> Iterator[tu
         s.compose("up", "-d", "--no-build", "router", "bridge", "monitor", "predictor", "pilot", timeout=240)
         yield s, f"tls/127.0.0.1:{port}"
     finally:
-        log = tmp_path_factory.mktemp("compose") / "compose.log"
-        log.write_text(s.logs())
-        print(f"compose logs: {log}")
+        (tmp_path_factory.mktemp("compose") / "compose.log").write_text(s.logs())
         s.down()
 
 
@@ -74,30 +72,6 @@ def operator_config(stack: Stack, folder: Path, endpoint: str) -> Path:
     return output
 
 
-class StatusLog:
-    """Every :class:`PilotStatus` the pilot publishes, in order."""
-
-    def __init__(self, session: zenoh.Session):
-        self.statuses: list[PilotStatus] = []
-        self._lock = threading.Lock()
-        self._sub = session.declare_subscriber(keys.pilot_status(SYSTEM), self._on)
-
-    def _on(self, sample: zenoh.Sample) -> None:
-        with self._lock:
-            self.statuses.append(decode(sample.payload.to_bytes(), PilotStatus))
-
-    def last(self) -> PilotStatus | None:
-        with self._lock:
-            return self.statuses[-1] if self.statuses else None
-
-    def states(self, goal_id: int) -> list[str]:
-        with self._lock:
-            return [s.state for s in self.statuses if s.goal_id == goal_id]
-
-    def close(self) -> None:
-        self._sub.undeclare()
-
-
 def ask(session: zenoh.Session, client: str, request: PilotGoalRequest) -> list[PilotGoalReply]:
     return [decode(r.ok.payload.to_bytes(), PilotGoalReply)
             for r in session.get(keys.pilot_goal(SYSTEM, client), payload=encode(request), timeout=10.0)
@@ -114,7 +88,7 @@ def test_the_pilot_container_drives_an_operators_goal(onboard: tuple[Stack, str]
     observer, robot_session, operator = (host_login(onboard, folder, u) for u in ("observer", "robot", "operator"))
     system, _ = load_system(SYSTEM_FILE)
     robot = Simulator(robot_session, system, load_typemap(SYSTEM_FILE))
-    tokens, statuses = Tokens(observer), StatusLog(observer)
+    tokens, statuses = Tokens(observer), Statuses(observer)
     try:
         wait_until(lambda: all(tokens.of(s) for s in ("pilot", "monitor", "bridge_ros2", "predictor")), 120,
                    f"the services' liveliness tokens (got {sorted(tokens.alive)})")
@@ -135,22 +109,15 @@ def test_the_pilot_container_drives_an_operators_goal(onboard: tuple[Stack, str]
 
         (reply,) = ask(operator, "operator", goal)
         assert (reply.accepted, reply.reason, reply.answer) == (True, "", "cyclic"), reply
-        wait_until(lambda: robot.skill_status("spot", "init_power")[0], 60,
-                   f"the pilot's request on the robot (status: {statuses.last()})")
-        wait_until(lambda: (statuses.last() or reply).state == "waiting for outcome", 20,  # type: ignore[union-attr]
-                   f"the pilot waiting for the outcome (status: {statuses.last()})")
+        statuses.state("waiting for outcome", reply.goal_id, timeout=60)
+        assert robot.skill_status("spot", "init_power") == (True, f"pilot-{instance}-1")  # the pilot's execution
         assert robot.terminate("spot", "init_power", "success", "powered_on")
-        wait_until(lambda: (statuses.last() or reply).state == "reached", 30,  # type: ignore[union-attr]
-                   f"the goal reached (status: {statuses.last()})")
-        last = statuses.last()
-        assert last is not None
-        assert (last.goal_id, last.client, last.mode, last.commands, last.denied, last.retries) == (
-            reply.goal_id, "operator", "drive", 1, 0, {})
+        last = statuses.state("reached", reply.goal_id, timeout=30)
+        assert (last.client, last.mode, last.commands, last.denied, last.retries) == ("operator", "drive", 1, 0, {})
         states = statuses.states(reply.goal_id)
         assert states.index("waiting for outcome") < states.index("reached") == len(states) - 1, states
     finally:
         tokens.close()
-        statuses.close()
         robot.close()
         for s in (observer, robot_session, operator):
             s.close()
