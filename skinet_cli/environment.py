@@ -130,7 +130,7 @@ VARIABLES: dict[str, Variable] = {
     "SKINET_CHECK_RATE_LIMIT": Variable("--check-rate-limit of the monitor and skinet run"),
     "SKINET_LOST_AFTER": Variable("--lost-after of the monitor and skinet run, compose.yaml"),
     "SKINET_RATE_LIMIT": Variable("--rate-limit of the predictor and skinet run"),
-    "SKINET_ROS_NAMESPACE": Variable("--namespace of the bridge, compose.yaml"),
+    "SKINET_ROS_NAMESPACE": Variable("--namespace of the bridge and the pilot, compose.yaml"),
     "SKINET_SPEED": Variable("--speed of the simulator, compose.yaml"),
     "SKINET_DASHBOARD_HOST": Variable("--host of the dashboard"),
     "SKINET_DASHBOARD_PORT": Variable("--port of the dashboard, compose.yaml (the host port)"),

@@ -10,10 +10,14 @@ import re
 import socket
 import sys
 from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING
 
 from skinet_cli.environment import check_environment
-from skinet_cli.options import key_name
+from skinet_cli.options import count, key_name, key_prefix
 from skinet.errors import SkinetError, SourceError
+
+if TYPE_CHECKING:
+    from skinet.ros.keys import KeyStyle
 
 LEVELS = ("DEBUG", "INFO", "WARNING", "ERROR", "CRITICAL")
 
@@ -43,6 +47,29 @@ def add_log_arg(parser: argparse.ArgumentParser) -> None:
 
 def setup_logging(args: argparse.Namespace) -> None:
     logging.basicConfig(level=args.log_level.upper(), format="%(asctime)s %(name)s %(levelname)s %(message)s")
+
+
+def add_ros_style_args(parser: argparse.ArgumentParser) -> None:
+    """How the robot's ROS 2 topics show on Zenoh (ZENOH.md): ``--rmw-zenoh``, ``--namespace``
+    (``$SKINET_ROS_NAMESPACE``), ``--domain`` (``$ROS_DOMAIN_ID``), ``--ros-distro`` (``$ROS_DISTRO``).
+    The bridge reads the managers with them and the pilot sends its requests with them: give both the same."""
+    parser.add_argument("--rmw-zenoh", action="store_true",
+                        help="topics as rmw_zenoh carries them (default: zenoh-bridge-ros2dds keys)")
+    parser.add_argument("--namespace", type=key_prefix("namespace", env="SKINET_ROS_NAMESPACE"),
+                        default=os.environ.get("SKINET_ROS_NAMESPACE", ""),
+                        help="zenoh-bridge-ros2dds namespace prefixing the keys (default: $SKINET_ROS_NAMESPACE)")
+    parser.add_argument("--domain", type=count(0, 232, env="ROS_DOMAIN_ID"), default=os.environ.get("ROS_DOMAIN_ID", "0"),
+                        help="ROS domain id in rmw_zenoh keys (default: $ROS_DOMAIN_ID or 0)")
+    parser.add_argument("--ros-distro", default=os.environ.get("ROS_DISTRO", "jazzy"),
+                        help="ROS 2 distribution of rmw_zenoh (default: $ROS_DISTRO or jazzy); on humble the keys "
+                             "carry TypeHashNotSupported instead of a RIHS01 type hash")
+
+
+def ros_style(args: argparse.Namespace) -> "KeyStyle":
+    """The key style of the flags of :func:`add_ros_style_args`."""
+    from skinet.ros.keys import KeyStyle  # rosbags' type system: only for the services that speak ROS 2
+
+    return KeyStyle(args.rmw_zenoh, args.namespace, args.domain, args.ros_distro == "humble")
 
 
 def one_line_errors(prog: str) -> Callable[[Callable[[Sequence[str] | None], int]], Callable[..., int]]:

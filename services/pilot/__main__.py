@@ -6,9 +6,12 @@ import logging
 import sys
 from collections.abc import Sequence
 
-from services.common.cli import add_instance_arg, add_log_arg, one_line_errors, setup_logging
+from services.common.cli import (
+    add_instance_arg, add_log_arg, add_ros_style_args, one_line_errors, ros_style, setup_logging,
+)
 from services.common.zenoh_config import add_zenoh_args, client_name, config_from_args, open_session
 from services.embedded import stop_on_signals
+from services.pilot.act import default_actuator
 from services.pilot.service import start_pilot
 from skinet.files import load_typemap
 from skinet.wire import keys
@@ -30,6 +33,7 @@ def build_parser() -> ArgumentParser:
                    help="planning budget per goal, seconds (default: 1); past it the plan is unknown and the goal fails")
     p.add_argument("--response-timeout", type=seconds(), default=5.0,
                    help="seconds a manager has to react to a command before the goal fails (default: 5)")
+    add_ros_style_args(p)
     add_log_arg(p)
     add_zenoh_args(p)
     return p
@@ -46,8 +50,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     stop = stop_on_signals()
     session = open_session(config)
     try:
-        pilot = start_pilot(session, system, instance=args.instance, response_timeout=args.response_timeout,
-                            budget=args.budget, client=client_name(config), typemap=typemap)
+        actuator = default_actuator(session, system, typemap, ros_style(args), instance=f"pilot-{args.instance}")
+        pilot = start_pilot(session, system, instance=args.instance, actuator=actuator,
+                            response_timeout=args.response_timeout, budget=args.budget, client=client_name(config),
+                            typemap=typemap)
         log.info("pilot %s of %s: goals on %s, status on %s", pilot.instance, system.name,
                  keys.pilot_goal(system.name, "<client>"), keys.pilot_status(system.name))
         while not stop.wait(0.5):

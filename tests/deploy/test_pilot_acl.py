@@ -44,6 +44,8 @@ NAV2_ROBOT = ["navigate_to_pose/**", "dock_robot/**", "undock_robot/**", "bt_nav
 LOGINS = ("pilot", "operator", "observer", "robot", "bridge", "monitor")
 STYLES = {"zenoh-bridge-ros2dds": KeyStyle(), "its namespace": KeyStyle(namespace="robot1"),
           "rmw_zenoh": KeyStyle(rmw_zenoh=True, domain=3)}
+STYLE_FLAGS = {"zenoh-bridge-ros2dds": (), "its namespace": ("--namespace", "robot1"),
+               "rmw_zenoh": ("--rmw-zenoh", "--domain", "3")}  # the same, for the bridge and the pilot
 
 
 @pytest.fixture(scope="module")
@@ -264,19 +266,22 @@ def test_the_pilot_login_sends_and_cancels_bound_action_goals(nav2_router: str, 
             s.close()
 
 
-def test_an_operators_goal_is_driven_through_the_acl_router(acl_router: str, tmp_path: Path) -> None:
+@pytest.mark.parametrize("style", STYLES.keys())
+def test_an_operators_goal_is_driven_through_the_acl_router(acl_router: str, tmp_path: Path, style: str) -> None:
     """The services as processes, each with its own login (``python -m services.pilot`` as ``pilot``), the
-    managers logged in as ``robot``: an operator's goal in drive mode is accepted, the pilot's request
-    starts the skill on the robot, and its outcome ends the goal reached with one command, none denied."""
+    managers logged in as ``robot`` behind either gateway (the bridge and the pilot given the same key
+    flags): an operator's goal in drive mode is accepted, the pilot's request starts the skill on the
+    robot, and its outcome ends the goal reached with one command, none denied."""
     system, _ = load_system(SYSTEM_FILE)
     robot_session, operator, reader = (login(acl_router, u) for u in ("robot", "operator", "observer"))
-    sim = Simulator(robot_session, system, load_typemap(SYSTEM_FILE))
+    sim = Simulator(robot_session, system, load_typemap(SYSTEM_FILE), style=STYLES[style])
+    flags = STYLE_FLAGS[style]
     tokens, services = Tokens(reader), Services(tmp_path)
     try:
         services.start("services.predictor", "predictor", acl_router)
         services.start("services.monitor", "monitor", acl_router, "skillsets/spot_arm.toml")
-        services.start("services.bridge_ros2", "bridge", acl_router, "skillsets/spot_arm.toml")
-        services.start("services.pilot", "pilot", acl_router, "skillsets/spot_arm.toml", "--instance", "p1")
+        services.start("services.bridge_ros2", "bridge", acl_router, "skillsets/spot_arm.toml", *flags)
+        services.start("services.pilot", "pilot", acl_router, "skillsets/spot_arm.toml", "--instance", "p1", *flags)
         wait_until(lambda: all(tokens.of(s) for s in ("predictor", "monitor", "bridge_ros2", "pilot")), 30,
                    f"the services' liveliness tokens (got {sorted(tokens.alive)})")
         request = PilotGoalRequest(system=SYSTEM, goals=["run spot:init_power"], mode="drive")
