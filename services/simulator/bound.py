@@ -41,6 +41,7 @@ from typing import Any
 import zenoh
 import zenoh.ext as zext
 
+from services.common.ros_client import ServiceClient
 from services.common.ros_liveliness import declare_node
 from services.common.zenoh_config import undeclare
 from services.simulator.driver import StepRun
@@ -181,6 +182,7 @@ class BoundSimulator:
         self.bindings = dict(bindings)
         self.style = style
         self.status_first = status_first
+        self.client = ServiceClient(session, style)  # the operator's client (send_goal, cancel_goal)
         self.publishers: dict[str, _Publisher] = {}  # ROS topic name -> publisher
         self.actions: dict[tuple[str, str], _ActionServer] = {}  # (skillset, skill) -> server
         self.nodes: dict[tuple[str, str], _LifecycleNode] = {}  # (skillset, resource) -> lifecycle node
@@ -284,20 +286,13 @@ class BoundSimulator:
 
     # -- the operator's client ----------------------------------------------------------------
 
-    def _call(self, key: str, payload: bytes, timeout: float = 5.0) -> bytes | None:
-        attachment = rmw_attachment(1, time.time_ns(), os.urandom(16)) if self.style.rmw_zenoh else None
-        for reply in self.session.get(key, payload=payload, attachment=attachment, timeout=timeout):
-            if reply.ok is not None:
-                return reply.ok.payload.to_bytes()
-        return None
-
     def send_goal(self, skillset: str, skill: str, inputs: Mapping[str, Any] | None = None) -> bool:
         """Send a goal as a client would; True when accepted."""
         b, s = self.bindings[skillset], self.actions[(skillset, skill)].skill
         goal = os.urandom(16)
         self.sent[(skillset, skill)] = goal
-        reply = self._call(self.key(s.name("send_goal"), f"{s.type}_SendGoal", b.store),
-                           send_goal_request(b.store, s.type, goal, inputs))
+        reply = self.client.call(s.name("send_goal"), f"{s.type}_SendGoal", send_goal_request(b.store, s.type, goal,
+                                                                                               inputs), 5.0)
         with self.actions[(skillset, skill)].logic.lock:  # the server has published what followed its reply
             pass
         return reply is not None and send_goal_reply(b.store, s.type, reply)[0]
@@ -308,8 +303,8 @@ class BoundSimulator:
         goal = server.logic.current()
         if goal is None:
             return False
-        reply = self._call(self.key(server.skill.name("cancel_goal"), CANCEL_TYPE, b.store),
-                           cancel_goal_request(b.store, goal.id))
+        reply = self.client.call(server.skill.name("cancel_goal"), CANCEL_TYPE, cancel_goal_request(b.store, goal.id),
+                                 5.0)
         with server.logic.lock:  # the server has published what followed its reply
             pass
         return reply is not None

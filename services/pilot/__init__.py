@@ -1,0 +1,1 @@
+"""The pilot (SPEC §8): goals in, safe commands out."""
