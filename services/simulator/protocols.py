@@ -149,12 +149,14 @@ class ActionLogic:
         goal.waiting.clear()
         return [("status", self.status_array())], due
 
-    def finish(self, status: int, result: Mapping[str, Any]) -> tuple[list[Output], list[tuple[Any, bytes]]] | None:
-        """End the latest active goal (SUCCEEDED or ABORTED); ``None`` when none is active.
+    def finish(self, status: int, result: Mapping[str, Any],
+               goal_id: bytes | None = None) -> tuple[list[Output], list[tuple[Any, bytes]]] | None:
+        """End the latest active goal, or the goal ``goal_id`` (SUCCEEDED or ABORTED); ``None`` when it is not
+        active.
 
         An unknown result field raises ``TypeError`` (with the fields the result has)."""
-        goal = self.current()
-        if goal is None:
+        goal = self.current() if goal_id is None else self.goals.get(goal_id)
+        if goal is None or goal.status not in ACTIVE:
             return None
         message(self.store, f"{self.action}_Result", result)
         return self._end(goal, status, result)

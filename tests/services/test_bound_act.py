@@ -166,3 +166,23 @@ def test_bad_commands_are_clear_errors_and_send_nothing(nav2, client_factory) ->
     with pytest.raises(ActError) as info:
         act.send(PilotCommand(skillset="nav2", transition="undock_robot.start"))
     assert str(info.value).endswith(": no reply from the action server of /undock_robot within 0.5 s")
+
+
+@pytest.mark.parametrize("rig", STYLES[:1], ids=IDS[:1], indirect=True)
+def test_the_simulated_robot_ends_the_goals_it_accepted(rig: Rig, nav2, client_factory) -> None:  # type: ignore[no-untyped-def]
+    """Without a scenario, ``on_start`` hears of each goal an action server accepts and ``terminate`` ends that
+    goal in a mode: what a pilot acting through the bindings needs from the simulated robot."""
+    _, bindings = nav2
+    started: list[tuple[str, str, str]] = []
+    rig.robot.on_start.append(lambda *args: started.append(args))
+    undocked(rig)
+    act = BoundActuator(client_factory(), bindings)
+    act.send(PilotCommand(skillset="nav2", transition="dock_robot.start", inputs={"dock": "d1"}))
+    [(goal, _)] = rig.received("dock_robot")
+    assert started == [("nav2", "undock_robot", rig.received("undock_robot")[0][0]), ("nav2", "dock_robot", goal)]
+    with pytest.raises(ValueError, match="the failure mode not_charging comes from the goal's result"):
+        rig.robot.terminate("nav2", "dock_robot", "failure", "not_charging", goal)
+    assert not rig.robot.terminate("nav2", "dock_robot", "success", "docked", rig.received("undock_robot")[0][0])
+    assert rig.robot.terminate("nav2", "dock_robot", "success", "docked", goal)
+    rig.wait_for("dock_robot.success.docked")
+    assert rig.events.items[-1].status.resources["dock"] == "Docked"
