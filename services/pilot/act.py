@@ -6,7 +6,10 @@ for the log; it raises :class:`ActError` with the reason when it cannot.  Which
 protocol carries a skill is decided in one place, :func:`route`: the
 :class:`ManagerActuator` (the default) speaks a generated skillset manager's
 request protocol, as an operator GUI does (:mod:`skinet.ros.requests`); skills
-bound to ROS 2 actions (SPEC §9) are sent by a bound actuator.
+bound to ROS 2 actions (SPEC §9) are sent by the
+:class:`~services.pilot.bound_act.BoundActuator` (a goal, a cancel request).
+:func:`default_actuator` gives the pilot one of each that the system needs,
+behind a :class:`RoutedActuator` that sends each command where :func:`route` says.
 
 An interrupt needs the running execution's id.  The manager's own
 ``SkillsetStatus`` says it: the actuator follows each manager's status topic and,
@@ -19,7 +22,7 @@ from __future__ import annotations
 import logging
 import threading
 from collections.abc import Mapping
-from typing import Literal, Protocol
+from typing import Any, Literal, Protocol
 
 import zenoh
 
@@ -60,6 +63,43 @@ def route(system: System, skillset: str, skill: str) -> Literal["manager", "bind
     """The protocol that carries ``skillset:skill``'s commands: ``binding`` when its skillset is bound to
     plain ROS 2 interfaces (SPEC §9: the binding's action), else ``manager`` (the manager's requests)."""
     return "binding" if system.component(skillset).binding else "manager"
+
+
+class RoutedActuator:
+    """Sends each command with the actuator of its :func:`route` (``manager`` or ``binding``)."""
+
+    def __init__(self, system: System, actuators: Mapping[str, Actuator]):
+        self.system = system
+        self.actuators = dict(actuators)
+
+    def send(self, command: PilotCommand) -> str:
+        kind = route(self.system, command.skillset, command.transition.partition(".")[0])
+        actuator = self.actuators.get(kind)
+        if actuator is None:  # the system has no such skillset: its manager's actuator says so
+            actuator = self.actuators.get("manager") or next(iter(self.actuators.values()))
+        return actuator.send(command)
+
+    def close(self) -> None:
+        for actuator in self.actuators.values():
+            actuator.close()
+
+
+def default_actuator(session: zenoh.Session, system: System, typemap: Mapping[str, str] | None = None,
+                     style: KeyStyle = KeyStyle(), instance: str = "pilot",
+                     bindings: Mapping[str, Any] | None = None) -> Actuator:
+    """The actuators ``system`` needs: a :class:`ManagerActuator` for its managers' skillsets, a
+    :class:`~services.pilot.bound_act.BoundActuator` for its bound ones (``bindings``, skillset name ->
+    :class:`~skinet.ros.binding.Binding`; read from the system's binding files when not given), on the keys
+    of ``style``.  Raises :class:`~skinet.errors.SourceError` for a binding that does not load."""
+    manager = ManagerActuator(session, system, typemap, style=style, instance=instance)
+    if not any(c.binding for c in system.components):
+        return manager
+    from services.pilot.bound_act import BoundActuator  # only systems with bindings need it
+    from skinet.files import load_bindings
+
+    if bindings is None:
+        bindings, _ = load_bindings(system)
+    return RoutedActuator(system, {"manager": manager, "binding": BoundActuator(session, bindings, style=style)})
 
 
 class ManagerActuator:
@@ -147,4 +187,4 @@ def _inputs(inputs: Mapping[str, object]) -> str:
     return f", inputs {dict(inputs)}" if inputs else ""
 
 
-__all__ = ["ActError", "Actuator", "ManagerActuator", "route"]
+__all__ = ["ActError", "Actuator", "ManagerActuator", "RoutedActuator", "default_actuator", "route"]

@@ -32,6 +32,7 @@ from typing import Any
 import zenoh
 
 from services.common.ros_client import ServiceClient
+from services.pilot.act import ActError
 from skinet.plan.inputs import message_problem
 from skinet.ros.actions import (
     SentGoal, cancel_goal_reply, cancel_goal_request, followed_goal, send_goal_reply, send_goal_request,
@@ -41,10 +42,6 @@ from skinet.ros.bound import STATUS_NAMES, Goal, goal_text, goals_from_plain
 from skinet.ros.keys import KeyStyle, history_selector
 from skinet.ros.typestore import decode, to_plain
 from skinet.wire.messages import PilotCommand
-
-
-class ActError(Exception):
-    """A command could not be sent, or the robot refused it; ``str()`` is the reason, in the operator's words."""
 
 
 class BoundActuator:
@@ -71,7 +68,8 @@ class BoundActuator:
         binding = self.bindings.get(command.skillset)
         bound = binding.skill(skill) if binding is not None else None
         if binding is None or bound is None:
-            raise ActError(f"{command.skillset}:{skill} is bound to no action")
+            raise ActError(f"{command.skillset}:{skill} is bound to no action" + (
+                " (its skillset has no manager either: the pilot cannot command it)" if binding else ""))
         if kind == "start":
             return self._start(command.skillset, binding, bound, command.inputs)
         if kind == "interrupt":
@@ -142,4 +140,4 @@ def _shown(goals: list[Goal]) -> str:
     return ", ".join(f"{goal_text(g.id)[:8]} {STATUS_NAMES.get(g.status, g.status)}" for g in goals) or "no goal"
 
 
-__all__ = ["ActError", "BoundActuator"]
+__all__ = ["BoundActuator"]

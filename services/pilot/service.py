@@ -40,7 +40,7 @@ from typing import Any
 import zenoh
 
 from services.common.zenoh_config import undeclare
-from services.pilot.act import ActError, Actuator, ManagerActuator
+from services.pilot.act import ActError, Actuator, default_actuator
 from skinet.errors import SkinetError, SourceError
 from skinet.plan import Command, Goal, Plan, Planner, Reached, parse_goal, parse_goals
 from skinet.system import System
@@ -108,7 +108,7 @@ class Pilot:
         self.client = keys.check_chunk(client or keys.LOCAL_CLIENT, "client name")
         self.response_timeout, self.budget = response_timeout, budget
         self.typemap = dict(typemap or {})
-        self.actuator: Actuator = actuator if actuator is not None else ManagerActuator(
+        self.actuator: Actuator = actuator if actuator is not None else default_actuator(
             session, system, typemap, instance=f"pilot-{self.instance}")
         self.planner = Planner(system)
         self._lock = threading.Lock()
@@ -534,9 +534,9 @@ def start_pilot(session: zenoh.Session, system: System, instance: str | None = N
     """Start a pilot of ``system`` on ``session`` (which may be shared, SPEC §7).
 
     ``instance``: its id in the liveliness token and the status (default: random);
-    ``actuator``: how it acts (default: a :class:`~services.pilot.act.ManagerActuator` on the
-    managers' topics, which needs the system's ``typemap``); ``response_timeout``: seconds a
-    manager has to react to a command; ``budget``: planning seconds per goal; ``client``: its
+    ``actuator``: how it acts (default: :func:`~services.pilot.act.default_actuator`: the
+    managers' topics, which need the system's ``typemap``, and the bound skills' actions);
+    ``response_timeout``: seconds a manager has to react to a command; ``budget``: planning seconds per goal; ``client``: its
     router login, the client chunk of its check queries (default ``local``).
     """
     return Pilot(session, system, instance=instance, actuator=actuator, response_timeout=response_timeout,

@@ -118,15 +118,15 @@ class _ActionServer:
                 query.drop()
                 return
             reply, outputs = done
+            if outputs:  # accepted: the robot's implementation runs it (told before the client hears of it)
+                goal = self.logic.received[-1][0]
+                for hook in self.sim.on_start:
+                    hook(self.skillset, self.skill.skill, goal_text(goal))
             if not self.sim.status_first:
                 self._reply(query, reply)
             self._send(outputs)
             if self.sim.status_first:  # the status overtakes the reply (each has its own route)
                 self._reply(query, reply)
-            if outputs:  # accepted: the robot's implementation runs it
-                goal = self.logic.received[-1][0]
-                for hook in self.sim.on_start:
-                    hook(self.skillset, self.skill.skill, goal_text(goal))
 
     def _cancel(self, query: zenoh.Query) -> None:
         with self.logic.lock:

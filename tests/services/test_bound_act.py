@@ -21,7 +21,8 @@ import zenoh
 
 from event_watch import Events
 from services.bridge_ros2.bound_live import start_bound_bridge
-from services.pilot.bound_act import ActError, BoundActuator
+from services.pilot.act import ActError
+from services.pilot.bound_act import BoundActuator
 from services.simulator.bound import BoundSimulator
 from skinet.files import load_bindings, load_system
 from skinet.ros.keys import KeyStyle
@@ -48,13 +49,13 @@ class Rig:
         self.events = Events(open_(), system.name)
         self.bridge = start_bound_bridge(open_(), system, bindings, style=style, settle=0.1, retry=0.1)
         self.robot.publish_topics(FIRST)
-        self.events.wait(lambda items: [e.info for e in items] == ["initial status"])
+        self.events.wait(lambda items: [e.info for e in items] == ["initial status"], timeout=20)
 
     def transitions(self) -> list[str | None]:
         return [e.transition for e in self.events.items]
 
     def wait_for(self, transition: str) -> None:
-        self.events.wait(lambda items: transition in [e.transition for e in items])
+        self.events.wait(lambda items: transition in [e.transition for e in items], timeout=20)
 
     def received(self, skill: str) -> list[tuple[str, dict]]:
         """The goals the robot's action server of ``skill`` received: (goal id as ROS prints it, fields)."""
@@ -150,7 +151,8 @@ def test_bad_commands_are_clear_errors_and_send_nothing(nav2, client_factory) ->
          "nav2:dock_robot: 'target' is not an input of dock_robot"),
         (PilotCommand(skillset="nav2", transition="dock_robot.start", inputs={"dock": 3}),
          "nav2:dock_robot: the goal of /dock_robot cannot be sent: expected string at dock_id, got an integer"),
-        (PilotCommand(skillset="nav2", transition="launch.start"), "nav2:launch is bound to no action"),
+        (PilotCommand(skillset="nav2", transition="launch.start"),
+         "nav2:launch is bound to no action (its skillset has no manager either: the pilot cannot command it)"),
         (PilotCommand(skillset="base", transition="dock_robot.start"), "base:dock_robot is bound to no action"),
         (PilotCommand(skillset="nav2", transition="dock_robot.success"),
          "nav2:dock_robot.success is not a command (SKILL.start or SKILL.interrupt)"),

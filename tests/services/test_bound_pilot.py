@@ -1,0 +1,126 @@
+"""The pilot drives a robot without skillset managers through its bindings (SPEC §8, §9 *Acting*; issue 26 item 4).
+
+The Nav2 example through a real router, each party on its own client session: the
+simulated robot (action servers, bt_navigator's lifecycle and the battery topic in CDR),
+the bound bridge, the monitor, a predictor and the pilot with its default actuator.  The
+robot ends each goal it accepts in its success mode, as Nav2's servers would.  A goal
+`run nav2:dock_robot` from the dock, in drive mode, is reached by exactly two action
+goals (undock, then dock with the goal's input at the binding's field); guide mode
+sends none; a goal the server rejects ends the pilot's goal with the server's reason.
+"""
+
+from __future__ import annotations
+
+import threading
+import uuid
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import pytest
+import zenoh
+
+from event_watch import Events
+from services.bridge_ros2.bound_live import start_bound_bridge
+from services.monitor import start_monitor
+from services.pilot import start_pilot
+from services.pilot.act import default_actuator
+from services.predictor.service import start_predictor
+from services.simulator.bound import BoundSimulator
+from skinet.files import load_bindings, load_system
+from skinet.ros.keys import KeyStyle
+from tests.services.pilot_robot import Recording, Statuses, ask_goal, goal
+
+NAV2 = Path(__file__).resolve().parents[2] / "examples" / "nav2"
+FIRST = {"/battery_state": {"percentage": 0.15, "power_supply_status": 2}, "/emergency_stop": {"data": False}}
+DOCK = {"dock_robot": {"dock": "home_dock"}}
+
+
+class Nav2:
+    """Robot, bridge, monitor, predictor and pilot of the Nav2 example, each on its own client session."""
+
+    def __init__(self, sessions: Callable[[], zenoh.Session], style: KeyStyle, end_goals: bool = True):
+        self.system, _ = load_system(NAV2 / "nav2.toml")
+        self.bindings, _ = load_bindings(self.system)
+        self.robot = BoundSimulator(sessions(), self.system, self.bindings, style=style)
+        self.ended: list[str] = []
+        if end_goals:  # the robot's implementation: each accepted goal succeeds a moment later
+            self.robot.on_start.append(lambda ss, skill, goal: threading.Timer(0.05, self._end, (ss, skill, goal))
+                                       .start())
+        self.bridge = start_bound_bridge(sessions(), self.system, self.bindings, style=style, settle=0.1, retry=0.1)
+        self.predictor = start_predictor(sessions(), "bound-pilot-test")
+        self.monitor = start_monitor(sessions(), self.system)
+        pilot_session = sessions()
+        self.actuator = Recording(default_actuator(pilot_session, self.system, style=style))  # type: ignore[arg-type]
+        self.pilot = start_pilot(pilot_session, self.system, instance="p1", actuator=self.actuator)
+        self.observer = sessions()
+        self.statuses = Statuses(self.observer, "nav2")
+        self.events = Events(self.observer, "nav2")
+        self.robot.publish_topics(FIRST)
+        self.statuses.state("idle")
+
+    def _end(self, skillset: str, skill: str, goal: str) -> None:
+        self.ended.append(f"{skill} {goal}")  # before: the pilot may see its effect before terminate returns
+        if not self.robot.terminate(skillset, skill, "success", "", goal):
+            self.ended[-1] += " (no longer active)"
+
+    def received(self) -> list[tuple[str, str, dict]]:
+        """Every goal the robot's action servers received, in order: (skill, goal id, fields)."""
+        got = [(server.logic.received, skill) for (_, skill), server in self.robot.actions.items()]
+        return [(skill, str(uuid.UUID(bytes=g)), f) for received, skill in got for g, f in received]
+
+    def close(self) -> None:
+        self.pilot.close()
+        self.monitor.close()
+        self.bridge.close()
+        self.predictor.close()
+        self.robot.close()
+
+
+@pytest.fixture
+def nav2(client_factory: Callable[[], zenoh.Session], request: pytest.FixtureRequest) -> Iterator[Nav2]:
+    style, end_goals = getattr(request, "param", (KeyStyle(), True))
+    rig = Nav2(client_factory, style, end_goals)
+    yield rig
+    rig.close()
+
+
+@pytest.mark.parametrize("nav2", [(KeyStyle(), True), (KeyStyle(rmw_zenoh=True, domain=3), True)],
+                         ids=["zenoh-bridge-ros2dds", "rmw_zenoh"], indirect=True)
+def test_drive_docks_through_the_action_servers(nav2: Nav2) -> None:
+    """From the dock, `run nav2:dock_robot`: undock, then dock with the goal's input at dock_id; reached."""
+    reply = ask_goal(nav2.observer, goal("run nav2:dock_robot", system="nav2", inputs=DOCK, mode="drive"),
+                     system="nav2")
+    # As `skinet plan examples/nav2/nav2.toml "run nav2:dock_robot"` gives it: undock first, retry on failure.
+    assert (reply.accepted, reply.reason, reply.answer, reply.moves) == (True, "", "cyclic", 4)
+    assert [(s.action, s.expect, s.inputs) for s in reply.steps] == [
+        ("undock_robot.start", None, None), ("wait", "undock_robot.success.undocked", None),
+        ("dock_robot.start", None, {"dock": "home_dock"}), ("wait", "dock_robot.success.docked", None)]
+    done = nav2.statuses.state("reached", reply.goal_id)
+    assert (done.commands, done.denied, done.retries) == (2, 0, {})
+    assert nav2.actuator.sent == ["nav2:undock_robot.start", "nav2:dock_robot.start"]
+    [(undock, undock_id, undock_goal), (dock, dock_id, dock_goal)] = sorted(
+        nav2.received(), key=lambda r: r[0] != "undock_robot")
+    assert (undock, undock_goal) == ("undock_robot", {"dock_type": "", "max_undocking_time": 0.0})
+    assert dock == "dock_robot" and {k: dock_goal[k] for k in ("use_dock_id", "dock_id", "dock_type")} == {
+        "use_dock_id": True, "dock_id": "home_dock", "dock_type": ""}
+    assert nav2.ended == [f"undock_robot {undock_id}", f"dock_robot {dock_id}"]
+    transitions = [e.transition for e in nav2.events.wait(lambda items: len(items) >= 5, timeout=20)]
+    assert transitions == [None, "undock_robot.start", "undock_robot.success.undocked", "dock_robot.start",
+                           "dock_robot.success.docked"]
+    assert nav2.events.items[-1].status.resources["dock"] == "Docked"
+
+
+@pytest.mark.parametrize("nav2", [(KeyStyle(), False)], ids=["robot-idle"], indirect=True)
+def test_guide_sends_no_goal_and_a_rejected_goal_fails_with_the_server_s_reason(nav2: Nav2) -> None:
+    reply = ask_goal(nav2.observer, goal("run nav2:dock_robot", system="nav2", inputs=DOCK), system="nav2")
+    guiding = nav2.statuses.wait(lambda s: s.goal_id == reply.goal_id and s.state == "guiding")
+    assert (guiding.next.skillset, guiding.next.transition) == ("nav2", "undock_robot.start")
+    assert nav2.received() == [] and nav2.actuator.sent == []
+    # Drive: the undocking server refuses goals.
+    nav2.robot.actions[("nav2", "undock_robot")].logic.accepting = False
+    reply = ask_goal(nav2.observer, goal("run nav2:dock_robot", system="nav2", inputs=DOCK, mode="drive",
+                                         replace=True), system="nav2")
+    failed = nav2.statuses.state("failed", reply.goal_id)
+    [(_, goal_id, _)] = nav2.received()
+    assert failed.reason == (f"cannot send nav2:undock_robot.start: send_goal /undock_robot goal {goal_id} {{}}: "
+                             "the action server of /undock_robot rejected the goal")
