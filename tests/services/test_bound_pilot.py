@@ -7,10 +7,12 @@ robot ends each goal it accepts in its success mode, as Nav2's servers would.  A
 `run nav2:dock_robot` from the dock, in drive mode, is reached by exactly two action
 goals (undock, then dock with the goal's input at the binding's field); guide mode
 sends none; a goal the server rejects ends the pilot's goal with the server's reason.
+`skinet demo nav2` ends with the pilot docking the robot through the binding.
 """
 
 from __future__ import annotations
 
+import re
 import threading
 import uuid
 from collections.abc import Callable, Iterator
@@ -28,6 +30,7 @@ from services.predictor.service import start_predictor
 from services.simulator.bound import BoundSimulator
 from skinet.files import load_bindings, load_system
 from skinet.ros.keys import KeyStyle
+from skinet_cli.main import main
 from tests.services.pilot_robot import Recording, Statuses, ask_goal, goal
 
 NAV2 = Path(__file__).resolve().parents[2] / "examples" / "nav2"
@@ -124,3 +127,22 @@ def test_guide_sends_no_goal_and_a_rejected_goal_fails_with_the_server_s_reason(
     [(_, goal_id, _)] = nav2.received()
     assert failed.reason == (f"cannot send nav2:undock_robot.start: send_goal /undock_robot goal {goal_id} {{}}: "
                              "the action server of /undock_robot rejected the goal")
+
+
+def test_skinet_demo_nav2_ends_with_the_pilot_docking(capsys: pytest.CaptureFixture[str]) -> None:
+    """Issue 26 item 5: after the run in which the check warns twice, the pilot docks through the binding: one
+    goal to the docking server with the goals file's input at dock_id, the robot docked, nothing violated."""
+    assert main(["demo", "nav2"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    dock = NAV2 / "missions" / "dock.toml"
+    at = next(n for n, line in enumerate(out) if line.startswith("   then the pilot"))
+    assert out[at - 1].startswith("   warnings heeded (commands considered, flagged, not issued): 2; ")
+    assert out[at] == (f"   then the pilot, in drive mode through the bindings: run nav2:dock_robot ({dock}): cyclic, "
+                       "2 moves when outcomes are favourable")
+    assert re.fullmatch(r'     sent: send_goal /dock_robot goal [0-9a-f]{8}(-[0-9a-f]{4}){3}-[0-9a-f]{12} '
+                        r'\{"dock_id": "home_dock", "use_dock_id": true\}: accepted', out[at + 1]), out[at + 1]
+    assert out[at + 2:] == ["     robot: nav2:dock_robot.start, nav2:dock_robot.success.docked",
+                            "   pilot: reached; 1 command sent, 0 denied; violations: 0", ""]
+    assert main(["demo", "nav2", "--core"]) == 0
+    assert capsys.readouterr().out.splitlines()[-2] == (f"   (the pilot's goals, {dock}, need the chain of a bound "
+                                                        "system: not played here)")
