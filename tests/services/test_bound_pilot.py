@@ -146,3 +146,16 @@ def test_skinet_demo_nav2_ends_with_the_pilot_docking(capsys: pytest.CaptureFixt
     assert main(["demo", "nav2", "--core"]) == 0
     assert capsys.readouterr().out.splitlines()[-2] == (f"   (the pilot's goals, {dock}, need the chain of a bound "
                                                         "system: not played here)")
+
+
+def test_a_bad_pilot_goals_file_stops_the_demo_before_the_run(tmp_path: Path,
+                                                              capsys: pytest.CaptureFixture[str]) -> None:
+    run = (NAV2 / "missions" / "nav2_run.toml").read_text().replace('"../nav2.toml"', f'"{NAV2 / "nav2.toml"}"')
+    (tmp_path / "run.toml").write_text(run.replace('pilot = "dock.toml"', 'pilot = "nodock.toml"'))
+    assert main(["demo", str(tmp_path / "run.toml")]) == 1
+    assert capsys.readouterr() == ("", f"{tmp_path / 'nodock.toml'}: error: cannot read file: No such file or "
+                                       "directory\n")
+    (tmp_path / "nodock.toml").write_text('[[goals]]\nrun = "nav2:dock_robt"\n')
+    assert main(["demo", str(tmp_path / "run.toml")]) == 1
+    assert capsys.readouterr() == ("", f"{tmp_path / 'nodock.toml'}:2:13: error: unknown skill 'dock_robt' of 'nav2' "
+                                       "(candidates: dock_robot, undock_robot)\n")
