@@ -13,6 +13,7 @@ sends none; a goal the server rejects ends the pilot's goal with the server's re
 from __future__ import annotations
 
 import re
+import subprocess
 import threading
 import uuid
 from collections.abc import Callable, Iterator
@@ -41,7 +42,8 @@ DOCK = {"dock_robot": {"dock": "home_dock"}}
 class Nav2:
     """Robot, bridge, monitor, predictor and pilot of the Nav2 example, each on its own client session."""
 
-    def __init__(self, sessions: Callable[[], zenoh.Session], style: KeyStyle, end_goals: bool = True):
+    def __init__(self, sessions: Callable[[], zenoh.Session], style: KeyStyle, end_goals: bool = True,
+                 pilot: bool = True):
         self.system, _ = load_system(NAV2 / "nav2.toml")
         self.bindings, _ = load_bindings(self.system)
         self.robot = BoundSimulator(sessions(), self.system, self.bindings, style=style)
@@ -52,14 +54,15 @@ class Nav2:
         self.bridge = start_bound_bridge(sessions(), self.system, self.bindings, style=style, settle=0.1, retry=0.1)
         self.predictor = start_predictor(sessions(), "bound-pilot-test")
         self.monitor = start_monitor(sessions(), self.system)
-        pilot_session = sessions()
-        self.actuator = Recording(default_actuator(pilot_session, self.system, style=style))  # type: ignore[arg-type]
-        self.pilot = start_pilot(pilot_session, self.system, instance="p1", actuator=self.actuator)
+        self.pilot = None
+        if pilot:  # else a pilot process of the test's
+            pilot_session = sessions()
+            self.actuator = Recording(default_actuator(pilot_session, self.system, style=style))  # type: ignore[arg-type]
+            self.pilot = start_pilot(pilot_session, self.system, instance="p1", actuator=self.actuator)
         self.observer = sessions()
         self.statuses = Statuses(self.observer, "nav2")
         self.events = Events(self.observer, "nav2")
         self.robot.publish_topics(FIRST)
-        self.statuses.state("idle")
 
     def _end(self, skillset: str, skill: str, goal: str) -> None:
         self.ended.append(f"{skill} {goal}")  # before: the pilot may see its effect before terminate returns
@@ -72,7 +75,8 @@ class Nav2:
         return [(skill, str(uuid.UUID(bytes=g)), f) for received, skill in got for g, f in received]
 
     def close(self) -> None:
-        self.pilot.close()
+        if self.pilot is not None:
+            self.pilot.close()
         self.monitor.close()
         self.bridge.close()
         self.predictor.close()
@@ -83,6 +87,7 @@ class Nav2:
 def nav2(client_factory: Callable[[], zenoh.Session], request: pytest.FixtureRequest) -> Iterator[Nav2]:
     style, end_goals = getattr(request, "param", (KeyStyle(), True))
     rig = Nav2(client_factory, style, end_goals)
+    rig.statuses.state("idle")
     yield rig
     rig.close()
 
@@ -127,6 +132,26 @@ def test_guide_sends_no_goal_and_a_rejected_goal_fails_with_the_server_s_reason(
     [(_, goal_id, _)] = nav2.received()
     assert failed.reason == (f"cannot send nav2:undock_robot.start: send_goal /undock_robot goal {goal_id} {{}}: "
                              "the action server of /undock_robot rejected the goal")
+
+
+def test_the_pilot_process_acts_on_rmw_zenoh_keys(client_factory: Callable[[], zenoh.Session], zenoh_args: list[str],
+                                                  spawn: Callable[..., subprocess.Popen]) -> None:
+    """``python -m services.pilot nav2.toml --rmw-zenoh --domain 4``: its goals reach the action servers on rmw_zenoh
+    keys (the robot, bridge and monitor of the test speak them too)."""
+    rig = Nav2(client_factory, KeyStyle(rmw_zenoh=True, domain=4), pilot=False)
+    try:
+        spawn("services.pilot", str(NAV2 / "nav2.toml"), "--rmw-zenoh", "--domain", "4", "--instance", "proc",
+              *zenoh_args)
+        rig.statuses.wait(lambda s: s.pilot == "proc" and s.state == "idle", 30, "'idle' of the pilot process")
+        reply = ask_goal(rig.observer, goal("run nav2:dock_robot", system="nav2", inputs=DOCK, mode="drive"),
+                         system="nav2")
+        done = rig.statuses.state("reached", reply.goal_id, timeout=30)
+        assert (done.commands, done.denied) == (2, 0)
+        assert [(skill, {k: fields[k] for k in ("dock_id",) if k in fields}) for skill, _, fields in sorted(
+            rig.received(), key=lambda r: r[0] != "undock_robot")] == [
+            ("undock_robot", {}), ("dock_robot", {"dock_id": "home_dock"})]
+    finally:
+        rig.close()
 
 
 def test_skinet_demo_nav2_ends_with_the_pilot_docking(capsys: pytest.CaptureFixture[str]) -> None:
