@@ -3,13 +3,12 @@
 An :class:`Actuator` sends one :class:`~skinet.wire.messages.PilotCommand`
 (``SKILL.start`` with its inputs, or ``SKILL.interrupt``) and says what it sent,
 for the log; it raises :class:`ActError` with the reason when it cannot.  Which
-protocol carries a skill is decided in one place, :func:`route`: the
-:class:`ManagerActuator` (the default) speaks a generated skillset manager's
-request protocol, as an operator GUI does (:mod:`skinet.ros.requests`); skills
-bound to ROS 2 actions (SPEC §9) are sent by the
+protocol carries a skill is decided in one place, :func:`route`, and
+:class:`Routed` (the pilot's :func:`default_actuator`) sends each command
+through the actuator of its route: the :class:`ManagerActuator` speaks a
+generated skillset manager's request protocol, as an operator GUI does
+(:mod:`skinet.ros.requests`); skills bound to ROS 2 actions (SPEC §9) go to the
 :class:`~services.pilot.bound_act.BoundActuator` (a goal, a cancel request).
-:func:`default_actuator` gives the pilot one of each that the system needs,
-behind a :class:`RoutedActuator` that sends each command where :func:`route` says.
 
 An interrupt needs the running execution's id.  The manager's own
 ``SkillsetStatus`` says it: the actuator follows each manager's status topic and,
@@ -65,43 +64,6 @@ def route(system: System, skillset: str, skill: str) -> Literal["manager", "bind
     return "binding" if system.component(skillset).binding else "manager"
 
 
-class RoutedActuator:
-    """Sends each command with the actuator of its :func:`route` (``manager`` or ``binding``)."""
-
-    def __init__(self, system: System, actuators: Mapping[str, Actuator]):
-        self.system = system
-        self.actuators = dict(actuators)
-
-    def send(self, command: PilotCommand) -> str:
-        kind = route(self.system, command.skillset, command.transition.partition(".")[0])
-        actuator = self.actuators.get(kind)
-        if actuator is None:  # the system has no such skillset: its manager's actuator says so
-            actuator = self.actuators.get("manager") or next(iter(self.actuators.values()))
-        return actuator.send(command)
-
-    def close(self) -> None:
-        for actuator in self.actuators.values():
-            actuator.close()
-
-
-def default_actuator(session: zenoh.Session, system: System, typemap: Mapping[str, str] | None = None,
-                     style: KeyStyle = KeyStyle(), instance: str = "pilot",
-                     bindings: Mapping[str, Any] | None = None) -> Actuator:
-    """The actuators ``system`` needs: a :class:`ManagerActuator` for its managers' skillsets, a
-    :class:`~services.pilot.bound_act.BoundActuator` for its bound ones (``bindings``, skillset name ->
-    :class:`~skinet.ros.binding.Binding`; read from the system's binding files when not given), on the keys
-    of ``style``.  Raises :class:`~skinet.errors.SourceError` for a binding that does not load."""
-    manager = ManagerActuator(session, system, typemap, style=style, instance=instance)
-    if not any(c.binding for c in system.components):
-        return manager
-    from services.pilot.bound_act import BoundActuator  # only systems with bindings need it
-    from skinet.files import load_bindings
-
-    if bindings is None:
-        bindings, _ = load_bindings(system)
-    return RoutedActuator(system, {"manager": manager, "binding": BoundActuator(session, bindings, style=style)})
-
-
 class ManagerActuator:
     """Commands as ``Skill<K>Request`` and ``SkillInterrupt`` on the managers' topics (keys of ``style``).
 
@@ -150,12 +112,12 @@ class ManagerActuator:
         store = self._stores[skillset]
         if kind == "start":
             with self._lock:
+                id_ = f"{self.instance}-{self._count + 1}"
+                try:
+                    request = skill_request(store, c.skillset, skill, id_, command.inputs)
+                except (ValueError, KeyError, TypeError) as exc:
+                    raise ActError(f"cannot encode {skillset}:{command.transition}: {exc}") from None
                 self._count += 1
-                id_ = f"{self.instance}-{self._count}"
-            try:
-                request = skill_request(store, c.skillset, skill, id_, command.inputs)
-            except (ValueError, KeyError, TypeError) as exc:
-                raise ActError(f"cannot encode {skillset}:{command.transition}: {exc}") from None
             key = self._requests.put(skillset, *request)
             return f"{command.transition} (id '{id_}'{_inputs(command.inputs)}) on {key}"
         if kind == "interrupt":
@@ -183,8 +145,50 @@ class ManagerActuator:
         self._requests.close()
 
 
+class Routed:
+    """Sends each command through the actuator of its :func:`route` (``manager`` or ``binding``)."""
+
+    def __init__(self, system: System, actuators: Mapping[str, Actuator]):
+        self.system, self.actuators = system, dict(actuators)
+
+    def send(self, command: PilotCommand) -> str:
+        skill = command.transition.partition(".")[0]
+        try:
+            way = route(self.system, command.skillset, skill)
+        except KeyError:
+            raise ActError(f"unknown skillset '{command.skillset}' of {self.system.name}") from None
+        actuator = self.actuators.get(way)
+        if actuator is None:
+            raise ActError(f"{command.skillset}:{skill} is bound to a ROS 2 interface (SPEC §9), and this pilot "
+                           "cannot act through bindings")
+        return actuator.send(command)
+
+    def close(self) -> None:
+        for actuator in self.actuators.values():
+            actuator.close()
+
+
+def default_actuator(session: zenoh.Session, system: System, typemap: Mapping[str, str] | None = None,
+                     style: KeyStyle = KeyStyle(), instance: str = "pilot",
+                     bindings: Mapping[str, Any] | None = None) -> Actuator:
+    """The pilot's default: each skill through the protocol :func:`route` gives it, on the keys of ``style``:
+    a :class:`ManagerActuator` for the managers' skillsets, a
+    :class:`~services.pilot.bound_act.BoundActuator` for the bound ones (``bindings``: skillset name ->
+    :class:`~skinet.ros.binding.Binding`, read from the system's binding files when not given; a binding
+    that does not load raises :class:`~skinet.errors.SourceError`)."""
+    actuators: dict[str, Actuator] = {"manager": ManagerActuator(session, system, typemap, style, instance)}
+    if any(c.binding for c in system.components):
+        from services.pilot.bound_act import BoundActuator  # only systems with bindings need it
+        from skinet.files import load_bindings
+
+        if bindings is None:
+            bindings, _ = load_bindings(system)
+        actuators["binding"] = BoundActuator(session, bindings, style=style)
+    return Routed(system, actuators)
+
+
 def _inputs(inputs: Mapping[str, object]) -> str:
     return f", inputs {dict(inputs)}" if inputs else ""
 
 
-__all__ = ["ActError", "Actuator", "ManagerActuator", "RoutedActuator", "default_actuator", "route"]
+__all__ = ["ActError", "Actuator", "ManagerActuator", "Routed", "default_actuator", "route"]
