@@ -121,7 +121,7 @@ def test_drive_docks_through_the_action_servers(nav2: Nav2) -> None:
 @pytest.mark.parametrize("nav2", [(KeyStyle(), False)], ids=["robot-idle"], indirect=True)
 def test_guide_sends_no_goal_and_a_rejected_goal_fails_with_the_server_s_reason(nav2: Nav2) -> None:
     reply = ask_goal(nav2.observer, goal("run nav2:dock_robot", system="nav2", inputs=DOCK), system="nav2")
-    guiding = nav2.statuses.wait(lambda s: s.goal_id == reply.goal_id and s.state == "guiding")
+    guiding = nav2.statuses.first(lambda s: s.goal_id == reply.goal_id and s.state == "guiding")
     assert (guiding.next.skillset, guiding.next.transition) == ("nav2", "undock_robot.start")
     assert nav2.received() == [] and nav2.actuator.sent == []
     # Drive: the undocking server refuses goals.
@@ -142,7 +142,7 @@ def test_the_pilot_process_acts_on_rmw_zenoh_keys(client_factory: Callable[[], z
     try:
         spawn("services.pilot", str(NAV2 / "nav2.toml"), "--rmw-zenoh", "--domain", "4", "--instance", "proc",
               *zenoh_args)
-        rig.statuses.wait(lambda s: s.pilot == "proc" and s.state == "idle", 30, "'idle' of the pilot process")
+        rig.statuses.first(lambda s: s.pilot == "proc" and s.state == "idle", 30, "'idle' of the pilot process")
         reply = ask_goal(rig.observer, goal("run nav2:dock_robot", system="nav2", inputs=DOCK, mode="drive"),
                          system="nav2")
         done = rig.statuses.state("reached", reply.goal_id, timeout=30)
