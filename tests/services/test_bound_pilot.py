@@ -188,3 +188,14 @@ def test_a_bad_pilot_goals_file_stops_the_demo_before_the_run(tmp_path: Path,
     assert main(["demo", str(tmp_path / "run.toml")]) == 1
     assert capsys.readouterr() == ("", f"{tmp_path / 'nodock.toml'}:2:13: error: unknown skill 'dock_robt' of 'nav2' "
                                        "(candidates: dock_robot, undock_robot)\n")
+
+
+def test_skinet_run_takes_the_robot_s_keys_for_its_pilot_and_the_bridge_it_prints(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """``skinet run ... --rmw-zenoh --domain 3``: its embedded pilot's actuator gets those keys (default_actuator with
+    key_style, as the pilot process above), and the bridge command it prints reads them."""
+    assert main(["run", str(NAV2 / "nav2.toml"), "--once", "--rmw-zenoh", "--domain", "3", "--no-properties"]) == 0
+    lines = capsys.readouterr().err.splitlines()
+    bridge = next(line for line in lines if "services.bridge_ros2" in line)
+    assert re.fullmatch(rf"  python -m services.bridge_ros2 {re.escape(str(NAV2 / 'nav2.toml'))} --rmw-zenoh "
+                        r"--domain 3 -e tcp/127\.0\.0\.1:\d+   \(the robot's side\)", bridge), bridge
