@@ -23,7 +23,7 @@ from services.bridge_ros2.replay import monitor_log, replay_bag
 from services.bridge_ros2.service import default_source, start_bridge
 from services.bridge_ros2.worker import Worker
 from services.common.cli import (
-    add_instance_arg, add_log_arg, add_ros_style_args, one_line_errors, ros_style, setup_logging,
+    add_instance_arg, add_log_arg, add_ros_key_args, key_style, one_line_errors, setup_logging,
 )
 from services.common.events import event_publisher
 from services.common.zenoh_config import add_zenoh_args, config_from_args, open_session
@@ -44,7 +44,7 @@ def build_parser() -> ArgumentParser:
                     "skinet/<system>/events/<skillset>.",
     )
     parser.add_argument("system", help="system TOML file ([system] types names the type map)")
-    add_ros_style_args(parser)
+    add_ros_key_args(parser)
     add_instance_arg(parser)
     parser.add_argument("--source", default=None, help="source name in the events (default: bridge_ros2/INSTANCE)")
     parser.add_argument("--replay", metavar="BAG", help="replay a rosbag2 file (directory or .db3/.mcap) and exit")
@@ -83,7 +83,7 @@ def main(argv: list[str] | None = None) -> int:
         stop = threading.Event()
         for sig in (signal.SIGINT, signal.SIGTERM):
             signal.signal(sig, lambda *_: stop.set())
-        style = ros_style(args)
+        style = key_style(args)
         bridge = None
         managed = [c.name for c in system.components if not c.binding]
         # One derivation thread, epoch and heartbeat for both kinds: their events leave in arrival order.

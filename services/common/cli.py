@@ -1,4 +1,4 @@
-"""Command-line pieces every service shares: instance ids, logging, one-line errors."""
+"""Command-line pieces every service shares: instance ids, logging, one-line errors, ROS 2 key styles."""
 
 from __future__ import annotations
 
@@ -10,14 +10,11 @@ import re
 import socket
 import sys
 from collections.abc import Callable, Sequence
-from typing import TYPE_CHECKING
 
 from skinet_cli.environment import check_environment
 from skinet_cli.options import count, key_name, key_prefix
 from skinet.errors import SkinetError, SourceError
-
-if TYPE_CHECKING:
-    from skinet.ros.keys import KeyStyle
+from skinet.ros.keys import KeyStyle
 
 LEVELS = ("DEBUG", "INFO", "WARNING", "ERROR", "CRITICAL")
 
@@ -31,6 +28,26 @@ def add_instance_arg(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--instance", type=key_name("instance id"),
                         default=os.environ.get("SKINET_INSTANCE") or default_instance_id(),
                         help="instance id in the liveliness token (default: $SKINET_INSTANCE or HOST-PID)")
+
+
+def add_ros_key_args(parser: argparse.ArgumentParser) -> None:
+    """``--rmw-zenoh``, ``--namespace``, ``--domain``, ``--ros-distro``: how ROS 2 topics and services show on Zenoh
+    (:func:`key_style`), for the services that read or write them (the bridge, the pilot)."""
+    parser.add_argument("--rmw-zenoh", action="store_true",
+                        help="topics as rmw_zenoh carries them (default: zenoh-bridge-ros2dds keys)")
+    parser.add_argument("--namespace", type=key_prefix("namespace", env="SKINET_ROS_NAMESPACE"),
+                        default=os.environ.get("SKINET_ROS_NAMESPACE", ""),
+                        help="zenoh-bridge-ros2dds namespace prefixing the keys")
+    parser.add_argument("--domain", type=count(0, 232, env="ROS_DOMAIN_ID"), default=os.environ.get("ROS_DOMAIN_ID", "0"),
+                        help="ROS domain id in rmw_zenoh keys (default: $ROS_DOMAIN_ID or 0)")
+    parser.add_argument("--ros-distro", default=os.environ.get("ROS_DISTRO", "jazzy"),
+                        help="ROS 2 distribution of rmw_zenoh (default: $ROS_DISTRO or jazzy); on humble the keys "
+                             "carry TypeHashNotSupported instead of a RIHS01 type hash")
+
+
+def key_style(args: argparse.Namespace) -> KeyStyle:
+    """The :class:`~skinet.ros.keys.KeyStyle` of :func:`add_ros_key_args`'s options."""
+    return KeyStyle(args.rmw_zenoh, args.namespace, args.domain, args.ros_distro == "humble")
 
 
 def _log_level(text: str) -> str:
@@ -47,29 +64,6 @@ def add_log_arg(parser: argparse.ArgumentParser) -> None:
 
 def setup_logging(args: argparse.Namespace) -> None:
     logging.basicConfig(level=args.log_level.upper(), format="%(asctime)s %(name)s %(levelname)s %(message)s")
-
-
-def add_ros_style_args(parser: argparse.ArgumentParser) -> None:
-    """How the robot's ROS 2 topics show on Zenoh (ZENOH.md): ``--rmw-zenoh``, ``--namespace``
-    (``$SKINET_ROS_NAMESPACE``), ``--domain`` (``$ROS_DOMAIN_ID``), ``--ros-distro`` (``$ROS_DISTRO``).
-    The bridge reads the managers with them and the pilot sends its requests with them: give both the same."""
-    parser.add_argument("--rmw-zenoh", action="store_true",
-                        help="topics as rmw_zenoh carries them (default: zenoh-bridge-ros2dds keys)")
-    parser.add_argument("--namespace", type=key_prefix("namespace", env="SKINET_ROS_NAMESPACE"),
-                        default=os.environ.get("SKINET_ROS_NAMESPACE", ""),
-                        help="zenoh-bridge-ros2dds namespace prefixing the keys (default: $SKINET_ROS_NAMESPACE)")
-    parser.add_argument("--domain", type=count(0, 232, env="ROS_DOMAIN_ID"), default=os.environ.get("ROS_DOMAIN_ID", "0"),
-                        help="ROS domain id in rmw_zenoh keys (default: $ROS_DOMAIN_ID or 0)")
-    parser.add_argument("--ros-distro", default=os.environ.get("ROS_DISTRO", "jazzy"),
-                        help="ROS 2 distribution of rmw_zenoh (default: $ROS_DISTRO or jazzy); on humble the keys "
-                             "carry TypeHashNotSupported instead of a RIHS01 type hash")
-
-
-def ros_style(args: argparse.Namespace) -> "KeyStyle":
-    """The key style of the flags of :func:`add_ros_style_args`."""
-    from skinet.ros.keys import KeyStyle  # rosbags' type system: only for the services that speak ROS 2
-
-    return KeyStyle(args.rmw_zenoh, args.namespace, args.domain, args.ros_distro == "humble")
 
 
 def one_line_errors(prog: str) -> Callable[[Callable[[Sequence[str] | None], int]], Callable[..., int]]:

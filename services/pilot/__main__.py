@@ -7,7 +7,7 @@ import sys
 from collections.abc import Sequence
 
 from services.common.cli import (
-    add_instance_arg, add_log_arg, add_ros_style_args, one_line_errors, ros_style, setup_logging,
+    add_instance_arg, add_log_arg, add_ros_key_args, key_style, one_line_errors, setup_logging,
 )
 from services.common.zenoh_config import add_zenoh_args, client_name, config_from_args, open_session
 from services.embedded import stop_on_signals
@@ -22,9 +22,11 @@ def build_parser() -> ArgumentParser:
     p = ArgumentParser(
         prog="python -m services.pilot",
         description="SkiNet Live pilot: takes goals on skinet/<system>/pilot/goal/<client>, follows the monitor's "
-                    "live state, and guides the operator (the next command) or drives the skillset managers "
-                    "itself, sending only commands the monitor's strict check allows. Its status is on "
-                    "skinet/<system>/pilot/status. Send goals with a PilotGoalRequest (see docs/pilot.md).",
+                    "live state, and guides the operator (the next command) or drives the robot itself (the skillset "
+                    "managers' request topics; for skills bound to ROS 2 actions, goals and cancel requests on the "
+                    "keys of --rmw-zenoh/--namespace), sending only commands the monitor's strict check allows. Its "
+                    "status is on skinet/<system>/pilot/status. Send goals with a PilotGoalRequest (see "
+                    "docs/pilot.md).",
     )
     p.add_argument("system", help="system file (.toml), e.g. skillsets/spot_arm.toml (its type map gives the "
                                   "managers' message types)")
@@ -33,7 +35,7 @@ def build_parser() -> ArgumentParser:
                    help="planning budget per goal, seconds (default: 1); past it the plan is unknown and the goal fails")
     p.add_argument("--response-timeout", type=seconds(), default=5.0,
                    help="seconds a manager has to react to a command before the goal fails (default: 5)")
-    add_ros_style_args(p)
+    add_ros_key_args(p)
     add_log_arg(p)
     add_zenoh_args(p)
     return p
@@ -50,7 +52,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     stop = stop_on_signals()
     session = open_session(config)
     try:
-        actuator = default_actuator(session, system, typemap, ros_style(args), instance=f"pilot-{args.instance}")
+        actuator = default_actuator(session, system, typemap, style=key_style(args), instance=f"pilot-{args.instance}")
         pilot = start_pilot(session, system, instance=args.instance, actuator=actuator,
                             response_timeout=args.response_timeout, budget=args.budget, client=client_name(config),
                             typemap=typemap)

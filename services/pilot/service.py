@@ -18,7 +18,8 @@ after the step it was planned from); never two commands in flight; no reaction w
 ``response_timeout`` ends the goal ``failed: no response from <manager>``.
 
 A skillset that is not ``live``, a model divergence (until the next step, or ``resume``),
-a pending prediction (when a command is due) or an operator's ``pause`` pause it.  A
+a prediction still pending ``PENDING_GRACE`` after its step (when a command is due) or an
+operator's ``pause`` pause it.  A
 skill that fails ``max_retries`` times in one goal ends it ``failed``.  The status
 (:class:`PilotStatus`) is put on ``keys.pilot_status`` at every change and answered on
 ``get``.  Bad requests, an unknown system, a goal without a plan, no monitor, a manager
@@ -57,6 +58,7 @@ TICK = 0.1  # seconds between the worker's looks at timeouts
 CHECK_WAIT = 1.0  # seconds the check may wait for a synced state and a fresh prediction
 MAX_REQUEST = 256 << 10  # bytes of a goal request (a mission file's text)
 MAX_STATE = 1 << 20  # bytes of a LiveState or UnsafeReport read
+PENDING_GRACE = 0.5  # seconds a step's prediction may take before the pilot says it is paused for it
 RETRY_REFUSED = 1.0  # seconds before a check that gave no decision is asked again at the same step
 
 
@@ -124,6 +126,7 @@ class Pilot:
         self._asked: tuple[int, int, UnsafeReport, float] | None = None  # goal, step, report, until: a refused check
         self._refusal = ""  # why that check did not allow
         self._seq = 0
+        self._pending = (-1, 0.0)  # the step whose prediction is awaited, since when (monotonic)
         self._steps: tuple[Plan | None, list[PlanStep]] = (None, [])  # a plan's steps as messages, made once
         self._status = PilotStatus(system=self.name, pilot=self.instance, seq=0, stamp=time.time(),
                                    state="waiting for monitor", reason=self._no_monitor())
@@ -425,6 +428,10 @@ class Pilot:
             return self._show("guiding", next_=command, plan=g.plan, marking=marking)
         u = self._unsafe
         if u is None or u.seq != st.seq or u.prediction_stale:
+            if self._pending[0] != st.seq:
+                self._pending = (st.seq, time.monotonic())
+            if time.monotonic() - self._pending[1] < PENDING_GRACE:  # the usual moment after every step
+                return self._show("driving", f"waiting for the prediction of step {st.seq}", command, g.plan, marking)
             return self._show("paused", f"the prediction of step {st.seq} is pending", command, g.plan, marking)
         a = self._asked
         if a is not None and a[:3] == (g.id, st.seq, u) and time.monotonic() < a[3]:
@@ -554,9 +561,9 @@ def start_pilot(session: zenoh.Session, system: System, instance: str | None = N
     """Start a pilot of ``system`` on ``session`` (which may be shared, SPEC §7).
 
     ``instance``: its id in the liveliness token and the status (default: random);
-    ``actuator``: how it acts (default: :func:`~services.pilot.act.default_actuator`, the managers'
-    request topics, which needs the system's ``typemap``); ``response_timeout``: seconds a
-    manager has to react to a command; ``budget``: planning seconds per goal; ``client``: its
+    ``actuator``: how it acts (default: :func:`~services.pilot.act.default_actuator`: the managers'
+    request topics, which need the system's ``typemap``, and the bound skills' actions); ``response_timeout``:
+    seconds a manager has to react to a command; ``budget``: planning seconds per goal; ``client``: its
     router login, the client chunk of its check queries (default ``local``).
     """
     return Pilot(session, system, instance=instance, actuator=actuator, response_timeout=response_timeout,
