@@ -11,7 +11,6 @@ and publish its own keys, never report for the robot or the bridge; only the
 from __future__ import annotations
 
 import json
-import os
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -21,16 +20,15 @@ import zenoh
 
 from deploy_support import REPO, SYSTEM, Services, Tokens, acl_router_config, free_port, login, wait_until
 from services.pilot import start_pilot
-from services.pilot.act import ManagerActuator
+from services.pilot.act import ActError, ManagerActuator
+from services.pilot.bound_act import BoundActuator
 from services.simulator.bound import BoundSimulator
 from services.simulator.driver import Operator
 from services.simulator.service import Simulator
 from skinet.files import load_bindings, load_system, load_typemap
-from skinet.ros.actions import cancel_goal_reply, cancel_goal_request, send_goal_reply, send_goal_request
-from skinet.ros.binding import CANCEL_TYPE
 from skinet.ros.interfaces import status_request_topic
 from skinet.ros.requests import event_request, skill_interrupt, skill_request
-from skinet.ros.keys import KeyStyle, manager_topics, rmw_attachment
+from skinet.ros.keys import KeyStyle, manager_topics
 from skinet.wire import keys
 from skinet.wire.codec import decode, encode
 from skinet.wire.messages import PilotCommand, PilotGoalReply, PilotGoalRequest, PilotStatus
@@ -38,9 +36,12 @@ from test_acl import Inbox, acl_router  # noqa: F401 (the shipped configuration'
 
 SYSTEM_FILE = REPO / "skillsets" / "spot_arm.toml"
 NAV2_FILE = REPO / "examples" / "nav2" / "nav2.toml"
-# What a deployment of examples/nav2 adds to the rule "robot traffic": its robot's own keys.
+# What a deployment of examples/nav2 adds to the rules "robot traffic" (its robot's own keys) and "deliver"
+# (the last action status kept by the gateway's cache, which `**` does not reach: docs/deployment.md).
 NAV2_ROBOT = ["navigate_to_pose/**", "dock_robot/**", "undock_robot/**", "bt_navigator/**", "battery_state",
               "emergency_stop"]
+NAV2_CACHES = [k for a in ("navigate_to_pose", "dock_robot", "undock_robot")
+               for k in (f"{a}/_action/status/@adv/**", f"*/{a}/_action/status/*/*/@adv/**")]
 LOGINS = ("pilot", "operator", "observer", "robot", "bridge", "monitor")
 STYLES = {"zenoh-bridge-ros2dds": KeyStyle(), "its namespace": KeyStyle(namespace="robot1"),
           "rmw_zenoh": KeyStyle(rmw_zenoh=True, domain=3)}
@@ -207,12 +208,13 @@ def _replies(session: zenoh.Session, key: str, payload: bytes | None = None) -> 
 
 @pytest.fixture(scope="module")
 def nav2_router() -> Iterator[str]:
-    """The shipped configuration with examples/nav2's robot keys in "robot traffic", as its deployment has them."""
+    """The shipped configuration with examples/nav2's robot keys, as its deployment has them."""
     endpoint = f"tls/127.0.0.1:{free_port()}"
     config = acl_router_config(endpoint)
     acl = json.loads(config.get_json("access_control"))
-    rule = next(r for r in acl["rules"] if r["id"] == "robot traffic")
-    rule["key_exprs"] += [*NAV2_ROBOT, *(f"*/{k}" for k in NAV2_ROBOT)]
+    rules = {r["id"]: r for r in acl["rules"]}
+    rules["robot traffic"]["key_exprs"] += [*NAV2_ROBOT, *(f"*/{k}" for k in NAV2_ROBOT), *NAV2_CACHES]
+    rules["deliver"]["key_exprs"] += NAV2_CACHES
     config.insert_json5("access_control", json.dumps(acl))
     router = zenoh.open(config)
     try:
@@ -221,44 +223,40 @@ def nav2_router() -> Iterator[str]:
         router.close()
 
 
-def _call(session: zenoh.Session, key: str, payload: bytes, style: KeyStyle) -> bytes | None:
-    attachment = rmw_attachment(1, time.time_ns(), os.urandom(16)) if style.rmw_zenoh else None
-    replies = [r.ok.payload.to_bytes() for r in session.get(key, payload=payload, attachment=attachment, timeout=1.5)
-               if r.ok is not None]
-    return replies[0] if replies else None
-
-
 @pytest.mark.parametrize("style", [KeyStyle(), KeyStyle(rmw_zenoh=True)], ids=["zenoh-bridge-ros2dds", "rmw_zenoh"])
 def test_the_pilot_login_sends_and_cancels_bound_action_goals(nav2_router: str, style: KeyStyle) -> None:
-    """Skills bound to actions (SPEC §9): the pilot's send_goal and cancel_goal reach the robot's action
-    server and are answered; the operator's and the observer's do not, nor the pilot's get_result."""
+    """Skills bound to actions (SPEC §9): the pilot's actuator sends a goal to the robot's action server
+    and cancels it (after reading the action's last status); the same actuator logged in as the
+    operator or the observer gets no answer, so nothing starts or stops."""
     system, _ = load_system(NAV2_FILE)
     bindings, _ = load_bindings(system)
-    binding = bindings["nav2"]
-    skill = next(s for s in binding.skills if s.skill == "navigate")
     robot_session = login(nav2_router, "robot")
     sim = BoundSimulator(robot_session, system, bindings, style=style)
     clients = {u: login(nav2_router, u) for u in ("pilot", "operator", "observer")}
-    store, server = binding.store, sim.actions[("nav2", "navigate")]
-    send_goal = sim.key(skill.name("send_goal"), f"{skill.type}_SendGoal", store)
-    cancel_goal = sim.key(skill.name("cancel_goal"), CANCEL_TYPE, store)
+    actuators = {u: BoundActuator(s, bindings, style=style, timeout=1.0) for u, s in clients.items()}
+    server = sim.actions[("nav2", "navigate")]
+    start, interrupt = (PilotCommand(skillset="nav2", transition=f"navigate.{k}") for k in ("start", "interrupt"))
     try:
         time.sleep(0.3)
         for user in ("operator", "observer"):
-            goal = os.urandom(16)
-            assert _call(clients[user], send_goal, send_goal_request(store, skill.type, goal), style) is None, user
+            with pytest.raises(ActError, match="no reply from the action server of /navigate_to_pose"):
+                actuators[user].send(start)
         assert server.logic.current() is None
-        goal = os.urandom(16)
-        reply = _call(clients["pilot"], send_goal, send_goal_request(store, skill.type, goal), style)
-        assert reply is not None and send_goal_reply(store, skill.type, reply)[0]
-        assert server.logic.current().id == goal
-        get_result = sim.key(skill.name("get_result"), f"{skill.type}_GetResult", store)
-        assert [r for r in clients["pilot"].get(get_result, timeout=0.5) if r.ok is not None] == []
+        assert actuators["pilot"].send(start).endswith(": accepted")
+        goal = server.logic.current()
+        assert goal is not None and goal.id == actuators["pilot"].sent[("nav2", "navigate")].id
         for user in ("operator", "observer"):
-            assert _call(clients[user], cancel_goal, cancel_goal_request(store, goal), style) is None, user
-        assert server.logic.current().id == goal
-        reply = _call(clients["pilot"], cancel_goal, cancel_goal_request(store, goal), style)
-        assert reply is not None and cancel_goal_reply(store, reply) == ("ERROR_NONE", [goal])
+            with pytest.raises(ActError):  # it reads no status, or gets no answer to its cancel
+                actuators[user].send(interrupt)
+        assert server.logic.current() is goal
+        assert actuators["pilot"].send(interrupt).endswith("(the goal the pilot sent): canceling")
+        assert server.logic.current() is None
+        # A goal the operator's own client sent (on the robot's side): the pilot finds it in the action's
+        # last status, read from the gateway's cache through the router, and cancels it.
+        assert sim.send_goal("nav2", "navigate")
+        theirs = server.logic.current()
+        assert theirs is not None
+        assert actuators["pilot"].send(interrupt).endswith("(the goal the bridge follows): canceling")
         assert server.logic.current() is None
     finally:
         sim.close()
