@@ -3,9 +3,11 @@
 The router is the Python wheel with the shipped configuration on a ``tls/`` endpoint
 (mutual TLS, each user with its own password and certificate, as in ``test_acl.py``);
 the robot is the simulator's managers (the real request protocol, CDR on the keys of
-both gateways) logged in as ``robot``.  The pilot login may drive the managers' skills
-and publish its own keys, never report for the robot or the bridge; only the
-``operator`` login reaches the pilot's goal queryable.
+both gateways) logged in as ``robot``, or examples/nav2's simulated action servers.  The
+pilot login may drive the managers' skills and the bound actions (with the pilot's own
+actuators) and publish its own keys, never report for the robot or the bridge; only the
+``operator`` login reaches the real pilot's goal queryable; and the services, each a
+process with its own login, drive an operator's goal to ``reached`` through the router.
 """
 
 from __future__ import annotations
