@@ -91,7 +91,8 @@ def parse_pilot_run(text: str, source: str = "<pilot run>") -> PilotRun:
                              f"failure_rate must be a probability between 0 and 1, got {rate!r}")
     entries = data.get("failures", [])
     if not isinstance(entries, list):
-        raise SourceError.at(source, locate(text, (), "failures"), "'failures' must be [[failures]] tables")
+        raise SourceError.at(source, locate(text, ("failures",)) or locate(text, (), "failures"),
+                             "'failures' must be [[failures]] tables")
     failures = []
     for n, entry in enumerate(entries):
         table = ("failures", n)
