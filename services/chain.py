@@ -70,14 +70,14 @@ def run_chain(
     monitor showed then, ``after`` with the records once the run is over, while
     every service still runs (``skinet demo --live`` keeps serving the views then).
     """
-    with _embedded(session, system, predict) as (session, monitor, services):
+    with embedded_services(session, system, predict) as (session, monitor, services):
         external = simulator is not None
         if simulator is None:
             simulator = Simulator(session, system, typemap)
             services.append(simulator)
         bridge = start_bridge(session, system, typemap, style=style)
         services.append(bridge)
-        _wait(monitor.synced, settle, "initial statuses")  # SPEC §7: every skillset live
+        wait_until(monitor.synced, settle, "initial statuses")  # SPEC §7: every skillset live
         lost = {name: 0 for name in simulator.nodes}
         if external:
             # Behind a gateway, statuses answering the first requests are lost until its
@@ -89,8 +89,8 @@ def run_chain(
             expected = {name: n - lost[name] for name, n in simulator.statuses_published().items()}
             if not bridge.wait_statuses(expected):
                 raise ChainError(f"step {run.index}: the bridge did not receive every status")
-            _wait(lambda: _handled(monitor, bridge.feed.source, {n: m.seq for n, m in bridge.feed.managers.items()}),
-                  settle, f"step {run.index} applied")
+            seqs = lambda: {n: m.seq for n, m in bridge.feed.managers.items()}  # noqa: E731
+            wait_until(lambda: handled_all(monitor, bridge.feed.source, seqs()), settle, f"step {run.index} applied")
 
         records, on_step = _recorder(system, monitor, caught_up, predict, settle, on_record)
         simulator.drive(scenario, speed=speed, on_step=on_step)
@@ -122,13 +122,13 @@ def run_bound_chain(
     from services.bridge_ros2.bound_live import start_bound_bridge
     from services.simulator.bound import BoundSimulator
 
-    with _embedded(session, system, predict) as (session, monitor, services):
+    with embedded_services(session, system, predict) as (session, monitor, services):
         robot = BoundSimulator(session, system, bindings, style=style)
         services.append(robot)
         bridge = start_bound_bridge(session, system, bindings, style=style, settle=0.2, retry=0.2)
         services.append(bridge)
         robot.publish_topics(scenario.topics)
-        _wait(monitor.synced, settle, "initial statuses")  # SPEC §7: every skillset live
+        wait_until(monitor.synced, settle, "initial statuses")  # SPEC §7: every skillset live
         watched = set(bridge.feed.routes)
 
         def caught_up() -> bool:
@@ -136,10 +136,10 @@ def run_bound_chain(
             return bridge.counters.messages >= published and not bridge.feed.pending_results()
 
         def step_done(run: StepRun) -> None:
-            _wait(caught_up, settle, f"step {run.index}: the bridge's messages")
+            wait_until(caught_up, settle, f"step {run.index}: the bridge's messages")
             bridge.wait_idle(settle)
-            _wait(lambda: _handled(monitor, bridge.feed.source, {n: s.seq for n, s in bridge.feed.skillsets.items()}),
-                  settle, f"step {run.index} applied")
+            seqs = lambda: {n: s.seq for n, s in bridge.feed.skillsets.items()}  # noqa: E731
+            wait_until(lambda: handled_all(monitor, bridge.feed.source, seqs()), settle, f"step {run.index} applied")
 
         records, on_step = _recorder(system, monitor, step_done, predict, settle, on_record)
         robot.drive(scenario, speed=speed, on_step=on_step)
@@ -149,7 +149,7 @@ def run_bound_chain(
 
 
 @contextmanager
-def _embedded(session: zenoh.Session | None, system: System,
+def embedded_services(session: zenoh.Session | None, system: System,
               predict: bool) -> Iterator[tuple[zenoh.Session, Any, list[Any]]]:
     """A session (a new peer one unless given), the monitor and a predictor on it, and the list of
     services to close at the end: the monitor first, then the others in reverse order (the session too, if it
@@ -179,7 +179,7 @@ def _recorder(system: System, monitor: Any, caught_up: Callable[[StepRun], None]
     records: list[StepRecord] = []
     before = {p.name: True for p in system.properties}
     if predict:
-        _wait(lambda: not monitor.snapshot().unsafe.prediction_stale, settle, "initial prediction")
+        wait_until(lambda: not monitor.snapshot().unsafe.prediction_stale, settle, "initial prediction")
     first = monitor.snapshot()
     shown = [unsafe_transition(u) for u in first.unsafe.unsafe]  # what the operator sees
     seq = first.state.seq  # the monitor's last step
@@ -188,7 +188,7 @@ def _recorder(system: System, monitor: Any, caught_up: Callable[[StepRun], None]
         nonlocal before, shown, seq
         caught_up(run)
         if predict:
-            _wait(lambda: not monitor.snapshot().unsafe.prediction_stale, settle, f"step {run.index} prediction")
+            wait_until(lambda: not monitor.snapshot().unsafe.prediction_stale, settle, f"step {run.index} prediction")
         view = monitor.snapshot()
         stepped, seq = view.state.seq != seq, view.state.seq
         record = _record(run, view, before, shown, _divergence(system, run, view, stepped))
@@ -202,7 +202,7 @@ def _recorder(system: System, monitor: Any, caught_up: Callable[[StepRun], None]
     return records, on_step
 
 
-def _handled(monitor: Any, source: str, next_seq: Mapping[str, int]) -> bool:
+def handled_all(monitor: Any, source: str, next_seq: Mapping[str, int]) -> bool:
     """Whether the monitor handled every event ``source`` published (``next_seq``: per skillset, the seq
     its next event will have): applied, or covered by the resync it synced from."""
     for name, n in next_seq.items():
@@ -251,7 +251,8 @@ def _record(run: StepRun, view: MonitorView, before: dict[str, bool], shown: lis
                       flags_on(shown, run.step.skillset, run.step.transition or ""), recovery)
 
 
-def _wait(condition, timeout: float, what: str) -> None:
+def wait_until(condition: Callable[[], object], timeout: float, what: str) -> None:
+    """Poll ``condition`` until it holds; :class:`ChainError` naming ``what`` after ``timeout`` seconds."""
     deadline = time.monotonic() + timeout
     while not condition():
         if time.monotonic() > deadline:

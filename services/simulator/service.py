@@ -181,6 +181,12 @@ class Simulator:
                 out[name] = node.statuses
         return out
 
+    def commands_handled(self) -> int:
+        """Skill requests and interrupts handled so far, by every manager (an operator's or a pilot's commands)."""
+        with self._cond:
+            return sum(n for node in self.nodes.values() for topic, n in node.handled.items()
+                       if node.topics[topic].kind in ("skill_request", "skill_interrupt"))
+
     def handled(self, skillset: str, topic: str) -> int:
         """Inputs handled so far on a node-relative topic (for callers waiting on their request)."""
         with self._cond:
