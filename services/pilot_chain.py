@@ -112,7 +112,13 @@ def run_pilot_chain(
         reply = _ask(session, keys.pilot_goal(system.name, keys.LOCAL_CLIENT), request, settle)
         if not reply.accepted:
             raise ChainError(f"the pilot refused the mission: {reply.reason}")
-        wait_until(lambda: watch.ended(reply.goal_id), timeout, f"the end of the mission ({pilot.status.state})")
+        try:
+            wait_until(lambda: watch.ended(reply.goal_id), timeout, "the end of the mission")
+        except ChainError:
+            status = pilot.status
+            raise ChainError(f"the pilot's mission did not end within {timeout:g} s: it is {status.state}"
+                             + (f" ({status.reason})" if status.reason else "")
+                             + f" at goal {status.index + 1} of {len(status.goals)}") from None
         seconds = time.monotonic() - started
         wait_until(world.idle, settle, "the simulated skills' ends")
         expected = simulator.statuses_published()

@@ -8,29 +8,35 @@ import sys
 from pathlib import Path
 
 from skinet.errors import SkinetError, SourceError
+from skinet_cli.demo_pilot import PilotEntry, Row, load_pilot_entry, play_pilot, table, tally
 from skinet_cli.live_demo import add_live_args, live_options_misused, play_live
 from skinet_cli.options import add_no_properties_arg, load_live_system, require_properties
 from skinet.explain import plural, warning_line
 from skinet.files import load_bindings, load_typemap, read_text
 from skinet.mission import Scenario, StepRecord, check_scenario, flagged_before, parse_scenario, replay
 from skinet.mission_log import records_to_log
+from skinet.pilot_run import is_pilot_run
 from skinet.system import System
 from skinet.wire.log import log_line
 
-MISSIONS = ("unassisted.toml", "assisted.toml", "mobile_unassisted.toml", "mobile_assisted.toml")
+MISSIONS = ("unassisted.toml", "assisted.toml", "pilot.toml", "mobile_unassisted.toml", "mobile_assisted.toml")
 UNEXPECTED = 3  # exit status: a divergence the scenario did not declare, or a declared one that did not happen
 EXAMPLES = {"nav2": Path("examples") / "nav2" / "missions" / "nav2_run.toml"}  # skinet demo nav2
-HELP = (f"play {len(MISSIONS)} runs: the paper's unassisted and assisted runs, then the mobile manipulator's two "
-        "(the main job)")
+HELP = (f"play {len(MISSIONS)} runs: the paper's unassisted and assisted runs, the paper's mission driven by the "
+        "pilot, then the mobile manipulator's two (the main job)")
 DESCRIPTION = (
     f"Play {len(MISSIONS)} runs through the whole chain (simulated managers, CDR, bridge, monitor, predictor on one "
     "embedded Zenoh session) and print what the operator would have seen: the paper's unassisted run "
-    "(three violations) and assisted run (two warnings heeded, no violation), then the mobile manipulator's "
-    "unassisted and assisted runs (a forced constraint). Given SCENARIO files, it plays those instead; 'nav2' "
+    "(three violations) and assisted run (two warnings heeded, no violation), the same mission driven by the "
+    "pilot from a goals file with two failures injected (retried; no violation, no command denied), then the "
+    "mobile manipulator's unassisted and assisted runs (a forced constraint), and a table of the runs side by "
+    "side (commands, moves, retries, violations, denied). Given SCENARIO files (or pilot run files, with a "
+    "[pilot] table), it plays those instead; 'nav2' "
     "plays a Nav2 base that has no skillset manager, bound to its action servers, lifecycle node and topics "
     "(examples/nav2). A step the model does not allow then is shown as a model divergence. Exit status: 0; 3 when "
     "a run diverged at a step its scenario does not mark expect_divergence = true, or a marked step did not "
-    "diverge; 1 on bad input. With --live it plays one run (the paper's unassisted run by default) in real time, "
+    "diverge, or a pilot run did not reach its goals, saw a violation or had a command denied; 1 on bad input. "
+    "With --live it plays one run (the paper's unassisted run by default) in real time, "
     "served on Zenoh for skinet watch, skinet dashboard and skinet check (it prints their lines), and with "
     "--dashboard PORT serves the dashboard itself.")
 
@@ -80,17 +86,33 @@ def cmd_demo(args: argparse.Namespace) -> int:
             Path(folder).mkdir(parents=True, exist_ok=True)
         except OSError as exc:
             raise SourceError.at(folder, None, f"cannot create folder: {exc.strerror}") from None
-    runs = []
+    runs: list[tuple[Path, Scenario, System] | PilotEntry] = []
     for path in paths:  # every file checked before the first run starts
-        scenario = parse_scenario(read_text(path), str(path))
+        text = read_text(path)
+        if is_pilot_run(text):
+            if args.live:
+                raise SkinetError(f"--live plays scenarios; {path} is a pilot run (play it without --live)")
+            runs.append(load_pilot_entry(path, text, args.no_properties))
+            continue
+        scenario = parse_scenario(text, str(path))
         system, _ = load_live_system(path.parent / scenario.system)
         require_properties(system, path.parent / scenario.system, args.no_properties)
         check_scenario(scenario, system, str(path))
         runs.append((path, scenario, system))
     surprises: list[str] = []
     if args.live:
-        return _live(args, *runs[0])
-    for path, scenario, system in runs:
+        return _live(args, *runs[0])  # type: ignore[misc]
+    rows: list[Row] = []
+    for entry in runs:
+        if isinstance(entry, PilotEntry):
+            scenario, records, row, found = play_pilot(args, entry, _line)
+            rows.append(row)
+            surprises += [f"{entry.path}: {s}" for s in found]
+            if args.log or args.timeline:
+                _write_run(args, entry.system, scenario, records)
+            print()
+            continue
+        path, scenario, system = entry
         if args.core:
             records = replay(system, scenario, predict=not args.no_predict)
             how = "core replay"
@@ -113,10 +135,12 @@ def cmd_demo(args: argparse.Namespace) -> int:
             if args.all_steps or r.violations or r.warnings or r.flagged or r.divergence or r.step.consider:
                 print(_line(r))
         print(_summary(records))
+        rows.append(tally(scenario.name, records))
         surprises += [f"{path}: {s}" for s in unexpected(records)]
         if args.log or args.timeline:
             _write_run(args, system, scenario, records)
         print()
+    print(table(rows))
     for line in surprises:
         print(f"skinet demo: {line}", file=sys.stderr)
     return UNEXPECTED if surprises else 0
