@@ -1,0 +1,224 @@
+"""The paper's robot for pilot tests, through a real router (SPEC §8; issue 24).
+
+:class:`Robot` runs the simulated managers (real CDR on bridge keys), the bridge,
+the monitor and a predictor, each on its own client session of the test's router,
+and a pilot on another; :class:`Implementations` is the robot's side of the skills:
+it ends each execution it sees running in the mode a script gives (the first
+success mode by default), after a delay, through the simulator's implementation
+hook (the managers then speak the real protocol).  :class:`Recording` wraps the
+pilot's real actuator and keeps what it sent, in order.
+"""
+
+from __future__ import annotations
+
+import random
+import threading
+import time
+from collections.abc import Callable, Iterable
+from typing import Any
+
+import pytest
+import zenoh
+
+from services.bridge_ros2 import start_bridge
+from services.common.requests import Requests
+from services.monitor import start_monitor
+from services.pilot import ManagerActuator, Pilot, start_pilot
+from services.predictor.service import start_predictor
+from services.simulator import Simulator
+from skinet.ros.keys import KeyStyle
+from skinet.ros.requests import skill_interrupt, skill_request
+from skinet.system import System
+from skinet.wire import keys
+from skinet.wire.codec import decode, encode
+from skinet.wire.messages import PilotCommand, PilotGoalReply, PilotGoalRequest, PilotStatus
+from tests.event_watch import Messages
+
+WALK = {"go_to_waypoint": {"target": {"x": 12.0, "y": 3.5, "z": 0.0}}}
+
+
+class Recording:
+    """The pilot's :class:`ManagerActuator`, keeping every command it sent (``skillset:transition``)."""
+
+    def __init__(self, inner: ManagerActuator):
+        self.inner = inner
+        self.sent: list[str] = []
+        self.inputs: list[dict[str, Any]] = []
+
+    def send(self, command: PilotCommand) -> str:
+        out = self.inner.send(command)
+        self.sent.append(f"{command.skillset}:{command.transition}")
+        self.inputs.append(command.inputs)
+        return out
+
+    def close(self) -> None:
+        self.inner.close()
+
+
+class Statuses(Messages[PilotStatus]):
+    """Every PilotStatus published, in arrival order, with a blocking wait."""
+
+    def __init__(self, session: zenoh.Session, system: str = "spot_arm"):
+        super().__init__(session, keys.pilot_status(system), PilotStatus)
+
+    def first(self, predicate: Callable[[PilotStatus], bool], timeout: float = 20.0, what: str = "") -> PilotStatus:
+        """The first status (from now on or already received) for which ``predicate`` holds."""
+        try:
+            items = super().wait(lambda items: any(predicate(s) for s in items), timeout)
+        except AssertionError:
+            last = self.items[-1] if self.items else None
+            pytest.fail(f"no pilot status {what} within {timeout} s; last: "
+                        f"{None if last is None else (last.state, last.reason, last.next)}")
+        return next(s for s in items if predicate(s))
+
+    def state(self, state: str, goal: int | None = None, timeout: float = 20.0) -> PilotStatus:
+        return self.first(lambda s: s.state == state and (goal is None or s.goal_id == goal), timeout,
+                          f"'{state}'")
+
+    def states(self, goal: int) -> list[str]:
+        """The states of ``goal``'s statuses, repeats dropped."""
+        with self._cond:
+            out: list[str] = []
+            for s in self.items:
+                if s.goal_id == goal and (not out or out[-1] != s.state):
+                    out.append(s.state)
+            return out
+
+
+def ask_goal(session: zenoh.Session, request: PilotGoalRequest | bytes | None, client: str = "operator1",
+             system: str = "spot_arm") -> PilotGoalReply:
+    """One goal request on the pilot's queryable, as ``client``."""
+    payload = request if isinstance(request, (bytes, type(None))) else encode(request)
+    replies = list(session.get(keys.pilot_goal(system, client), payload=payload, timeout=10.0))
+    assert len(replies) == 1 and replies[0].ok is not None, replies
+    return decode(replies[0].ok.payload.to_bytes(), PilotGoalReply)
+
+
+def goal(*goals: str, **fields: Any) -> PilotGoalRequest:
+    return PilotGoalRequest(system=fields.pop("system", "spot_arm"), goals=list(goals), **fields)
+
+
+class Implementations:
+    """The robot's skill implementations: each execution seen running ends after ``delay`` seconds (a
+    random one in ``[0, delay]`` with ``rng``) in the next mode of ``script[(skillset, skill)]``, else (with ``rng``,
+    with probability ``fail``) in a random failure mode, else in its first success mode; ``hold`` lists skills
+    left running until :meth:`release`."""
+
+    def __init__(self, simulator: Simulator, system: System, script: dict[tuple[str, str], list[str]] | None = None,
+                 delay: float = 0.05, rng: random.Random | None = None, hold: Iterable[tuple[str, str]] = (),
+                 fail: float = 0.0):
+        self.sim, self.system, self.fail = simulator, system, fail
+        self.script = {k: list(v) for k, v in (script or {}).items()}
+        self.delay, self.rng = delay, rng
+        self.hold = set(hold)
+        self.ended: list[str] = []  # skillset:skill.kind.mode, in order
+        self._seen: set[tuple[str, str, str]] = set()
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def release(self, skillset: str, skill: str) -> None:
+        self.hold.discard((skillset, skill))
+
+    def _run(self) -> None:
+        while not self._stop.wait(0.005):
+            for c in self.system.components:
+                for k in c.skillset.skills:
+                    running, id_ = self.sim.skill_status(c.name, k.name)
+                    if not running or (c.name, k.name, id_) in self._seen or (c.name, k.name) in self.hold:
+                        continue
+                    self._seen.add((c.name, k.name, id_))
+                    queue = self.script.get((c.name, k.name))
+                    failures = [m.name for m in k.modes if m.kind == "failure"]
+                    if queue:
+                        mode = queue.pop(0)
+                    elif self.rng is not None and failures and self.rng.random() < self.fail:
+                        mode = self.rng.choice(failures)
+                    else:
+                        mode = next(m for m in k.modes if m.kind == "success").name
+                    kind = next(m.kind for m in k.modes if m.name == mode)
+                    wait = self.rng.uniform(0, self.delay) if self.rng else self.delay
+                    threading.Timer(wait, self._end, (c.name, k.name, kind, mode)).start()
+
+    def _end(self, skillset: str, skill: str, kind: str, mode: str) -> None:
+        if self.sim.terminate(skillset, skill, kind, mode):
+            self.ended.append(f"{skillset}:{skill}.{kind}.{mode}")
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(2.0)
+
+
+class Robot:
+    """Simulator, bridge, monitor, predictor and pilot of the paper's system, each on its own client session."""
+
+    def __init__(self, sessions: Callable[[], zenoh.Session], system: System, typemap: dict[str, str],
+                 monitor: bool = True, style: KeyStyle = KeyStyle(), lost_after: float = 2.0, **pilot: Any):
+        self.system, self.typemap, self.sessions, self.lost_after = system, typemap, sessions, lost_after
+        self.sim = Simulator(sessions(), system, typemap, style=style)
+        self.bridge = start_bridge(sessions(), system, typemap, style=style)
+        self.predictor: Any = start_predictor(sessions(), "pilot-test")
+        self.monitor: Any = None
+        if monitor:
+            self.start_monitor()
+        pilot_session = sessions()
+        self.actuator = Recording(ManagerActuator(pilot_session, system, typemap, style, instance="p1"))
+        self.pilot: Pilot = start_pilot(pilot_session, system, instance="p1",
+                                        actuator=pilot.pop("actuator", self.actuator), typemap=typemap, **pilot)
+        self.observer = sessions()
+        self.statuses = Statuses(self.observer)
+        if monitor:
+            self.wait_synced()
+            self.wait_pilot("idle")
+
+    def wait_pilot(self, state: str, timeout: float = 10.0) -> None:
+        """Until the pilot's own last status is ``state``."""
+        deadline = time.monotonic() + timeout
+        while self.pilot.status.state != state:
+            if time.monotonic() > deadline:
+                pytest.fail(f"the pilot is {self.pilot.status.state} ({self.pilot.status.reason}), not {state}")
+            time.sleep(0.01)
+
+    def start_monitor(self) -> None:
+        self.monitor = start_monitor(self.sessions(), self.system, lost_after=self.lost_after)
+
+    def wait_synced(self, timeout: float = 10.0) -> None:
+        deadline = time.monotonic() + timeout
+        while self.monitor is None or not self.monitor.synced():
+            if time.monotonic() > deadline:
+                pytest.fail("the monitor did not sync")
+            time.sleep(0.01)
+
+    def close(self) -> None:
+        self.pilot.close()
+        if self.monitor is not None:
+            self.monitor.close()
+        self.bridge.close()
+        self.sim.close()
+        if self.predictor is not None:
+            self.predictor.close()
+
+
+class Gui:
+    """An operator's GUI: its own requests to the managers (the same protocol as the pilot's)."""
+
+    def __init__(self, session: zenoh.Session, robot: Robot):
+        self.robot = robot
+        self.stores = {name: node.store for name, node in robot.sim.nodes.items()}
+        self.requests = Requests(session, [(n.component, n.store) for n in robot.sim.nodes.values()])
+        self.count = 0
+
+    def start(self, skillset: str, skill: str, inputs: dict[str, Any] | None = None) -> None:
+        self.count += 1
+        component = self.robot.system.component(skillset)
+        self.requests.put(skillset, *skill_request(self.stores[skillset], component.skillset, skill,
+                                                   f"gui-{self.count}", inputs))
+
+    def interrupt(self, skillset: str, skill: str) -> None:
+        """Interrupt ``skill`` with the running id its manager's status shows."""
+        _, id_ = self.robot.sim.skill_status(skillset, skill)
+        component = self.robot.system.component(skillset)
+        self.requests.put(skillset, *skill_interrupt(self.stores[skillset], component.skillset, skill, id_))
+
+    def close(self) -> None:
+        self.requests.close()
