@@ -115,7 +115,7 @@ def test_demo_core_flies_the_pilot_run(capsys: pytest.CaptureFixture[str]) -> No
     out = capsys.readouterr().out
     assert "   chain: core only (the pilot's drive mode on the live nets; no simulator, Zenoh, check)\n" in out
     assert "   pilot: reached; 29 goals, 68 moves, 34 commands sent, 2 retries\n" in out
-    assert out.endswith("   pilot       34     68        2           0       -\n")
+    assert out.endswith("   pilot        34     68        2           0       -\n")
 
 
 def test_a_pilot_run_that_fails_is_an_unexpected_end(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
