@@ -78,12 +78,7 @@ def run_chain(
         bridge = start_bridge(session, system, typemap, style=style)
         services.append(bridge)
         wait_until(monitor.synced, settle, "initial statuses")  # SPEC §7: every skillset live
-        lost = {name: 0 for name in simulator.nodes}
-        if external:
-            # Behind a gateway, statuses answering the first requests are lost until its
-            # routes exist (volatile QoS); count them once the answers to the retries are in.
-            time.sleep(0.5)
-            lost = {name: n - bridge.feed.statuses[name] for name, n in simulator.statuses_published().items()}
+        lost = statuses_lost(simulator, bridge) if external else {name: 0 for name in simulator.nodes}
 
         def caught_up(run: StepRun) -> None:
             expected = {name: n - lost[name] for name, n in simulator.statuses_published().items()}
@@ -200,6 +195,14 @@ def _recorder(system: System, monitor: Any, caught_up: Callable[[StepRun], None]
             on_record(record)
 
     return records, on_step
+
+
+def statuses_lost(simulator: Simulator, bridge: Any) -> dict[str, int]:
+    """Per skillset, the statuses of ``simulator`` that ``bridge`` will never see.  Behind a gateway,
+    statuses answering the first requests are lost until its routes exist (volatile QoS); count them
+    once the answers to the retries are in."""
+    time.sleep(0.5)
+    return {name: n - bridge.feed.statuses[name] for name, n in simulator.statuses_published().items()}
 
 
 def handled_all(monitor: Any, source: str, next_seq: Mapping[str, int]) -> bool:

@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 import zenoh
 
 from services.bridge_ros2 import start_bridge
-from services.chain import ChainError, embedded_services, handled_all, wait_until
+from services.chain import ChainError, embedded_services, handled_all, statuses_lost, wait_until
 from services.pilot import start_pilot
 from services.pilot.act import ManagerActuator
 from services.simulator import Simulator
@@ -93,6 +93,7 @@ def run_pilot_chain(
     the mission or the chain does not settle.
     """
     with embedded_services(session, system, predict) as (session, monitor, services):
+        external = simulator is not None
         if simulator is None:
             simulator = Simulator(session, system, typemap, style=style)
             services.append(simulator)
@@ -106,6 +107,7 @@ def run_pilot_chain(
         pilot = start_pilot(session, system, instance="demo", actuator=actuator, typemap=typemap)
         services.append(pilot)
         wait_until(monitor.synced, settle, "initial statuses")  # SPEC §7: every skillset live
+        lost = statuses_lost(simulator, bridge) if external else {name: 0 for name in simulator.nodes}
         wait_until(lambda: pilot.status.state == "idle", settle, "the pilot to follow the monitor")
         request = PilotGoalRequest(system=system.name, mission=mission, mission_name=mission_name, mode=run.mode)
         started = time.monotonic()
@@ -121,7 +123,7 @@ def run_pilot_chain(
                              + f" at goal {status.index + 1} of {len(status.goals)}") from None
         seconds = time.monotonic() - started
         wait_until(world.idle, settle, "the simulated skills' ends")
-        expected = simulator.statuses_published()
+        expected = {name: n - lost[name] for name, n in simulator.statuses_published().items()}
         if not bridge.wait_statuses(expected, settle):
             raise ChainError("the bridge did not receive every status")
         seqs = lambda: {n: m.seq for n, m in bridge.feed.managers.items()}  # noqa: E731
