@@ -106,6 +106,8 @@ def play_pilot(args: argparse.Namespace, entry: PilotEntry,
     surprises = [f"the pilot's mission ended {end}: {reason}"] if end != "reached" else []
     surprises += [f"{row.violations} violations under the pilot"] if row.violations else []
     surprises += [f"the check denied {denied} of the pilot's commands"] if denied else []
+    surprises += [f"step {r.index} ({r.step.skillset}:{r.step.transition}) does not replay on the model: "
+                  f"{r.divergence}" for r in records if r.divergence]
     replayed = sum(len(r.violations) for r in records)
     if monitor_violations is not None and replayed != monitor_violations:
         surprises.append(f"the monitor showed {monitor_violations} violations, the core replay {replayed}")
