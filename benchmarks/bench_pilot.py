@@ -7,7 +7,8 @@ publish them (``tests/bridge_side.py``); the outcome's LiveState is the marking 
 which the pilot sends its next command.  A sample is the time from that LiveState's arrival
 (a subscriber on the pilot's session) to the actuator's ``send``: the pilot's wait for the
 step's prediction, the ``strict`` check's round trip and the plan (or its reuse) are in it.
-The first lap (cold predictions, first plans) is left out.
+The first lap (cold predictions, first plans) is left out, and so is each lap's first command (it
+answers the goal request, not a marking change).
 
 Rows:
 
@@ -53,7 +54,9 @@ from skinet.plan import Planner  # noqa: E402
 from skinet.system import System  # noqa: E402
 from skinet.wire import keys  # noqa: E402
 from skinet.wire.codec import decode, encode  # noqa: E402
-from skinet.wire.messages import CheckRequest, LiveState, PilotCommand, PilotGoalReply, PilotGoalRequest, PilotStatus  # noqa: E402
+from skinet.wire.messages import (  # noqa: E402
+    CheckRequest, LiveState, PilotCommand, PilotGoalReply, PilotGoalRequest, PilotStatus, UnsafeReport,
+)
 from tests.bridge_side import BridgeSide  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -91,31 +94,44 @@ class Robot:
 
 
 class States:
-    """When each LiveState step first arrived (perf_counter), on the pilot's session."""
+    """When each LiveState step, and the UnsafeReport with its fresh prediction, first arrived (perf_counter),
+    on the pilot's session."""
 
     def __init__(self, session: zenoh.Session, system: str):
         self.first: dict[int, float] = {}
-        self._sub = session.declare_subscriber(keys.state(system), self._on)
+        self.predicted: dict[int, float] = {}
+        self._subs = [session.declare_subscriber(keys.state(system), self._on_state),
+                      session.declare_subscriber(keys.unsafe(system), self._on_unsafe)]
 
-    def _on(self, sample: zenoh.Sample) -> None:
+    def _on_state(self, sample: zenoh.Sample) -> None:
         now = time.perf_counter()
         self.first.setdefault(decode(sample.payload.to_bytes(), LiveState).seq, now)
 
-    def before(self, t: float) -> float:
-        """The arrival of the last step that came before ``t``."""
-        return max(a for a in self.first.values() if a <= t)
+    def _on_unsafe(self, sample: zenoh.Sample) -> None:
+        now = time.perf_counter()
+        report = decode(sample.payload.to_bytes(), UnsafeReport)
+        if not report.prediction_stale:
+            self.predicted.setdefault(report.seq, now)
+
+    def cause(self, t: float) -> tuple[float, float]:
+        """The arrival of the last step that came before ``t``, and the time its prediction took to come."""
+        seq, at = max(((s, a) for s, a in self.first.items() if a <= t), key=lambda x: x[1])
+        return at, max(0.0, self.predicted.get(seq, at) - at)
 
     def close(self) -> None:
-        self._sub.undeclare()
+        for sub in self._subs:
+            sub.undeclare()
 
 
-def laps(session: zenoh.Session, system: System, side: BridgeSide, n: int) -> list[float]:
-    """Fly the mission ``n`` times with a pilot on ``session``; the latencies of laps 2..n."""
+def laps(session: zenoh.Session, system: System, side: BridgeSide, n: int) -> tuple[list[float], list[float]]:
+    """Fly the mission ``n`` times with a pilot on ``session``; the latencies of laps 2..n, and the part of
+    each spent waiting for the step's prediction."""
     robot = Robot(side, system)
     states = States(session, system.name)
     pilot = start_pilot(session, system, instance="bench", actuator=robot, typemap=load_typemap(SYSTEM_FILE))
     mission = read_text(GOALS_FILE)
     samples: list[float] = []
+    waits: list[float] = []
     try:
         wait(lambda: pilot.status.state == "idle", "the pilot to follow the monitor")
         for lap in range(n):
@@ -127,9 +143,11 @@ def laps(session: zenoh.Session, system: System, side: BridgeSide, n: int) -> li
             assert reply.accepted, reply.reason
             wait(lambda: _ended(pilot.status, reply.goal_id), f"lap {lap + 1} ({pilot.status.state})", 120)
             assert (pilot.status.state, pilot.status.denied) == ("reached", 0), pilot.status
-            if lap:
-                samples += [t - states.before(t) for t in robot.sent[first:]]
-        return samples
+            for t in robot.sent[first + 1:] if lap else ():  # a lap's first command answers the goal request
+                at, wait_ = states.cause(t)
+                samples.append(t - at)
+                waits.append(wait_)
+        return samples, waits
     finally:
         pilot.close()
         robot.close()
@@ -153,8 +171,9 @@ def in_process(n: int) -> list[list[object]]:
     side = BridgeSide(session, system.name, source="bench", model=system)
     try:
         side.synced()
-        samples = laps(session, system, side, n)
+        samples, waits = laps(session, system, side, n)
         return [row("in-process: LiveState -> command sent", samples, None),
+                row("  of which: the step's prediction coming (UnsafeReport)", waits, None),
                 row("baseline: the strict check's round trip, same session",
                     check_round_trip(session, system.name, 500), None)]
     finally:
@@ -183,10 +202,11 @@ def through_router(n: int) -> list[list[object]]:
         wait(lambda: bool(tokens), "the monitor process")
         side = BridgeSide(bridge, system.name, source="bench", model=system)
         side.synced()
-        samples = laps(client, system, side, n)
+        samples, waits = laps(client, system, side, n)
         rows = [row("router: LiveState -> command sent (monitor, predictor: processes)", samples, TARGET),
-                row("baseline: the strict check's round trip via the router", check_round_trip(client, system.name, 500),
-                    None)]
+                row("  of which: the step's prediction coming (UnsafeReport)", waits, None),
+                row("baseline: the strict check's round trip via the router",
+                    check_round_trip(client, system.name, 500), None)]
         side.close()
         sub.undeclare()
         return rows
