@@ -106,9 +106,9 @@ def cmd_demo(args: argparse.Namespace) -> int:
     for entry in runs:
         if isinstance(entry, PilotEntry):
             scenario, records, row, found = play_pilot(args, entry, _line)
-            rows.append(row)
+            rows += [row] if row is not None else []
             surprises += [f"{entry.path}: {s}" for s in found]
-            if args.log or args.timeline:
+            if (args.log or args.timeline) and records:
                 _write_run(args, entry.system, scenario, records)
             print()
             continue

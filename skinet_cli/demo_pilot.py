@@ -66,9 +66,10 @@ def load_pilot_entry(path: Path, text: str, no_properties: bool) -> PilotEntry:
 
 
 def play_pilot(args: argparse.Namespace, entry: PilotEntry,
-               line: Callable[[StepRecord], str]) -> tuple[Scenario, list[StepRecord], Row, list[str]]:
+               line: Callable[[StepRecord], str]) -> tuple[Scenario, list[StepRecord], Row | None, list[str]]:
     """Fly the pilot run, print it (``line`` formats one record), and return its scenario, records, table
-    row and surprises (a mission not reached, a violation, a denied command)."""
+    row (None when the chain did not let it end) and surprises (a mission not reached, a violation, a
+    denied command, a run that did not end)."""
     run, system = entry.run, entry.system
     failures = ", ".join(f"run {f.run} of {f.skillset}:{f.skill} ends {f.mode}" for f in run.failures) or "none"
     print(f"== {run.name} run ({entry.path}): {len(entry.goals)} goals ({entry.goals_path}), {run.mode} mode, "
@@ -82,11 +83,16 @@ def play_pilot(args: argparse.Namespace, entry: PilotEntry,
         end, reason, denied, monitor_violations, sent = flight.end, flight.reason, None, None, None
         print("   chain: core only (the pilot's drive mode on the live nets; no simulator, Zenoh, check)")
     else:
+        from services.chain import ChainError
         from services.pilot_chain import run_pilot_chain  # Zenoh only when the chain runs
 
-        record = run_pilot_chain(system, load_typemap(entry.path.parent / run.system), run, entry.mission,
-                                 mission_name=str(entry.goals_path), predict=not args.no_predict,
-                                 duration=SKILL_SECONDS)
+        try:
+            record = run_pilot_chain(system, load_typemap(entry.path.parent / run.system), run, entry.mission,
+                                     mission_name=str(entry.goals_path), predict=not args.no_predict,
+                                     duration=SKILL_SECONDS)
+        except ChainError as exc:  # the run did not end: said, and counted as a surprise
+            print(f"   pilot: the run did not end: {exc}")
+            return Scenario(run.name, run.system, ()), [], None, [f"the pilot run did not end: {exc}"]
         scenario = record.scenario()
         end, reason, denied = record.status.state, record.status.reason, record.status.denied
         monitor_violations, sent = len(record.violations), record.commands
@@ -123,7 +129,7 @@ def tally(name: str, records: list[StepRecord], denied: int | None = None) -> Ro
 
 def table(rows: list[Row]) -> str:
     """The runs side by side."""
-    width = max(len("run"), *(len(r.name) for r in rows))
+    width = max([len("run"), *(len(r.name) for r in rows)])
     lines = ["== the runs side by side",
              f"   {'run':<{width}}  commands  moves  retries  violations  denied"]
     for r in rows:

@@ -130,3 +130,22 @@ def test_a_pilot_run_that_fails_is_an_unexpected_end(tmp_path: Path, capsys: pyt
            "3 retries\n" in out
     assert f"skinet demo: {run}: the pilot's mission ended failed: spot:init_power failed 3 times (last: no_battery)" \
         in err
+
+
+def test_a_pilot_run_that_does_not_end_is_said_not_crashed(monkeypatch: pytest.MonkeyPatch,
+                                                            capsys: pytest.CaptureFixture[str]) -> None:
+    """The chain not letting the mission end (a pilot paused for good) is an unexpected end, with the reason."""
+    import services.pilot_chain
+    from services.chain import ChainError
+
+    def stuck(*_args: object, **_options: object) -> None:
+        raise ChainError("the pilot's mission did not end within 120 s: it is paused (spot is lost) at goal 3 of 29")
+
+    monkeypatch.setattr(services.pilot_chain, "run_pilot_chain", stuck)
+    assert main(["demo", "--no-predict", str(PILOT)]) == 3
+    out, err = capsys.readouterr()
+    assert "   pilot: the run did not end: the pilot's mission did not end within 120 s: it is paused (spot is lost) " \
+           "at goal 3 of 29\n" in out
+    assert out.endswith("== the runs side by side\n   run  commands  moves  retries  violations  denied\n")
+    assert err == (f"skinet demo: {PILOT}: the pilot run did not end: the pilot's mission did not end within 120 s: "
+                   "it is paused (spot is lost) at goal 3 of 29\n")
