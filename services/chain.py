@@ -17,6 +17,7 @@ divergence too (the robot and its model disagree).
 
 from __future__ import annotations
 
+import itertools
 import time
 from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
@@ -25,6 +26,7 @@ from typing import Any
 import zenoh
 
 from services.bridge_ros2 import start_bridge
+from services.common.cli import default_instance_id
 from services.common.zenoh_config import session_config
 from services.monitor.service import MonitorView, start_monitor
 from services.predictor.service import start_predictor
@@ -44,6 +46,16 @@ class ChainError(RuntimeError):
     """The chain did not settle in time (a service is stuck or lost messages)."""
 
 
+_RUNS = itertools.count(1)
+
+
+def run_instance() -> str:
+    """An instance id of its own for each run's bridge (host-pid-n): runs one after the other in a process
+    (``skinet demo`` on one session) must not share a liveliness token or an event source, or a monitor
+    could take the previous bridge's leaving for its own bridge's."""
+    return f"{default_instance_id()}-{next(_RUNS)}"
+
+
 def run_chain(
     system: System,
     typemap: Mapping[str, str],
@@ -57,6 +69,7 @@ def run_chain(
     style: KeyStyle = KeyStyle(),
     on_record: Callable[[StepRecord], None] | None = None,
     after: Callable[[list[StepRecord]], None] | None = None,
+    shared_predictor: bool = False,
 ) -> list[StepRecord]:
     """Drive ``scenario`` through the whole chain and record what the monitor published.
 
@@ -69,13 +82,14 @@ def run_chain(
     then closes itself.  ``on_record`` is called after each step with what the
     monitor showed then, ``after`` with the records once the run is over, while
     every service still runs (``skinet demo --live`` keeps serving the views then).
+    ``shared_predictor``: a predictor already serves ``session`` (:func:`shared_session`), start none.
     """
-    with embedded_services(session, system, predict) as (session, monitor, services):
+    with embedded_services(session, system, predict and not shared_predictor) as (session, monitor, services):
         external = simulator is not None
         if simulator is None:
             simulator = Simulator(session, system, typemap)
             services.append(simulator)
-        bridge = start_bridge(session, system, typemap, style=style)
+        bridge = start_bridge(session, system, typemap, style=style, instance_id=run_instance())
         services.append(bridge)
         wait_until(monitor.synced, settle, "initial statuses")  # SPEC §7: every skillset live
         lost = statuses_lost(simulator, bridge) if external else {name: 0 for name in simulator.nodes}
@@ -106,6 +120,7 @@ def run_bound_chain(
     style: KeyStyle = KeyStyle(),
     on_record: Callable[[StepRecord], None] | None = None,
     after: Callable[[list[StepRecord]], None] | None = None,
+    shared_predictor: bool = False,
 ) -> list[StepRecord]:
     """:func:`run_chain` for a system whose skillsets are all bound to plain ROS 2 interfaces (SPEC §9).
 
@@ -117,10 +132,11 @@ def run_bound_chain(
     from services.bridge_ros2.bound_live import start_bound_bridge
     from services.simulator.bound import BoundSimulator
 
-    with embedded_services(session, system, predict) as (session, monitor, services):
+    with embedded_services(session, system, predict and not shared_predictor) as (session, monitor, services):
         robot = BoundSimulator(session, system, bindings, style=style)
         services.append(robot)
-        bridge = start_bound_bridge(session, system, bindings, style=style, settle=0.2, retry=0.2)
+        bridge = start_bound_bridge(session, system, bindings, style=style, settle=0.2, retry=0.2,
+                                    instance_id=run_instance())
         services.append(bridge)
         robot.publish_topics(scenario.topics)
         wait_until(monitor.synced, settle, "initial statuses")  # SPEC §7: every skillset live
@@ -141,6 +157,21 @@ def run_bound_chain(
         if after is not None:
             after(records)
         return records
+
+
+@contextmanager
+def shared_session(predict: bool = True) -> Iterator[zenoh.Session]:
+    """One peer session, with a predictor on it when ``predict``, for several runs in a row (``skinet demo``):
+    each run brings its own monitor, simulator and bridge (``shared_predictor=True``), and the predictor's
+    worker processes start once (about 1.5 s each time otherwise)."""
+    session = zenoh.open(session_config("peer", multicast_scouting=False))
+    predictor = start_predictor(session, "embedded") if predict else None
+    try:
+        yield session
+    finally:
+        if predictor is not None:
+            predictor.close()
+        session.close()
 
 
 @contextmanager

@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 import zenoh
 
 from services.bridge_ros2 import start_bridge
-from services.chain import ChainError, embedded_services, handled_all, statuses_lost, wait_until
+from services.chain import ChainError, embedded_services, handled_all, run_instance, statuses_lost, wait_until
 from services.pilot import start_pilot
 from services.pilot.act import ManagerActuator
 from services.simulator import Simulator
@@ -75,13 +75,13 @@ def run_pilot_chain(
     mission: str,
     *,
     mission_name: str = "goals.toml",
-    predict: bool = True,
     duration: float = 0.0,
     timeout: float = 120.0,
     settle: float = 10.0,
     session: zenoh.Session | None = None,
     simulator: Simulator | None = None,
     style: KeyStyle = KeyStyle(),
+    shared_predictor: bool = False,
 ) -> PilotRecord:
     """Send ``mission`` (a goals file's text) to a pilot on the whole chain and follow it to its end.
 
@@ -89,22 +89,25 @@ def run_pilot_chain(
     take; ``settle`` bounds the start-up and the final catching up.  By default everything shares
     one new peer session with simulated managers on Zenoh; a caller may give the ``session`` and
     its own ``simulator`` (managers on DDS behind a gateway, or with ``rmw_zenoh`` keys: ``style``),
-    which it then closes itself.  Raises :class:`~services.chain.ChainError` when the pilot refuses
-    the mission or the chain does not settle.
+    which it then closes itself; ``shared_predictor``: a predictor already serves ``session`` (else one is
+    started: the pilot sends a command only from a step whose prediction came, so there is always one).
+    Raises :class:`~services.chain.ChainError` when the pilot refuses the mission or the chain does not
+    settle.
     """
-    with embedded_services(session, system, predict) as (session, monitor, services):
+    with embedded_services(session, system, not shared_predictor) as (session, monitor, services):
         external = simulator is not None
         if simulator is None:
             simulator = Simulator(session, system, typemap, style=style)
             services.append(simulator)
         world = World(simulator, Outcomes.of(run, system), duration)
         services.append(world)
-        bridge = start_bridge(session, system, typemap, style=style)
+        instance = run_instance()
+        bridge = start_bridge(session, system, typemap, style=style, instance_id=instance)
         services.append(bridge)
         watch = _Watch(session, system.name)
         services.append(watch)
-        actuator = ManagerActuator(session, system, typemap, style=style, instance="demo-pilot")
-        pilot = start_pilot(session, system, instance="demo", actuator=actuator, typemap=typemap)
+        actuator = ManagerActuator(session, system, typemap, style=style, instance=f"pilot-{instance}")
+        pilot = start_pilot(session, system, instance=instance, actuator=actuator, typemap=typemap)
         services.append(pilot)
         wait_until(monitor.synced, settle, "initial statuses")  # SPEC §7: every skillset live
         lost = statuses_lost(simulator, bridge) if external else {name: 0 for name in simulator.nodes}

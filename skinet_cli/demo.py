@@ -6,6 +6,7 @@ import argparse
 import re
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from skinet.errors import SkinetError, SourceError
 from skinet_cli.demo_pilot import PilotEntry, Row, load_pilot_entry, play_pilot, table, tally
@@ -18,6 +19,9 @@ from skinet.mission_log import records_to_log
 from skinet.pilot_run import is_pilot_run
 from skinet.system import System
 from skinet.wire.log import log_line
+
+if TYPE_CHECKING:
+    import zenoh
 
 MISSIONS = ("unassisted.toml", "assisted.toml", "pilot.toml", "mobile_unassisted.toml", "mobile_assisted.toml")
 UNEXPECTED = 3  # exit status: a divergence the scenario did not declare, or a declared one that did not happen
@@ -99,13 +103,26 @@ def cmd_demo(args: argparse.Namespace) -> int:
         require_properties(system, path.parent / scenario.system, args.no_properties)
         check_scenario(scenario, system, str(path))
         runs.append((path, scenario, system))
-    surprises: list[str] = []
     if args.live:
         return _live(args, *runs[0])  # type: ignore[misc]
+    if args.core:
+        return _play(args, runs, None)
+    from services.chain import shared_session  # Zenoh only when the chain runs
+
+    with shared_session(predict=not args.no_predict) as session:  # one predictor for every run
+        return _play(args, runs, session)
+
+
+def _play(args: argparse.Namespace, runs: list[tuple[Path, Scenario, System] | PilotEntry],
+          session: zenoh.Session | None) -> int:
+    """Play ``runs`` one after the other (on ``session`` and its predictor, or on the core), print them and the
+    table of the runs side by side; the exit status."""
+    surprises: list[str] = []
     rows: list[Row] = []
+    chain = dict(session=session, shared_predictor=True)
     for entry in runs:
         if isinstance(entry, PilotEntry):
-            scenario, records, row, found = play_pilot(args, entry, _line)
+            scenario, records, row, found = play_pilot(args, entry, _line, session)
             rows += [row] if row is not None else []
             surprises += [f"{entry.path}: {s}" for s in found]
             if (args.log or args.timeline) and records:
@@ -120,13 +137,14 @@ def cmd_demo(args: argparse.Namespace) -> int:
             from services.chain import run_bound_chain  # Zenoh only when the chain runs
 
             bindings, _ = load_bindings(system)
-            records = run_bound_chain(system, bindings, scenario, predict=not args.no_predict)
+            records = run_bound_chain(system, bindings, scenario, predict=not args.no_predict, **chain)
             how = ("simulated action servers, lifecycle node and topics -> CDR -> bridge (bindings) -> monitor -> "
                    "predictor, embedded Zenoh session")
         else:
             from services.chain import run_chain  # Zenoh only when the chain runs
 
-            records = run_chain(system, load_typemap(path.parent / scenario.system), scenario, predict=not args.no_predict)
+            records = run_chain(system, load_typemap(path.parent / scenario.system), scenario,
+                                predict=not args.no_predict, **chain)
             how = "simulated managers -> CDR -> bridge -> monitor -> predictor, embedded Zenoh session"
         steps = sum(r.step.transition is not None for r in records)  # considered commands are no steps
         print(f"== {scenario.name} run ({path}): {steps} steps, system {system.name}")

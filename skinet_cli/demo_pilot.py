@@ -18,6 +18,7 @@ import os
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from skinet.files import load_goals, load_typemap, read_text
 from skinet.mission import Scenario, Step, StepRecord, replay
@@ -25,6 +26,9 @@ from skinet.pilot_run import Outcomes, PilotRun, check_pilot_run, parse_pilot_ru
 from skinet.plan import Goal
 from skinet.system import System
 from skinet_cli.options import load_live_system, require_properties
+
+if TYPE_CHECKING:
+    import zenoh
 
 SKILL_SECONDS = 0.05  # how long each simulated skill runs: the pilot's commands stay under the check's rate limit
 
@@ -65,11 +69,13 @@ def load_pilot_entry(path: Path, text: str, no_properties: bool) -> PilotEntry:
     return PilotEntry(path, run, system, goals, read_text(goals_path), goals_path)
 
 
-def play_pilot(args: argparse.Namespace, entry: PilotEntry,
-               line: Callable[[StepRecord], str]) -> tuple[Scenario, list[StepRecord], Row | None, list[str]]:
-    """Fly the pilot run, print it (``line`` formats one record), and return its scenario, records, table
+def play_pilot(args: argparse.Namespace, entry: PilotEntry, line: Callable[[StepRecord], str],
+               session: zenoh.Session | None = None) -> tuple[Scenario, list[StepRecord], Row | None, list[str]]:
+    """Fly the pilot run (through the chain on ``session``, where a predictor runs unless ``--no-predict``;
+    ``--core``: on the core), print it (``line`` formats one record), and return its scenario, records, table
     row (None when the chain did not let it end) and surprises (a mission not reached, a violation, a
-    denied command, a run that did not end)."""
+    denied command, a run that did not end).  The chain always has a predictor: the pilot commands only
+    from a step whose prediction came."""
     run, system = entry.run, entry.system
     failures = ", ".join(f"run {f.run} of {f.skillset}:{f.skill} ends {f.mode}" for f in run.failures) or "none"
     print(f"== {run.name} run ({entry.path}): {len(entry.goals)} goals ({entry.goals_path}), {run.mode} mode, "
@@ -88,8 +94,8 @@ def play_pilot(args: argparse.Namespace, entry: PilotEntry,
 
         try:
             record = run_pilot_chain(system, load_typemap(entry.path.parent / run.system), run, entry.mission,
-                                     mission_name=str(entry.goals_path), predict=not args.no_predict,
-                                     duration=SKILL_SECONDS)
+                                     mission_name=str(entry.goals_path), duration=SKILL_SECONDS, session=session,
+                                     shared_predictor=session is not None and not args.no_predict)
         except ChainError as exc:  # the run did not end: said, and counted as a surprise
             print(f"   pilot: the run did not end: {exc}")
             return Scenario(run.name, run.system, ()), [], None, [f"the pilot run did not end: {exc}"]
