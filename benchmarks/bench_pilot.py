@@ -30,14 +30,13 @@ from __future__ import annotations
 
 import argparse
 import queue
-import socket
 import subprocess
 import sys
 import threading
 import time
 from pathlib import Path
 
-from bench_check import get_once, row, timed, wait
+from bench_check import get_once, loopback_router, row, timed, wait, wait_for_monitor
 from common import table
 
 import zenoh  # noqa: E402
@@ -184,22 +183,14 @@ def in_process(n: int) -> list[list[object]]:
 
 
 def through_router(n: int) -> list[list[object]]:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        endpoint = f"tcp/127.0.0.1:{s.getsockname()[1]}"
-    router = zenoh.open(session_config("router", listen=[endpoint], multicast_scouting=False))
-    client = zenoh.open(session_config("client", connect=[endpoint], multicast_scouting=False))
-    bridge = zenoh.open(session_config("client", connect=[endpoint], multicast_scouting=False))
+    endpoint, router, (client, bridge) = loopback_router(2)
     zargs = ["--mode", "client", "--connect", endpoint, "--no-multicast-scouting", "--log-level", "ERROR"]
     procs = [subprocess.Popen([sys.executable, "-m", "services.predictor", *zargs], cwd=ROOT),
              subprocess.Popen([sys.executable, "-m", "services.monitor", str(SYSTEM_FILE), *zargs,
                                "--check-rate-limit", "0"], cwd=ROOT)]
     try:
         system, _ = load_system(SYSTEM_FILE)
-        tokens: set[str] = set()
-        sub = client.liveliness().declare_subscriber(keys.alive(system.name, "monitor", "*"),
-                                                     lambda s: tokens.add(str(s.key_expr)), history=True)
-        wait(lambda: bool(tokens), "the monitor process")
+        wait_for_monitor(client, system.name)
         side = BridgeSide(bridge, system.name, source="bench", model=system)
         side.synced()
         samples, waits = laps(client, system, side, n)
@@ -208,7 +199,6 @@ def through_router(n: int) -> list[list[object]]:
                 row("baseline: the strict check's round trip via the router",
                     check_round_trip(client, system.name, 500), None)]
         side.close()
-        sub.undeclare()
         return rows
     finally:
         for p in procs:
