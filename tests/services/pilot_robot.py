@@ -6,7 +6,7 @@ and a pilot on another; :class:`Implementations` is the robot's side of the skil
 it ends each execution it sees running in the mode a script gives (the first
 success mode by default), after a delay, through the simulator's implementation
 hook (the managers then speak the real protocol).  :class:`Recording` wraps the
-pilot's real actuator and keeps what it sent, in order.
+pilot's real actuator (:func:`~services.pilot.act.default_actuator`) and keeps what it sent, in order.
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ import zenoh
 from services.bridge_ros2 import start_bridge
 from services.common.requests import Requests
 from services.monitor import start_monitor
-from services.pilot import ManagerActuator, Pilot, start_pilot
+from services.pilot import Actuator, Pilot, default_actuator, start_pilot
 from services.predictor.service import start_predictor
 from services.simulator import Simulator
 from skinet.ros.keys import KeyStyle
@@ -38,9 +38,9 @@ WALK = {"go_to_waypoint": {"target": {"x": 12.0, "y": 3.5, "z": 0.0}}}
 
 
 class Recording:
-    """The pilot's :class:`ManagerActuator`, keeping every command it sent (``skillset:transition``)."""
+    """The pilot's actuator, keeping every command it sent (``skillset:transition``)."""
 
-    def __init__(self, inner: ManagerActuator):
+    def __init__(self, inner: Actuator):
         self.inner = inner
         self.sent: list[str] = []
         self.inputs: list[dict[str, Any]] = []
@@ -153,17 +153,18 @@ class Robot:
     """Simulator, bridge, monitor, predictor and pilot of the paper's system, each on its own client session."""
 
     def __init__(self, sessions: Callable[[], zenoh.Session], system: System, typemap: dict[str, str],
-                 monitor: bool = True, style: KeyStyle = KeyStyle(), lost_after: float = 2.0, **pilot: Any):
+                 monitor: bool = True, style: KeyStyle = KeyStyle(), lost_after: float = 2.0,
+                 pilot_system: System | None = None, **pilot: Any):
         self.system, self.typemap, self.sessions, self.lost_after = system, typemap, sessions, lost_after
         self.sim = Simulator(sessions(), system, typemap, style=style)
         self.bridge = start_bridge(sessions(), system, typemap, style=style)
-        self.predictor: Any = start_predictor(sessions(), "pilot-test")
+        self.predictor: Any = start_predictor(sessions(), "pilot-test", workers=1)
         self.monitor: Any = None
         if monitor:
             self.start_monitor()
         pilot_session = sessions()
-        self.actuator = Recording(ManagerActuator(pilot_session, system, typemap, style, instance="p1"))
-        self.pilot: Pilot = start_pilot(pilot_session, system, instance="p1",
+        self.actuator = Recording(default_actuator(pilot_session, system, typemap, style, instance="p1"))
+        self.pilot: Pilot = start_pilot(pilot_session, pilot_system or system, instance="p1",
                                         actuator=pilot.pop("actuator", self.actuator), typemap=typemap, **pilot)
         self.observer = sessions()
         self.statuses = Statuses(self.observer)

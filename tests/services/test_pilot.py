@@ -4,6 +4,7 @@ sessions; the skills' outcomes come from :class:`~tests.services.pilot_robot.Imp
 
 from __future__ import annotations
 
+import dataclasses
 import random
 import time
 from collections.abc import Callable, Iterator
@@ -163,7 +164,7 @@ def test_a_pending_prediction_pauses_the_pilot_until_it_comes(robot: Robot, clie
         assert (paused.next.skillset, paused.next.transition) == ("spot", "stand_up.start")  # what it would send
         time.sleep(0.3)
         assert robot.actuator.sent == ["spot:init_power.start"]
-        robot.predictor = start_predictor(client_factory(), "pilot-test-2")
+        robot.predictor = start_predictor(client_factory(), "pilot-test-2", workers=1)
         robot.statuses.state("reached", reply.goal_id)
         assert robot.actuator.sent == ["spot:init_power.start", "spot:stand_up.start", "spot:go_to_waypoint.start"]
     finally:
@@ -217,12 +218,15 @@ def test_bad_requests_get_a_clear_reason_and_never_a_command(robot: Robot) -> No
     assert mission.reason.startswith("m.toml:5:10: error: "), mission.reason
     assert ask(b"\x93garbage").reason.startswith("malformed goal request: ")
     assert ask(None).reason == "empty goal request: send a PilotGoalRequest (msgpack)"
+    assert ask_goal(robot.observer, goal("reach spot:Standing"), client="*").reason == (
+        "key 'skinet/spot_arm/pilot/goal/*': the client chunk must be a name (skinet/spot_arm/pilot/goal/<client>)")
     assert ask(goal("reach spot:Standing", system="other")).reason == \
         "unknown system 'other': this pilot serves 'spot_arm'"
     unsafe = ask(goal("reach spot:Busy and manipulator:Busy", mode="drive"))
     assert unsafe.reason.startswith("goal 'reach spot:Busy and manipulator:Busy' has no plan from the live state: "
                                     "none: "), unsafe.reason
     assert ask(goal()).reason.startswith("no goals: ")
+    assert ask(goal(*["reach spot:Standing"] * 33)).reason == "33 goals: a mission has at most 32"
     assert ask(PilotGoalRequest(system="spot_arm", op="pause")).reason == "no goal is being followed: nothing to pause"
     assert robot.pilot.status.state == "idle"
     # One goal at a time, unless the new one says replace.
@@ -328,7 +332,7 @@ def test_switching_to_drive_and_pausing_by_the_operator(robot: Robot) -> None:
 def test_the_actuator_interrupts_with_the_running_id_its_manager_shows(robot: Robot) -> None:
     """The running id comes from the manager's own status, whoever started the skill."""
     gui = Gui(robot.observer, robot)
-    actuator = robot.actuator.inner
+    actuator = robot.actuator.inner.actuators["manager"]
     try:
         gui.start("spot", "init_power")
         wait_until(lambda: robot.sim.skill_status("spot", "init_power") == (True, "gui-1"), 5, "init_power runs")
@@ -349,3 +353,43 @@ def test_the_actuator_interrupts_with_the_running_id_its_manager_shows(robot: Ro
         wait_until(lambda: robot.sim.skill_status("spot", "init_power") == (True, "p1-1"), 5, "started by the pilot")
     finally:
         gui.close()
+
+
+def test_a_command_the_check_denies_is_a_defect_never_sent(client_factory, spot_arm) -> None:
+    """A pilot whose model lacks safety_guard (the monitor's has it) plans to walk with the arm ready:
+    the monitor's strict check denies the walk, and the pilot counts the defect and sends nothing."""
+    system, typemap = spot_arm
+    weaker = dataclasses.replace(system, properties=tuple(p for p in system.properties if p.name != "safety_guard"))
+    robot = Robot(client_factory, system, typemap, pilot_system=weaker)
+    impl = Implementations(robot.sim, robot.system)
+    gui = Gui(robot.observer, robot)
+    try:
+        gui.start("manipulator", "arm_ready")
+        robot.statuses.first(lambda s: s.state == "idle" and s.state_seq == 2, what="the arm ready")
+        reply = ask_goal(robot.observer, goal("run spot:go_to_waypoint", inputs=WALK, mode="drive"))
+        paused = robot.statuses.first(lambda s: s.denied == 1, what="a denied command")
+        assert (paused.state, paused.next.transition) == ("paused", "go_to_waypoint.start")
+        assert paused.reason.startswith(f"the check answered deny for spot:go_to_waypoint.start at step "
+                                        f"{paused.state_seq}: safety_guard (explicit): "), paused.reason
+        time.sleep(0.5)
+        assert robot.actuator.sent == ["spot:init_power.start", "spot:stand_up.start"]
+        assert ask_goal(robot.observer, PilotGoalRequest(system="spot_arm", op="cancel")).accepted
+        assert robot.statuses.state("cancelled", reply.goal_id).denied == 1  # asked once at that step
+    finally:
+        gui.close()
+        impl.close()
+        robot.close()
+
+
+def test_drive_through_rmw_zenoh_keys(client_factory, spot_arm) -> None:
+    """The pilot's requests on rmw_zenoh keys, with their attachments, reach the managers."""
+    robot = Robot(client_factory, *spot_arm, style=KeyStyle(rmw_zenoh=True, domain=31))
+    impl = Implementations(robot.sim, robot.system)
+    try:
+        reply = ask_goal(robot.observer, goal("reach spot:Standing", mode="drive"))
+        robot.statuses.state("reached", reply.goal_id)
+        assert robot.actuator.sent == ["spot:init_power.start", "spot:stand_up.start"]
+        assert robot.sim.skill_status("spot", "stand_up") == (False, "p1-2")  # the pilot's own request ids
+    finally:
+        impl.close()
+        robot.close()
