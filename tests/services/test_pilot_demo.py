@@ -149,3 +149,23 @@ def test_a_pilot_run_that_does_not_end_is_said_not_crashed(monkeypatch: pytest.M
     assert out.endswith("== the runs side by side\n   run  commands  moves  retries  violations  denied\n")
     assert err == (f"skinet demo: {PILOT}: the pilot run did not end: the pilot's mission did not end within 120 s: "
                    "it is paused (spot is lost) at goal 3 of 29\n")
+
+
+def test_bad_pilot_runs_are_refused_before_anything_runs(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A pilot run's errors name the file, line and column (its goals file's too); --live plays scenarios only."""
+    assert main(["demo", "--live", "--no-multicast-scouting", str(PILOT)]) == 1
+    assert capsys.readouterr().err == f"skinet: error: --live plays scenarios; {PILOT} is a pilot run (play it " \
+                                      "without --live)\n"
+    bad = tmp_path / "bad.toml"
+    bad.write_text(f'[pilot]\nname = "bad"\nsystem = "{MISSIONS.parent / "spot_arm.toml"}"\ngoals = "goals.toml"\n'
+                   '\n[[failures]]\nskill = "manipulator:arm_ready"\nmode = "ready"\n')
+    (tmp_path / "goals.toml").write_text('[[goals]]\nrun = "spot:fly"\n')
+    assert main(["demo", str(MISSIONS / "assisted.toml"), str(bad)]) == 1
+    out, err = capsys.readouterr()
+    assert out == "" and err == (f"{bad}:8:1: error: failure 1: 'ready' is not a failure mode of "
+                                 "manipulator:arm_ready (failure modes: blocked)\n")
+    bad.write_text(bad.read_text().replace('mode = "ready"', 'mode = "blocked"'))
+    assert main(["demo", str(bad)]) == 1
+    err = capsys.readouterr().err
+    assert err == (f"{tmp_path / 'goals.toml'}:2:13: error: unknown skill 'fly' of 'spot' (expected one of: "
+                   "init_power, safe_poweroff, stand_up, sit_down, go_to_waypoint, teleop)\n")
