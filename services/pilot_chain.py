@@ -59,7 +59,7 @@ class PilotRecord:
     @property
     def retries(self) -> int:
         """Failed skill runs the pilot had to get past (each failure outcome the monitor saw)."""
-        return sum(".failure." in (e.transition or "") or (e.transition or "").endswith(".failure") for e in self.events)
+        return sum((e.transition or "").split(".")[1:2] == ["failure"] for e in self.events)
 
     def scenario(self, system_path: str = "") -> Scenario:
         """The run as a scenario: one step per transition, at its time from the first one."""
