@@ -65,7 +65,8 @@ def example_scenario(name: str) -> Path:
 def add_parser(sub: argparse._SubParsersAction) -> None:
     c = sub.add_parser("demo", help=HELP, description=DESCRIPTION)
     c.add_argument("scenarios", nargs="*", metavar="SCENARIO",
-                   help=f"scenario files (default: the {len(MISSIONS)} runs above, skillsets/missions/"
+                   help=f"scenario files or pilot run files ([pilot]: a goals file driven by the pilot, with "
+                        f"injected failures) (default: the {len(MISSIONS)} runs above, skillsets/missions/"
                         f"{{{','.join(m.removesuffix('.toml') for m in MISSIONS)}}}.toml), or 'nav2' (examples/nav2)")
     c.add_argument("--no-predict", action="store_true", help="explicit constraints only")
     add_no_properties_arg(c)
