@@ -171,7 +171,10 @@ def test_skinet_demo_nav2_ends_with_the_pilot_docking(capsys: pytest.CaptureFixt
     assert re.fullmatch(r'     sent: send_goal /dock_robot goal [0-9a-f]{8}(-[0-9a-f]{4}){3}-[0-9a-f]{12} '
                         r'\{"dock_id": "home_dock", "use_dock_id": true\}: accepted', out[at + 1]), out[at + 1]
     assert out[at + 2:] == ["     robot: nav2:dock_robot.start, nav2:dock_robot.success.docked",
-                            "   pilot: reached; 1 command sent, 0 denied; violations: 0", ""]
+                            "   pilot: reached; 1 command sent, 0 denied; violations: 0", "",
+                            "== the runs side by side",
+                            "   run   commands  moves  retries  violations  denied",
+                            "   nav2         5     12        1           0       -"]
     assert main(["demo", "nav2", "--core"]) == 0
     assert capsys.readouterr().out.splitlines()[-2] == (f"   (the pilot's goals, {dock}, need the chain of a bound "
                                                         "system: not played here)")
