@@ -38,9 +38,11 @@ class Placed:
     field: str | None = None
     line: int | None = None
     column: int | None = None
+    detail: str = ""  # the message without its SOURCE:LINE:COL: error: prefix
 
     def json(self) -> dict[str, Any]:
-        return {"error": self.message, "field": self.field, "line": self.line, "column": self.column}
+        return {"error": self.message, "detail": self.detail or self.message, "field": self.field, "line": self.line,
+                "column": self.column}
 
 
 class GoalFormError(SkinetError):
@@ -93,13 +95,13 @@ def place(reason: str, lines: list[int]) -> Placed:
     m = _PLACE.match(reason.strip())
     if m is None:
         return Placed(reason)
-    line, column = int(m["line"]), int(m["column"])
+    line, column, detail = int(m["line"]), int(m["column"]), m["message"]
     if m["source"] == INPUTS_SOURCE:
-        return Placed(reason, "inputs", line, column)
+        return Placed(reason, "inputs", line, column, detail)
     goal = _GOAL_SOURCE.match(m["source"])
     if goal is None:
         return Placed(reason)
     n = int(goal["n"] or 1)
     if not 1 <= n <= len(lines) or line != 1:  # a goal is one line of the box
         return Placed(reason)
-    return Placed(reason, "goals", lines[n - 1], column)
+    return Placed(reason, "goals", lines[n - 1], column, detail)

@@ -594,7 +594,8 @@ function renderPilot() {
   fill("pilot-status", el("span", { class: "pilot-state", "data-state": p.state, "data-goal": p.goal_id },
     p.state + (p.reason ? `: ${p.reason}` : "")), el("span", { class: "facts" }, ...facts));
   document.getElementById("plan-answer").textContent = plan.answer
-    ? `(${plan.answer}${plan.moves !== null ? `, ${plan.moves} moves from here` : ""})` : "";
+    ? `(${plan.answer}${plan.moves !== null && active ? `, ${plan.moves} move${plan.moves === 1 ? "" : "s"} from here` : ""})`
+    : "";
   fill("plan", ...stepNodes(plan.steps, flat));
 }
 
@@ -606,7 +607,9 @@ function showGoalError(body) {
   box.hidden = false;
   Object.assign(box.dataset, { field: body.field || "", line: body.line || "", column: body.column || "",
     rejected: !!body.rejected });
-  const parts = [el("div", { class: "message" }, body.error)];
+  const where = body.field && body.line
+    ? `${body.field === "inputs" ? "skill inputs" : "goal"} line ${body.line}, column ${body.column}: ` : "";
+  const parts = [el("div", { class: "message", title: body.error }, where + (body.detail || body.error))];
   if (body.field && body.line) {
     const input = document.getElementById(body.field === "inputs" ? "goal-inputs" : "goal-text");
     const lines = input.value.split("\n"), text = lines[body.line - 1] || "";

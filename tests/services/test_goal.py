@@ -1,0 +1,179 @@
+"""``skinet goal`` through a real router with the real pilot (SPEC §8, issue 24 item 4).
+
+The pilot drives the paper's system on simulated managers (:mod:`tests.services.piloted`);
+``skinet goal`` runs as its own process, a client of the router, and is judged on its exit
+status and the exact lines it prints: the pilot's reply, then one line per change of the
+pilot's status until the goal ends.
+"""
+
+from __future__ import annotations
+
+import re
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+
+import pytest
+
+from services.common.goals import NoPilot, ask_pilot, no_pilot_message, pilot_status
+from services.dashboard.goalbox import GoalFormError, Placed, goal_request, place
+from skinet.files import load_system
+from skinet.wire.messages import PilotGoalRequest
+from tests.services.conftest import REPO, client_args, open_client, start_skinet
+from tests.services.piloted import SYSTEM_FILE, PilotedRobot
+
+STAND_UP = [  # skinet plan's steps for "reach spot:Standing" from the initial marking
+    "steps:",
+    "  1. spot:init_power.start",
+    "  2. wait for spot:init_power.success.powered_on",
+    "     if spot:init_power.failure.no_battery: retry from step 1",
+    "  3. spot:stand_up.start",
+    "  4. wait for spot:stand_up.success.standing",
+    "     if spot:stand_up.failure.fell: retry from step 3",
+]
+
+
+def goal(router: str, *args: str, timeout: float = 60) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "skinet_cli.main", "goal", *args, *client_args(router)], cwd=REPO,
+                          capture_output=True, text=True, timeout=timeout)
+
+
+def status_lines(out: str) -> list[str]:
+    """The lines after the reply and its steps: one per change of the pilot's status."""
+    lines = out.splitlines()
+    k = 0
+    while k < len(lines) and (lines[k].startswith(("goal ", "cyclic:", "strong:", "steps:", " ")) or not lines[k]):
+        k += 1
+    return lines[k:]
+
+
+@pytest.fixture
+def robot(router: str) -> Iterator[PilotedRobot]:
+    with PilotedRobot(router) as r:
+        yield r
+
+
+def test_a_goal_driven_to_its_end_prints_the_plan_then_each_change_and_exits_0(robot, router) -> None:
+    done = goal(router, str(SYSTEM_FILE), "reach spot:Standing", "--drive")
+    assert done.returncode == 0, done.stdout + done.stderr
+    lines = done.stdout.splitlines()
+    assert lines[:9] == ["goal 1 accepted (drive mode: the pilot sends each command)",
+                         "cyclic: 4 moves when outcomes are favourable", *STAND_UP], done.stdout
+    changes = status_lines(done.stdout)
+    nexts = [m[1] for line in changes if (m := re.search(r"next (\S+)", line))]
+    assert list(dict.fromkeys(nexts)) == ["spot:init_power.start", "spot:stand_up.start"], changes
+    assert changes[-1] == "reached \u2014 2 commands sent", changes
+    assert len(changes) == len(set(changes)) or all(a != b for a, b in zip(changes, changes[1:])), changes
+    assert robot.world.ended == [("spot", "init_power", "success.powered_on"), ("spot", "stand_up", "success.standing")]
+    assert robot.pilot.status.state == "reached" and robot.pilot.status.denied == 0
+
+
+def test_a_skill_that_keeps_failing_ends_the_goal_failed_with_exit_1(router) -> None:
+    with PilotedRobot(router, world={"always": {("spot", "init_power"): "failure.no_battery"}}) as robot:
+        done = goal(router, "spot_arm", "reach spot:Standing", "--drive", "--max-retries", "2")
+    assert done.returncode == 1, done.stdout + done.stderr
+    last = status_lines(done.stdout)[-1]
+    assert last.startswith("failed: ") and "spot:init_power" in last and "no_battery" in last, done.stdout
+    assert robot.world.ended == [("spot", "init_power", "failure.no_battery")] * 2
+
+
+def test_a_malformed_goal_is_placed_before_any_connection_or_by_the_pilot(robot, router) -> None:
+    # With the system file at hand, skinet goal checks it itself: FILE:LINE:COL, exit 1, nothing sent.
+    done = goal(router, str(SYSTEM_FILE), "reach spot:Standin")
+    assert (done.returncode, done.stdout) == (1, "")
+    assert done.stderr == ("<goal>:1:7: error: unknown name 'spot:Standin' (candidates: spot:Standing, "
+                           "spot:posture.Standing)\n")
+    # With a name only, the pilot says it: rejected, exit 2.
+    done = goal(router, "spot_arm", "reach spot:Standin")
+    assert done.returncode == 2, done.stdout + done.stderr
+    assert done.stderr.startswith("goal rejected by the pilot: <goal>:1:7: error: unknown name 'spot:Standin'")
+    assert robot.pilot.status.goal_id == 0 and robot.pilot.status.commands == 0
+
+
+def test_a_goal_with_no_plan_is_rejected_with_the_reason(robot, router) -> None:
+    done = goal(router, "spot_arm", "reach spot:Busy and manipulator:Busy", "--drive")
+    assert done.returncode == 2, done.stdout + done.stderr
+    assert "the goal is unsafe" in done.stderr and "action_guard" in done.stderr, done.stderr
+    assert robot.pilot.status.commands == 0
+
+
+def test_no_pilot_is_one_clear_line_and_exit_1(router) -> None:
+    done = goal(router, "spot_arm", "reach spot:Standing", "--timeout", "1")
+    assert (done.returncode, done.stdout) == (1, "")
+    assert done.stderr == ("skinet: error: no pilot answers on skinet/spot_arm/pilot/goal/local: is `skinet run` or "
+                           "the pilot service running?\n")
+    assert no_pilot_message("spot_arm", "observer").endswith(
+        "(or the router refused user 'observer': only operator-role users may send goals)")
+
+
+def test_ctrl_c_cancels_the_goal(robot, router) -> None:
+    proc = start_skinet("goal", "spot_arm", "reach spot:Standing", *client_args(router))  # guide: waits for you
+    try:
+        lines: list[str] = []
+        while not any(line.startswith("guiding") for line in lines):
+            line = proc.stdout.readline()
+            assert line, "".join(lines)
+            lines.append(line)
+        proc.send_signal(signal.SIGINT)
+        out, _ = proc.communicate(timeout=20)
+    finally:
+        proc.kill()
+    lines += out.splitlines(keepends=True)
+    assert proc.returncode == 1, "".join(lines)
+    assert "cancelled by Ctrl-C: asking the pilot to cancel the goal\n" in lines
+    assert lines[-1].startswith("cancelled"), lines
+    assert robot.pilot.status.state == "cancelled" and robot.pilot.status.commands == 0
+
+
+def test_pause_resume_cancel_and_a_second_goal_without_replace(robot, router) -> None:
+    first = start_skinet("goal", "spot_arm", "reach spot:Standing", *client_args(router))
+    try:
+        deadline = time.monotonic() + 20
+        while robot.pilot.status.state != "guiding":
+            assert time.monotonic() < deadline, robot.pilot.status
+            time.sleep(0.05)
+        second = goal(router, "spot_arm", "run spot:init_power")
+        assert second.returncode == 2 and second.stderr.startswith("goal rejected by the pilot: "), second.stderr
+        paused = goal(router, "spot_arm", "--pause")
+        assert paused.returncode == 0 and paused.stdout.startswith("pause: done (goal 1)\npaused"), paused.stdout
+        resumed = goal(router, "spot_arm", "--resume")
+        assert resumed.returncode == 0 and resumed.stdout.startswith("resume: done (goal 1)\n"), resumed.stdout
+        cancelled = goal(router, "spot_arm", "--cancel")
+        assert cancelled.returncode == 0, cancelled.stdout + cancelled.stderr
+        out, _ = first.communicate(timeout=20)
+    finally:
+        first.kill()
+    assert first.returncode == 1 and out.splitlines()[-1].startswith("cancelled"), out
+    assert "paused" in out  # its own view showed the pause too
+
+
+# -- the client side the dashboard shares --------------------------------------------------
+
+
+def test_the_goal_box_places_errors_in_the_box() -> None:
+    system, _ = load_system(SYSTEM_FILE)
+    form = {"goals": "reach spot:Standing\n\nreach spot:Standin", "mode": "drive"}
+    with pytest.raises(GoalFormError) as caught:
+        goal_request("spot_arm", form, system)
+    assert caught.value.placed == Placed(
+        "<goal 2>:1:7: error: unknown name 'spot:Standin' (candidates: spot:Standing, spot:posture.Standing)",
+        "goals", 3, 7, "unknown name 'spot:Standin' (candidates: spot:Standing, spot:posture.Standing)")
+    form = {"goals": "run spot:go_to_waypoint", "inputs": "go_to_waypoint.targt = {x = 1.0}"}
+    with pytest.raises(GoalFormError) as caught:
+        goal_request("spot_arm", form, system)
+    assert (caught.value.placed.field, caught.value.placed.line, caught.value.placed.column) == ("inputs", 1, 16)
+    request = goal_request("spot_arm", {"goals": " reach spot:Standing \n", "mode": "drive", "replace": True}, None)
+    assert request == PilotGoalRequest(system="spot_arm", goals=["reach spot:Standing"], mode="drive", replace=True)
+    assert place("no plan: the goal is unsafe", [1]) == Placed("no plan: the goal is unsafe")
+
+
+def test_ask_pilot_without_a_pilot_raises_the_message(router) -> None:
+    session = open_client(router)
+    try:
+        with pytest.raises(NoPilot, match=re.escape(no_pilot_message("spot_arm", "local"))):
+            ask_pilot(session, PilotGoalRequest(system="spot_arm"), "local", timeout=0.5)
+        assert pilot_status(session, "spot_arm", timeout=0.5) is None
+    finally:
+        session.close()
