@@ -25,11 +25,12 @@ from typing import Literal, Protocol
 
 import zenoh
 
+from services.common.requests import Requests
 from skinet.lang.model import Skillset
 from skinet.mission import Scenario, Step, step_numbers
-from skinet.ros.interfaces import event_request_topic, skill_topic
-from skinet.ros.keys import KeyStyle, ManagerTopic, manager_topics, rmw_attachment
-from skinet.ros.typestore import Typestore, default_instance, encode
+from skinet.ros.keys import KeyStyle, ManagerTopic
+from skinet.ros.requests import event_request, skill_interrupt, skill_request
+from skinet.ros.typestore import Typestore
 from skinet.system import Component
 
 log = logging.getLogger("skinet.simulator")
@@ -102,35 +103,23 @@ def plan(skillset: Skillset, step: Step) -> Planned:
 
 
 class Operator:
-    """Sends requests to the managers over Zenoh, like an operator GUI."""
+    """Sends requests to the managers over Zenoh, like an operator GUI (:mod:`skinet.ros.requests`)."""
 
     def __init__(self, session: zenoh.Session, simulator: Managers):
         self.simulator = simulator
-        self._publishers: dict[tuple[str, str], tuple[ManagerTopic, zenoh.Publisher]] = {}
-        for name, node in simulator.nodes.items():
-            for t in manager_topics(node.component.skillset):
-                if t.kind in ("skill_request", "skill_interrupt", "event_request"):
-                    key = simulator.style.key(node.component.manager, t, node.store)
-                    pub = session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
-                    self._publishers[(name, t.topic)] = (t, pub)
-        self._sequence = 0
+        self._requests = Requests(session, ((n.component, n.store) for n in simulator.nodes.values()),
+                                  simulator.style, b"operator-gui-gid")
 
-    def send(self, skillset: str, topic: str, timeout: float = 5.0, **values: object) -> bool:
-        """Publish one request and wait until the manager has handled it."""
-        t, pub = self._publishers[(skillset, topic)]
-        node = self.simulator.nodes[skillset]
-        payload = encode(node.store, t.typename, default_instance(node.store, t.typename, **values))
-        attachment = None
-        if self.simulator.style.rmw_zenoh:
-            self._sequence += 1
-            attachment = rmw_attachment(self._sequence, time.time_ns(), b"operator-gui-gid"[:16])
-        before = self.simulator.handled(skillset, topic)
-        pub.put(payload, attachment=attachment)
-        return self.simulator.wait_handled(skillset, topic, before + 1, timeout)
+    def send(self, skillset: str, request: tuple[ManagerTopic, bytes], timeout: float = 5.0) -> bool:
+        """Publish one request (:func:`skinet.ros.requests.skill_request`...) and wait until the manager
+        has handled it."""
+        topic, payload = request
+        before = self.simulator.handled(skillset, topic.topic)
+        self._requests.put(skillset, topic, payload)
+        return self.simulator.wait_handled(skillset, topic.topic, before + 1, timeout)
 
     def close(self) -> None:
-        for _, pub in self._publishers.values():
-            pub.undeclare()
+        self._requests.close()
 
 
 def drive(simulator: Managers, scenario: Scenario, speed: float = 1.0,
@@ -157,20 +146,21 @@ def drive(simulator: Managers, scenario: Scenario, speed: float = 1.0,
                 delay = origin + step.t / speed - time.monotonic()
                 if delay > 0:
                     time.sleep(delay)
-            ss = simulator.nodes[step.skillset].component.skillset
+            node = simulator.nodes[step.skillset]
+            ss, store = node.component.skillset, node.store
             ok, detail = True, ""
             if p.action == "start":
                 detail = f"{scenario.name}-{i}"
-                ok = operator.send(step.skillset, skill_topic(ss, p.skill or "", "request"), id=detail)
+                ok = operator.send(step.skillset, skill_request(store, ss, p.skill or "", detail))
                 ok = ok and simulator.skill_status(step.skillset, p.skill or "") == (True, detail)
                 detail = detail if ok else f"the manager did not start {p.skill} (request '{detail}')"
             elif p.action == "interrupt":
                 running, detail = simulator.skill_status(step.skillset, p.skill or "")
-                ok = operator.send(step.skillset, skill_topic(ss, p.skill or "", "interrupt"), id=detail)
+                ok = operator.send(step.skillset, skill_interrupt(store, ss, p.skill or "", detail))
                 ok = ok and running
             elif p.action == "event":
                 detail = f"{scenario.name}-{i}"
-                ok = operator.send(step.skillset, event_request_topic(ss), id=detail, name=p.name)
+                ok = operator.send(step.skillset, event_request(store, ss, detail, p.name))
             elif p.action in ("success", "failure"):
                 ok = simulator.terminate(step.skillset, p.skill or "", p.action, p.name)
                 detail = "" if ok else f"{p.skill} is not running"

@@ -16,13 +16,15 @@ from functools import lru_cache
 from skinet.errors import SkinetError, SourceError
 from skinet.net.semantics import steps
 from skinet.options import PredictionOptions, PropertyOptions
+from skinet.plan.policy import Step
 from skinet.props.evaluate import holds
 from skinet.system import Marking, System, build_system, marking_from_json, marking_to_json
 from skinet.lang.parser import parse_model, parse_skillset
 from skinet.verify.algorithm1 import Analysis, PredictionVerdict
 from skinet.verify.predict import Forecast
 from skinet.wire.messages import (
-    ModelBundle, PredictRequest, PropertyVerdict, RecoveryEntry, Risk, SkillsetStatus, StateSpaceReport, UnsafeEntry,
+    ModelBundle, PlanBranch, PlanStep, PredictRequest, PropertyVerdict, RecoveryEntry, Risk, SkillsetStatus,
+    StateSpaceReport, UnsafeEntry,
 )
 
 
@@ -157,3 +159,12 @@ def analysis_bodies(
         for p, rs in analysis.recovery.items() for r in rs
     ]
     return props, unsafe, recovery
+
+
+def plan_steps(steps: Iterable[Step]) -> list[PlanStep]:
+    """A plan's steps and branches (:attr:`skinet.plan.Plan.steps`) as wire messages (SPEC §8)."""
+    return [PlanStep(number=s.number, skillset=s.skillset, action=s.action, expect=s.expect,
+                     inputs=dict(s.inputs) if s.inputs else None,
+                     branches=[PlanBranch(skillset=b.skillset, transition=b.transition, then=b.then, step=b.step,
+                                          steps=plan_steps(b.steps)) for b in s.branches])
+            for s in steps]

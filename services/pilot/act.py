@@ -1,0 +1,150 @@
+"""How the pilot acts on the robot (SPEC §8, *The pilot*; §9, *Acting*).
+
+An :class:`Actuator` sends one :class:`~skinet.wire.messages.PilotCommand`
+(``SKILL.start`` with its inputs, or ``SKILL.interrupt``) and says what it sent,
+for the log; it raises :class:`ActError` with the reason when it cannot.  Which
+protocol carries a skill is decided in one place, :func:`route`: the
+:class:`ManagerActuator` (the default) speaks a generated skillset manager's
+request protocol, as an operator GUI does (:mod:`skinet.ros.requests`); skills
+bound to ROS 2 actions (SPEC §9) are sent by a bound actuator.
+
+An interrupt needs the running execution's id.  The manager's own
+``SkillsetStatus`` says it: the actuator follows each manager's status topic and,
+when it has not seen one yet, asks for it (``status_request``) and waits a moment.
+A pilot's start ids are ``<instance>-<n>``.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from collections.abc import Mapping
+from typing import Literal, Protocol
+
+import zenoh
+
+from services.common.requests import Requests
+from services.common.zenoh_config import undeclare
+from skinet.errors import SkinetError
+from skinet.ros.derive import SkillView
+from skinet.ros.keys import KeyStyle
+from skinet.ros.requests import skill_ids, skill_interrupt, skill_request, status_request, topic_of
+from skinet.ros.typestore import Typestore, build_typestore
+from skinet.system import Component, System
+from skinet.wire.messages import PilotCommand
+
+log = logging.getLogger("skinet.pilot")
+STATUS_WAIT = 1.0  # seconds an interrupt waits for a manager's status when it has seen none
+READY = 0  # SkillXStatus.state
+
+
+class ActError(Exception):
+    """The command could not be sent; ``reason`` says why, in the operator's words."""
+
+    def __init__(self, reason: str):
+        super().__init__(reason)
+        self.reason = reason
+
+
+class Actuator(Protocol):
+    """What the pilot needs to act."""
+
+    def send(self, command: PilotCommand) -> str:
+        """Send ``command``; returns what was sent (for the log); raises :class:`ActError`."""
+        ...
+
+    def close(self) -> None: ...
+
+
+def route(system: System, skillset: str, skill: str) -> Literal["manager", "binding"]:
+    """The protocol that carries ``skillset:skill``'s commands: ``binding`` when its skillset is bound to
+    plain ROS 2 interfaces (SPEC §9: the binding's action), else ``manager`` (the manager's requests)."""
+    return "binding" if system.component(skillset).binding else "manager"
+
+
+class ManagerActuator:
+    """Commands as ``Skill<K>Request`` and ``SkillInterrupt`` on the managers' topics (keys of ``style``).
+
+    ``typemap`` is the system's type map (``[system] types``): a skillset whose interface messages
+    cannot be built from it is refused at each command, with the type map's error as the reason."""
+
+    def __init__(self, session: zenoh.Session, system: System, typemap: Mapping[str, str] | None = None,
+                 style: KeyStyle = KeyStyle(), instance: str = "pilot"):
+        self.system, self.instance = system, instance
+        self._stores: dict[str, Typestore] = {}
+        self._problems: dict[str, str] = {}
+        for c in system.components:
+            if route(system, c.name, "") == "binding":
+                continue
+            if not c.manager:
+                self._problems[c.name] = f"skillset {c.name} names no manager node (manager = ... in the system file)"
+                continue
+            try:
+                self._stores[c.name] = build_typestore(c.skillset, typemap or {})
+            except SkinetError as exc:
+                self._problems[c.name] = f"the interface messages of {c.name} cannot be built: {exc}"
+        nodes = [(system.component(name), store) for name, store in self._stores.items()]
+        self._requests = Requests(session, nodes, style)
+        self._lock = threading.Condition()
+        self._ids: dict[str, dict[str, SkillView]] = {}  # skillset -> skill -> state and id, from its status
+        self._count = 0
+        self._subs = [session.declare_subscriber(style.key(c.manager, topic_of(c.skillset, "status"), None),
+                                                 lambda s, c=c: self._on_status(c, s)) for c, _ in nodes]
+
+    def _on_status(self, component: Component, sample: zenoh.Sample) -> None:
+        try:
+            ids = skill_ids(self._stores[component.name], component.skillset, sample.payload.to_bytes())
+        except Exception as exc:  # a malformed status must not stop the pilot (SPEC §7)
+            log.warning("status of %s not understood: %s", component.manager, exc)
+            return
+        with self._lock:
+            self._ids[component.name] = ids
+            self._lock.notify_all()
+
+    def send(self, command: PilotCommand) -> str:
+        skillset, (skill, _, kind) = command.skillset, command.transition.partition(".")
+        if skillset not in self._stores:
+            raise ActError(self._problems.get(skillset) or f"{skillset}:{skill} is bound to a ROS 2 interface; "
+                                                            "this actuator speaks only the managers' protocol")
+        c = self.system.component(skillset)
+        store = self._stores[skillset]
+        if kind == "start":
+            with self._lock:
+                self._count += 1
+                id_ = f"{self.instance}-{self._count}"
+            try:
+                request = skill_request(store, c.skillset, skill, id_, command.inputs)
+            except (ValueError, KeyError, TypeError) as exc:
+                raise ActError(f"cannot encode {skillset}:{command.transition}: {exc}") from None
+            key = self._requests.put(skillset, *request)
+            return f"{command.transition} (id '{id_}'{_inputs(command.inputs)}) on {key}"
+        if kind == "interrupt":
+            id_ = self._running_id(c, store, skill)
+            key = self._requests.put(skillset, *skill_interrupt(store, c.skillset, skill, id_))
+            return f"{command.transition} (running id '{id_}') on {key}"
+        raise ActError(f"{skillset}:{command.transition} is not a command (SKILL.start or SKILL.interrupt)")
+
+    def _running_id(self, c: Component, store: Typestore, skill: str) -> str:
+        """The id of ``skill``'s running execution, as the manager's last status shows it."""
+        with self._lock:
+            if c.name not in self._ids:
+                self._requests.put(c.name, *status_request(store, c.skillset))
+                self._lock.wait_for(lambda: c.name in self._ids, STATUS_WAIT)
+            view = self._ids.get(c.name, {}).get(skill)
+        if view is None:
+            raise ActError(f"the running id of {c.name}:{skill} is unknown: no status from {c.manager} "
+                           f"within {STATUS_WAIT:g} s")
+        if view.state == READY:
+            raise ActError(f"{c.name}:{skill} is not running according to {c.manager}'s last status")
+        return view.id
+
+    def close(self) -> None:
+        undeclare(*self._subs)
+        self._requests.close()
+
+
+def _inputs(inputs: Mapping[str, object]) -> str:
+    return f", inputs {dict(inputs)}" if inputs else ""
+
+
+__all__ = ["ActError", "Actuator", "ManagerActuator", "route"]

@@ -1,0 +1,543 @@
+"""The pilot: goals in, safe skill requests out, on the live robot (SPEC §8, *The pilot*; issue 24).
+
+Follows the monitor: its :class:`LiveState` on ``keys.state`` (asked with a ``get`` at
+start and whenever a monitor appears), its :class:`UnsafeReport` on ``keys.unsafe``
+(``prediction_stale``) and its liveliness token.  Holds one goal (or mission, goal
+after goal), set on the queryable ``keys.pilot_goal(system, <client>)``, and plans it
+with :class:`skinet.plan.Planner` from the live marking, reusing the plan while
+``plan.action(marking)`` answers and planning again when the marking leaves it (an
+outcome, an event, the operator's own command: the operator keeps full control).
+
+*guide* publishes the next command; *drive* also sends it through the
+:class:`~services.pilot.act.Actuator`, only after the monitor's check
+(``keys.check``, policy ``strict``) answered ``allow`` about the very step the command
+was planned from (``CheckReply.seq`` = ``LiveState.seq``, neither state nor prediction
+stale); a deny is a defect, logged with its reason and counted in ``denied``, never
+sent.  After a command the pilot waits for its effect (an event of that skillset
+after the step it was planned from); never two commands in flight; no reaction within
+``response_timeout`` ends the goal ``failed: no response from <manager>``.
+
+A skillset that is not ``live``, a model divergence (until the next step, or ``resume``),
+a pending prediction (when a command is due) or an operator's ``pause`` pause it.  A
+skill that fails ``max_retries`` times in one goal ends it ``failed``.  The status
+(:class:`PilotStatus`) is put on ``keys.pilot_status`` at every change and answered on
+``get``.  Bad requests, an unknown system, a goal without a plan, no monitor, a manager
+that is gone: a reason in the reply or the status, never a command, never a crash.
+Cost per marking change: one ``plan.action`` (a few set lookups) while the plan covers
+the marking, else one plan (:mod:`skinet.plan.planner`); one check query per command.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+import uuid
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import zenoh
+
+from services.common.zenoh_config import undeclare
+from services.pilot.act import ActError, Actuator, ManagerActuator
+from skinet.errors import SkinetError, SourceError
+from skinet.plan import Command, Goal, Plan, Planner, Reached, parse_goal, parse_goals
+from skinet.system import System
+from skinet.wire import keys
+from skinet.wire.codec import DecodeError, decode, encode
+from skinet.wire.convert import marking_of, plan_steps
+from skinet.wire.messages import (
+    CheckReply, CheckRequest, LiveState, PilotCommand, PilotGoalReply, PilotGoalRequest, PilotStatus, UnsafeReport,
+)
+
+log = logging.getLogger("skinet.pilot")
+TICK = 0.1  # seconds between the worker's looks at timeouts
+CHECK_WAIT = 1.0  # seconds the check may wait for a synced state and a fresh prediction
+MAX_REQUEST = 256 << 10  # bytes of a goal request (a mission file's text)
+MAX_STATE = 1 << 20  # bytes of a LiveState or UnsafeReport read
+RETRY_REFUSED = 1.0  # seconds before a check that did not allow is asked again at the same step
+
+
+@dataclass
+class _Goal:
+    """The goal (or mission) being followed."""
+
+    id: int
+    client: str
+    mode: str
+    goals: list[Goal]
+    max_retries: int
+    since: int  # the LiveState.seq when it was set: only later events count
+    index: int = 0
+    plan: Plan | None = None
+    retries: dict[str, int] = field(default_factory=dict)
+    commands: int = 0
+    denied: int = 0
+    paused_by: str = ""  # the client that paused it
+    accepted_divergence: int = -1  # the step whose divergence `resume` accepted
+    end: str = ""  # reached, failed or cancelled
+    reason: str = ""
+
+
+@dataclass
+class _InFlight:
+    command: PilotCommand
+    seq: int  # the step it was planned from: its effect is an event of its skillset after it
+    deadline: float  # monotonic
+    manager: str
+
+
+@dataclass
+class _Due:
+    command: PilotCommand
+    seq: int
+    goal: int
+    unsafe: UnsafeReport  # the report that said the prediction of ``seq`` is fresh
+
+
+class Pilot:
+    """A running pilot; build it with :func:`start_pilot`."""
+
+    def __init__(self, session: zenoh.Session, system: System, *, instance: str | None = None,
+                 actuator: Actuator | None = None, response_timeout: float = 5.0, budget: float = 1.0,
+                 client: str | None = None, typemap: Mapping[str, str] | None = None):
+        self.session, self.system = session, system
+        self.name = keys.check_chunk(system.name, "system name")
+        self.instance = keys.check_chunk(instance or uuid.uuid4().hex[:8], "instance id")
+        self.client = keys.check_chunk(client or keys.LOCAL_CLIENT, "client name")
+        self.response_timeout, self.budget = response_timeout, budget
+        self.typemap = dict(typemap or {})
+        self.actuator: Actuator = actuator if actuator is not None else ManagerActuator(
+            session, system, typemap, instance=f"pilot-{self.instance}")
+        self.planner = Planner(system)
+        self._lock = threading.Lock()
+        self._wake = threading.Event()
+        self._closed = False
+        self._state: LiveState | None = None
+        self._unsafe: UnsafeReport | None = None
+        self._monitors: set[str] = set()
+        self._goal: _Goal | None = None
+        self._goals = 0
+        self._inflight: _InFlight | None = None
+        self._asked: tuple[int, int, UnsafeReport, float] | None = None  # goal, step, report, until: a refused check
+        self._refusal = ""  # why that check did not allow
+        self._seq = 0
+        self._status = PilotStatus(system=self.name, pilot=self.instance, seq=0, stamp=time.time(),
+                                   state="waiting for monitor", reason=self._no_monitor())
+        self._payload = encode(self._status)
+        self._pub = session.declare_publisher(keys.pilot_status(self.name),
+                                              congestion_control=zenoh.CongestionControl.BLOCK, express=True)
+        self._state_sub = session.declare_subscriber(keys.state(self.name), self._on_state)
+        self._unsafe_sub = session.declare_subscriber(keys.unsafe(self.name), self._on_unsafe)
+        self._monitor_sub = session.liveliness().declare_subscriber(keys.alive(self.name, "monitor", "*"),
+                                                                     self._on_monitor, history=True)
+        self._status_q = session.declare_queryable(keys.pilot_status(self.name), self._on_status_query)
+        self._goal_q = session.declare_queryable(keys.pilot_goal(self.name, "*"), self._on_goal_query)
+        self._pub.put(self._payload)
+        self._token = session.liveliness().declare_token(keys.alive(self.name, "pilot", self.instance))
+        self._worker = threading.Thread(target=self._run, name="skinet-pilot", daemon=True)
+        self._worker.start()
+
+    # -- public API ---------------------------------------------------------------------
+
+    @property
+    def status(self) -> PilotStatus:
+        """The last published status."""
+        with self._lock:
+            return self._status
+
+    def close(self) -> None:
+        """Undeclare everything (the session stays open: it may be shared)."""
+        with self._lock:
+            if self._closed:
+                return
+            self._closed = True
+        self._wake.set()
+        self._worker.join(CHECK_WAIT + 3.0)
+        undeclare(self._token, self._goal_q, self._status_q, self._monitor_sub, self._unsafe_sub, self._state_sub)
+        self.actuator.close()
+        with self._lock:
+            undeclare(self._pub)
+
+    # -- what the monitor says -----------------------------------------------------------
+
+    def _read(self, payload: zenoh.ZBytes, kind: type, what: str) -> Any:
+        try:
+            if len(payload) > MAX_STATE:
+                raise DecodeError(f"{len(payload)} bytes")
+            message = decode(payload.to_bytes(), kind)
+            if message.system != self.name:
+                raise DecodeError(f"system '{message.system}'")
+            return message
+        except DecodeError as exc:
+            log.warning("%s not understood: %s", what, exc)
+            return None
+
+    def _on_state(self, sample: zenoh.Sample) -> None:
+        state = self._read(sample.payload, LiveState, "live state")
+        if state is not None:
+            with self._lock:
+                self._take_state(state)
+            self._wake.set()
+
+    def _take_state(self, state: LiveState) -> None:
+        """Follow one LiveState: effects of the command in flight, failures, run goals reached (lock held)."""
+        last = self._state
+        if last is not None and state.seq < last.seq:
+            return  # an older publication (a get's answer after the subscriber's)
+        self._state = state
+        if last is not None and state.seq == last.seq:
+            return  # the same step again (sync states changed)
+        skillset, _, rest = state.event.partition(":")
+        transition = rest.partition("#")[0]
+        flight = self._inflight
+        if flight is not None and skillset == flight.command.skillset and state.seq > flight.seq:
+            self._inflight = None  # its effect (or an event that changed what it would do): plan again
+        g = self._goal
+        if g is None or g.end or state.seq <= g.since or not transition:
+            return
+        skill, _, outcome = transition.partition(".")
+        if outcome.startswith("failure"):
+            name = f"{skillset}:{skill}"
+            g.retries[name] = g.retries.get(name, 0) + 1
+            if g.retries[name] >= max(1, g.max_retries):
+                mode = outcome.partition(".")[2] or "failure"
+                self._end(g, "failed", f"{name} failed {g.retries[name]} times (last: {mode})")
+                return
+        if g.goals[g.index].target(skillset, transition):
+            self._next_goal(g)
+
+    def _on_unsafe(self, sample: zenoh.Sample) -> None:
+        report = self._read(sample.payload, UnsafeReport, "unsafe report")
+        if report is not None:
+            with self._lock:
+                if self._unsafe is None or report.seq >= self._unsafe.seq or \
+                        (self._state is not None and report.seq == self._state.seq):
+                    self._unsafe = report
+            self._wake.set()
+
+    def _on_monitor(self, sample: zenoh.Sample) -> None:
+        key = str(sample.key_expr)
+        with self._lock:
+            if sample.kind == zenoh.SampleKind.PUT:
+                self._monitors.add(key)
+                self._state = self._unsafe = None  # a new monitor counts its steps from 0: ask it
+                if self._inflight is not None:
+                    self._inflight.seq = -1
+            else:
+                self._monitors.discard(key)
+                if not self._monitors:
+                    self._state = self._unsafe = None
+        self._wake.set()
+
+    def _fetch(self) -> None:
+        """Ask the monitor for its last state and unsafe report (a late joiner's ``get``)."""
+        for key, kind, take in ((keys.state(self.name), LiveState, self._take_state),
+                                (keys.unsafe(self.name), UnsafeReport, None)):
+            for reply in self.session.get(key, timeout=2.0):
+                if reply.ok is None:
+                    continue
+                message = self._read(reply.ok.payload, kind, key)
+                if message is None:
+                    continue
+                with self._lock:
+                    if take is not None:
+                        take(message)
+                    elif self._unsafe is None or message.seq >= self._unsafe.seq:
+                        self._unsafe = message
+
+    # -- goal requests ------------------------------------------------------------------
+
+    def _on_goal_query(self, query: zenoh.Query) -> None:
+        with query:
+            try:
+                reply = self._answer(query)
+            except Exception:  # a bug must not stop the pilot; the client gets a reason
+                log.exception("error while answering a goal request")
+                reply = self._reject("internal error in the pilot (see its log)")
+            query.reply(str(query.key_expr), encode(reply))
+        self._wake.set()
+
+    def _reject(self, reason: str) -> PilotGoalReply:
+        return PilotGoalReply(system=self.name, accepted=False, reason=reason)
+
+    def _answer(self, query: zenoh.Query) -> PilotGoalReply:
+        client = keys.client_of(str(query.key_expr))
+        if client is None:
+            return self._reject(f"key '{query.key_expr}': the client chunk must be a name "
+                                f"({keys.pilot_goal(self.name, '<client>')})")
+        size = 0 if query.payload is None else len(query.payload)
+        if size > MAX_REQUEST:
+            return self._reject(f"goal request of {size} bytes refused (limit {MAX_REQUEST} bytes)")
+        if query.payload is None:
+            return self._reject("empty goal request: send a PilotGoalRequest (msgpack)")
+        try:
+            request = decode(query.payload.to_bytes(), PilotGoalRequest)
+        except DecodeError as exc:
+            return self._reject(f"malformed goal request: {exc}")
+        if request.system != self.name:
+            return self._reject(f"unknown system '{request.system}': this pilot serves '{self.name}'")
+        if request.op == "goal":
+            return self._set_goal(request, client)
+        with self._lock:
+            g = self._goal
+            if g is None or g.end:
+                return self._reject(f"no goal is being followed: nothing to {request.op}")
+            if request.op == "mode":
+                g.mode = request.mode
+            elif request.op == "cancel":
+                self._end(g, "cancelled", f"cancelled by {client}")
+            elif request.op == "pause":
+                g.paused_by = client
+            else:  # resume: also accepts the divergence shown now
+                g.paused_by = ""
+                if self._state is not None and self._state.divergence:
+                    g.accepted_divergence = self._state.seq
+            self._asked = None
+            self._decide()
+            return PilotGoalReply(system=self.name, accepted=True, goal_id=g.id)
+
+    def _set_goal(self, request: PilotGoalRequest, client: str) -> PilotGoalReply:
+        try:
+            several = len(request.goals) > 1
+            goals = [parse_goal(self.system, text, request.inputs or None, f"<goal {n}>" if several else "<goal>",
+                                types=self.typemap) for n, text in enumerate(request.goals, 1)]
+            if request.mission:
+                goals += parse_goals(request.mission, self.system, request.mission_name, self.typemap)
+        except SourceError as exc:
+            return self._reject(str(exc))
+        if not goals:
+            return self._reject("no goals: give goals ('reach FORMULA', 'run SKILLSET:SKILL') or a mission")
+        with self._lock:
+            g = self._goal
+            if g is not None and not g.end and not request.replace:
+                return self._reject(f"goal {g.id} of {g.client} is being followed ({self._status.state}): "
+                                    "cancel it, or send the new goal with replace")
+            plans: list[Plan] = []
+            if self._state is not None:
+                try:
+                    plans = self.planner.mission(goals, marking_of(self.system, self._state.skillsets), self.budget)
+                except SkinetError as exc:
+                    return self._reject(f"the live state cannot be planned from: {exc}")
+                for n, p in enumerate(plans, 1):
+                    if p.answer not in ("strong", "cyclic"):
+                        which = f"goal {n} ({p.goal.text})" if len(goals) > 1 else f"goal '{p.goal.text}'"
+                        return self._reject(f"{which} has no plan from the live state: {p.answer}: {p.reason}")
+            if g is not None and not g.end:
+                self._end(g, "cancelled", f"replaced by goal {self._goals + 1} of {client}")
+            self._goals += 1
+            since = self._state.seq if self._state is not None else -1
+            self._goal = _Goal(self._goals, client, request.mode, goals, request.max_retries, since,
+                               plan=plans[0] if plans else None)
+            self._asked = None
+            log.info("goal %d of %s (%s): %s", self._goals, client, request.mode, "; ".join(x.text for x in goals))
+            self._decide()
+            first = plans[0] if plans else None
+            return PilotGoalReply(system=self.name, accepted=True, goal_id=self._goals,
+                                  answer=None if first is None else first.answer,
+                                  moves=None if first is None else first.moves,
+                                  steps=[] if first is None else plan_steps(first.steps))
+
+    def _on_status_query(self, query: zenoh.Query) -> None:
+        with query:
+            with self._lock:
+                payload = self._payload
+            query.reply(keys.pilot_status(self.name), payload)
+
+    # -- deciding and acting ------------------------------------------------------------
+
+    def _run(self) -> None:
+        fetched = False
+        while not self._closed:
+            try:
+                if not fetched or (self._state is None and self._monitors):
+                    self._fetch()
+                    fetched = True
+                with self._lock:
+                    due = None if self._closed else self._decide()
+                if due is not None:
+                    self._act(due)
+            except Exception:  # a bug must not stop the pilot
+                log.exception("error in the pilot")
+            self._wake.wait(TICK)
+            self._wake.clear()
+
+    def _decide(self) -> _Due | None:
+        """Publish what the pilot does now; the command to check and send, if one is due (lock held)."""
+        g, st = self._goal, self._state
+        if g is not None and g.end:
+            return self._show(g.end, g.reason)
+        if not self._monitors or st is None:
+            return self._show("waiting for monitor", self._no_monitor() if not self._monitors else
+                              f"no live state from the monitor of {self.name} yet")
+        if g is None:
+            return self._show("idle")
+        flight = self._inflight
+        if flight is not None and time.monotonic() >= flight.deadline:
+            self._inflight = None
+            self._end(g, "failed", f"no response from {flight.manager} within {self.response_timeout:g} s to "
+                                   f"{flight.command.skillset}:{flight.command.transition}")
+            return self._show(g.end, g.reason)
+        why = self._paused(g, st)
+        if why:
+            return self._show("paused", why)
+        if flight is not None:
+            return self._show("waiting for outcome", f"the effect of {flight.command.skillset}:"
+                                                     f"{flight.command.transition}", next_=flight.command)
+        try:
+            marking = marking_of(self.system, st.skillsets)
+        except SkinetError as exc:
+            return self._show("paused", f"the live state of step {st.seq} is not understood: {exc}")
+        while True:
+            if g.plan is None or g.plan.action(marking) is None:
+                self._show("planning")
+                g.plan = self.planner.plan(g.goals[g.index], marking, self.budget)
+                if g.plan.answer not in ("strong", "cyclic"):
+                    self._end(g, "failed", f"no plan for '{g.goals[g.index].text}' from step {st.seq}: "
+                                           f"{g.plan.answer}: {g.plan.reason}")
+                    return self._show(g.end, g.reason)
+            action = g.plan.action(marking)
+            if not isinstance(action, Reached):
+                break
+            self._next_goal(g)
+            if g.end:
+                return self._show(g.end, g.reason)
+        if not isinstance(action, Command):
+            return self._show("waiting for outcome", "a running skill's outcome", plan=g.plan, marking=marking)
+        command = PilotCommand(skillset=action.skillset, transition=action.transition, inputs=dict(action.inputs))
+        if g.mode == "guide":
+            return self._show("guiding", next_=command, plan=g.plan, marking=marking)
+        u = self._unsafe
+        if u is None or u.seq != st.seq or u.prediction_stale:
+            return self._show("paused", f"the prediction of step {st.seq} is pending", command, g.plan, marking)
+        a = self._asked
+        if a is not None and a[:3] == (g.id, st.seq, u) and time.monotonic() < a[3]:
+            return self._show("paused", self._refusal, command, g.plan, marking)
+        self._show("driving", next_=command, plan=g.plan, marking=marking)
+        return _Due(command, st.seq, g.id, u)
+
+    def _paused(self, g: _Goal, st: LiveState) -> str:
+        if g.paused_by:
+            return f"paused by {g.paused_by}"
+        if not st.sync:
+            return "the monitor does not say whether its state is synced: it cannot vouch for it"
+        stale = [f"{name} is {s.state}" + (f": {s.reason}" if s.reason else "")
+                 for name, s in st.sync.items() if s.state != "live"]
+        if stale:
+            return "; ".join(stale)
+        if st.divergence and st.seq != g.accepted_divergence:
+            return (f"model divergence at step {st.seq} ({st.event}): {st.divergence}; resume to go on from the "
+                    "state the monitor adopted")
+        return ""
+
+    def _act(self, due: _Due) -> None:
+        """Ask the check about ``due``; send it only on ``allow`` about the step it was planned from."""
+        c = due.command
+        request = CheckRequest(skillset=c.skillset, transition=c.transition, wait=CHECK_WAIT,
+                               policy="strict")
+        reply: CheckReply | None = None
+        problem = "the monitor's check did not answer"
+        for r in self.session.get(keys.check(self.name, self.client), payload=encode(request),
+                                  timeout=CHECK_WAIT + 2.0):
+            if r.ok is not None:
+                try:
+                    reply = decode(r.ok.payload.to_bytes(), CheckReply)
+                except DecodeError as exc:
+                    problem = f"the check's answer is not understood: {exc}"
+            else:
+                problem = f"the check failed: {r.err.payload.to_string() if r.err is not None else '?'}"
+        with self._lock:
+            g, st = self._goal, self._state
+            if g is None or g.id != due.goal or g.end or st is None or st.seq != due.seq or self._inflight:
+                return  # things moved on while the check was asked: decide again
+            what = f"{c.skillset}:{c.transition}"
+            if reply is None or not reply.ok:
+                self._refuse(g, due, problem if reply is None else f"the check could not judge {what}: {reply.error}")
+                return
+            if reply.seq != due.seq:
+                return  # the check judged another step: the state it planned from is gone
+            if reply.state_stale or reply.prediction_stale:
+                self._refuse(g, due, f"the check cannot vouch for step {due.seq}: "
+                                     + (reply.state_reason or "its prediction is pending"))
+                return
+            if reply.decision != "allow":
+                why = "; ".join(f"{r.property} ({r.constraint}): {r.reason}" for r in reply.reasons) or reply.decision
+                if reply.decision == "deny":
+                    g.denied += 1
+                    log.error("DEFECT: the check denied %s at step %d, which the plan gave: %s", what, due.seq, why)
+                self._refuse(g, due, f"the check answered {reply.decision} for {what} at step {due.seq}: {why}")
+                return
+            manager = self.system.component(c.skillset).manager or c.skillset
+            self._inflight = _InFlight(c, due.seq, time.monotonic() + self.response_timeout, manager)
+            g.commands += 1
+            self._show("waiting for outcome", f"the effect of {what}", c, g.plan,
+                       marking_of(self.system, st.skillsets))
+        try:
+            sent = self.actuator.send(c)
+            log.info("goal %d: sent %s:%s", due.goal, c.skillset, sent)
+        except ActError as exc:
+            with self._lock:
+                self._inflight = None
+                g = self._goal
+                if g is not None and g.id == due.goal and not g.end:
+                    self._end(g, "failed", f"cannot send {c.skillset}:{c.transition}: {exc.reason}")
+                    self._decide()
+
+    def _refuse(self, g: _Goal, due: _Due, reason: str) -> None:
+        self._asked, self._refusal = (g.id, due.seq, due.unsafe, time.monotonic() + RETRY_REFUSED), reason
+        self._decide()
+
+    def _next_goal(self, g: _Goal) -> None:
+        g.index += 1
+        g.plan = None
+        g.retries.clear()
+        if g.index == len(g.goals):
+            g.index -= 1
+            self._end(g, "reached", "")
+
+    def _end(self, g: _Goal, state: str, reason: str) -> None:
+        g.end, g.reason = state, reason
+        (log.warning if state == "failed" else log.info)("goal %d %s%s", g.id, state, f": {reason}" if reason else "")
+        self._show(state, reason)
+
+    def _no_monitor(self) -> str:
+        return f"no monitor of {self.name} is running (no token on {keys.alive(self.name, 'monitor', '*')})"
+
+    def _show(self, state: str, reason: str = "", next_: PilotCommand | None = None, plan: Plan | None = None,
+              marking: Mapping[str, int] | None = None) -> None:
+        """Publish the status if it changed (lock held); returns None for :meth:`_decide`."""
+        g, st = self._goal, self._state
+        fields: dict[str, Any] = dict(state=state, reason=reason, next=next_, state_seq=st.seq if st else 0)
+        if g is not None:
+            fields.update(goal_id=g.id, client=g.client, mode=g.mode, goals=[x.text for x in g.goals], index=g.index,
+                          retries=dict(g.retries), commands=g.commands, denied=g.denied)
+            if plan is not None:
+                fields.update(answer=plan.answer, steps=plan_steps(plan.steps),
+                              moves_left=plan.rank(marking) if marking is not None else plan.moves)
+        status = PilotStatus(system=self.name, pilot=self.instance, seq=self._status.seq, stamp=self._status.stamp,
+                             **fields)
+        if status == self._status:
+            return None
+        self._seq += 1
+        self._status = status.model_copy(update={"seq": self._seq, "stamp": time.time()})
+        self._payload = encode(self._status)
+        if not self._closed:
+            self._pub.put(self._payload)
+        log.debug("status %s%s", state, f": {reason}" if reason else "")
+        return None
+
+
+def start_pilot(session: zenoh.Session, system: System, instance: str | None = None,
+                actuator: Actuator | None = None, response_timeout: float = 5.0, budget: float = 1.0,
+                client: str | None = None, typemap: Mapping[str, str] | None = None) -> Pilot:
+    """Start a pilot of ``system`` on ``session`` (which may be shared, SPEC §7).
+
+    ``instance``: its id in the liveliness token and the status (default: random);
+    ``actuator``: how it acts (default: a :class:`~services.pilot.act.ManagerActuator` on the
+    managers' topics, which needs the system's ``typemap``); ``response_timeout``: seconds a
+    manager has to react to a command; ``budget``: planning seconds per goal; ``client``: its
+    router login, the client chunk of its check queries (default ``local``).
+    """
+    return Pilot(session, system, instance=instance, actuator=actuator, response_timeout=response_timeout,
+                 budget=budget, client=client, typemap=typemap)

@@ -1,0 +1,187 @@
+"""The paper's robot for pilot tests, through a real router (SPEC §8; issue 24).
+
+:class:`Robot` runs the simulated managers (real CDR on bridge keys), the bridge,
+the monitor and a predictor, each on its own client session of the test's router,
+and a pilot on another; :class:`Implementations` is the robot's side of the skills:
+it ends each execution it sees running in the mode a script gives (the first
+success mode by default), after a delay, through the simulator's implementation
+hook (the managers then speak the real protocol).  :class:`Recording` wraps the
+pilot's real actuator and keeps what it sent, in order.
+"""
+
+from __future__ import annotations
+
+import random
+import threading
+import time
+from collections.abc import Callable, Iterable
+from typing import Any
+
+import pytest
+import zenoh
+
+from services.bridge_ros2 import start_bridge
+from services.monitor import start_monitor
+from services.pilot import ManagerActuator, Pilot, start_pilot
+from services.predictor.service import start_predictor
+from services.simulator import Simulator
+from skinet.system import System
+from skinet.wire import keys
+from skinet.wire.codec import decode, encode
+from skinet.wire.messages import PilotCommand, PilotGoalReply, PilotGoalRequest, PilotStatus
+
+WALK = {"go_to_waypoint": {"target": {"x": 12.0, "y": 3.5, "z": 0.0}}}
+
+
+class Recording:
+    """The pilot's :class:`ManagerActuator`, keeping every command it sent (``skillset:transition``)."""
+
+    def __init__(self, inner: ManagerActuator):
+        self.inner = inner
+        self.sent: list[str] = []
+        self.inputs: list[dict[str, Any]] = []
+
+    def send(self, command: PilotCommand) -> str:
+        out = self.inner.send(command)
+        self.sent.append(f"{command.skillset}:{command.transition}")
+        self.inputs.append(command.inputs)
+        return out
+
+    def close(self) -> None:
+        self.inner.close()
+
+
+class Statuses:
+    """Every PilotStatus published, in arrival order, with a blocking wait."""
+
+    def __init__(self, session: zenoh.Session, system: str = "spot_arm"):
+        self.items: list[PilotStatus] = []
+        self._cond = threading.Condition()
+        self._sub = session.declare_subscriber(keys.pilot_status(system), self._on_sample)
+
+    def _on_sample(self, sample: zenoh.Sample) -> None:
+        with self._cond:
+            self.items.append(decode(sample.payload.to_bytes(), PilotStatus))
+            self._cond.notify_all()
+
+    def wait(self, predicate: Callable[[PilotStatus], bool], timeout: float = 20.0, what: str = "") -> PilotStatus:
+        """The first status (from now on or already received) for which ``predicate`` holds."""
+        with self._cond:
+            if not self._cond.wait_for(lambda: any(predicate(s) for s in self.items), timeout):
+                last = self.items[-1] if self.items else None
+                pytest.fail(f"no pilot status {what} within {timeout} s; last: "
+                            f"{None if last is None else (last.state, last.reason, last.next)}")
+            return next(s for s in self.items if predicate(s))
+
+    def state(self, state: str, goal: int | None = None, timeout: float = 20.0) -> PilotStatus:
+        return self.wait(lambda s: s.state == state and (goal is None or s.goal_id == goal), timeout,
+                         f"'{state}'")
+
+    def states(self, goal: int) -> list[str]:
+        """The states of ``goal``'s statuses, repeats dropped."""
+        with self._cond:
+            out: list[str] = []
+            for s in self.items:
+                if s.goal_id == goal and (not out or out[-1] != s.state):
+                    out.append(s.state)
+            return out
+
+
+def ask_goal(session: zenoh.Session, request: PilotGoalRequest | bytes | None, client: str = "operator1",
+             system: str = "spot_arm") -> PilotGoalReply:
+    """One goal request on the pilot's queryable, as ``client``."""
+    payload = request if isinstance(request, (bytes, type(None))) else encode(request)
+    replies = list(session.get(keys.pilot_goal(system, client), payload=payload, timeout=10.0))
+    assert len(replies) == 1 and replies[0].ok is not None, replies
+    return decode(replies[0].ok.payload.to_bytes(), PilotGoalReply)
+
+
+def goal(*goals: str, **fields: Any) -> PilotGoalRequest:
+    return PilotGoalRequest(system=fields.pop("system", "spot_arm"), goals=list(goals), **fields)
+
+
+class Implementations:
+    """The robot's skill implementations: each execution seen running ends after ``delay`` seconds (a
+    random one in ``[0, delay]`` with ``rng``) in the next mode of ``script[(skillset, skill)]``, else in its
+    first success mode; ``hold`` lists skills left running until :meth:`release`."""
+
+    def __init__(self, simulator: Simulator, system: System, script: dict[tuple[str, str], list[str]] | None = None,
+                 delay: float = 0.05, rng: random.Random | None = None, hold: Iterable[tuple[str, str]] = ()):
+        self.sim, self.system = simulator, system
+        self.script = {k: list(v) for k, v in (script or {}).items()}
+        self.delay, self.rng = delay, rng
+        self.hold = set(hold)
+        self.ended: list[str] = []  # skillset:skill.kind.mode, in order
+        self._seen: set[tuple[str, str, str]] = set()
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def release(self, skillset: str, skill: str) -> None:
+        self.hold.discard((skillset, skill))
+
+    def _run(self) -> None:
+        while not self._stop.wait(0.005):
+            for c in self.system.components:
+                for k in c.skillset.skills:
+                    running, id_ = self.sim.skill_status(c.name, k.name)
+                    if not running or (c.name, k.name, id_) in self._seen or (c.name, k.name) in self.hold:
+                        continue
+                    self._seen.add((c.name, k.name, id_))
+                    queue = self.script.get((c.name, k.name))
+                    mode = queue.pop(0) if queue else next(m for m in k.modes if m.kind == "success").name
+                    kind = next(m.kind for m in k.modes if m.name == mode)
+                    wait = self.rng.uniform(0, self.delay) if self.rng else self.delay
+                    threading.Timer(wait, self._end, (c.name, k.name, kind, mode)).start()
+
+    def _end(self, skillset: str, skill: str, kind: str, mode: str) -> None:
+        if self.sim.terminate(skillset, skill, kind, mode):
+            self.ended.append(f"{skillset}:{skill}.{kind}.{mode}")
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(2.0)
+
+
+class Robot:
+    """Simulator, bridge, monitor, predictor and pilot of the paper's system, each on its own client session."""
+
+    def __init__(self, sessions: Callable[[], zenoh.Session], system: System, typemap: dict[str, str],
+                 monitor: bool = True, **pilot: Any):
+        self.system, self.typemap, self.sessions = system, typemap, sessions
+        self.sim = Simulator(sessions(), system, typemap)
+        self.bridge = start_bridge(sessions(), system, typemap)
+        self.predictor = start_predictor(sessions(), "pilot-test")
+        self.monitor = start_monitor(sessions(), system) if monitor else None
+        pilot_session = sessions()
+        self.actuator = Recording(ManagerActuator(pilot_session, system, typemap, instance="p1"))
+        self.pilot: Pilot = start_pilot(pilot_session, system, instance="p1",
+                                        actuator=pilot.pop("actuator", self.actuator), typemap=typemap, **pilot)
+        self.observer = sessions()
+        self.statuses = Statuses(self.observer)
+        if monitor:
+            self.wait_synced()
+            self.wait_pilot("idle")
+
+    def wait_pilot(self, state: str, timeout: float = 10.0) -> None:
+        """Until the pilot's own last status is ``state``."""
+        deadline = time.monotonic() + timeout
+        while self.pilot.status.state != state:
+            if time.monotonic() > deadline:
+                pytest.fail(f"the pilot is {self.pilot.status.state} ({self.pilot.status.reason}), not {state}")
+            time.sleep(0.01)
+
+    def wait_synced(self, timeout: float = 10.0) -> None:
+        deadline = time.monotonic() + timeout
+        while self.monitor is None or not self.monitor.synced():
+            if time.monotonic() > deadline:
+                pytest.fail("the monitor did not sync")
+            time.sleep(0.01)
+
+    def close(self) -> None:
+        self.pilot.close()
+        if self.monitor is not None:
+            self.monitor.close()
+        self.bridge.close()
+        self.sim.close()
+        self.predictor.close()
