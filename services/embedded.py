@@ -2,7 +2,7 @@
 
 ``skinet run SYSTEM.toml`` opens one Zenoh ``peer`` session (no router; ZENOH.md:
 share one session in a process; loopback only and no multicast scouting unless
-asked), starts the monitor and a predictor on it, prints the endpoint it
+asked), starts the monitor, a predictor and the pilot (SPEC §8; ``--no-pilot``) on it, prints the endpoint it
 listens on (a free port is chosen before opening, so that it can be printed)
 with the exact commands that reach it, and shows the operator view: redrawn in
 place on a terminal, one line per change otherwise.  ``--listen`` lets a bridge
@@ -34,7 +34,9 @@ from skinet_cli.memory import memory_limit
 from skinet_cli.options import load_live_system, require_properties
 from skinet.explain import warning_line
 from skinet_cli.render import seconds, table
+from skinet.files import load_typemap
 from skinet.system import System
+from skinet.wire import keys
 from skinet.wire.messages import LiveState, StateSpaceReport, UnsafeReport, Verdicts
 
 if TYPE_CHECKING:
@@ -182,6 +184,7 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     monitor: Monitor | None = None
     predictor = None
     dashboard = None
+    pilot = None
     try:
         if args.dashboard is not None:  # first: a port in use stops the run before anything starts
             dashboard = start_dashboard(session, system.name, args.dashboard_host, args.dashboard,
@@ -192,7 +195,13 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
         monitor = start_monitor(session, system, budget=args.budget, check_policy=args.check_policy,
                                 client=client_name(config), check_rate_limit=args.check_rate_limit,
                                 lost_after=args.lost_after)
-        print("\n".join(connect_lines(args, system, mode, listening)), file=sys.stderr, flush=True)
+        if not args.no_pilot:
+            from services.pilot import start_pilot
+
+            pilot = start_pilot(session, system, instance=f"embedded-{os.getpid()}", client=client_name(config),
+                                typemap=load_typemap(args.system))
+        print("\n".join(connect_lines(args, system, mode, listening, pilot=pilot is not None)), file=sys.stderr,
+              flush=True)
         if args.once:
             deadline = time.monotonic() + args.budget + 2.0  # the first prediction, if any comes
             view = monitor.snapshot()
@@ -207,6 +216,8 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
         if dashboard is not None:
             dashboard.close()
             dashboard.observer.close()
+        if pilot is not None:
+            pilot.close()
         if monitor is not None:
             monitor.close()
         session.close()
@@ -236,9 +247,9 @@ def fix_free_ports(config: zenoh.Config) -> list[str]:
 
 
 def connect_lines(args: argparse.Namespace, system: System, mode: str, listening: list[str],
-                  prog: str = "skinet run", bridge: bool = True) -> list[str]:
+                  prog: str = "skinet run", bridge: bool = True, pilot: bool = False) -> list[str]:
     """What ``skinet run`` (or ``prog``) prints at start: where it listens, and the exact commands that reach it
-    (``bridge``: the bridge's too, for the system file ``args.system``)."""
+    (``bridge``: the bridge's too, for the system file ``args.system``; ``pilot``: the pilot's goal key)."""
     if mode == "peer":
         endpoint = next((e for e in listening if e.startswith("tcp/")), listening[0] if listening else "")
         endpoint = re.sub(r"^tcp/0\.0\.0\.0:", "tcp/127.0.0.1:", re.sub(r"^tcp/\[::\]:", "tcp/[::1]:", endpoint))
@@ -259,6 +270,9 @@ def connect_lines(args: argparse.Namespace, system: System, mode: str, listening
              f"  skinet check {system.name} {command} {flags('observer')}"]
     if bridge:
         lines.append(f"  python -m services.bridge_ros2 {args.system} {flags('bridge')}   (the robot's side)")
+    if pilot:
+        lines.append(f"  pilot: goals on {keys.pilot_goal(system.name, '<client>')} (<client>: your login, "
+                     f"'{keys.LOCAL_CLIENT}' without one), status on {keys.pilot_status(system.name)}")
     return lines
 
 

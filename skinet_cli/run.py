@@ -24,7 +24,7 @@ def _zenoh_args(c: argparse.ArgumentParser, listen_help: str) -> None:
 
 
 def add_commands(sub: argparse._SubParsersAction) -> None:
-    c = sub.add_parser("run", help="monitor and predictor in one process with a live operator view (SPEC §7)")
+    c = sub.add_parser("run", help="monitor, predictor and pilot in one process with a live operator view (SPEC §7, §8)")
     c.add_argument("system", help="system file (.toml), e.g. skillsets/spot_arm.toml")
     c.add_argument("--once", action="store_true", help="print one view (after the first prediction) and exit")
     c.add_argument("--duration", type=seconds(), help="stop after this many seconds")
@@ -33,6 +33,9 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     c.add_argument("--dashboard", type=count(0, 65535), metavar="PORT",
                    help="also serve the live web dashboard on this port (0: a free one; see skinet dashboard)")
     c.add_argument("--dashboard-host", default="127.0.0.1", help="address of --dashboard (default: 127.0.0.1)")
+    c.add_argument("--no-pilot", action="store_true",
+                   help="do not start the pilot (SPEC §8: goals on skinet/<system>/pilot/goal/<client>, guided or "
+                        "driven with the strict check; see docs/pilot.md)")
     add_no_properties_arg(c)
     add_policy_arg(c)
     add_lost_after_arg(c)

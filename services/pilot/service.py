@@ -404,7 +404,8 @@ class Pilot:
             if g.end:
                 return self._show(g.end, g.reason)
         if not isinstance(action, Command):
-            return self._show("waiting for outcome", "a running skill's outcome", plan=g.plan, marking=marking)
+            running = ", ".join(f"{n}:{k}" for n, ss in st.skillsets.items() for k in ss.running)
+            return self._show("waiting for outcome", f"the outcome of {running}", plan=g.plan, marking=marking)
         command = PilotCommand(skillset=action.skillset, transition=action.transition, inputs=dict(action.inputs))
         if g.mode == "guide":
             return self._show("guiding", next_=command, plan=g.plan, marking=marking)
@@ -489,12 +490,12 @@ class Pilot:
         self._decide()
 
     def _next_goal(self, g: _Goal) -> None:
+        if g.index + 1 == len(g.goals):
+            self._end(g, "reached", "")
+            return
         g.index += 1
         g.plan = None
-        g.retries.clear()
-        if g.index == len(g.goals):
-            g.index -= 1
-            self._end(g, "reached", "")
+        g.retries.clear()  # max_retries counts per goal of a mission
 
     def _end(self, g: _Goal, state: str, reason: str) -> None:
         g.end, g.reason = state, reason

@@ -21,10 +21,13 @@ import pytest
 import zenoh
 
 from services.bridge_ros2 import start_bridge
+from services.common.requests import Requests
 from services.monitor import start_monitor
 from services.pilot import ManagerActuator, Pilot, start_pilot
 from services.predictor.service import start_predictor
 from services.simulator import Simulator
+from skinet.ros.keys import KeyStyle
+from skinet.ros.requests import skill_interrupt, skill_request
 from skinet.system import System
 from skinet.wire import keys
 from skinet.wire.codec import decode, encode
@@ -147,14 +150,16 @@ class Robot:
     """Simulator, bridge, monitor, predictor and pilot of the paper's system, each on its own client session."""
 
     def __init__(self, sessions: Callable[[], zenoh.Session], system: System, typemap: dict[str, str],
-                 monitor: bool = True, **pilot: Any):
-        self.system, self.typemap, self.sessions = system, typemap, sessions
-        self.sim = Simulator(sessions(), system, typemap)
-        self.bridge = start_bridge(sessions(), system, typemap)
-        self.predictor = start_predictor(sessions(), "pilot-test")
-        self.monitor = start_monitor(sessions(), system) if monitor else None
+                 monitor: bool = True, style: KeyStyle = KeyStyle(), lost_after: float = 2.0, **pilot: Any):
+        self.system, self.typemap, self.sessions, self.lost_after = system, typemap, sessions, lost_after
+        self.sim = Simulator(sessions(), system, typemap, style=style)
+        self.bridge = start_bridge(sessions(), system, typemap, style=style)
+        self.predictor: Any = start_predictor(sessions(), "pilot-test")
+        self.monitor: Any = None
+        if monitor:
+            self.start_monitor()
         pilot_session = sessions()
-        self.actuator = Recording(ManagerActuator(pilot_session, system, typemap, instance="p1"))
+        self.actuator = Recording(ManagerActuator(pilot_session, system, typemap, style, instance="p1"))
         self.pilot: Pilot = start_pilot(pilot_session, system, instance="p1",
                                         actuator=pilot.pop("actuator", self.actuator), typemap=typemap, **pilot)
         self.observer = sessions()
@@ -171,6 +176,9 @@ class Robot:
                 pytest.fail(f"the pilot is {self.pilot.status.state} ({self.pilot.status.reason}), not {state}")
             time.sleep(0.01)
 
+    def start_monitor(self) -> None:
+        self.monitor = start_monitor(self.sessions(), self.system, lost_after=self.lost_after)
+
     def wait_synced(self, timeout: float = 10.0) -> None:
         deadline = time.monotonic() + timeout
         while self.monitor is None or not self.monitor.synced():
@@ -184,4 +192,30 @@ class Robot:
             self.monitor.close()
         self.bridge.close()
         self.sim.close()
-        self.predictor.close()
+        if self.predictor is not None:
+            self.predictor.close()
+
+
+class Gui:
+    """An operator's GUI: its own requests to the managers (the same protocol as the pilot's)."""
+
+    def __init__(self, session: zenoh.Session, robot: Robot):
+        self.robot = robot
+        self.stores = {name: node.store for name, node in robot.sim.nodes.items()}
+        self.requests = Requests(session, [(n.component, n.store) for n in robot.sim.nodes.values()])
+        self.count = 0
+
+    def start(self, skillset: str, skill: str, inputs: dict[str, Any] | None = None) -> None:
+        self.count += 1
+        component = self.robot.system.component(skillset)
+        self.requests.put(skillset, *skill_request(self.stores[skillset], component.skillset, skill,
+                                                   f"gui-{self.count}", inputs))
+
+    def interrupt(self, skillset: str, skill: str) -> None:
+        """Interrupt ``skill`` with the running id its manager's status shows."""
+        _, id_ = self.robot.sim.skill_status(skillset, skill)
+        component = self.robot.system.component(skillset)
+        self.requests.put(skillset, *skill_interrupt(self.stores[skillset], component.skillset, skill, id_))
+
+    def close(self) -> None:
+        self.requests.close()
