@@ -42,16 +42,23 @@ goals (as in skinet plan):
   run SKILLSET:SKILL                 start SKILL and have it end in a success mode
   run SKILLSET:SKILL.success.MODE    ... in that success mode
 
-examples (a system run with `skinet run skillsets/spot_arm.toml --listen tcp/127.0.0.1:7447`):
-  skinet goal skillsets/spot_arm.toml "reach spot:Standing and manipulator:RD" -e tcp/127.0.0.1:7447
+examples, with a robot connected to `skinet run skillsets/spot_arm.toml --listen tcp/127.0.0.1:7447`
+(tests/services/test_goal.py runs them all, in order):
+  skinet goal skillsets/spot_arm.toml "reach spot:Standing and manipulator:RD" --drive -e tcp/127.0.0.1:7447
   skinet goal spot_arm "run spot:go_to_waypoint" --drive -e tcp/127.0.0.1:7447 \\
       --inputs 'go_to_waypoint.target = {x = 12.0, y = 3.5, z = 0.0}'
-  skinet goal skillsets/spot_arm.toml --goals skillsets/goals/walk.toml --drive --replace -e tcp/127.0.0.1:7447
-  skinet goal spot_arm --pause -e tcp/127.0.0.1:7447
+  skinet goal skillsets/spot_arm.toml --goals skillsets/goals/walk.toml --drive -e tcp/127.0.0.1:7447
 
-through a router with logins, only operator-role users may send goals:
-  skinet goal spot_arm "reach spot:Standing" --drive -e tcp/127.0.0.1:7448 --user operator \\
-      --password-file ~/.config/skinet/secrets/operator.password"""
+guide mode (the pilot shows each command, you send it); from another terminal, pause it, switch it
+to drive and resume it (it then sends the commands itself):
+  skinet goal spot_arm "reach spot:Sitting" -e tcp/127.0.0.1:7447
+  skinet goal spot_arm --pause -e tcp/127.0.0.1:7447
+  skinet goal spot_arm --set-mode drive -e tcp/127.0.0.1:7447
+  skinet goal spot_arm --resume -e tcp/127.0.0.1:7447
+
+Through a router with logins, log in as an operator-role user (--user operator --password-file
+~/.config/skinet/secrets/operator.password, or --zenoh-config from skinet client-config --user
+operator): the router lets no other user send goals, and says nothing to them (no pilot answers)."""
 
 EXIT_REACHED, EXIT_ENDED, EXIT_REJECTED = 0, 1, 2
 POLL = 0.2  # seconds between looks at Ctrl-C while waiting for a status
@@ -190,11 +197,12 @@ def command_text(command: PilotCommand) -> str:
     return f"{command.skillset}:{command.transition}{given}"
 
 
-def status_line(s: PilotStatus) -> str:
-    """One line of the pilot's status: ``STATE[: REASON] — goal i/n, next ..., moves left, retries, commands``."""
+def status_line(s: PilotStatus, mode: bool = False) -> str:
+    """One line of the pilot's status: ``STATE[: REASON] — goal i/n, next ..., moves left, retries, commands``;
+    ``mode``: say the mode too (it has just changed)."""
     from skinet_cli.plan import moves_text
 
-    parts = []
+    parts = [f"now in {s.mode} mode"] if mode else []
     if len(s.goals) > 1 and s.index < len(s.goals):
         parts.append(f"goal {s.index + 1}/{len(s.goals)} {s.goals[s.index]}")
     if s.next is not None:
@@ -275,8 +283,9 @@ class _Follower:
                           + (f" of {status.client}" if status.client else ""), file=sys.stderr)
                     return EXIT_ENDED
                 if _change(status) != shown:
+                    switched = shown is not None and shown[3] != status.mode
                     shown = _change(status)
-                    print(status_line(status), flush=True)
+                    print(status_line(status, switched), flush=True)
                 if status.state in ("reached", "failed", "cancelled"):
                     return EXIT_REACHED if status.state == "reached" else EXIT_ENDED
             except KeyboardInterrupt:

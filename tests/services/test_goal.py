@@ -212,3 +212,57 @@ def test_ask_pilot_without_a_pilot_raises_the_message(router) -> None:
         assert pilot_status(session, "spot_arm", timeout=0.5) is None
     finally:
         session.close()
+
+
+# -- skinet goal --help: its examples work as written -------------------------------------------------------
+
+
+def help_sections() -> list[list[list[str]]]:
+    """The ``skinet goal`` examples of ``skinet goal --help``, per section, as argument lists (continued lines
+    joined)."""
+    import shlex
+
+    from skinet_cli.goal import EPILOG
+
+    sections: list[list[str]] = [[]]
+    for line in EPILOG.replace("\\\n", " ").splitlines():
+        if not line.strip():
+            sections.append([])
+        elif line.startswith("  skinet goal "):
+            sections[-1].append(line.strip())
+    return [[shlex.split(e)[1:] for e in s] for s in sections if s]
+
+
+def test_every_help_example_works_as_written(robot, skills, router) -> None:
+    skills(delay=0.1)
+    driven, guided = help_sections()
+    assert [len(driven), len(guided)] == [3, 4]
+
+    def argv(words: list[str]) -> list[str]:
+        return [sys.executable, "-m", "skinet_cli.main", *(router if w == "tcp/127.0.0.1:7447" else w for w in words)]
+
+    for words in driven:
+        done = subprocess.run(argv(words), cwd=REPO, capture_output=True, text=True, timeout=120)
+        assert done.returncode == 0 and done.stdout.splitlines()[-1].startswith("reached"), done.stdout + done.stderr
+    assert robot.actuator.sent[-1] == "spot:go_to_waypoint.start"
+    follower = subprocess.Popen(argv(guided[0]), cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        deadline = time.monotonic() + 30
+        while robot.pilot.status.state != "guiding":
+            assert time.monotonic() < deadline, robot.pilot.status
+            time.sleep(0.05)
+        sent = len(robot.actuator.sent)
+        for words in guided[1:]:
+            done = subprocess.run(argv(words), cwd=REPO, capture_output=True, text=True, timeout=60)
+            assert done.returncode == 0, done.stdout + done.stderr
+        out, _ = follower.communicate(timeout=60)
+    finally:
+        follower.kill()
+    assert follower.returncode == 0, out
+    assert robot.actuator.sent[sent:] == ["spot:sit_down.start"]  # sent once switched to drive
+    changes = status_lines(out)
+    assert changes[:4] == ["guiding \u2014 next spot:sit_down.start, 2 moves left",
+                           "paused: paused by local",
+                           "paused: paused by local \u2014 now in drive mode, 0 commands sent",
+                           "driving \u2014 next spot:sit_down.start, 2 moves left, 0 commands sent"], out
+    assert changes[-1] == "reached \u2014 1 command sent", out
