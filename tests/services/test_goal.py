@@ -52,6 +52,15 @@ def status_lines(out: str) -> list[str]:
     return lines[k:]
 
 
+def doc_block(page: str, heading: str) -> list[str]:
+    """The lines of the first code block after ``heading`` in ``page``."""
+    text = (REPO / page).read_text(encoding="utf-8")
+    after = text[text.index(f"\n{heading}\n"):]
+    start = after.index("\n```") + 1
+    start = after.index("\n", start) + 1
+    return after[start:after.index("\n```", start)].splitlines()
+
+
 @pytest.fixture
 def robot(client_factory: Callable[[], zenoh.Session], spot_arm: tuple) -> Iterator[Robot]:
     r = Robot(client_factory, *spot_arm)
@@ -86,13 +95,15 @@ def test_a_goal_driven_to_its_end_prints_the_plan_then_each_change_and_exits_0(r
         "driving \u2014 next spot:init_power.start, 4 moves left, 0 commands sent",
         "waiting for outcome: the effect of spot:init_power.start \u2014 next spot:init_power.start, 4 moves left, "
         "1 command sent",
-        "waiting for outcome: a running skill's outcome \u2014 3 moves left, 1 command sent",
+        "waiting for outcome: the outcome of spot:init_power \u2014 3 moves left, 1 command sent",
         "driving \u2014 next spot:stand_up.start, 2 moves left, 1 command sent",
         "waiting for outcome: the effect of spot:stand_up.start \u2014 next spot:stand_up.start, 2 moves left, "
         "2 commands sent",
-        "waiting for outcome: a running skill's outcome \u2014 1 move left, 2 commands sent",
+        "waiting for outcome: the outcome of spot:stand_up \u2014 1 move left, 2 commands sent",
         "reached \u2014 2 commands sent",
     ], done.stdout
+    shown = doc_block("docs/commands.md", "## Goals for a running pilot: `skinet goal`")
+    assert shown == [line for line in done.stdout.splitlines() if line not in status_lines(done.stdout)] + changes
     assert impl.ended == ["spot:init_power.success.powered_on", "spot:stand_up.success.standing"]
     assert robot.actuator.sent == ["spot:init_power.start", "spot:stand_up.start"]
     assert robot.pilot.status.state == "reached" and robot.pilot.status.denied == 0
