@@ -92,7 +92,7 @@ LAZY_COMMANDS: tuple[tuple[str, str, dict[str, str]], ...] = (
     ("skinet_cli.conform", "add_parser",
      {"conform": "replay rosbag2 files against the model and report every divergence"}),
     ("skinet_cli.run", "add_commands", {
-        "run": "monitor and predictor in one process with a live operator view (SPEC §7)",
+        "run": "monitor, predictor and pilot in one process with a live operator view (SPEC §7, §8)",
         "router": "run a Zenoh router (the Python wheel in router mode) until interrupted",
         "fleet": "link robots' routers to a hub over mutual TLS: exchange the trust files",
     }),
