@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING, Any
 
 from services.common.zenoh_config import add_zenoh_args
 from skinet_cli.options import count, seconds
+from skinet_cli.plan import add_goal_args
 
 if TYPE_CHECKING:
     from skinet.wire.messages import PilotCommand, PilotGoalReply, PilotStatus
@@ -70,13 +71,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     c.add_argument("system", metavar="SYSTEM",
                    help="system file (.toml: the goals are checked here first) or system name")
-    c.add_argument("goals", nargs="*", metavar="GOAL",
-                   help='a goal, e.g. "run spot:init_power" (several: a mission, in order; after --goals ones)')
-    c.add_argument("--goals", dest="goals_file", metavar="FILE",
-                   help="a mission: a TOML file of [[goals]] tables (as skinet plan --goals), sent as its text")
-    c.add_argument("--inputs", metavar="TOML",
-                   help="skill inputs of the GOAL arguments, as TOML: 'go_to_waypoint.target = {x = 1.0, y = 2.0, "
-                        "z = 0.0}' (as skinet plan --inputs)")
+    add_goal_args(c)  # as skinet plan's; a --goals file is sent as its text, so errors come back as FILE:LINE:COL
     c.add_argument("--drive", action="store_true",
                    help="the pilot sends the commands itself (default: guide, it shows each one and you send it)")
     c.add_argument("--replace", action="store_true", help="replace a goal that runs (else the pilot rejects the new one)")

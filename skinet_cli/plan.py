@@ -50,13 +50,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     c = sub.add_parser("plan", help=HELP, description=DESCRIPTION, epilog=EPILOG,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     c.add_argument("system", help="system file (.toml), e.g. skillsets/spot_arm.toml")
-    c.add_argument("goals", nargs="*", metavar="GOAL",
-                   help='a goal, e.g. "run spot:init_power" (several: a mission, in order; after --goals ones)')
-    c.add_argument("--goals", dest="goals_file", metavar="FILE",
-                   help="a mission: a TOML file of [[goals]] tables, each with reach = or run = and its inputs")
-    c.add_argument("--inputs", metavar="TOML",
-                   help="skill inputs of the GOAL arguments, as TOML: 'go_to_waypoint.target = {x = 1.0, y = 2.0, z = 0.0}' "
-                        "(a skill name, or skillset:skill in quotes, then each input)")
+    add_goal_args(c)
     c.add_argument("--state", metavar="STATE",
                    help="start marking: a JSON file, or the JSON itself ('{\"spot\": {...}}'); omitted resources are "
                         "initial, omitted skills idle (default: the initial marking)")
@@ -68,6 +62,17 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         "(explicit for small products; default)")
     c.add_argument("--json", action="store_true", help="machine-readable plans (a list, one per goal)")
     c.set_defaults(func=cmd_plan)
+
+
+def add_goal_args(c: argparse.ArgumentParser) -> None:
+    """GOAL..., ``--goals FILE`` and ``--inputs TOML``, read by :func:`read_goals` (``skinet plan``, ``skinet goal``)."""
+    c.add_argument("goals", nargs="*", metavar="GOAL",
+                   help='a goal, e.g. "run spot:init_power" (several: a mission, in order; after --goals ones)')
+    c.add_argument("--goals", dest="goals_file", metavar="FILE",
+                   help="a mission: a TOML file of [[goals]] tables, each with reach = or run = and its inputs")
+    c.add_argument("--inputs", metavar="TOML",
+                   help="skill inputs of the GOAL arguments, as TOML: 'go_to_waypoint.target = {x = 1.0, y = 2.0, z = 0.0}' "
+                        "(a skill name, or skillset:skill in quotes, then each input)")
 
 
 def read_goals(args: argparse.Namespace, system: System) -> list[Goal]:
