@@ -389,6 +389,10 @@ def test_skinet_run_serves_the_dashboard_beside_its_monitor(tmp_path) -> None:
 def test_no_violation_reads_none_not_a_numbered_none(browser, dashboard) -> None:
     """The empty violations list showed "1. none" (a numbered list item); it reads "none"."""
     browser.get(dashboard())
+    # With no pilot ever seen, its panel is one line (SPEC §8's goal box has nobody to send goals to).
+    until(browser, lambda d: css(d, "#status[data-connected=true]"), "the live status")
+    assert browser.execute_script("return document.getElementById('pilot-panel').innerText").strip() == (
+        "Pilot (no pilot alive: skinet run starts one, or python -m services.pilot)")
     until(browser, lambda d: css(d, "#violations li.none"), "the empty violations list")
     marker = browser.execute_script(
         "return getComputedStyle(document.querySelector('#violations li.none')).listStyleType")
@@ -686,6 +690,14 @@ def test_the_goal_box_drives_a_goal_with_the_next_step_highlighted(browser, dash
         until(browser, lambda d: pilot_state(d) == "cancelled", "cancelled")
         assert css(browser, "#goal-cancel")[0].get("disabled") is not None
         screenshot(browser, tmp_path, "dashboard-goal-cancelled.png")
+
+        # The pilot gone: the box stays (its last status too), and a goal gets the reason nobody took it.
+        robot.pilot.close()
+        until(browser, lambda d: css(d, "#pilot-panel[data-pilot=gone]"), "the pilot gone")
+        type_goal(browser, "reach spot:Standing")
+        until(browser, lambda d: css(d, "#goal-error:not([hidden])"), "the error")
+        assert css(browser, "#goal-error .message")[0]["text"] == (
+            "no pilot answers on skinet/spot_arm/pilot/goal/local: is `skinet run` or the pilot service running?")
     finally:
         impl.close()
         robot.close()

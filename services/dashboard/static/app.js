@@ -567,7 +567,10 @@ function stepNodes(steps, flat) {
 
 function renderPilot() {
   const p = view.pilot, alive = (view.alive.pilot || []).length;
-  document.getElementById("pilot-service").textContent = alive ? "" : "(no pilot alive: start skinet run or the pilot service)";
+  // With no pilot at all (alive or heard of), the panel is one line: nothing to send goals to.
+  document.getElementById("pilot-panel").dataset.pilot = alive ? "alive" : p ? "gone" : "none";
+  document.getElementById("pilot-service").textContent = alive ? ""
+    : "(no pilot alive: skinet run starts one, or python -m services.pilot)";
   const active = p && ACTIVE.includes(p.state);
   document.getElementById("goal-pause").disabled = !active || p.state === "paused";
   document.getElementById("goal-resume").disabled = !(p && p.state === "paused");
