@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import queue
+import signal
 import sys
 import time
 from typing import TYPE_CHECKING, Any
@@ -112,14 +113,19 @@ def cmd_goal(args: argparse.Namespace) -> int:
         if op is not None:
             return _operate(session, request, client, args.timeout)
         follower = _Follower(session, name)  # before the request: no change is missed
+        # Ctrl-C is noted, not raised: one that comes while the pilot plans (Zenoh's get holds it until the reply
+        # is in) or before the follower starts still cancels the goal the reply accepted.
+        ctrl_c: list[float] = []
+        previous = signal.signal(signal.SIGINT, lambda *_: ctrl_c.append(time.monotonic()))
         try:
             reply = ask_pilot(session, request, client, args.timeout)
             if not reply.accepted:
                 print(f"goal rejected by the pilot: {reply.reason}", file=sys.stderr)
                 return EXIT_REJECTED
             _print_reply(reply, request.mode)
-            return follower.follow(reply.goal_id, lambda: _cancel(session, name, client))
+            return follower.follow(reply.goal_id, lambda: _cancel(session, name, client), ctrl_c)
         finally:
+            signal.signal(signal.SIGINT, previous)
             follower.close()
     finally:
         session.close()
@@ -246,8 +252,9 @@ class _Follower:
         if status.system == self.system:
             self.queue.put(status)
 
-    def follow(self, goal_id: int, cancel: Any) -> int:
-        """Print the changes of goal ``goal_id`` until it ends; Ctrl-C calls ``cancel`` and waits for the end."""
+    def follow(self, goal_id: int, cancel: Any, ctrl_c: list[float]) -> int:
+        """Print the changes of goal ``goal_id`` until it ends.  ``ctrl_c`` grows at each Ctrl-C: the first
+        calls ``cancel`` and waits for the end, a second one gives up waiting (KeyboardInterrupt)."""
         from services.common.goals import pilot_status
 
         now = pilot_status(self.session, self.system)  # in case it ended before the subscriber's first sample
@@ -255,39 +262,38 @@ class _Follower:
             self.queue.put(now)
         shown: tuple | None = None
         seqs: dict[str, int] = {}
-        deadline: float | None = None  # after Ctrl-C: how long to wait for `cancelled`
+        cancelled = False
         while True:
-            try:
-                try:
-                    status = self.queue.get(timeout=POLL)
-                except queue.Empty:
-                    if deadline is not None and time.monotonic() > deadline:
-                        print("the pilot did not report the goal cancelled", file=sys.stderr)
-                        return EXIT_ENDED
-                    continue
-                if status is None:  # a pilot left: is one still there?
-                    if self._pilots():
-                        continue
-                    print(f"the pilot stopped before goal {goal_id} ended", file=sys.stderr)
-                    return EXIT_ENDED
-                if status.goal_id < goal_id or status.seq <= seqs.get(status.pilot, -1):
-                    continue  # an earlier goal's, or an older copy
-                seqs[status.pilot] = status.seq
-                if status.goal_id > goal_id:
-                    print(f"goal {goal_id} was replaced by goal {status.goal_id}"
-                          + (f" of {status.client}" if status.client else ""), file=sys.stderr)
-                    return EXIT_ENDED
-                if _change(status) != shown:
-                    switched = shown is not None and shown[3] != status.mode
-                    shown = _change(status)
-                    print(status_line(status, switched), flush=True)
-                if status.state in ("reached", "failed", "cancelled"):
-                    return EXIT_REACHED if status.state == "reached" else EXIT_ENDED
-            except KeyboardInterrupt:
-                if deadline is not None:
-                    raise  # a second Ctrl-C: give up waiting
-                deadline = time.monotonic() + CANCEL_WAIT
+            if len(ctrl_c) > 1:
+                raise KeyboardInterrupt
+            if ctrl_c and not cancelled:
+                cancelled = True
                 cancel()
+            try:
+                status = self.queue.get(timeout=POLL)
+            except queue.Empty:
+                if cancelled and time.monotonic() > ctrl_c[0] + CANCEL_WAIT:
+                    print("the pilot did not report the goal cancelled", file=sys.stderr)
+                    return EXIT_ENDED
+                continue
+            if status is None:  # a pilot left: is one still there?
+                if self._pilots():
+                    continue
+                print(f"the pilot stopped before goal {goal_id} ended", file=sys.stderr)
+                return EXIT_ENDED
+            if status.goal_id < goal_id or status.seq <= seqs.get(status.pilot, -1):
+                continue  # an earlier goal's, or an older copy
+            seqs[status.pilot] = status.seq
+            if status.goal_id > goal_id:
+                print(f"goal {goal_id} was replaced by goal {status.goal_id}"
+                      + (f" of {status.client}" if status.client else ""), file=sys.stderr)
+                return EXIT_ENDED
+            if _change(status) != shown:
+                switched = shown is not None and shown[3] != status.mode
+                shown = _change(status)
+                print(status_line(status, switched), flush=True)
+            if status.state in ("reached", "failed", "cancelled"):
+                return EXIT_REACHED if status.state == "reached" else EXIT_ENDED
 
     def _pilots(self) -> bool:
         from skinet.wire import keys

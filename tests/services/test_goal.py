@@ -170,6 +170,23 @@ def test_ctrl_c_cancels_the_goal(robot, router) -> None:
     assert robot.pilot.status.state == "cancelled" and robot.pilot.status.commands == 0
 
 
+@pytest.mark.parametrize("delay", [0.3, 1.0, 1.6, 2.4])
+def test_ctrl_c_at_any_moment_leaves_no_goal_running(robot, router, delay: float) -> None:
+    """Before the request (nothing sent, exit 130 or killed by the signal), while the pilot plans (its reply holds the signal back) or
+    after: whenever Ctrl-C comes, the goal it sent is cancelled."""
+    proc = start_skinet("goal", "spot_arm", "reach spot:Standing", *client_args(router))
+    time.sleep(delay)
+    proc.send_signal(signal.SIGINT)
+    out, _ = proc.communicate(timeout=30)
+    status = robot.pilot.status
+    if proc.returncode in (130, -signal.SIGINT):  # still starting (importing, or opening its session)
+        assert status.goal_id == 0, out
+    else:
+        assert proc.returncode == 1 and "cancelled by Ctrl-C: asking the pilot to cancel the goal\n" in out, out
+        assert out.splitlines()[-1].startswith("cancelled") and (status.goal_id, status.state) == (1, "cancelled")
+    assert status.commands == 0
+
+
 def test_pause_resume_cancel_and_a_second_goal_without_replace(robot, router) -> None:
     nothing = goal(router, "spot_arm", "--pause")
     assert (nothing.returncode, nothing.stdout, nothing.stderr) == (
