@@ -23,6 +23,7 @@ import pytest
 import services.bridge_ros2.__main__ as bridge_main
 import services.dashboard.__main__ as dashboard_main
 import services.monitor.__main__ as monitor_main
+import services.pilot.__main__ as pilot_main
 import services.predictor.__main__ as predictor_main
 import services.simulator.__main__ as simulator_main
 from skinet_cli.main import build_parser, main
@@ -115,7 +116,7 @@ def test_matcher() -> None:
 
 SERVICES = {"services.monitor": monitor_main, "services.predictor": predictor_main,
             "services.bridge_ros2": bridge_main, "services.simulator": simulator_main,
-            "services.dashboard": dashboard_main}
+            "services.dashboard": dashboard_main, "services.pilot": pilot_main}
 
 
 def _help(usage: str) -> str:

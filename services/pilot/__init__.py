@@ -1,6 +1,6 @@
 """The pilot service (SPEC §8, *The pilot*): goals in, safe skill requests out; see :mod:`services.pilot.service`."""
 
-from services.pilot.act import ActError, Actuator, ManagerActuator, route
+from services.pilot.act import ActError, Actuator, ManagerActuator, Routed, default_actuator, route
 from services.pilot.service import Pilot, start_pilot
 
-__all__ = ["ActError", "Actuator", "ManagerActuator", "Pilot", "route", "start_pilot"]
+__all__ = ["ActError", "Actuator", "ManagerActuator", "Pilot", "Routed", "default_actuator", "route", "start_pilot"]

@@ -3,13 +3,12 @@
 from __future__ import annotations
 
 import logging
-import signal
 import sys
-import threading
 from collections.abc import Sequence
 
 from services.common.cli import add_instance_arg, add_log_arg, one_line_errors, setup_logging
 from services.common.zenoh_config import add_zenoh_args, client_name, config_from_args, open_session
+from services.embedded import stop_on_signals
 from services.pilot.service import start_pilot
 from skinet.files import load_typemap
 from skinet.wire import keys
@@ -44,9 +43,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     typemap = load_typemap(args.system)
     config = config_from_args(args)
     log = logging.getLogger("skinet.pilot")
-    stop = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
+    stop = stop_on_signals()
     session = open_session(config)
     try:
         pilot = start_pilot(session, system, instance=args.instance, response_timeout=args.response_timeout,

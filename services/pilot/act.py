@@ -3,10 +3,12 @@
 An :class:`Actuator` sends one :class:`~skinet.wire.messages.PilotCommand`
 (``SKILL.start`` with its inputs, or ``SKILL.interrupt``) and says what it sent,
 for the log; it raises :class:`ActError` with the reason when it cannot.  Which
-protocol carries a skill is decided in one place, :func:`route`: the
-:class:`ManagerActuator` (the default) speaks a generated skillset manager's
-request protocol, as an operator GUI does (:mod:`skinet.ros.requests`); skills
-bound to ROS 2 actions (SPEC §9) are sent by a bound actuator.
+protocol carries a skill is decided in one place, :func:`route`, and
+:class:`Routed` (the pilot's :func:`default_actuator`) sends each command
+through the actuator of its route: the :class:`ManagerActuator` speaks a
+generated skillset manager's request protocol, as an operator GUI does
+(:mod:`skinet.ros.requests`); skills bound to ROS 2 actions (SPEC §9) need a
+bound actuator.
 
 An interrupt needs the running execution's id.  The manager's own
 ``SkillsetStatus`` says it: the actuator follows each manager's status topic and,
@@ -110,12 +112,12 @@ class ManagerActuator:
         store = self._stores[skillset]
         if kind == "start":
             with self._lock:
+                id_ = f"{self.instance}-{self._count + 1}"
+                try:
+                    request = skill_request(store, c.skillset, skill, id_, command.inputs)
+                except (ValueError, KeyError, TypeError) as exc:
+                    raise ActError(f"cannot encode {skillset}:{command.transition}: {exc}") from None
                 self._count += 1
-                id_ = f"{self.instance}-{self._count}"
-            try:
-                request = skill_request(store, c.skillset, skill, id_, command.inputs)
-            except (ValueError, KeyError, TypeError) as exc:
-                raise ActError(f"cannot encode {skillset}:{command.transition}: {exc}") from None
             key = self._requests.put(skillset, *request)
             return f"{command.transition} (id '{id_}'{_inputs(command.inputs)}) on {key}"
         if kind == "interrupt":
@@ -143,8 +145,37 @@ class ManagerActuator:
         self._requests.close()
 
 
+class Routed:
+    """Sends each command through the actuator of its :func:`route` (``manager`` or ``binding``)."""
+
+    def __init__(self, system: System, actuators: Mapping[str, Actuator]):
+        self.system, self.actuators = system, dict(actuators)
+
+    def send(self, command: PilotCommand) -> str:
+        skill = command.transition.partition(".")[0]
+        try:
+            way = route(self.system, command.skillset, skill)
+        except KeyError:
+            raise ActError(f"unknown skillset '{command.skillset}' of {self.system.name}") from None
+        actuator = self.actuators.get(way)
+        if actuator is None:
+            raise ActError(f"{command.skillset}:{skill} is bound to a ROS 2 interface (SPEC §9), and this pilot "
+                           "cannot act through bindings")
+        return actuator.send(command)
+
+    def close(self) -> None:
+        for actuator in self.actuators.values():
+            actuator.close()
+
+
+def default_actuator(session: zenoh.Session, system: System, typemap: Mapping[str, str] | None = None,
+                     style: KeyStyle = KeyStyle(), instance: str = "pilot") -> Actuator:
+    """The pilot's default: each skill through the protocol :func:`route` gives it."""
+    return Routed(system, {"manager": ManagerActuator(session, system, typemap, style, instance)})
+
+
 def _inputs(inputs: Mapping[str, object]) -> str:
     return f", inputs {dict(inputs)}" if inputs else ""
 
 
-__all__ = ["ActError", "Actuator", "ManagerActuator", "route"]
+__all__ = ["ActError", "Actuator", "ManagerActuator", "Routed", "default_actuator", "route"]

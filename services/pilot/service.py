@@ -18,7 +18,8 @@ after the step it was planned from); never two commands in flight; no reaction w
 ``response_timeout`` ends the goal ``failed: no response from <manager>``.
 
 A skillset that is not ``live``, a model divergence (until the next step, or ``resume``),
-a pending prediction (when a command is due) or an operator's ``pause`` pause it.  A
+a prediction still pending ``PENDING_GRACE`` after its step (when a command is due) or an
+operator's ``pause`` pause it.  A
 skill that fails ``max_retries`` times in one goal ends it ``failed``.  The status
 (:class:`PilotStatus`) is put on ``keys.pilot_status`` at every change and answered on
 ``get``.  Bad requests, an unknown system, a goal without a plan, no monitor, a manager
@@ -40,7 +41,7 @@ from typing import Any
 import zenoh
 
 from services.common.zenoh_config import undeclare
-from services.pilot.act import ActError, Actuator, ManagerActuator
+from services.pilot.act import ActError, Actuator, default_actuator
 from skinet.errors import SkinetError, SourceError
 from skinet.plan import Command, Goal, Plan, Planner, Reached, parse_goal, parse_goals
 from skinet.system import System
@@ -48,7 +49,8 @@ from skinet.wire import keys
 from skinet.wire.codec import DecodeError, decode, encode
 from skinet.wire.convert import marking_of, plan_steps
 from skinet.wire.messages import (
-    CheckReply, CheckRequest, LiveState, PilotCommand, PilotGoalReply, PilotGoalRequest, PilotStatus, UnsafeReport,
+    CheckReply, CheckRequest, LiveState, PilotCommand, PilotGoalReply, PilotGoalRequest, PilotStatus, PlanStep,
+    UnsafeReport,
 )
 
 log = logging.getLogger("skinet.pilot")
@@ -56,7 +58,8 @@ TICK = 0.1  # seconds between the worker's looks at timeouts
 CHECK_WAIT = 1.0  # seconds the check may wait for a synced state and a fresh prediction
 MAX_REQUEST = 256 << 10  # bytes of a goal request (a mission file's text)
 MAX_STATE = 1 << 20  # bytes of a LiveState or UnsafeReport read
-RETRY_REFUSED = 1.0  # seconds before a check that did not allow is asked again at the same step
+PENDING_GRACE = 0.5  # seconds a step's prediction may take before the pilot says it is paused for it
+RETRY_REFUSED = 1.0  # seconds before a check that gave no decision is asked again at the same step
 
 
 @dataclass
@@ -108,7 +111,7 @@ class Pilot:
         self.client = keys.check_chunk(client or keys.LOCAL_CLIENT, "client name")
         self.response_timeout, self.budget = response_timeout, budget
         self.typemap = dict(typemap or {})
-        self.actuator: Actuator = actuator if actuator is not None else ManagerActuator(
+        self.actuator: Actuator = actuator if actuator is not None else default_actuator(
             session, system, typemap, instance=f"pilot-{self.instance}")
         self.planner = Planner(system)
         self._lock = threading.Lock()
@@ -123,6 +126,8 @@ class Pilot:
         self._asked: tuple[int, int, UnsafeReport, float] | None = None  # goal, step, report, until: a refused check
         self._refusal = ""  # why that check did not allow
         self._seq = 0
+        self._pending = (-1, 0.0)  # the step whose prediction is awaited, since when (monotonic)
+        self._steps: tuple[Plan | None, list[PlanStep]] = (None, [])  # a plan's steps as messages, made once
         self._status = PilotStatus(system=self.name, pilot=self.instance, seq=0, stamp=time.time(),
                                    state="waiting for monitor", reason=self._no_monitor())
         self._payload = encode(self._status)
@@ -225,6 +230,8 @@ class Pilot:
                 self._state = self._unsafe = None  # a new monitor counts its steps from 0: ask it
                 if self._inflight is not None:
                     self._inflight.seq = -1
+                if self._goal is not None:
+                    self._goal.since = -1
             else:
                 self._monitors.discard(key)
                 if not self._monitors:
@@ -256,7 +263,10 @@ class Pilot:
             except Exception:  # a bug must not stop the pilot; the client gets a reason
                 log.exception("error while answering a goal request")
                 reply = self._reject("internal error in the pilot (see its log)")
-            query.reply(str(query.key_expr), encode(reply))
+            try:
+                query.reply(str(query.key_expr), encode(reply))
+            except zenoh.ZError:  # a key no reply can take (a wildcard): the reason as an error reply
+                query.reply_err(reply.reason or "reply refused by Zenoh")
         self._wake.set()
 
     def _reject(self, reason: str) -> PilotGoalReply:
@@ -367,19 +377,26 @@ class Pilot:
         """Publish what the pilot does now; the command to check and send, if one is due (lock held)."""
         g, st = self._goal, self._state
         if g is not None and g.end:
+            f = self._inflight
+            if f is not None and time.monotonic() >= f.deadline:  # a goal that ended: its command is forgotten
+                log.warning("no effect of %s:%s seen from %s", f.command.skillset, f.command.transition, f.manager)
+                self._inflight = None
             return self._show(g.end, g.reason)
-        if not self._monitors or st is None:
-            return self._show("waiting for monitor", self._no_monitor() if not self._monitors else
-                              f"no live state from the monitor of {self.name} yet")
+        waiting = self._no_monitor() if not self._monitors else \
+            f"no live state from the monitor of {self.name} yet" if st is None else ""
+        why = waiting or ("" if g is None or st is None else self._paused(g, st))
+        flight = self._inflight
+        if why and flight is not None:  # its effect cannot be seen now: the manager's time starts again after
+            flight.deadline = time.monotonic() + self.response_timeout
+        if waiting or st is None:
+            return self._show("waiting for monitor", waiting)
         if g is None:
             return self._show("idle")
-        flight = self._inflight
         if flight is not None and time.monotonic() >= flight.deadline:
             self._inflight = None
             self._end(g, "failed", f"no response from {flight.manager} within {self.response_timeout:g} s to "
                                    f"{flight.command.skillset}:{flight.command.transition}")
             return self._show(g.end, g.reason)
-        why = self._paused(g, st)
         if why:
             return self._show("paused", why)
         if flight is not None:
@@ -411,6 +428,10 @@ class Pilot:
             return self._show("guiding", next_=command, plan=g.plan, marking=marking)
         u = self._unsafe
         if u is None or u.seq != st.seq or u.prediction_stale:
+            if self._pending[0] != st.seq:
+                self._pending = (st.seq, time.monotonic())
+            if time.monotonic() - self._pending[1] < PENDING_GRACE:  # the usual moment after every step
+                return self._show("driving", f"waiting for the prediction of step {st.seq}", command, g.plan, marking)
             return self._show("paused", f"the prediction of step {st.seq} is pending", command, g.plan, marking)
         a = self._asked
         if a is not None and a[:3] == (g.id, st.seq, u) and time.monotonic() < a[3]:
@@ -467,7 +488,8 @@ class Pilot:
                 if reply.decision == "deny":
                     g.denied += 1
                     log.error("DEFECT: the check denied %s at step %d, which the plan gave: %s", what, due.seq, why)
-                self._refuse(g, due, f"the check answered {reply.decision} for {what} at step {due.seq}: {why}")
+                self._refuse(g, due, f"the check answered {reply.decision} for {what} at step {due.seq}: {why}",
+                             again=False)
                 return
             manager = self.system.component(c.skillset).manager or c.skillset
             self._inflight = _InFlight(c, due.seq, time.monotonic() + self.response_timeout, manager)
@@ -485,8 +507,10 @@ class Pilot:
                     self._end(g, "failed", f"cannot send {c.skillset}:{c.transition}: {exc.reason}")
                     self._decide()
 
-    def _refuse(self, g: _Goal, due: _Due, reason: str) -> None:
-        self._asked, self._refusal = (g.id, due.seq, due.unsafe, time.monotonic() + RETRY_REFUSED), reason
+    def _refuse(self, g: _Goal, due: _Due, reason: str, again: bool = True) -> None:
+        """Hold ``due`` back: asked again at the next step or report, or (``again``) after RETRY_REFUSED s."""
+        until = time.monotonic() + RETRY_REFUSED if again else float("inf")
+        self._asked, self._refusal = (g.id, due.seq, due.unsafe, until), reason
         self._decide()
 
     def _next_goal(self, g: _Goal) -> None:
@@ -514,7 +538,9 @@ class Pilot:
             fields.update(goal_id=g.id, client=g.client, mode=g.mode, goals=[x.text for x in g.goals], index=g.index,
                           retries=dict(g.retries), commands=g.commands, denied=g.denied)
             if plan is not None:
-                fields.update(answer=plan.answer, steps=plan_steps(plan.steps),
+                if self._steps[0] is not plan:
+                    self._steps = (plan, plan_steps(plan.steps))
+                fields.update(answer=plan.answer, steps=self._steps[1],
                               moves_left=plan.rank(marking) if marking is not None else plan.moves)
         status = PilotStatus(system=self.name, pilot=self.instance, seq=self._status.seq, stamp=self._status.stamp,
                              **fields)
@@ -535,8 +561,8 @@ def start_pilot(session: zenoh.Session, system: System, instance: str | None = N
     """Start a pilot of ``system`` on ``session`` (which may be shared, SPEC §7).
 
     ``instance``: its id in the liveliness token and the status (default: random);
-    ``actuator``: how it acts (default: a :class:`~services.pilot.act.ManagerActuator` on the
-    managers' topics, which needs the system's ``typemap``); ``response_timeout``: seconds a
+    ``actuator``: how it acts (default: :func:`~services.pilot.act.default_actuator`, the managers'
+    request topics, which needs the system's ``typemap``); ``response_timeout``: seconds a
     manager has to react to a command; ``budget``: planning seconds per goal; ``client``: its
     router login, the client chunk of its check queries (default ``local``).
     """

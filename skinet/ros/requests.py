@@ -36,6 +36,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from rosbags.serde import SerdeError
 from rosbags.typesys.store import Typestore
 
 from skinet.lang.model import Skillset
@@ -89,13 +90,15 @@ def status_request(store: Typestore, skillset: Skillset) -> tuple[ManagerTopic, 
 
 
 def skill_ids(store: Typestore, skillset: Skillset, payload: bytes) -> dict[str, SkillView]:
-    """Each skill's state and current (or last) execution id in a CDR ``SkillsetStatus``; raises
-    ``ValueError`` (or rosbags' errors) when the payload is not one."""
+    """Each skill's state and current (or last) execution id in a CDR ``SkillsetStatus``; ``ValueError``
+    when the payload is not one."""
     try:
         msg = to_plain(decode(store, msg_typename(skillset, "SkillsetStatus"), payload))
         return dict(status_from_plain(skillset, msg).skills)
     except KeyError as exc:
         raise ValueError(f"not a SkillsetStatus of {skillset.name}: no field {exc}") from None
+    except SerdeError as exc:
+        raise ValueError(f"not a SkillsetStatus of {skillset.name}: {exc}") from None
 
 
 @dataclass

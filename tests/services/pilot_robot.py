@@ -6,7 +6,7 @@ and a pilot on another; :class:`Implementations` is the robot's side of the skil
 it ends each execution it sees running in the mode a script gives (the first
 success mode by default), after a delay, through the simulator's implementation
 hook (the managers then speak the real protocol).  :class:`Recording` wraps the
-pilot's real actuator and keeps what it sent, in order.
+pilot's real actuator (:func:`~services.pilot.act.default_actuator`) and keeps what it sent, in order.
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ import zenoh
 from services.bridge_ros2 import start_bridge
 from services.common.requests import Requests
 from services.monitor import start_monitor
-from services.pilot import ManagerActuator, Pilot, start_pilot
+from services.pilot import Actuator, Pilot, default_actuator, start_pilot
 from services.predictor.service import start_predictor
 from services.simulator import Simulator
 from skinet.ros.keys import KeyStyle
@@ -32,14 +32,15 @@ from skinet.system import System
 from skinet.wire import keys
 from skinet.wire.codec import decode, encode
 from skinet.wire.messages import PilotCommand, PilotGoalReply, PilotGoalRequest, PilotStatus
+from tests.event_watch import Messages
 
 WALK = {"go_to_waypoint": {"target": {"x": 12.0, "y": 3.5, "z": 0.0}}}
 
 
 class Recording:
-    """The pilot's :class:`ManagerActuator`, keeping every command it sent (``skillset:transition``)."""
+    """The pilot's actuator, keeping every command it sent (``skillset:transition``)."""
 
-    def __init__(self, inner: ManagerActuator):
+    def __init__(self, inner: Actuator):
         self.inner = inner
         self.sent: list[str] = []
         self.inputs: list[dict[str, Any]] = []
@@ -54,31 +55,25 @@ class Recording:
         self.inner.close()
 
 
-class Statuses:
+class Statuses(Messages[PilotStatus]):
     """Every PilotStatus published, in arrival order, with a blocking wait."""
 
     def __init__(self, session: zenoh.Session, system: str = "spot_arm"):
-        self.items: list[PilotStatus] = []
-        self._cond = threading.Condition()
-        self._sub = session.declare_subscriber(keys.pilot_status(system), self._on_sample)
+        super().__init__(session, keys.pilot_status(system), PilotStatus)
 
-    def _on_sample(self, sample: zenoh.Sample) -> None:
-        with self._cond:
-            self.items.append(decode(sample.payload.to_bytes(), PilotStatus))
-            self._cond.notify_all()
-
-    def wait(self, predicate: Callable[[PilotStatus], bool], timeout: float = 20.0, what: str = "") -> PilotStatus:
+    def first(self, predicate: Callable[[PilotStatus], bool], timeout: float = 20.0, what: str = "") -> PilotStatus:
         """The first status (from now on or already received) for which ``predicate`` holds."""
-        with self._cond:
-            if not self._cond.wait_for(lambda: any(predicate(s) for s in self.items), timeout):
-                last = self.items[-1] if self.items else None
-                pytest.fail(f"no pilot status {what} within {timeout} s; last: "
-                            f"{None if last is None else (last.state, last.reason, last.next)}")
-            return next(s for s in self.items if predicate(s))
+        try:
+            items = super().wait(lambda items: any(predicate(s) for s in items), timeout)
+        except AssertionError:
+            last = self.items[-1] if self.items else None
+            pytest.fail(f"no pilot status {what} within {timeout} s; last: "
+                        f"{None if last is None else (last.state, last.reason, last.next)}")
+        return next(s for s in items if predicate(s))
 
     def state(self, state: str, goal: int | None = None, timeout: float = 20.0) -> PilotStatus:
-        return self.wait(lambda s: s.state == state and (goal is None or s.goal_id == goal), timeout,
-                         f"'{state}'")
+        return self.first(lambda s: s.state == state and (goal is None or s.goal_id == goal), timeout,
+                          f"'{state}'")
 
     def states(self, goal: int) -> list[str]:
         """The states of ``goal``'s statuses, repeats dropped."""
@@ -105,12 +100,14 @@ def goal(*goals: str, **fields: Any) -> PilotGoalRequest:
 
 class Implementations:
     """The robot's skill implementations: each execution seen running ends after ``delay`` seconds (a
-    random one in ``[0, delay]`` with ``rng``) in the next mode of ``script[(skillset, skill)]``, else in its
-    first success mode; ``hold`` lists skills left running until :meth:`release`."""
+    random one in ``[0, delay]`` with ``rng``) in the next mode of ``script[(skillset, skill)]``, else (with ``rng``,
+    with probability ``fail``) in a random failure mode, else in its first success mode; ``hold`` lists skills
+    left running until :meth:`release`."""
 
     def __init__(self, simulator: Simulator, system: System, script: dict[tuple[str, str], list[str]] | None = None,
-                 delay: float = 0.05, rng: random.Random | None = None, hold: Iterable[tuple[str, str]] = ()):
-        self.sim, self.system = simulator, system
+                 delay: float = 0.05, rng: random.Random | None = None, hold: Iterable[tuple[str, str]] = (),
+                 fail: float = 0.0):
+        self.sim, self.system, self.fail = simulator, system, fail
         self.script = {k: list(v) for k, v in (script or {}).items()}
         self.delay, self.rng = delay, rng
         self.hold = set(hold)
@@ -132,7 +129,13 @@ class Implementations:
                         continue
                     self._seen.add((c.name, k.name, id_))
                     queue = self.script.get((c.name, k.name))
-                    mode = queue.pop(0) if queue else next(m for m in k.modes if m.kind == "success").name
+                    failures = [m.name for m in k.modes if m.kind == "failure"]
+                    if queue:
+                        mode = queue.pop(0)
+                    elif self.rng is not None and failures and self.rng.random() < self.fail:
+                        mode = self.rng.choice(failures)
+                    else:
+                        mode = next(m for m in k.modes if m.kind == "success").name
                     kind = next(m.kind for m in k.modes if m.name == mode)
                     wait = self.rng.uniform(0, self.delay) if self.rng else self.delay
                     threading.Timer(wait, self._end, (c.name, k.name, kind, mode)).start()
@@ -150,7 +153,8 @@ class Robot:
     """Simulator, bridge, monitor, predictor and pilot of the paper's system, each on its own client session."""
 
     def __init__(self, sessions: Callable[[], zenoh.Session], system: System, typemap: dict[str, str],
-                 monitor: bool = True, style: KeyStyle = KeyStyle(), lost_after: float = 2.0, **pilot: Any):
+                 monitor: bool = True, style: KeyStyle = KeyStyle(), lost_after: float = 2.0,
+                 pilot_system: System | None = None, **pilot: Any):
         self.system, self.typemap, self.sessions, self.lost_after = system, typemap, sessions, lost_after
         self.sim = Simulator(sessions(), system, typemap, style=style)
         self.bridge = start_bridge(sessions(), system, typemap, style=style)
@@ -159,8 +163,8 @@ class Robot:
         if monitor:
             self.start_monitor()
         pilot_session = sessions()
-        self.actuator = Recording(ManagerActuator(pilot_session, system, typemap, style, instance="p1"))
-        self.pilot: Pilot = start_pilot(pilot_session, system, instance="p1",
+        self.actuator = Recording(default_actuator(pilot_session, system, typemap, style, instance="p1"))
+        self.pilot: Pilot = start_pilot(pilot_session, pilot_system or system, instance="p1",
                                         actuator=pilot.pop("actuator", self.actuator), typemap=typemap, **pilot)
         self.observer = sessions()
         self.statuses = Statuses(self.observer)

@@ -4,11 +4,23 @@ sessions; the skills' outcomes come from :class:`~tests.services.pilot_robot.Imp
 
 from __future__ import annotations
 
+import dataclasses
+import random
+import time
 from collections.abc import Callable, Iterator
 
 import pytest
 import zenoh
 
+from services.bridge_ros2 import start_bridge
+from services.common.zenoh_config import undeclare
+from services.pilot import ActError
+from services.predictor.service import start_predictor
+from skinet.ros.keys import KeyStyle
+from skinet.wire import keys
+from skinet.wire.messages import PilotCommand, PilotGoalRequest, Verdicts
+from tests.event_watch import Messages
+from tests.services.test_monitor import wait_until
 from tests.services.pilot_robot import WALK, Gui, Implementations, Robot, ask_goal, goal
 
 
@@ -49,15 +61,15 @@ def test_guide_sends_nothing_and_publishes_the_exact_next_command(robot: Robot) 
         assert (reply.accepted, reply.answer, reply.moves) == (True, "cyclic", 6)
         assert [(s.number, s.skillset, s.action, s.expect) for s in reply.steps[:2]] == [
             ("1", "spot", "init_power.start", None), ("2", "spot", "wait", "init_power.success.powered_on")]
-        first = robot.statuses.wait(lambda s: s.state == "guiding" and s.next is not None)
+        first = robot.statuses.first(lambda s: s.state == "guiding" and s.next is not None)
         assert (first.next.skillset, first.next.transition, first.next.inputs, first.mode) == (
             "spot", "init_power.start", {}, "guide")
         assert (first.answer, first.moves_left, first.goals) == ("cyclic", 6, ["run spot:go_to_waypoint"])
         gui.start("spot", "init_power")  # the operator follows the guide
-        after = robot.statuses.wait(lambda s: s.next is not None and s.next.transition == "stand_up.start")
+        after = robot.statuses.first(lambda s: s.next is not None and s.next.transition == "stand_up.start")
         assert (after.state, after.moves_left) == ("guiding", 4)
         gui.start("spot", "stand_up")
-        walk = robot.statuses.wait(lambda s: s.next is not None and s.next.transition == "go_to_waypoint.start")
+        walk = robot.statuses.first(lambda s: s.next is not None and s.next.transition == "go_to_waypoint.start")
         assert walk.next.inputs == WALK["go_to_waypoint"]
         gui.start("spot", "go_to_waypoint", WALK["go_to_waypoint"])
         done = robot.statuses.state("reached", reply.goal_id)
@@ -74,9 +86,9 @@ def test_the_operator_acts_and_the_pilot_plans_again_from_what_they_caused(robot
     gui = Gui(robot.observer, robot)
     try:
         reply = ask_goal(robot.observer, goal("run spot:go_to_waypoint", inputs=WALK, mode="drive"))
-        robot.statuses.wait(lambda s: s.reason == "the outcome of spot:stand_up")  # the pilot saw it start
+        robot.statuses.first(lambda s: s.reason == "the outcome of spot:stand_up")  # the pilot saw it start
         gui.interrupt("spot", "stand_up")
-        robot.statuses.wait(lambda s: s.commands == 3, what="a third command")
+        robot.statuses.first(lambda s: s.commands == 3, what="a third command")
         impl.release("spot", "stand_up")
         done = robot.statuses.state("reached", reply.goal_id)
         assert robot.actuator.sent == ["spot:init_power.start", "spot:stand_up.start", "spot:stand_up.start",
@@ -109,3 +121,260 @@ def test_max_retries_failures_of_one_skill_end_the_goal_with_skill_and_mode(robo
         assert (done.retries, done.next) == ({"spot:stand_up": 2}, None)
     finally:
         impl.close()
+
+
+@pytest.fixture
+def quick(client_factory: Callable[[], zenoh.Session], spot_arm: tuple) -> Iterator[Robot]:
+    """The robot with a monitor that calls a skillset lost after 0.5 s of silence."""
+    r = Robot(client_factory, *spot_arm, lost_after=0.5)
+    yield r
+    r.close()
+
+
+def test_a_skillset_not_live_pauses_the_pilot_until_it_is_live_again(quick: Robot, client_factory) -> None:
+    robot = quick
+    impl = Implementations(robot.sim, robot.system, hold=[("spot", "init_power")])
+    try:
+        reply = ask_goal(robot.observer, goal("run spot:go_to_waypoint", inputs=WALK, mode="drive"))
+        robot.statuses.first(lambda s: s.reason == "the outcome of spot:init_power")
+        robot.bridge.close()  # the robot goes silent
+        paused = robot.statuses.first(lambda s: s.state == "paused" and " is lost: " in s.reason, what="lost")
+        assert paused.reason.startswith(("spot is lost: the liveliness token of 'bridge_ros2/",
+                                         "manipulator is lost: the liveliness token of 'bridge_ros2/")), paused.reason
+        impl.release("spot", "init_power")  # spot powers on meanwhile: nobody sees it
+        time.sleep(0.3)
+        assert robot.actuator.sent == ["spot:init_power.start"]  # nothing from a state it cannot vouch for
+        robot.bridge = start_bridge(client_factory(), robot.system, robot.typemap)  # heard again: resync
+        done = robot.statuses.state("reached", reply.goal_id)
+        assert robot.actuator.sent == ["spot:init_power.start", "spot:stand_up.start", "spot:go_to_waypoint.start"]
+        assert (done.commands, done.denied) == (3, 0)
+    finally:
+        impl.close()
+
+
+def test_a_pending_prediction_pauses_the_pilot_until_it_comes(robot: Robot, client_factory) -> None:
+    impl = Implementations(robot.sim, robot.system, hold=[("spot", "init_power")])
+    try:
+        reply = ask_goal(robot.observer, goal("run spot:go_to_waypoint", inputs=WALK, mode="drive"))
+        robot.statuses.first(lambda s: s.reason == "the outcome of spot:init_power")
+        robot.predictor.close()
+        impl.release("spot", "init_power")
+        paused = robot.statuses.first(lambda s: s.state == "paused" and s.commands == 1, what="paused")
+        assert paused.reason == f"the prediction of step {paused.state_seq} is pending"
+        assert (paused.next.skillset, paused.next.transition) == ("spot", "stand_up.start")  # what it would send
+        time.sleep(0.3)
+        assert robot.actuator.sent == ["spot:init_power.start"]
+        robot.predictor = start_predictor(client_factory(), "pilot-test-2")
+        robot.statuses.state("reached", reply.goal_id)
+        assert robot.actuator.sent == ["spot:init_power.start", "spot:stand_up.start", "spot:go_to_waypoint.start"]
+    finally:
+        impl.close()
+
+
+def test_a_model_divergence_pauses_the_pilot_until_resumed(robot: Robot) -> None:
+    """The robot stands up with no skill (a model divergence): the pilot stops until the operator resumes,
+    then goes on from the state the monitor adopted."""
+    impl = Implementations(robot.sim, robot.system, hold=[("spot", "init_power")])
+    try:
+        reply = ask_goal(robot.observer, goal("run spot:go_to_waypoint", inputs=WALK, mode="drive"))
+        robot.statuses.first(lambda s: s.reason == "the outcome of spot:init_power")
+        node = robot.sim.nodes["spot"]
+        with node.lock:
+            node.manager.resources["posture"] = "Standing"
+        impl.release("spot", "init_power")  # its status shows the posture the model cannot explain
+        paused = robot.statuses.first(lambda s: s.state == "paused" and "divergence" in s.reason, what="diverged")
+        assert paused.reason.startswith(f"model divergence at step {paused.state_seq} (spot:"), paused.reason
+        assert paused.reason.endswith("; resume to go on from the state the monitor adopted")
+        time.sleep(0.3)
+        assert robot.actuator.sent == ["spot:init_power.start"]
+        assert ask_goal(robot.observer, PilotGoalRequest(system="spot_arm", op="resume")).accepted
+        robot.statuses.state("reached", reply.goal_id)
+        assert robot.actuator.sent == ["spot:init_power.start", "spot:go_to_waypoint.start"]  # standing already
+    finally:
+        impl.close()
+
+
+def test_a_manager_that_does_not_react_ends_the_goal(client_factory, spot_arm) -> None:
+    robot = Robot(client_factory, *spot_arm, response_timeout=1.0)
+    try:
+        undeclare(*robot.sim._subscribers)  # the managers no longer hear requests; the bridge still hears them
+        reply = ask_goal(robot.observer, goal("run spot:go_to_waypoint", inputs=WALK, mode="drive"))
+        failed = robot.statuses.state("failed", reply.goal_id)
+        assert failed.reason == "no response from /spot/spot_skillset_manager within 1 s to spot:init_power.start"
+        assert (robot.actuator.sent, failed.commands) == (["spot:init_power.start"], 1)
+        assert robot.pilot.status.state == "failed"  # and the service lives: it takes the next goal
+        assert ask_goal(robot.observer, goal("reach spot:PowerOff")).accepted
+    finally:
+        robot.close()
+
+
+def test_bad_requests_get_a_clear_reason_and_never_a_command(robot: Robot) -> None:
+    ask = lambda request: ask_goal(robot.observer, request)  # noqa: E731
+    bad_goal = ask(goal("run spot:go_to_waypont", inputs=WALK, mode="drive"))
+    assert (bad_goal.accepted, bad_goal.goal_id) == (False, 0)
+    assert bad_goal.reason == "<goal>:1:10: error: unknown skill 'go_to_waypont' of 'spot' (candidates: go_to_waypoint)"
+    mission = ask(PilotGoalRequest(system="spot_arm", mission='[[goals]]\nreach = "manipulator:RD"\n\n[[goals]]\n'
+                                                              'reach = "spot:Standng"\n', mission_name="m.toml"))
+    assert mission.reason.startswith("m.toml:5:10: error: "), mission.reason
+    assert ask(b"\x93garbage").reason.startswith("malformed goal request: ")
+    assert ask(None).reason == "empty goal request: send a PilotGoalRequest (msgpack)"
+    assert ask_goal(robot.observer, goal("reach spot:Standing"), client="*").reason == (
+        "key 'skinet/spot_arm/pilot/goal/*': the client chunk must be a name (skinet/spot_arm/pilot/goal/<client>)")
+    assert ask(goal("reach spot:Standing", system="other")).reason == \
+        "unknown system 'other': this pilot serves 'spot_arm'"
+    unsafe = ask(goal("reach spot:Busy and manipulator:Busy", mode="drive"))
+    assert unsafe.reason.startswith("goal 'reach spot:Busy and manipulator:Busy' has no plan from the live state: "
+                                    "none: "), unsafe.reason
+    assert ask(goal()).reason.startswith("no goals: ")
+    assert ask(PilotGoalRequest(system="spot_arm", op="pause")).reason == "no goal is being followed: nothing to pause"
+    assert robot.pilot.status.state == "idle"
+    # One goal at a time, unless the new one says replace.
+    first = ask(goal("reach spot:Standing"))
+    assert (first.accepted, first.goal_id) == (True, 1)
+    busy = ask(goal("reach manipulator:RD"))
+    assert (busy.accepted, busy.reason) == (False, "goal 1 of operator1 is being followed (guiding): cancel it, or "
+                                                   "send the new goal with replace")
+    second = ask(goal("reach manipulator:RD", replace=True))
+    assert (second.accepted, second.goal_id) == (True, 2)
+    assert robot.statuses.first(lambda s: s.goal_id == 1 and s.state == "cancelled").reason == \
+        "replaced by goal 2 of operator1"
+    guiding = robot.statuses.first(lambda s: s.goal_id == 2 and s.state == "guiding")
+    assert (guiding.next.skillset, guiding.next.transition, guiding.client) == ("manipulator", "arm_ready.start",
+                                                                              "operator1")
+    assert ask_goal(robot.observer, PilotGoalRequest(system="spot_arm", op="cancel"), client="operator2").accepted
+    cancelled = robot.statuses.first(lambda s: s.goal_id == 2 and s.state == "cancelled")
+    assert cancelled.reason == "cancelled by operator2"
+    assert robot.actuator.sent == []
+
+
+def test_no_monitor_means_waiting_then_the_goal_goes_on(client_factory, spot_arm) -> None:
+    robot = Robot(client_factory, *spot_arm, monitor=False)
+    impl = Implementations(robot.sim, robot.system)
+    try:
+        robot.wait_pilot("waiting for monitor")
+        assert robot.pilot.status.reason == ("no monitor of spot_arm is running (no token on "
+                                             "skinet/spot_arm/alive/monitor/*)")
+        reply = ask_goal(robot.observer, goal("reach spot:Standing", mode="drive"))
+        assert (reply.accepted, reply.answer, reply.steps) == (True, None, [])  # nothing to plan from yet
+        time.sleep(0.3)
+        assert (robot.pilot.status.state, robot.actuator.sent) == ("waiting for monitor", [])
+        robot.start_monitor()
+        robot.statuses.state("reached", reply.goal_id)
+        assert robot.actuator.sent == ["spot:init_power.start", "spot:stand_up.start"]
+    finally:
+        impl.close()
+        robot.close()
+
+
+def test_a_manager_that_is_gone_pauses_the_pilot_with_no_command(client_factory, spot_arm) -> None:
+    """rmw_zenoh keys: the managers' liveliness tokens say when they leave."""
+    robot = Robot(client_factory, *spot_arm, style=KeyStyle(rmw_zenoh=True, domain=23))
+    try:
+        robot.sim.close()
+        reply = ask_goal(robot.observer, goal("reach spot:Standing", mode="drive"))
+        paused = robot.statuses.first(lambda s: s.goal_id == reply.goal_id and s.state == "paused" and
+                                     "manager left" in s.reason, what="its manager left")
+        assert "spot is lost: its manager left (said 'bridge_ros2/" in paused.reason, paused.reason
+        time.sleep(0.5)
+        assert robot.actuator.sent == []
+        assert ask_goal(robot.observer, PilotGoalRequest(system="spot_arm", op="cancel")).accepted
+    finally:
+        robot.close()
+
+
+RACE_GOALS = ["reach manipulator:RD and spot:Standing", "reach manipulator:HP and spot:Sitting and spot:PowerOff",
+              "run spot:go_to_waypoint", "reach spot:Sitting and manipulator:RD"]
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_outcomes_at_random_moments_around_commands_never_lead_to_a_violation(robot: Robot, seed: int) -> None:
+    """SPEC §8, *Races*: both components' skills end at random moments (0 to 30 ms after they start,
+    a quarter of them in a failure mode), so outcomes arrive before, during and after the pilot's
+    commands to the other component; 12 goals per seed, every one reached, no command denied, no
+    property ever violated."""
+    verdicts = Messages(robot.observer, keys.verdicts("spot_arm"), Verdicts)
+    impl = Implementations(robot.sim, robot.system, delay=0.03, rng=random.Random(seed), fail=0.25)
+    try:
+        commands = 0
+        for n in range(12):
+            reply = ask_goal(robot.observer, goal(RACE_GOALS[n % 4], inputs=WALK, mode="drive", max_retries=100))
+            assert reply.accepted, reply.reason
+            done = robot.statuses.first(lambda s: s.goal_id == reply.goal_id and s.state in ("reached", "failed"),
+                                       timeout=60)
+            assert (done.state, done.reason, done.denied) == ("reached", "", 0)
+            commands += done.commands
+        assert [(v.seq, p.name) for v in verdicts.items for p in v.properties if not p.holds] == []
+        assert any(e.split(".")[1] == "failure" for e in impl.ended)  # failures did come
+        assert len(robot.actuator.sent) == commands  # every command counted was sent, and only those
+    finally:
+        impl.close()
+
+
+def test_switching_to_drive_and_pausing_by_the_operator(robot: Robot) -> None:
+    impl = Implementations(robot.sim, robot.system)
+    try:
+        reply = ask_goal(robot.observer, goal("reach spot:Standing"))
+        robot.statuses.first(lambda s: s.state == "guiding" and s.next is not None)
+        pause = ask_goal(robot.observer, PilotGoalRequest(system="spot_arm", op="pause"), client="operator2")
+        assert (pause.accepted, pause.goal_id) == (True, reply.goal_id)
+        assert robot.statuses.first(lambda s: s.state == "paused").reason == "paused by operator2"
+        assert ask_goal(robot.observer, PilotGoalRequest(system="spot_arm", op="mode", mode="drive")).accepted
+        time.sleep(0.3)
+        assert (robot.pilot.status.state, robot.pilot.status.mode, robot.actuator.sent) == ("paused", "drive", [])
+        assert ask_goal(robot.observer, PilotGoalRequest(system="spot_arm", op="resume")).accepted
+        robot.statuses.state("reached", reply.goal_id)
+        assert robot.actuator.sent == ["spot:init_power.start", "spot:stand_up.start"]
+    finally:
+        impl.close()
+
+
+def test_the_actuator_interrupts_with_the_running_id_its_manager_shows(robot: Robot) -> None:
+    """The running id comes from the manager's own status, whoever started the skill."""
+    gui = Gui(robot.observer, robot)
+    actuator = robot.actuator.inner.actuators["manager"]
+    try:
+        gui.start("spot", "init_power")
+        wait_until(lambda: robot.sim.skill_status("spot", "init_power") == (True, "gui-1"), 5, "init_power runs")
+        interrupt = PilotCommand(skillset="spot", transition="init_power.interrupt")
+        sent = actuator.send(interrupt)
+        assert sent == "init_power.interrupt (running id 'gui-1') on spot/spot_skillset_manager/spot_skillset/skill/" \
+                       "init_power/interrupt"
+        wait_until(lambda: not robot.sim.skill_status("spot", "init_power")[0], 5, "init_power interrupted")
+        with pytest.raises(ActError, match=r"^spot:init_power is not running according to /spot/spot_skillset_"
+                                           r"manager's last status$"):
+            wait_until(lambda: actuator._ids["spot"]["init_power"].state == 0, 5, "the status seen")
+            actuator.send(interrupt)
+        with pytest.raises(ActError, match=r"^cannot encode spot:go_to_waypoint.start: spot:go_to_waypoint has no "
+                                           r"input 'goal' \(inputs: target\)$"):
+            actuator.send(PilotCommand(skillset="spot", transition="go_to_waypoint.start", inputs={"goal": 1.0}))
+        assert actuator.send(PilotCommand(skillset="spot", transition="init_power.start")) == \
+            "init_power.start (id 'p1-1') on spot/spot_skillset_manager/spot_skillset/skill/init_power/request"
+        wait_until(lambda: robot.sim.skill_status("spot", "init_power") == (True, "p1-1"), 5, "started by the pilot")
+    finally:
+        gui.close()
+
+
+def test_a_command_the_check_denies_is_a_defect_never_sent(client_factory, spot_arm) -> None:
+    """A pilot whose model lacks safety_guard (the monitor's has it) plans to walk with the arm ready:
+    the monitor's strict check denies the walk, and the pilot counts the defect and sends nothing."""
+    system, typemap = spot_arm
+    weaker = dataclasses.replace(system, properties=tuple(p for p in system.properties if p.name != "safety_guard"))
+    robot = Robot(client_factory, system, typemap, pilot_system=weaker)
+    impl = Implementations(robot.sim, robot.system)
+    gui = Gui(robot.observer, robot)
+    try:
+        gui.start("manipulator", "arm_ready")
+        robot.statuses.first(lambda s: s.state == "idle" and s.state_seq == 2, what="the arm ready")
+        reply = ask_goal(robot.observer, goal("run spot:go_to_waypoint", inputs=WALK, mode="drive"))
+        paused = robot.statuses.first(lambda s: s.denied == 1, what="a denied command")
+        assert (paused.state, paused.next.transition) == ("paused", "go_to_waypoint.start")
+        assert paused.reason.startswith(f"the check answered deny for spot:go_to_waypoint.start at step "
+                                        f"{paused.state_seq}: safety_guard (explicit): "), paused.reason
+        time.sleep(0.5)
+        assert robot.actuator.sent == ["spot:init_power.start", "spot:stand_up.start"]
+        assert ask_goal(robot.observer, PilotGoalRequest(system="spot_arm", op="cancel")).accepted
+        assert robot.statuses.state("cancelled", reply.goal_id).denied == 1  # asked once at that step
+    finally:
+        gui.close()
+        impl.close()
+        robot.close()
