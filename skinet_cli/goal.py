@@ -220,9 +220,11 @@ def status_line(s: PilotStatus, mode: bool = False) -> str:
     return head + (" \u2014 " + ", ".join(parts) if parts else "")
 
 
-def _change(s: PilotStatus) -> tuple:
-    """What a line shows: a status equal in all of it is no new line."""
-    return (s.goal_id, s.state, s.reason, s.mode, s.index, s.next and s.next.model_dump_json(), s.moves_left,
+def _change(s: PilotStatus, shown: tuple | None) -> tuple:
+    """What a line shows: a status equal in all of it to the one ``shown`` is no new line (moves left not
+    known, None, is no change from those shown)."""
+    moves = shown[6] if s.moves_left is None and shown is not None and shown[1] == s.state else s.moves_left
+    return (s.goal_id, s.state, s.reason, s.mode, s.index, s.next and s.next.model_dump_json(), moves,
             tuple(sorted(s.retries.items())), s.commands, s.denied)
 
 
@@ -288,9 +290,9 @@ class _Follower:
                 print(f"goal {goal_id} was replaced by goal {status.goal_id}"
                       + (f" of {status.client}" if status.client else ""), file=sys.stderr)
                 return EXIT_ENDED
-            if _change(status) != shown:
+            if _change(status, shown) != shown:
                 switched = shown is not None and shown[3] != status.mode
-                shown = _change(status)
+                shown = _change(status, shown)
                 print(status_line(status, switched), flush=True)
             if status.state in ("reached", "failed", "cancelled"):
                 return EXIT_REACHED if status.state == "reached" else EXIT_ENDED
