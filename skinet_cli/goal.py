@@ -237,11 +237,11 @@ class _Follower:
         from skinet.wire import keys
 
         self.session, self.system = session, system
-        self.queue: queue.Queue[PilotStatus | None] = queue.Queue()
+        self.queue: queue.Queue[PilotStatus | str] = queue.Queue()  # a status, or the id of a pilot that left
         self._sub = session.declare_subscriber(keys.pilot_status(system), self._on_status)
         self._tokens = session.liveliness().declare_subscriber(
             keys.alive(system, "pilot", "*"),
-            lambda sample: self.queue.put(None) if sample.kind == zenoh.SampleKind.DELETE else None)
+            lambda s: self.queue.put(str(s.key_expr).rsplit("/", 1)[-1]) if s.kind == zenoh.SampleKind.DELETE else None)
 
     def _on_status(self, sample: Any) -> None:
         from skinet.wire.codec import DecodeError, decode
@@ -264,6 +264,7 @@ class _Follower:
             self.queue.put(now)
         shown: tuple | None = None
         seqs: dict[str, int] = {}
+        ours = ""  # the pilot instance following the goal, once a status of it came
         cancelled = False
         while True:
             if len(ctrl_c) > 1:
@@ -278,14 +279,16 @@ class _Follower:
                     print("the pilot did not report the goal cancelled", file=sys.stderr)
                     return EXIT_ENDED
                 continue
-            if status is None:  # a pilot left: is one still there?
-                if self._pilots():
+            if isinstance(status, str):  # a pilot left: ours (or, not knowing ours yet, the last one)?
+                still_there = status != ours if ours else self._pilots()
+                if still_there:
                     continue
                 print(f"the pilot stopped before goal {goal_id} ended", file=sys.stderr)
                 return EXIT_ENDED
             if status.goal_id < goal_id or status.seq <= seqs.get(status.pilot, -1):
                 continue  # an earlier goal's, or an older copy
             seqs[status.pilot] = status.seq
+            ours = ours or (status.pilot if status.goal_id == goal_id else "")
             if status.goal_id > goal_id:
                 print(f"goal {goal_id} was replaced by goal {status.goal_id}"
                       + (f" of {status.client}" if status.client else ""), file=sys.stderr)

@@ -191,6 +191,20 @@ def test_ctrl_c_at_any_moment_leaves_no_goal_running(robot, router, delay: float
     assert status.commands == 0
 
 
+def test_the_pilot_stopping_ends_the_follow_with_exit_1(robot, router) -> None:
+    proc = start_skinet("goal", "spot_arm", "reach spot:Standing", *client_args(router))
+    try:
+        deadline = time.monotonic() + 20
+        while robot.pilot.status.state != "guiding":
+            assert time.monotonic() < deadline, robot.pilot.status
+            time.sleep(0.05)
+        robot.pilot.close()
+        out, _ = proc.communicate(timeout=20)
+    finally:
+        proc.kill()
+    assert proc.returncode == 1 and out.endswith("\nthe pilot stopped before goal 1 ended\n"), out
+
+
 def test_pause_resume_cancel_and_a_second_goal_without_replace(robot, router) -> None:
     nothing = goal(router, "spot_arm", "--pause")
     assert (nothing.returncode, nothing.stdout, nothing.stderr) == (
