@@ -29,7 +29,7 @@ from services.dashboard.board import Board
 from services.monitor import start_monitor
 from skinet.files import load_system, load_typemap, read_text
 from skinet.mission import StepRecord, parse_scenario
-from skinet.wire.messages import LiveState, PropertyVerdict, UnsafeReport, Verdicts
+from skinet.wire.messages import LiveState, PilotStatus, PropertyVerdict, UnsafeReport, Verdicts
 from tests.services.conftest import REPO, client_args, free_port, open_client, open_router
 from tests.services.test_divergences import TEN
 from tests.services.test_monitor import Events
@@ -349,6 +349,23 @@ def test_board_joins_steps_in_any_order_and_counts_violations_once() -> None:
         ("p", 1, 0, "a:x#0"), ("p", 0, 1, "")]
     assert [(p["epoch"], p["seq"], p["holds"], p["literal"]) for p in snap["points"]] == [
         (0, 0, {"p": True}, None), (0, 1, {"p": False}, 7), (0, 2, {"p": False}, None), (1, 0, {"p": False}, None)]
+
+
+def test_board_keeps_the_pilots_last_status() -> None:
+    """A late copy of the pilot's status (its answer to the start-up query) never hides a newer one; a
+    restarted pilot (another instance) counts from 0 again."""
+    board = Board("s")
+
+    def status(seq: int, state: str, pilot: str = "p1") -> PilotStatus:
+        return PilotStatus(system="s", pilot=pilot, seq=seq, stamp=float(seq), state=state)
+
+    assert board.feed(status(2, "driving"), 0) == [{"kind": "pilot", "message": status(2, "driving").model_dump(
+        mode="json")}]
+    assert board.feed(status(1, "planning"), 0, initial=True) == []
+    assert board.feed(status(2, "driving"), 0) == []
+    assert [u["message"]["state"] for u in board.feed(status(3, "reached"), 0)] == ["reached"]
+    assert [u["message"]["state"] for u in board.feed(status(0, "idle", "p2"), 0)] == ["idle"]
+    assert board.snapshot()["pilot"]["pilot"] == "p2"
 
 
 def test_skinet_run_serves_the_dashboard_beside_its_monitor(tmp_path) -> None:
