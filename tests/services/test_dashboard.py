@@ -104,9 +104,15 @@ def css(driver, selector: str) -> list[dict[str, str]]:
         "Object.fromEntries([...e.attributes].map((a) => [a.name, a.value])), {text: e.textContent}))", selector)
 
 
-def screenshot(driver, tmp_path: Path, name: str) -> Path:
+def screenshot(driver, tmp_path: Path, name: str, element: str | None = None) -> Path:
+    """The page (or the element of id ``element``) as ``name`` in ``tmp_path`` (and ``$SKINET_SCREENSHOTS``)."""
     path = tmp_path / name
-    driver.save_screenshot(str(path))
+    if element is None:
+        driver.save_screenshot(str(path))
+    else:
+        from selenium.webdriver.common.by import By
+
+        driver.find_element(By.ID, element).screenshot(str(path))
     if os.environ.get("SKINET_SCREENSHOTS"):
         folder = Path(os.environ["SKINET_SCREENSHOTS"])
         folder.mkdir(parents=True, exist_ok=True)
@@ -676,6 +682,9 @@ def test_the_goal_box_drives_a_goal_with_the_next_step_highlighted(browser, dash
         until(browser, lambda d: css(d, "#goal-error[hidden]"), "the error gone")
         until(browser, lambda d: pilot_state(d) == "waiting for outcome", "the first command on its way")
         screenshot(browser, tmp_path, "dashboard-goal-driving.png")
+        until(browser, lambda d: [s["data-number"] for s in css(d, "#plan li.step.next")] == ["4"],
+              "the fourth step highlighted")
+        screenshot(browser, tmp_path, "goalbox.png", "pilot-panel")  # docs/goalbox.png
         until(browser, lambda d: pilot_state(d) == "reached", "the goal reached", 60)
         labels = [s["text"] for s in css(browser, "#plan > li.step > .label")]
         assert labels == PLAN_STAND_READY
