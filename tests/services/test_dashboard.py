@@ -652,6 +652,8 @@ def pilot_state(driver) -> str:
 
 def test_the_goal_box_drives_a_goal_with_the_next_step_highlighted(browser, dashboard, client_factory, spot_arm,
                                                                    tmp_path) -> None:
+    from selenium.webdriver.common.by import By
+
     from tests.services.pilot_robot import Implementations, Robot
 
     robot = Robot(client_factory, *spot_arm)
@@ -696,13 +698,16 @@ def test_the_goal_box_drives_a_goal_with_the_next_step_highlighted(browser, dash
         facts = {f["data-fact"]: f["text"] for f in css(browser, "#pilot-status [data-fact]")}
         assert facts["commands"] == "3 commands sent" and facts["mode"] == "drive mode" and "denied" not in facts
 
-        # Guide mode, pause, resume, then switched to drive and cancelled while its skill runs.
-        impl.hold.add(("spot", "sit_down"))
+        # Guide mode with skill inputs, pause, resume, then switched to drive and cancelled while its skill runs.
+        impl.hold.add(("manipulator", "arm_RD_to_HP"))
         click(browser, "input[name=goal-mode][value=guide]")
-        type_goal(browser, "reach spot:Sitting")
+        browser.find_element(By.ID, "goal-inputs").send_keys("go_to_waypoint.target = {x = 12.0, y = 3.5, z = 0.0}")
+        type_goal(browser, "run spot:go_to_waypoint")
         until(browser, lambda d: pilot_state(d) == "guiding", "guiding")
         next_step = until(browser, lambda d: css(d, "#plan li.step.next"), "the highlighted step")[0]
-        assert (next_step["data-number"], next_step["data-action"]) == ("1", "sit_down.start")
+        assert (next_step["data-number"], next_step["data-action"]) == ("1", "arm_RD_to_HP.start")
+        assert "3. spot:go_to_waypoint.start with {target = {x = 12, y = 3.5, z = 0}}" in [
+            s["text"] for s in css(browser, "#plan li.step > .label")]
         click(browser, "#goal-pause")
         until(browser, lambda d: pilot_state(d) == "paused", "paused")
         assert css(browser, "#goal-pause")[0].get("disabled") is not None
@@ -711,7 +716,7 @@ def test_the_goal_box_drives_a_goal_with_the_next_step_highlighted(browser, dash
         until(browser, lambda d: pilot_state(d) == "guiding", "guiding again")
         assert robot.actuator.sent[-1] == "manipulator:arm_ready.start"  # guide mode sent nothing
         click(browser, "input[name=goal-mode][value=drive]")
-        until(browser, lambda d: robot.actuator.sent[-1] == "spot:sit_down.start", "the command sent once in drive")
+        until(browser, lambda d: robot.actuator.sent[-1] == "manipulator:arm_RD_to_HP.start", "the command sent in drive")
         click(browser, "#goal-cancel")
         until(browser, lambda d: pilot_state(d) == "cancelled", "cancelled")
         assert css(browser, "#goal-cancel")[0].get("disabled") is not None

@@ -523,8 +523,14 @@ function updateNames() {
 const ACTIVE = ["planning", "guiding", "driving", "waiting for outcome", "paused", "waiting for monitor"];
 const plan = { goal: 0, steps: [], answer: null, moves: null, at: -1 };  // the plan shown and its next step (flat index)
 
+function tomlValue(v) {  // inputs as TOML writes them inline, as skinet plan and skinet goal print them
+  if (Array.isArray(v)) return `[${v.map(tomlValue).join(", ")}]`;
+  if (v && typeof v === "object") return `{${Object.entries(v).map(([k, x]) => `${k} = ${tomlValue(x)}`).join(", ")}}`;
+  return typeof v === "string" ? JSON.stringify(v) : String(v);
+}
+
 function commandText(c) {
-  const inputs = c.inputs && Object.keys(c.inputs).length ? ` with ${JSON.stringify(c.inputs)}` : "";
+  const inputs = c.inputs && Object.keys(c.inputs).length ? ` with ${tomlValue(c.inputs)}` : "";
   return `${c.skillset}:${c.transition}${inputs}`;
 }
 
@@ -550,7 +556,7 @@ function stepNodes(steps, flat) {
   return steps.map((s) => {
     const k = flat.indexOf(s);
     const label = s.action === "wait" ? `${s.number}. wait for ${s.skillset}:${s.expect}`
-      : `${s.number}. ${s.skillset}:${s.action}${s.inputs ? " with " + JSON.stringify(s.inputs) : ""}`;
+      : `${s.number}. ${s.skillset}:${s.action}${s.inputs ? " with " + tomlValue(s.inputs) : ""}`;
     const branches = (s.branches || []).map((b) => {
       const head = `if ${b.skillset}:${b.transition}`;
       if (b.then === "retry") return el("li", { class: "branch", "data-then": b.then }, `${head}: retry from step ${b.step}`);
