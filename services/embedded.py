@@ -196,10 +196,11 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
                                 client=client_name(config), check_rate_limit=args.check_rate_limit,
                                 lost_after=args.lost_after)
         if not args.no_pilot:
+            from services.common.cli import key_style
             from services.pilot import start_pilot
 
             pilot = start_pilot(session, system, instance=f"embedded-{os.getpid()}", client=client_name(config),
-                                typemap=load_typemap(args.system))
+                                typemap=load_typemap(args.system), style=key_style(args))
         print("\n".join(connect_lines(args, system, mode, listening, pilot=pilot is not None)), file=sys.stderr,
               flush=True)
         if args.once:

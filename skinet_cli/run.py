@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import os
 
+from services.common.cli import add_ros_key_args
 from services.common.ratelimit import add_rate_args
 from services.common.zenoh_config import add_login_args
 from services.monitor.check import add_policy_arg
@@ -36,6 +37,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     c.add_argument("--no-pilot", action="store_true",
                    help="do not start the pilot (SPEC §8: goals on skinet/<system>/pilot/goal/<client>, guided or "
                         "driven with the strict check; see docs/pilot.md)")
+    add_ros_key_args(c)  # the keys of the managers' topics, on which the pilot acts
     add_no_properties_arg(c)
     add_policy_arg(c)
     add_lost_after_arg(c)

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import argparse
 import logging
-import os
 import signal
 import sys
 import threading
@@ -23,13 +22,14 @@ from services.bridge_ros2.bound_live import start_bound_bridge
 from services.bridge_ros2.replay import monitor_log, replay_bag
 from services.bridge_ros2.service import default_source, start_bridge
 from services.bridge_ros2.worker import Worker
-from services.common.cli import add_instance_arg, add_log_arg, one_line_errors, setup_logging
+from services.common.cli import (
+    add_instance_arg, add_log_arg, add_ros_key_args, key_style, one_line_errors, setup_logging,
+)
 from services.common.events import event_publisher
 from services.common.zenoh_config import add_zenoh_args, config_from_args, open_session
-from skinet_cli.options import ArgumentParser, count, key_prefix, load_live_system, seconds
+from skinet_cli.options import ArgumentParser, load_live_system, seconds
 from skinet.errors import SkinetError, SourceError
 from skinet.files import load_bindings, load_typemap
-from skinet.ros.keys import KeyStyle
 from skinet.wire import keys
 from skinet.wire.codec import encode
 
@@ -44,15 +44,7 @@ def build_parser() -> ArgumentParser:
                     "skinet/<system>/events/<skillset>.",
     )
     parser.add_argument("system", help="system TOML file ([system] types names the type map)")
-    parser.add_argument("--rmw-zenoh", action="store_true",
-                        help="topics as rmw_zenoh carries them (default: zenoh-bridge-ros2dds keys)")
-    parser.add_argument("--namespace", type=key_prefix("namespace", env="SKINET_ROS_NAMESPACE"), default=os.environ.get("SKINET_ROS_NAMESPACE", ""),
-                        help="zenoh-bridge-ros2dds namespace prefixing the keys")
-    parser.add_argument("--domain", type=count(0, 232, env="ROS_DOMAIN_ID"), default=os.environ.get("ROS_DOMAIN_ID", "0"),
-                        help="ROS domain id in rmw_zenoh keys (default: $ROS_DOMAIN_ID or 0)")
-    parser.add_argument("--ros-distro", default=os.environ.get("ROS_DISTRO", "jazzy"),
-                        help="ROS 2 distribution of rmw_zenoh (default: $ROS_DISTRO or jazzy); on humble the keys "
-                             "carry TypeHashNotSupported instead of a RIHS01 type hash")
+    add_ros_key_args(parser)
     add_instance_arg(parser)
     parser.add_argument("--source", default=None, help="source name in the events (default: bridge_ros2/INSTANCE)")
     parser.add_argument("--replay", metavar="BAG", help="replay a rosbag2 file (directory or .db3/.mcap) and exit")
@@ -91,7 +83,7 @@ def main(argv: list[str] | None = None) -> int:
         stop = threading.Event()
         for sig in (signal.SIGINT, signal.SIGTERM):
             signal.signal(sig, lambda *_: stop.set())
-        style = KeyStyle(args.rmw_zenoh, args.namespace, args.domain, args.ros_distro == "humble")
+        style = key_style(args)
         bridge = None
         managed = [c.name for c in system.components if not c.binding]
         # One derivation thread, epoch and heartbeat for both kinds: their events leave in arrival order.

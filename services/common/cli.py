@@ -1,4 +1,4 @@
-"""Command-line pieces every service shares: instance ids, logging, one-line errors."""
+"""Command-line pieces every service shares: instance ids, logging, one-line errors, ROS 2 key styles."""
 
 from __future__ import annotations
 
@@ -12,8 +12,9 @@ import sys
 from collections.abc import Callable, Sequence
 
 from skinet_cli.environment import check_environment
-from skinet_cli.options import key_name
+from skinet_cli.options import count, key_name, key_prefix
 from skinet.errors import SkinetError, SourceError
+from skinet.ros.keys import KeyStyle
 
 LEVELS = ("DEBUG", "INFO", "WARNING", "ERROR", "CRITICAL")
 
@@ -27,6 +28,26 @@ def add_instance_arg(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--instance", type=key_name("instance id"),
                         default=os.environ.get("SKINET_INSTANCE") or default_instance_id(),
                         help="instance id in the liveliness token (default: $SKINET_INSTANCE or HOST-PID)")
+
+
+def add_ros_key_args(parser: argparse.ArgumentParser) -> None:
+    """``--rmw-zenoh``, ``--namespace``, ``--domain``, ``--ros-distro``: how ROS 2 topics and services show on Zenoh
+    (:func:`key_style`), for the services that read or write them (the bridge, the pilot)."""
+    parser.add_argument("--rmw-zenoh", action="store_true",
+                        help="topics as rmw_zenoh carries them (default: zenoh-bridge-ros2dds keys)")
+    parser.add_argument("--namespace", type=key_prefix("namespace", env="SKINET_ROS_NAMESPACE"),
+                        default=os.environ.get("SKINET_ROS_NAMESPACE", ""),
+                        help="zenoh-bridge-ros2dds namespace prefixing the keys")
+    parser.add_argument("--domain", type=count(0, 232, env="ROS_DOMAIN_ID"), default=os.environ.get("ROS_DOMAIN_ID", "0"),
+                        help="ROS domain id in rmw_zenoh keys (default: $ROS_DOMAIN_ID or 0)")
+    parser.add_argument("--ros-distro", default=os.environ.get("ROS_DISTRO", "jazzy"),
+                        help="ROS 2 distribution of rmw_zenoh (default: $ROS_DISTRO or jazzy); on humble the keys "
+                             "carry TypeHashNotSupported instead of a RIHS01 type hash")
+
+
+def key_style(args: argparse.Namespace) -> KeyStyle:
+    """The :class:`~skinet.ros.keys.KeyStyle` of :func:`add_ros_key_args`'s options."""
+    return KeyStyle(args.rmw_zenoh, args.namespace, args.domain, args.ros_distro == "humble")
 
 
 def _log_level(text: str) -> str:

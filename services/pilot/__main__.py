@@ -6,13 +6,17 @@ import logging
 import sys
 from collections.abc import Sequence
 
-from services.common.cli import add_instance_arg, add_log_arg, one_line_errors, setup_logging
+from services.common.cli import (
+    add_instance_arg, add_log_arg, add_ros_key_args, key_style, one_line_errors, setup_logging,
+)
 from services.common.zenoh_config import add_zenoh_args, client_name, config_from_args, open_session
 from services.embedded import stop_on_signals
 from services.pilot.service import start_pilot
 from skinet.files import load_typemap
 from skinet.wire import keys
-from skinet_cli.options import ArgumentParser, budget, load_live_system, seconds
+from skinet_cli.options import (
+    ArgumentParser, add_no_properties_arg, budget, load_live_system, require_properties, seconds,
+)
 
 
 def build_parser() -> ArgumentParser:
@@ -30,6 +34,8 @@ def build_parser() -> ArgumentParser:
                    help="planning budget per goal, seconds (default: 1); past it the plan is unknown and the goal fails")
     p.add_argument("--response-timeout", type=seconds(), default=5.0,
                    help="seconds a manager has to react to a command before the goal fails (default: 5)")
+    add_ros_key_args(p)
+    add_no_properties_arg(p)
     add_log_arg(p)
     add_zenoh_args(p)
     return p
@@ -40,6 +46,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     setup_logging(args)
     system, _ = load_live_system(args.system)
+    require_properties(system, args.system, args.no_properties)
     typemap = load_typemap(args.system)
     config = config_from_args(args)
     log = logging.getLogger("skinet.pilot")
@@ -47,7 +54,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     session = open_session(config)
     try:
         pilot = start_pilot(session, system, instance=args.instance, response_timeout=args.response_timeout,
-                            budget=args.budget, client=client_name(config), typemap=typemap)
+                            budget=args.budget, client=client_name(config), typemap=typemap,
+                            style=key_style(args))
         log.info("pilot %s of %s: goals on %s, status on %s", pilot.instance, system.name,
                  keys.pilot_goal(system.name, "<client>"), keys.pilot_status(system.name))
         while not stop.wait(0.5):
