@@ -300,7 +300,7 @@ def test_every_help_example_works_as_written(robot, skills, router) -> None:
     assert robot.actuator.sent[sent:] == ["spot:sit_down.start"]  # sent once switched to drive
     changes = status_lines(out)
     assert changes[:4] == ["guiding \u2014 next spot:sit_down.start, 2 moves left",
-                           "paused: paused by local",
-                           "paused: paused by local \u2014 now in drive mode, 0 commands sent",
+                           "paused: paused by local \u2014 2 moves left",
+                           "paused: paused by local \u2014 now in drive mode, 2 moves left, 0 commands sent",
                            "driving \u2014 next spot:sit_down.start, 2 moves left, 0 commands sent"], out
     assert changes[-1] == "reached \u2014 1 command sent", out
