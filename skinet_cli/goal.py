@@ -92,11 +92,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def cmd_goal(args: argparse.Namespace) -> int:
-    from services.common.goals import ask_pilot
-    from services.common.zenoh_config import client_name, config_from_args, open_session, wait_connected, warn_on_stderr
+    from services.common.goals import NoPilot, ask_pilot
+    from services.common.zenoh_config import (
+        check_connected, client_name, config_from_args, open_session, wait_connected, warn_on_stderr,
+    )
     from services.dashboard.app import resolve_system
     from skinet.errors import SkinetError
-    from skinet.wire.messages import PilotGoalRequest
+    from skinet.wire.messages import PilotGoalReply, PilotGoalRequest
 
     name, system = resolve_system(args.system)
     op = "mode" if args.set_mode else args.op
@@ -106,24 +108,32 @@ def cmd_goal(args: argparse.Namespace) -> int:
     elif args.goals or args.goals_file or args.inputs:
         raise SkinetError(f"--{'set-mode' if op == 'mode' else op} takes no goals: it acts on the goal that runs")
     config = config_from_args(args)
-    client = client_name(config)
     session = open_session(config, warn_on_stderr("skinet goal"))
+
+    def ask(request: PilotGoalRequest, timeout: float = args.timeout) -> PilotGoalReply:
+        """The pilot's reply; with none, an endpoint still unreached is the reason given, else no pilot."""
+        try:
+            return ask_pilot(session, request, client_name(config), timeout)
+        except NoPilot:
+            check_connected(session, config)
+            raise
+
     try:
         wait_connected(session, config, min(args.timeout, 2.0))
         if op is not None:
-            return _operate(session, request, client, args.timeout)
+            return _operate(session, request, ask)
         follower = _Follower(session, name)  # before the request: no change is missed
         # Ctrl-C is noted, not raised: one that comes while the pilot plans (Zenoh's get holds it until the reply
         # is in) or before the follower starts still cancels the goal the reply accepted.
         ctrl_c: list[float] = []
         previous = signal.signal(signal.SIGINT, lambda *_: ctrl_c.append(time.monotonic()))
         try:
-            reply = ask_pilot(session, request, client, args.timeout)
+            reply = ask(request)
             if not reply.accepted:
                 print(f"goal rejected by the pilot: {reply.reason}", file=sys.stderr)
                 return EXIT_REJECTED
             _print_reply(reply, request.mode)
-            return follower.follow(reply.goal_id, lambda: _cancel(session, name, client), ctrl_c)
+            return follower.follow(reply.goal_id, lambda: _cancel(name, ask), ctrl_c)
         finally:
             signal.signal(signal.SIGINT, previous)
             follower.close()
@@ -152,11 +162,11 @@ def _goal_fields(args: argparse.Namespace, system: Any) -> dict[str, Any]:
     return fields
 
 
-def _operate(session: Any, request: Any, client: str, timeout: float) -> int:
-    """Cancel, pause, resume or switch mode: print the pilot's reply and its status."""
-    from services.common.goals import ask_pilot, pilot_status
+def _operate(session: Any, request: Any, ask: Any) -> int:
+    """Cancel, pause, resume or switch mode: print the pilot's reply (``ask(request)``) and its status."""
+    from services.common.goals import pilot_status
 
-    reply = ask_pilot(session, request, client, timeout)
+    reply = ask(request)
     what = f"mode {request.mode}" if request.op == "mode" else request.op
     if not reply.accepted:
         print(f"{what} rejected by the pilot: {reply.reason}", file=sys.stderr)
@@ -168,12 +178,11 @@ def _operate(session: Any, request: Any, client: str, timeout: float) -> int:
     return 0
 
 
-def _cancel(session: Any, system: str, client: str) -> None:
-    from services.common.goals import ask_pilot
+def _cancel(system: str, ask: Any) -> None:
     from skinet.wire.messages import PilotGoalRequest
 
     print("cancelled by Ctrl-C: asking the pilot to cancel the goal", flush=True)
-    reply = ask_pilot(session, PilotGoalRequest(system=system, op="cancel"), client, CANCEL_WAIT)
+    reply = ask(PilotGoalRequest(system=system, op="cancel"), CANCEL_WAIT)
     if not reply.accepted:
         print(f"the pilot did not cancel: {reply.reason}", file=sys.stderr)
 

@@ -22,7 +22,7 @@ from services.common.goals import NoPilot, ask_pilot, no_pilot_message, pilot_st
 from services.dashboard.goalbox import GoalFormError, Placed, goal_request, place
 from skinet.files import load_system
 from skinet.wire.messages import PilotGoalRequest
-from tests.services.conftest import REPO, client_args, open_client, start_skinet
+from tests.services.conftest import REPO, client_args, free_port, open_client, start_skinet
 from tests.services.pilot_robot import Implementations, Robot
 
 SYSTEM_FILE = REPO / "skillsets" / "spot_arm.toml"
@@ -146,11 +146,19 @@ def test_a_goal_with_no_plan_is_rejected_with_the_reason(robot, router) -> None:
     assert robot.pilot.status.commands == 0
 
 
-def test_no_pilot_is_one_clear_line_and_exit_1(router) -> None:
+def test_no_pilot_or_no_router_is_one_clear_line_and_exit_1(router) -> None:
     done = goal(router, "spot_arm", "reach spot:Standing", "--timeout", "1")
     assert (done.returncode, done.stdout) == (1, "")
     assert done.stderr == ("skinet: error: no pilot answers on skinet/spot_arm/pilot/goal/local: is `skinet run` or "
                            "the pilot service running?\n")
+    # No router either: the endpoint is the reason, as skinet check says it.
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    done = subprocess.run([sys.executable, "-m", "skinet_cli.main", "goal", "spot_arm", "reach spot:Standing", "-e",
+                           endpoint], cwd=REPO, capture_output=True, text=True, timeout=60)
+    assert (done.returncode, done.stdout) == (1, "")
+    assert done.stderr == (f"skinet goal: warning: cannot connect to {endpoint}: nothing answers there; Zenoh keeps "
+                           f"trying in the background\nskinet: error: cannot connect to {endpoint}: nothing answers "
+                           "there\n")
     assert no_pilot_message("spot_arm", "observer").endswith(
         "(or the router refused user 'observer': only operator-role users may send goals)")
 
