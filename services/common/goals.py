@@ -3,11 +3,14 @@
 Shared by ``skinet goal`` and the dashboard's goal box.  A goal request goes to
 ``skinet/<system>/pilot/goal/<client>`` where ``client`` is the session's router
 login (the router lets user ``U`` ask only under ``U``, and lets only
-``operator``-role users ask there at all); no answer within the timeout is a
-:class:`NoPilot` error whose message says where it asked and what to check.
+``operator``-role users ask there at all); no answer is a :class:`NoPilot`
+error whose message says where it asked and what to check: nobody there (the
+query ends at once), or nobody answering within the timeout.
 """
 
 from __future__ import annotations
+
+import time
 
 import zenoh
 
@@ -36,6 +39,7 @@ def ask_pilot(session: zenoh.Session, request: PilotGoalRequest, client: str,
     """The pilot's reply to ``request`` asked as ``client``; raises :class:`NoPilot` when none comes
     within ``timeout`` seconds and :class:`SkinetError` for an answer that does not decode."""
     key = keys.pilot_goal(request.system, client)
+    start = time.monotonic()
     for reply in session.get(key, payload=encode(request), timeout=timeout):
         if reply.ok is None:
             continue
@@ -43,6 +47,9 @@ def ask_pilot(session: zenoh.Session, request: PilotGoalRequest, client: str,
             return decode(reply.ok.payload.to_bytes(), PilotGoalReply)
         except DecodeError as exc:
             raise SkinetError(f"undecodable answer on {key}: {exc}") from None
+    if time.monotonic() - start >= timeout:  # somebody holds the query: a pilot still planning, or frozen
+        raise NoPilot(f"no answer on {key} within {timeout:g} s: a pilot still planning may yet take the goal "
+                      f"(skinet goal {request.system} --cancel cancels it)")
     raise NoPilot(no_pilot_message(request.system, client))
 
 

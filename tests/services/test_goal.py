@@ -254,12 +254,24 @@ def test_the_goal_box_places_errors_in_the_box() -> None:
 
 
 def test_ask_pilot_without_a_pilot_raises_the_message(router) -> None:
-    session = open_client(router)
+    session, frozen = open_client(router), open_client(router)
     try:
         with pytest.raises(NoPilot, match=re.escape(no_pilot_message("spot_arm", "local"))):
-            ask_pilot(session, PilotGoalRequest(system="spot_arm"), "local", timeout=0.5)
+            ask_pilot(session, PilotGoalRequest(system="spot_arm"), "local", timeout=5.0)  # ends at once: nobody there
         assert pilot_status(session, "spot_arm", timeout=0.5) is None
+        # A queryable that holds the query and never answers (a frozen process, ZENOH.md): the timeout is the reason.
+        held: list[zenoh.Query] = []
+        queryable = frozen.declare_queryable("skinet/spot_arm/pilot/goal/*", held.append)
+        time.sleep(0.3)
+        with pytest.raises(NoPilot) as caught:
+            ask_pilot(session, PilotGoalRequest(system="spot_arm"), "local", timeout=0.5)
+        assert str(caught.value) == ("no answer on skinet/spot_arm/pilot/goal/local within 0.5 s: a pilot still "
+                                     "planning may yet take the goal (skinet goal spot_arm --cancel cancels it)")
+        assert len(held) == 1
+        queryable.undeclare()
+        held.clear()
     finally:
+        frozen.close()
         session.close()
 
 
