@@ -122,7 +122,7 @@ def test_a_skill_that_keeps_failing_ends_the_goal_failed_with_exit_1(robot, skil
     assert impl.ended == ["spot:init_power.failure.no_battery"] * 2
 
 
-def test_a_malformed_goal_is_placed_before_any_connection_or_by_the_pilot(robot, router) -> None:
+def test_a_malformed_goal_is_placed_before_any_connection_or_by_the_pilot(robot, router, tmp_path) -> None:
     # With the system file at hand, skinet goal checks it itself: FILE:LINE:COL, exit 1, nothing sent.
     done = goal(router, str(SYSTEM_FILE), "reach spot:Standin")
     assert (done.returncode, done.stdout) == (1, "")
@@ -133,6 +133,12 @@ def test_a_malformed_goal_is_placed_before_any_connection_or_by_the_pilot(robot,
     assert done.returncode == 2, done.stdout + done.stderr
     assert done.stderr == ("goal rejected by the pilot: <goal>:1:7: error: unknown name 'spot:Standin' (candidates: "
                            "spot:Standing, spot:posture.Standing)\n")
+    # A goals file is sent as its text with its name: the pilot's error points into the file.
+    mission = tmp_path / "mission.toml"
+    mission.write_text('[[goals]]\nreach = "manipulator:RD"\n\n[[goals]]\nrun = "spot:go_to_waypont"\n')
+    done = goal(router, "spot_arm", "--goals", str(mission))
+    assert (done.returncode, done.stderr) == (2, f"goal rejected by the pilot: {mission}:5:13: error: unknown skill "
+                                                 "'go_to_waypont' of 'spot' (candidates: go_to_waypoint)\n")
     assert robot.pilot.status.goal_id == 0 and robot.pilot.status.commands == 0
 
 
