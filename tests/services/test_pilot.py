@@ -393,3 +393,24 @@ def test_drive_through_rmw_zenoh_keys(client_factory, spot_arm) -> None:
     finally:
         impl.close()
         robot.close()
+
+
+def test_a_start_the_manager_refuses_is_asked_again_then_ends_the_goal(robot: Robot) -> None:
+    """A faulty manager refuses init_power (its preconditions, it says, are false): nothing changes on the
+    robot, so the pilot learns it from the manager's response, asks again, and gives up after max_retries."""
+    manager = robot.sim.nodes["spot"].manager
+    skill = manager.skillset.skill("init_power")
+
+    def refuse(name: str, id_: str, input_: object = None) -> list:
+        manager.skills[name].id = id_  # as the generated manager does: the id kept, the start refused
+        return [manager._response(skill, "PRECONDITION_FAILURE", preconditions={p.name: False for p in skill.preconditions}),
+                manager.status()]
+
+    manager.skill_request = refuse
+    reply = ask_goal(robot.observer, goal("reach spot:Standing", mode="drive", max_retries=2))
+    refused = robot.statuses.first(lambda s: s.state == "paused" and "refused" in s.reason, what="refused once")
+    assert refused.reason == ("/spot/spot_skillset_manager refused spot:init_power.start: PRECONDITION_FAILURE "
+                              f"({', '.join(p.name for p in skill.preconditions)} false)")
+    failed = robot.statuses.state("failed", reply.goal_id)
+    assert failed.reason == refused.reason + " (2 times)"
+    assert (robot.actuator.sent, failed.commands) == ([], 2)  # sent, refused: the recording keeps what went through
