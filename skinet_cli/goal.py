@@ -6,8 +6,9 @@ first steps as ``skinet plan`` prints them, or the reason of a rejection), then
 one line per change of ``skinet/<system>/pilot/status`` until the goal ends.
 Goals are checked here first when the system file is at hand, so a typo is
 ``FILE:LINE:COL`` before any connection; the pilot checks them again (it has the
-live model).  Exit status: 0 reached, 1 failed or cancelled (or an error: no
-pilot, no router), 2 rejected.
+live model).  Ctrl-C, from the request on, cancels the goal the pilot accepted.
+Exit status: 0 reached, 1 failed or cancelled (or an error: no pilot, no
+router), 2 rejected.  Cost: one query, then O(1) per status received.
 """
 
 from __future__ import annotations
