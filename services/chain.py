@@ -20,7 +20,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
-from typing import Any
+from typing import Any, NamedTuple
 
 import zenoh
 
@@ -111,13 +111,16 @@ def run_bound_chain(
     style: KeyStyle = KeyStyle(),
     on_record: Callable[[StepRecord], None] | None = None,
     after: Callable[[list[StepRecord]], None] | None = None,
+    then: Callable[[BoundChain], None] | None = None,
 ) -> list[StepRecord]:
     """:func:`run_chain` for a system whose skillsets are all bound to plain ROS 2 interfaces (SPEC §9).
 
     The simulated robot's action servers, lifecycle nodes and topics (CDR on Zenoh keys)
     -> the bound bridge -> monitor -> predictor.  After each step the chain waits until
     the bridge has fed every message the robot published on a bound topic (and fetched
-    the results it needed), and the monitor has applied every event.
+    the results it needed), and the monitor has applied every event.  ``then`` is called
+    after the last step, before ``after``, with the running chain (a pilot drives the
+    robot from where the run left it: :mod:`services.bound_pilot`).
     """
     from services.bridge_ros2.bound_live import start_bound_bridge
     from services.simulator.bound import BoundSimulator
@@ -143,9 +146,23 @@ def run_bound_chain(
 
         records, on_step = _recorder(system, monitor, step_done, predict, settle, on_record)
         robot.drive(scenario, speed=speed, on_step=on_step)
+        if then is not None:
+            then(BoundChain(session, system, bindings, style, robot, bridge, monitor))
         if after is not None:
             after(records)
         return records
+
+
+class BoundChain(NamedTuple):
+    """The running parts of :func:`run_bound_chain`."""
+
+    session: zenoh.Session
+    system: System
+    bindings: Mapping[str, Binding]
+    style: KeyStyle
+    robot: Any  # services.simulator.bound.BoundSimulator
+    bridge: Any  # services.bridge_ros2.bound_live.BoundBridge
+    monitor: Any  # services.monitor.service.Monitor
 
 
 @contextmanager

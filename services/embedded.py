@@ -26,6 +26,7 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
+from services.common.cli import key_style
 from services.common.zenoh_config import (
     ZenohSetupError, client_name, login, open_session, session_config, session_mode, warn_on_stderr,
 )
@@ -196,7 +197,6 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
                                 client=client_name(config), check_rate_limit=args.check_rate_limit,
                                 lost_after=args.lost_after)
         if not args.no_pilot:
-            from services.common.cli import key_style
             from services.pilot import start_pilot
 
             pilot = start_pilot(session, system, instance=f"embedded-{os.getpid()}", client=client_name(config),
@@ -270,7 +270,10 @@ def connect_lines(args: argparse.Namespace, system: System, mode: str, listening
              f"  skinet dashboard {system.name} {flags('observer')}",
              f"  skinet check {system.name} {command} {flags('observer')}"]
     if bridge:
-        lines.append(f"  python -m services.bridge_ros2 {args.system} {flags('bridge')}   (the robot's side)")
+        ros = (" --rmw-zenoh" + (f" --domain {args.domain}" if args.domain else "") + (
+            " --ros-distro humble" if args.ros_distro == "humble" else "") if args.rmw_zenoh else "") + (
+            f" --namespace {args.namespace}" if args.namespace else "")  # the robot's keys, as the pilot's
+        lines.append(f"  python -m services.bridge_ros2 {args.system}{ros} {flags('bridge')}   (the robot's side)")
     if pilot:
         lines.append(f"  pilot: goals on {keys.pilot_goal(system.name, '<client>')} (<client>: your login, "
                      f"'{keys.LOCAL_CLIENT}' without one), status on {keys.pilot_status(system.name)}")

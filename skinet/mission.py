@@ -10,6 +10,9 @@ robot) says so with ``expect_divergence = true`` on the step.
 For a skillset bound to plain ROS 2 interfaces (SPEC §9), ``message = {...}``
 gives the fields of the message that causes the step (a goal's inputs or result,
 a topic sample), and ``[scenario] topics`` the first sample of each bound topic.
+``[scenario] pilot = "dock.toml"`` names a goals file (:mod:`skinet.plan.goalfile`)
+that the pilot drives after the steps (SPEC §8), when the run goes through the
+whole chain (``skinet demo``).
 The simulator of issue 5 plays the same files through the whole chain.
 """
 
@@ -51,6 +54,7 @@ class Scenario:
     text: str = field(default="", compare=False, repr=False)  # the file's text, to locate errors in it
     # bound skillsets (SPEC §9): the first sample the simulated robot publishes on each bound topic
     topics: Mapping[str, Mapping[str, Any]] = field(default_factory=dict, compare=False)
+    pilot: str = ""  # a goals file (relative to the scenario file) the pilot drives after the steps; '' for none
 
 
 @dataclass
@@ -69,7 +73,7 @@ class StepRecord:
 
 
 SCENARIO_TABLES = ("[scenario]", "[[steps]]")
-SCENARIO_KEYS = ("name", "system", "topics")
+SCENARIO_KEYS = ("name", "system", "topics", "pilot")
 STEP_KEYS = ("t", "skillset", "transition", "consider", "note", "expect_divergence", "message")
 
 
@@ -129,7 +133,11 @@ def parse_scenario(text: str, source: str = "<scenario>") -> Scenario:
     if not isinstance(topics, dict) or not all(isinstance(v, dict) for v in topics.values()):
         raise SourceError.at(source, locate(text, ("scenario",), "topics"),
                              "[scenario] 'topics' must map topic names to tables of message fields")
-    return Scenario(head["name"], head["system"], tuple(steps), text, topics)
+    pilot = head.get("pilot", "")
+    if not isinstance(pilot, str):
+        raise SourceError.at(source, locate(text, ("scenario",), "pilot"),
+                             "[scenario] 'pilot' must be the path of a goals file (relative to the scenario)")
+    return Scenario(head["name"], head["system"], tuple(steps), text, topics, pilot)
 
 
 def step_numbers(scenario: Scenario) -> list[int]:

@@ -6,12 +6,13 @@ import argparse
 import re
 import sys
 from pathlib import Path
+from typing import Any
 
 from skinet.errors import SkinetError, SourceError
 from skinet_cli.live_demo import add_live_args, live_options_misused, play_live
 from skinet_cli.options import add_no_properties_arg, load_live_system, require_properties
 from skinet.explain import plural, warning_line
-from skinet.files import load_bindings, load_typemap, read_text
+from skinet.files import load_bindings, load_goals, load_typemap, read_text
 from skinet.mission import Scenario, StepRecord, check_scenario, flagged_before, parse_scenario, replay
 from skinet.mission_log import records_to_log
 from skinet.system import System
@@ -86,11 +87,14 @@ def cmd_demo(args: argparse.Namespace) -> int:
         system, _ = load_live_system(path.parent / scenario.system)
         require_properties(system, path.parent / scenario.system, args.no_properties)
         check_scenario(scenario, system, str(path))
+        if scenario.pilot:
+            load_goals(path.parent / scenario.pilot, system, load_typemap(path.parent / scenario.system))
         runs.append((path, scenario, system))
     surprises: list[str] = []
     if args.live:
         return _live(args, *runs[0])
     for path, scenario, system in runs:
+        piloted: list[Any] = []  # what the pilot did after the run (scenario.pilot, bound systems)
         if args.core:
             records = replay(system, scenario, predict=not args.no_predict)
             how = "core replay"
@@ -98,7 +102,13 @@ def cmd_demo(args: argparse.Namespace) -> int:
             from services.chain import run_bound_chain  # Zenoh only when the chain runs
 
             bindings, _ = load_bindings(system)
-            records = run_bound_chain(system, bindings, scenario, predict=not args.no_predict)
+            then = None
+            if scenario.pilot:
+                from services.bound_pilot import drive_goals
+
+                goals = path.parent / scenario.pilot
+                then = lambda chain: piloted.append(drive_goals(chain, read_text(goals), str(goals)))  # noqa: E731
+            records = run_bound_chain(system, bindings, scenario, predict=not args.no_predict, then=then)
             how = ("simulated action servers, lifecycle node and topics -> CDR -> bridge (bindings) -> monitor -> "
                    "predictor, embedded Zenoh session")
         else:
@@ -113,6 +123,11 @@ def cmd_demo(args: argparse.Namespace) -> int:
             if args.all_steps or r.violations or r.warnings or r.flagged or r.divergence or r.step.consider:
                 print(_line(r))
         print(_summary(records))
+        if scenario.pilot and piloted:
+            print(_pilot_lines(path.parent / scenario.pilot, piloted[0]))
+        elif scenario.pilot:
+            print(f"   (the pilot's goals, {path.parent / scenario.pilot}, need the chain of a bound system: not "
+                  "played here)")
         surprises += [f"{path}: {s}" for s in unexpected(records)]
         if args.log or args.timeline:
             _write_run(args, system, scenario, records)
@@ -194,6 +209,19 @@ def _summary(records: list[StepRecord]) -> str:
     lines.append(f"   warnings heeded (commands considered, flagged, not issued): {len(heeded)}"
                  + "".join(f"; {w.skillset}:{w.transition} {w.constraint} for {w.property} at step {i}"
                            for w, i in heeded))
+    return "\n".join(lines)
+
+
+def _pilot_lines(goals: Path, end: Any) -> str:
+    """What the pilot did after the run (:class:`services.bound_pilot.PilotEnd`)."""
+    status = end.status
+    lines = [f"   then the pilot, in drive mode through the bindings: {', '.join(status.goals)} ({goals}): "
+             f"{end.reply.answer}, {plural(end.reply.moves or 0, 'move')} when outcomes are favourable"]
+    lines += [f"     sent: {s}" for s in end.sent]
+    lines.append(f"     robot: {', '.join(end.transitions) or 'nothing'}")
+    lines.append(f"   pilot: {status.state}{': ' + status.reason if status.reason else ''}; "
+                 f"{plural(status.commands, 'command')} sent, {status.denied} denied; "
+                 f"violations: {len(end.violations)}" + "".join(f"; {p}" for p in end.violations))
     return "\n".join(lines)
 
 

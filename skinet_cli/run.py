@@ -43,6 +43,8 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     add_lost_after_arg(c)
     add_rate_args(c)
     add_memory_arg(c)
+    ros = c.add_argument_group("the robot's ROS 2 keys (the pilot's commands, the printed bridge command)")
+    add_ros_key_args(ros)
     _zenoh_args(c, "endpoint on which a bridge, watch, dashboard or check in another process can connect "
                    "(default: tcp/127.0.0.1 with a free port, this host only; printed at start)")
     c.add_argument("--mode", "-m", choices=("peer", "client"),

@@ -66,7 +66,7 @@ def test_the_typo_no_longer_means_no_properties(folder: Path, capsys: pytest.Cap
 
 @pytest.mark.parametrize(("text", "message"), [
     ("[scenario]\nname = 'x'\nsystem = 'y'\nspeed = 2\n",
-     "4:1: error: unknown key 'speed' in [scenario] (expected one of: name, system, topics)"),
+     "4:1: error: unknown key 'speed' in [scenario] (expected one of: name, system, topics, pilot)"),
     ("[scenario]\nname = 'x'\nsystem = 'y'\n[[steps]]\nt = 1\nskillset = 'spot'\ntransiton = 'teleop.start'\n",
      "7:1: error: unknown key 'transiton' in step 1 (candidates: transition)"),
     ("[scenario]\nname = 'x'\nsystem = 'y'\n[[step]]\nt = 1\n",
@@ -74,6 +74,8 @@ def test_the_typo_no_longer_means_no_properties(folder: Path, capsys: pytest.Cap
     ("[scenaro]\nname = 'x'\nsystem = 'y'\n", "1:1: error: unknown table '[scenaro]' (candidates: [scenario])"),
     ("[scenario]\nname = 'x'\nsystem = 'y'\n[[steps]]\nt = 'soon'\nskillset = 'spot'\ntransition = 'a'\n",
      "5:1: error: step 1: 't' must be a number of seconds, got 'soon'"),
+    ("[scenario]\nname = 'x'\nsystem = 'y'\npilot = 3\n",
+     "4:1: error: [scenario] 'pilot' must be the path of a goals file (relative to the scenario)"),
 ])
 def test_a_misspelt_scenario_file_is_refused(text: str, message: str) -> None:
     with pytest.raises(SourceError) as info:

@@ -6,6 +6,10 @@
 // Nav2 accepts a navigate_to_pose goal while the robot sits on its dock: the
 // model says so (navigate needs no Undocked), and nav2.props says it is unsafe.
 
+type {
+    DockId
+}
+
 skillset nav2 {
 
     resource {
@@ -78,6 +82,7 @@ skillset nav2 {
     }
 
     skill dock_robot {
+        input dock: DockId
         precondition {
             undocked: dock == Undocked
             still: motion == Still

@@ -7,8 +7,8 @@ protocol carries a skill is decided in one place, :func:`route`, and
 :class:`Routed` (the pilot's :func:`default_actuator`) sends each command
 through the actuator of its route: the :class:`ManagerActuator` speaks a
 generated skillset manager's request protocol, as an operator GUI does
-(:mod:`skinet.ros.requests`); skills bound to ROS 2 actions (SPEC §9) need a
-bound actuator.
+(:mod:`skinet.ros.requests`); skills bound to ROS 2 actions (SPEC §9) go to the
+:class:`~services.pilot.bound_act.BoundActuator` (a goal, a cancel request).
 
 An interrupt needs the running execution's id.  The manager's own
 ``SkillsetStatus`` says it: the actuator follows each manager's status topic and,
@@ -24,7 +24,7 @@ from __future__ import annotations
 import logging
 import threading
 from collections.abc import Mapping
-from typing import Literal, Protocol
+from typing import Any, Literal, Protocol
 
 import zenoh
 
@@ -210,9 +210,22 @@ class Routed:
 
 
 def default_actuator(session: zenoh.Session, system: System, typemap: Mapping[str, str] | None = None,
-                     style: KeyStyle = KeyStyle(), instance: str = "pilot") -> Actuator:
-    """The pilot's default: each skill through the protocol :func:`route` gives it."""
-    return Routed(system, {"manager": ManagerActuator(session, system, typemap, style, instance)})
+                     style: KeyStyle = KeyStyle(), instance: str = "pilot",
+                     bindings: Mapping[str, Any] | None = None) -> Actuator:
+    """The pilot's default: each skill through the protocol :func:`route` gives it, on the keys of ``style``:
+    a :class:`ManagerActuator` for the managers' skillsets, a
+    :class:`~services.pilot.bound_act.BoundActuator` for the bound ones (``bindings``: skillset name ->
+    :class:`~skinet.ros.binding.Binding`, read from the system's binding files when not given; a binding
+    that does not load raises :class:`~skinet.errors.SourceError`)."""
+    actuators: dict[str, Actuator] = {"manager": ManagerActuator(session, system, typemap, style, instance)}
+    if any(c.binding for c in system.components):
+        from services.pilot.bound_act import BoundActuator  # only systems with bindings need it
+        from skinet.files import load_bindings
+
+        if bindings is None:
+            bindings, _ = load_bindings(system)
+        actuators["binding"] = BoundActuator(session, bindings, style=style)
+    return Routed(system, actuators)
 
 
 def _inputs(inputs: Mapping[str, object]) -> str:

@@ -26,7 +26,10 @@ lifecycle node (back to unconfigured), their route tokens leaving and coming bac
 (``zenoh-bridge-ros2dds`` keys).  :meth:`drive` plays a scenario: ``k.start`` sends a goal as an
 operator's client would, ``k.interrupt`` cancels it, outcomes end it, an event
 publishes the message that makes its binding fire (a bound event's topic, or the
-resource its effects set: a topic sample or a lifecycle transition).
+resource its effects set: a topic sample or a lifecycle transition).  Without a
+scenario (a pilot acting through the bindings), ``on_start`` hooks hear of each goal
+an action server accepts, and :meth:`~BoundSimulator.terminate` ends it, as the
+robot's implementation would.
 """
 
 from __future__ import annotations
@@ -35,12 +38,14 @@ import logging
 import math
 import os
 import time
+import uuid
 from collections.abc import Callable, Mapping
 from typing import Any
 
 import zenoh
 import zenoh.ext as zext
 
+from services.common.ros_client import ServiceClient
 from services.common.ros_liveliness import declare_node
 from services.common.zenoh_config import undeclare
 from services.simulator.driver import StepRun
@@ -50,6 +55,7 @@ from skinet.ros.actions import cancel_goal_request, message, send_goal_reply, se
 from skinet.ros.binding import (
     CANCEL_TYPE, GET_STATE_TYPE, STATUS_TYPE, TRANSITION_EVENT_TYPE, Binding, ResourceBinding, SkillBinding,
 )
+from skinet.ros.bound import goal_text
 from skinet.ros.keys import KeyStyle, rmw_attachment
 from skinet.ros.typestore import encode
 from skinet.system import System
@@ -82,7 +88,7 @@ class _ActionServer:
     """An action server on Zenoh keys: queryables for its services, publishers for status and feedback."""
 
     def __init__(self, sim: "BoundSimulator", binding: Binding, skill: SkillBinding):
-        self.sim, self.skill, self.store = sim, skill, binding.store
+        self.sim, self.skill, self.store, self.skillset = sim, skill, binding.store, binding.skillset
         self.logic = ActionLogic(binding.store, skill.type)
         self.out = {"status": sim.publisher(skill.name("status"), STATUS_TYPE, self.store, advanced=True),
                     "feedback": sim.publisher(skill.name("feedback"), f"{skill.type}_FeedbackMessage", self.store)}
@@ -112,6 +118,10 @@ class _ActionServer:
                 query.drop()
                 return
             reply, outputs = done
+            if outputs:  # accepted: the robot's implementation runs it (told before the client hears of it)
+                goal = self.logic.received[-1][0]
+                for hook in self.sim.on_start:
+                    hook(self.skillset, self.skill.skill, goal_text(goal))
             if not self.sim.status_first:
                 self._reply(query, reply)
             self._send(outputs)
@@ -135,9 +145,9 @@ class _ActionServer:
             if reply is not None:
                 self._reply(query, reply)
 
-    def finish(self, status: int, result: Mapping[str, Any]) -> bool:
+    def finish(self, status: int, result: Mapping[str, Any], goal_id: bytes | None = None) -> bool:
         with self.logic.lock:
-            done = self.logic.finish(status, result)
+            done = self.logic.finish(status, result, goal_id)
             if done is not None:
                 self._send(*done)
             return done is not None
@@ -181,6 +191,10 @@ class BoundSimulator:
         self.bindings = dict(bindings)
         self.style = style
         self.status_first = status_first
+        self.client = ServiceClient(session, style)  # the operator's client (send_goal, cancel_goal)
+        # Called with (skillset, skill, goal id as ROS prints it) when an action server accepts a goal, under its
+        # lock (a simulated implementation, services.simulator.world, ends it later): keep them short.
+        self.on_start: list[Callable[[str, str, str], None]] = []
         self.publishers: dict[str, _Publisher] = {}  # ROS topic name -> publisher
         self.actions: dict[tuple[str, str], _ActionServer] = {}  # (skillset, skill) -> server
         self.nodes: dict[tuple[str, str], _LifecycleNode] = {}  # (skillset, resource) -> lifecycle node
@@ -263,6 +277,19 @@ class BoundSimulator:
         """End ``skill``'s active goal: ``kind`` is ``success`` (SUCCEEDED) or ``failure`` (ABORTED)."""
         return self.actions[(skillset, skill)].finish(SUCCEEDED if kind == "success" else ABORTED, result or {})
 
+    def terminate(self, skillset: str, skill: str, kind: str, mode: str = "", id_: str | None = None,
+                  result: Mapping[str, Any] | None = None) -> bool:
+        """End the goal ``id_`` (as ROS prints it; default: the active one) of ``skill`` in mode ``mode`` of
+        ``kind`` (``success``: SUCCEEDED, ``failure``: ABORTED); False when that goal is not active.  A mode
+        other than the binding's default for ``kind`` needs the ``result`` fields that name it (ValueError)."""
+        server = self.actions[(skillset, skill)]
+        outcome = server.skill.success if kind == "success" else server.skill.failure
+        if result is None and mode and mode != outcome.default:
+            raise ValueError(f"{skillset}:{skill}: the {kind} mode {mode} comes from the goal's result "
+                             f"(not the binding's default, {outcome.default}): give the result's fields")
+        goal = uuid.UUID(id_).bytes if id_ is not None else None
+        return server.finish(SUCCEEDED if kind == "success" else ABORTED, result or {}, goal)
+
     def publish(self, skillset: str, topic: str, fields: Mapping[str, Any]) -> None:
         """Publish one sample of a bound topic with ``fields`` (others default)."""
         binding = self.bindings[skillset]
@@ -284,20 +311,13 @@ class BoundSimulator:
 
     # -- the operator's client ----------------------------------------------------------------
 
-    def _call(self, key: str, payload: bytes, timeout: float = 5.0) -> bytes | None:
-        attachment = rmw_attachment(1, time.time_ns(), os.urandom(16)) if self.style.rmw_zenoh else None
-        for reply in self.session.get(key, payload=payload, attachment=attachment, timeout=timeout):
-            if reply.ok is not None:
-                return reply.ok.payload.to_bytes()
-        return None
-
     def send_goal(self, skillset: str, skill: str, inputs: Mapping[str, Any] | None = None) -> bool:
         """Send a goal as a client would; True when accepted."""
         b, s = self.bindings[skillset], self.actions[(skillset, skill)].skill
         goal = os.urandom(16)
         self.sent[(skillset, skill)] = goal
-        reply = self._call(self.key(s.name("send_goal"), f"{s.type}_SendGoal", b.store),
-                           send_goal_request(b.store, s.type, goal, inputs))
+        reply = self.client.call(s.name("send_goal"), f"{s.type}_SendGoal", send_goal_request(b.store, s.type, goal,
+                                                                                               inputs), 5.0)
         with self.actions[(skillset, skill)].logic.lock:  # the server has published what followed its reply
             pass
         return reply is not None and send_goal_reply(b.store, s.type, reply)[0]
@@ -308,8 +328,8 @@ class BoundSimulator:
         goal = server.logic.current()
         if goal is None:
             return False
-        reply = self._call(self.key(server.skill.name("cancel_goal"), CANCEL_TYPE, b.store),
-                           cancel_goal_request(b.store, goal.id))
+        reply = self.client.call(server.skill.name("cancel_goal"), CANCEL_TYPE, cancel_goal_request(b.store, goal.id),
+                                 5.0)
         with server.logic.lock:  # the server has published what followed its reply
             pass
         return reply is not None

@@ -2,7 +2,9 @@
 
 :class:`ActionLogic` is one action server's goals, as ``rclcpp_action`` keeps them:
 CDR requests in (``send_goal``, ``cancel_goal``, ``get_result``), CDR replies and
-``GoalStatusArray`` / feedback messages out.  A goal is accepted (status ACCEPTED,
+``GoalStatusArray`` / feedback messages out.  Every goal received is kept
+(``received``: its id and fields); while ``accepting`` is false, goals are rejected
+(``accepted`` false, no status), as a server whose goal callback refuses them.  A goal is accepted (status ACCEPTED,
 then EXECUTING, one feedback message), ends when the robot says so (SUCCEEDED or
 ABORTED with a result), and a cancel request makes it CANCELING then CANCELED at
 once; a ``get_result`` for an active goal is answered when it ends.
@@ -26,7 +28,7 @@ from typing import Any
 
 from skinet.ros.actions import goal_uuid, message
 from skinet.ros.binding import CANCEL_TYPE, GET_STATE_TYPE, LIFECYCLE_STATES, STATUS_TYPE, TRANSITION_EVENT_TYPE
-from skinet.ros.typestore import Typestore, decode, default_instance, encode
+from skinet.ros.typestore import Typestore, decode, default_instance, encode, to_plain
 
 log = logging.getLogger("skinet.simulator")
 
@@ -57,6 +59,8 @@ class ActionLogic:
         self.store = store
         self.action = action
         self.goals: OrderedDict[bytes, Goal] = OrderedDict()
+        self.received: list[tuple[bytes, dict[str, Any]]] = []  # every goal sent to it: (id, fields), in order
+        self.accepting = True
         self.lock = threading.Lock()
 
     def current(self) -> Goal | None:
@@ -81,11 +85,14 @@ class ActionLogic:
             log.warning("%s: bad send_goal request ignored: %s", self.action, exc)
             return None
         goal = Goal(bytes(request.goal_id.uuid), time.time())
-        self.goals[goal.id] = goal
+        self.received.append((goal.id, to_plain(request.goal)))
         typename = f"{self.action}_SendGoal_Response"
         reply = encode(self.store, typename, default_instance(
-            self.store, typename, accepted=True,
+            self.store, typename, accepted=self.accepting,
             stamp=default_instance(self.store, "builtin_interfaces/msg/Time", sec=int(goal.stamp))))
+        if not self.accepting:
+            return reply, []
+        self.goals[goal.id] = goal
         outputs = [("status", self.status_array())]  # ACCEPTED
         goal.status = EXECUTING
         feedback = default_instance(self.store, f"{self.action}_FeedbackMessage",
@@ -142,12 +149,14 @@ class ActionLogic:
         goal.waiting.clear()
         return [("status", self.status_array())], due
 
-    def finish(self, status: int, result: Mapping[str, Any]) -> tuple[list[Output], list[tuple[Any, bytes]]] | None:
-        """End the latest active goal (SUCCEEDED or ABORTED); ``None`` when none is active.
+    def finish(self, status: int, result: Mapping[str, Any],
+               goal_id: bytes | None = None) -> tuple[list[Output], list[tuple[Any, bytes]]] | None:
+        """End the latest active goal, or the goal ``goal_id`` (SUCCEEDED or ABORTED); ``None`` when it is not
+        active.
 
         An unknown result field raises ``TypeError`` (with the fields the result has)."""
-        goal = self.current()
-        if goal is None:
+        goal = self.current() if goal_id is None else self.goals.get(goal_id)
+        if goal is None or goal.status not in ACTIVE:
             return None
         message(self.store, f"{self.action}_Result", result)
         return self._end(goal, status, result)

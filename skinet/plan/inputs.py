@@ -118,6 +118,12 @@ def type_problem(value: Any, variable: Variable, types: Mapping[str, str]) -> st
 _BASE, _NAME, _ARRAY, _SEQUENCE = 1, 2, 3, 4  # rosbags' Nodetype values
 
 
+def message_problem(value: Any, typename: str, store: Any) -> str | None:
+    """Why ``value`` (a table of fields) cannot be a ``typename`` message of ``store``, or ``None``
+    (a binding's goal fields, :mod:`skinet.ros.binding`)."""
+    return _problem(value, (_NAME, typename), store, "")
+
+
 @cache
 def _store() -> Any:
     from rosbags.typesys import Stores, get_typestore

@@ -14,6 +14,9 @@ What a client puts on the wire to act through a binding, and reads back:
 
 :class:`SentGoal` follows one goal a client sent, whichever comes first of the
 server's reply and its status array (each crosses a gateway on its own route).
+:func:`followed_goal` is the goal of a status array that runs the skill, as the
+bridge's derivation follows it (:mod:`skinet.ros.bound`): the pilot cancels it when
+it did not send the goal itself.
 
 Pure: type stores from :func:`skinet.ros.definitions.build_store`; goal ids are
 given by the caller (``uuid.uuid4().bytes``).  Cost: one CDR encoding or decoding.
@@ -117,6 +120,20 @@ def get_state_reply(store: Typestore, payload: bytes) -> tuple[int, str]:
     return int(msg.current_state.id), str(msg.current_state.label)
 
 
+def followed_goal(goals: Sequence[Goal]) -> Goal | None:
+    """The active goal (ACCEPTED, EXECUTING, CANCELING) with the earliest stamp: the one the bridge takes
+    for the skill's run (a later concurrent goal is a drift, SPEC §9); ``None`` when none is active.
+
+    Examples:
+        >>> followed_goal([Goal(b"a" * 16, 2.0, 2), Goal(b"b" * 16, 1.0, 4), Goal(b"c" * 16, 3.0, 1)]).id[:1]
+        b'a'
+        >>> followed_goal([Goal(b"b" * 16, 1.0, 5)]) is None
+        True
+    """
+    active = [g for g in goals if g.status in ACTIVE]
+    return min(active, key=lambda g: (g.stamp, g.id)) if active else None
+
+
 @dataclass
 class SentGoal:
     """One goal a client sent: accepted by the reply *or* by a status array showing it, whichever
@@ -151,6 +168,6 @@ class SentGoal:
 
 
 __all__ = [
-    "CANCEL_CODES", "SentGoal", "cancel_goal_reply", "cancel_goal_request", "get_result_reply", "get_result_request",
-    "get_state_reply", "get_state_request", "goal_uuid", "message", "send_goal_reply", "send_goal_request",
+    "CANCEL_CODES", "SentGoal", "cancel_goal_reply", "cancel_goal_request", "followed_goal", "get_result_reply",
+    "get_result_request", "get_state_reply", "get_state_request", "goal_uuid", "message", "send_goal_reply", "send_goal_request",
 ]

@@ -12,6 +12,8 @@ entry) lets the bridge play the part of a skillset manager::
     success = "arrived"                   # mode of a SUCCEEDED goal
     failure = "failed"                    # mode of an ABORTED goal, unless a condition below holds
     failure_when = { timed_out = "error_code == TIMEOUT" }   # on the result, tried in order
+    inputs = { target = "pose" }          # the skill's input target is the goal's field pose (acting)
+    goal = { behavior_tree = "" }         # goal fields sent with every goal the pilot sends
 
     [resources.navigator]                 # a resource <-> a lifecycle node
     lifecycle = "/bt_navigator"
@@ -35,6 +37,13 @@ the binding's definitions) and every condition (:mod:`skinet.ros.condition`), an
 reports each error at the file, line and column of the key or value.  A skill
 without a binding is a warning: the bridge never sees it run.
 
+Acting (SPEC §9, *Acting*): the pilot's ``k.start`` sends a goal of ``k``'s action
+(:meth:`SkillBinding.goal_fields`): the fixed fields of ``goal``, then each input
+of the skill at its goal field (``inputs``: input -> field path, dotted for a
+nested field such as ``pose.pose.position.x``; an input named like a top-level
+goal field needs no entry).  Every input of the skill must reach a goal field,
+every path must name one, and ``goal`` must type-check against the goal message.
+
 A bound resource's change is an event of the skillset (the model's event that
 explains it), uncontrollable unless the binding says the resource is
 ``commanded`` (SPEC §9): then every event of the model that changes it is
@@ -49,6 +58,7 @@ in the file.
 
 from __future__ import annotations
 
+import copy
 import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -59,6 +69,7 @@ from rosbags.typesys.store import Typestore
 from skinet.closenames import close_names, unknown
 from skinet.errors import Diagnostic, Pos, SourceError
 from skinet.lang.model import Skill, Skillset
+from skinet.plan.inputs import message_problem
 from skinet.ros.condition import Condition, parse_condition
 from skinet.ros.definitions import action_types, build_store
 from skinet.tomltext import locate_path, parse_toml
@@ -74,7 +85,7 @@ ROS_NAME = re.compile(r"/?[A-Za-z_~][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*")
 _KEYS: dict[str, tuple[str, ...]] = {
     "": ("binding", "events", "resources", "skills"),
     "binding": ("definitions", "skillset"),
-    "skills": ("action", "failure", "failure_when", "success", "success_when", "type"),
+    "skills": ("action", "failure", "failure_when", "goal", "inputs", "success", "success_when", "type"),
     "resources": ("commanded", "lifecycle", "states", "topic", "type"),
     "events": ("topic", "type", "when"),
 }
@@ -103,10 +114,35 @@ class SkillBinding:
     type: str  # nav2_msgs/action/NavigateToPose
     success: Outcome
     failure: Outcome
+    inputs: tuple[tuple[str, tuple[str, ...]], ...] = ()  # (skill input, goal field path), every input of the skill
+    goal: Mapping[str, Any] = field(default_factory=dict, hash=False)  # fixed goal fields (nested tables for messages)
 
     def name(self, suffix: str) -> str:
         """A name of the action's protocol: ``status``, ``send_goal``, ``get_result``, ``cancel_goal``, ``feedback``."""
         return f"{self.action}/_action/{suffix}"
+
+    def goal_fields(self, inputs: Mapping[str, Any]) -> dict[str, Any]:
+        """The goal's fields (nested dicts) for a start with ``inputs``: the fixed ``goal`` fields, then
+        each input given at its field.  ``KeyError`` names an input the skill does not have.
+
+        Examples:
+            >>> b = SkillBinding("dock_robot", "/dock_robot", "opennav_docking_msgs/action/DockRobot",
+            ...                  Outcome("docked"), Outcome("failed"), (("dock", ("dock_id",)),),
+            ...                  {"use_dock_id": True})
+            >>> b.goal_fields({"dock": "home"})
+            {'use_dock_id': True, 'dock_id': 'home'}
+        """
+        out = copy.deepcopy(dict(self.goal))
+        paths = dict(self.inputs)
+        for name, value in inputs.items():
+            if name not in paths:
+                raise KeyError(f"'{name}' is not an input of {self.skill}")
+            *parents, last = paths[name]
+            at = out
+            for part in parents:
+                at = at.setdefault(part, {})
+            at[last] = value
+        return out
 
     @property
     def needs_result(self) -> bool:
@@ -285,8 +321,77 @@ class _Parser:
                                               "the binding's definitions folder as <package>/action/<Name>.action",
                              True)
         skill = skills[name]
+        goal = self.fixed_goal(table, path, typename)
         return SkillBinding(name, action, typename, self.outcome(table, path, skill, "success", typename),
-                            self.outcome(table, path, skill, "failure", typename))
+                            self.outcome(table, path, skill, "failure", typename),
+                            self.inputs(table, path, skill, typename, goal), goal)
+
+    def fixed_goal(self, table: dict[str, Any], path: tuple[str, ...], action: str) -> dict[str, Any]:
+        """``goal``: fixed goal fields, checked against ``<action>_Goal``."""
+        if "goal" not in table:
+            return {}
+        goal = self.table(table["goal"], (*path, "goal"), f"[skills.{path[1]}] goal")
+        fields = self.fields(f"{action}_Goal")
+        for name, value in goal.items():
+            if name not in fields:
+                raise self.error((*path, "goal", name), unknown("field", name, list(fields), f" of {action}_Goal"))
+            problem = message_problem({name: value}, f"{action}_Goal", self.store)
+            if problem:
+                raise self.error((*path, "goal", name), f"[skills.{path[1]}] goal: {problem}", True)
+        return goal
+
+    def fields(self, typename: str) -> dict[str, Any]:
+        return dict(self.store.fielddefs[typename][1])
+
+    def inputs(self, table: dict[str, Any], path: tuple[str, ...], skill: Skill, action: str,
+               goal: Mapping[str, Any]) -> tuple[tuple[str, tuple[str, ...]], ...]:
+        """Every input of ``skill`` with the goal field it fills (``inputs``, else the field of its name)."""
+        goal_type = f"{action}_Goal"
+        declared = [v.name for v in skill.inputs]
+        given = self.table(table.get("inputs", {}), (*path, "inputs"), f"[skills.{skill.name}] inputs")
+        out: dict[str, tuple[str, ...]] = {}
+        for name, target in given.items():
+            key = (*path, "inputs", name)
+            if name not in declared:
+                raise self.error(key, unknown("input", name, declared, f" of skill '{skill.name}'"))
+            if not isinstance(target, str) or not target:
+                raise self.error(key, f"[skills.{skill.name}] inputs: the goal field of input '{name}' must be a "
+                                      "field name such as \"pose\" or \"pose.pose.position.x\"", True)
+            out[name] = self.field_path(target, goal_type, key)
+        for name in declared:
+            if name not in out:
+                if name not in self.fields(goal_type):
+                    raise self.error(path, f"input '{name}' of skill '{skill.name}' reaches no field of {goal_type}: "
+                                           f"map it with inputs = {{ {name} = \"<field>\" }} (fields: "
+                                           f"{', '.join(self.fields(goal_type))})")
+                out[name] = (name,)
+        seen: dict[tuple[str, ...], str] = {}
+        for name, field_path in out.items():
+            for other, other_path in seen.items():
+                shorter = min(len(field_path), len(other_path))
+                if field_path[:shorter] == other_path[:shorter]:
+                    raise self.error((*path, "inputs", name) if name in given else path,
+                                     f"inputs '{other}' and '{name}' of skill '{skill.name}' both set goal field "
+                                     f"{'.'.join(field_path[:shorter])}")
+            seen[field_path] = name
+            if field_path[0] in goal:
+                raise self.error((*path, "goal", field_path[0]), f"goal field {field_path[0]} is fixed by "
+                                 f"[skills.{skill.name}] goal and set by input '{name}': keep one")
+        return tuple(out.items())
+
+    def field_path(self, text: str, typename: str, key: tuple[str, ...]) -> tuple[str, ...]:
+        """The field path ``pose.pose.position.x`` of ``typename``, checked part by part."""
+        parts = tuple(text.split("."))
+        current = typename
+        for n, part in enumerate(parts):
+            if current is None:
+                raise self.error(key, f"{'.'.join(parts[:n])} is not a message: it has no field '{part}'", True)
+            fields = self.fields(current)
+            if part not in fields:
+                raise self.error(key, unknown("field", part, list(fields), f" of {current}"), True)
+            desc = fields[part]
+            current = desc[1] if desc[0].name == "NAME" else None
+        return parts
 
     def outcome(self, table: dict[str, Any], path: tuple[str, ...], skill: Skill, kind: str, action: str) -> Outcome:
         modes = [m.name for m in (skill.successes if kind == "success" else skill.failures)]

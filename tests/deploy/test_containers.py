@@ -38,7 +38,7 @@ pytestmark = pytest.mark.slow
 IMAGE = os.environ.get("SKINET_TEST_IMAGE", "skinet-live:local")  # own tag per checkout under test
 SECRETS_IN_IMAGE = "/var/lib/skinet/secrets"  # each service's own files (the job's vault, in its container)
 USER_SERVICE = {"bridge": "bridge", "monitor": "monitor", "predictor": "predictor", "robot": "simulator",
-                "observer": "dashboard"}  # the compose service holding each user's files
+                "observer": "dashboard", "pilot": "pilot"}  # the compose service holding each user's files
 BUILD_TIMEOUT = 2400  # a first build (debootstrap, wheels, image) took 20 min on a loaded 2-core machine
 
 

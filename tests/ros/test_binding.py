@@ -251,3 +251,56 @@ def test_docstring_examples() -> None:
 
     import skinet.ros.condition
     assert doctest.testmod(skinet.ros.condition).failed == 0
+
+
+DOCK = GOOD + """\
+[skills.dock_robot]
+action = "/dock_robot"
+type = "opennav_docking_msgs/action/DockRobot"
+failure = "failed"
+"""
+DOCK_FILES = {"interfaces/opennav_docking_msgs/action/DockRobot.action":
+              (NAV2 / "interfaces/opennav_docking_msgs/action/DockRobot.action").read_text()}
+DOCK_GOAL = "opennav_docking_msgs/action/DockRobot_Goal"
+
+
+@pytest.mark.parametrize("text,message", [
+    (DOCK, f"b.toml:8:1: error: input 'dock' of skill 'dock_robot' reaches no field of {DOCK_GOAL}: map it with "
+           'inputs = { dock = "<field>" } (fields: use_dock_id, dock_id, dock_pose, dock_type, max_staging_time, '
+           "navigate_to_staging_pose)"),
+    (DOCK + 'inputs = { dock = "dock_idd" }\n',
+     f"b.toml:12:20: error: unknown field 'dock_idd' of {DOCK_GOAL} (candidates: dock_id, use_dock_id)"),
+    (DOCK + 'inputs = { dok = "dock_id" }\n',
+     "b.toml:12:12: error: unknown input 'dok' of skill 'dock_robot' (candidates: dock)"),
+    (DOCK + 'inputs = { dock = "dock_pose.pose.position.z.w" }\n',
+     "b.toml:12:20: error: dock_pose.pose.position.z is not a message: it has no field 'w'"),
+    (DOCK + 'inputs = { dock = "dock_pose.pose.posiion" }\n',
+     "b.toml:12:20: error: unknown field 'posiion' of geometry_msgs/msg/Pose (candidates: position)"),
+    (DOCK + 'inputs = { dock = 3 }\n',
+     "b.toml:12:19: error: [skills.dock_robot] inputs: the goal field of input 'dock' must be a field name such as "
+     '"pose" or "pose.pose.position.x"'),
+    (DOCK + 'inputs = { dock = "dock_id" }\ngoal = { dock_id = "home" }\n',
+     "b.toml:13:10: error: goal field dock_id is fixed by [skills.dock_robot] goal and set by input 'dock': keep one"),
+    (DOCK + 'inputs = { dock = "dock_id" }\ngoal = { use_dock_id = 1 }\n',
+     "b.toml:13:24: error: [skills.dock_robot] goal: expected bool at use_dock_id, got an integer"),
+    (DOCK + 'inputs = { dock = "dock_id" }\ngoal = { dock_pose = { pose = { position = { x = "far" } } } }\n',
+     "b.toml:13:22: error: [skills.dock_robot] goal: expected float64 at dock_pose.pose.position.x, got a string"),
+    (DOCK + 'inputs = { dock = "dock_id" }\ngoal = { use_dockid = true }\n',
+     f"b.toml:13:10: error: unknown field 'use_dockid' of {DOCK_GOAL} (candidates: use_dock_id, dock_id)"),
+    (DOCK + 'inputs = { dock = "dock_id" }\ngoal = 3\n',
+     "b.toml:13:8: error: [skills.dock_robot] goal must be a table"),
+])
+def test_bad_goal_mappings_give_one_line_at_the_fault(tmp_path: Path, text: str, message: str) -> None:
+    """What a pilot's start sends (SPEC §9, Acting): every input reaches a goal field, fixed fields type-check."""
+    assert check(tmp_path, text, DOCK_FILES) == message
+
+
+def test_a_start_s_goal_fields_from_the_plan_s_inputs(nav2) -> None:  # type: ignore[no-untyped-def]
+    _, binding, _ = nav2
+    dock = binding.skill("dock_robot")
+    assert (dock.inputs, dock.goal) == ((("dock", ("dock_id",)),), {"use_dock_id": True})
+    assert dock.goal_fields({"dock": "home"}) == {"use_dock_id": True, "dock_id": "home"}
+    assert dock.goal_fields({}) == {"use_dock_id": True}
+    assert binding.skill("navigate").goal_fields({}) == {}
+    with pytest.raises(KeyError, match="'target' is not an input of dock_robot"):
+        dock.goal_fields({"target": 1})

@@ -1,0 +1,143 @@
+"""The pilot's commands for skills bound to ROS 2 actions (SPEC §9, *Acting*): goals and cancel requests.
+
+For a skill whose skillset has a binding instead of a skillset manager
+(:mod:`skinet.ros.binding`), :class:`BoundActuator` does what an action client does,
+on the keys of :class:`~skinet.ros.keys.KeyStyle` (``zenoh-bridge-ros2dds`` or
+``rmw_zenoh``, as the bound bridge reads them):
+
+- ``SKILL.start``: a ``send_goal`` request on ``<action>/_action/send_goal`` with a
+  new goal id (UUID 4) and the goal's fields from the command's inputs, as the
+  binding maps them (:meth:`~skinet.ros.binding.SkillBinding.goal_fields`: its fixed
+  ``goal`` fields, each input at its field).  A goal the server rejects
+  (``accepted`` false), or no reply within ``timeout``, raises :class:`ActError`.
+- ``SKILL.interrupt``: a ``cancel_goal`` request for one goal id: the goal this
+  actuator sent, while the action's status shows it active; otherwise (the operator
+  started the skill) the goal the bridge follows, read from the status cache
+  (:func:`~skinet.ros.actions.followed_goal`).  No active goal, or a cancel the
+  server refuses (``ERROR_REJECTED``, ``ERROR_UNKNOWN_GOAL_ID``,
+  ``ERROR_GOAL_TERMINATED``), raises :class:`ActError` with the reason.
+
+What a start or an interrupt caused is not this module's business: the bridge sees
+it in the action's status and the pilot in the monitor's live state.  Each command
+is one request and one reply (an interrupt: one read of the status cache more).
+"""
+
+from __future__ import annotations
+
+import json
+import uuid
+from collections.abc import Mapping
+from typing import Any
+
+import zenoh
+
+from services.common.ros_client import ServiceClient
+from services.pilot.act import ActError
+from skinet.plan.inputs import message_problem
+from skinet.ros.actions import (
+    SentGoal, cancel_goal_reply, cancel_goal_request, followed_goal, send_goal_reply, send_goal_request,
+)
+from skinet.ros.binding import CANCEL_TYPE, STATUS_TYPE, Binding, SkillBinding
+from skinet.ros.bound import STATUS_NAMES, Goal, goal_text, goals_from_plain
+from skinet.ros.keys import KeyStyle, history_selector
+from skinet.ros.typestore import decode, to_plain
+from skinet.wire.messages import PilotCommand
+
+
+class BoundActuator:
+    """Sends the pilot's commands to the action servers of the bound skillsets ``bindings`` (skillset name ->
+    its binding) through ``session``; ``timeout``: seconds to wait for a server's reply."""
+
+    def __init__(self, session: zenoh.Session, bindings: Mapping[str, Binding], *, style: KeyStyle = KeyStyle(),
+                 timeout: float = 5.0):
+        self.session = session
+        self.bindings = dict(bindings)
+        self.style = style
+        self.timeout = timeout
+        self.client = ServiceClient(session, style)
+        self.sent: dict[tuple[str, str], SentGoal] = {}  # (skillset, skill) -> the last goal sent
+
+    def binds(self, skillset: str, skill: str) -> bool:
+        """Whether ``skill`` of ``skillset`` is bound to an action (the pilot then acts through this actuator)."""
+        binding = self.bindings.get(skillset)
+        return binding is not None and binding.skill(skill) is not None
+
+    def send(self, command: PilotCommand) -> str:
+        """Send ``command`` (``SKILL.start`` or ``SKILL.interrupt``); returns what was sent, for the log."""
+        skill, _, kind = command.transition.partition(".")
+        binding = self.bindings.get(command.skillset)
+        bound = binding.skill(skill) if binding is not None else None
+        if binding is None or bound is None:
+            raise ActError(f"{command.skillset}:{skill} is bound to no action" + (
+                " (its skillset has no manager either: the pilot cannot command it)" if binding else ""))
+        if kind == "start":
+            return self._start(command.skillset, binding, bound, command.inputs)
+        if kind == "interrupt":
+            return self._interrupt(command.skillset, binding, bound)
+        raise ActError(f"{command.skillset}:{command.transition} is not a command (SKILL.start or SKILL.interrupt)")
+
+    def _start(self, skillset: str, binding: Binding, skill: SkillBinding, inputs: Mapping[str, Any]) -> str:
+        try:
+            fields = skill.goal_fields(inputs)
+        except KeyError as exc:
+            raise ActError(f"{skillset}:{skill.skill}: {exc.args[0]}") from None
+        problem = message_problem(fields, f"{skill.type}_Goal", binding.store)
+        if problem:
+            raise ActError(f"{skillset}:{skill.skill}: the goal of {skill.action} cannot be sent: {problem}")
+        goal = SentGoal(uuid.uuid4().bytes)
+        sent = f"send_goal {skill.action} goal {goal_text(goal.id)} {json.dumps(fields, sort_keys=True)}"
+        reply = self.client.call(skill.name("send_goal"), f"{skill.type}_SendGoal",
+                                 send_goal_request(binding.store, skill.type, goal.id, fields), self.timeout)
+        if reply is None:
+            raise ActError(f"{sent}: no reply from the action server of {skill.action} within {self.timeout:g} s")
+        accepted, _ = send_goal_reply(binding.store, skill.type, reply)
+        goal.on_reply(accepted)
+        if not accepted:
+            raise ActError(f"{sent}: the action server of {skill.action} rejected the goal")
+        self.sent[(skillset, skill.skill)] = goal
+        return f"{sent}: accepted"
+
+    def _interrupt(self, skillset: str, binding: Binding, skill: SkillBinding) -> str:
+        goals = self._status(binding, skill)
+        own = self.sent.get((skillset, skill.skill))
+        if own is not None:
+            own.on_status(goals)
+        target = own.id if own is not None and not own.done and own.status else None
+        whose = "the goal the pilot sent"
+        if target is None:
+            followed = followed_goal(goals)
+            if followed is None:
+                raise ActError(f"{skillset}:{skill.skill}: no goal of {skill.action} is active (its status shows "
+                               f"{_shown(goals)}): nothing to cancel")
+            target, whose = followed.id, "the goal the bridge follows"
+        sent = f"cancel_goal {skill.action} goal {goal_text(target)} ({whose})"
+        reply = self.client.call(skill.name("cancel_goal"), CANCEL_TYPE, cancel_goal_request(binding.store, target),
+                                 self.timeout)
+        if reply is None:
+            raise ActError(f"{sent}: no reply from the action server of {skill.action} within {self.timeout:g} s")
+        code, canceling = cancel_goal_reply(binding.store, reply)
+        if code != "ERROR_NONE" or target not in canceling:
+            raise ActError(f"{sent}: the action server of {skill.action} refused: {code}")
+        return f"{sent}: canceling"
+
+    def _status(self, binding: Binding, skill: SkillBinding) -> list[Goal]:
+        """The goals of the action's last status (its transient-local cache); none when it never had one."""
+        key = history_selector(self.style.name_key(skill.name("status"), STATUS_TYPE))
+        goals: list[Goal] = []
+        for reply in self.session.get(key, accept_replies=zenoh.ReplyKeyExpr.ANY, timeout=self.timeout):
+            if reply.ok is not None:
+                try:  # the cache answers oldest first: the last one is the current status
+                    goals = goals_from_plain(to_plain(decode(binding.store, STATUS_TYPE, reply.ok.payload.to_bytes())))
+                except Exception:  # a malformed status: skipped (the bridge counts it)
+                    continue
+        return goals
+
+    def close(self) -> None:
+        """Nothing is declared: requests only."""
+
+
+def _shown(goals: list[Goal]) -> str:
+    return ", ".join(f"{goal_text(g.id)[:8]} {STATUS_NAMES.get(g.status, g.status)}" for g in goals) or "no goal"
+
+
+__all__ = ["BoundActuator"]

@@ -1,0 +1,190 @@
+"""The pilot acting through bindings (SPEC §9, *Acting*; services/pilot/bound_act.py).
+
+Through a real router, each party on its own client session: the Nav2 example's
+simulated robot (action servers speaking the real action protocol in CDR), the
+bound bridge, and the actuator.  A start's goal reaches the action server with
+the goal fields the binding maps from the inputs, the bridge reports the skill's
+start; an interrupt cancels the goal and the bridge reports the interrupt; a goal
+the server rejects, a goal with bad inputs, a missing server and an interrupt with
+nothing to cancel are clear errors.  On zenoh-bridge-ros2dds keys (with and without
+a namespace) and on rmw_zenoh keys.
+"""
+
+from __future__ import annotations
+
+import uuid
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import pytest
+import zenoh
+
+from event_watch import Events
+from services.bridge_ros2.bound_live import start_bound_bridge
+from services.pilot.act import ActError
+from services.pilot.bound_act import BoundActuator
+from services.simulator.bound import BoundSimulator
+from skinet.files import load_bindings, load_system
+from skinet.ros.keys import KeyStyle
+from skinet.wire.messages import PilotCommand
+
+NAV2 = Path(__file__).resolve().parents[2] / "examples" / "nav2"
+FIRST = {"/battery_state": {"percentage": 0.9, "power_supply_status": 2}, "/emergency_stop": {"data": False}}
+STYLES = [KeyStyle(), KeyStyle(namespace="/robot1"), KeyStyle(rmw_zenoh=True, domain=7)]
+IDS = ["zenoh-bridge-ros2dds", "namespace", "rmw_zenoh"]
+
+
+@pytest.fixture(scope="module")
+def nav2():
+    system, _ = load_system(NAV2 / "nav2.toml")
+    bindings, _ = load_bindings(system)
+    return system, bindings
+
+
+class Rig:
+    """The robot, the bridge and an observer of its events, each on its own client session of the router."""
+
+    def __init__(self, system, bindings, style: KeyStyle, open_: Callable[[], zenoh.Session]):  # type: ignore[no-untyped-def]
+        self.robot = BoundSimulator(open_(), system, bindings, style=style)
+        self.events = Events(open_(), system.name)
+        self.bridge = start_bound_bridge(open_(), system, bindings, style=style, settle=0.1, retry=0.1)
+        self.robot.publish_topics(FIRST)
+        self.events.wait(lambda items: [e.info for e in items] == ["initial status"], timeout=20)
+
+    def transitions(self) -> list[str | None]:
+        return [e.transition for e in self.events.items]
+
+    def wait_for(self, transition: str) -> None:
+        self.events.wait(lambda items: transition in [e.transition for e in items], timeout=20)
+
+    def received(self, skill: str) -> list[tuple[str, dict]]:
+        """The goals the robot's action server of ``skill`` received: (goal id as ROS prints it, fields)."""
+        return [(str(uuid.UUID(bytes=g)), fields) for g, fields in self.robot.actions[("nav2", skill)].logic.received]
+
+    def close(self) -> None:
+        self.bridge.close()
+        self.robot.close()
+
+
+@pytest.fixture
+def rig(nav2, client_factory, request) -> Iterator[Rig]:  # type: ignore[no-untyped-def]
+    system, bindings = nav2
+    made = Rig(system, bindings, request.param, client_factory)
+    yield made
+    made.close()
+
+
+def undocked(rig: Rig) -> None:
+    """The navigator active, the robot off its dock (the operator's doing, through the simulated robot)."""
+    for transition in ("navigator_configured", "navigator_activated", "undock_robot.start",
+                       "undock_robot.success.undocked"):
+        assert rig.robot.play("nav2", transition, None)
+        rig.wait_for(transition)
+
+
+@pytest.mark.parametrize("rig", STYLES, ids=IDS, indirect=True)
+def test_a_start_sends_the_goal_and_an_interrupt_cancels_it(rig: Rig, nav2, client_factory) -> None:  # type: ignore[no-untyped-def]
+    """dock_robot.start: a goal with the binding's fixed field and the input at its field; the bridge
+    reports dock_robot.start; dock_robot.interrupt cancels that goal: the bridge reports the interrupt."""
+    _, bindings = nav2
+    undocked(rig)
+    style = rig.bridge.style
+    act = BoundActuator(client_factory(), bindings, style=style)
+    sent = act.send(PilotCommand(skillset="nav2", transition="dock_robot.start", inputs={"dock": "home_dock"}))
+    [(goal, fields)] = rig.received("dock_robot")
+    assert sent == (f'send_goal /dock_robot goal {goal} {{"dock_id": "home_dock", "use_dock_id": true}}: accepted')
+    assert {k: fields[k] for k in ("use_dock_id", "dock_id", "dock_type", "navigate_to_staging_pose")} == {
+        "use_dock_id": True, "dock_id": "home_dock", "dock_type": "", "navigate_to_staging_pose": False}
+    rig.wait_for("dock_robot.start")
+    assert act.send(PilotCommand(skillset="nav2", transition="dock_robot.interrupt")) == (
+        f"cancel_goal /dock_robot goal {goal} (the goal the pilot sent): canceling")
+    rig.wait_for("dock_robot.interrupt")
+    assert rig.transitions()[-2:] == ["dock_robot.start", "dock_robot.interrupt"]
+    assert rig.events.items[-1].status.running == [] and rig.bridge.counters.drifts == 0
+
+
+@pytest.mark.parametrize("rig", STYLES[:1] + STYLES[2:], ids=IDS[:1] + IDS[2:], indirect=True)
+def test_an_interrupt_cancels_the_goal_the_bridge_follows_when_the_pilot_did_not_send_it(
+        rig: Rig, nav2, client_factory) -> None:  # type: ignore[no-untyped-def]
+    """The operator started the skill from their own client: the pilot cancels the goal that runs it."""
+    _, bindings = nav2
+    rig.robot.play("nav2", "undock_robot.start", None)
+    rig.wait_for("undock_robot.start")
+    [(goal, _)] = rig.received("undock_robot")
+    act = BoundActuator(client_factory(), bindings, style=rig.bridge.style)
+    assert act.send(PilotCommand(skillset="nav2", transition="undock_robot.interrupt")) == (
+        f"cancel_goal /undock_robot goal {goal} (the goal the bridge follows): canceling")
+    rig.wait_for("undock_robot.interrupt")
+    # The goal has ended: another interrupt has nothing to cancel, and says what the status shows.
+    with pytest.raises(ActError) as info:
+        act.send(PilotCommand(skillset="nav2", transition="undock_robot.interrupt"))
+    assert str(info.value) == (f"nav2:undock_robot: no goal of /undock_robot is active (its status shows "
+                               f"{goal[:8]} CANCELED): nothing to cancel")
+
+
+@pytest.mark.parametrize("rig", STYLES[:1], ids=IDS[:1], indirect=True)
+def test_a_rejected_goal_is_an_error_and_starts_nothing(rig: Rig, nav2, client_factory) -> None:  # type: ignore[no-untyped-def]
+    _, bindings = nav2
+    server = rig.robot.actions[("nav2", "undock_robot")].logic
+    server.accepting = False
+    act = BoundActuator(client_factory(), bindings)
+    with pytest.raises(ActError) as info:
+        act.send(PilotCommand(skillset="nav2", transition="undock_robot.start"))
+    [(goal, _)] = rig.received("undock_robot")
+    assert str(info.value) == (f'send_goal /undock_robot goal {goal} {{}}: the action server of /undock_robot '
+                               "rejected the goal")
+    assert server.goals == {} and rig.bridge.wait_idle() and rig.transitions() == [None]
+    # Its server takes goals again: the same command is accepted.
+    server.accepting = True
+    assert act.send(PilotCommand(skillset="nav2", transition="undock_robot.start")).endswith(": accepted")
+    rig.wait_for("undock_robot.start")
+
+
+def test_bad_commands_are_clear_errors_and_send_nothing(nav2, client_factory) -> None:  # type: ignore[no-untyped-def]
+    """Inputs the skill does not have or whose type does not fit the goal, a skill bound to no action, an
+    action server that does not answer, an interrupt with no goal."""
+    system, bindings = nav2
+    robot = BoundSimulator(client_factory(), system, bindings)
+    act = BoundActuator(client_factory(), bindings, timeout=0.5)
+    cases = [
+        (PilotCommand(skillset="nav2", transition="dock_robot.start", inputs={"target": "home"}),
+         "nav2:dock_robot: 'target' is not an input of dock_robot"),
+        (PilotCommand(skillset="nav2", transition="dock_robot.start", inputs={"dock": 3}),
+         "nav2:dock_robot: the goal of /dock_robot cannot be sent: expected string at dock_id, got an integer"),
+        (PilotCommand(skillset="nav2", transition="launch.start"),
+         "nav2:launch is bound to no action (its skillset has no manager either: the pilot cannot command it)"),
+        (PilotCommand(skillset="base", transition="dock_robot.start"), "base:dock_robot is bound to no action"),
+        (PilotCommand(skillset="nav2", transition="dock_robot.success"),
+         "nav2:dock_robot.success is not a command (SKILL.start or SKILL.interrupt)"),
+        (PilotCommand(skillset="nav2", transition="navigate.interrupt"),
+         "nav2:navigate: no goal of /navigate_to_pose is active (its status shows no goal): nothing to cancel"),
+    ]
+    for command, reason in cases:
+        with pytest.raises(ActError) as info:
+            act.send(command)
+        assert str(info.value) == reason
+    assert all(not server.logic.received for server in robot.actions.values())
+    robot.close()  # no action server any more
+    with pytest.raises(ActError) as info:
+        act.send(PilotCommand(skillset="nav2", transition="undock_robot.start"))
+    assert str(info.value).endswith(": no reply from the action server of /undock_robot within 0.5 s")
+
+
+@pytest.mark.parametrize("rig", STYLES[:1], ids=IDS[:1], indirect=True)
+def test_the_simulated_robot_ends_the_goals_it_accepted(rig: Rig, nav2, client_factory) -> None:  # type: ignore[no-untyped-def]
+    """Without a scenario, ``on_start`` hears of each goal an action server accepts and ``terminate`` ends that
+    goal in a mode: what a pilot acting through the bindings needs from the simulated robot."""
+    _, bindings = nav2
+    started: list[tuple[str, str, str]] = []
+    rig.robot.on_start.append(lambda *args: started.append(args))
+    undocked(rig)
+    act = BoundActuator(client_factory(), bindings)
+    act.send(PilotCommand(skillset="nav2", transition="dock_robot.start", inputs={"dock": "d1"}))
+    [(goal, _)] = rig.received("dock_robot")
+    assert started == [("nav2", "undock_robot", rig.received("undock_robot")[0][0]), ("nav2", "dock_robot", goal)]
+    with pytest.raises(ValueError, match="the failure mode not_charging comes from the goal's result"):
+        rig.robot.terminate("nav2", "dock_robot", "failure", "not_charging", goal)
+    assert not rig.robot.terminate("nav2", "dock_robot", "success", "docked", rig.received("undock_robot")[0][0])
+    assert rig.robot.terminate("nav2", "dock_robot", "success", "docked", goal)
+    rig.wait_for("dock_robot.success.docked")
+    assert rig.events.items[-1].status.resources["dock"] == "Docked"
