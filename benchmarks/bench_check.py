@@ -137,24 +137,35 @@ def in_process(n: int) -> list[list[object]]:
         session.close()
 
 
-def through_router(n: int) -> list[list[object]]:
+def loopback_router(clients: int) -> tuple[str, zenoh.Session, list[zenoh.Session]]:
+    """A router on a free port of 127.0.0.1 (its endpoint and session) and ``clients`` client sessions of it."""
     import socket
 
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         endpoint = f"tcp/127.0.0.1:{s.getsockname()[1]}"
     router = zenoh.open(session_config("router", listen=[endpoint], multicast_scouting=False))
-    client = zenoh.open(session_config("client", connect=[endpoint], multicast_scouting=False))
-    other = zenoh.open(session_config("client", connect=[endpoint], multicast_scouting=False))
+    return endpoint, router, [zenoh.open(session_config("client", connect=[endpoint], multicast_scouting=False))
+                              for _ in range(clients)]
+
+
+def wait_for_monitor(session: zenoh.Session, system: str) -> None:
+    """Until a monitor of ``system`` holds its liveliness token."""
+    tokens: set[str] = set()
+    sub = session.liveliness().declare_subscriber(keys.alive(system, "monitor", "*"),
+                                                  lambda s: tokens.add(str(s.key_expr)), history=True)
+    wait(lambda: bool(tokens), "the monitor process")
+    sub.undeclare()
+
+
+def through_router(n: int) -> list[list[object]]:
+    endpoint, router, (client, other) = loopback_router(2)
     monitor = subprocess.Popen([sys.executable, "-m", "services.monitor", str(SYSTEM_FILE), "--mode", "client",
                                 "--connect", endpoint, "--no-multicast-scouting", "--log-level", "ERROR",
                                 "--check-rate-limit", "0"], cwd=ROOT)
     try:
         system = "spot_arm"
-        tokens: set[str] = set()
-        sub = client.liveliness().declare_subscriber(keys.alive(system, "monitor", "*"),
-                                                     lambda s: tokens.add(str(s.key_expr)), history=True)
-        wait(lambda: bool(tokens), "the monitor process")
+        wait_for_monitor(client, system)
         side = send_events(client, load_system(SYSTEM_FILE)[0])
         payload, key = encode(REQUEST), keys.check(system, keys.LOCAL_CLIENT)
         wait(lambda: decode(get_once(client, key, payload), CheckReply).seq == len(TO_WARNING), "the events applied")
@@ -167,7 +178,6 @@ def through_router(n: int) -> list[list[object]]:
                 lambda: get_once(client, "bench/echo", b"x"), n), None),
         ]
         echo.undeclare()
-        sub.undeclare()
         side.close()
         return rows
     finally:

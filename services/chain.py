@@ -17,6 +17,7 @@ divergence too (the robot and its model disagree).
 
 from __future__ import annotations
 
+import itertools
 import time
 from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
@@ -25,6 +26,7 @@ from typing import Any, NamedTuple
 import zenoh
 
 from services.bridge_ros2 import start_bridge
+from services.common.cli import default_instance_id
 from services.common.zenoh_config import session_config
 from services.monitor.service import MonitorView, start_monitor
 from services.predictor.service import start_predictor
@@ -44,6 +46,16 @@ class ChainError(RuntimeError):
     """The chain did not settle in time (a service is stuck or lost messages)."""
 
 
+_RUNS = itertools.count(1)
+
+
+def run_instance() -> str:
+    """An instance id of its own for each run's bridge (host-pid-n): runs one after the other in a process
+    (``skinet demo`` on one session) must not share a liveliness token or an event source, or a monitor
+    could take the previous bridge's leaving for its own bridge's."""
+    return f"{default_instance_id()}-{next(_RUNS)}"
+
+
 def run_chain(
     system: System,
     typemap: Mapping[str, str],
@@ -57,6 +69,7 @@ def run_chain(
     style: KeyStyle = KeyStyle(),
     on_record: Callable[[StepRecord], None] | None = None,
     after: Callable[[list[StepRecord]], None] | None = None,
+    shared_predictor: bool = False,
 ) -> list[StepRecord]:
     """Drive ``scenario`` through the whole chain and record what the monitor published.
 
@@ -69,28 +82,24 @@ def run_chain(
     then closes itself.  ``on_record`` is called after each step with what the
     monitor showed then, ``after`` with the records once the run is over, while
     every service still runs (``skinet demo --live`` keeps serving the views then).
+    ``shared_predictor``: a predictor already serves ``session`` (:func:`shared_session`), start none.
     """
-    with _embedded(session, system, predict) as (session, monitor, services):
+    with embedded_services(session, system, predict and not shared_predictor) as (session, monitor, services):
         external = simulator is not None
         if simulator is None:
             simulator = Simulator(session, system, typemap)
             services.append(simulator)
-        bridge = start_bridge(session, system, typemap, style=style)
+        bridge = start_bridge(session, system, typemap, style=style, instance_id=run_instance())
         services.append(bridge)
-        _wait(monitor.synced, settle, "initial statuses")  # SPEC §7: every skillset live
-        lost = {name: 0 for name in simulator.nodes}
-        if external:
-            # Behind a gateway, statuses answering the first requests are lost until its
-            # routes exist (volatile QoS); count them once the answers to the retries are in.
-            time.sleep(0.5)
-            lost = {name: n - bridge.feed.statuses[name] for name, n in simulator.statuses_published().items()}
+        wait_until(monitor.synced, settle, "initial statuses")  # SPEC §7: every skillset live
+        lost = statuses_lost(simulator, bridge) if external else {name: 0 for name in simulator.nodes}
 
         def caught_up(run: StepRun) -> None:
             expected = {name: n - lost[name] for name, n in simulator.statuses_published().items()}
             if not bridge.wait_statuses(expected):
                 raise ChainError(f"step {run.index}: the bridge did not receive every status")
-            _wait(lambda: _handled(monitor, bridge.feed.source, {n: m.seq for n, m in bridge.feed.managers.items()}),
-                  settle, f"step {run.index} applied")
+            seqs = lambda: {n: m.seq for n, m in bridge.feed.managers.items()}  # noqa: E731
+            wait_until(lambda: handled_all(monitor, bridge.feed.source, seqs()), settle, f"step {run.index} applied")
 
         records, on_step = _recorder(system, monitor, caught_up, predict, settle, on_record)
         simulator.drive(scenario, speed=speed, on_step=on_step)
@@ -112,6 +121,7 @@ def run_bound_chain(
     on_record: Callable[[StepRecord], None] | None = None,
     after: Callable[[list[StepRecord]], None] | None = None,
     then: Callable[[BoundChain], None] | None = None,
+    shared_predictor: bool = False,
 ) -> list[StepRecord]:
     """:func:`run_chain` for a system whose skillsets are all bound to plain ROS 2 interfaces (SPEC §9).
 
@@ -125,13 +135,14 @@ def run_bound_chain(
     from services.bridge_ros2.bound_live import start_bound_bridge
     from services.simulator.bound import BoundSimulator
 
-    with _embedded(session, system, predict) as (session, monitor, services):
+    with embedded_services(session, system, predict and not shared_predictor) as (session, monitor, services):
         robot = BoundSimulator(session, system, bindings, style=style)
         services.append(robot)
-        bridge = start_bound_bridge(session, system, bindings, style=style, settle=0.2, retry=0.2)
+        bridge = start_bound_bridge(session, system, bindings, style=style, settle=0.2, retry=0.2,
+                                    instance_id=run_instance())
         services.append(bridge)
         robot.publish_topics(scenario.topics)
-        _wait(monitor.synced, settle, "initial statuses")  # SPEC §7: every skillset live
+        wait_until(monitor.synced, settle, "initial statuses")  # SPEC §7: every skillset live
         watched = set(bridge.feed.routes)
 
         def caught_up() -> bool:
@@ -139,10 +150,10 @@ def run_bound_chain(
             return bridge.counters.messages >= published and not bridge.feed.pending_results()
 
         def step_done(run: StepRun) -> None:
-            _wait(caught_up, settle, f"step {run.index}: the bridge's messages")
+            wait_until(caught_up, settle, f"step {run.index}: the bridge's messages")
             bridge.wait_idle(settle)
-            _wait(lambda: _handled(monitor, bridge.feed.source, {n: s.seq for n, s in bridge.feed.skillsets.items()}),
-                  settle, f"step {run.index} applied")
+            seqs = lambda: {n: s.seq for n, s in bridge.feed.skillsets.items()}  # noqa: E731
+            wait_until(lambda: handled_all(monitor, bridge.feed.source, seqs()), settle, f"step {run.index} applied")
 
         records, on_step = _recorder(system, monitor, step_done, predict, settle, on_record)
         robot.drive(scenario, speed=speed, on_step=on_step)
@@ -166,8 +177,23 @@ class BoundChain(NamedTuple):
 
 
 @contextmanager
-def _embedded(session: zenoh.Session | None, system: System,
-              predict: bool) -> Iterator[tuple[zenoh.Session, Any, list[Any]]]:
+def shared_session(predict: bool = True) -> Iterator[zenoh.Session]:
+    """One peer session, with a predictor on it when ``predict``, for several runs in a row (``skinet demo``):
+    each run brings its own monitor, simulator and bridge (``shared_predictor=True``), and the predictor's
+    worker processes start once (about 1.5 s each time otherwise)."""
+    session = zenoh.open(session_config("peer", multicast_scouting=False))
+    predictor = start_predictor(session, "embedded") if predict else None
+    try:
+        yield session
+    finally:
+        if predictor is not None:
+            predictor.close()
+        session.close()
+
+
+@contextmanager
+def embedded_services(session: zenoh.Session | None, system: System,
+                      predict: bool) -> Iterator[tuple[zenoh.Session, Any, list[Any]]]:
     """A session (a new peer one unless given), the monitor and a predictor on it, and the list of
     services to close at the end: the monitor first, then the others in reverse order (the session too, if it
     is ours)."""
@@ -196,7 +222,7 @@ def _recorder(system: System, monitor: Any, caught_up: Callable[[StepRun], None]
     records: list[StepRecord] = []
     before = {p.name: True for p in system.properties}
     if predict:
-        _wait(lambda: not monitor.snapshot().unsafe.prediction_stale, settle, "initial prediction")
+        wait_until(lambda: not monitor.snapshot().unsafe.prediction_stale, settle, "initial prediction")
     first = monitor.snapshot()
     shown = [unsafe_transition(u) for u in first.unsafe.unsafe]  # what the operator sees
     seq = first.state.seq  # the monitor's last step
@@ -205,7 +231,7 @@ def _recorder(system: System, monitor: Any, caught_up: Callable[[StepRun], None]
         nonlocal before, shown, seq
         caught_up(run)
         if predict:
-            _wait(lambda: not monitor.snapshot().unsafe.prediction_stale, settle, f"step {run.index} prediction")
+            wait_until(lambda: not monitor.snapshot().unsafe.prediction_stale, settle, f"step {run.index} prediction")
         view = monitor.snapshot()
         stepped, seq = view.state.seq != seq, view.state.seq
         record = _record(run, view, before, shown, _divergence(system, run, view, stepped))
@@ -219,7 +245,15 @@ def _recorder(system: System, monitor: Any, caught_up: Callable[[StepRun], None]
     return records, on_step
 
 
-def _handled(monitor: Any, source: str, next_seq: Mapping[str, int]) -> bool:
+def statuses_lost(simulator: Simulator, bridge: Any) -> dict[str, int]:
+    """Per skillset, the statuses of ``simulator`` that ``bridge`` will never see.  Behind a gateway,
+    statuses answering the first requests are lost until its routes exist (volatile QoS); count them
+    once the answers to the retries are in."""
+    time.sleep(0.5)
+    return {name: n - bridge.feed.statuses[name] for name, n in simulator.statuses_published().items()}
+
+
+def handled_all(monitor: Any, source: str, next_seq: Mapping[str, int]) -> bool:
     """Whether the monitor handled every event ``source`` published (``next_seq``: per skillset, the seq
     its next event will have): applied, or covered by the resync it synced from."""
     for name, n in next_seq.items():
@@ -268,7 +302,8 @@ def _record(run: StepRun, view: MonitorView, before: dict[str, bool], shown: lis
                       flags_on(shown, run.step.skillset, run.step.transition or ""), recovery)
 
 
-def _wait(condition, timeout: float, what: str) -> None:
+def wait_until(condition: Callable[[], object], timeout: float, what: str) -> None:
+    """Poll ``condition`` until it holds; :class:`ChainError` naming ``what`` after ``timeout`` seconds."""
     deadline = time.monotonic() + timeout
     while not condition():
         if time.monotonic() > deadline:

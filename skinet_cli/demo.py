@@ -6,32 +6,41 @@ import argparse
 import re
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from skinet.errors import SkinetError, SourceError
+from skinet_cli.demo_pilot import PilotEntry, Row, load_pilot_entry, play_pilot, table, tally
 from skinet_cli.live_demo import add_live_args, live_options_misused, play_live
 from skinet_cli.options import add_no_properties_arg, load_live_system, require_properties
 from skinet.explain import plural, warning_line
 from skinet.files import load_bindings, load_goals, load_typemap, read_text
 from skinet.mission import Scenario, StepRecord, check_scenario, flagged_before, parse_scenario, replay
 from skinet.mission_log import records_to_log
+from skinet.pilot_run import is_pilot_run
 from skinet.system import System
 from skinet.wire.log import log_line
 
-MISSIONS = ("unassisted.toml", "assisted.toml", "mobile_unassisted.toml", "mobile_assisted.toml")
+if TYPE_CHECKING:
+    import zenoh
+
+MISSIONS = ("unassisted.toml", "assisted.toml", "pilot.toml", "mobile_unassisted.toml", "mobile_assisted.toml")
 UNEXPECTED = 3  # exit status: a divergence the scenario did not declare, or a declared one that did not happen
 EXAMPLES = {"nav2": Path("examples") / "nav2" / "missions" / "nav2_run.toml"}  # skinet demo nav2
-HELP = (f"play {len(MISSIONS)} runs: the paper's unassisted and assisted runs, then the mobile manipulator's two "
-        "(the main job)")
+HELP = (f"play {len(MISSIONS)} runs: the paper's unassisted and assisted runs, the paper's mission driven by the "
+        "pilot, then the mobile manipulator's two (the main job)")
 DESCRIPTION = (
     f"Play {len(MISSIONS)} runs through the whole chain (simulated managers, CDR, bridge, monitor, predictor on one "
     "embedded Zenoh session) and print what the operator would have seen: the paper's unassisted run "
-    "(three violations) and assisted run (two warnings heeded, no violation), then the mobile manipulator's "
-    "unassisted and assisted runs (a forced constraint). Given SCENARIO files, it plays those instead; 'nav2' "
+    "(three violations) and assisted run (two warnings heeded, no violation), the same mission driven by the "
+    "pilot from a goals file with two failures injected (retried; no violation, no command denied), then the "
+    "mobile manipulator's unassisted and assisted runs (a forced constraint), and a table of the runs side by "
+    "side (commands, moves, retries, violations, denied). Given SCENARIO files (or pilot run files, with a "
+    "[pilot] table), it plays those instead; 'nav2' "
     "plays a Nav2 base that has no skillset manager, bound to its action servers, lifecycle node and topics "
     "(examples/nav2). A step the model does not allow then is shown as a model divergence. Exit status: 0; 3 when "
     "a run diverged at a step its scenario does not mark expect_divergence = true, or a marked step did not "
-    "diverge; 1 on bad input. With --live it plays one run (the paper's unassisted run by default) in real time, "
+    "diverge, or a pilot run did not reach its goals, saw a violation or had a command denied; 1 on bad input. "
+    "With --live it plays one run (the paper's unassisted run by default) in real time, "
     "served on Zenoh for skinet watch, skinet dashboard and skinet check (it prints their lines), and with "
     "--dashboard PORT serves the dashboard itself.")
 
@@ -56,7 +65,8 @@ def example_scenario(name: str) -> Path:
 def add_parser(sub: argparse._SubParsersAction) -> None:
     c = sub.add_parser("demo", help=HELP, description=DESCRIPTION)
     c.add_argument("scenarios", nargs="*", metavar="SCENARIO",
-                   help=f"scenario files (default: the {len(MISSIONS)} runs above, skillsets/missions/"
+                   help=f"scenario files or pilot run files ([pilot]: a goals file driven by the pilot, with "
+                        f"injected failures) (default: the {len(MISSIONS)} runs above, skillsets/missions/"
                         f"{{{','.join(m.removesuffix('.toml') for m in MISSIONS)}}}.toml), or 'nav2' (examples/nav2)")
     c.add_argument("--no-predict", action="store_true", help="explicit constraints only")
     add_no_properties_arg(c)
@@ -81,19 +91,48 @@ def cmd_demo(args: argparse.Namespace) -> int:
             Path(folder).mkdir(parents=True, exist_ok=True)
         except OSError as exc:
             raise SourceError.at(folder, None, f"cannot create folder: {exc.strerror}") from None
-    runs = []
+    runs: list[tuple[Path, Scenario, System] | PilotEntry] = []
     for path in paths:  # every file checked before the first run starts
-        scenario = parse_scenario(read_text(path), str(path))
+        text = read_text(path)
+        if is_pilot_run(text):
+            if args.live:
+                raise SkinetError(f"--live plays scenarios; {path} is a pilot run (play it without --live)")
+            runs.append(load_pilot_entry(path, text, args.no_properties))
+            continue
+        scenario = parse_scenario(text, str(path))
         system, _ = load_live_system(path.parent / scenario.system)
         require_properties(system, path.parent / scenario.system, args.no_properties)
         check_scenario(scenario, system, str(path))
         if scenario.pilot:
             load_goals(path.parent / scenario.pilot, system, load_typemap(path.parent / scenario.system))
         runs.append((path, scenario, system))
-    surprises: list[str] = []
     if args.live:
-        return _live(args, *runs[0])
-    for path, scenario, system in runs:
+        return _live(args, *runs[0])  # type: ignore[misc]
+    if args.core:
+        return _play(args, runs, None)
+    from services.chain import shared_session  # Zenoh only when the chain runs
+
+    with shared_session(predict=not args.no_predict) as session:  # one predictor for every run
+        return _play(args, runs, session)
+
+
+def _play(args: argparse.Namespace, runs: list[tuple[Path, Scenario, System] | PilotEntry],
+          session: zenoh.Session | None) -> int:
+    """Play ``runs`` one after the other (on ``session`` and its predictor, or on the core), print them and the
+    table of the runs side by side; the exit status."""
+    surprises: list[str] = []
+    rows: list[Row] = []
+    chain = dict(session=session, shared_predictor=True)
+    for entry in runs:
+        if isinstance(entry, PilotEntry):
+            scenario, records, row, found = play_pilot(args, entry, _line, session)
+            rows += [row] if row is not None else []
+            surprises += [f"{entry.path}: {s}" for s in found]
+            if (args.log or args.timeline) and records:
+                _write_run(args, entry.system, scenario, records)
+            print()
+            continue
+        path, scenario, system = entry
         piloted: list[Any] = []  # what the pilot did after the run (scenario.pilot, bound systems)
         if args.core:
             records = replay(system, scenario, predict=not args.no_predict)
@@ -107,14 +146,15 @@ def cmd_demo(args: argparse.Namespace) -> int:
                 from services.bound_pilot import drive_goals
 
                 goals = path.parent / scenario.pilot
-                then = lambda chain: piloted.append(drive_goals(chain, read_text(goals), str(goals)))  # noqa: E731
-            records = run_bound_chain(system, bindings, scenario, predict=not args.no_predict, then=then)
+                then = lambda c: piloted.append(drive_goals(c, read_text(goals), str(goals)))  # noqa: E731
+            records = run_bound_chain(system, bindings, scenario, predict=not args.no_predict, then=then, **chain)
             how = ("simulated action servers, lifecycle node and topics -> CDR -> bridge (bindings) -> monitor -> "
                    "predictor, embedded Zenoh session")
         else:
             from services.chain import run_chain  # Zenoh only when the chain runs
 
-            records = run_chain(system, load_typemap(path.parent / scenario.system), scenario, predict=not args.no_predict)
+            records = run_chain(system, load_typemap(path.parent / scenario.system), scenario,
+                                predict=not args.no_predict, **chain)
             how = "simulated managers -> CDR -> bridge -> monitor -> predictor, embedded Zenoh session"
         steps = sum(r.step.transition is not None for r in records)  # considered commands are no steps
         print(f"== {scenario.name} run ({path}): {steps} steps, system {system.name}")
@@ -128,10 +168,12 @@ def cmd_demo(args: argparse.Namespace) -> int:
         elif scenario.pilot:
             print(f"   (the pilot's goals, {path.parent / scenario.pilot}, need the chain of a bound system: not "
                   "played here)")
+        rows.append(tally(scenario.name, records))
         surprises += [f"{path}: {s}" for s in unexpected(records)]
         if args.log or args.timeline:
             _write_run(args, system, scenario, records)
         print()
+    print(table(rows))
     for line in surprises:
         print(f"skinet demo: {line}", file=sys.stderr)
     return UNEXPECTED if surprises else 0

@@ -81,8 +81,9 @@ PROGRESS_EVERY = 0.2  # seconds between progress reports of an exploration
 # `skinet unsafe` does not pay for them (issue 10 (d); tests/cli/test_cli.py checks that the
 # helps here are the modules' own).
 LAZY_COMMANDS: tuple[tuple[str, str, dict[str, str]], ...] = (
-    ("skinet_cli.demo", "add_parser", {"demo": "play 4 runs: the paper's unassisted and assisted runs, then the mobile "
-                                               "manipulator's two (the main job)"}),
+    ("skinet_cli.demo", "add_parser", {"demo": "play 5 runs: the paper's unassisted and assisted runs, the paper's "
+                                               "mission driven by the pilot, then the mobile manipulator's two (the "
+                                               "main job)"}),
     ("skinet_cli.record", "add_parser",
      {"record": "record the monitor's messages of a system into a JSON Lines log"}),
     ("skinet_cli.timeline", "add_parser",

@@ -37,7 +37,6 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     c.add_argument("--no-pilot", action="store_true",
                    help="do not start the pilot (SPEC §8: goals on skinet/<system>/pilot/goal/<client>, guided or "
                         "driven with the strict check; see docs/pilot.md)")
-    add_ros_key_args(c)  # the keys of the managers' topics, on which the pilot acts
     add_no_properties_arg(c)
     add_policy_arg(c)
     add_lost_after_arg(c)

@@ -78,6 +78,7 @@ class _Goal:
     since: int  # the LiveState.seq when it was set: only later events count
     index: int = 0
     plan: Plan | None = None
+    plans: list[Plan] = field(default_factory=list)  # the mission's, planned when it was set: reused while they cover
     retries: dict[str, int] = field(default_factory=dict)
     refused: dict[str, int] = field(default_factory=dict)  # 'skillset:transition' -> refusals by the robot
     commands: int = 0
@@ -347,7 +348,7 @@ class Pilot:
             self._goals += 1
             since = self._state.seq if self._state is not None else -1
             self._goal = _Goal(self._goals, client, request.mode, goals, request.max_retries, since,
-                               plan=plans[0] if plans else None)
+                               plan=plans[0] if plans else None, plans=plans)
             self._asked = None
             log.info("goal %d of %s (%s): %s", self._goals, client, request.mode, "; ".join(x.text for x in goals))
             self._decide()
@@ -472,7 +473,7 @@ class Pilot:
         reply: CheckReply | None = None
         problem = "the monitor's check did not answer"
         for r in self.session.get(keys.check(self.name, self.client), payload=encode(request),
-                                  timeout=CHECK_WAIT + 2.0):
+                                  timeout=CHECK_WAIT + 2.0, express=True):
             if r.ok is not None:
                 try:
                     reply = decode(r.ok.payload.to_bytes(), CheckReply)
@@ -542,7 +543,9 @@ class Pilot:
             self._end(g, "reached", "")
             return
         g.index += 1
-        g.plan = None
+        # The next goal's plan from when the mission was set: it serves wherever it covers the marking (a
+        # plan's policy holds in its whole winning region, SPEC §8), so a goal change costs no planning.
+        g.plan = g.plans[g.index] if g.index < len(g.plans) else None
         g.retries.clear()  # max_retries counts per goal of a mission
 
     def _end(self, g: _Goal, state: str, reason: str) -> None:

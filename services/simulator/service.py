@@ -28,7 +28,7 @@ import zenoh
 from services.common.ros_liveliness import declare_node
 from services.common.zenoh_config import undeclare
 from services.simulator.driver import StepRun, drive
-from services.simulator.manager import INTERRUPTING, READY, Manager, Message
+from services.simulator.manager import INTERRUPTING, READY, RUNNING, Manager, Message
 from skinet.mission import Scenario
 from skinet.ros.keys import KeyStyle, ManagerTopic, manager_topics, rmw_attachment, topic_fqn
 from skinet.ros.typestore import Typestore, build_typestore, decode, encode
@@ -76,6 +76,9 @@ class Simulator:
         self._clock = clock
         self._cond = threading.Condition()
         self._subscribers: list[Any] = []
+        # Called with (skillset, skill, request id) under the manager's lock whenever a request starts a skill
+        # (a simulated implementation, services.simulator.world, ends it later): keep them short.
+        self.on_start: list[Callable[[str, str, str], None]] = []
         self.nodes: dict[str, _Node] = {}
         for comp in system.components:
             store = build_typestore(comp.skillset, typemap, extra_types)
@@ -136,13 +139,17 @@ class Simulator:
 
     def _handle(self, node: _Node, topic: ManagerTopic, msg: Any) -> None:
         m = node.manager
+        started = False
         with node.lock:
             if topic.kind == "status_request":
                 out = m.status_request()
             elif topic.kind == "event_request":
                 out = m.event_request(msg.id, msg.name)
             elif topic.kind == "skill_request":
+                skill = m.skills[topic.skill or ""]
+                idle = skill.state == READY
                 out = m.skill_request(topic.skill or "", msg.id, msg.input)
+                started = idle and skill.state == RUNNING
             else:
                 out = m.interrupt(topic.skill or "", msg.id)
                 if not out:
@@ -151,6 +158,8 @@ class Simulator:
                 elif m.skills[topic.skill or ""].state == INTERRUPTING:
                     out += m.interrupted(topic.skill or "")  # the implementation stops at once
             self._publish(node, out)
+            for hook in self.on_start if started else ():
+                hook(node.component.name, topic.skill or "", msg.id)
 
     def _publish(self, node: _Node, messages: list[Message]) -> None:
         if not node.publishers:
@@ -172,6 +181,12 @@ class Simulator:
                 out[name] = node.statuses
         return out
 
+    def commands_handled(self) -> int:
+        """Skill requests and interrupts handled so far, by every manager (an operator's or a pilot's commands)."""
+        with self._cond:
+            return sum(n for node in self.nodes.values() for topic, n in node.handled.items()
+                       if node.topics[topic].kind in ("skill_request", "skill_interrupt"))
+
     def handled(self, skillset: str, topic: str) -> int:
         """Inputs handled so far on a node-relative topic (for callers waiting on their request)."""
         with self._cond:
@@ -185,10 +200,13 @@ class Simulator:
 
     # -- the simulated skill implementations ------------------------------------------------
 
-    def terminate(self, skillset: str, skill: str, kind: str, mode: str = "") -> bool:
-        """End a running skill in a success or failure mode; False when it is not running."""
+    def terminate(self, skillset: str, skill: str, kind: str, mode: str = "", id_: str | None = None) -> bool:
+        """End a running skill in a success or failure mode; False when it is not running (or, given
+        ``id_``, when the execution running is another one)."""
         node = self.nodes[skillset]
         with node.lock:
+            if id_ is not None and node.manager.skills[skill].id != id_:
+                return False
             out = node.manager.terminate(skill, kind, mode)
             self._publish(node, out)
         return bool(out)

@@ -358,10 +358,11 @@ def test_demo_help_says_how_many_runs_it_plays(capsys: pytest.CaptureFixture[str
         main(["demo", "--help"])
     help_text = " ".join(capsys.readouterr().out.split())
     assert f"Play {len(MISSIONS)} runs through the whole chain" in help_text
-    assert "skillsets/missions/{unassisted,assisted,mobile_unassisted,mobile_assisted}.toml" in help_text.replace(
+    assert "skillsets/missions/{unassisted,assisted,pilot,mobile_unassisted,mobile_assisted}.toml" in help_text.replace(
         " ", "")
     code, out, _ = run(capsys, "demo", "--core", "--no-predict")
-    assert code == 0 and len([line for line in out.splitlines() if line.startswith("== ")]) == len(MISSIONS) == 4
+    runs = [line for line in out.splitlines() if line.startswith("== ")]
+    assert code == 0 and len(runs) == len(MISSIONS) + 1 == 6 and runs[-1] == "== the runs side by side"
 
 
 def test_live_demo_options_are_checked_before_anything_runs(capsys: pytest.CaptureFixture[str]) -> None:

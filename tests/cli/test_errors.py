@@ -49,6 +49,7 @@ FREE_TEXT = {
     ("python -m services.bridge_ros2", "--source"): "any text names the source inside the events' payload",
     ("python -m services.bridge_ros2", "--ros-distro"): "only humble changes the keys; any other name is a later one",
     ("python -m services.simulator", "--ros-distro"): "only humble changes the keys; any other name is a later one",
+    ("skinet run", "--ros-distro"): "only humble changes the keys; any other name is a later one",
     **{(program, option): "any user name and password is sent; the router judges them (tests/deploy/test_operator_acl.py)"
        for program in ("skinet record", "skinet replay", "skinet run", "skinet router", "skinet watch", "skinet check",
                        "skinet goal",
@@ -346,6 +347,11 @@ def _cases() -> list[Case]:
           "argument --rate-limit: expected a number >= 0, got '-1'")
     usage("skinet", "--check-rate-limit", ("run", SYSTEM, "--check-rate-limit", "fast"),
           "argument --check-rate-limit: expected a number >= 0, got 'fast'")
+    usage("skinet", "--namespace", ("run", SYSTEM, "--namespace", "robot/*"),
+          "argument --namespace: namespace 'robot/*' cannot be used in a Zenoh key "
+          "(/-separated names of letters, digits, _ - .)")
+    usage("skinet", "--domain", ("run", SYSTEM, "--domain", "233"),
+          "argument --domain: expected an integer from 0 to 232, got '233'")
     usage("skinet", "--lost-after", ("run", SYSTEM, "--lost-after", "0.5"),
           "argument --lost-after: expected a number of seconds >= 1 (two heartbeat periods), got '0.5'")
     usage("skinet", "--format", ("record", "spot_arm", "-o", "{tmp}/rec.csv", "--format", "csv"),

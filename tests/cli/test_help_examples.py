@@ -146,7 +146,7 @@ READY: dict[str, Callable[[Watched, list[str]], None]] = {
 }
 
 CHECK: dict[str, Callable[[subprocess.CompletedProcess, list[str]], None]] = {
-    "skinet demo": lambda d, _w: d.stdout.count("\n== ") + d.stdout.startswith("== ") == 4 or pytest.fail(d.stdout),
+    "skinet demo": lambda d, _w: d.stdout.count("\n== ") + d.stdout.startswith("== ") == 6 or pytest.fail(d.stdout),
     "python -m services.simulator": lambda d, _w: f"step {MISSION_STEPS:>3} " in d.stdout or pytest.fail(d.stdout),
     "skinet check": lambda d, _w: d.stdout.startswith("spot:teleop.start: ") or pytest.fail(d.stdout + d.stderr),
 }

@@ -122,3 +122,26 @@ def test_the_examples_of_plan_help_work(capsys: pytest.CaptureFixture[str], monk
         assert argv[:2] == ["skinet", "plan"]
         out = run(capsys, *argv[2:])
         assert "cyclic" in out, line
+
+
+def test_the_papers_mission_as_goals_is_planned_whole(capsys: pytest.CaptureFixture[str]) -> None:
+    """skillsets/goals/paper_mission.toml: MISSION.md's protocol (stand up, four traps), every goal planned,
+    each from where the previous one ends, with the commands of the protocol when outcomes are favourable."""
+    data = json.loads(run(capsys, SYSTEM, "--goals", str(ROOT / "skillsets" / "goals" / "paper_mission.toml"),
+                          "--json"))
+    trap = ["run spot:go_to_waypoint", "run spot:teleop", "run manipulator:arm_ready", "run manipulator:arm_joystick",
+            "run manipulator:arm_moving_to_RD", "run manipulator:arm_RD_to_HP", "run spot:teleop"]
+    assert [d["goal"] for d in data] == ["reach spot:Standing", *trap * 4]
+    assert {d["answer"] for d in data} == {"cyclic"}
+    commands = [s["action"] for d in data for s in d["steps"] if s["action"] != "wait"]
+    assert commands == ["init_power.start", "stand_up.start", *[
+        "go_to_waypoint.start", "teleop.start", "arm_ready.start", "arm_joystick.start", "arm_moving_to_RD.start",
+        "arm_RD_to_HP.start", "teleop.start"] * 4]
+    walks = [s["inputs"]["target"] for d in data for s in d["steps"] if s["action"] == "go_to_waypoint.start"]
+    assert walks == [{"x": 8.0, "y": 2.0, "z": 0.0}, {"x": 15.5, "y": -3.0, "z": 0.0},
+                     {"x": 22.0, "y": 4.5, "z": 0.0}, {"x": 30.0, "y": 0.0, "z": 0.0}]
+    # A blocked arm on its way to ready is brought to RD, home, and started again.
+    arm_ready = data[3]["steps"][1]["branches"]
+    assert [(b["outcome"], b["then"]) for b in arm_ready] == [("arm_ready.failure.blocked", "route")]
+    assert [s["action"] for s in arm_ready[0]["steps"]] == [
+        "arm_moving_to_RD.start", "wait", "arm_RD_to_HP.start", "wait"]

@@ -82,6 +82,16 @@ def test_demo_command_runs_the_chain(capsys: pytest.CaptureFixture[str]) -> None
     assert out.count("chain: simulated managers -> CDR -> bridge -> monitor -> predictor") == 4
     assert "   violations: 3; action_guard at step 26; safety_guard at step 33; action_guard at step 38" in out
     assert "model divergence" not in out
+    # The third run: the pilot (tests/services/test_pilot_demo.py), then every run side by side.
+    assert out.count("   chain: simulated managers (skills end by themselves) -> CDR -> bridge -> monitor -> predictor "
+                     "-> pilot -> check (strict) -> requests on the managers' topics") == 1
+    assert out.endswith("== the runs side by side\n"
+                        "   run                commands  moves  retries  violations  denied\n"
+                        "   unassisted               31     62        0           3       -\n"
+                        "   assisted                 30     60        0           0       -\n"
+                        "   pilot                    34     68        2           0       0\n"
+                        "   mobile unassisted         7     14        0           1       -\n"
+                        "   mobile assisted           7     14        0           0       -\n")
 
 
 def test_mobile_runs_through_the_chain() -> None:

@@ -336,3 +336,54 @@ def test_driver_rejects_unknown_names_before_sending(client_factory, spot_arm):
         sim.drive(bad, speed=0)
     assert sim.skill_status("spot", "init_power") == (False, "")
     sim.close()
+
+
+def test_the_world_ends_each_started_skill_as_the_outcomes_say(client_factory, spot_arm):
+    """services/simulator/world.py: a pilot starts skills and no scenario step ends them; the simulated
+    implementations do, in the favourable mode or the failure declared for that run of that skill."""
+    from services.simulator.driver import Operator
+    from services.simulator.world import End, World
+    from skinet.pilot_run import Failure, Outcomes
+    from skinet.ros.requests import skill_interrupt, skill_request
+
+    system, typemap = spot_arm
+    sim = Simulator(client_factory(), system, typemap)
+    log = StatusLog(client_factory(), system, typemap)
+    world = World(sim, Outcomes(system, [Failure("manipulator", "arm_ready", 1, "blocked")]))
+    operator = Operator(client_factory(), sim)
+    node = sim.nodes["manipulator"]
+    time.sleep(0.5)  # the operator's and the log's declarations reach the simulator's session
+
+    def start(skill: str, id_: str) -> None:
+        assert operator.send("manipulator", skill_request(node.store, node.component.skillset, skill, id_))
+        deadline = time.monotonic() + 5
+        while not world.idle():
+            assert time.monotonic() < deadline, world.ends
+            time.sleep(0.01)
+
+    try:
+        for skill, id_ in [("arm_ready", "a1"), ("arm_moving_to_RD", "a2"), ("arm_RD_to_HP", "a3"),
+                           ("arm_ready", "a4")]:
+            start(skill, id_)
+        assert world.ends == [End("manipulator", "arm_ready", "a1", "failure", "blocked", True),
+                              End("manipulator", "arm_moving_to_RD", "a2", "success", "at_ready", True),
+                              End("manipulator", "arm_RD_to_HP", "a3", "success", "at_home", True),
+                              End("manipulator", "arm_ready", "a4", "success", "ready", True)]
+        responses = [(t.split("/")[-2], m["id"], m["result"], m["name"]) for ss, t, m, _ in log.wait(12)  # 3 a start
+                     if ss == "manipulator" and t.endswith("/response")]
+        assert responses == [("arm_ready", "a1", R["FAILURE"], "blocked"),
+                             ("arm_moving_to_rd", "a2", R["SUCCESS"], "at_ready"),  # topics are lower case
+                             ("arm_rd_to_hp", "a3", R["SUCCESS"], "at_home"),
+                             ("arm_ready", "a4", R["SUCCESS"], "ready")]
+        # An execution stopped otherwise before its end is left alone (the interrupt comes first).
+        world.duration = 1.0
+        assert operator.send("manipulator", skill_request(node.store, node.component.skillset, "arm_RD_to_HP", "a5"))
+        assert operator.send("manipulator", skill_interrupt(node.store, node.component.skillset, "arm_RD_to_HP", "a5"))
+        start("arm_moving_to_RD", "a6")  # the arm is Away: to RD again, while a5's end is still due
+        assert world.ends[4:] == [End("manipulator", "arm_RD_to_HP", "a5", "success", "at_home", False),
+                                  End("manipulator", "arm_moving_to_RD", "a6", "success", "at_ready", True)]
+        assert sim.skill_status("manipulator", "arm_RD_to_HP") == (False, "a5")
+    finally:
+        world.close()
+        operator.close()
+        sim.close()
