@@ -277,6 +277,10 @@ def connect_lines(args: argparse.Namespace, system: System, mode: str, listening
     if pilot:
         lines.append(f"  pilot: goals on {keys.pilot_goal(system.name, '<client>')} (<client>: your login, "
                      f"'{keys.LOCAL_CLIENT}' without one), status on {keys.pilot_status(system.name)}")
+        runnable = [f"run {c.name}:{k.name}" for c in system.components for k in c.skillset.skills
+                    if k.successes and not k.inputs]
+        lines.append(f"  skinet goal {system.name} \"{runnable[0] if runnable else 'reach FORMULA'}\" "
+                     f"{flags('operator')}   (guided; --drive: the pilot sends the commands)")
     return lines
 
 

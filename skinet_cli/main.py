@@ -99,6 +99,8 @@ LAZY_COMMANDS: tuple[tuple[str, str, dict[str, str]], ...] = (
     }),
     ("skinet_cli.plan", "add_parser",
      {"plan": "plan the commands that reach a goal without violating any property (SPEC §8)"}),
+    ("skinet_cli.goal", "add_parser",
+     {"goal": "give a running pilot a goal (guide or drive) and follow it until it ends (SPEC §8)"}),
     ("skinet_cli.operator", "add_parsers", {
         "dashboard": "live web dashboard of a running system (served on 127.0.0.1:8080)",
         "watch": "terminal live view of a running system (any deployment)",

@@ -17,7 +17,9 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     c = sub.add_parser("dashboard", help="live web dashboard of a running system (served on 127.0.0.1:8080)",
                        description="Serve a live web page of a running system: skillsets, properties, unsafe "
                                    "commands with kind, steps and witness, predictions, state space, violations "
-                                   "and a timeline. Read-only: it observes the monitor's messages on Zenoh.")
+                                   "and a timeline, observed on Zenoh; and a goal box that gives goals to the "
+                                   "system's pilot (guide or drive, pause, resume, cancel; SPEC §8) under this "
+                                   "process's login (--user: only operator-role users may send goals).")
     add_dashboard_args(c)
     c.set_defaults(func=cmd_dashboard)
 

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import argparse
 import json
-from collections.abc import Mapping
-from typing import Any
+from collections.abc import Mapping, Sequence
+from typing import TYPE_CHECKING, Any
 
 from skinet.errors import Pos, SkinetError, SourceError
 from skinet.files import load_goals, load_typemap
@@ -15,6 +15,9 @@ from skinet.plan.planner import ENGINES, Planner
 from skinet.plan.policy import Branch, Command, Plan, Reached, Step, Wait
 from skinet.system import System, marking_problems, marking_to_json
 from skinet.tomltext import parse_toml
+
+if TYPE_CHECKING:  # pydantic only for the types: `skinet plan` does not import it
+    from skinet.wire.messages import PlanBranch, PlanStep
 from skinet_cli.memory import add_memory_arg, memory_limit
 from skinet_cli.options import load_live_system, print_warnings, state_marking
 from skinet_cli.options import seconds as duration
@@ -47,13 +50,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     c = sub.add_parser("plan", help=HELP, description=DESCRIPTION, epilog=EPILOG,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     c.add_argument("system", help="system file (.toml), e.g. skillsets/spot_arm.toml")
-    c.add_argument("goals", nargs="*", metavar="GOAL",
-                   help='a goal, e.g. "run spot:init_power" (several: a mission, in order; after --goals ones)')
-    c.add_argument("--goals", dest="goals_file", metavar="FILE",
-                   help="a mission: a TOML file of [[goals]] tables, each with reach = or run = and its inputs")
-    c.add_argument("--inputs", metavar="TOML",
-                   help="skill inputs of the GOAL arguments, as TOML: 'go_to_waypoint.target = {x = 1.0, y = 2.0, z = 0.0}' "
-                        "(a skill name, or skillset:skill in quotes, then each input)")
+    add_goal_args(c)
     c.add_argument("--state", metavar="STATE",
                    help="start marking: a JSON file, or the JSON itself ('{\"spot\": {...}}'); omitted resources are "
                         "initial, omitted skills idle (default: the initial marking)")
@@ -67,7 +64,20 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     c.set_defaults(func=cmd_plan)
 
 
-def _goals(args: argparse.Namespace, system: System) -> list[Goal]:
+def add_goal_args(c: argparse.ArgumentParser) -> None:
+    """GOAL..., ``--goals FILE`` and ``--inputs TOML``, read by :func:`read_goals` (``skinet plan``, ``skinet goal``)."""
+    c.add_argument("goals", nargs="*", metavar="GOAL",
+                   help='a goal, e.g. "run spot:init_power" (several: a mission, in order; after --goals ones)')
+    c.add_argument("--goals", dest="goals_file", metavar="FILE",
+                   help="a mission: a TOML file of [[goals]] tables, each with reach = or run = and its inputs")
+    c.add_argument("--inputs", metavar="TOML",
+                   help="skill inputs of the GOAL arguments, as TOML: 'go_to_waypoint.target = {x = 1.0, y = 2.0, z = 0.0}' "
+                        "(a skill name, or skillset:skill in quotes, then each input)")
+
+
+def read_goals(args: argparse.Namespace, system: System) -> list[Goal]:
+    """The goals of ``args.goals_file`` then of the GOAL arguments, with ``args.inputs`` (both ``skinet plan``
+    and ``skinet goal``); :class:`SourceError` at the file, line and column of a bad one."""
     types = load_typemap(args.system)
     goals = load_goals(args.goals_file, system, types) if args.goals_file else []
     inputs: Inputs = {}
@@ -88,7 +98,7 @@ def _goals(args: argparse.Namespace, system: System) -> list[Goal]:
 def cmd_plan(args: argparse.Namespace) -> int:
     system, warnings = load_live_system(args.system)
     print_warnings(warnings)
-    goals = _goals(args, system)
+    goals = read_goals(args, system)
     marking = system.initial_marking()
     if args.state:
         marking, source = state_marking(args.state, system, what_if=True)
@@ -116,45 +126,50 @@ def cmd_plan(args: argparse.Namespace) -> int:
 
 
 def answer_line(plan: Plan) -> str:
-    if plan.answer == "strong":
-        return f"strong: at most {_moves(plan.moves or 0)}, whatever the outcomes"
-    if plan.answer == "cyclic":
-        retries = plan.retries
-        text = f"cyclic: {_moves(plan.moves or 0)} when outcomes are favourable"
+    return answer_text(plan.answer, plan.moves, plan.retries, plan.reason)
+
+
+def answer_text(answer: str, moves: int | None, retries: Sequence[str] = (), reason: str | None = None) -> str:
+    """A plan's answer in one line (``skinet plan``, and ``skinet goal`` for the pilot's reply)."""
+    if answer == "strong":
+        return f"strong: at most {moves_text(moves or 0)}, whatever the outcomes"
+    if answer == "cyclic":
+        text = f"cyclic: {moves_text(moves or 0)} when outcomes are favourable"
         return text + (f"; retries after {', '.join(retries)}" if retries else "")
-    return f"{plan.answer}: {plan.reason}"
+    return f"{answer}: {reason}" if reason else answer
 
 
 def plan_lines(plan: Plan) -> list[str]:
     out = [answer_line(plan)]
     if plan.steps:
         out.append("steps:")
-        out.extend(_step_lines(plan.steps, "  "))
+        out.extend(step_lines(plan.steps, "  "))
     s = plan.stats
     state = "complete" if s.complete else f"cut by the {'memory limit' if s.truncated_by == 'memory' else s.truncated_by}"
     out.append(f"{s.engine} engine: {s.markings} markings ({state}), {seconds(s.elapsed)}")
     return out
 
 
-def _moves(n: int) -> str:
+def moves_text(n: int) -> str:
     return f"{n} move{'' if n == 1 else 's'}"
 
 
-def _step_lines(steps: list[Step], indent: str) -> list[str]:
+def step_lines(steps: Sequence[Step | PlanStep], indent: str) -> list[str]:
+    """Numbered steps with their branches, indented (a plan's, or the pilot's :class:`PlanStep` copies)."""
     out = []
     for step in steps:
         head = f"{indent}{step.number}. "
         if step.action == "wait":
             out.append(f"{head}wait for {step.skillset}:{step.expect}")
         else:
-            given = f" with {_toml(step.inputs)}" if step.inputs else ""
+            given = f" with {toml_value(step.inputs)}" if step.inputs else ""
             out.append(f"{head}{step.skillset}:{step.action}{given}")
         for b in step.branches:
             out.extend(_branch_lines(b, " " * len(head)))
     return out
 
 
-def _branch_lines(b: Branch, indent: str) -> list[str]:
+def _branch_lines(b: Branch | PlanBranch, indent: str) -> list[str]:
     label = f"{indent}if {b.skillset}:{b.transition}"
     if b.then == "retry":
         return [f"{label}: retry from step {b.step}"]
@@ -162,18 +177,18 @@ def _branch_lines(b: Branch, indent: str) -> list[str]:
         return [f"{label}: continue at step {b.step}"]
     if b.then == "reached":
         return [f"{label}: the goal is reached"]
-    lines = [f"{label}:"] + _step_lines(b.steps, indent + "  ")
+    lines = [f"{label}:"] + step_lines(b.steps, indent + "  ")
     if b.step is not None:
         lines.append(f"{indent}  then continue at step {b.step}")
     return lines
 
 
-def _toml(value: Any) -> str:
+def toml_value(value: Any) -> str:
     """A value as TOML writes it inline (for inputs)."""
     if isinstance(value, Mapping):
-        return "{" + ", ".join(f"{k} = {_toml(v)}" for k, v in value.items()) + "}"
+        return "{" + ", ".join(f"{k} = {toml_value(v)}" for k, v in value.items()) + "}"
     if isinstance(value, list):
-        return "[" + ", ".join(_toml(v) for v in value) + "]"
+        return "[" + ", ".join(toml_value(v) for v in value) + "]"
     if isinstance(value, bool):
         return "true" if value else "false"
     return json.dumps(value) if isinstance(value, str) else str(value)

@@ -1,1 +1,2 @@
-"""The operator's live web dashboard (SPEC §7): a read-only Zenoh observer and a small web server."""
+"""The operator's live web dashboard (SPEC §7): a Zenoh observer, a small web server, and the goal box that
+hands goals to the pilot (SPEC §8, :mod:`~services.dashboard.goalbox`)."""

@@ -1,7 +1,8 @@
 """The dashboard as a command: ``skinet dashboard SYSTEM`` and ``python -m services.dashboard``.
 
-Opens a Zenoh session (read-only observer), serves the page, warns when no
-monitor of the system shows up, and runs until ``stop`` is set.  Errors (port
+Opens a Zenoh session (an observer; it asks the pilot only when the page sends
+a goal), serves the page, warns when no monitor of the system shows up, and
+runs until ``stop`` is set.  Errors (port
 in use, no router, refused login, bad system file) are raised as one-line
 :class:`~skinet.errors.SkinetError` for the caller's handler.
 """

@@ -8,7 +8,8 @@ monitor step for the timeline (paper Fig. 3/4); the violations, each with
 the step and event where its property went from holding to failing; and the
 model divergences and manager restarts of every monitor run it saw
 (:class:`Divergences`, kept by monitor instance and entry number, the last
-:data:`KEPT_DIVERGENCES`; issue 27 item 4).
+:data:`KEPT_DIVERGENCES`; issue 27 item 4); and the pilot's last status
+(:class:`PilotStatus`, SPEC §8: its goal, state, plan and next command).
 
 A monitor restart shows as a step counter going back: a new *epoch* starts, the
 timeline keeps the previous points.  The same step published again with a later
@@ -30,7 +31,7 @@ from skinet.errors import SkinetError
 from skinet.system import System
 from skinet.wire.convert import system_from_bundle
 from skinet.wire.messages import (
-    CanonicalEvent, Divergences, LiveState, ModelBundle, StateSpaceReport, UnsafeReport, Verdicts,
+    CanonicalEvent, Divergences, LiveState, ModelBundle, PilotStatus, StateSpaceReport, UnsafeReport, Verdicts,
 )
 
 Update = dict[str, Any]
@@ -60,6 +61,7 @@ class Board:
         self._last_seq = -1
         self._holds: dict[str, bool] = {}
         self._pending: list[tuple[Verdicts | UnsafeReport, bool]] = []
+        self.pilot: PilotStatus | None = None  # the pilot's last status (SPEC §8)
         self.divergences: OrderedDict[tuple[str, int], dict[str, Any]] = OrderedDict()  # (monitor, n) -> entry
         self._noted: OrderedDict[str, int] = OrderedDict()  # monitor run -> entries it noted (listed or older)
         self._forgotten = 0  # entries noted by runs no longer in _noted
@@ -91,7 +93,16 @@ class Board:
             return []
         if isinstance(message, Divergences):
             return self._divergences(message)
+        if isinstance(message, PilotStatus):
+            return self._pilot(message)
         return []
+
+    def _pilot(self, msg: PilotStatus) -> list[Update]:
+        """The pilot's status, unless an older copy of the one shown (same instance, lower or equal seq)."""
+        if self.pilot is not None and msg.pilot == self.pilot.pilot and msg.seq <= self.pilot.seq:
+            return []
+        self.pilot = msg
+        return [{"kind": "pilot", "message": _json(msg)}]
 
     def token(self, key: str, alive: bool) -> list[Update]:
         """A liveliness token ``skinet/<system>/alive/<service>/<id>`` appeared or vanished."""
@@ -231,6 +242,7 @@ class Board:
             "model": self._model_json(),
             "alive": self._alive_json(), "points": list(self.points), "violations": list(self.violations),
             "divergences": list(self.divergences.values()), "divergences_older": self.divergences_older,
+            "pilot": _json(self.pilot),
         }
 
 

@@ -1,11 +1,12 @@
 """A read-only Zenoh observer of one system, feeding a :class:`Board` (SPEC §7).
 
-Subscribes to the monitor's five result keys and to the liveliness tokens of the
-system's services and of the predictors; when a monitor appears (at start, or
-after a restart) it fetches the model bundle and the last publications (the
-monitor answers ``get`` on its result keys), so a view opened mid-mission is
-complete at once.  It publishes nothing and declares nothing a read-only ACL
-role refuses.  Listeners get every update, called from Zenoh's threads with the
+Subscribes to the monitor's five result keys, the pilot's status (SPEC §8) and to
+the liveliness tokens of the system's services and of the predictors; when a
+monitor or a pilot appears (at start, or after a restart) it fetches the model
+bundle and the last publications (the monitor and the pilot answer ``get`` on
+their keys), so a view opened mid-mission is complete at once.  It publishes
+nothing and declares nothing a read-only ACL role refuses; goals go to the pilot
+only when the page sends one (:meth:`Observer.goal`), under the session's login.  Listeners get every update, called from Zenoh's threads with the
 observer's lock held: they must not block.
 """
 
@@ -18,20 +19,24 @@ from collections.abc import Callable
 import zenoh
 from pydantic import BaseModel
 
+from services.common.goals import ask_pilot
 from services.common.zenoh_config import undeclare
 from services.dashboard.board import Board, Update
 from services.monitor.check import parse_command
+from skinet.errors import SkinetError
 from skinet.system import System
 from skinet.wire import keys
 from skinet.wire.codec import DecodeError, decode, encode
+from skinet.wire.convert import system_from_bundle
 from skinet.wire.messages import (
-    CheckReply, Divergences, LiveState, ModelBundle, StateSpaceReport, UnsafeReport, Verdicts,
+    CheckReply, Divergences, LiveState, ModelBundle, PilotGoalReply, PilotGoalRequest, PilotStatus, StateSpaceReport,
+    UnsafeReport, Verdicts,
 )
 
 Listener = Callable[[list[Update]], None]
 RESULTS: tuple[tuple[Callable[[str], str], type[BaseModel]], ...] = (
     (keys.state, LiveState), (keys.verdicts, Verdicts), (keys.unsafe, UnsafeReport),
-    (keys.state_space, StateSpaceReport), (keys.divergences, Divergences),
+    (keys.state_space, StateSpaceReport), (keys.divergences, Divergences), (keys.pilot_status, PilotStatus),
 )
 QUERY_TIMEOUT = 2.0
 
@@ -56,6 +61,8 @@ class Observer:
         self.name = keys.check_chunk(system, "system name")
         self.client = keys.check_chunk(client, "client name")
         self.board = Board(self.name, history, model)
+        self._model = model  # the system file's; else rebuilt from the monitor's bundle (:meth:`model`)
+        self._bundled: tuple[str, System | None] | None = None  # (digest, system) of the last bundle rebuilt
         self.malformed = 0
         self._lock = threading.Lock()
         self._listeners: list[Listener] = []
@@ -106,6 +113,25 @@ class Observer:
                 return decode(reply.ok.payload.to_bytes(), CheckReply)
         raise LookupError(f"no monitor of system '{self.name}' answered on {key}")
 
+    def model(self) -> System | None:
+        """The system: the file's, else the monitor's model bundle rebuilt (None before one came)."""
+        if self._model is not None:
+            return self._model
+        with self._lock:
+            bundle = self.board.model
+        if bundle is None:
+            return None
+        if self._bundled is None or self._bundled[0] != bundle.digest:
+            try:
+                self._bundled = (bundle.digest, system_from_bundle(bundle))
+            except SkinetError:
+                self._bundled = (bundle.digest, None)
+        return self._bundled[1]
+
+    def goal(self, request: PilotGoalRequest, timeout: float) -> PilotGoalReply:
+        """Ask the pilot under this session's login; raises :class:`~services.common.goals.NoPilot`."""
+        return ask_pilot(self.session, request, self.client, timeout)
+
     def close(self) -> None:
         self._closed.set()
         self._resync.set()
@@ -140,6 +166,8 @@ class Observer:
         if alive and key.split("/")[1:4:2] == [self.name, "monitor"]:
             self._monitor_seen.set()
             self._resync.set()
+        elif alive and key.split("/")[1:4:2] == [self.name, "pilot"]:
+            self._resync.set()  # its status
 
     def _emit(self, updates: list[Update]) -> None:
         if updates:

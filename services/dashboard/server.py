@@ -8,6 +8,11 @@ here: no CDN, works offline) and:
   ``EventSource`` reconnects by itself (``retry: 1000``) and gets a fresh snapshot.
 - ``GET /api/snapshot``: the snapshot as JSON.
 - ``GET /api/check?command=skillset:transition``: the monitor's command check, as JSON.
+- ``POST /api/goal``: the goal box (SPEC §8): a JSON form (``op``, ``goals``, ``inputs``,
+  ``mode``, ``replace``; :mod:`~services.dashboard.goalbox`) sent to the pilot under the
+  dashboard's login; answers ``{"ok": true, "reply": PilotGoalReply}``, or ``{"ok": false,
+  "error", "field", "line", "column"}`` for a goal that cannot be sent or was rejected (its
+  place in the form), or that no pilot answered.
 
 The server runs its asyncio loop in a thread of its own, so it can sit beside
 the embedded monitor of ``skinet run``; updates cross from Zenoh's threads with
@@ -26,7 +31,9 @@ from typing import Any
 
 from aiohttp import web
 
+from services.common.goals import GOAL_TIMEOUT, NoPilot
 from services.dashboard.board import Update
+from services.dashboard.goalbox import GoalFormError, goal_lines, goal_request, place
 from services.dashboard.observer import Observer
 from skinet.errors import SkinetError
 
@@ -105,6 +112,7 @@ class Dashboard:
         app.router.add_get("/events", self._events)
         app.router.add_get("/api/snapshot", self._snapshot)
         app.router.add_get("/api/check", self._check)
+        app.router.add_post("/api/goal", self._goal)
         self._runner = web.AppRunner(app, handle_signals=False, access_log=None, shutdown_timeout=1.0)
         await self._runner.setup()
         site = web.TCPSite(self._runner, self.host, self.port, reuse_address=True)
@@ -157,6 +165,29 @@ class Dashboard:
         except (ValueError, LookupError) as exc:
             return web.json_response({"ok": False, "error": str(exc)}, status=400 if isinstance(exc, ValueError) else 504)
         return web.json_response(reply.model_dump(mode="json"))
+
+    async def _goal(self, request: web.Request) -> web.Response:
+        try:
+            form = await request.json()
+        except ValueError:
+            form = None
+        if not isinstance(form, dict):
+            return web.json_response({"ok": False, "error": "expected a JSON object"}, status=400)
+        loop = asyncio.get_running_loop()
+        try:
+            model = await loop.run_in_executor(None, self.observer.model)
+            goal = goal_request(self.observer.name, form, model)
+            reply = await loop.run_in_executor(None, self.observer.goal, goal, GOAL_TIMEOUT)
+        except GoalFormError as exc:
+            return web.json_response({"ok": False, **exc.placed.json()})
+        except NoPilot as exc:
+            return web.json_response({"ok": False, "error": str(exc), "field": None}, status=504)
+        except SkinetError as exc:
+            return web.json_response({"ok": False, "error": str(exc), "field": None}, status=502)
+        if not reply.accepted:
+            lines = [n for n, _ in goal_lines(str(form.get("goals", "")))]
+            return web.json_response({"ok": False, **place(reply.reason, lines).json(), "rejected": True})
+        return web.json_response({"ok": True, "reply": reply.model_dump(mode="json")})
 
     async def _events(self, request: web.Request) -> web.StreamResponse:
         response = web.StreamResponse(headers={

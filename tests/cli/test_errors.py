@@ -52,6 +52,7 @@ FREE_TEXT = {
     ("skinet run", "--ros-distro"): "only humble changes the keys; any other name is a later one",
     **{(program, option): "any user name and password is sent; the router judges them (tests/deploy/test_operator_acl.py)"
        for program in ("skinet record", "skinet replay", "skinet run", "skinet router", "skinet watch", "skinet check",
+                       "skinet goal",
                        "skinet demo",
                        "skinet dashboard", "python -m services.monitor", "python -m services.predictor",
                        "python -m services.bridge_ros2", "python -m services.simulator")
@@ -205,6 +206,38 @@ def _cases() -> list[Case]:
     usage("skinet", "--engine", ("plan", SYSTEM, "reach spot:Busy", "--engine", "fast"),
           "argument --engine: invalid choice: 'fast' (choose from 'auto', 'explicit', 'symbolic')")
 
+    # skinet goal (issue 24 item 4): checked as skinet plan checks them when the system file is given, before
+    # any connection; with a system name the pilot checks them (tests/services/test_goal.py)
+    add("skinet", "system", ("goal", "{tmp}/missing.toml", "reach spot:Busy"), 1, missing)
+    add("skinet", "system", ("goal", "{tmp}/badname.toml", "reach spot:Busy"), 1, bad_name)
+    add("skinet", "system", ("goal", "a/b", "reach spot:Busy"), 1,
+        "skinet: error: system name 'a/b' cannot be used in a Zenoh key (letters, digits, _ - . only)")
+    add("skinet", "goals", ("goal", SYSTEM, "reach spot:Stnding"), 1,
+        "<goal>:1:7: error: unknown name 'spot:Stnding' (candidates: spot:Standing, spot:Sitting, spot:posture.Standing)")
+    add("skinet", "goals", ("goal", SYSTEM, "reach spot:Busy", "reach manipulator:Bussy"), 1,
+        "<goal 2>:1:7: error: unknown name 'manipulator:Bussy' (candidates: manipulator:Busy)")
+    add("skinet", "goals", ("goal", "spot_arm"), 1,
+        'skinet: error: no goals: give GOAL arguments (e.g. "reach spot:Standing") or --goals FILE (or --cancel, '
+        "--pause, --resume, --set-mode for the goal that runs)")
+    add("skinet", "goals", ("goal", "spot_arm", "--cancel", "--inputs", "x = 1"), 1,
+        "skinet: error: --cancel takes no goals: it acts on the goal that runs")
+    add("skinet", "--goals", ("goal", SYSTEM, "--goals", "{tmp}/missing.toml"), 1, missing)
+    add("skinet", "--goals", ("goal", SYSTEM, "--goals", "{tmp}/goals_formula.toml"), 1,
+        "{tmp}/goals_formula.toml:5:28: error: unknown name 'spot:Bussy' (candidates: spot:Busy)")
+    add("skinet", "--inputs", ("goal", "spot_arm", "reach spot:Busy", "--inputs", "target ="), 1,
+        "<--inputs>:1:9: error: invalid TOML: Invalid value")
+    add("skinet", "--inputs", ("goal", SYSTEM, "run spot:go_to_waypoint", "--inputs",
+                               "go_to_waypoint.target = {x = \"far\"}"), 1,
+        "<--inputs>:1:16: error: input 'target' of spot:go_to_waypoint (GeoPoint): expected float64 at x, got a string")
+    usage("skinet", "--max-retries", ("goal", "spot_arm", "reach spot:Busy", "--max-retries", "-1"),
+          "argument --max-retries: expected an integer from 0 to 100, got '-1'")
+    usage("skinet", "--set-mode", ("goal", "spot_arm", "--set-mode", "fly"),
+          "argument --set-mode: invalid choice: 'fly' (choose from 'guide', 'drive')")
+    add("skinet", "--set-mode", ("goal", "spot_arm", "reach spot:Busy", "--set-mode", "drive"), 1,
+        "skinet: error: --set-mode takes no goals: it acts on the goal that runs")
+    usage("skinet", "--timeout", ("goal", "spot_arm", "reach spot:Busy", "--timeout", "0"),
+          "argument --timeout: " + seconds.format("0"))
+
     # skinet demo
     add("skinet", "scenarios", ("demo", "{tmp}/missing.toml"), 1, missing)
     add("skinet", "scenarios", ("demo", "{tmp}/unknown_skillset.toml"), 1,
@@ -235,6 +268,7 @@ def _cases() -> list[Case]:
         "skinet": (("record", "spot_arm", "-o", "{tmp}/rec.jsonl", "--duration", "1"),
                    ("run", SYSTEM, "--once"), ("router",), ("watch", "spot_arm", "--wait", "0.5"),
                    ("check", "spot_arm", "spot:teleop.start", "--timeout", "0.5"),
+                   ("goal", "spot_arm", "reach spot:Busy", "--timeout", "0.5"),
                    ("dashboard", "spot_arm", "--port", "0", "--wait", "0"),
                    ("replay", "{tmp}/run.jsonl", "--linger", "0"), ("demo", "--live", "--linger", "0")),
         "python -m services.monitor": ((SYSTEM,),),

@@ -29,7 +29,7 @@ from services.dashboard.board import Board
 from services.monitor import start_monitor
 from skinet.files import load_system, load_typemap, read_text
 from skinet.mission import StepRecord, parse_scenario
-from skinet.wire.messages import LiveState, PropertyVerdict, UnsafeReport, Verdicts
+from skinet.wire.messages import LiveState, PilotStatus, PropertyVerdict, UnsafeReport, Verdicts
 from tests.services.conftest import REPO, client_args, free_port, open_client, open_router
 from tests.services.test_divergences import TEN
 from tests.services.test_monitor import Events
@@ -104,9 +104,15 @@ def css(driver, selector: str) -> list[dict[str, str]]:
         "Object.fromEntries([...e.attributes].map((a) => [a.name, a.value])), {text: e.textContent}))", selector)
 
 
-def screenshot(driver, tmp_path: Path, name: str) -> Path:
+def screenshot(driver, tmp_path: Path, name: str, element: str | None = None) -> Path:
+    """The page (or the element of id ``element``) as ``name`` in ``tmp_path`` (and ``$SKINET_SCREENSHOTS``)."""
     path = tmp_path / name
-    driver.save_screenshot(str(path))
+    if element is None:
+        driver.save_screenshot(str(path))
+    else:
+        from selenium.webdriver.common.by import By
+
+        driver.find_element(By.ID, element).screenshot(str(path))
     if os.environ.get("SKINET_SCREENSHOTS"):
         folder = Path(os.environ["SKINET_SCREENSHOTS"])
         folder.mkdir(parents=True, exist_ok=True)
@@ -351,6 +357,23 @@ def test_board_joins_steps_in_any_order_and_counts_violations_once() -> None:
         (0, 0, {"p": True}, None), (0, 1, {"p": False}, 7), (0, 2, {"p": False}, None), (1, 0, {"p": False}, None)]
 
 
+def test_board_keeps_the_pilots_last_status() -> None:
+    """A late copy of the pilot's status (its answer to the start-up query) never hides a newer one; a
+    restarted pilot (another instance) counts from 0 again."""
+    board = Board("s")
+
+    def status(seq: int, state: str, pilot: str = "p1") -> PilotStatus:
+        return PilotStatus(system="s", pilot=pilot, seq=seq, stamp=float(seq), state=state)
+
+    assert board.feed(status(2, "driving"), 0) == [{"kind": "pilot", "message": status(2, "driving").model_dump(
+        mode="json")}]
+    assert board.feed(status(1, "planning"), 0, initial=True) == []
+    assert board.feed(status(2, "driving"), 0) == []
+    assert [u["message"]["state"] for u in board.feed(status(3, "reached"), 0)] == ["reached"]
+    assert [u["message"]["state"] for u in board.feed(status(0, "idle", "p2"), 0)] == ["idle"]
+    assert board.snapshot()["pilot"]["pilot"] == "p2"
+
+
 def test_skinet_run_serves_the_dashboard_beside_its_monitor(tmp_path) -> None:
     import subprocess
     import sys
@@ -389,6 +412,10 @@ def test_skinet_run_serves_the_dashboard_beside_its_monitor(tmp_path) -> None:
 def test_no_violation_reads_none_not_a_numbered_none(browser, dashboard) -> None:
     """The empty violations list showed "1. none" (a numbered list item); it reads "none"."""
     browser.get(dashboard())
+    # With no pilot ever seen, its panel is one line (SPEC §8's goal box has nobody to send goals to).
+    until(browser, lambda d: css(d, "#status[data-connected=true]"), "the live status")
+    assert browser.execute_script("return document.getElementById('pilot-panel').innerText").strip() == (
+        "Pilot (no pilot alive: skinet run starts one, or python -m services.pilot)")
     until(browser, lambda d: css(d, "#violations li.none"), "the empty violations list")
     marker = browser.execute_script(
         "return getComputedStyle(document.querySelector('#violations li.none')).listStyleType")
@@ -585,3 +612,123 @@ def test_the_screenshot_target_photographs_the_live_dashboard(browser, tmp_path)
     colours = set(picture.getdata())
     assert (0xD6, 0x27, 0x28) in colours  # the violated-bar of the timeline (two violations so far)
     assert (0xFB, 0xD3, 0xD0) in colours  # the badge of an explicit constraint: the warning on arm_ready.start
+
+
+# -- the goal box: goals to the real pilot, its status and plan (SPEC §8, issue 24 item 4) --------------------
+
+PLAN_STAND_READY = ["1. spot:init_power.start", "2. wait for spot:init_power.success.powered_on",
+                    "3. spot:stand_up.start", "4. wait for spot:stand_up.success.standing",
+                    "5. manipulator:arm_ready.start", "6. wait for manipulator:arm_ready.success.ready"]
+# Every step the page highlights, in order, as a MutationObserver of the plan sees it (repeats dropped).
+RECORD_HIGHLIGHTS = """
+window.highlights = [];
+new MutationObserver(() => {
+  const n = document.querySelector('#plan li.step.next > .label');
+  const t = n ? n.textContent : null;
+  if (t && window.highlights[window.highlights.length - 1] !== t) window.highlights.push(t);
+}).observe(document.getElementById('plan'), {childList: true, subtree: true});
+"""
+
+
+def type_goal(driver, text: str) -> None:
+    from selenium.webdriver.common.by import By
+
+    box = driver.find_element(By.ID, "goal-text")
+    box.clear()
+    box.send_keys(text)
+    driver.find_element(By.ID, "goal-start").click()
+
+
+def click(driver, selector: str) -> None:
+    from selenium.webdriver.common.by import By
+
+    driver.find_element(By.CSS_SELECTOR, selector).click()
+
+
+def pilot_state(driver) -> str:
+    shown = css(driver, "#pilot-status .pilot-state")
+    return shown[0]["data-state"] if shown else ""
+
+
+def test_the_goal_box_drives_a_goal_with_the_next_step_highlighted(browser, dashboard, client_factory, spot_arm,
+                                                                   tmp_path) -> None:
+    from selenium.webdriver.common.by import By
+
+    from tests.services.pilot_robot import Implementations, Robot
+
+    robot = Robot(client_factory, *spot_arm)
+    impl = Implementations(robot.sim, robot.system, delay=1.0)  # each outcome a second after its start: seen
+    try:
+        browser.get(dashboard())
+        until(browser, lambda d: css(d, "#services [data-service=pilot][data-alive='1']"), "the pilot alive")
+        until(browser, lambda d: pilot_state(d) == "idle", "the idle pilot")
+
+        # A typo is shown in place: the message, the line with a caret under the column, the box outlined.
+        type_goal(browser, "reach spot:Standin and manipulator:RD")
+        error = until(browser, lambda d: css(d, "#goal-error[data-line]:not([hidden])"), "the parse error")[0]
+        assert (error["data-field"], error["data-line"], error["data-column"]) == ("goals", "1", "7")
+        assert css(browser, "#goal-error .message")[0]["text"] == (
+            "goal line 1, column 7: unknown name 'spot:Standin' (candidates: spot:Standing, spot:posture.Standing)")
+        assert css(browser, "#goal-error .excerpt")[0]["text"] == "reach spot:Standin and manipulator:RD\n      ^"
+        assert "invalid" in css(browser, "#goal-text")[0]["class"]
+        screenshot(browser, tmp_path, "dashboard-goal-error.png")
+        # The pilot's own refusal (no plan) is shown too, with its reason.
+        type_goal(browser, "reach spot:Busy and manipulator:Busy")
+        until(browser, lambda d: css(d, "#goal-error[data-rejected=true]:not([hidden])"), "the pilot's refusal")
+        assert "has no plan from the live state: none: the goal is unsafe" in css(browser, "#goal-error")[0]["text"]
+
+        # A good goal in drive mode: the plan, its next step highlighted as the pilot moves on, then reached.
+        click(browser, "input[name=goal-mode][value=drive]")
+        browser.execute_script(RECORD_HIGHLIGHTS)
+        type_goal(browser, "reach spot:Standing and manipulator:RD")
+        until(browser, lambda d: css(d, "#goal-error[hidden]"), "the error gone")
+        until(browser, lambda d: pilot_state(d) == "waiting for outcome", "the first command on its way")
+        screenshot(browser, tmp_path, "dashboard-goal-driving.png")
+        until(browser, lambda d: [s["data-number"] for s in css(d, "#plan li.step.next")] == ["4"],
+              "the fourth step highlighted")
+        screenshot(browser, tmp_path, "goalbox.png", "pilot-panel")  # docs/goalbox.png
+        until(browser, lambda d: pilot_state(d) == "reached", "the goal reached", 60)
+        labels = [s["text"] for s in css(browser, "#plan > li.step > .label")]
+        assert labels == PLAN_STAND_READY
+        seen = browser.execute_script("return window.highlights")
+        assert seen == sorted(seen, key=PLAN_STAND_READY.index), seen  # it only moved on
+        assert set(PLAN_STAND_READY[1::2]) <= set(seen), seen  # every wait for an outcome, each a second long
+        assert not css(browser, "#plan li.step.next")  # reached: nothing left to do
+        assert robot.actuator.sent == ["spot:init_power.start", "spot:stand_up.start", "manipulator:arm_ready.start"]
+        facts = {f["data-fact"]: f["text"] for f in css(browser, "#pilot-status [data-fact]")}
+        assert facts["commands"] == "3 commands sent" and facts["mode"] == "drive mode" and "denied" not in facts
+
+        # Guide mode with skill inputs, pause, resume, then switched to drive and cancelled while its skill runs.
+        impl.hold.add(("manipulator", "arm_RD_to_HP"))
+        click(browser, "input[name=goal-mode][value=guide]")
+        browser.find_element(By.ID, "goal-inputs").send_keys("go_to_waypoint.target = {x = 12.0, y = 3.5, z = 0.0}")
+        type_goal(browser, "run spot:go_to_waypoint")
+        until(browser, lambda d: pilot_state(d) == "guiding", "guiding")
+        next_step = until(browser, lambda d: css(d, "#plan li.step.next"), "the highlighted step")[0]
+        assert (next_step["data-number"], next_step["data-action"]) == ("1", "arm_RD_to_HP.start")
+        assert "3. spot:go_to_waypoint.start with {target = {x = 12, y = 3.5, z = 0}}" in [
+            s["text"] for s in css(browser, "#plan li.step > .label")]
+        click(browser, "#goal-pause")
+        until(browser, lambda d: pilot_state(d) == "paused", "paused")
+        assert css(browser, "#goal-pause")[0].get("disabled") is not None
+        assert css(browser, "#goal-resume")[0].get("disabled") is None
+        click(browser, "#goal-resume")
+        until(browser, lambda d: pilot_state(d) == "guiding", "guiding again")
+        assert robot.actuator.sent[-1] == "manipulator:arm_ready.start"  # guide mode sent nothing
+        click(browser, "input[name=goal-mode][value=drive]")
+        until(browser, lambda d: robot.actuator.sent[-1] == "manipulator:arm_RD_to_HP.start", "the command sent in drive")
+        click(browser, "#goal-cancel")
+        until(browser, lambda d: pilot_state(d) == "cancelled", "cancelled")
+        assert css(browser, "#goal-cancel")[0].get("disabled") is not None
+        screenshot(browser, tmp_path, "dashboard-goal-cancelled.png")
+
+        # The pilot gone: the box stays (its last status too), and a goal gets the reason nobody took it.
+        robot.pilot.close()
+        until(browser, lambda d: css(d, "#pilot-panel[data-pilot=gone]"), "the pilot gone")
+        type_goal(browser, "reach spot:Standing")
+        until(browser, lambda d: css(d, "#goal-error:not([hidden])"), "the error")
+        assert css(browser, "#goal-error .message")[0]["text"] == (
+            "no pilot answers on skinet/spot_arm/pilot/goal/local: is `skinet run` or the pilot service running?")
+    finally:
+        impl.close()
+        robot.close()

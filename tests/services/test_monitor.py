@@ -456,13 +456,15 @@ def test_skinet_run_listens_for_a_bridge_and_logs_changes(tmp_path):
     bridge = None
     try:
         assert proc.stdout is not None
-        connect = [proc.stdout.readline() for _ in range(6)]  # issue 27: where it listens, what reaches it
+        connect = [proc.stdout.readline() for _ in range(7)]  # issue 27: where it listens, what reaches it
         assert connect == [f"skinet run: system spot_arm, listening on {endpoint}; connect with:\n",
                            f"  skinet watch spot_arm -e {endpoint}\n", f"  skinet dashboard spot_arm -e {endpoint}\n",
                            f"  skinet check spot_arm spot:init_power.start -e {endpoint}\n",
                            f"  python -m services.bridge_ros2 {SYSTEM_FILE} -e {endpoint}   (the robot's side)\n",
                            "  pilot: goals on skinet/spot_arm/pilot/goal/<client> (<client>: your login, 'local' "
-                           "without one), status on skinet/spot_arm/pilot/status\n"]
+                           "without one), status on skinet/spot_arm/pilot/status\n",
+                           f"  skinet goal spot_arm \"run spot:init_power\" -e {endpoint}   (guided; --drive: the pilot "
+                           "sends the commands)\n"]
         assert proc.stdout.readline().startswith("[0] start")  # listening now
         bridge = open_client(endpoint)  # a bridge connects to the embedded peer
         watch = LivelinessWatch(bridge, keys.alive("spot_arm", "monitor", "*"))

@@ -6,7 +6,7 @@
 const view = {
   system: "", epoch: 0, state: null, verdicts: null, unsafe: null, stateSpace: null, stateSpaceT: null,
   model: { digest: null, lanes: {} }, alive: {}, points: [], violations: [], restarts: [],
-  divergences: [], divergencesOlder: 0,
+  divergences: [], divergencesOlder: 0, pilot: null,
   connected: false, lastMessage: null,
 };
 const NS = "http://www.w3.org/2000/svg";
@@ -56,9 +56,11 @@ function apply(u) {
       view.unsafe = u.unsafe; view.stateSpace = u.state_space; view.stateSpaceT = u.state_space_t;
       view.model = u.model; view.alive = u.alive; view.points = u.points; view.violations = u.violations;
       view.divergences = u.divergences || []; view.divergencesOlder = u.divergences_older || 0;
+      view.pilot = u.pilot || null;
       view.lastPointAt = Date.now() / 1000;
       break;
     case "divergences": addDivergences(u.added, u.older); break;
+    case "pilot": view.pilot = u.message; break;
     case "state": view.state = u.message; break;
     case "verdicts": view.verdicts = u.message; break;
     case "unsafe": view.unsafe = u.message; break;
@@ -98,6 +100,7 @@ function render() {
   renderSpace();
   renderViolations();
   renderDivergences();
+  renderPilot();
   renderTimeline();
 }
 
@@ -107,7 +110,7 @@ function renderHeader() {
   st.textContent = view.connected ? "live" : "disconnected, reconnecting\u2026";
   const monitors = view.alive.monitor || [];
   const replay = monitors.length > 0 && monitors.every((id) => id.startsWith("replay-"));  // skinet replay's token
-  const services = [["monitor", "monitor"], ["bridge_ros2", "bridge"], ["predictor", "predictors"]].map(([s, label]) => {
+  const services = [["monitor", "monitor"], ["bridge_ros2", "bridge"], ["predictor", "predictors"], ["pilot", "pilot"]].map(([s, label]) => {
     const ids = view.alive[s] || [];
     const up = s === "predictor" ? ids.length : (s === "monitor" && replay ? "replay" : "up");
     return el("span", { class: "service " + (ids.length ? "up" : "down"), "data-service": s, "data-alive": ids.length,
@@ -515,6 +518,168 @@ function updateNames() {
   list.replaceChildren(...[...new Set(names)].map((n) => el("option", { value: n })));
 }
 
+// -- the pilot: goal box, status, plan (SPEC §8) ---------------------------------------
+
+const ACTIVE = ["planning", "guiding", "driving", "waiting for outcome", "paused", "waiting for monitor"];
+const plan = { goal: 0, steps: [], answer: null, moves: null, at: -1 };  // the plan shown and its next step (flat index)
+
+function tomlValue(v) {  // inputs as TOML writes them inline, as skinet plan and skinet goal print them
+  if (Array.isArray(v)) return `[${v.map(tomlValue).join(", ")}]`;
+  if (v && typeof v === "object") return `{${Object.entries(v).map(([k, x]) => `${k} = ${tomlValue(x)}`).join(", ")}}`;
+  return typeof v === "string" ? JSON.stringify(v) : String(v);
+}
+
+function commandText(c) {
+  const inputs = c.inputs && Object.keys(c.inputs).length ? ` with ${tomlValue(c.inputs)}` : "";
+  return `${c.skillset}:${c.transition}${inputs}`;
+}
+
+function flatSteps(steps, out) {  // depth first, as the plan lists them: each step, then its branches' routes
+  for (const s of steps) { out.push(s); for (const b of s.branches || []) flatSteps(b.steps || [], out); }
+  return out;
+}
+
+// The step the pilot is at: the one whose command is `next` (or, waiting for an outcome, the next wait), searched
+// from the one highlighted before, so the highlight moves on along the plan (and back on a retry).
+function nextStep(p, flat) {
+  if (!ACTIVE.includes(p.state)) return -1;
+  const waiting = !p.next && ["waiting for outcome", "guiding", "driving"].includes(p.state);
+  if (!p.next && !waiting) return plan.at;  // planning, paused: where it was
+  const same = (s) => (p.next ? s.skillset === p.next.skillset && s.action === p.next.transition : s.action === "wait");
+  const from = Math.max(0, plan.at);
+  for (let k = from; k < flat.length; k++) if (same(flat[k])) return k;
+  for (let k = 0; k < from; k++) if (same(flat[k])) return k;
+  return -1;
+}
+
+function stepNodes(steps, flat) {
+  return steps.map((s) => {
+    const k = flat.indexOf(s);
+    const label = s.action === "wait" ? `${s.number}. wait for ${s.skillset}:${s.expect}`
+      : `${s.number}. ${s.skillset}:${s.action}${s.inputs ? " with " + tomlValue(s.inputs) : ""}`;
+    const branches = (s.branches || []).map((b) => {
+      const head = `if ${b.skillset}:${b.transition}`;
+      if (b.then === "retry") return el("li", { class: "branch", "data-then": b.then }, `${head}: retry from step ${b.step}`);
+      if (b.then === "continue") return el("li", { class: "branch", "data-then": b.then }, `${head}: continue at step ${b.step}`);
+      if (b.then === "reached") return el("li", { class: "branch", "data-then": b.then }, `${head}: the goal is reached`);
+      return el("li", { class: "branch", "data-then": b.then }, `${head}:`, el("ol", {}, ...stepNodes(b.steps || [], flat)),
+        b.step ? `then continue at step ${b.step}` : "");
+    });
+    return el("li", { class: "step" + (k === plan.at ? " next" : ""), "data-number": s.number, "data-action": s.action,
+      "data-skillset": s.skillset, "data-next": k === plan.at }, el("span", { class: "label" }, label),
+      branches.length ? el("ul", { class: "branches" }, ...branches) : "");
+  });
+}
+
+function renderPilot() {
+  const p = view.pilot, alive = (view.alive.pilot || []).length;
+  // With no pilot at all (alive or heard of), the panel is one line: nothing to send goals to.
+  document.getElementById("pilot-panel").dataset.pilot = alive ? "alive" : p ? "gone" : "none";
+  document.getElementById("pilot-service").textContent = alive ? ""
+    : "(no pilot alive: skinet run starts one, or python -m services.pilot)";
+  const active = p && ACTIVE.includes(p.state);
+  document.getElementById("goal-pause").disabled = !active || p.state === "paused";
+  document.getElementById("goal-resume").disabled = !(p && p.state === "paused");
+  document.getElementById("goal-cancel").disabled = !active;
+  if (active && !modeClicked) for (const r of document.querySelectorAll("input[name=goal-mode]")) r.checked = r.value === p.mode;
+  if (!p) { fill("pilot-status", el("span", { class: "muted" }, "no pilot status yet")); fill("plan"); return; }
+  if (p.goal_id > plan.goal) Object.assign(plan, { goal: p.goal_id, steps: [], answer: null, moves: null, at: -1 });
+  const mine = p.goal_id === plan.goal;  // else the status is of a goal older than the reply just shown
+  if (mine && p.steps && p.steps.length) plan.steps = p.steps;
+  if (mine && p.answer) { plan.answer = p.answer; plan.moves = p.moves_left; }
+  const flat = flatSteps(plan.steps, []);
+  if (mine) plan.at = nextStep(p, flat);
+  const facts = [];
+  const fact = (name, ...text) => facts.push(el("span", { "data-fact": name }, ...text));
+  if (p.goal_id) fact("goal", `goal ${p.goal_id}` + (p.client ? ` of ${p.client}` : ""));
+  if (p.goals.length) fact("goals", p.goals.length > 1 ? `${p.index + 1}/${p.goals.length}: ${p.goals[p.index] || ""}` : p.goals[0]);
+  fact("mode", `${p.mode} mode`);
+  if (p.next) fact("next", "next ", el("strong", { class: "mono" }, commandText(p.next)));
+  if (p.moves_left !== null && active) fact("moves", `${p.moves_left} move${p.moves_left === 1 ? "" : "s"} left`);
+  const retries = Object.entries(p.retries || {});
+  if (retries.length) fact("retries", "retries " + retries.map(([k, n]) => `${k} ${n}`).join(", "));
+  fact("commands", `${p.commands} command${p.commands === 1 ? "" : "s"} sent`);
+  if (p.denied) facts.push(el("span", { "data-fact": "denied", class: "denied" }, `${p.denied} denied by the check`));
+  fill("pilot-status", el("span", { class: "pilot-state", "data-state": p.state, "data-goal": p.goal_id },
+    p.state + (p.reason ? `: ${p.reason}` : "")), el("span", { class: "facts" }, ...facts));
+  document.getElementById("plan-answer").textContent = plan.answer
+    ? `(${plan.answer}${plan.moves !== null && active ? `, ${plan.moves} move${plan.moves === 1 ? "" : "s"} from here` : ""})`
+    : "";
+  fill("plan", ...stepNodes(plan.steps, flat));
+}
+
+// Errors point into the box: the message, the line with a caret under the column, and the cursor put there.
+function showGoalError(body) {
+  const box = document.getElementById("goal-error");
+  for (const id of ["goal-text", "goal-inputs"]) document.getElementById(id).classList.remove("invalid");
+  if (!body) { box.hidden = true; box.replaceChildren(); return; }
+  box.hidden = false;
+  Object.assign(box.dataset, { field: body.field || "", line: body.line || "", column: body.column || "",
+    rejected: !!body.rejected });
+  const where = body.field && body.line
+    ? `${body.field === "inputs" ? "skill inputs" : "goal"} line ${body.line}, column ${body.column}: ` : "";
+  const parts = [el("div", { class: "message", title: body.error }, where + (body.detail || body.error))];
+  if (body.field && body.line) {
+    const input = document.getElementById(body.field === "inputs" ? "goal-inputs" : "goal-text");
+    const lines = input.value.split("\n"), text = lines[body.line - 1] || "";
+    parts.push(el("pre", { class: "excerpt" }, `${text}\n${" ".repeat(Math.max(0, body.column - 1))}^`));
+    input.classList.add("invalid");
+    const offset = lines.slice(0, body.line - 1).reduce((n, l) => n + l.length + 1, 0) + body.column - 1;
+    input.focus();
+    input.setSelectionRange(offset, offset + 1);
+  }
+  box.replaceChildren(...parts);
+}
+
+async function askPilot(form) {
+  try {
+    const r = await fetch("/api/goal", { method: "POST", headers: { "Content-Type": "application/json" },
+      body: JSON.stringify(form) });
+    const body = await r.json();
+    showGoalError(body.ok ? null : body);
+    if (body.ok && form.op === "goal") {
+      const reply = body.reply;
+      Object.assign(plan, { goal: reply.goal_id, steps: reply.steps, answer: reply.answer, moves: reply.moves, at: -1 });
+      schedule();
+    }
+    return body.ok;
+  } catch (e) {
+    showGoalError({ error: `the dashboard did not answer: ${e}` });
+    return false;
+  }
+}
+
+let modeClicked = false;  // a mode change on its way to the pilot: the radios keep the operator's choice meanwhile
+
+function chosenMode() {
+  return document.querySelector("input[name=goal-mode]:checked").value;
+}
+
+function initGoalBox() {
+  document.getElementById("goal-form").addEventListener("submit", (e) => {
+    e.preventDefault();
+    askPilot({ op: "goal", goals: document.getElementById("goal-text").value,
+      inputs: document.getElementById("goal-inputs").value, mode: chosenMode(),
+      replace: document.getElementById("goal-replace").checked });
+  });
+  for (const id of ["goal-pause", "goal-resume", "goal-cancel"]) {
+    const button = document.getElementById(id);
+    button.addEventListener("click", () => askPilot({ op: button.dataset.op, mode: chosenMode() }));
+  }
+  for (const radio of document.querySelectorAll("input[name=goal-mode]")) {
+    radio.addEventListener("change", async () => {  // a goal that runs switches at once; else the next goal's mode
+      if (!(view.pilot && ACTIVE.includes(view.pilot.state))) return;
+      modeClicked = true;
+      await askPilot({ op: "mode", mode: chosenMode() });
+      modeClicked = false;
+      schedule();
+    });
+  }
+  for (const id of ["goal-text", "goal-inputs"]) {
+    document.getElementById(id).addEventListener("input", () => showGoalError(null));
+  }
+}
+
 // -- connection ---------------------------------------------------------------------
 
 function connect() {
@@ -530,6 +695,7 @@ function connect() {
 }
 
 document.getElementById("check-form").addEventListener("submit", check);
+initGoalBox();
 initZoom();
 window.addEventListener("resize", schedule);
 setInterval(schedule, 1000);  // ages and the timeline's right edge move on

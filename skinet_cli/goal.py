@@ -1,0 +1,322 @@
+"""``skinet goal``: give a running pilot a goal and follow it to its end (SPEC §8, issue 24 item 4).
+
+Sends a :class:`~skinet.wire.messages.PilotGoalRequest` on
+``skinet/<system>/pilot/goal/<login>``, prints the reply (the plan's answer and
+first steps as ``skinet plan`` prints them, or the reason of a rejection), then
+one line per change of ``skinet/<system>/pilot/status`` until the goal ends.
+Goals are checked here first when the system file is at hand, so a typo is
+``FILE:LINE:COL`` before any connection; the pilot checks them again (it has the
+live model).  Ctrl-C, from the request on, cancels the goal the pilot accepted.
+Exit status: 0 reached, 1 failed or cancelled (or an error: no pilot, no
+router), 2 rejected.  Cost: one query, then O(1) per status received.
+"""
+
+from __future__ import annotations
+
+import argparse
+import queue
+import signal
+import sys
+import time
+from typing import TYPE_CHECKING, Any
+
+from services.common.zenoh_config import add_zenoh_args
+from skinet_cli.options import count, seconds
+from skinet_cli.plan import add_goal_args
+
+if TYPE_CHECKING:
+    from skinet.wire.messages import PilotCommand, PilotGoalReply, PilotStatus
+
+HELP = "give a running pilot a goal (guide or drive) and follow it until it ends (SPEC §8)"
+DESCRIPTION = """\
+Send goals to the pilot of a running system (skinet run, or the pilot service)
+and follow them. The pilot plans from the live marking as skinet plan does and
+either guides (it shows the next command; you send it) or, with --drive, sends
+each command to the skillset managers itself, only after the monitor's check
+allows it under the strict policy. The reply (the plan's answer and its first
+steps) is printed, then one line per change of the pilot's status (state, next
+command, moves left, retries, commands sent) until the goal ends. Ctrl-C
+cancels the goal. Exit status: 0 reached, 1 failed or cancelled (or no pilot,
+no router), 2 rejected (a malformed goal, a goal with no plan, another goal
+running without --replace, a login that may not send goals)."""
+EPILOG = """\
+goals (as in skinet plan):
+  reach FORMULA                      a marking where FORMULA holds (the property language)
+  run SKILLSET:SKILL                 start SKILL and have it end in a success mode
+  run SKILLSET:SKILL.success.MODE    ... in that success mode
+
+examples, with a robot connected to `skinet run skillsets/spot_arm.toml --listen tcp/127.0.0.1:7447`
+(tests/services/test_goal.py runs them all, in order):
+  skinet goal skillsets/spot_arm.toml "reach spot:Standing and manipulator:RD" --drive -e tcp/127.0.0.1:7447
+  skinet goal spot_arm "run spot:go_to_waypoint" --drive -e tcp/127.0.0.1:7447 \\
+      --inputs 'go_to_waypoint.target = {x = 12.0, y = 3.5, z = 0.0}'
+  skinet goal skillsets/spot_arm.toml --goals skillsets/goals/walk.toml --drive -e tcp/127.0.0.1:7447
+
+guide mode (the pilot shows each command, you send it); from another terminal, pause it, switch it
+to drive and resume it (it then sends the commands itself):
+  skinet goal spot_arm "reach spot:Sitting" -e tcp/127.0.0.1:7447
+  skinet goal spot_arm --pause -e tcp/127.0.0.1:7447
+  skinet goal spot_arm --set-mode drive -e tcp/127.0.0.1:7447
+  skinet goal spot_arm --resume -e tcp/127.0.0.1:7447
+
+Through a router with logins, log in as an operator-role user (--user operator --password-file
+~/.config/skinet/secrets/operator.password, or --zenoh-config from skinet client-config --user
+operator): the router lets no other user send goals, and says nothing to them (no pilot answers)."""
+
+EXIT_REACHED, EXIT_ENDED, EXIT_REJECTED = 0, 1, 2
+POLL = 0.2  # seconds between looks at Ctrl-C while waiting for a status
+CANCEL_WAIT = 3.0  # seconds to wait for the pilot's `cancelled` after Ctrl-C
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    c = sub.add_parser("goal", help=HELP, description=DESCRIPTION, epilog=EPILOG,
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    c.add_argument("system", metavar="SYSTEM",
+                   help="system file (.toml: the goals are checked here first) or system name")
+    add_goal_args(c)  # as skinet plan's; a --goals file is sent as its text, so errors come back as FILE:LINE:COL
+    c.add_argument("--drive", action="store_true",
+                   help="the pilot sends the commands itself (default: guide, it shows each one and you send it)")
+    c.add_argument("--replace", action="store_true", help="replace a goal that runs (else the pilot rejects the new one)")
+    c.add_argument("--max-retries", type=count(0, 100), default=3, metavar="N",
+                   help="failures of one skill after which the goal fails (default: 3)")
+    ops = c.add_mutually_exclusive_group()
+    ops.add_argument("--cancel", dest="op", action="store_const", const="cancel", help="cancel the goal that runs")
+    ops.add_argument("--pause", dest="op", action="store_const", const="pause",
+                     help="pause the goal that runs (no command is sent until --resume)")
+    ops.add_argument("--resume", dest="op", action="store_const", const="resume", help="resume a paused goal")
+    ops.add_argument("--set-mode", choices=("guide", "drive"), metavar="MODE",
+                     help="switch the goal that runs to guide or drive")
+    c.add_argument("--timeout", type=seconds(), default=10.0,
+                   help="seconds to wait for the pilot's reply (it plans first; default: 10)")
+    add_zenoh_args(c)
+    c.set_defaults(func=cmd_goal, op=None)
+
+
+def cmd_goal(args: argparse.Namespace) -> int:
+    from services.common.goals import NoPilot, ask_pilot
+    from services.common.zenoh_config import (
+        check_connected, client_name, config_from_args, open_session, wait_connected, warn_on_stderr,
+    )
+    from services.dashboard.app import resolve_system
+    from skinet.errors import SkinetError
+    from skinet.wire.messages import PilotGoalReply, PilotGoalRequest
+
+    name, system = resolve_system(args.system)
+    op = "mode" if args.set_mode else args.op
+    request = PilotGoalRequest(system=name, op=op or "goal", mode=args.set_mode or ("drive" if args.drive else "guide"))
+    if op is None:
+        request = request.model_copy(update=_goal_fields(args, system))
+    elif args.goals or args.goals_file or args.inputs:
+        raise SkinetError(f"--{'set-mode' if op == 'mode' else op} takes no goals: it acts on the goal that runs")
+    config = config_from_args(args)
+    session = open_session(config, warn_on_stderr("skinet goal"))
+
+    def ask(request: PilotGoalRequest, timeout: float = args.timeout) -> PilotGoalReply:
+        """The pilot's reply; with none, an endpoint still unreached is the reason given, else no pilot."""
+        try:
+            return ask_pilot(session, request, client_name(config), timeout)
+        except NoPilot:
+            check_connected(session, config)
+            raise
+
+    try:
+        wait_connected(session, config, min(args.timeout, 2.0))
+        if op is not None:
+            return _operate(session, request, ask)
+        follower = _Follower(session, name)  # before the request: no change is missed
+        # Ctrl-C is noted, not raised: one that comes while the pilot plans (Zenoh's get holds it until the reply
+        # is in) or before the follower starts still cancels the goal the reply accepted.
+        ctrl_c: list[float] = []
+        previous = signal.signal(signal.SIGINT, lambda *_: ctrl_c.append(time.monotonic()))
+        try:
+            reply = ask(request)
+            if not reply.accepted:
+                print(f"goal rejected by the pilot: {reply.reason}", file=sys.stderr)
+                return EXIT_REJECTED
+            _print_reply(reply, request.mode)
+            return follower.follow(reply.goal_id, lambda: _cancel(name, ask), ctrl_c)
+        finally:
+            signal.signal(signal.SIGINT, previous)
+            follower.close()
+    finally:
+        session.close()
+
+
+def _goal_fields(args: argparse.Namespace, system: Any) -> dict[str, Any]:
+    """The request's goals, mission and inputs; checked first against ``system`` (when the file is at hand)."""
+    from skinet.errors import SkinetError
+    from skinet.files import read_text
+    from skinet.tomltext import parse_toml
+    from skinet_cli.plan import read_goals
+
+    if not args.goals and not args.goals_file:
+        raise SkinetError("no goals: give GOAL arguments (e.g. \"reach spot:Standing\") or --goals FILE "
+                          "(or --cancel, --pause, --resume, --set-mode for the goal that runs)")
+    if system is not None:
+        read_goals(argparse.Namespace(system=args.system, goals_file=args.goals_file, inputs=args.inputs,
+                                      goals=args.goals), system)
+    fields: dict[str, Any] = {"goals": list(args.goals), "replace": args.replace, "max_retries": args.max_retries}
+    if args.inputs is not None:
+        fields["inputs"] = parse_toml(args.inputs, "<--inputs>")
+    if args.goals_file:
+        fields["mission"], fields["mission_name"] = read_text(args.goals_file), args.goals_file
+    return fields
+
+
+def _operate(session: Any, request: Any, ask: Any) -> int:
+    """Cancel, pause, resume or switch mode: print the pilot's reply (``ask(request)``) and its status."""
+    from services.common.goals import pilot_status
+
+    reply = ask(request)
+    what = f"mode {request.mode}" if request.op == "mode" else request.op
+    if not reply.accepted:
+        print(f"{what} rejected by the pilot: {reply.reason}", file=sys.stderr)
+        return EXIT_REJECTED
+    print(f"{what}: done (goal {reply.goal_id})" if reply.goal_id else f"{what}: done")
+    status = pilot_status(session, request.system)
+    if status is not None:
+        print(status_line(status))
+    return 0
+
+
+def _cancel(system: str, ask: Any) -> None:
+    from skinet.wire.messages import PilotGoalRequest
+
+    print("cancelled by Ctrl-C: asking the pilot to cancel the goal", flush=True)
+    reply = ask(PilotGoalRequest(system=system, op="cancel"), CANCEL_WAIT)
+    if not reply.accepted:
+        print(f"the pilot did not cancel: {reply.reason}", file=sys.stderr)
+
+
+def _print_reply(reply: PilotGoalReply, mode: str) -> None:
+    from skinet_cli.plan import answer_text, step_lines
+
+    how = "the pilot sends each command" if mode == "drive" else "the pilot shows each command, you send it"
+    print(f"goal {reply.goal_id} accepted ({mode} mode: {how})")
+    if reply.answer is not None:
+        print(answer_text(reply.answer, reply.moves))
+    if reply.steps:
+        print("steps:")
+        print("\n".join(step_lines(reply.steps, "  ")))
+    sys.stdout.flush()
+
+
+def command_text(command: PilotCommand) -> str:
+    from skinet_cli.plan import toml_value
+
+    given = f" with {toml_value(command.inputs)}" if command.inputs else ""
+    return f"{command.skillset}:{command.transition}{given}"
+
+
+def status_line(s: PilotStatus, mode: bool = False) -> str:
+    """One line of the pilot's status: ``STATE[: REASON] — goal i/n, next ..., moves left, retries, commands``;
+    ``mode``: say the mode too (it has just changed)."""
+    from skinet_cli.plan import moves_text
+
+    parts = [f"now in {s.mode} mode"] if mode else []
+    if len(s.goals) > 1 and s.index < len(s.goals):
+        parts.append(f"goal {s.index + 1}/{len(s.goals)} {s.goals[s.index]}")
+    if s.next is not None:
+        parts.append(f"next {command_text(s.next)}")
+    if s.moves_left is not None and s.state not in ("reached", "failed", "cancelled"):
+        parts.append(f"{moves_text(s.moves_left)} left")
+    if s.retries:
+        parts.append("retries " + ", ".join(f"{k} {n}" for k, n in sorted(s.retries.items())))
+    if s.mode == "drive" or s.commands:
+        parts.append(f"{s.commands} command{'' if s.commands == 1 else 's'} sent")
+    if s.denied:
+        parts.append(f"{s.denied} denied by the check")
+    head = s.state + (f": {s.reason}" if s.reason else "")
+    return head + (" \u2014 " + ", ".join(parts) if parts else "")
+
+
+def _change(s: PilotStatus, shown: tuple | None) -> tuple:
+    """What a line shows: a status equal in all of it to the one ``shown`` is no new line (moves left not
+    known, None, is no change from those shown)."""
+    moves = shown[6] if s.moves_left is None and shown is not None and shown[1] == s.state else s.moves_left
+    return (s.goal_id, s.state, s.reason, s.mode, s.index, s.next and s.next.model_dump_json(), moves,
+            tuple(sorted(s.retries.items())), s.commands, s.denied)
+
+
+class _Follower:
+    """The pilot's status changes and the pilots' liveliness, queued for the main thread (which sees Ctrl-C)."""
+
+    def __init__(self, session: Any, system: str):
+        import zenoh
+
+        from skinet.wire import keys
+
+        self.session, self.system = session, system
+        self.queue: queue.Queue[PilotStatus | str] = queue.Queue()  # a status, or the id of a pilot that left
+        self._sub = session.declare_subscriber(keys.pilot_status(system), self._on_status)
+        self._tokens = session.liveliness().declare_subscriber(
+            keys.alive(system, "pilot", "*"),
+            lambda s: self.queue.put(str(s.key_expr).rsplit("/", 1)[-1]) if s.kind == zenoh.SampleKind.DELETE else None)
+
+    def _on_status(self, sample: Any) -> None:
+        from skinet.wire.codec import DecodeError, decode
+        from skinet.wire.messages import PilotStatus
+
+        try:
+            status = decode(sample.payload.to_bytes(), PilotStatus)
+        except DecodeError:
+            return
+        if status.system == self.system:
+            self.queue.put(status)
+
+    def follow(self, goal_id: int, cancel: Any, ctrl_c: list[float]) -> int:
+        """Print the changes of goal ``goal_id`` until it ends.  ``ctrl_c`` grows at each Ctrl-C: the first
+        calls ``cancel`` and waits for the end, a second one gives up waiting (KeyboardInterrupt)."""
+        from services.common.goals import pilot_status
+
+        now = pilot_status(self.session, self.system)  # in case it ended before the subscriber's first sample
+        if now is not None:
+            self.queue.put(now)
+        shown: tuple | None = None
+        seqs: dict[str, int] = {}
+        ours = ""  # the pilot instance following the goal, once a status of it came
+        cancelled = False
+        while True:
+            if len(ctrl_c) > 1:
+                raise KeyboardInterrupt
+            if ctrl_c and not cancelled:
+                cancelled = True
+                cancel()
+            try:
+                status = self.queue.get(timeout=POLL)
+            except queue.Empty:
+                if cancelled and time.monotonic() > ctrl_c[0] + CANCEL_WAIT:
+                    print("the pilot did not report the goal cancelled", file=sys.stderr)
+                    return EXIT_ENDED
+                continue
+            if isinstance(status, str):  # a pilot left: ours (or, not knowing ours yet, the last one)?
+                still_there = status != ours if ours else self._pilots()
+                if still_there:
+                    continue
+                print(f"the pilot stopped before goal {goal_id} ended", file=sys.stderr)
+                return EXIT_ENDED
+            if status.goal_id < goal_id or status.seq <= seqs.get(status.pilot, -1):
+                continue  # an earlier goal's, or an older copy
+            seqs[status.pilot] = status.seq
+            ours = ours or (status.pilot if status.goal_id == goal_id else "")
+            if status.goal_id > goal_id:
+                print(f"goal {goal_id} was replaced by goal {status.goal_id}"
+                      + (f" of {status.client}" if status.client else ""), file=sys.stderr)
+                return EXIT_ENDED
+            if _change(status, shown) != shown:
+                switched = shown is not None and shown[3] != status.mode
+                shown = _change(status, shown)
+                print(status_line(status, switched), flush=True)
+            if status.state in ("reached", "failed", "cancelled"):
+                return EXIT_REACHED if status.state == "reached" else EXIT_ENDED
+
+    def _pilots(self) -> bool:
+        from skinet.wire import keys
+
+        return any(r.ok is not None for r in self.session.liveliness().get(keys.alive(self.system, "pilot", "*"),
+                                                                         timeout=1.0))
+
+    def close(self) -> None:
+        from services.common.zenoh_config import undeclare
+
+        undeclare(self._sub, self._tokens)

@@ -1,0 +1,332 @@
+"""``skinet goal`` through a real router with the real pilot (SPEC §8, issue 24 item 4).
+
+The pilot drives the paper's system on simulated managers (:mod:`tests.services.pilot_robot`);
+``skinet goal`` runs as its own process, a client of the router, and is judged on its exit
+status and the exact lines it prints: the pilot's reply, then one line per change of the
+pilot's status until the goal ends.
+"""
+
+from __future__ import annotations
+
+import re
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Iterator
+
+import pytest
+import zenoh
+
+from services.common.goals import NoPilot, ask_pilot, no_pilot_message, pilot_status
+from services.dashboard.goalbox import GoalFormError, Placed, goal_request, place
+from skinet.files import load_system
+from skinet.wire.messages import PilotGoalRequest
+from tests.services.conftest import REPO, client_args, free_port, open_client, start_skinet
+from tests.services.pilot_robot import Implementations, Robot
+
+SYSTEM_FILE = REPO / "skillsets" / "spot_arm.toml"
+
+STAND_UP = [  # skinet plan's steps for "reach spot:Standing" from the initial marking
+    "steps:",
+    "  1. spot:init_power.start",
+    "  2. wait for spot:init_power.success.powered_on",
+    "     if spot:init_power.failure.no_battery: retry from step 1",
+    "  3. spot:stand_up.start",
+    "  4. wait for spot:stand_up.success.standing",
+    "     if spot:stand_up.failure.fell: retry from step 3",
+]
+
+
+PENDING = re.compile(r"(\w+: waiting for the prediction|paused: the prediction) of step \d+")
+
+
+def goal(router: str, *args: str, timeout: float = 60) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "skinet_cli.main", "goal", *args, *client_args(router)], cwd=REPO,
+                          capture_output=True, text=True, timeout=timeout)
+
+
+def status_lines(out: str) -> list[str]:
+    """The lines after the reply and its steps: one per change of the pilot's status."""
+    lines = out.splitlines()
+    k = 0
+    while k < len(lines) and (lines[k].startswith(("goal ", "cyclic:", "strong:", "steps:", " ")) or not lines[k]):
+        k += 1
+    return lines[k:]
+
+
+def doc_block(page: str, heading: str) -> list[str]:
+    """The lines of the first code block after ``heading`` in ``page``."""
+    text = (REPO / page).read_text(encoding="utf-8")
+    after = text[text.index(f"\n{heading}\n"):]
+    start = after.index("\n```") + 1
+    start = after.index("\n", start) + 1
+    return after[start:after.index("\n```", start)].splitlines()
+
+
+@pytest.fixture
+def robot(client_factory: Callable[[], zenoh.Session], spot_arm: tuple) -> Iterator[Robot]:
+    r = Robot(client_factory, *spot_arm)
+    yield r
+    r.close()
+
+
+@pytest.fixture
+def skills(robot: Robot) -> Iterator[Callable[..., Implementations]]:
+    """Starts the robot's skill implementations (:class:`Implementations` options)."""
+    started: list[Implementations] = []
+
+    def start(**options: object) -> Implementations:
+        started.append(Implementations(robot.sim, robot.system, **options))  # type: ignore[arg-type]
+        return started[-1]
+
+    yield start
+    for impl in started:
+        impl.close()
+
+
+def test_a_goal_driven_to_its_end_prints_the_plan_then_each_change_and_exits_0(robot, skills, router) -> None:
+    impl = skills(delay=0.3)
+    done = goal(router, str(SYSTEM_FILE), "reach spot:Standing", "--drive")
+    assert done.returncode == 0, done.stdout + done.stderr
+    lines = done.stdout.splitlines()
+    assert lines[:9] == ["goal 1 accepted (drive mode: the pilot sends each command)",
+                         "cyclic: 4 moves when outcomes are favourable", *STAND_UP], done.stdout
+    # A step's prediction on its way is said (and becomes a pause past a grace) or not, as the predictor is quick
+    # or not (SPEC §7).
+    changes = [c for c in status_lines(done.stdout) if not PENDING.match(c)]
+    assert changes == [
+        "driving \u2014 next spot:init_power.start, 4 moves left, 0 commands sent",
+        "waiting for outcome: the effect of spot:init_power.start \u2014 next spot:init_power.start, 4 moves left, "
+        "1 command sent",
+        "waiting for outcome: the outcome of spot:init_power \u2014 3 moves left, 1 command sent",
+        "driving \u2014 next spot:stand_up.start, 2 moves left, 1 command sent",
+        "waiting for outcome: the effect of spot:stand_up.start \u2014 next spot:stand_up.start, 2 moves left, "
+        "2 commands sent",
+        "waiting for outcome: the outcome of spot:stand_up \u2014 1 move left, 2 commands sent",
+        "reached \u2014 2 commands sent",
+    ], done.stdout
+    shown = doc_block("docs/commands.md", "## Goals for a running pilot: `skinet goal`")
+    assert shown == [line for line in done.stdout.splitlines() if line not in status_lines(done.stdout)] + changes
+    assert impl.ended == ["spot:init_power.success.powered_on", "spot:stand_up.success.standing"]
+    assert robot.actuator.sent == ["spot:init_power.start", "spot:stand_up.start"]
+    assert robot.pilot.status.state == "reached" and robot.pilot.status.denied == 0
+
+
+def test_a_skill_that_keeps_failing_ends_the_goal_failed_with_exit_1(robot, skills, router) -> None:
+    impl = skills(script={("spot", "init_power"): ["no_battery"] * 5})
+    done = goal(router, "spot_arm", "reach spot:Standing", "--drive", "--max-retries", "2")
+    assert done.returncode == 1, done.stdout + done.stderr
+    assert status_lines(done.stdout)[-1] == ("failed: spot:init_power failed 2 times (last: no_battery) \u2014 "
+                                             "retries spot:init_power 2, 2 commands sent"), done.stdout
+    assert impl.ended == ["spot:init_power.failure.no_battery"] * 2
+
+
+def test_a_malformed_goal_is_placed_before_any_connection_or_by_the_pilot(robot, router, tmp_path) -> None:
+    # With the system file at hand, skinet goal checks it itself: FILE:LINE:COL, exit 1, nothing sent.
+    done = goal(router, str(SYSTEM_FILE), "reach spot:Standin")
+    assert (done.returncode, done.stdout) == (1, "")
+    assert done.stderr == ("<goal>:1:7: error: unknown name 'spot:Standin' (candidates: spot:Standing, "
+                           "spot:posture.Standing)\n")
+    # With a name only, the pilot says it: rejected, exit 2.
+    done = goal(router, "spot_arm", "reach spot:Standin")
+    assert done.returncode == 2, done.stdout + done.stderr
+    assert done.stderr == ("goal rejected by the pilot: <goal>:1:7: error: unknown name 'spot:Standin' (candidates: "
+                           "spot:Standing, spot:posture.Standing)\n")
+    # A goals file is sent as its text with its name: the pilot's error points into the file.
+    mission = tmp_path / "mission.toml"
+    mission.write_text('[[goals]]\nreach = "manipulator:RD"\n\n[[goals]]\nrun = "spot:go_to_waypont"\n')
+    done = goal(router, "spot_arm", "--goals", str(mission))
+    assert (done.returncode, done.stderr) == (2, f"goal rejected by the pilot: {mission}:5:13: error: unknown skill "
+                                                 "'go_to_waypont' of 'spot' (candidates: go_to_waypoint)\n")
+    assert robot.pilot.status.goal_id == 0 and robot.pilot.status.commands == 0
+
+
+def test_a_goal_with_no_plan_is_rejected_with_the_reason(robot, router) -> None:
+    done = goal(router, "spot_arm", "reach spot:Busy and manipulator:Busy", "--drive")
+    assert done.returncode == 2, done.stdout + done.stderr
+    assert (done.stdout, done.stderr) == ("", (
+        "goal rejected by the pilot: goal 'reach spot:Busy and manipulator:Busy' has no plan from the live state: "
+        "none: the goal is unsafe: every marking where it holds is forced for action_guard (violated there: spot "
+        "control_mode at Busy while manipulator mutex at Busy)\n"))
+    assert robot.pilot.status.commands == 0
+
+
+def test_no_pilot_or_no_router_is_one_clear_line_and_exit_1(router) -> None:
+    done = goal(router, "spot_arm", "reach spot:Standing", "--timeout", "1")
+    assert (done.returncode, done.stdout) == (1, "")
+    assert done.stderr == ("skinet: error: no pilot answers on skinet/spot_arm/pilot/goal/local: is `skinet run` or "
+                           "the pilot service running?\n")
+    # No router either: the endpoint is the reason, as skinet check says it.
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    done = subprocess.run([sys.executable, "-m", "skinet_cli.main", "goal", "spot_arm", "reach spot:Standing", "-e",
+                           endpoint], cwd=REPO, capture_output=True, text=True, timeout=60)
+    assert (done.returncode, done.stdout) == (1, "")
+    assert done.stderr == (f"skinet goal: warning: cannot connect to {endpoint}: nothing answers there; Zenoh keeps "
+                           f"trying in the background\nskinet: error: cannot connect to {endpoint}: nothing answers "
+                           "there\n")
+    assert no_pilot_message("spot_arm", "observer").endswith(
+        "(or the router refused user 'observer': only operator-role users may send goals)")
+
+
+def test_ctrl_c_cancels_the_goal(robot, router) -> None:
+    proc = start_skinet("goal", "spot_arm", "reach spot:Standing", *client_args(router))  # guide: waits for you
+    try:
+        lines: list[str] = []
+        while not any(line.startswith("guiding") for line in lines):
+            line = proc.stdout.readline()
+            assert line, "".join(lines)
+            lines.append(line)
+        proc.send_signal(signal.SIGINT)
+        out, _ = proc.communicate(timeout=20)
+    finally:
+        proc.kill()
+    lines += out.splitlines(keepends=True)
+    assert proc.returncode == 1, "".join(lines)
+    assert "cancelled by Ctrl-C: asking the pilot to cancel the goal\n" in lines
+    assert lines[-1].startswith("cancelled"), lines
+    assert robot.pilot.status.state == "cancelled" and robot.pilot.status.commands == 0
+
+
+@pytest.mark.parametrize("delay", [0.3, 1.0, 1.6, 2.4])
+def test_ctrl_c_at_any_moment_leaves_no_goal_running(robot, router, delay: float) -> None:
+    """Before the request (nothing sent, exit 130 or killed by the signal), while the pilot plans (its reply holds the signal back) or
+    after: whenever Ctrl-C comes, the goal it sent is cancelled."""
+    proc = start_skinet("goal", "spot_arm", "reach spot:Standing", *client_args(router))
+    time.sleep(delay)
+    proc.send_signal(signal.SIGINT)
+    out, _ = proc.communicate(timeout=30)
+    status = robot.pilot.status
+    if proc.returncode in (130, -signal.SIGINT):  # still starting (importing, or opening its session)
+        assert status.goal_id == 0, out
+    else:
+        assert proc.returncode == 1 and "cancelled by Ctrl-C: asking the pilot to cancel the goal\n" in out, out
+        assert out.splitlines()[-1].startswith("cancelled") and (status.goal_id, status.state) == (1, "cancelled")
+    assert status.commands == 0
+
+
+def test_the_pilot_stopping_ends_the_follow_with_exit_1(robot, router) -> None:
+    proc = start_skinet("goal", "spot_arm", "reach spot:Standing", *client_args(router))
+    try:
+        robot.wait_pilot("guiding", 20)
+        robot.pilot.close()
+        out, _ = proc.communicate(timeout=20)
+    finally:
+        proc.kill()
+    assert proc.returncode == 1 and out.endswith("\nthe pilot stopped before goal 1 ended\n"), out
+
+
+def test_pause_resume_cancel_and_a_second_goal_without_replace(robot, router) -> None:
+    nothing = goal(router, "spot_arm", "--pause")
+    assert (nothing.returncode, nothing.stdout, nothing.stderr) == (
+        2, "", "pause rejected by the pilot: no goal is being followed: nothing to pause\n")
+    first = start_skinet("goal", "spot_arm", "reach spot:Standing", *client_args(router))
+    try:
+        robot.wait_pilot("guiding", 20)
+        second = goal(router, "spot_arm", "run spot:init_power")
+        assert (second.returncode, second.stderr) == (2, "goal rejected by the pilot: goal 1 of local is being followed "
+                                                         "(guiding): cancel it, or send the new goal with replace\n")
+        paused = goal(router, "spot_arm", "--pause")
+        assert paused.returncode == 0 and paused.stdout.startswith("pause: done (goal 1)\npaused"), paused.stdout
+        resumed = goal(router, "spot_arm", "--resume")
+        assert resumed.returncode == 0 and resumed.stdout.startswith("resume: done (goal 1)\n"), resumed.stdout
+        cancelled = goal(router, "spot_arm", "--cancel")
+        assert cancelled.returncode == 0, cancelled.stdout + cancelled.stderr
+        out, _ = first.communicate(timeout=20)
+    finally:
+        first.kill()
+    assert first.returncode == 1 and out.splitlines()[-1].startswith("cancelled"), out
+    assert "paused" in out  # its own view showed the pause too
+
+
+# -- the client side the dashboard shares --------------------------------------------------
+
+
+def test_the_goal_box_places_errors_in_the_box() -> None:
+    system, _ = load_system(SYSTEM_FILE)
+    form = {"goals": "reach spot:Standing\n\nreach spot:Standin", "mode": "drive"}
+    with pytest.raises(GoalFormError) as caught:
+        goal_request("spot_arm", form, system)
+    assert caught.value.placed == Placed(
+        "<goal 2>:1:7: error: unknown name 'spot:Standin' (candidates: spot:Standing, spot:posture.Standing)",
+        "goals", 3, 7, "unknown name 'spot:Standin' (candidates: spot:Standing, spot:posture.Standing)")
+    form = {"goals": "run spot:go_to_waypoint", "inputs": "go_to_waypoint.targt = {x = 1.0}"}
+    with pytest.raises(GoalFormError) as caught:
+        goal_request("spot_arm", form, system)
+    assert (caught.value.placed.field, caught.value.placed.line, caught.value.placed.column) == ("inputs", 1, 16)
+    request = goal_request("spot_arm", {"goals": " reach spot:Standing \n", "mode": "drive", "replace": True}, None)
+    assert request == PilotGoalRequest(system="spot_arm", goals=["reach spot:Standing"], mode="drive", replace=True)
+    assert place("no plan: the goal is unsafe", [1]) == Placed("no plan: the goal is unsafe")
+
+
+def test_ask_pilot_without_a_pilot_raises_the_message(router) -> None:
+    session, frozen = open_client(router), open_client(router)
+    try:
+        with pytest.raises(NoPilot, match=re.escape(no_pilot_message("spot_arm", "local"))):
+            ask_pilot(session, PilotGoalRequest(system="spot_arm"), "local", timeout=5.0)  # ends at once: nobody there
+        assert pilot_status(session, "spot_arm", timeout=0.5) is None
+        # A queryable that holds the query and never answers (a frozen process, ZENOH.md): the timeout is the reason.
+        held: list[zenoh.Query] = []
+        queryable = frozen.declare_queryable("skinet/spot_arm/pilot/goal/*", held.append)
+        time.sleep(0.3)
+        with pytest.raises(NoPilot) as caught:
+            ask_pilot(session, PilotGoalRequest(system="spot_arm"), "local", timeout=0.5)
+        assert str(caught.value) == ("no answer on skinet/spot_arm/pilot/goal/local within 0.5 s: a pilot still "
+                                     "planning may yet take the goal (skinet goal spot_arm --cancel cancels it)")
+        assert len(held) == 1
+        queryable.undeclare()
+        held.clear()
+    finally:
+        frozen.close()
+        session.close()
+
+
+# -- skinet goal --help: its examples work as written -------------------------------------------------------
+
+
+def help_sections() -> list[list[list[str]]]:
+    """The ``skinet goal`` examples of ``skinet goal --help``, per section, as argument lists (continued lines
+    joined)."""
+    import shlex
+
+    from skinet_cli.goal import EPILOG
+
+    sections: list[list[str]] = [[]]
+    for line in EPILOG.replace("\\\n", " ").splitlines():
+        if not line.strip():
+            sections.append([])
+        elif line.startswith("  skinet goal "):
+            sections[-1].append(line.strip())
+    return [[shlex.split(e)[1:] for e in s] for s in sections if s]
+
+
+def test_every_help_example_works_as_written(robot, skills, router) -> None:
+    skills(delay=0.1)
+    driven, guided = help_sections()
+    assert [len(driven), len(guided)] == [3, 4]
+
+    def argv(words: list[str]) -> list[str]:
+        return [sys.executable, "-m", "skinet_cli.main", *(router if w == "tcp/127.0.0.1:7447" else w for w in words)]
+
+    for words in driven:
+        done = subprocess.run(argv(words), cwd=REPO, capture_output=True, text=True, timeout=120)
+        assert done.returncode == 0 and done.stdout.splitlines()[-1].startswith("reached"), done.stdout + done.stderr
+    assert robot.actuator.sent[-1] == "spot:go_to_waypoint.start"
+    follower = subprocess.Popen(argv(guided[0]), cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        robot.wait_pilot("guiding", 30)
+        sent = len(robot.actuator.sent)
+        for words in guided[1:]:
+            done = subprocess.run(argv(words), cwd=REPO, capture_output=True, text=True, timeout=60)
+            assert done.returncode == 0, done.stdout + done.stderr
+        out, _ = follower.communicate(timeout=60)
+    finally:
+        follower.kill()
+    assert follower.returncode == 0, out
+    assert robot.actuator.sent[sent:] == ["spot:sit_down.start"]  # sent once switched to drive
+    changes = status_lines(out)
+    assert changes[:4] == ["guiding \u2014 next spot:sit_down.start, 2 moves left",
+                           "paused: paused by local \u2014 2 moves left",
+                           "paused: paused by local \u2014 now in drive mode, 2 moves left, 0 commands sent",
+                           "driving \u2014 next spot:sit_down.start, 2 moves left, 0 commands sent"], out
+    assert changes[-1] == "reached \u2014 1 command sent", out
