@@ -57,11 +57,6 @@ class BoundActuator:
         self.client = ServiceClient(session, style)
         self.sent: dict[tuple[str, str], SentGoal] = {}  # (skillset, skill) -> the last goal sent
 
-    def binds(self, skillset: str, skill: str) -> bool:
-        """Whether ``skill`` of ``skillset`` is bound to an action (the pilot then acts through this actuator)."""
-        binding = self.bindings.get(skillset)
-        return binding is not None and binding.skill(skill) is not None
-
     def send(self, command: PilotCommand) -> str:
         """Send ``command`` (``SKILL.start`` or ``SKILL.interrupt``); returns what was sent, for the log."""
         skill, _, kind = command.transition.partition(".")
@@ -86,11 +81,17 @@ class BoundActuator:
             raise ActError(f"{skillset}:{skill.skill}: the goal of {skill.action} cannot be sent: {problem}")
         goal = SentGoal(uuid.uuid4().bytes)
         sent = f"send_goal {skill.action} goal {goal_text(goal.id)} {json.dumps(fields, sort_keys=True)}"
-        reply = self.client.call(skill.name("send_goal"), f"{skill.type}_SendGoal",
-                                 send_goal_request(binding.store, skill.type, goal.id, fields), self.timeout)
+        try:
+            request = send_goal_request(binding.store, skill.type, goal.id, fields)
+        except Exception as exc:  # a value the type check let through that CDR refuses: never crash the pilot
+            raise ActError(f"{sent}: cannot be encoded: {exc}") from None
+        reply = self.client.call(skill.name("send_goal"), f"{skill.type}_SendGoal", request, self.timeout)
         if reply is None:
             raise ActError(f"{sent}: no reply from the action server of {skill.action} within {self.timeout:g} s")
-        accepted, _ = send_goal_reply(binding.store, skill.type, reply)
+        try:
+            accepted, _ = send_goal_reply(binding.store, skill.type, reply)
+        except Exception as exc:
+            raise ActError(f"{sent}: the reply of {skill.action} does not decode: {exc}") from None
         goal.on_reply(accepted)
         if not accepted:
             raise ActError(f"{sent}: the action server of {skill.action} rejected the goal")
@@ -115,7 +116,10 @@ class BoundActuator:
                                  self.timeout)
         if reply is None:
             raise ActError(f"{sent}: no reply from the action server of {skill.action} within {self.timeout:g} s")
-        code, canceling = cancel_goal_reply(binding.store, reply)
+        try:
+            code, canceling = cancel_goal_reply(binding.store, reply)
+        except Exception as exc:
+            raise ActError(f"{sent}: the reply of {skill.action} does not decode: {exc}") from None
         if code != "ERROR_NONE" or target not in canceling:
             raise ActError(f"{sent}: the action server of {skill.action} refused: {code}")
         return f"{sent}: canceling"

@@ -142,7 +142,7 @@ def test_a_rejected_goal_is_an_error_and_starts_nothing(rig: Rig, nav2, client_f
 
 def test_bad_commands_are_clear_errors_and_send_nothing(nav2, client_factory) -> None:  # type: ignore[no-untyped-def]
     """Inputs the skill does not have or whose type does not fit the goal, a skill bound to no action, an
-    action server that does not answer, an interrupt with no goal."""
+    action server that does not answer or whose reply does not decode, an interrupt with no goal."""
     system, bindings = nav2
     robot = BoundSimulator(client_factory(), system, bindings)
     act = BoundActuator(client_factory(), bindings, timeout=0.5)
@@ -168,6 +168,13 @@ def test_bad_commands_are_clear_errors_and_send_nothing(nav2, client_factory) ->
     with pytest.raises(ActError) as info:
         act.send(PilotCommand(skillset="nav2", transition="undock_robot.start"))
     assert str(info.value).endswith(": no reply from the action server of /undock_robot within 0.5 s")
+    # A server whose replies do not decode.
+    junk = client_factory().declare_queryable("undock_robot/_action/send_goal",
+                                              lambda q: q.reply(q.key_expr, b"\x00\x01\x00"))
+    with pytest.raises(ActError) as info:
+        act.send(PilotCommand(skillset="nav2", transition="undock_robot.start"))
+    assert "the reply of /undock_robot does not decode: " in str(info.value)
+    junk.undeclare()
 
 
 @pytest.mark.parametrize("rig", STYLES[:1], ids=IDS[:1], indirect=True)
