@@ -9,7 +9,8 @@ on the keys of :class:`~skinet.ros.keys.KeyStyle` (``zenoh-bridge-ros2dds`` or
   new goal id (UUID 4) and the goal's fields from the command's inputs, as the
   binding maps them (:meth:`~skinet.ros.binding.SkillBinding.goal_fields`: its fixed
   ``goal`` fields, each input at its field).  A goal the server rejects
-  (``accepted`` false), or no reply within ``timeout``, raises :class:`ActError`.
+  (``accepted`` false), no reply within ``timeout``, or a reply that does not decode
+  raises :class:`ActError`.
 - ``SKILL.interrupt``: a ``cancel_goal`` request for one goal id: the goal this
   actuator sent, while the action's status shows it active; otherwise (the operator
   started the skill) the goal the bridge follows, read from the status cache
