@@ -26,7 +26,6 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
-from services.common.cli import key_style
 from services.common.zenoh_config import (
     ZenohSetupError, client_name, login, open_session, session_config, session_mode, warn_on_stderr,
 )
@@ -197,15 +196,11 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
                                 client=client_name(config), check_rate_limit=args.check_rate_limit,
                                 lost_after=args.lost_after)
         if not args.no_pilot:
+            from services.common.cli import key_style
             from services.pilot import start_pilot
 
-            from services.pilot.act import default_actuator
-
-            typemap = load_typemap(args.system)
-            actuator = default_actuator(session, system, typemap, style=key_style(args),
-                                        instance=f"pilot-embedded-{os.getpid()}")
             pilot = start_pilot(session, system, instance=f"embedded-{os.getpid()}", client=client_name(config),
-                                typemap=typemap, actuator=actuator)
+                                typemap=load_typemap(args.system), style=key_style(args))
         print("\n".join(connect_lines(args, system, mode, listening, pilot=pilot is not None)), file=sys.stderr,
               flush=True)
         if args.once:

@@ -11,22 +11,21 @@ from services.common.cli import (
 )
 from services.common.zenoh_config import add_zenoh_args, client_name, config_from_args, open_session
 from services.embedded import stop_on_signals
-from services.pilot.act import default_actuator
 from services.pilot.service import start_pilot
 from skinet.files import load_typemap
 from skinet.wire import keys
-from skinet_cli.options import ArgumentParser, budget, load_live_system, seconds
+from skinet_cli.options import (
+    ArgumentParser, add_no_properties_arg, budget, load_live_system, require_properties, seconds,
+)
 
 
 def build_parser() -> ArgumentParser:
     p = ArgumentParser(
         prog="python -m services.pilot",
         description="SkiNet Live pilot: takes goals on skinet/<system>/pilot/goal/<client>, follows the monitor's "
-                    "live state, and guides the operator (the next command) or drives the robot itself (the skillset "
-                    "managers' request topics; for skills bound to ROS 2 actions, goals and cancel requests on the "
-                    "keys of --rmw-zenoh/--namespace), sending only commands the monitor's strict check allows. Its "
-                    "status is on skinet/<system>/pilot/status. Send goals with a PilotGoalRequest (see "
-                    "docs/pilot.md).",
+                    "live state, and guides the operator (the next command) or drives the skillset managers "
+                    "itself, sending only commands the monitor's strict check allows. Its status is on "
+                    "skinet/<system>/pilot/status. Send goals with a PilotGoalRequest (see docs/pilot.md).",
     )
     p.add_argument("system", help="system file (.toml), e.g. skillsets/spot_arm.toml (its type map gives the "
                                   "managers' message types)")
@@ -36,6 +35,7 @@ def build_parser() -> ArgumentParser:
     p.add_argument("--response-timeout", type=seconds(), default=5.0,
                    help="seconds a manager has to react to a command before the goal fails (default: 5)")
     add_ros_key_args(p)
+    add_no_properties_arg(p)
     add_log_arg(p)
     add_zenoh_args(p)
     return p
@@ -46,16 +46,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     setup_logging(args)
     system, _ = load_live_system(args.system)
+    require_properties(system, args.system, args.no_properties)
     typemap = load_typemap(args.system)
     config = config_from_args(args)
     log = logging.getLogger("skinet.pilot")
     stop = stop_on_signals()
     session = open_session(config)
     try:
-        actuator = default_actuator(session, system, typemap, style=key_style(args), instance=f"pilot-{args.instance}")
-        pilot = start_pilot(session, system, instance=args.instance, actuator=actuator,
-                            response_timeout=args.response_timeout, budget=args.budget, client=client_name(config),
-                            typemap=typemap)
+        pilot = start_pilot(session, system, instance=args.instance, response_timeout=args.response_timeout,
+                            budget=args.budget, client=client_name(config), typemap=typemap,
+                            style=key_style(args))
         log.info("pilot %s of %s: goals on %s, status on %s", pilot.instance, system.name,
                  keys.pilot_goal(system.name, "<client>"), keys.pilot_status(system.name))
         while not stop.wait(0.5):

@@ -44,6 +44,7 @@ from services.common.zenoh_config import undeclare
 from services.pilot.act import ActError, Actuator, default_actuator
 from skinet.errors import SkinetError, SourceError
 from skinet.plan import Command, Goal, Plan, Planner, Reached, parse_goal, parse_goals
+from skinet.ros.keys import KeyStyle
 from skinet.system import System
 from skinet.wire import keys
 from skinet.wire.codec import DecodeError, decode, encode
@@ -57,6 +58,7 @@ log = logging.getLogger("skinet.pilot")
 TICK = 0.1  # seconds between the worker's looks at timeouts
 CHECK_WAIT = 1.0  # seconds the check may wait for a synced state and a fresh prediction
 MAX_REQUEST = 256 << 10  # bytes of a goal request (a mission file's text)
+MAX_GOALS = 32  # goals of one request
 MAX_STATE = 1 << 20  # bytes of a LiveState or UnsafeReport read
 PENDING_GRACE = 0.5  # seconds a step's prediction may take before the pilot says it is paused for it
 RETRY_REFUSED = 1.0  # seconds before a check that gave no decision is asked again at the same step
@@ -104,7 +106,7 @@ class Pilot:
 
     def __init__(self, session: zenoh.Session, system: System, *, instance: str | None = None,
                  actuator: Actuator | None = None, response_timeout: float = 5.0, budget: float = 1.0,
-                 client: str | None = None, typemap: Mapping[str, str] | None = None):
+                 client: str | None = None, typemap: Mapping[str, str] | None = None, style: KeyStyle = KeyStyle()):
         self.session, self.system = session, system
         self.name = keys.check_chunk(system.name, "system name")
         self.instance = keys.check_chunk(instance or uuid.uuid4().hex[:8], "instance id")
@@ -112,7 +114,7 @@ class Pilot:
         self.response_timeout, self.budget = response_timeout, budget
         self.typemap = dict(typemap or {})
         self.actuator: Actuator = actuator if actuator is not None else default_actuator(
-            session, system, typemap, instance=f"pilot-{self.instance}")
+            session, system, typemap, style, instance=f"pilot-{self.instance}")
         self.planner = Planner(system)
         self._lock = threading.Lock()
         self._wake = threading.Event()
@@ -126,6 +128,7 @@ class Pilot:
         self._asked: tuple[int, int, UnsafeReport, float] | None = None  # goal, step, report, until: a refused check
         self._refusal = ""  # why that check did not allow
         self._seq = 0
+        self._marked: tuple[LiveState | None, dict[str, int] | None] = (None, None)  # a LiveState's marking
         self._pending = (-1, 0.0)  # the step whose prediction is awaited, since when (monotonic)
         self._steps: tuple[Plan | None, list[PlanStep]] = (None, [])  # a plan's steps as messages, made once
         self._status = PilotStatus(system=self.name, pilot=self.instance, seq=0, stamp=time.time(),
@@ -319,6 +322,8 @@ class Pilot:
             return self._reject(str(exc))
         if not goals:
             return self._reject("no goals: give goals ('reach FORMULA', 'run SKILLSET:SKILL') or a mission")
+        if len(goals) > MAX_GOALS:  # each is planned at once, within the budget
+            return self._reject(f"{len(goals)} goals: a mission has at most {MAX_GOALS}")
         with self._lock:
             g = self._goal
             if g is not None and not g.end and not request.replace:
@@ -402,14 +407,17 @@ class Pilot:
         if flight is not None:
             return self._show("waiting for outcome", f"the effect of {flight.command.skillset}:"
                                                      f"{flight.command.transition}", next_=flight.command)
-        try:
-            marking = marking_of(self.system, st.skillsets)
-        except SkinetError as exc:
-            return self._show("paused", f"the live state of step {st.seq} is not understood: {exc}")
+        marking = self._marking()
+        if marking is None:
+            return self._show("paused", f"the live state of step {st.seq} names what {self.name} does not have")
         while True:
             if g.plan is None or g.plan.action(marking) is None:
                 self._show("planning")
-                g.plan = self.planner.plan(g.goals[g.index], marking, self.budget)
+                try:
+                    g.plan = self.planner.plan(g.goals[g.index], marking, self.budget)
+                except SkinetError as exc:  # a marking the robot cannot be in (SPEC §3): nothing to plan from
+                    g.plan = None
+                    return self._show("paused", f"the live state of step {st.seq} cannot be planned from: {exc}")
                 if g.plan.answer not in ("strong", "cyclic"):
                     self._end(g, "failed", f"no plan for '{g.goals[g.index].text}' from step {st.seq}: "
                                            f"{g.plan.answer}: {g.plan.reason}")
@@ -422,21 +430,21 @@ class Pilot:
                 return self._show(g.end, g.reason)
         if not isinstance(action, Command):
             running = ", ".join(f"{n}:{k}" for n, ss in st.skillsets.items() for k in ss.running)
-            return self._show("waiting for outcome", f"the outcome of {running}", plan=g.plan, marking=marking)
+            return self._show("waiting for outcome", f"the outcome of {running}")
         command = PilotCommand(skillset=action.skillset, transition=action.transition, inputs=dict(action.inputs))
         if g.mode == "guide":
-            return self._show("guiding", next_=command, plan=g.plan, marking=marking)
+            return self._show("guiding", next_=command)
         u = self._unsafe
         if u is None or u.seq != st.seq or u.prediction_stale:
             if self._pending[0] != st.seq:
                 self._pending = (st.seq, time.monotonic())
             if time.monotonic() - self._pending[1] < PENDING_GRACE:  # the usual moment after every step
-                return self._show("driving", f"waiting for the prediction of step {st.seq}", command, g.plan, marking)
-            return self._show("paused", f"the prediction of step {st.seq} is pending", command, g.plan, marking)
+                return self._show("driving", f"waiting for the prediction of step {st.seq}", command)
+            return self._show("paused", f"the prediction of step {st.seq} is pending", command)
         a = self._asked
         if a is not None and a[:3] == (g.id, st.seq, u) and time.monotonic() < a[3]:
-            return self._show("paused", self._refusal, command, g.plan, marking)
-        self._show("driving", next_=command, plan=g.plan, marking=marking)
+            return self._show("paused", self._refusal, command)
+        self._show("driving", next_=command)
         return _Due(command, st.seq, g.id, u)
 
     def _paused(self, g: _Goal, st: LiveState) -> str:
@@ -471,8 +479,9 @@ class Pilot:
                 problem = f"the check failed: {r.err.payload.to_string() if r.err is not None else '?'}"
         with self._lock:
             g, st = self._goal, self._state
-            if g is None or g.id != due.goal or g.end or st is None or st.seq != due.seq or self._inflight:
-                return  # things moved on while the check was asked: decide again
+            if g is None or g.id != due.goal or g.end or st is None or st.seq != due.seq or self._inflight or \
+                    not self._monitors or self._paused(g, st):
+                return  # things moved on while the check was asked (a step, a sync state, a pause): decide again
             what = f"{c.skillset}:{c.transition}"
             if reply is None or not reply.ok:
                 self._refuse(g, due, problem if reply is None else f"the check could not judge {what}: {reply.error}")
@@ -494,8 +503,7 @@ class Pilot:
             manager = self.system.component(c.skillset).manager or c.skillset
             self._inflight = _InFlight(c, due.seq, time.monotonic() + self.response_timeout, manager)
             g.commands += 1
-            self._show("waiting for outcome", f"the effect of {what}", c, g.plan,
-                       marking_of(self.system, st.skillsets))
+            self._show("waiting for outcome", f"the effect of {what}", c)
         try:
             sent = self.actuator.send(c)
             log.info("goal %d: sent %s:%s", due.goal, c.skillset, sent)
@@ -529,19 +537,20 @@ class Pilot:
     def _no_monitor(self) -> str:
         return f"no monitor of {self.name} is running (no token on {keys.alive(self.name, 'monitor', '*')})"
 
-    def _show(self, state: str, reason: str = "", next_: PilotCommand | None = None, plan: Plan | None = None,
-              marking: Mapping[str, int] | None = None) -> None:
+    def _show(self, state: str, reason: str = "", next_: PilotCommand | None = None) -> None:
         """Publish the status if it changed (lock held); returns None for :meth:`_decide`."""
         g, st = self._goal, self._state
         fields: dict[str, Any] = dict(state=state, reason=reason, next=next_, state_seq=st.seq if st else 0)
         if g is not None:
             fields.update(goal_id=g.id, client=g.client, mode=g.mode, goals=[x.text for x in g.goals], index=g.index,
                           retries=dict(g.retries), commands=g.commands, denied=g.denied)
+            plan = g.plan
             if plan is not None:
                 if self._steps[0] is not plan:
                     self._steps = (plan, plan_steps(plan.steps))
+                marking = self._marking()
                 fields.update(answer=plan.answer, steps=self._steps[1],
-                              moves_left=plan.rank(marking) if marking is not None else plan.moves)
+                              moves_left=None if marking is None or g.end else plan.rank(marking))
         status = PilotStatus(system=self.name, pilot=self.instance, seq=self._status.seq, stamp=self._status.stamp,
                              **fields)
         if status == self._status:
@@ -554,17 +563,30 @@ class Pilot:
         log.debug("status %s%s", state, f": {reason}" if reason else "")
         return None
 
+    def _marking(self) -> dict[str, int] | None:
+        """The live marking (None when unknown or not understood), computed once per LiveState."""
+        st = self._state
+        if st is None:
+            return None
+        if self._marked[0] is not st:
+            try:
+                self._marked = (st, marking_of(self.system, st.skillsets))
+            except SkinetError:
+                self._marked = (st, None)
+        return self._marked[1]
+
 
 def start_pilot(session: zenoh.Session, system: System, instance: str | None = None,
                 actuator: Actuator | None = None, response_timeout: float = 5.0, budget: float = 1.0,
-                client: str | None = None, typemap: Mapping[str, str] | None = None) -> Pilot:
+                client: str | None = None, typemap: Mapping[str, str] | None = None,
+                style: KeyStyle = KeyStyle()) -> Pilot:
     """Start a pilot of ``system`` on ``session`` (which may be shared, SPEC §7).
 
     ``instance``: its id in the liveliness token and the status (default: random);
-    ``actuator``: how it acts (default: :func:`~services.pilot.act.default_actuator`: the managers'
-    request topics, which need the system's ``typemap``, and the bound skills' actions); ``response_timeout``:
-    seconds a manager has to react to a command; ``budget``: planning seconds per goal; ``client``: its
+    ``actuator``: how it acts (default: :func:`~services.pilot.act.default_actuator` on the keys of
+    ``style``: the managers' request topics, which need the system's ``typemap``, and the bound skills'
+    actions); ``response_timeout``: seconds a manager has to react to a command; ``budget``: planning seconds per goal; ``client``: its
     router login, the client chunk of its check queries (default ``local``).
     """
     return Pilot(session, system, instance=instance, actuator=actuator, response_timeout=response_timeout,
-                 budget=budget, client=client, typemap=typemap)
+                 budget=budget, client=client, typemap=typemap, style=style)

@@ -158,7 +158,7 @@ class Robot:
         self.system, self.typemap, self.sessions, self.lost_after = system, typemap, sessions, lost_after
         self.sim = Simulator(sessions(), system, typemap, style=style)
         self.bridge = start_bridge(sessions(), system, typemap, style=style)
-        self.predictor: Any = start_predictor(sessions(), "pilot-test")
+        self.predictor: Any = start_predictor(sessions(), "pilot-test", workers=1)
         self.monitor: Any = None
         if monitor:
             self.start_monitor()

@@ -164,7 +164,7 @@ def test_a_pending_prediction_pauses_the_pilot_until_it_comes(robot: Robot, clie
         assert (paused.next.skillset, paused.next.transition) == ("spot", "stand_up.start")  # what it would send
         time.sleep(0.3)
         assert robot.actuator.sent == ["spot:init_power.start"]
-        robot.predictor = start_predictor(client_factory(), "pilot-test-2")
+        robot.predictor = start_predictor(client_factory(), "pilot-test-2", workers=1)
         robot.statuses.state("reached", reply.goal_id)
         assert robot.actuator.sent == ["spot:init_power.start", "spot:stand_up.start", "spot:go_to_waypoint.start"]
     finally:
@@ -226,6 +226,7 @@ def test_bad_requests_get_a_clear_reason_and_never_a_command(robot: Robot) -> No
     assert unsafe.reason.startswith("goal 'reach spot:Busy and manipulator:Busy' has no plan from the live state: "
                                     "none: "), unsafe.reason
     assert ask(goal()).reason.startswith("no goals: ")
+    assert ask(goal(*["reach spot:Standing"] * 33)).reason == "33 goals: a mission has at most 32"
     assert ask(PilotGoalRequest(system="spot_arm", op="pause")).reason == "no goal is being followed: nothing to pause"
     assert robot.pilot.status.state == "idle"
     # One goal at a time, unless the new one says replace.
@@ -376,5 +377,19 @@ def test_a_command_the_check_denies_is_a_defect_never_sent(client_factory, spot_
         assert robot.statuses.state("cancelled", reply.goal_id).denied == 1  # asked once at that step
     finally:
         gui.close()
+        impl.close()
+        robot.close()
+
+
+def test_drive_through_rmw_zenoh_keys(client_factory, spot_arm) -> None:
+    """The pilot's requests on rmw_zenoh keys, with their attachments, reach the managers."""
+    robot = Robot(client_factory, *spot_arm, style=KeyStyle(rmw_zenoh=True, domain=31))
+    impl = Implementations(robot.sim, robot.system)
+    try:
+        reply = ask_goal(robot.observer, goal("reach spot:Standing", mode="drive"))
+        robot.statuses.state("reached", reply.goal_id)
+        assert robot.actuator.sent == ["spot:init_power.start", "spot:stand_up.start"]
+        assert robot.sim.skill_status("spot", "stand_up") == (False, "p1-2")  # the pilot's own request ids
+    finally:
         impl.close()
         robot.close()
