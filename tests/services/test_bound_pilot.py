@@ -192,8 +192,8 @@ def test_a_bad_pilot_goals_file_stops_the_demo_before_the_run(tmp_path: Path,
 
 def test_skinet_run_takes_the_robot_s_keys_for_its_pilot_and_the_bridge_it_prints(
         capsys: pytest.CaptureFixture[str]) -> None:
-    """``skinet run ... --rmw-zenoh --domain 3``: its embedded pilot's actuator gets those keys (default_actuator with
-    key_style, as the pilot process above), and the bridge command it prints reads them."""
+    """``skinet run ... --rmw-zenoh --domain 3``: its embedded pilot gets those keys (start_pilot's style, as the pilot
+    process above), and the bridge command it prints reads them."""
     assert main(["run", str(NAV2 / "nav2.toml"), "--once", "--rmw-zenoh", "--domain", "3", "--no-properties"]) == 0
     lines = capsys.readouterr().err.splitlines()
     bridge = next(line for line in lines if "services.bridge_ros2" in line)
