@@ -41,7 +41,7 @@ from typing import Any
 import zenoh
 
 from services.common.zenoh_config import undeclare
-from services.pilot.act import ActError, Actuator, default_actuator
+from services.pilot.act import ActError, Actuator, default_actuator, responder
 from skinet.errors import SkinetError, SourceError
 from skinet.plan import Command, Goal, Plan, Planner, Reached, parse_goal, parse_goals
 from skinet.ros.keys import KeyStyle
@@ -500,7 +500,7 @@ class Pilot:
                 self._refuse(g, due, f"the check answered {reply.decision} for {what} at step {due.seq}: {why}",
                              again=False)
                 return
-            manager = self.system.component(c.skillset).manager or c.skillset
+            manager = responder(self.system, c.skillset, c.transition.partition(".")[0])
             self._inflight = _InFlight(c, due.seq, time.monotonic() + self.response_timeout, manager)
             g.commands += 1
             self._show("waiting for outcome", f"the effect of {what}", c)

@@ -29,6 +29,7 @@ from services.pilot import start_pilot
 from services.pilot.act import default_actuator
 from services.predictor.service import start_predictor
 from services.simulator.bound import BoundSimulator
+from services.simulator.protocols import ActionLogic
 from skinet.files import load_bindings, load_system
 from skinet.ros.keys import KeyStyle
 from skinet_cli.main import main
@@ -43,7 +44,7 @@ class Nav2:
     """Robot, bridge, monitor, predictor and pilot of the Nav2 example, each on its own client session."""
 
     def __init__(self, sessions: Callable[[], zenoh.Session], style: KeyStyle, end_goals: bool = True,
-                 pilot: bool = True):
+                 pilot: bool = True, response_timeout: float = 5.0):
         self.system, _ = load_system(NAV2 / "nav2.toml")
         self.bindings, _ = load_bindings(self.system)
         self.robot = BoundSimulator(sessions(), self.system, self.bindings, style=style)
@@ -58,7 +59,8 @@ class Nav2:
         if pilot:  # else a pilot process of the test's
             pilot_session = sessions()
             self.actuator = Recording(default_actuator(pilot_session, self.system, style=style))  # type: ignore[arg-type]
-            self.pilot = start_pilot(pilot_session, self.system, instance="p1", actuator=self.actuator)
+            self.pilot = start_pilot(pilot_session, self.system, instance="p1", actuator=self.actuator,
+                                     response_timeout=response_timeout)
         self.observer = sessions()
         self.statuses = Statuses(self.observer, "nav2")
         self.events = Events(self.observer, "nav2")
@@ -136,6 +138,27 @@ def test_guide_sends_no_goal_and_a_rejected_goal_fails_with_the_server_s_reason(
     [(_, goal_id, _)] = nav2.received()
     assert failed.reason == (f"cannot send nav2:undock_robot.start: send_goal /undock_robot goal {goal_id} {{}}: "
                              "the action server of /undock_robot rejected the goal")
+
+
+def test_an_action_server_that_accepts_and_then_says_nothing_fails_the_goal(
+        client_factory: Callable[[], zenoh.Session]) -> None:
+    """A stuck server: it accepts the goal, and no status ever shows it.  The goal fails naming that server."""
+    rig = Nav2(client_factory, KeyStyle(), response_timeout=1.0)
+    try:
+        rig.statuses.state("idle")
+        rig.robot.actions[("nav2", "undock_robot")].close()  # its queryables go; a stuck one takes its place
+        stuck = ActionLogic(rig.bindings["nav2"].store, rig.bindings["nav2"].skill("undock_robot").type)
+        server = client_factory().declare_queryable(
+            "undock_robot/_action/send_goal", lambda q: q.reply(q.key_expr, stuck.send_goal(q.payload.to_bytes())[0]))
+        reply = ask_goal(rig.observer, goal("run nav2:dock_robot", system="nav2", inputs=DOCK, mode="drive"),
+                         system="nav2")
+        failed = rig.statuses.state("failed", reply.goal_id)
+        assert failed.reason == ("no response from the action server of nav2:undock_robot within 1 s to "
+                                 "nav2:undock_robot.start")
+        assert len(stuck.received) == 1 and rig.actuator.sent == ["nav2:undock_robot.start"]
+        server.undeclare()
+    finally:
+        rig.close()
 
 
 def test_the_pilot_process_acts_on_rmw_zenoh_keys(client_factory: Callable[[], zenoh.Session], zenoh_args: list[str],
