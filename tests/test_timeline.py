@@ -72,8 +72,8 @@ def test_log_line_rejects_what_is_not_a_message() -> None:
 
 
 GOOD_BODY = '{"v":1,"system":"s","seq":0,"stamp":0,"skillsets":{}}'
-TYPES = ("CanonicalEvent, CheckReply, CheckRequest, Divergences, Heartbeat, LiveState, ModelBundle, PredictReply, "
-         "PredictRequest, StateSpaceReport, UnsafeReport, Verdicts")
+TYPES = ("CanonicalEvent, CheckReply, CheckRequest, Divergences, Heartbeat, LiveState, ModelBundle, PilotGoalReply, "
+         "PilotGoalRequest, PilotStatus, PredictReply, PredictRequest, StateSpaceReport, UnsafeReport, Verdicts")
 
 
 @pytest.mark.parametrize("line, error", [
