@@ -195,6 +195,12 @@ def test_skinet_demo_nav2_ends_with_the_pilot_docking(capsys: pytest.CaptureFixt
                         r'\{"dock_id": "home_dock", "use_dock_id": true\}: accepted', out[at + 1]), out[at + 1]
     assert out[at + 2:] == ["     robot: nav2:dock_robot.start, nav2:dock_robot.success.docked",
                             "   pilot: reached; 1 command sent, 0 denied; violations: 0", ""]
+    # Live (real time; here as fast as the chain goes): the same pilot part, after the run's summary.
+    assert main(["demo", "nav2", "--live", "--speed", "0", "--linger", "0"]) == 0
+    live = capsys.readouterr().out.splitlines()
+    pilot = next(n for n, line in enumerate(live) if line.startswith("   then the pilot"))
+    assert live[pilot - 1].startswith("   warnings heeded") and live[pilot] == out[at]
+    assert live[pilot + 2:pilot + 4] == out[at + 2:at + 4]  # robot: ..., pilot: reached ...
     assert main(["demo", "nav2", "--core"]) == 0
     assert capsys.readouterr().out.splitlines()[-2] == (f"   (the pilot's goals, {dock}, need the chain of a bound "
                                                         "system: not played here)")
