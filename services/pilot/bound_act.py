@@ -18,13 +18,17 @@ on the keys of :class:`~skinet.ros.keys.KeyStyle` (``zenoh-bridge-ros2dds`` or
   server refuses (``ERROR_REJECTED``, ``ERROR_UNKNOWN_GOAL_ID``,
   ``ERROR_GOAL_TERMINATED``), raises :class:`ActError` with the reason.
 
-What a start or an interrupt caused is not this module's business: the bridge sees
-it in the action's status and the pilot in the monitor's live state.  Each command
+On ``rmw_zenoh`` keys the actuator shows in the ROS graph as rmw_zenoh clients do: a
+node ``/skinet_pilot_<n>`` with a service client token for each action's
+``send_goal`` and ``cancel_goal``.  What a start or an interrupt caused is not this
+module's business: the bridge sees it in the action's status and the pilot in the
+monitor's live state.  Each command
 is one request and one reply (an interrupt: one read of the status cache more).
 """
 
 from __future__ import annotations
 
+import itertools
 import json
 import uuid
 from collections.abc import Mapping
@@ -33,6 +37,8 @@ from typing import Any
 import zenoh
 
 from services.common.ros_client import ServiceClient
+from services.common.ros_liveliness import declare_node
+from services.common.zenoh_config import undeclare
 from services.pilot.act import ActError
 from skinet.plan.inputs import message_problem
 from skinet.ros.actions import (
@@ -43,6 +49,9 @@ from skinet.ros.bound import STATUS_NAMES, Goal, goal_text, goals_from_plain
 from skinet.ros.keys import KeyStyle, history_selector
 from skinet.ros.typestore import decode, to_plain
 from skinet.wire.messages import PilotCommand
+
+
+_nodes = itertools.count(1)  # node names of the actuators of this process
 
 
 class BoundActuator:
@@ -57,6 +66,12 @@ class BoundActuator:
         self.timeout = timeout
         self.client = ServiceClient(session, style)
         self.sent: dict[tuple[str, str], SentGoal] = {}  # (skillset, skill) -> the last goal sent
+        self._tokens: list[Any] = []
+        if style.rmw_zenoh:  # an action client in the ROS graph (ros2 node list, ros2 service info), as rmw does
+            clients = [("SC", s.name(name), typename, style.type_hash(b.store, typename))
+                       for b in self.bindings.values() for s in b.skills
+                       for name, typename in (("send_goal", f"{s.type}_SendGoal"), ("cancel_goal", CANCEL_TYPE))]
+            _, self._tokens = declare_node(session, style.domain, f"/skinet_pilot_{next(_nodes)}", clients)
 
     def send(self, command: PilotCommand) -> str:
         """Send ``command`` (``SKILL.start`` or ``SKILL.interrupt``); returns what was sent, for the log."""
@@ -138,7 +153,8 @@ class BoundActuator:
         return goals
 
     def close(self) -> None:
-        """Nothing is declared: requests only."""
+        """Leave the ROS graph (rmw_zenoh); the rest is requests only."""
+        undeclare(*self._tokens)
 
 
 def _shown(goals: list[Goal]) -> str:

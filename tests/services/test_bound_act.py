@@ -12,6 +12,7 @@ a namespace) and on rmw_zenoh keys.
 
 from __future__ import annotations
 
+import time
 import uuid
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -25,7 +26,7 @@ from services.pilot.act import ActError
 from services.pilot.bound_act import BoundActuator
 from services.simulator.bound import BoundSimulator
 from skinet.files import load_bindings, load_system
-from skinet.ros.keys import KeyStyle
+from skinet.ros.keys import KeyStyle, parse_liveliness_token
 from skinet.wire.messages import PilotCommand
 
 NAV2 = Path(__file__).resolve().parents[2] / "examples" / "nav2"
@@ -195,3 +196,27 @@ def test_the_simulated_robot_ends_the_goals_it_accepted(rig: Rig, nav2, client_f
     assert rig.robot.terminate("nav2", "dock_robot", "success", "docked", goal)
     rig.wait_for("dock_robot.success.docked")
     assert rig.events.items[-1].status.resources["dock"] == "Docked"
+
+
+def test_on_rmw_zenoh_the_actuator_shows_as_an_action_client_in_the_ros_graph(nav2, client_factory) -> None:  # type: ignore[no-untyped-def]
+    """rmw_zenoh's graph tokens: a node with a service client of each action's send_goal and cancel_goal, gone
+    when the actuator closes."""
+    _, bindings = nav2
+    observer = client_factory()
+
+    def graph() -> set[tuple[str, str, str]]:
+        found = {parse_liveliness_token(str(r.ok.key_expr)) for r in observer.liveliness().get("@ros2_lv/9/**",
+                                                                                               timeout=2.0) if r.ok}
+        return {(e.node, e.kind, e.topic) for e in found if e is not None and e.node.startswith("skinet_pilot_")}
+
+    act = BoundActuator(client_factory(), bindings, style=KeyStyle(rmw_zenoh=True, domain=9))
+    got = graph()
+    node = next(iter(got))[0]
+    assert got == {(node, "NN", "")} | {(node, "SC", f"/{action}/_action/{service}")
+                                        for action in ("navigate_to_pose", "dock_robot", "undock_robot")
+                                        for service in ("send_goal", "cancel_goal")}
+    act.close()
+    deadline = time.monotonic() + 5  # the undeclarations cross the router
+    while graph() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert graph() == set()
