@@ -2,7 +2,7 @@
 # Container entry point: `skinet-entrypoint SERVICE [ARGS...]`.
 #
 #   router                      skinet router ARGS
-#   monitor | predictor | simulator | dashboard | bridge_ros2 (or bridge)
+#   monitor | predictor | pilot | simulator | dashboard | bridge_ros2 (or bridge)
 #                               python -m services.SERVICE ARGS
 #   secrets                     python -m services.secrets ARGS (compose's one-shot job)
 #   skinet                      the skinet command line
@@ -33,7 +33,7 @@ shift
 # need it: `skinet router --robots` (SKINET_FLEET_ROBOTS) makes its logins and
 # per-robot TLS settings itself.
 case "$service" in
-    monitor|predictor|simulator|dashboard|bridge|bridge_ros2) session=1 ;;
+    monitor|predictor|pilot|simulator|dashboard|bridge|bridge_ros2) session=1 ;;
     router) session="${SKINET_ZENOH_USER:+1}" ;;
     *) session= ;;
 esac
@@ -98,6 +98,6 @@ case "$service" in
     secrets) exec python3 -m services.secrets "$@" ;;
     skinet) exec skinet "$@" ;;
     bridge|bridge_ros2) exec python3 -m services.bridge_ros2 "$@" ;;
-    monitor|predictor|simulator|dashboard) exec python3 -m "services.$service" "$@" ;;
+    monitor|predictor|pilot|simulator|dashboard) exec python3 -m "services.$service" "$@" ;;
     *) exec "$service" "$@" ;;
 esac

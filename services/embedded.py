@@ -198,7 +198,6 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
                                 client=client_name(config), check_rate_limit=args.check_rate_limit,
                                 lost_after=args.lost_after)
         if not args.no_pilot:
-            from services.common.cli import key_style
             from services.pilot import start_pilot
 
             pilot = start_pilot(session, system, instance=f"embedded-{os.getpid()}", client=client_name(config),

@@ -17,6 +17,7 @@ from pathlib import Path
 from skinet_cli.options import key_name
 
 DEFAULT_ENDPOINT = "tls/127.0.0.1:7447"
+OPERATOR = "operator"  # the compose vault's user of the operator role: it may send the pilot goals
 HELP = "write the Zenoh client configuration (TLS, login) of one user from a deployment's secrets"
 DESCRIPTION = """\
 Write the Zenoh configuration with which a command logs in to a SkiNet router
@@ -32,9 +33,12 @@ examples:
   skinet watch spot_arm -m client --zenoh-config observer.json5
   skinet client-config --secrets /srv/skinet/predictor --user predictor \\
       --connect tls/robot.example:7447 -o predictor.json5
+  skinet client-config --secrets operator --user operator     # an operator: may send the pilot goals
+  skinet goal spot_arm "run spot:init_power" --drive -m client --zenoh-config operator.json5
 
-docs/deployment.md ("Host access") shows how to get a user's folder out of a
-compose deployment; a folder of `skinet router --secrets DIR` serves as it is."""
+docs/deployment.md ("Host access"; "The pilot and its operators" for the
+operator's) shows how to get a user's folder out of a compose deployment; a
+folder of `skinet router --secrets DIR` serves as it is."""
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -46,7 +50,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="folder of USER's secrets: a compose service's own folder, or a router's "
                         "(default: $SKINET_SECRETS or ~/.config/skinet/secrets, as skinet router)")
     c.add_argument("--user", type=key_name("user name"), default="observer",
-                   help="the router user to log in as (default: observer, which may only read and ask the check)")
+                   help="the router user to log in as (default: observer, which may only read and ask the check; "
+                        "operator may also send the pilot goals)")
     c.add_argument("--connect", "-e", default=DEFAULT_ENDPOINT, metavar="ENDPOINT",
                    help=f"the router's tls/ endpoint as seen from where the file is used (default: {DEFAULT_ENDPOINT}, "
                         "the compose router published on this host)")
@@ -82,4 +87,6 @@ def cmd_client_config(args: argparse.Namespace) -> int:
         raise SkinetError(f"cannot write {output}: {exc.strerror}") from None
     print(f"wrote {output}: user {args.user} at {args.connect} (password, CA, certificate and key of {folder})")
     print(f"  skinet watch SYSTEM_NAME -m client --zenoh-config {output}")
+    if args.user == OPERATOR:
+        print(f"  skinet goal SYSTEM_NAME GOAL... --drive -m client --zenoh-config {output}")
     return 0

@@ -46,7 +46,7 @@ from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
 from skinet.errors import SkinetError
 
-USERS = ("bridge", "monitor", "predictor", "robot", "observer", "hub")
+USERS = ("bridge", "monitor", "predictor", "robot", "observer", "hub", "pilot", "operator")
 DAY = datetime.timedelta(days=1)
 
 

@@ -13,6 +13,9 @@ generated skillset manager's request protocol, as an operator GUI does
 An interrupt needs the running execution's id.  The manager's own
 ``SkillsetStatus`` says it: the actuator follows each manager's status topic and,
 when it has not seen one yet, asks for it (``status_request``) and waits a moment.
+A start waits (up to ``REACT_WAIT``) for the manager's answer: the status showing
+its id, or a refusal (``ALREADY_RUNNING``, ``PRECONDITION_FAILURE``...), raised as
+:class:`Refused` since such a refusal changes nothing the monitor could show.
 A pilot's start ids are ``<instance>-<n>``.
 """
 
@@ -29,14 +32,17 @@ from services.common.requests import Requests
 from services.common.zenoh_config import undeclare
 from skinet.errors import SkinetError
 from skinet.ros.derive import SkillView
-from skinet.ros.keys import KeyStyle
-from skinet.ros.requests import skill_ids, skill_interrupt, skill_request, status_request, topic_of
+from skinet.ros.keys import KeyStyle, manager_topics
+from skinet.ros.requests import (
+    skill_ids, skill_interrupt, skill_request, start_refusal, status_request,
+)
 from skinet.ros.typestore import Typestore, build_typestore
 from skinet.system import Component, System
 from skinet.wire.messages import PilotCommand
 
 log = logging.getLogger("skinet.pilot")
 STATUS_WAIT = 1.0  # seconds an interrupt waits for a manager's status when it has seen none
+REACT_WAIT = 1.0  # seconds a start waits for the manager's answer (its status, or a refusal) before it returns
 READY = 0  # SkillXStatus.state
 
 
@@ -46,6 +52,10 @@ class ActError(Exception):
     def __init__(self, reason: str):
         super().__init__(reason)
         self.reason = reason
+
+
+class Refused(ActError):
+    """The robot answered the command with a refusal (a start the manager refused): nothing changed there."""
 
 
 class Actuator(Protocol):
@@ -98,17 +108,37 @@ class ManagerActuator:
         self._lock = threading.Condition()
         self._ids: dict[str, dict[str, SkillView]] = {}  # skillset -> skill -> state and id, from its status
         self._count = 0
-        self._subs = [session.declare_subscriber(style.key(c.manager, topic_of(c.skillset, "status"), None),
-                                                 lambda s, c=c: self._on_status(c, s)) for c, _ in nodes]
+        self._starts: dict[str, tuple[str, str, str]] = {}  # start id -> (skillset, skill, refusal or "")
+        # One subscriber per manager keeps its messages in order: a refusal comes before the status after it.
+        self.style = style
+        self._topics = {c.name: {t.topic: t for t in manager_topics(c.skillset)} for c, _ in nodes}
+        self._subs = [session.declare_subscriber(style.all_topics(c.manager, c.skillset),
+                                                 lambda s, c=c: self._on_sample(c, s)) for c, _ in nodes]
 
-    def _on_status(self, component: Component, sample: zenoh.Sample) -> None:
+    def _on_sample(self, component: Component, sample: zenoh.Sample) -> None:
+        topic = self._topics[component.name].get(self.style.topic(component.manager, str(sample.key_expr)) or "")
+        if topic is None or topic.kind not in ("status", "skill_response"):
+            return  # requests (ours too) and the other outputs
+        store, skillset = self._stores[component.name], component.skillset
         try:
-            ids = skill_ids(self._stores[component.name], component.skillset, sample.payload.to_bytes())
-        except Exception as exc:  # a malformed status must not stop the pilot (SPEC §7)
-            log.warning("status of %s not understood: %s", component.manager, exc)
+            if topic.kind == "status":
+                ids = skill_ids(store, skillset, sample.payload.to_bytes())
+                with self._lock:
+                    self._ids[component.name] = ids
+                    self._lock.notify_all()
+                return
+            refusal = start_refusal(store, skillset, topic.skill or "", sample.payload.to_bytes())
+        except Exception as exc:  # a malformed message must not stop the pilot (SPEC §7)
+            log.warning("%s of %s not understood: %s", topic.topic, component.manager, exc)
             return
+        if refusal is None:
+            return
+        id_, why = refusal
         with self._lock:
-            self._ids[component.name] = ids
+            for start, (ss, skill, _) in self._starts.items():
+                # ALREADY_RUNNING names the running execution, not the refused one
+                if (ss, skill) == (component.name, topic.skill) and (start == id_ or why.startswith("ALREADY")):
+                    self._starts[start] = (ss, skill, why)
             self._lock.notify_all()
 
     def send(self, command: PilotCommand) -> str:
@@ -126,13 +156,24 @@ class ManagerActuator:
                 except (ValueError, KeyError, TypeError) as exc:
                     raise ActError(f"cannot encode {skillset}:{command.transition}: {exc}") from None
                 self._count += 1
+                self._starts[id_] = (skillset, skill, "")
             key = self._requests.put(skillset, *request)
+            with self._lock:  # the manager's answer: its status with the new id, or a refusal before it
+                self._lock.wait_for(lambda: self._starts[id_][2] or self._shows(skillset, skill, id_), REACT_WAIT)
+                refusal = self._starts.pop(id_)[2]
+            if refusal:
+                raise Refused(f"{c.manager} refused {skillset}:{command.transition}: {refusal}")
             return f"{command.transition} (id '{id_}'{_inputs(command.inputs)}) on {key}"
         if kind == "interrupt":
             id_ = self._running_id(c, store, skill)
             key = self._requests.put(skillset, *skill_interrupt(store, c.skillset, skill, id_))
             return f"{command.transition} (running id '{id_}') on {key}"
         raise ActError(f"{skillset}:{command.transition} is not a command (SKILL.start or SKILL.interrupt)")
+
+    def _shows(self, skillset: str, skill: str, id_: str) -> bool:
+        """Whether the manager's last status shows ``id_`` as ``skill``'s execution (lock held)."""
+        view = self._ids.get(skillset, {}).get(skill)
+        return view is not None and view.id == id_
 
     def _running_id(self, c: Component, store: Typestore, skill: str) -> str:
         """The id of ``skill``'s running execution, as the manager's last status shows it."""
@@ -199,4 +240,5 @@ def _inputs(inputs: Mapping[str, object]) -> str:
     return f", inputs {dict(inputs)}" if inputs else ""
 
 
-__all__ = ["ActError", "Actuator", "ManagerActuator", "Routed", "default_actuator", "responder", "route"]
+__all__ = ["ActError", "Actuator", "ManagerActuator", "Refused", "Routed", "default_actuator", "responder",
+           "route"]

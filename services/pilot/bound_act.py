@@ -9,14 +9,15 @@ on the keys of :class:`~skinet.ros.keys.KeyStyle` (``zenoh-bridge-ros2dds`` or
   new goal id (UUID 4) and the goal's fields from the command's inputs, as the
   binding maps them (:meth:`~skinet.ros.binding.SkillBinding.goal_fields`: its fixed
   ``goal`` fields, each input at its field).  A goal the server rejects
-  (``accepted`` false), no reply within ``timeout``, or a reply that does not decode
-  raises :class:`ActError`.
+  (``accepted`` false) raises :class:`~services.pilot.act.Refused` (nothing changed:
+  the pilot asks again, up to its ``max_retries``); no reply within ``timeout``, or a
+  reply that does not decode, :class:`~services.pilot.act.ActError`.
 - ``SKILL.interrupt``: a ``cancel_goal`` request for one goal id: the goal this
   actuator sent, while the action's status shows it active; otherwise (the operator
   started the skill) the goal the bridge follows, read from the status cache
-  (:func:`~skinet.ros.actions.followed_goal`).  No active goal, or a cancel the
-  server refuses (``ERROR_REJECTED``, ``ERROR_UNKNOWN_GOAL_ID``,
-  ``ERROR_GOAL_TERMINATED``), raises :class:`ActError` with the reason.
+  (:func:`~skinet.ros.actions.followed_goal`).  No active goal raises
+  :class:`ActError`; a cancel the server refuses (``ERROR_REJECTED``,
+  ``ERROR_UNKNOWN_GOAL_ID``, ``ERROR_GOAL_TERMINATED``) :class:`Refused`, with its code.
 
 On ``rmw_zenoh`` keys the actuator shows in the ROS graph as rmw_zenoh clients do: a
 node ``/skinet_pilot_<n>`` with a service client token for each action's
@@ -39,7 +40,7 @@ import zenoh
 from services.common.ros_client import ServiceClient
 from services.common.ros_liveliness import declare_node
 from services.common.zenoh_config import undeclare
-from services.pilot.act import ActError
+from services.pilot.act import ActError, Refused
 from skinet.plan.inputs import message_problem
 from skinet.ros.actions import (
     SentGoal, cancel_goal_reply, cancel_goal_request, followed_goal, send_goal_reply, send_goal_request,
@@ -109,8 +110,8 @@ class BoundActuator:
         except Exception as exc:
             raise ActError(f"{sent}: the reply of {skill.action} does not decode: {exc}") from None
         goal.on_reply(accepted)
-        if not accepted:
-            raise ActError(f"{sent}: the action server of {skill.action} rejected the goal")
+        if not accepted:  # nothing changed on the robot: the pilot may ask again (Refused)
+            raise Refused(f"{sent}: the action server of {skill.action} rejected the goal")
         self.sent[(skillset, skill.skill)] = goal
         return f"{sent}: accepted"
 
@@ -137,7 +138,7 @@ class BoundActuator:
         except Exception as exc:
             raise ActError(f"{sent}: the reply of {skill.action} does not decode: {exc}") from None
         if code != "ERROR_NONE" or target not in canceling:
-            raise ActError(f"{sent}: the action server of {skill.action} refused: {code}")
+            raise Refused(f"{sent}: the action server of {skill.action} refused: {code}")
         return f"{sent}: canceling"
 
     def _status(self, binding: Binding, skill: SkillBinding) -> list[Goal]:

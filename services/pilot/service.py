@@ -15,7 +15,9 @@ was planned from (``CheckReply.seq`` = ``LiveState.seq``, neither state nor pred
 stale); a deny is a defect, logged with its reason and counted in ``denied``, never
 sent.  After a command the pilot waits for its effect (an event of that skillset
 after the step it was planned from); never two commands in flight; no reaction within
-``response_timeout`` ends the goal ``failed: no response from <manager>``.
+``response_timeout`` ends the goal ``failed: no response from <manager>``; a command the
+robot refuses (:class:`~services.pilot.act.Refused`) is asked again, and ends the goal after
+``max_retries`` refusals.
 
 A skillset that is not ``live``, a model divergence (until the next step, or ``resume``),
 a prediction still pending ``PENDING_GRACE`` after its step (when a command is due) or an
@@ -41,7 +43,7 @@ from typing import Any
 import zenoh
 
 from services.common.zenoh_config import undeclare
-from services.pilot.act import ActError, Actuator, default_actuator, responder
+from services.pilot.act import ActError, Actuator, Refused, default_actuator, responder
 from skinet.errors import SkinetError, SourceError
 from skinet.plan import Command, Goal, Plan, Planner, Reached, parse_goal, parse_goals
 from skinet.ros.keys import KeyStyle
@@ -77,6 +79,7 @@ class _Goal:
     index: int = 0
     plan: Plan | None = None
     retries: dict[str, int] = field(default_factory=dict)
+    refused: dict[str, int] = field(default_factory=dict)  # 'skillset:transition' -> refusals by the robot
     commands: int = 0
     denied: int = 0
     paused_by: str = ""  # the client that paused it
@@ -507,6 +510,19 @@ class Pilot:
         try:
             sent = self.actuator.send(c)
             log.info("goal %d: sent %s:%s", due.goal, c.skillset, sent)
+        except Refused as exc:  # nothing changed on the robot: ask again, up to max_retries times
+            log.warning("goal %d: %s", due.goal, exc.reason)
+            with self._lock:
+                self._inflight = None
+                g = self._goal
+                if g is not None and g.id == due.goal and not g.end:
+                    name = f"{c.skillset}:{c.transition}"
+                    g.refused[name] = g.refused.get(name, 0) + 1
+                    if g.refused[name] >= max(1, g.max_retries):
+                        self._end(g, "failed", f"{exc.reason} ({g.refused[name]} times)")
+                    else:
+                        self._refuse(g, due, exc.reason)
+                    self._decide()
         except ActError as exc:
             with self._lock:
                 self._inflight = None
@@ -585,7 +601,8 @@ def start_pilot(session: zenoh.Session, system: System, instance: str | None = N
     ``instance``: its id in the liveliness token and the status (default: random);
     ``actuator``: how it acts (default: :func:`~services.pilot.act.default_actuator` on the keys of
     ``style``: the managers' request topics, which need the system's ``typemap``, and the bound skills'
-    actions); ``response_timeout``: seconds a manager has to react to a command; ``budget``: planning seconds per goal; ``client``: its
+    actions); ``response_timeout``: seconds a manager has to react to a command; ``budget``: planning
+    seconds per goal; ``client``: its
     router login, the client chunk of its check queries (default ``local``).
     """
     return Pilot(session, system, instance=instance, actuator=actuator, response_timeout=response_timeout,

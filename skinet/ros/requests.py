@@ -3,7 +3,9 @@
 A generated manager takes, on topics relative to its node (:func:`skinet.ros.keys.manager_topics`):
 
 - ``skill/<k>/request``: ``Skill<K>Request`` (``id``, ``input``: a ``Skill<K>Input`` with
-  the skill's input fields), which starts ``k`` (:func:`skill_request`);
+  the skill's input fields), which starts ``k`` (:func:`skill_request`); an accepted start
+  gets no response, only the status showing the new id, and a refused one a
+  ``Skill<K>Response`` first (:func:`start_refusal`);
 - ``skill/<k>/interrupt``: ``SkillInterrupt`` (``id``), which interrupts ``k`` only when
   ``id`` is the running execution's id (:func:`skill_interrupt`); that id is read from
   the manager's own ``SkillsetStatus`` (:func:`skill_ids`), never guessed;
@@ -41,8 +43,8 @@ from rosbags.typesys.store import Typestore
 
 from skinet.lang.model import Skillset
 from skinet.ros.actions import message
-from skinet.ros.derive import SkillView, status_from_plain
-from skinet.ros.interfaces import skill_type
+from skinet.ros.derive import SkillView, skill_response_from_plain, status_from_plain
+from skinet.ros.interfaces import RESULTS, skill_type
 from skinet.ros.keys import EMPTY_TYPE, GID_SIZE, ManagerTopic, TopicKind, manager_topics, rmw_attachment
 from skinet.ros.typestore import decode, default_instance, encode, msg_typename, to_plain
 
@@ -101,6 +103,28 @@ def skill_ids(store: Typestore, skillset: Skillset, payload: bytes) -> dict[str,
         raise ValueError(f"not a SkillsetStatus of {skillset.name}: {exc}") from None
 
 
+REFUSALS = ("ALREADY_RUNNING", "PRECONDITION_FAILURE", "VALIDATE_FAILURE", "START_FAILURE")
+
+
+def start_refusal(store: Typestore, skillset: Skillset, skill: str, payload: bytes) -> tuple[str, str] | None:
+    """``(id, why)`` when a CDR ``Skill<K>Response`` refuses a start (``ALREADY_RUNNING`` with the running
+    execution's id, ``PRECONDITION_FAILURE`` with the preconditions that are false, ``VALIDATE_FAILURE``,
+    ``START_FAILURE``); None for any other response; ``ValueError`` when the payload is not one."""
+    k = skillset.skill(skill)
+    try:
+        msg = to_plain(decode(store, msg_typename(skillset, skill_type(k, "Response")), payload))
+        r = skill_response_from_plain(skillset, skill, msg)
+    except (KeyError, SerdeError) as exc:
+        raise ValueError(f"not a response of {skillset.name}:{skill}: {exc}") from None
+    code = next((c for c in REFUSALS if RESULTS[c] == r.result), None)
+    if code == "ALREADY_RUNNING":
+        return r.id, f"{code} (running id '{r.id}')"
+    if code == "PRECONDITION_FAILURE":
+        false = [name for name, ok in r.preconditions.items() if not ok]
+        return r.id, f"{code} ({', '.join(false)} false)" if false else code
+    return None if code is None else (r.id, code)
+
+
 @dataclass
 class Writer:
     """One writer of ROS 2 messages on Zenoh: its ``rmw_zenoh`` GID and sequence numbers."""
@@ -118,4 +142,5 @@ class Writer:
         return rmw_attachment(self.sequence, timestamp_ns, self.gid)
 
 
-__all__ = ["Writer", "event_request", "skill_ids", "skill_interrupt", "skill_request", "status_request", "topic_of"]
+__all__ = ["REFUSALS", "Writer", "event_request", "skill_ids", "skill_interrupt", "skill_request", "start_refusal",
+           "status_request", "topic_of"]

@@ -241,10 +241,15 @@ class MissionObserver:
     A violation is a property that holds in one ``Verdicts`` and not in the next; its
     event is the ``LiveState`` of the same ``seq`` (``skillset:transition#n``), and its
     scenario step comes from :func:`align`.
+
+    ``after``: the monitor's last step before the mission (its ``seq``).  The monitor
+    publishes that step again whenever a skillset's sync state changes (same ``seq``,
+    the old event's name); such a copy is no step of the mission and is left out.
     """
 
-    def __init__(self, session: zenoh.Session, system: str = SYSTEM):
+    def __init__(self, session: zenoh.Session, system: str = SYSTEM, after: int = -1):
         self._lock = threading.Lock()
+        self.after = after
         self.states: dict[int, LiveState] = {}
         self.verdicts: dict[int, Verdicts] = {}
         self.unsafe: list[tuple[float, UnsafeReport]] = []  # (arrival, report)
@@ -278,10 +283,14 @@ class MissionObserver:
         self.event_log.append((now, m.stamp, f"{m.skillset}:{m.transition}#{m.seq}"))
 
     def _state(self, now: float, m: LiveState) -> None:
+        if m.seq <= self.after:
+            return
         self.states[m.seq] = m
         self.arrivals.setdefault(("state", m.seq), now)
 
     def _verdicts(self, now: float, m: Verdicts) -> None:
+        if m.seq <= self.after:
+            return
         self.verdicts[m.seq] = m
         self.arrivals.setdefault(("verdicts", m.seq), now)
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shlex
 import shutil
 import subprocess
@@ -37,7 +38,7 @@ pytestmark = pytest.mark.slow
 IMAGE = os.environ.get("SKINET_TEST_IMAGE", "skinet-live:local")  # own tag per checkout under test
 SECRETS_IN_IMAGE = "/var/lib/skinet/secrets"  # each service's own files (the job's vault, in its container)
 USER_SERVICE = {"bridge": "bridge", "monitor": "monitor", "predictor": "predictor", "robot": "simulator",
-                "observer": "dashboard"}  # the compose service holding each user's files
+                "observer": "dashboard", "pilot": "pilot"}  # the compose service holding each user's files
 BUILD_TIMEOUT = 2400  # a first build (debootstrap, wheels, image) took 20 min on a loaded 2-core machine
 
 
@@ -379,7 +380,41 @@ def test_offboard_network_cut_leaves_stale_predictions_then_recovers(stack: tupl
         obs.close()
 
 
+def _latest_state(session: zenoh.Session) -> LiveState | None:
+    """The monitor's last published state, as a late joiner asks for it (None: no answer yet)."""
+    for reply in session.get(keys.state("spot_arm"), timeout=2.0):
+        if reply.ok is not None:
+            return decode(reply.ok.payload.to_bytes(), LiveState)
+    return None
+
+
+def _sync_reason(st: LiveState | None, skillset: str) -> str:
+    """Why the monitor cannot vouch for ``skillset`` in ``st`` ('' when it can, or without a state)."""
+    return st.sync[skillset].reason if st is not None and skillset in st.sync else ""
+
+
+def _all_in(st: LiveState | None, state: str) -> bool:
+    """Whether every skillset of ``st`` is in sync state ``state`` (live, syncing, lost)."""
+    return st is not None and bool(st.sync) and all(s.state == state for s in st.sync.values())
+
+
+def _standby_robot(s: Stack) -> str:
+    """The simulator serving spot_arm's managers without playing anything (a start delay of an
+    hour): a robot at rest, which answers the bridge's status requests.  Returns its container."""
+    before = set(s.containers("simulator"))
+    s.compose("run", "-d", "--no-deps", "simulator", SKINET_START_DELAY="3600")
+    (robot,) = set(s.containers("simulator")) - before
+    return robot
+
+
 def test_router_restart_clients_reconnect(stack: tuple[Stack, str], observer: zenoh.Session) -> None:
+    """Every service comes back after ``docker restart`` of the router, and the next mission gives
+    the in-process verdicts.
+
+    No robot runs across the restart: the bridge cannot tell what its managers did while its
+    link was cut, so the monitor vouches for no skillset (syncing, SPEC §7) until the mission's
+    managers answer the bridge; it then publishes its last step again with the new sync state,
+    which is no step of the mission (:class:`MissionObserver`'s ``after``)."""
     s = stack[0]
     tokens = Tokens(observer)
     try:
@@ -392,11 +427,19 @@ def test_router_restart_clients_reconnect(stack: tuple[Stack, str], observer: ze
                    60, f"every service back (got {sorted(tokens.alive)})")
     finally:
         tokens.close()
-    obs = MissionObserver(observer)
+    latest: list[LiveState | None] = [None]
+
+    def unvouched() -> bool:
+        latest[0] = _latest_state(observer)
+        return _all_in(latest[0], "syncing")
+
+    wait_until(unvouched, 30, "spot and manipulator syncing after the restart")
+    assert latest[0] is not None
+    obs = MissionObserver(observer, after=latest[0].seq)  # no step can come before the mission's managers answer
     try:
         _finish(s.run_simulator(speed=10))
         _settle(obs)
-        assert obs.violations(load_scenario()) == expected_violations()
+        assert obs.violations(load_scenario()) == expected_violations(), (obs.events(), obs.event_trace())
         assert any(not r.prediction_stale for _, r in obs.unsafe)
     finally:
         obs.close()
@@ -408,30 +451,47 @@ def test_router_restart_loses_no_event(stack: tuple[Stack, str], observer: zenoh
     The host publishes status events of its own stream as the bridge does (advanced
     publisher: cache and heartbeats) before, during and after ``docker restart`` of
     the router; the monitor (advanced subscriber) applies each once, so its step
-    counter grows by exactly the number of events, and it logs no gap for the stream.
+    counter grows by exactly the number of events (plus the resync steps), and it
+    logs no gap for the stream.
+
+    The restart also cut the stack's bridge from spot's manager: until the manager's
+    next status closes that gap the bridge refuses the resync, and the monitor does
+    not vouch for spot (SPEC §7): the host's events wait.  So a robot at rest serves
+    the managers (a simulator that plays nothing), frozen (``docker pause``) across
+    the restart so that the refusal is seen, then thawed to answer.
     """
     s = stack[0]
     states: list[LiveState] = []
     sub = observer.declare_subscriber(keys.state("spot_arm"), lambda x: states.append(
         decode(x.payload.to_bytes(), LiveState)))
+    robot = _standby_robot(s)
+    paused = False
     bridge = host_login(stack, secrets, "bridge")
     publisher = event_publisher(bridge, keys.events("spot_arm", "spot"))
     source, sent = f"host-{os.getpid()}", 0
+    transitions = ("init_power.start", "init_power.success.powered_on")
+
+    def name(n: int) -> str:
+        return f"spot:{transitions[n % 2]}#{n}"
 
     def publish(n: int, rate: float = 40.0) -> None:
         nonlocal sent
         for _ in range(n):
             # Named transitions: each is a step of the monitor (a status confirming the marking is not).
             ev = CanonicalEvent(system="spot_arm", skillset="spot", seq=sent, stamp=time.time(), source=source,
-                                transition=("init_power.start", "init_power.success.powered_on")[sent % 2])
+                                transition=transitions[sent % 2])
             publisher.put(encode(ev))
             sent += 1
             time.sleep(1 / rate)
 
     try:
+        # The bridge has a status of each skillset (from the robot at rest, or an earlier mission).
+        wait_until(lambda: _all_in(_latest_state(observer), "live"), 60, "spot and manipulator live")
         publish(10)
-        wait_until(lambda: any(st.event.endswith(f"#{sent - 1}") for st in states), 30, "the first events")
+        wait_until(lambda: any(st.event == name(sent - 1) for st in states), 30, "the first events")
         first = max(st.seq for st in states)
+        subprocess.run(["docker", "pause", robot], check=True, capture_output=True)
+        paused = True
         (router,) = s.containers("router")
         restart = threading.Thread(target=subprocess.run, args=(["docker", "restart", "-t", "1", router],),
                                    kwargs={"check": True, "capture_output": True})
@@ -439,17 +499,32 @@ def test_router_restart_loses_no_event(stack: tuple[Stack, str], observer: zenoh
         publish(160)  # 4 s: the router is down for part of it
         restart.join()
         publish(10)
-        wait_until(lambda: any(st.event.endswith(f"#{sent - 1}") for st in states), 60,
+        cut = "has no current status of spot: the link to the managers was cut"
+        wait_until(lambda: cut in _sync_reason(_latest_state(observer), "spot"), 60,
+                   "the monitor to say why it cannot vouch for spot")
+        assert not any(st.event == name(sent - 1) for st in states), "an event applied while spot was not live"
+        subprocess.run(["docker", "unpause", robot], check=True, capture_output=True)
+        paused = False
+        wait_until(lambda: any(st.event == name(sent - 1) for st in states), 60,
                    "the last event after the restart")
-        last = max(st.seq for st in states)
-        # The outage also cost the bridge's token: spot was lost, then resynced from the bridge (SPEC §7),
-        # which is a step of its own when the bridge's status differs from the host's events.
-        resyncs = len({st.seq for st in states if st.seq > first and ":resync#" in st.event})
-        assert last - first - resyncs == sent - 10, \
-            f"{sent - 10} events and {resyncs} resyncs after step {first}, but the monitor reached {last}"
+        steps = {st.seq: st.event for st in states if st.seq > first}
+        last = max(steps)
+        ours = {name(n) for n in range(sent)}
+        host = [e for _, e in sorted(steps.items()) if e in ours]
+        others = [e for e in steps.values() if e not in ours]
+        # The observer was back before the robot thawed, so it saw every step that is not the host's.
+        assert all(re.fullmatch(r"(spot|manipulator):(status|resync)#\d+", e) for e in others), others
+        assert last - first - len(others) == sent - 10, \
+            f"{sent - 10} events and {len(others)} other steps ({others}) after step {first}, but the monitor " \
+            f"reached {last}"
+        numbers = [int(e.rsplit("#", 1)[1]) for e in host]
+        assert numbers == sorted(set(numbers)), f"host events out of order or twice: {numbers}"
         logs = s.compose("logs", "--no-color", "monitor", check=False).stdout
         assert f"from '{source}'" not in logs, [line for line in logs.splitlines() if source in line]
     finally:
+        if paused:
+            subprocess.run(["docker", "unpause", robot], capture_output=True)
+        subprocess.run(["docker", "rm", "-f", robot], capture_output=True)
         publisher.undeclare()
         bridge.close()
         sub.undeclare()

@@ -31,7 +31,7 @@ from skinet.wire.convert import bundle, statuses
 from skinet.wire.messages import CanonicalEvent, PredictReply, PredictRequest, SkillsetStatus
 from tests.bridge_side import BridgeSide
 
-USERS = ("bridge", "monitor", "predictor", "robot", "observer", "hub")
+USERS = ("bridge", "monitor", "predictor", "robot", "observer", "hub", "pilot", "operator")
 FLOODER = "flooder"  # a second user allowed to ask predictions, as an operator adds one
 MISSION = [  # the paper's mission, as a cycle: every step a new marking
     ("spot", "init_power.start"), ("spot", "init_power.success.powered_on"), ("spot", "stand_up.start"),
@@ -107,7 +107,7 @@ def test_a_forged_client_chunk_is_refused_by_the_acl(router: str) -> None:
                         keys.predict(SYSTEM, "*"), keys.predict_instance(SYSTEM, "*", "p1"),
                         keys.predict(SYSTEM, "local")):
                 assert _replies(s, key) == [], (user, key)
-        for user in ("observer", "robot", "bridge", "hub"):
+        for user in ("observer", "robot", "bridge", "hub", "pilot", "operator"):
             assert _replies(sessions[user], keys.predict(SYSTEM, user)) == [], user
             assert _replies(sessions[user], keys.predict(SYSTEM, "monitor")) == [], user
     finally:

@@ -61,7 +61,7 @@ class Statuses(Messages[PilotStatus]):
     def __init__(self, session: zenoh.Session, system: str = "spot_arm"):
         super().__init__(session, keys.pilot_status(system), PilotStatus)
 
-    def first(self, predicate: Callable[[PilotStatus], bool], timeout: float = 20.0, what: str = "") -> PilotStatus:
+    def first(self, predicate: Callable[[PilotStatus], bool], timeout: float = 60.0, what: str = "") -> PilotStatus:
         """The first status (from now on or already received) for which ``predicate`` holds."""
         try:
             items = super().wait(lambda items: any(predicate(s) for s in items), timeout)
@@ -71,7 +71,7 @@ class Statuses(Messages[PilotStatus]):
                         f"{None if last is None else (last.state, last.reason, last.next)}")
         return next(s for s in items if predicate(s))
 
-    def state(self, state: str, goal: int | None = None, timeout: float = 20.0) -> PilotStatus:
+    def state(self, state: str, goal: int | None = None, timeout: float = 60.0) -> PilotStatus:
         return self.first(lambda s: s.state == state and (goal is None or s.goal_id == goal), timeout,
                           f"'{state}'")
 
@@ -172,7 +172,7 @@ class Robot:
             self.wait_synced()
             self.wait_pilot("idle")
 
-    def wait_pilot(self, state: str, timeout: float = 10.0) -> None:
+    def wait_pilot(self, state: str, timeout: float = 30.0) -> None:
         """Until the pilot's own last status is ``state``."""
         deadline = time.monotonic() + timeout
         while self.pilot.status.state != state:
@@ -183,7 +183,7 @@ class Robot:
     def start_monitor(self) -> None:
         self.monitor = start_monitor(self.sessions(), self.system, lost_after=self.lost_after)
 
-    def wait_synced(self, timeout: float = 10.0) -> None:
+    def wait_synced(self, timeout: float = 30.0) -> None:
         deadline = time.monotonic() + timeout
         while self.monitor is None or not self.monitor.synced():
             if time.monotonic() > deadline:

@@ -125,19 +125,22 @@ def test_drive_docks_through_the_action_servers(nav2: Nav2) -> None:
 
 
 @pytest.mark.parametrize("nav2", [(KeyStyle(), False)], ids=["robot-idle"], indirect=True)
-def test_guide_sends_no_goal_and_a_rejected_goal_fails_with_the_server_s_reason(nav2: Nav2) -> None:
+def test_guide_sends_no_goal_and_rejected_goals_are_asked_again_then_fail_the_goal(nav2: Nav2) -> None:
     reply = ask_goal(nav2.observer, goal("run nav2:dock_robot", system="nav2", inputs=DOCK), system="nav2")
     guiding = nav2.statuses.first(lambda s: s.goal_id == reply.goal_id and s.state == "guiding")
     assert (guiding.next.skillset, guiding.next.transition) == ("nav2", "undock_robot.start")
     assert nav2.received() == [] and nav2.actuator.sent == []
-    # Drive: the undocking server refuses goals.
+    # Drive: the undocking server refuses goals.  Nothing changed on the robot: the pilot pauses with the
+    # server's reason and asks again, a new goal each time, until max_retries refusals end the goal.
     nav2.robot.actions[("nav2", "undock_robot")].logic.accepting = False
     reply = ask_goal(nav2.observer, goal("run nav2:dock_robot", system="nav2", inputs=DOCK, mode="drive",
-                                         replace=True), system="nav2")
+                                         replace=True, max_retries=2), system="nav2")
     failed = nav2.statuses.state("failed", reply.goal_id)
-    [(_, goal_id, _)] = nav2.received()
-    assert failed.reason == (f"cannot send nav2:undock_robot.start: send_goal /undock_robot goal {goal_id} {{}}: "
-                             "the action server of /undock_robot rejected the goal")
+    [(_, first, _), (_, second, _)] = nav2.received()
+    rejected = "send_goal /undock_robot goal {} {{}}: the action server of /undock_robot rejected the goal"
+    paused = nav2.statuses.first(lambda s: s.goal_id == reply.goal_id and s.state == "paused")
+    assert (paused.reason, failed.reason) == (rejected.format(first), f"{rejected.format(second)} (2 times)")
+    assert first != second and nav2.robot.actions[("nav2", "undock_robot")].logic.goals == {}
 
 
 def test_an_action_server_that_accepts_and_then_says_nothing_fails_the_goal(

@@ -129,7 +129,7 @@ def test_a_certificate_of_another_user_gets_nothing_from_the_router(deployment: 
 def vault(tmp_path: Path) -> Path:
     folder = tmp_path / "vault"
     ensure_users(folder)
-    ensure_tls(folder / "tls", ["observer", "bridge"])
+    ensure_tls(folder / "tls", ["observer", "bridge", "operator"])
     return folder
 
 
@@ -192,3 +192,16 @@ def test_the_default_output_is_the_users_file_here_and_never_names_the_ca_key(va
     text = (tmp_path / "bridge.json5").read_text()
     assert "ca.key" not in text and str(vault / "tls" / "bridge.key") in text
     zenoh.Config.from_file(str(tmp_path / "bridge.json5"))  # Zenoh reads it
+
+
+def test_an_operators_configuration_says_how_to_send_goals(vault: Path, tmp_path: Path) -> None:
+    """The vault's ``operator`` (the role that may send the pilot goals: docs/deployment.md)."""
+    r = skinet("client-config", "--secrets", str(vault), "--user", "operator", cwd=tmp_path)
+    assert (r.returncode, r.stderr) == (0, ""), r
+    assert r.stdout.splitlines() == [
+        f"wrote operator.json5: user operator at tls/127.0.0.1:7447 (password, CA, certificate and key of {vault})",
+        "  skinet watch SYSTEM_NAME -m client --zenoh-config operator.json5",
+        "  skinet goal SYSTEM_NAME GOAL... --drive -m client --zenoh-config operator.json5"]
+    body = json.loads((tmp_path / "operator.json5").read_text().split("\n", 4)[4])
+    assert body["transport"]["auth"]["usrpwd"] == {"user": "operator",
+                                                   "password": (vault / "operator.password").read_text().strip()}

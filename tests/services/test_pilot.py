@@ -335,22 +335,22 @@ def test_the_actuator_interrupts_with_the_running_id_its_manager_shows(robot: Ro
     actuator = robot.actuator.inner.actuators["manager"]
     try:
         gui.start("spot", "init_power")
-        wait_until(lambda: robot.sim.skill_status("spot", "init_power") == (True, "gui-1"), 5, "init_power runs")
+        wait_until(lambda: robot.sim.skill_status("spot", "init_power") == (True, "gui-1"), 30, "init_power runs")
         interrupt = PilotCommand(skillset="spot", transition="init_power.interrupt")
         sent = actuator.send(interrupt)
         assert sent == "init_power.interrupt (running id 'gui-1') on spot/spot_skillset_manager/spot_skillset/skill/" \
                        "init_power/interrupt"
-        wait_until(lambda: not robot.sim.skill_status("spot", "init_power")[0], 5, "init_power interrupted")
+        wait_until(lambda: not robot.sim.skill_status("spot", "init_power")[0], 30, "init_power interrupted")
         with pytest.raises(ActError, match=r"^spot:init_power is not running according to /spot/spot_skillset_"
                                            r"manager's last status$"):
-            wait_until(lambda: actuator._ids["spot"]["init_power"].state == 0, 5, "the status seen")
+            wait_until(lambda: actuator._ids["spot"]["init_power"].state == 0, 30, "the status seen")
             actuator.send(interrupt)
         with pytest.raises(ActError, match=r"^cannot encode spot:go_to_waypoint.start: spot:go_to_waypoint has no "
                                            r"input 'goal' \(inputs: target\)$"):
             actuator.send(PilotCommand(skillset="spot", transition="go_to_waypoint.start", inputs={"goal": 1.0}))
         assert actuator.send(PilotCommand(skillset="spot", transition="init_power.start")) == \
             "init_power.start (id 'p1-1') on spot/spot_skillset_manager/spot_skillset/skill/init_power/request"
-        wait_until(lambda: robot.sim.skill_status("spot", "init_power") == (True, "p1-1"), 5, "started by the pilot")
+        wait_until(lambda: robot.sim.skill_status("spot", "init_power") == (True, "p1-1"), 30, "started by the pilot")
     finally:
         gui.close()
 
@@ -393,3 +393,24 @@ def test_drive_through_rmw_zenoh_keys(client_factory, spot_arm) -> None:
     finally:
         impl.close()
         robot.close()
+
+
+def test_a_start_the_manager_refuses_is_asked_again_then_ends_the_goal(robot: Robot) -> None:
+    """A faulty manager refuses init_power (its preconditions, it says, are false): nothing changes on the
+    robot, so the pilot learns it from the manager's response, asks again, and gives up after max_retries."""
+    manager = robot.sim.nodes["spot"].manager
+    skill = manager.skillset.skill("init_power")
+
+    def refuse(name: str, id_: str, input_: object = None) -> list:
+        manager.skills[name].id = id_  # as the generated manager does: the id kept, the start refused
+        return [manager._response(skill, "PRECONDITION_FAILURE", preconditions={p.name: False for p in skill.preconditions}),
+                manager.status()]
+
+    manager.skill_request = refuse
+    reply = ask_goal(robot.observer, goal("reach spot:Standing", mode="drive", max_retries=2))
+    refused = robot.statuses.first(lambda s: s.state == "paused" and "refused" in s.reason, what="refused once")
+    assert refused.reason == ("/spot/spot_skillset_manager refused spot:init_power.start: PRECONDITION_FAILURE "
+                              f"({', '.join(p.name for p in skill.preconditions)} false)")
+    failed = robot.statuses.state("failed", reply.goal_id)
+    assert failed.reason == refused.reason + " (2 times)"
+    assert (robot.actuator.sent, failed.commands) == ([], 2)  # sent, refused: the recording keeps what went through
