@@ -26,6 +26,7 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
+from services.common.cli import key_style
 from services.common.zenoh_config import (
     ZenohSetupError, client_name, login, open_session, session_config, session_mode, warn_on_stderr,
 )
