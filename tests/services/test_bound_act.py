@@ -209,14 +209,17 @@ def test_on_rmw_zenoh_the_actuator_shows_as_an_action_client_in_the_ros_graph(na
                                                                                                timeout=2.0) if r.ok}
         return {(e.node, e.kind, e.topic) for e in found if e is not None and e.node.startswith("skinet_pilot_")}
 
+    def settled(expected: int) -> set[tuple[str, str, str]]:
+        deadline = time.monotonic() + 10  # declarations and undeclarations cross the router
+        while len(got := graph()) != expected and time.monotonic() < deadline:
+            time.sleep(0.05)
+        return got
+
     act = BoundActuator(client_factory(), bindings, style=KeyStyle(rmw_zenoh=True, domain=9))
-    got = graph()
+    got = settled(7)
     node = next(iter(got))[0]
     assert got == {(node, "NN", "")} | {(node, "SC", f"/{action}/_action/{service}")
                                         for action in ("navigate_to_pose", "dock_robot", "undock_robot")
                                         for service in ("send_goal", "cancel_goal")}
     act.close()
-    deadline = time.monotonic() + 5  # the undeclarations cross the router
-    while graph() and time.monotonic() < deadline:
-        time.sleep(0.05)
-    assert graph() == set()
+    assert settled(0) == set()
