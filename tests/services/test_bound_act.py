@@ -22,7 +22,7 @@ import zenoh
 
 from event_watch import Events
 from services.bridge_ros2.bound_live import start_bound_bridge
-from services.pilot.act import ActError
+from services.pilot.act import ActError, Refused
 from services.pilot.bound_act import BoundActuator
 from services.simulator.bound import BoundSimulator
 from skinet.files import load_bindings, load_system
@@ -134,6 +134,7 @@ def test_a_rejected_goal_is_an_error_and_starts_nothing(rig: Rig, nav2, client_f
     [(goal, _)] = rig.received("undock_robot")
     assert str(info.value) == (f'send_goal /undock_robot goal {goal} {{}}: the action server of /undock_robot '
                                "rejected the goal")
+    assert isinstance(info.value, Refused)  # nothing changed on the robot: the pilot may ask again
     assert server.goals == {} and rig.bridge.wait_idle() and rig.transitions() == [None]
     # Its server takes goals again: the same command is accepted.
     server.accepting = True
