@@ -102,7 +102,7 @@ def drive_goals(chain: BoundChain, mission: str, mission_name: str, *, duration:
     robot.on_start.append(implementation)
     seen = _Seen(session, system.name)
     actuator = _Logged(default_actuator(session, system, bindings=chain.bindings, style=chain.style))
-    pilot = start_pilot(session, system, instance="demo", actuator=actuator)
+    pilot = start_pilot(session, system, actuator=actuator)  # a random instance: one of its own per run
     try:
         _wait(lambda: pilot.status.state == "idle", settle, "the pilot to follow the monitor")
         with seen.lock:

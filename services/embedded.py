@@ -165,8 +165,10 @@ def divergence_lines(entries: Sequence[Mapping[str, Any]], older: int, last: int
     return out + ["  " + divergence_line(d) for d in shown]
 
 
-def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
-    """``skinet run``: see the module docstring; returns the exit status."""
+def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
+    """``skinet run``: see the module docstring; returns the exit status (the view on ``out``, default the
+    standard output of the moment, not of the import)."""
+    out = sys.stdout if out is None else out
     from services.predictor.service import start_predictor
 
     system, _ = load_live_system(args.system)

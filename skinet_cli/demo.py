@@ -141,13 +141,8 @@ def _play(args: argparse.Namespace, runs: list[tuple[Path, Scenario, System] | P
             from services.chain import run_bound_chain  # Zenoh only when the chain runs
 
             bindings, _ = load_bindings(system)
-            then = None
-            if scenario.pilot:
-                from services.bound_pilot import drive_goals
-
-                goals = path.parent / scenario.pilot
-                then = lambda c: piloted.append(drive_goals(c, read_text(goals), str(goals)))  # noqa: E731
-            records = run_bound_chain(system, bindings, scenario, predict=not args.no_predict, then=then, **chain)
+            records = run_bound_chain(system, bindings, scenario, predict=not args.no_predict,
+                                      then=_pilot_after_run(path, scenario, piloted), **chain)
             how = ("simulated action servers, lifecycle node and topics -> CDR -> bridge (bindings) -> monitor -> "
                    "predictor, embedded Zenoh session")
         else:
@@ -184,17 +179,35 @@ def _live(args: argparse.Namespace, path: Path, scenario: Scenario, system: Syst
     header = (f"== {scenario.name} run ({path}), live at speed {1.0 if args.speed is None else args.speed:g}: "
               f"{sum(s.transition is not None for s in scenario.steps)} steps, system {system.name}")
     surprises: list[str] = []
+    piloted: list[Any] = []  # what the pilot did after the run (scenario.pilot, bound systems)
 
     def after(records: list[StepRecord]) -> None:
         print(_summary(records), flush=True)
+        if piloted:
+            print(_pilot_lines(path.parent / scenario.pilot, piloted[0]), flush=True)
         surprises.extend(f"{path}: {s}" for s in unexpected(records))
         for line in surprises:
             print(f"skinet demo: {line}", file=sys.stderr, flush=True)
         if args.log or args.timeline:
             _write_run(args, system, scenario, records)
 
-    play_live(args, path, scenario, system, header, lambda r: print(_line(r), flush=True), after)
+    speed = 1.0 if args.speed is None else args.speed
+    then = _pilot_after_run(path, scenario, piloted, 2.0 / speed if speed > 0 else 0.05) if any(
+        c.binding for c in system.components) else None  # a skill takes 2 s at speed 1
+    play_live(args, path, scenario, system, header, lambda r: print(_line(r), flush=True), after, then)
     return UNEXPECTED if surprises else 0
+
+
+def _pilot_after_run(path: Path, scenario: Scenario, piloted: list[Any], duration: float = 0.05) -> Any:
+    """The ``then`` of a bound chain run whose scenario names goals for the pilot (``[scenario] pilot``): the pilot
+    drives them from where the run left the robot, each goal lasting ``duration`` s (what it did goes to
+    ``piloted``); ``None`` without such goals."""
+    if not scenario.pilot:
+        return None
+    from services.bound_pilot import drive_goals  # Zenoh only when the chain runs
+
+    goals = path.parent / scenario.pilot
+    return lambda chain: piloted.append(drive_goals(chain, read_text(goals), str(goals), duration=duration))
 
 
 def unexpected(records: list[StepRecord]) -> list[str]:

@@ -19,6 +19,7 @@ import json
 import sys
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 from services.common.zenoh_config import add_zenoh_args
 from skinet.files import load_bindings, load_typemap
@@ -59,10 +60,12 @@ def live_options_misused(args: argparse.Namespace) -> str | None:
 
 
 def play_live(args: argparse.Namespace, path: Path, scenario: Scenario, system: System, header: str,
-              on_record: Callable[[StepRecord], None], after: Callable[[list[StepRecord]], None]) -> list[StepRecord]:
+              on_record: Callable[[StepRecord], None], after: Callable[[list[StepRecord]], None],
+              then: Callable[[Any], None] | None = None) -> list[StepRecord]:
     """Play ``scenario`` as the module docstring says: ``header`` printed once the session and the dashboard
-    are up, ``on_record`` after each step, ``after`` once the run is over (then the chain keeps running until
-    Ctrl-C or ``--linger``).  Raises one-line
+    are up, ``on_record`` after each step, ``then`` after the last step (a bound system's chain: the pilot's
+    goals, :func:`services.chain.run_bound_chain`), ``after`` once the run is over (then the chain keeps running
+    until Ctrl-C or ``--linger``).  Raises one-line
     :class:`~skinet.errors.SkinetError` (unreachable endpoint, refused login, port in use)."""
     from services.chain import run_bound_chain, run_chain
     from services.common.zenoh_config import (
@@ -97,7 +100,8 @@ def play_live(args: argparse.Namespace, path: Path, scenario: Scenario, system: 
         speed = 1.0 if args.speed is None else args.speed
         options = dict(session=session, speed=speed, on_record=on_record, after=linger)
         if any(c.binding for c in system.components):
-            return run_bound_chain(system, load_bindings(system)[0], scenario, **options)  # type: ignore[arg-type]
+            return run_bound_chain(system, load_bindings(system)[0], scenario, then=then,  # type: ignore[arg-type]
+                                   **options)
         return run_chain(system, load_typemap(path.parent / scenario.system), scenario, **options)  # type: ignore[arg-type]
     finally:
         if dashboard is not None:

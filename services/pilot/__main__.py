@@ -23,11 +23,9 @@ def build_parser() -> ArgumentParser:
     p = ArgumentParser(
         prog="python -m services.pilot",
         description="SkiNet Live pilot: takes goals on skinet/<system>/pilot/goal/<client>, follows the monitor's "
-                    "live state, and guides the operator (the next command) or drives the robot itself (the skillset "
-                    "managers' request topics; for skills bound to ROS 2 actions, goals and cancel requests on the "
-                    "keys of --rmw-zenoh/--namespace), sending only commands the monitor's strict check allows. Its "
-                    "status is on skinet/<system>/pilot/status. Send goals with a PilotGoalRequest (see "
-                    "docs/pilot.md).",
+                    "live state, and guides the operator (the next command) or drives the skillset managers "
+                    "itself, sending only commands the monitor's strict check allows. Its status is on "
+                    "skinet/<system>/pilot/status. Send goals with a PilotGoalRequest (see docs/pilot.md).",
     )
     p.add_argument("system", help="system file (.toml), e.g. skillsets/spot_arm.toml (its type map gives the "
                                   "managers' message types)")

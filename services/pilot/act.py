@@ -74,6 +74,14 @@ def route(system: System, skillset: str, skill: str) -> Literal["manager", "bind
     return "binding" if system.component(skillset).binding else "manager"
 
 
+def responder(system: System, skillset: str, skill: str) -> str:
+    """Who must react to a command of ``skillset:skill``, in the operator's words (``no response from ...``):
+    its manager node, or, for a bound skill (:func:`route`), its action server."""
+    if route(system, skillset, skill) == "binding":
+        return f"the action server of {skillset}:{skill}"
+    return system.component(skillset).manager or skillset
+
+
 class ManagerActuator:
     """Commands as ``Skill<K>Request`` and ``SkillInterrupt`` on the managers' topics (keys of ``style``).
 
@@ -232,4 +240,5 @@ def _inputs(inputs: Mapping[str, object]) -> str:
     return f", inputs {dict(inputs)}" if inputs else ""
 
 
-__all__ = ["ActError", "Actuator", "ManagerActuator", "Refused", "Routed", "default_actuator", "route"]
+__all__ = ["ActError", "Actuator", "ManagerActuator", "Refused", "Routed", "default_actuator", "responder",
+           "route"]

@@ -9,21 +9,27 @@ on the keys of :class:`~skinet.ros.keys.KeyStyle` (``zenoh-bridge-ros2dds`` or
   new goal id (UUID 4) and the goal's fields from the command's inputs, as the
   binding maps them (:meth:`~skinet.ros.binding.SkillBinding.goal_fields`: its fixed
   ``goal`` fields, each input at its field).  A goal the server rejects
-  (``accepted`` false), or no reply within ``timeout``, raises :class:`ActError`.
+  (``accepted`` false) raises :class:`~services.pilot.act.Refused` (nothing changed:
+  the pilot asks again, up to its ``max_retries``); no reply within ``timeout``, or a
+  reply that does not decode, :class:`~services.pilot.act.ActError`.
 - ``SKILL.interrupt``: a ``cancel_goal`` request for one goal id: the goal this
   actuator sent, while the action's status shows it active; otherwise (the operator
   started the skill) the goal the bridge follows, read from the status cache
-  (:func:`~skinet.ros.actions.followed_goal`).  No active goal, or a cancel the
-  server refuses (``ERROR_REJECTED``, ``ERROR_UNKNOWN_GOAL_ID``,
-  ``ERROR_GOAL_TERMINATED``), raises :class:`ActError` with the reason.
+  (:func:`~skinet.ros.actions.followed_goal`).  No active goal raises
+  :class:`ActError`; a cancel the server refuses (``ERROR_REJECTED``,
+  ``ERROR_UNKNOWN_GOAL_ID``, ``ERROR_GOAL_TERMINATED``) :class:`Refused`, with its code.
 
-What a start or an interrupt caused is not this module's business: the bridge sees
-it in the action's status and the pilot in the monitor's live state.  Each command
+On ``rmw_zenoh`` keys the actuator shows in the ROS graph as rmw_zenoh clients do: a
+node ``/skinet_pilot_<n>`` with a service client token for each action's
+``send_goal`` and ``cancel_goal``.  What a start or an interrupt caused is not this
+module's business: the bridge sees it in the action's status and the pilot in the
+monitor's live state.  Each command
 is one request and one reply (an interrupt: one read of the status cache more).
 """
 
 from __future__ import annotations
 
+import itertools
 import json
 import uuid
 from collections.abc import Mapping
@@ -32,7 +38,9 @@ from typing import Any
 import zenoh
 
 from services.common.ros_client import ServiceClient
-from services.pilot.act import ActError
+from services.common.ros_liveliness import declare_node
+from services.common.zenoh_config import undeclare
+from services.pilot.act import ActError, Refused
 from skinet.plan.inputs import message_problem
 from skinet.ros.actions import (
     SentGoal, cancel_goal_reply, cancel_goal_request, followed_goal, send_goal_reply, send_goal_request,
@@ -42,6 +50,9 @@ from skinet.ros.bound import STATUS_NAMES, Goal, goal_text, goals_from_plain
 from skinet.ros.keys import KeyStyle, history_selector
 from skinet.ros.typestore import decode, to_plain
 from skinet.wire.messages import PilotCommand
+
+
+_nodes = itertools.count(1)  # node names of the actuators of this process
 
 
 class BoundActuator:
@@ -56,11 +67,12 @@ class BoundActuator:
         self.timeout = timeout
         self.client = ServiceClient(session, style)
         self.sent: dict[tuple[str, str], SentGoal] = {}  # (skillset, skill) -> the last goal sent
-
-    def binds(self, skillset: str, skill: str) -> bool:
-        """Whether ``skill`` of ``skillset`` is bound to an action (the pilot then acts through this actuator)."""
-        binding = self.bindings.get(skillset)
-        return binding is not None and binding.skill(skill) is not None
+        self._tokens: list[Any] = []
+        if style.rmw_zenoh:  # an action client in the ROS graph (ros2 node list, ros2 service info), as rmw does
+            clients = [("SC", s.name(name), typename, style.type_hash(b.store, typename))
+                       for b in self.bindings.values() for s in b.skills
+                       for name, typename in (("send_goal", f"{s.type}_SendGoal"), ("cancel_goal", CANCEL_TYPE))]
+            _, self._tokens = declare_node(session, style.domain, f"/skinet_pilot_{next(_nodes)}", clients)
 
     def send(self, command: PilotCommand) -> str:
         """Send ``command`` (``SKILL.start`` or ``SKILL.interrupt``); returns what was sent, for the log."""
@@ -86,14 +98,20 @@ class BoundActuator:
             raise ActError(f"{skillset}:{skill.skill}: the goal of {skill.action} cannot be sent: {problem}")
         goal = SentGoal(uuid.uuid4().bytes)
         sent = f"send_goal {skill.action} goal {goal_text(goal.id)} {json.dumps(fields, sort_keys=True)}"
-        reply = self.client.call(skill.name("send_goal"), f"{skill.type}_SendGoal",
-                                 send_goal_request(binding.store, skill.type, goal.id, fields), self.timeout)
+        try:
+            request = send_goal_request(binding.store, skill.type, goal.id, fields)
+        except Exception as exc:  # a value the type check let through that CDR refuses: never crash the pilot
+            raise ActError(f"{sent}: cannot be encoded: {exc}") from None
+        reply = self.client.call(skill.name("send_goal"), f"{skill.type}_SendGoal", request, self.timeout)
         if reply is None:
             raise ActError(f"{sent}: no reply from the action server of {skill.action} within {self.timeout:g} s")
-        accepted, _ = send_goal_reply(binding.store, skill.type, reply)
+        try:
+            accepted, _ = send_goal_reply(binding.store, skill.type, reply)
+        except Exception as exc:
+            raise ActError(f"{sent}: the reply of {skill.action} does not decode: {exc}") from None
         goal.on_reply(accepted)
-        if not accepted:
-            raise ActError(f"{sent}: the action server of {skill.action} rejected the goal")
+        if not accepted:  # nothing changed on the robot: the pilot may ask again (Refused)
+            raise Refused(f"{sent}: the action server of {skill.action} rejected the goal")
         self.sent[(skillset, skill.skill)] = goal
         return f"{sent}: accepted"
 
@@ -115,9 +133,12 @@ class BoundActuator:
                                  self.timeout)
         if reply is None:
             raise ActError(f"{sent}: no reply from the action server of {skill.action} within {self.timeout:g} s")
-        code, canceling = cancel_goal_reply(binding.store, reply)
+        try:
+            code, canceling = cancel_goal_reply(binding.store, reply)
+        except Exception as exc:
+            raise ActError(f"{sent}: the reply of {skill.action} does not decode: {exc}") from None
         if code != "ERROR_NONE" or target not in canceling:
-            raise ActError(f"{sent}: the action server of {skill.action} refused: {code}")
+            raise Refused(f"{sent}: the action server of {skill.action} refused: {code}")
         return f"{sent}: canceling"
 
     def _status(self, binding: Binding, skill: SkillBinding) -> list[Goal]:
@@ -133,7 +154,8 @@ class BoundActuator:
         return goals
 
     def close(self) -> None:
-        """Nothing is declared: requests only."""
+        """Leave the ROS graph (rmw_zenoh); the rest is requests only."""
+        undeclare(*self._tokens)
 
 
 def _shown(goals: list[Goal]) -> str:

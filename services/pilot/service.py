@@ -43,7 +43,7 @@ from typing import Any
 import zenoh
 
 from services.common.zenoh_config import undeclare
-from services.pilot.act import ActError, Actuator, Refused, default_actuator
+from services.pilot.act import ActError, Actuator, Refused, default_actuator, responder
 from skinet.errors import SkinetError, SourceError
 from skinet.plan import Command, Goal, Plan, Planner, Reached, parse_goal, parse_goals
 from skinet.ros.keys import KeyStyle
@@ -504,7 +504,7 @@ class Pilot:
                 self._refuse(g, due, f"the check answered {reply.decision} for {what} at step {due.seq}: {why}",
                              again=False)
                 return
-            manager = self.system.component(c.skillset).manager or c.skillset
+            manager = responder(self.system, c.skillset, c.transition.partition(".")[0])
             self._inflight = _InFlight(c, due.seq, time.monotonic() + self.response_timeout, manager)
             g.commands += 1
             self._show("waiting for outcome", f"the effect of {what}", c)
@@ -602,9 +602,10 @@ def start_pilot(session: zenoh.Session, system: System, instance: str | None = N
     """Start a pilot of ``system`` on ``session`` (which may be shared, SPEC §7).
 
     ``instance``: its id in the liveliness token and the status (default: random);
-    ``actuator``: how it acts (default: :func:`~services.pilot.act.default_actuator`, the managers'
-    request topics on the keys of ``style``, which needs the system's ``typemap``); ``response_timeout``: seconds a
-    manager has to react to a command; ``budget``: planning seconds per goal; ``client``: its
+    ``actuator``: how it acts (default: :func:`~services.pilot.act.default_actuator` on the keys of
+    ``style``: the managers' request topics, which need the system's ``typemap``, and the bound skills'
+    actions); ``response_timeout``: seconds a manager has to react to a command; ``budget``: planning
+    seconds per goal; ``client``: its
     router login, the client chunk of its check queries (default ``local``).
     """
     return Pilot(session, system, instance=instance, actuator=actuator, response_timeout=response_timeout,

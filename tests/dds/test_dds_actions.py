@@ -7,7 +7,8 @@ lifecycle node with get_state and transition_event, the battery topic, and
 ``ros_discovery_info``).  The plugin routes them: action server routes (AS tokens,
 send_goal/cancel_goal/get_result queryables, the status cached for late joiners),
 service routes, topics.  The test's operator sends goals and cancels through the
-plugin, as a remote client would; the bridge derives the model's transitions.
+plugin, as a remote client would, and so does the pilot's action client (SPEC §9,
+*Acting*); the bridge derives the model's transitions.
 """
 
 from __future__ import annotations
@@ -23,10 +24,14 @@ from event_watch import Events
 from gateway import free_domain
 from services.bridge_ros2.bound_live import start_bound_bridge
 from services.common.zenoh_config import session_config
+from services.pilot.act import ActError
+from services.pilot.bound_act import BoundActuator
 from services.simulator.dds_bound import DdsBoundRobot
 from skinet.files import load_bindings, load_system
 from skinet.ros.actions import cancel_goal_reply, cancel_goal_request, send_goal_reply, send_goal_request
+from skinet.ros.bound import goal_text
 from skinet.ros.keys import KeyStyle
+from skinet.wire.messages import PilotCommand
 
 pytestmark = pytest.mark.slow
 
@@ -139,3 +144,58 @@ def test_the_bridge_reads_a_busy_robot_at_start_up(gateway_factory, nav2) -> Non
     assert first.status.model_dump() == {
         "resources": {"navigator": "Active", "motion": "Still", "dock": "Docked", "battery": "Ok",
                       "charging": "NotCharging"}, "running": ["navigate"]}
+
+
+def test_the_pilot_s_goals_and_cancel_requests_cross_the_plugin(gateway_factory, nav2) -> None:
+    """SPEC §9, Acting: the pilot's BoundActuator, a Zenoh client behind the real plugin, sends the undocking and
+    the docking goals (the binding's goal fields, the input at dock_id) to the DDS action servers, then cancels
+    the docking goal it sent; the bridge derives start, success, start, interrupt."""
+    system, bindings = nav2
+    domain = free_domain()
+    gateway = gateway_factory(domain=domain, distro="jazzy")
+    robot = DdsBoundRobot(system, bindings, domain=domain, distro="jazzy")
+    session, pilot = client(gateway.endpoint), client(gateway.endpoint)
+    events = Events(session, system.name)
+    bridge = start_bound_bridge(session, system, bindings, settle=0.5, retry=0.3)
+    act = BoundActuator(pilot, bindings, timeout=2.0)
+
+    def send(transition: str, **inputs: str) -> str:
+        deadline = time.monotonic() + 10  # until the plugin's route to the DDS server exists
+        while True:
+            try:
+                return act.send(PilotCommand(skillset="nav2", transition=transition, inputs=inputs))
+            except ActError as exc:
+                if "no reply" not in str(exc) or time.monotonic() > deadline:
+                    raise
+                time.sleep(0.3)
+
+    try:
+        initial_status(robot, events, {"percentage": 0.9, "power_supply_status": 1})
+        assert send("undock_robot.start").endswith(": accepted")
+        events.wait(lambda items: [e.transition for e in items][-1:] == ["undock_robot.start"], timeout=10)
+        assert robot.finish("nav2", "undock_robot", "success")
+        events.wait(lambda items: [e.transition for e in items][-1:] == ["undock_robot.success.undocked"], timeout=10)
+        sent = send("dock_robot.start", dock="home_dock")
+        [(goal, fields)] = robot.actions[("nav2", "dock_robot")].received
+        assert (fields["use_dock_id"], fields["dock_id"]) == (True, "home_dock") and goal.hex()[:8] in sent.replace(
+            "-", "")
+        events.wait(lambda items: [e.transition for e in items][-1:] == ["dock_robot.start"], timeout=10)
+        assert send("dock_robot.interrupt").endswith("(the goal the pilot sent): canceling")
+        events.wait(lambda items: [e.transition for e in items][-1:] == ["dock_robot.interrupt"], timeout=10)
+        # An operator's goal: the pilot cancels the one the bridge follows, read from the plugin's status cache.
+        theirs = os.urandom(16)
+        call(session, "dock_robot/_action/send_goal", send_goal_request(
+            bindings["nav2"].store, "opennav_docking_msgs/action/DockRobot", theirs))
+        events.wait(lambda items: [e.transition for e in items][-1:] == ["dock_robot.start"], timeout=10)
+        assert send("dock_robot.interrupt").endswith(f"goal {goal_text(theirs)} (the goal the bridge follows): "
+                                                     "canceling")
+        got = events.wait(lambda items: len(items) == 7, timeout=15)
+    finally:
+        bridge.close()
+        robot.close()
+        session.close()
+        pilot.close()
+    assert [e.transition for e in got] == [None, "undock_robot.start", "undock_robot.success.undocked",
+                                           "dock_robot.start", "dock_robot.interrupt", "dock_robot.start",
+                                           "dock_robot.interrupt"]
+    assert bridge.counters.drifts == 0 and bridge.counters.malformed == 0 and not bridge.counters.bad

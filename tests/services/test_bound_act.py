@@ -12,6 +12,7 @@ a namespace) and on rmw_zenoh keys.
 
 from __future__ import annotations
 
+import time
 import uuid
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -21,11 +22,11 @@ import zenoh
 
 from event_watch import Events
 from services.bridge_ros2.bound_live import start_bound_bridge
-from services.pilot.act import ActError
+from services.pilot.act import ActError, Refused
 from services.pilot.bound_act import BoundActuator
 from services.simulator.bound import BoundSimulator
 from skinet.files import load_bindings, load_system
-from skinet.ros.keys import KeyStyle
+from skinet.ros.keys import KeyStyle, parse_liveliness_token
 from skinet.wire.messages import PilotCommand
 
 NAV2 = Path(__file__).resolve().parents[2] / "examples" / "nav2"
@@ -133,6 +134,7 @@ def test_a_rejected_goal_is_an_error_and_starts_nothing(rig: Rig, nav2, client_f
     [(goal, _)] = rig.received("undock_robot")
     assert str(info.value) == (f'send_goal /undock_robot goal {goal} {{}}: the action server of /undock_robot '
                                "rejected the goal")
+    assert isinstance(info.value, Refused)  # nothing changed on the robot: the pilot may ask again
     assert server.goals == {} and rig.bridge.wait_idle() and rig.transitions() == [None]
     # Its server takes goals again: the same command is accepted.
     server.accepting = True
@@ -142,7 +144,7 @@ def test_a_rejected_goal_is_an_error_and_starts_nothing(rig: Rig, nav2, client_f
 
 def test_bad_commands_are_clear_errors_and_send_nothing(nav2, client_factory) -> None:  # type: ignore[no-untyped-def]
     """Inputs the skill does not have or whose type does not fit the goal, a skill bound to no action, an
-    action server that does not answer, an interrupt with no goal."""
+    action server that does not answer or whose reply does not decode, an interrupt with no goal."""
     system, bindings = nav2
     robot = BoundSimulator(client_factory(), system, bindings)
     act = BoundActuator(client_factory(), bindings, timeout=0.5)
@@ -168,6 +170,13 @@ def test_bad_commands_are_clear_errors_and_send_nothing(nav2, client_factory) ->
     with pytest.raises(ActError) as info:
         act.send(PilotCommand(skillset="nav2", transition="undock_robot.start"))
     assert str(info.value).endswith(": no reply from the action server of /undock_robot within 0.5 s")
+    # A server whose replies do not decode.
+    junk = client_factory().declare_queryable("undock_robot/_action/send_goal",
+                                              lambda q: q.reply(q.key_expr, b"\x00\x01\x00"))
+    with pytest.raises(ActError) as info:
+        act.send(PilotCommand(skillset="nav2", transition="undock_robot.start"))
+    assert "the reply of /undock_robot does not decode: " in str(info.value)
+    junk.undeclare()
 
 
 @pytest.mark.parametrize("rig", STYLES[:1], ids=IDS[:1], indirect=True)
@@ -188,3 +197,30 @@ def test_the_simulated_robot_ends_the_goals_it_accepted(rig: Rig, nav2, client_f
     assert rig.robot.terminate("nav2", "dock_robot", "success", "docked", goal)
     rig.wait_for("dock_robot.success.docked")
     assert rig.events.items[-1].status.resources["dock"] == "Docked"
+
+
+def test_on_rmw_zenoh_the_actuator_shows_as_an_action_client_in_the_ros_graph(nav2, client_factory) -> None:  # type: ignore[no-untyped-def]
+    """rmw_zenoh's graph tokens: a node with a service client of each action's send_goal and cancel_goal, gone
+    when the actuator closes."""
+    _, bindings = nav2
+    observer = client_factory()
+
+    def graph() -> set[tuple[str, str, str]]:
+        found = {parse_liveliness_token(str(r.ok.key_expr)) for r in observer.liveliness().get("@ros2_lv/9/**",
+                                                                                               timeout=2.0) if r.ok}
+        return {(e.node, e.kind, e.topic) for e in found if e is not None and e.node.startswith("skinet_pilot_")}
+
+    def settled(expected: int) -> set[tuple[str, str, str]]:
+        deadline = time.monotonic() + 10  # declarations and undeclarations cross the router
+        while len(got := graph()) != expected and time.monotonic() < deadline:
+            time.sleep(0.05)
+        return got
+
+    act = BoundActuator(client_factory(), bindings, style=KeyStyle(rmw_zenoh=True, domain=9))
+    got = settled(7)
+    node = next(iter(got))[0]
+    assert got == {(node, "NN", "")} | {(node, "SC", f"/{action}/_action/{service}")
+                                        for action in ("navigate_to_pose", "dock_robot", "undock_robot")
+                                        for service in ("send_goal", "cancel_goal")}
+    act.close()
+    assert settled(0) == set()

@@ -29,6 +29,7 @@ from services.pilot import start_pilot
 from services.pilot.act import default_actuator
 from services.predictor.service import start_predictor
 from services.simulator.bound import BoundSimulator
+from services.simulator.protocols import ActionLogic
 from skinet.files import load_bindings, load_system
 from skinet.ros.keys import KeyStyle
 from skinet_cli.main import main
@@ -43,7 +44,7 @@ class Nav2:
     """Robot, bridge, monitor, predictor and pilot of the Nav2 example, each on its own client session."""
 
     def __init__(self, sessions: Callable[[], zenoh.Session], style: KeyStyle, end_goals: bool = True,
-                 pilot: bool = True):
+                 pilot: bool = True, response_timeout: float = 5.0):
         self.system, _ = load_system(NAV2 / "nav2.toml")
         self.bindings, _ = load_bindings(self.system)
         self.robot = BoundSimulator(sessions(), self.system, self.bindings, style=style)
@@ -58,7 +59,8 @@ class Nav2:
         if pilot:  # else a pilot process of the test's
             pilot_session = sessions()
             self.actuator = Recording(default_actuator(pilot_session, self.system, style=style))  # type: ignore[arg-type]
-            self.pilot = start_pilot(pilot_session, self.system, instance="p1", actuator=self.actuator)
+            self.pilot = start_pilot(pilot_session, self.system, instance="p1", actuator=self.actuator,
+                                     response_timeout=response_timeout)
         self.observer = sessions()
         self.statuses = Statuses(self.observer, "nav2")
         self.events = Events(self.observer, "nav2")
@@ -123,19 +125,43 @@ def test_drive_docks_through_the_action_servers(nav2: Nav2) -> None:
 
 
 @pytest.mark.parametrize("nav2", [(KeyStyle(), False)], ids=["robot-idle"], indirect=True)
-def test_guide_sends_no_goal_and_a_rejected_goal_fails_with_the_server_s_reason(nav2: Nav2) -> None:
+def test_guide_sends_no_goal_and_rejected_goals_are_asked_again_then_fail_the_goal(nav2: Nav2) -> None:
     reply = ask_goal(nav2.observer, goal("run nav2:dock_robot", system="nav2", inputs=DOCK), system="nav2")
     guiding = nav2.statuses.first(lambda s: s.goal_id == reply.goal_id and s.state == "guiding")
     assert (guiding.next.skillset, guiding.next.transition) == ("nav2", "undock_robot.start")
     assert nav2.received() == [] and nav2.actuator.sent == []
-    # Drive: the undocking server refuses goals.
+    # Drive: the undocking server refuses goals.  Nothing changed on the robot: the pilot pauses with the
+    # server's reason and asks again, a new goal each time, until max_retries refusals end the goal.
     nav2.robot.actions[("nav2", "undock_robot")].logic.accepting = False
     reply = ask_goal(nav2.observer, goal("run nav2:dock_robot", system="nav2", inputs=DOCK, mode="drive",
-                                         replace=True), system="nav2")
+                                         replace=True, max_retries=2), system="nav2")
     failed = nav2.statuses.state("failed", reply.goal_id)
-    [(_, goal_id, _)] = nav2.received()
-    assert failed.reason == (f"cannot send nav2:undock_robot.start: send_goal /undock_robot goal {goal_id} {{}}: "
-                             "the action server of /undock_robot rejected the goal")
+    [(_, first, _), (_, second, _)] = nav2.received()
+    rejected = "send_goal /undock_robot goal {} {{}}: the action server of /undock_robot rejected the goal"
+    paused = nav2.statuses.first(lambda s: s.goal_id == reply.goal_id and s.state == "paused")
+    assert (paused.reason, failed.reason) == (rejected.format(first), f"{rejected.format(second)} (2 times)")
+    assert first != second and nav2.robot.actions[("nav2", "undock_robot")].logic.goals == {}
+
+
+def test_an_action_server_that_accepts_and_then_says_nothing_fails_the_goal(
+        client_factory: Callable[[], zenoh.Session]) -> None:
+    """A stuck server: it accepts the goal, and no status ever shows it.  The goal fails naming that server."""
+    rig = Nav2(client_factory, KeyStyle(), response_timeout=1.0)
+    try:
+        rig.statuses.state("idle")
+        rig.robot.actions[("nav2", "undock_robot")].close()  # its queryables go; a stuck one takes its place
+        stuck = ActionLogic(rig.bindings["nav2"].store, rig.bindings["nav2"].skill("undock_robot").type)
+        server = client_factory().declare_queryable(
+            "undock_robot/_action/send_goal", lambda q: q.reply(q.key_expr, stuck.send_goal(q.payload.to_bytes())[0]))
+        reply = ask_goal(rig.observer, goal("run nav2:dock_robot", system="nav2", inputs=DOCK, mode="drive"),
+                         system="nav2")
+        failed = rig.statuses.state("failed", reply.goal_id)
+        assert failed.reason == ("no response from the action server of nav2:undock_robot within 1 s to "
+                                 "nav2:undock_robot.start")
+        assert len(stuck.received) == 1 and rig.actuator.sent == ["nav2:undock_robot.start"]
+        server.undeclare()
+    finally:
+        rig.close()
 
 
 def test_the_pilot_process_acts_on_rmw_zenoh_keys(client_factory: Callable[[], zenoh.Session], zenoh_args: list[str],
@@ -175,6 +201,12 @@ def test_skinet_demo_nav2_ends_with_the_pilot_docking(capsys: pytest.CaptureFixt
                             "== the runs side by side",
                             "   run   commands  moves  retries  violations  denied",
                             "   nav2         5     12        1           0       -"]
+    # Live (real time; here as fast as the chain goes): the same pilot part, after the run's summary.
+    assert main(["demo", "nav2", "--live", "--speed", "0", "--linger", "0"]) == 0
+    live = capsys.readouterr().out.splitlines()
+    pilot = next(n for n, line in enumerate(live) if line.startswith("   then the pilot"))
+    assert live[pilot - 1].startswith("   warnings heeded") and live[pilot] == out[at]
+    assert live[pilot + 2:pilot + 4] == out[at + 2:at + 4]  # robot: ..., pilot: reached ...
     assert main(["demo", "nav2", "--core"]) == 0
     assert capsys.readouterr().out.splitlines()[-5] == (f"   (the pilot's goals, {dock}, need the chain of a bound "
                                                         "system: not played here)")
@@ -195,8 +227,8 @@ def test_a_bad_pilot_goals_file_stops_the_demo_before_the_run(tmp_path: Path,
 
 def test_skinet_run_takes_the_robot_s_keys_for_its_pilot_and_the_bridge_it_prints(
         capsys: pytest.CaptureFixture[str]) -> None:
-    """``skinet run ... --rmw-zenoh --domain 3``: its embedded pilot's actuator gets those keys (default_actuator with
-    key_style, as the pilot process above), and the bridge command it prints reads them."""
+    """``skinet run ... --rmw-zenoh --domain 3``: its embedded pilot gets those keys (start_pilot's style, as the pilot
+    process above), and the bridge command it prints reads them."""
     assert main(["run", str(NAV2 / "nav2.toml"), "--once", "--rmw-zenoh", "--domain", "3", "--no-properties"]) == 0
     lines = capsys.readouterr().err.splitlines()
     bridge = next(line for line in lines if "services.bridge_ros2" in line)
