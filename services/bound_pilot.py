@@ -17,18 +17,17 @@ monitor's verdicts showed violated; beside the pilot's last status.
 from __future__ import annotations
 
 import threading
-import time
-from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import zenoh
 
-from services.chain import BoundChain, ChainError
+from services.chain import BoundChain, ChainError, wait_until
 from services.common.zenoh_config import undeclare
 from services.pilot import start_pilot
 from services.pilot.act import Actuator, default_actuator
+from services.pilot_chain import ask_goal
 from skinet.wire import keys
-from skinet.wire.codec import DecodeError, decode, encode
+from skinet.wire.codec import decode
 from skinet.wire.messages import CanonicalEvent, PilotCommand, PilotGoalReply, PilotGoalRequest, PilotStatus, Verdicts
 
 ENDED = ("reached", "failed", "cancelled")
@@ -104,21 +103,21 @@ def drive_goals(chain: BoundChain, mission: str, mission_name: str, *, duration:
     actuator = _Logged(default_actuator(session, system, bindings=chain.bindings, style=chain.style))
     pilot = start_pilot(session, system, actuator=actuator)  # a random instance: one of its own per run
     try:
-        _wait(lambda: pilot.status.state == "idle", settle, "the pilot to follow the monitor")
+        wait_until(lambda: pilot.status.state == "idle", settle, "the pilot to follow the monitor")
         with seen.lock:
             first = len(seen.events)
         request = PilotGoalRequest(system=system.name, mission=mission, mission_name=mission_name, mode="drive")
-        reply = _ask(session, keys.pilot_goal(system.name, keys.LOCAL_CLIENT), request, settle)
+        reply = ask_goal(session, keys.pilot_goal(system.name, keys.LOCAL_CLIENT), request, settle)
         if not reply.accepted:
             raise ChainError(f"the pilot refused {mission_name}: {reply.reason}")
-        _wait(lambda: pilot.status.goal_id == reply.goal_id and pilot.status.state in ENDED, timeout,
+        wait_until(lambda: pilot.status.goal_id == reply.goal_id and pilot.status.state in ENDED, timeout,
               f"the end of {mission_name} (the pilot is {pilot.status.state})")
         status = pilot.status
         source = chain.bridge.feed.source
-        _wait(lambda: chain.bridge.wait_idle(settle) and all(
+        wait_until(lambda: chain.bridge.wait_idle(settle) and all(
             (chain.monitor.last_seq(name, source) or 0) >= ss.seq - 1 for name, ss in chain.bridge.feed.skillsets.items()
             if ss.seq), settle, "the last events applied")
-        _wait(lambda: seen.verdicts >= chain.monitor.snapshot().verdicts.seq, settle, "the last verdicts")
+        wait_until(lambda: seen.verdicts >= chain.monitor.snapshot().verdicts.seq, settle, "the last verdicts")
         with seen.lock:
             transitions = [f"{e.skillset}:{e.transition}" for e in seen.events[first:] if e.transition]
             return PilotEnd(reply, status, list(actuator.sent), transitions, list(seen.violated))
@@ -126,24 +125,6 @@ def drive_goals(chain: BoundChain, mission: str, mission_name: str, *, duration:
         pilot.close()
         seen.close()
         robot.on_start.remove(implementation)
-
-
-def _ask(session: zenoh.Session, key: str, request: PilotGoalRequest, timeout: float) -> PilotGoalReply:
-    for r in session.get(key, payload=encode(request), timeout=timeout):
-        if r.ok is not None:
-            try:
-                return decode(r.ok.payload.to_bytes(), PilotGoalReply)
-            except DecodeError as exc:
-                raise ChainError(f"the pilot's reply is not understood: {exc}") from None
-    raise ChainError(f"no pilot answered on {key} within {timeout:g} s")
-
-
-def _wait(condition: Callable[[], bool], timeout: float, what: str) -> None:
-    deadline = time.monotonic() + timeout
-    while not condition():
-        if time.monotonic() > deadline:
-            raise ChainError(f"timed out waiting for {what}")
-        time.sleep(0.005)
 
 
 __all__ = ["PilotEnd", "drive_goals"]

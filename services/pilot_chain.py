@@ -114,7 +114,7 @@ def run_pilot_chain(
         wait_until(lambda: pilot.status.state == "idle", settle, "the pilot to follow the monitor")
         request = PilotGoalRequest(system=system.name, mission=mission, mission_name=mission_name, mode=run.mode)
         started = time.monotonic()
-        reply = _ask(session, keys.pilot_goal(system.name, keys.LOCAL_CLIENT), request, settle)
+        reply = ask_goal(session, keys.pilot_goal(system.name, keys.LOCAL_CLIENT), request, settle)
         if not reply.accepted:
             raise ChainError(f"the pilot refused the mission: {reply.reason}")
         try:
@@ -135,7 +135,8 @@ def run_pilot_chain(
         return watch.record(run, reply, pilot.status, simulator.commands_handled(), list(world.ends), seconds)
 
 
-def _ask(session: zenoh.Session, key: str, request: PilotGoalRequest, timeout: float) -> PilotGoalReply:
+def ask_goal(session: zenoh.Session, key: str, request: PilotGoalRequest, timeout: float) -> PilotGoalReply:
+    """The pilot's reply to ``request`` on ``key``; :class:`ChainError` when none comes within ``timeout``."""
     for r in session.get(key, payload=encode(request), timeout=timeout):
         if r.ok is not None:
             try:
@@ -198,4 +199,4 @@ class _Watch:
             sub.undeclare()
 
 
-__all__ = ["PilotRecord", "run_pilot_chain"]
+__all__ = ["PilotRecord", "ask_goal", "run_pilot_chain"]

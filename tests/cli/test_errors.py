@@ -25,6 +25,7 @@ import pytest
 
 import services.bridge_ros2.__main__ as bridge_main
 import services.monitor.__main__ as monitor_main
+import services.pilot.__main__ as pilot_main
 import services.predictor.__main__ as predictor_main
 import services.simulator.__main__ as simulator_main
 import skinet_cli.main as skinet_main
@@ -41,6 +42,7 @@ PROGRAMS: dict[str, tuple[Callable[..., int], Callable[[], argparse.ArgumentPars
     "python -m services.predictor": (predictor_main.main, predictor_main.build_parser),
     "python -m services.bridge_ros2": (bridge_main.main, bridge_main.build_parser),
     "python -m services.simulator": (simulator_main.main, simulator_main.build_parser),
+    "python -m services.pilot": (pilot_main.main, pilot_main.build_parser),
 }
 
 # Options where every value is acceptable (nothing to refuse).
@@ -50,12 +52,13 @@ FREE_TEXT = {
     ("python -m services.bridge_ros2", "--ros-distro"): "only humble changes the keys; any other name is a later one",
     ("python -m services.simulator", "--ros-distro"): "only humble changes the keys; any other name is a later one",
     ("skinet run", "--ros-distro"): "only humble changes the keys; any other name is a later one",
+    ("python -m services.pilot", "--ros-distro"): "only humble changes the keys; any other name is a later one",
     **{(program, option): "any user name and password is sent; the router judges them (tests/deploy/test_operator_acl.py)"
        for program in ("skinet record", "skinet replay", "skinet run", "skinet router", "skinet watch", "skinet check",
                        "skinet goal",
                        "skinet demo",
                        "skinet dashboard", "python -m services.monitor", "python -m services.predictor",
-                       "python -m services.bridge_ros2", "python -m services.simulator")
+                       "python -m services.bridge_ros2", "python -m services.simulator", "python -m services.pilot")
        for option in ("--user", "--password")},
     ("skinet router", "--secrets"): "any folder: made at first start when missing (test_security.py)",
     ("skinet fleet", "--secrets"): "any folder: made at first start when missing (test_security.py)",
@@ -275,6 +278,7 @@ def _cases() -> list[Case]:
         "python -m services.predictor": ((),),
         "python -m services.bridge_ros2": ((SYSTEM,),),
         "python -m services.simulator": ((SCENARIO,),),
+        "python -m services.pilot": ((SYSTEM,),),
     }
     for program, bases in zenoh_programs.items():
         for base in bases:
@@ -422,9 +426,14 @@ def _cases() -> list[Case]:
     # the services' own options
     mon, pred, br, sim = (f"python -m services.{s}" for s in ("monitor", "predictor", "bridge_ros2", "simulator"))
     not_a_key = "cannot be used in a Zenoh key (letters, digits, _ - . only)"
-    for program, base in ((mon, (SYSTEM,)), (br, (SYSTEM,))):
+    pilot = "python -m services.pilot"
+    for program, base in ((mon, (SYSTEM,)), (br, (SYSTEM,)), (pilot, (SYSTEM,))):
         add(program, "system", ("{tmp}/missing.toml",), 1, missing)
         add(program, "system", ("{tmp}/badname.toml",), 1, bad_name)
+    usage(pilot, "--instance", (SYSTEM, "--instance", "a/b"), f"argument --instance: instance id 'a/b' {not_a_key}")
+    usage(pilot, "--budget", (SYSTEM, "--budget", "0.01"), "argument --budget: " + budget.format("0.01"))
+    usage(pilot, "--response-timeout", (SYSTEM, "--response-timeout", "-1"),
+          "argument --response-timeout: " + seconds.format("-1"))
     usage(mon, "--id", (SYSTEM, "--id", "a b"), f"argument --id: instance id 'a b' {not_a_key}")
     usage(mon, "--budget", (SYSTEM, "--budget", "-1"), "argument --budget: " + budget.format("-1"))
     usage(mon, "--budget", (SYSTEM, "--budget", "0.049"), "argument --budget: " + budget.format("0.049"))
@@ -456,7 +465,7 @@ def _cases() -> list[Case]:
     usage(pred, "--memory-mb", ("--memory-mb", "8"), "argument --memory-mb: expected an integer >= 64, got '8'")
     usage(pred, "--grace", ("--grace", "-2"), "argument --grace: " + seconds.format("-2"))
     usage(br, "--instance", (SYSTEM, "--instance", "*"), f"argument --instance: instance id '*' {not_a_key}")
-    for program, base in ((br, (SYSTEM,)), (sim, (SCENARIO,))):
+    for program, base in ((br, (SYSTEM,)), (sim, (SCENARIO,)), (pilot, (SYSTEM,))):
         usage(program, "--namespace", (*base, "--namespace", "robot/*"),
               "argument --namespace: namespace 'robot/*' cannot be used in a Zenoh key "
               "(/-separated names of letters, digits, _ - .)")

@@ -112,13 +112,15 @@ def test_record_with_no_monitor_is_an_error(router: str, tmp_path: Path) -> None
 def test_run_prints_where_it_listens_and_lines_that_work() -> None:
     run = skinet("run", SYSTEM, "--duration", "120")
     try:
-        run.wait_for(lambda text: "  python -m services.bridge_ros2 " in text, "ready")
+        run.wait_for(lambda text: "  skinet goal " in text, "ready")  # the banner's last line
         head = next(line for line in run.lines if line.startswith("skinet run: "))
         endpoint = re.fullmatch(r"skinet run: system spot_arm, listening on (tcp/127\.0\.0\.1:\d+); connect with:",
                                 head).group(1)
         lines = [line.strip() for line in run.lines if line.startswith("  skinet ")]
         assert lines == [f"skinet watch spot_arm -e {endpoint}", f"skinet dashboard spot_arm -e {endpoint}",
-                         f"skinet check spot_arm spot:init_power.start -e {endpoint}"]
+                         f"skinet check spot_arm spot:init_power.start -e {endpoint}",
+                         f'skinet goal spot_arm "run spot:init_power" -e {endpoint}   (guided; --drive: the pilot '
+                         'sends the commands)']
         watch = subprocess.run([sys.executable, "-m", "skinet_cli.main", *shlex.split(lines[0])[1:], "--once"],
                                cwd=REPO, capture_output=True, text=True, timeout=60)
         assert watch.returncode == 0 and watch.stdout.startswith("SkiNet Live  system spot_arm  step 0"), watch
