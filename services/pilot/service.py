@@ -1,8 +1,9 @@
 """The pilot: goals in, safe skill requests out, on the live robot (SPEC §8, *The pilot*; issue 24).
 
 Follows the monitor: its :class:`LiveState` on ``keys.state`` (asked with a ``get`` at
-start and whenever a monitor appears), its :class:`UnsafeReport` on ``keys.unsafe``
-(``prediction_stale``) and its liveliness token.  Holds one goal (or mission, goal
+start and whenever a monitor appears; an answer that comes after the subscriber gave a
+publication is dropped, since it may be older news of the same step), its :class:`UnsafeReport`
+on ``keys.unsafe`` (``prediction_stale``) and its liveliness token.  Holds one goal (or mission, goal
 after goal), set on the queryable ``keys.pilot_goal(system, <client>)``, and plans it
 with :class:`skinet.plan.Planner` from the live marking, reusing the plan while
 ``plan.action(marking)`` answers and planning again when the marking leaves it (an
@@ -125,6 +126,7 @@ class Pilot:
         self._closed = False
         self._state: LiveState | None = None
         self._unsafe: UnsafeReport | None = None
+        self._heard = {"state": 0, "unsafe": 0}  # publications the subscribers gave (to date a get's answers)
         self._monitors: set[str] = set()
         self._goal: _Goal | None = None
         self._goals = 0
@@ -190,6 +192,7 @@ class Pilot:
         state = self._read(sample.payload, LiveState, "live state")
         if state is not None:
             with self._lock:
+                self._heard["state"] += 1
                 self._take_state(state)
             self._wake.set()
 
@@ -197,7 +200,7 @@ class Pilot:
         """Follow one LiveState: effects of the command in flight, failures, run goals reached (lock held)."""
         last = self._state
         if last is not None and state.seq < last.seq:
-            return  # an older publication (a get's answer after the subscriber's)
+            return  # an older publication
         self._state = state
         if last is not None and state.seq == last.seq:
             return  # the same step again (sync states changed)
@@ -224,6 +227,7 @@ class Pilot:
         report = self._read(sample.payload, UnsafeReport, "unsafe report")
         if report is not None:
             with self._lock:
+                self._heard["unsafe"] += 1
                 if self._unsafe is None or report.seq >= self._unsafe.seq or \
                         (self._state is not None and report.seq == self._state.seq):
                     self._unsafe = report
@@ -246,9 +250,15 @@ class Pilot:
         self._wake.set()
 
     def _fetch(self) -> None:
-        """Ask the monitor for its last state and unsafe report (a late joiner's ``get``)."""
-        for key, kind, take in ((keys.state(self.name), LiveState, self._take_state),
-                                (keys.unsafe(self.name), UnsafeReport, None)):
+        """Ask the monitor for its last state and unsafe report (a late joiner's ``get``).
+
+        An answer that comes after the subscriber gave a publication is dropped: it may have left the
+        monitor before that publication, with the same seq (a sync state's change publishes the step
+        again), and the subscriber gives whatever changed since; the loop asks again if nothing is known."""
+        for key, name, kind, take in ((keys.state(self.name), "state", LiveState, self._take_state),
+                                      (keys.unsafe(self.name), "unsafe", UnsafeReport, None)):
+            with self._lock:
+                heard = self._heard[name]
             for reply in self.session.get(key, timeout=2.0):
                 if reply.ok is None:
                     continue
@@ -256,6 +266,8 @@ class Pilot:
                 if message is None:
                     continue
                 with self._lock:
+                    if self._heard[name] != heard:
+                        continue
                     if take is not None:
                         take(message)
                     elif self._unsafe is None or message.seq >= self._unsafe.seq:

@@ -6,18 +6,21 @@ from __future__ import annotations
 
 import dataclasses
 import random
+import threading
 import time
 from collections.abc import Callable, Iterator
 
 import pytest
 import zenoh
 
-from services.bridge_ros2 import start_bridge
+from services.bridge_ros2 import Bridge, start_bridge
 from services.common.zenoh_config import undeclare
+from services.monitor import Monitor
 from services.pilot import ActError
 from services.predictor.service import start_predictor
 from skinet.ros.keys import KeyStyle
 from skinet.wire import keys
+from skinet.wire.codec import encode
 from skinet.wire.messages import PilotCommand, PilotGoalRequest, Verdicts
 from tests.event_watch import Messages
 from tests.services.test_monitor import wait_until
@@ -261,6 +264,52 @@ def test_no_monitor_means_waiting_then_the_goal_goes_on(client_factory, spot_arm
         assert (robot.pilot.status.state, robot.actuator.sent) == ("waiting for monitor", [])
         robot.start_monitor()
         robot.statuses.state("reached", reply.goal_id)
+        assert robot.actuator.sent == ["spot:init_power.start", "spot:stand_up.start"]
+    finally:
+        impl.close()
+        robot.close()
+
+
+def test_an_answer_to_the_pilots_get_older_than_a_publication_is_dropped(client_factory, spot_arm,
+                                                                         monkeypatch) -> None:
+    """The pilot asks a monitor that appears for its last state (``get``); here the answer leaves while
+    the monitor is still syncing and comes after the state it published once synced, of the same step 0
+    (what load did in the run where the goal stayed paused, "spot is syncing: the monitor started"):
+    the pilot keeps the newer state and the goal goes on."""
+    asked, sent = threading.Event(), threading.Event()
+    answers: list = []
+    latest, resync = Monitor._on_latest, Bridge._on_resync
+
+    def answer_late(monitor: Monitor, name: str, key: str, query: zenoh.Query) -> None:
+        if name != "state":
+            return latest(monitor, name, key, query)
+        answers.append(monitor.snapshot().state)  # what the monitor answers now...
+
+        def send() -> None:  # ...is sent once the monitor has synced and published that
+            wait_until(monitor.synced, 30, "the monitor synced")
+            query.reply(key, encode(answers[-1]))
+            query.drop()
+            sent.set()
+        threading.Thread(target=send, daemon=True).start()
+        asked.set()
+
+    def after_the_pilots_get(bridge: Bridge, query: zenoh.Query) -> None:
+        asked.wait(10)  # the monitor is still syncing when the pilot's get comes
+        resync(bridge, query)
+
+    monkeypatch.setattr(Monitor, "_on_latest", answer_late)
+    monkeypatch.setattr(Bridge, "_on_resync", after_the_pilots_get)
+    robot = Robot(client_factory, *spot_arm, monitor=False)
+    impl = Implementations(robot.sim, robot.system)
+    try:
+        robot.wait_pilot("waiting for monitor")
+        robot.start_monitor()
+        assert sent.wait(30), "the pilot did not ask the monitor for its state"
+        assert [{n: s.state for n, s in a.sync.items()} for a in answers[:1]] == [
+            {"spot": "syncing", "manipulator": "syncing"}]
+        assert answers[0].seq == robot.monitor.snapshot().state.seq == 0  # the same step
+        reply = ask_goal(robot.observer, goal("reach spot:Standing", mode="drive"))
+        robot.statuses.state("reached", reply.goal_id, timeout=30)
         assert robot.actuator.sent == ["spot:init_power.start", "spot:stand_up.start"]
     finally:
         impl.close()
