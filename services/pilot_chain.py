@@ -131,7 +131,8 @@ def run_pilot_chain(
             raise ChainError("the bridge did not receive every status")
         seqs = lambda: {n: m.seq for n, m in bridge.feed.managers.items()}  # noqa: E731
         wait_until(lambda: handled_all(monitor, bridge.feed.source, seqs()), settle, "the last events applied")
-        wait_until(lambda: watch.caught_up(monitor.snapshot().verdicts.seq), settle, "the last verdicts")
+        wait_until(lambda: watch.caught_up(monitor.snapshot().verdicts.seq, seqs()), settle,
+                   "the last verdicts and events")
         return watch.record(run, reply, pilot.status, simulator.commands_handled(), list(world.ends), seconds)
 
 
@@ -156,6 +157,7 @@ class _Watch:
         self.statuses: list[PilotStatus] = []
         self._holds: dict[str, bool] = {}
         self._verdicts = -1
+        self._seqs: dict[str, int] = {}  # skillset -> the last seq of its events seen here
         self._subs = [
             session.declare_subscriber(keys.events(system, "*"), lambda s: self._take(s, CanonicalEvent)),
             session.declare_subscriber(keys.verdicts(system), lambda s: self._take(s, Verdicts)),
@@ -166,6 +168,7 @@ class _Watch:
         message = decode(sample.payload.to_bytes(), kind)
         with self._cond:
             if isinstance(message, CanonicalEvent):
+                self._seqs[message.skillset] = max(self._seqs.get(message.skillset, -1), message.seq)
                 if message.transition is not None:
                     self.events.append(message)
             elif isinstance(message, Verdicts):
@@ -182,9 +185,12 @@ class _Watch:
         with self._cond:
             return any(s.goal_id == goal_id and s.state in ENDED for s in self.statuses)
 
-    def caught_up(self, verdicts_seq: int) -> bool:
+    def caught_up(self, verdicts_seq: int, next_seq: Mapping[str, int]) -> bool:
+        """Whether the verdicts up to ``verdicts_seq`` and every event before ``next_seq`` (skillset -> the seq
+        of its next event, as in :func:`~services.chain.handled_all`) came here: the monitor's subscription
+        may see the last events before this one does."""
         with self._cond:
-            return self._verdicts >= verdicts_seq
+            return self._verdicts >= verdicts_seq and all(self._seqs.get(n, -1) >= q - 1 for n, q in next_seq.items())
 
     def record(self, run: PilotRun, reply: PilotGoalReply, status: PilotStatus, commands: int, ends: list[End],
                seconds: float) -> PilotRecord:
