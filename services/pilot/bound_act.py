@@ -13,7 +13,7 @@ on the keys of :class:`~skinet.ros.keys.KeyStyle` (``zenoh-bridge-ros2dds`` or
   the pilot asks again, up to its ``max_retries``); no reply within ``timeout``, or a
   reply that does not decode, :class:`~services.pilot.act.ActError`.
 - ``SKILL.interrupt``: a ``cancel_goal`` request for one goal id: the goal this
-  actuator sent, while the action's status shows it active; otherwise (the operator
+  actuator sent and the server accepted, unless the action's status shows it ended; otherwise (the operator
   started the skill) the goal the bridge follows, read from the status cache
   (:func:`~skinet.ros.actions.followed_goal`).  No active goal raises
   :class:`ActError`; a cancel the server refuses (``ERROR_REJECTED``,
@@ -120,7 +120,9 @@ class BoundActuator:
         own = self.sent.get((skillset, skill.skill))
         if own is not None:
             own.on_status(goals)
-        target = own.id if own is not None and not own.done and own.status else None
+        # Its own accepted goal even before a status shows it (the status follows the accept a moment later);
+        # one that ended meanwhile gets ERROR_GOAL_TERMINATED, a refusal.
+        target = own.id if own is not None and own.accepted and not own.done else None
         whose = "the goal the pilot sent"
         if target is None:
             followed = followed_goal(goals)

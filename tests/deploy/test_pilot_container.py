@@ -110,6 +110,8 @@ def test_the_pilot_container_drives_an_operators_goal(onboard: tuple[Stack, str]
         (reply,) = ask(operator, "operator", goal)
         assert (reply.accepted, reply.reason, reply.answer) == (True, "", "cyclic"), reply
         statuses.state("waiting for outcome", reply.goal_id, timeout=60)
+        # The pilot says it waits for the outcome as it sends: its request reaches the robot a moment later.
+        wait_until(lambda: robot.skill_status("spot", "init_power")[0], 30, "the pilot's request on the robot")
         assert robot.skill_status("spot", "init_power") == (True, f"pilot-{instance}-1")  # the pilot's execution
         assert robot.terminate("spot", "init_power", "success", "powered_on")
         last = statuses.state("reached", reply.goal_id, timeout=30)
