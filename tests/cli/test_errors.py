@@ -49,16 +49,16 @@ PROGRAMS: dict[str, tuple[Callable[..., int], Callable[[], argparse.ArgumentPars
 FREE_TEXT = {
     ("skinet timeline", "--title"): "any text is a title (test_any_title_is_drawn)",
     ("python -m services.bridge_ros2", "--source"): "any text names the source inside the events' payload",
-    ("python -m services.bridge_ros2", "--ros-distro"): "only humble changes the keys; any other name is a later one",
-    ("python -m services.simulator", "--ros-distro"): "only humble changes the keys; any other name is a later one",
-    ("skinet run", "--ros-distro"): "only humble changes the keys; any other name is a later one",
-    ("python -m services.pilot", "--ros-distro"): "only humble changes the keys; any other name is a later one",
+    **{(program, "--ros-distro"): "only humble changes the keys; any other name is a later one"
+       for program in ("python -m services.bridge_ros2", "python -m services.simulator", "skinet run",
+                       "python -m services.pilot")},
     **{(program, option): "any user name and password is sent; the router judges them (tests/deploy/test_operator_acl.py)"
        for program in ("skinet record", "skinet replay", "skinet run", "skinet router", "skinet watch", "skinet check",
                        "skinet goal",
                        "skinet demo",
                        "skinet dashboard", "python -m services.monitor", "python -m services.predictor",
-                       "python -m services.bridge_ros2", "python -m services.simulator", "python -m services.pilot")
+                       "python -m services.bridge_ros2", "python -m services.simulator",
+                       "python -m services.pilot")
        for option in ("--user", "--password")},
     ("skinet router", "--secrets"): "any folder: made at first start when missing (test_security.py)",
     ("skinet fleet", "--secrets"): "any folder: made at first start when missing (test_security.py)",
@@ -97,6 +97,20 @@ def _cases() -> list[Case]:
     def usage(program: str, option: str, argv: tuple[str, ...], message: str, **env: str) -> None:
         command = f"skinet {argv[0]}" if program == "skinet" else program
         add(program, option, argv, 2, _usage(command, message), **env)
+
+    def live_options(base: tuple[str, ...]) -> None:
+        """The options of a real-time play served to other processes (skinet demo --live, skinet replay:
+        skinet_cli.live_demo.add_live_args), bad values after ``base``."""
+        for bad in ("-1", "fast"):
+            usage("skinet", "--speed", (*base, "--speed", bad),
+                  f"argument --speed: expected a number >= 0, got '{bad}'")
+        usage("skinet", "--linger", (*base, "--linger", "-1"), "argument --linger: expected a number of seconds >= 0, "
+                                                                "got '-1'")
+        usage("skinet", "--dashboard", (*base, "--dashboard", "65536"),
+              "argument --dashboard: expected an integer from 0 to 65535, got '65536'")
+        add("skinet", "--dashboard-host", (*base, "--no-multicast-scouting", "--dashboard", "0", "--dashboard-host",
+                                           "999.0.0.1"), 1,
+            "skinet: error: cannot listen on 999.0.0.1:0: Name or service not known")
 
     missing = "{tmp}/missing.toml: error: cannot read file: No such file or directory"
     bad_name = ("{tmp}/badname.toml:2:8: error: system name 'has space/slash' cannot be used in a Zenoh key "
@@ -255,16 +269,7 @@ def _cases() -> list[Case]:
     for option in ("--log", "--timeline"):
         add("skinet", option, ("demo", "--core", option, "{tmp}/list.json"), 1,
             "{tmp}/list.json: error: cannot create folder: File exists")
-    for bad in ("-1", "fast"):
-        usage("skinet", "--speed", ("demo", "--live", "--speed", bad),
-              f"argument --speed: expected a number >= 0, got '{bad}'")
-    usage("skinet", "--linger", ("demo", "--live", "--linger", "-1"),
-          "argument --linger: expected a number of seconds >= 0, got '-1'")
-    usage("skinet", "--dashboard", ("demo", "--live", "--dashboard", "65536"),
-          "argument --dashboard: expected an integer from 0 to 65535, got '65536'")
-    add("skinet", "--dashboard-host", ("demo", "--live", "--no-multicast-scouting", "--dashboard", "0",
-                                       "--dashboard-host", "999.0.0.1"), 1,
-        "skinet: error: cannot listen on 999.0.0.1:0: Name or service not known")
+    live_options(("demo", "--live"))
 
     # skinet record, run, router, and every service: the Zenoh options
     zenoh_programs = {
@@ -412,16 +417,7 @@ def _cases() -> list[Case]:
     add("skinet", "log", ("replay", "{tmp}/events.jsonl"), 1,
         "{tmp}/events.jsonl: error: no message of a monitor to replay (LiveState, Verdicts, UnsafeReport, "
         "StateSpaceReport, Divergences): the log holds 1 CanonicalEvent")
-    for bad in ("-1", "fast"):
-        usage("skinet", "--speed", ("replay", "{tmp}/run.jsonl", "--speed", bad),
-              f"argument --speed: expected a number >= 0, got '{bad}'")
-    usage("skinet", "--linger", ("replay", "{tmp}/run.jsonl", "--linger", "-1"),
-          "argument --linger: expected a number of seconds >= 0, got '-1'")
-    usage("skinet", "--dashboard", ("replay", "{tmp}/run.jsonl", "--dashboard", "65536"),
-          "argument --dashboard: expected an integer from 0 to 65535, got '65536'")
-    add("skinet", "--dashboard-host", ("replay", "{tmp}/run.jsonl", "--no-multicast-scouting", "--dashboard", "0",
-                                       "--dashboard-host", "999.0.0.1"), 1,
-        "skinet: error: cannot listen on 999.0.0.1:0: Name or service not known")
+    live_options(("replay", "{tmp}/run.jsonl"))
 
     # the services' own options
     mon, pred, br, sim = (f"python -m services.{s}" for s in ("monitor", "predictor", "bridge_ros2", "simulator"))
