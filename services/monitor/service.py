@@ -12,7 +12,10 @@ waiting for it (:mod:`services.monitor.prediction`); when a prediction for the
 live marking arrives, the UnsafeReport of the same step is published again with
 ``prediction_stale=False`` together with the :class:`StateSpaceReport`.
 Predictions are kept per marking (``prediction_cache``): a marking seen again is
-fresh at once and not queried again.  A gap, a jump, a restarted bridge or events
+fresh at once and not queried again.  An undecided one (the predictor's exploration was cut by its budget or
+memory limit, ``StateSpaceReport.timeout_reached``) is asked again while its marking stays live, after 1, 2, 4,
+8 and 16 s (:data:`REASK_FIRST`): a loaded predictor may decide it later, and until then the check says
+"could not decide", never allow.  A gap, a jump, a restarted bridge or events
 that could not be recovered make it ask the bridge for the skillset's last status
 (``keys.resync``) and apply it (see :meth:`Engine.check_seq`).  Bad payloads are counted and logged,
 never raised (SPEC §7).
@@ -38,6 +41,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import math
 import threading
 import time
 import uuid
@@ -56,7 +60,7 @@ from services.monitor.engine import Counters, Engine, MarkingKey, Step
 from services.monitor.prediction import PredictionClient, PredictorStats
 from services.monitor.sync import BOUND, SYNCING, SyncTracker
 from skinet.errors import SourceError
-from skinet.system import System
+from skinet.system import Marking, System
 from skinet.wire import keys
 from skinet.wire.codec import DecodeError, decode, encode
 from skinet.wire.convert import RiskTable, bundle
@@ -72,6 +76,9 @@ MAX_WAITING = 256  # check requests waiting at once; more are answered at once
 MAX_REASON = 512  # bytes of a resync error reply kept as the skillset's reason
 TICK = 0.1  # seconds between the watchdog's looks at silences and waiting checks
 DIVERGENCES_PERIOD = 0.1  # seconds between publications of the divergence list (a burst is one message)
+# An undecided prediction (exploration cut by the predictor's budget or memory limit) is asked again while its
+# marking stays live: after 1, 2, 4, 8 then 16 s (a loaded predictor may decide it), then left undecided.
+REASK_FIRST, REASK_TRIES = 1.0, 5
 M = TypeVar("M", bound=BaseModel)
 
 
@@ -149,6 +156,8 @@ class Monitor:
         self._divergences_due = False  # the list changed since it was published
         self._divergences_sent = float("-inf")  # monotonic time of its last publication
         self._divergences_published = 0  # entries noted (listed or older) when it was last published
+        self._undecided: dict[MarkingKey, tuple[float, int]] = {}  # key -> (monotonic time to ask again, tries)
+        self.reasked = 0  # undecided predictions asked again
         self.resync_timeout, self.lost_after = resync_timeout, lost_after
         opts = dict(congestion_control=zenoh.CongestionControl.BLOCK, express=express)
         self._pub = {k: session.declare_publisher(key, **opts) for k, key in (
@@ -479,6 +488,7 @@ class Monitor:
             with self._lock:
                 if self._closed:
                     return
+                self._note_undecided(key, reply.report is not None and reply.report.timeout_reached)
                 if not self._engine.add_prediction(key, table):
                     self._predict.superseded()
                     return
@@ -492,6 +502,32 @@ class Monitor:
                 self._bump()
         except Exception:
             log.exception("error while applying a prediction")
+
+    def _note_undecided(self, key: MarkingKey, undecided: bool) -> None:
+        """Plan to ask again for an undecided prediction of ``key`` (lock held; :data:`REASK_FIRST`)."""
+        if not undecided:
+            self._undecided.pop(key, None)
+            return
+        tries = self._undecided.pop(key, (0.0, 0))[1]
+        if tries >= REASK_TRIES:
+            log.warning("the prediction of marking %s stays undecided after %d more tries: the predictor's budget "
+                        "or memory limit is too small for it", key, tries)
+            due = math.inf
+        else:
+            due = time.monotonic() + REASK_FIRST * 2 ** tries
+        self._undecided[key] = (due, tries + 1)
+        while len(self._undecided) > max(1, self._engine.prediction_cache):
+            del self._undecided[next(iter(self._undecided))]
+
+    def _reask(self) -> tuple[MarkingKey, Marking] | None:
+        """The live marking, when its undecided prediction is due to be asked again (lock held)."""
+        key = self._engine.key
+        due, tries = self._undecided.get(key, (math.inf, 0))
+        if time.monotonic() < due:
+            return None
+        self._undecided[key] = (math.inf, tries)  # until the answer
+        self.reasked += 1
+        return key, self._engine.marking()
 
     def _on_model_query(self, query: zenoh.Query) -> None:
         with query:
@@ -608,8 +644,11 @@ class Monitor:
                     self._catch_up()
                     self._settle()
                     self._publish_divergences()
+                    again = self._reask()
                 for name in due:
                     self._ask_resync(name)
+                if again is not None:
+                    self._predict.want(*again)
                 self._answer_waiting()
             except Exception:  # a bug must not stop the watchdog
                 log.exception("error in the monitor's watchdog")

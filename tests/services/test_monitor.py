@@ -224,6 +224,65 @@ def _expect_prediction(reports: Reports, system: System, events: Events, steps: 
         (u.steps, list(u.witness)) for u in sorted(core, key=lambda u: (u.skillset, u.transition, u.property))]
 
 
+def test_an_undecided_prediction_is_asked_again_until_a_predictor_decides_it(router, monitor_factory, session,
+                                                                            system):
+    """A prediction cut by the predictor's memory limit stays honest ("could not decide") and is asked again while
+    its marking stays live: once a predictor with room answers, the same step's report turns complete, with no
+    new event.  Before, the undecided answer was kept for its marking and a drive goal waited for ever."""
+    reports = Reports(session)
+    small_session = open_client(router)
+    small = start_predictor(small_session, "small", memory_limit=1)  # every exploration cut at once
+    big_session = open_client(router)
+    try:
+        monitor = monitor_factory(system)
+        events = Events(session)
+        events.send("spot", "init_power.start")
+        cut = reports.wait("state_space", lambda m: m.timeout_reached, timeout=15)
+        assert cut.markings < 10
+        step = reports.wait("unsafe", lambda m: m.seq == 1 and not m.prediction_stale, timeout=10)
+        small.close()
+        start_predictor(big_session, "big")
+        after = len(reports.items)
+        space = reports.wait("state_space", lambda m: not m.timeout_reached, timeout=15, after=after)
+        live = LiveSystem(system)
+        live.apply("spot", "init_power.start")
+        assert space.markings == forecast(system, live.marking, budget=5.0).space.markings
+        fresh = reports.wait("unsafe", lambda m: not m.prediction_stale, timeout=5, after=after)
+        assert (fresh.seq, monitor.predictor_stats.last_instance) == (step.seq, "big")
+        assert monitor.reasked >= 1
+        assert not any(t == "state" for t, _, _ in reports.items[after:]), "no new step: the same marking"
+    finally:
+        small_session.close()
+        big_session.close()
+
+
+def test_an_undecided_prediction_is_asked_again_five_times_then_left_undecided(router, monitor_factory, session,
+                                                                            system, monkeypatch):
+    """The re-asks back off (REASK_FIRST x 1, 2, 4, 8, 16) and stop after five: a predictor too small for a
+    system is not asked for ever; the answer stays undecided."""
+    import services.monitor.service as monitor_service
+
+    monkeypatch.setattr(monitor_service, "REASK_FIRST", 0.05)
+    reports = Reports(session)
+    small_session = open_client(router)
+    start_predictor(small_session, "small", memory_limit=1)
+    try:
+        monitor = monitor_factory(system)
+        Events(session).send("spot", "init_power.start")
+        reports.wait("unsafe", lambda m: m.seq == 1 and not m.prediction_stale, timeout=15)
+        deadline = time.monotonic() + 20
+        while monitor.reasked < 5 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        time.sleep(1.0)  # the sixth would have come 1.6 s after the first: none
+        stats = monitor.predictor_stats
+        assert monitor.reasked == 5
+        assert stats.answers == {"small": stats.answered} and stats.last_complete is False
+        spaces = [m for t, _, m in reports.items if t == "state_space"]
+        assert spaces and all(m.timeout_reached for m in spaces)
+    finally:
+        small_session.close()
+
+
 def test_prediction_in_process(router, monitor_factory, session, system):
     reports = Reports(session)
     psession = open_client(router)
