@@ -4,8 +4,9 @@ A read-only observer (:class:`~services.dashboard.observer.Observer`) follows th
 monitor's messages through Zenoh; the view is the one ``skinet run`` draws
 (:func:`services.embedded.render`), plus the services alive, the violations
 seen and the model divergences and manager restarts of the run (the monitor's list so
-far, for a watch that joins late too): redrawn in place on a terminal, one line per step
-otherwise (:class:`StepLines`) and one per divergence or restart; a
+far, for a watch that joins late too), and the pilot's status (SPEC §8: its goal, state, next command):
+redrawn in place on a terminal, one line per step otherwise (:class:`StepLines`), one per divergence or
+restart and one per change of the pilot's status (as ``skinet goal`` prints them); a
 state the monitor cannot vouch for (a skillset syncing or lost, SPEC §7) is a banner on top,
 red or yellow on a terminal, and ``STATE STALE`` in a pipe's line (a skillset lost is a line at
 once, one still syncing after a second too).  With no
@@ -31,6 +32,8 @@ from services.dashboard.app import no_monitor_message
 from services.embedded import CLEAR, Observed, divergence_line, divergence_lines, render, stop_on_signals, summary
 from services.replay import INSTANCE_PREFIX as REPLAY
 from skinet.errors import SkinetError
+from skinet.wire.messages import PilotStatus
+from skinet_cli.goal import status_change, status_line
 
 
 def view_lines(board: Board, colour: bool = False) -> list[str]:
@@ -41,7 +44,10 @@ def view_lines(board: Board, colour: bool = False) -> list[str]:
         return []
     out = render(Observed(board.state, board.verdicts, board.unsafe, board.state_space), colour)
     alive = board.alive
-    out.append("services  " + ", ".join(f"{s}: {len(alive.get(s, ()))}" for s in ("monitor", "bridge_ros2", "predictor")))
+    out.append("services  " + ", ".join(f"{s}: {len(alive.get(s, ()))}"
+                                        for s in ("monitor", "bridge_ros2", "predictor", "pilot")))
+    if board.pilot is not None:
+        out.append(pilot_line(board.pilot))
     if not alive.get("monitor"):
         out.append("  NO MONITOR ALIVE: showing its last messages")
     elif all(i.startswith(REPLAY) for i in alive["monitor"]):
@@ -50,6 +56,14 @@ def view_lines(board: Board, colour: bool = False) -> list[str]:
         f"\n  {v['property']} at step {v['seq']}" + (f" by {v['event']}" if v["event"] else "")
         for v in board.violations[-10:]))
     return out + divergence_lines(list(board.divergences.values()), board.divergences_older)
+
+
+def pilot_line(status: PilotStatus) -> str:
+    """``pilot goal N (MODE, from CLIENT): STATE[: REASON] — ...`` (goal 0: no goal yet)."""
+    if status.goal_id == 0:
+        return f"pilot     {status.state}" + (f": {status.reason}" if status.reason else "")
+    who = f", from {status.client}" if status.client else ""
+    return f"pilot     goal {status.goal_id} ({status.mode}{who}): {status_line(status)}"
 
 
 def _look(board: Board, colour: bool = False) -> tuple[list[str], str, tuple, bool]:
@@ -64,7 +78,7 @@ def _look(board: Board, colour: bool = False) -> tuple[list[str], str, tuple, bo
     key = (board.epoch, board.state.seq, stale, board.unsafe.stamp,  # type: ignore[union-attr]
            board.state_space and board.state_space.stamp,
            tuple(sorted((s, len(ids)) for s, ids in board.alive.items())), len(board.violations),
-           len(board.divergences) + board.divergences_older)
+           len(board.divergences) + board.divergences_older, board.pilot and (board.pilot.pilot, board.pilot.seq))
     fresh = not board.unsafe.prediction_stale and board.state_space is not None and \
         not board.unsafe.state_stale  # type: ignore[union-attr]
     return lines, line, key, fresh
@@ -119,6 +133,12 @@ def watch(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     noted: deque[str] = deque()  # a pipe's lines of divergences and restarts not written yet
     first = [True]  # the first list: a watch that joined late says how many it cannot list
     in_order = threading.Lock()  # the lines of the snapshot before those of later updates
+    pilot_shown: list[tuple | None] = [None]  # what the pilot's last line showed
+
+    def pilot(status: PilotStatus | None) -> None:
+        if status is not None and status_change(status, pilot_shown[0]) != pilot_shown[0]:
+            pilot_shown[0] = status_change(status, pilot_shown[0])
+            noted.append(pilot_line(status))
 
     def note(added: list[dict], older: int) -> None:
         if first[0] and older:
@@ -132,6 +152,8 @@ def watch(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
                 for u in updates:
                     if u["kind"] == "divergences":
                         note(u["added"], u["older"])
+                    elif u["kind"] == "pilot":
+                        pilot(observer.board.pilot)
             lines, line, key, fresh = _look(observer.board)
             if lines:
                 live = not observer.board.unsafe.state_stale
@@ -145,6 +167,8 @@ def watch(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
             start = observer.listen(on_update)
             if not tty and not args.once and (start["divergences"] or start["divergences_older"]):
                 note(start["divergences"], start["divergences_older"])  # what the observer got before we listened
+            if not tty and not args.once:
+                pilot(observer.board.pilot)
         if not observer.wait_monitor(args.wait):
             check_connected(session, config)
             raise SkinetError(no_monitor_message(session, args.system).replace("; waiting for one", ""))

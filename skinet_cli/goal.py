@@ -230,7 +230,7 @@ def status_line(s: PilotStatus, mode: bool = False) -> str:
     return head + (" \u2014 " + ", ".join(parts) if parts else "")
 
 
-def _change(s: PilotStatus, shown: tuple | None) -> tuple:
+def status_change(s: PilotStatus, shown: tuple | None) -> tuple:
     """What a line shows: a status equal in all of it to the one ``shown`` is no new line (moves left not
     known, None, is no change from those shown)."""
     moves = shown[6] if s.moves_left is None and shown is not None and shown[1] == s.state else s.moves_left
@@ -303,9 +303,9 @@ class _Follower:
                 print(f"goal {goal_id} was replaced by goal {status.goal_id}"
                       + (f" of {status.client}" if status.client else ""), file=sys.stderr)
                 return EXIT_ENDED
-            if _change(status, shown) != shown:
+            if status_change(status, shown) != shown:
                 switched = shown is not None and shown[3] != status.mode
-                shown = _change(status, shown)
+                shown = status_change(status, shown)
                 print(status_line(status, switched), flush=True)
             if status.state in ("reached", "failed", "cancelled"):
                 return EXIT_REACHED if status.state == "reached" else EXIT_ENDED

@@ -25,8 +25,9 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
 
     c = sub.add_parser("watch", help="terminal live view of a running system (any deployment)",
                        description="Follow a running system's monitor through Zenoh and show the operator view "
-                                   "(skillsets, properties, unsafe transitions, predictions, services, violations): "
-                                   "redrawn on a terminal, one line per step in a pipe.")
+                                   "(skillsets, properties, unsafe transitions, predictions, services, violations, "
+                                   "divergences, the pilot's status): redrawn on a terminal; in a pipe, one line per "
+                                   "step, per divergence and per change of the pilot's status.")
     c.add_argument("system", metavar="SYSTEM_NAME", type=key_name("system name"),
                    help="system name, as in skinet/<system>/... keys")
     c.add_argument("--once", action="store_true", help="print one view (after a fresh prediction) and exit")

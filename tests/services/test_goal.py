@@ -330,3 +330,29 @@ def test_every_help_example_works_as_written(robot, skills, router) -> None:
                            "paused: paused by local \u2014 now in drive mode, 2 moves left, 0 commands sent",
                            "driving \u2014 next spot:sit_down.start, 2 moves left, 0 commands sent"], out
     assert changes[-1] == "reached \u2014 1 command sent", out
+
+
+def test_skinet_watch_in_a_pipe_prints_a_line_per_change_of_the_pilots_status(robot, skills, router) -> None:
+    """``skinet watch`` shows the pilot (SPEC §8): a pipe gets one line per change, the lines ``skinet goal``
+    prints, with the goal's number, mode and sender."""
+    skills(delay=0.3)
+    proc = subprocess.Popen([sys.executable, "-m", "skinet_cli.main", "watch", "spot_arm", "--duration", "60",
+                             *client_args(router)], cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+    try:
+        deadline = time.monotonic() + 30
+        while robot.pilot.status.state != "idle" and time.monotonic() < deadline:
+            time.sleep(0.05)
+        time.sleep(2.0)  # the watcher is up and has the pilot's idle status
+        done = goal(router, "spot_arm", "reach spot:Standing", "--drive")
+        assert done.returncode == 0, done.stdout + done.stderr
+        time.sleep(1.0)  # the last status reaches the watcher
+    finally:
+        proc.terminate()
+        out, err = proc.communicate(timeout=20)
+    pilot = [line for line in out.splitlines() if line.startswith("pilot ")]
+    head = "pilot     goal 1 (drive, from local): "
+    assert pilot[0] == "pilot     idle", out + err
+    assert [p for p in pilot[1:] if not PENDING.match(p.removeprefix(head))] == [
+        head + c for c in status_lines(done.stdout) if not PENDING.match(c)], out + err
+    assert pilot[-1] == head + "reached \u2014 2 commands sent"

@@ -178,7 +178,7 @@ def test_replay_publishes_the_recorded_run_as_its_monitor_did(recording: dict[st
         assert watch.stdout.startswith(f"SkiNet Live  system {NAME}  step {LAST_STEP}  last event "
                                        f"{last_state.event}\n")
         assert "  stowed_drive: holds\n" in watch.stdout
-        assert "services  monitor: 1, bridge_ros2: 0, predictor: 0\n  REPLAY of a recorded run (skinet replay), not the " \
+        assert "services  monitor: 1, bridge_ros2: 0, predictor: 0, pilot: 0\n  REPLAY of a recorded run (skinet replay), not the " \
             "live robot\n" in watch.stdout
         check = subprocess.run([sys.executable, "-m", "skinet_cli.main", "check", NAME, "arm:unfold.start",
                                 *client_args(router)], cwd=REPO, capture_output=True, text=True, timeout=60)
