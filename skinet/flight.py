@@ -79,7 +79,7 @@ def fly(system: System, goals: list[Goal], outcomes: Outcomes, *, max_retries: i
             name = f"{skillset}:{skill}"
             retries[name] = retries.get(name, 0) + 1
             flight.failures[name] = flight.failures.get(name, 0) + 1
-            if retries[name] >= max(1, max_retries):
+            if retries[name] >= max_retries:
                 return _failed(flight, f"{name} failed {retries[name]} times (last: {mode})")
         if goal.target(skillset, transition):
             index, plan, retries = index + 1, None, {}

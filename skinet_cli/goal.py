@@ -77,7 +77,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     c.add_argument("--drive", action="store_true",
                    help="the pilot sends the commands itself (default: guide, it shows each one and you send it)")
     c.add_argument("--replace", action="store_true", help="replace a goal that runs (else the pilot rejects the new one)")
-    c.add_argument("--max-retries", type=count(0, 100), default=3, metavar="N",
+    c.add_argument("--max-retries", type=count(1, 100), default=3, metavar="N",
                    help="failures of one skill after which the goal fails (default: 3)")
     ops = c.add_mutually_exclusive_group()
     ops.add_argument("--cancel", dest="op", action="store_const", const="cancel", help="cancel the goal that runs")

@@ -216,7 +216,7 @@ class Pilot:
         if outcome.startswith("failure"):
             name = f"{skillset}:{skill}"
             g.retries[name] = g.retries.get(name, 0) + 1
-            if g.retries[name] >= max(1, g.max_retries):
+            if g.retries[name] >= g.max_retries:
                 mode = outcome.partition(".")[2] or "failure"
                 self._end(g, "failed", f"{name} failed {g.retries[name]} times (last: {mode})")
                 return
@@ -531,7 +531,7 @@ class Pilot:
                 if g is not None and g.id == due.goal and not g.end:
                     name = f"{c.skillset}:{c.transition}"
                     g.refused[name] = g.refused.get(name, 0) + 1
-                    if g.refused[name] >= max(1, g.max_retries):
+                    if g.refused[name] >= g.max_retries:
                         self._end(g, "failed", f"{exc.reason} ({g.refused[name]} times)")
                     else:
                         self._refuse(g, due, exc.reason)

@@ -361,7 +361,7 @@ class PilotGoalRequest(_Message):
     mode: Literal["guide", "drive"] = Field("guide", description="guide: publish the next command; "
                                                                  "drive: also send it to the robot")
     replace: bool = Field(False, description="replace a goal that runs (otherwise such a request is rejected)")
-    max_retries: int = Field(3, ge=0, le=100, description="failures of one skill after which the goal fails")
+    max_retries: int = Field(3, ge=1, le=100, description="failures of one skill after which the goal fails")
 
 
 class PilotGoalReply(_Message):

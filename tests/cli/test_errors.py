@@ -246,8 +246,8 @@ def _cases() -> list[Case]:
     add("skinet", "--inputs", ("goal", SYSTEM, "run spot:go_to_waypoint", "--inputs",
                                "go_to_waypoint.target = {x = \"far\"}"), 1,
         "<--inputs>:1:16: error: input 'target' of spot:go_to_waypoint (GeoPoint): expected float64 at x, got a string")
-    usage("skinet", "--max-retries", ("goal", "spot_arm", "reach spot:Busy", "--max-retries", "-1"),
-          "argument --max-retries: expected an integer from 0 to 100, got '-1'")
+    usage("skinet", "--max-retries", ("goal", "spot_arm", "reach spot:Busy", "--max-retries", "0"),
+          "argument --max-retries: expected an integer from 1 to 100, got '0'")
     usage("skinet", "--set-mode", ("goal", "spot_arm", "--set-mode", "fly"),
           "argument --set-mode: invalid choice: 'fly' (choose from 'guide', 'drive')")
     add("skinet", "--set-mode", ("goal", "spot_arm", "reach spot:Busy", "--set-mode", "drive"), 1,
