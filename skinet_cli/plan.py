@@ -224,5 +224,5 @@ def _action_json(action: Command | Wait | Reached) -> dict[str, Any] | None:
 def _step_json(step: Step) -> dict[str, Any]:
     return {"number": step.number, "skillset": step.skillset, "action": step.action, "expect": step.expect,
             "inputs": dict(step.inputs) if step.inputs else None,
-            "branches": [{"skillset": b.skillset, "outcome": b.transition, "then": b.then, "step": b.step,
+            "branches": [{"skillset": b.skillset, "transition": b.transition, "then": b.then, "step": b.step,
                           "steps": [_step_json(s) for s in b.steps]} for b in step.branches]}

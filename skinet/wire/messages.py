@@ -396,7 +396,9 @@ class PilotStatus(_Message):
     answer: Literal["strong", "cyclic", "none", "unknown"] | None = None
     moves_left: int | None = Field(None, description="moves to the goal (strong: at most; cyclic: if favourable)")
     next: PilotCommand | None = Field(None, description="the command the plan gives now (None: wait or none)")
-    steps: list[PlanStep] = Field(default_factory=list, description="the plan from the live marking")
+    steps: list[PlanStep] = Field(default_factory=list, description=(
+        "the plan's expected steps from the marking it was made at (kept while it covers the live marking; "
+        "`moves_left` and `next` are from the live marking)"))
     retries: dict[str, int] = Field(default_factory=dict, description="'skillset:skill' -> its failures in this goal")
     commands: int = Field(0, ge=0, description="commands sent to the robot for this goal")
     denied: int = Field(0, ge=0, description="commands the check denied (a defect: never sent)")

@@ -68,7 +68,7 @@ def test_json_has_the_answer_steps_policy_and_stats(capsys: pytest.CaptureFixtur
         ("spot", "stand_up.start", None), ("spot", "wait", "stand_up.success.standing"),
         ("spot", "go_to_waypoint.start", None), ("spot", "wait", "go_to_waypoint.success.arrived")]
     assert data["steps"][4]["inputs"] == {"target": {"x": 12.0, "y": 3.5, "z": 0.0}}
-    assert data["steps"][1]["branches"] == [{"skillset": "spot", "outcome": "init_power.failure.no_battery",
+    assert data["steps"][1]["branches"] == [{"skillset": "spot", "transition": "init_power.failure.no_battery",
                                              "then": "retry", "step": "1", "steps": []}]
     policy = data["policy"]
     assert data["policy_complete"] and len(policy) == 6  # the markings the plan can reach
@@ -142,6 +142,6 @@ def test_the_papers_mission_as_goals_is_planned_whole(capsys: pytest.CaptureFixt
                      {"x": 22.0, "y": 4.5, "z": 0.0}, {"x": 30.0, "y": 0.0, "z": 0.0}]
     # A blocked arm on its way to ready is brought to RD, home, and started again.
     arm_ready = data[3]["steps"][1]["branches"]
-    assert [(b["outcome"], b["then"]) for b in arm_ready] == [("arm_ready.failure.blocked", "route")]
+    assert [(b["transition"], b["then"]) for b in arm_ready] == [("arm_ready.failure.blocked", "route")]
     assert [s["action"] for s in arm_ready[0]["steps"]] == [
         "arm_moving_to_RD.start", "wait", "arm_RD_to_HP.start", "wait"]
