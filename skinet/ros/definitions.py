@@ -8,7 +8,8 @@ action.  :func:`build_store` starts from its Humble store and registers:
   their documented fields (:data:`STANDARD`): ``action_msgs/srv/CancelGoal``,
   ``lifecycle_msgs/srv/GetState``;
 - every definition a binding brings (``.msg``, ``.srv``, ``.action`` texts by type
-  name, read from its ``definitions`` folder by :mod:`skinet.files`).
+  name, read from its ``definitions`` folder by :mod:`skinet.files`), with the
+  default values of its fields (:mod:`skinet.ros.defaults`).
 
 A service ``pkg/srv/Name`` (request ``---`` response) becomes ``Name_Request`` and
 ``Name_Response``; an action ``pkg/action/Name`` (goal ``---`` result ``---``
@@ -43,7 +44,8 @@ from rosbags.interfaces import Nodetype
 from rosbags.typesys import Stores, get_typestore, get_types_from_msg
 from rosbags.typesys.store import Typestore
 
-from skinet.errors import SourceError
+from skinet.errors import Pos, SourceError
+from skinet.ros.defaults import DefaultError, definition_defaults, register
 
 KINDS = ("msg", "srv", "action")
 UUID = "unique_identifier_msgs/msg/UUID"
@@ -158,6 +160,11 @@ def build_store(definitions: Mapping[str, str] | None = None,
             store.register(new)
         except Exception as exc:  # rosbags: "already present with different definition", unknown field types
             raise SourceError.at(source, None, f"cannot register {name}: {exc}") from None
+        try:
+            register(store, definition_defaults(name, sections(text)))
+        except DefaultError as exc:
+            raise SourceError.at(source, Pos(exc.line, exc.column), f"cannot read the definition of {name}: {exc}") \
+                from None
     return store
 
 

@@ -17,8 +17,9 @@ from rosbags.typesys import Stores, get_typestore, get_types_from_msg
 from rosbags.typesys.base import BASE_NAMES, normalize_fieldname
 from rosbags.typesys.store import Typestore
 
-from skinet.errors import Diagnostic, SourceError
+from skinet.errors import Diagnostic, Pos, SourceError
 from skinet.lang.model import Skillset
+from skinet.ros.defaults import DefaultError, defaults_of, message_defaults, register
 from skinet.ros.interfaces import typed_fields, generate_messages, package_name
 
 __all__ = [
@@ -57,8 +58,13 @@ def build_typestore(
     """
     store = get_typestore(Stores.ROS2_HUMBLE)
     types: dict[str, Any] = {}
+    defaults: dict[str, dict[str, Any]] = {}
     for name, text in (extra or {}).items():
         types.update(get_types_from_msg(text, name))
+        try:
+            defaults[name] = message_defaults(text)
+        except DefaultError as exc:
+            raise SourceError.at(f"<{name}>", Pos(exc.line, exc.column), str(exc)) from None
     pkg = package_name(skillset)
     for name, text in generate_messages(skillset, typemap).items():
         types.update(get_types_from_msg(text, f"{pkg}/msg/{name}"))
@@ -83,6 +89,7 @@ def build_typestore(
     if errors:
         raise SourceError(errors)
     store.register(types)
+    register(store, defaults)
     return store
 
 
@@ -121,12 +128,17 @@ def _default(store: Typestore, desc: Any) -> Any:
 def default_instance(store: Typestore, typename: str, **values: Any) -> Any:
     """An instance of ``typename`` with default fields, some replaced by ``values``.
 
-    Numbers are 0, strings empty, bools false, sequences empty, fixed arrays full of
+    A field takes its definition's default value (:mod:`skinet.ros.defaults`), else:
+    numbers are 0, strings empty, bools false, sequences empty, fixed arrays full of
     defaults, nested messages default.  An unknown field name raises ``TypeError``.
     """
     _, fielddefs = store.fielddefs[typename]
     cls = store.types[typename]
     args = {normalize_fieldname(name): _default(store, desc) for name, desc in fielddefs}
+    for name, value in defaults_of(store, typename).items():
+        name = normalize_fieldname(name)
+        if name in args:
+            args[name] = np.array(value, dtype=args[name].dtype) if isinstance(args[name], np.ndarray) else value
     unknown = set(values) - args.keys()
     if unknown:
         raise TypeError(f"{typename} has no field {', '.join(sorted(unknown))}")

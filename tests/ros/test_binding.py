@@ -14,7 +14,9 @@ from skinet.errors import Pos, SourceError
 from skinet.files import load_bindings, load_system
 from skinet.ros.binding import LIFECYCLE_STATES, parse_binding
 from skinet.ros.condition import parse_condition
+from skinet.ros.actions import message
 from skinet.ros.definitions import action_types, build_store, rihs01
+from skinet.ros.typestore import to_plain
 
 REPO = Path(__file__).resolve().parents[2]
 NAV2 = REPO / "examples" / "nav2"
@@ -63,9 +65,34 @@ def test_service_and_action_hashes_are_those_ros_publishes() -> None:
     ("pkg/srv/Bad", "int32 a\n", "a .srv definition has 2 part(s) separated by '---' lines, this one has 1"),
     ("pkg/action/lower", "---\n---\n", "'pkg/action/lower' is not a ROS 2 type name (package/msg|srv|action/Name)"),
     ("pkg/msg/Bad", "int32\n", "cannot read the definition of pkg/msg/Bad: Could not parse:"),
+    ("pkg/action/Bad", "int32 a\n---\nint32 b\n---\nint32 c 1.5  # feedback\n",
+     "5:9: error: cannot read the definition of pkg/action/Bad: the default of field c (int32): '1.5' is not an integer"),
+    ("pkg/srv/Bad", "bool[] flags [true, maybe]\n---\n", "1:14: error: cannot read the definition of pkg/srv/Bad: "
+                                                       "the default of field flags (bool[]): 'maybe' is not a bool"),
+    ("pkg/msg/Bad", "float32 x abc\n", "1:11: error: cannot read the definition of pkg/msg/Bad: the default of field x "
+                                       "(float32): 'abc' is not a number"),
 ])
 def test_bad_definitions(name: str, text: str, message: str) -> None:
-    assert error(build_store, {name: text}, {name: "defs/x"}).startswith(f"defs/x: error: {message}")
+    got = error(build_store, {name: text}, {name: "defs/x"})
+    assert got.startswith(f"defs/x:{message}" if message[0].isdigit() else f"defs/x: error: {message}"), got
+
+
+def test_fields_take_their_definitions_defaults_and_a_quaternion_is_no_rotation() -> None:
+    """rosbags drops a .msg field's default; rosidl, and so a goal the pilot sends, keeps it (SPEC §9).  The
+    defaults leave REP 2011 hashes unchanged (rmw_zenoh keys), as ROS hashes definitions without them."""
+    action = "pkg/action/Go"
+    text = ("float32 max_time 30.0  # s\nbool use_id True\nstring name 'a # b'\nint32[] ids [1, 2]\nuint8[2] pair [3, 4]\n"
+            "int8 LIMIT=5\ngeometry_msgs/PoseStamped pose\n---\nint32 code\n---\n")
+    store = build_store({action: text})
+    plain = to_plain(message(store, f"{action}_Goal", {"ids": [7]}))
+    assert plain == {"max_time": 30.0, "use_id": True, "name": "a # b", "ids": [7], "pair": [3, 4],
+                     "pose": {"header": {"stamp": {"sec": 0, "nanosec": 0}, "frame_id": ""},
+                              "pose": {"position": {"x": 0.0, "y": 0.0, "z": 0.0},
+                                       "orientation": {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}}}}
+    bare = build_store({action: "float32 max_time\nbool use_id\nstring name\nint32[] ids\nuint8[2] pair\nint8 LIMIT=5\n"
+                                "geometry_msgs/PoseStamped pose\n---\nint32 code\n---\n"})
+    assert to_plain(message(bare, f"{action}_Goal", {}))["max_time"] == 0.0
+    assert rihs01(store, f"{action}_SendGoal") == rihs01(bare, f"{action}_SendGoal")
 
 
 # ---- conditions --------------------------------------------------------------------------------

@@ -95,7 +95,7 @@ def test_a_start_sends_the_goal_and_an_interrupt_cancels_it(rig: Rig, nav2, clie
     [(goal, fields)] = rig.received("dock_robot")
     assert sent == (f'send_goal /dock_robot goal {goal} {{"dock_id": "home_dock", "use_dock_id": true}}: accepted')
     assert {k: fields[k] for k in ("use_dock_id", "dock_id", "dock_type", "navigate_to_staging_pose")} == {
-        "use_dock_id": True, "dock_id": "home_dock", "dock_type": "", "navigate_to_staging_pose": False}
+        "use_dock_id": True, "dock_id": "home_dock", "dock_type": "", "navigate_to_staging_pose": True}
     rig.wait_for("dock_robot.start")
     assert act.send(PilotCommand(skillset="nav2", transition="dock_robot.interrupt")) == (
         f"cancel_goal /dock_robot goal {goal} (the goal the pilot sent): canceling")

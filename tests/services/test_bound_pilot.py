@@ -110,13 +110,15 @@ def test_drive_docks_through_the_action_servers(nav2: Nav2) -> None:
     assert nav2.actuator.sent == ["nav2:undock_robot.start", "nav2:dock_robot.start"]
     [(undock, undock_id, undock_goal), (dock, dock_id, dock_goal)] = sorted(
         nav2.received(), key=lambda r: r[0] != "undock_robot")
-    assert (undock, undock_goal) == ("undock_robot", {"dock_type": "", "max_undocking_time": 0.0})
+    # The fields the plan does not give have their definitions' defaults, as rosidl gives them: Nav2 would time an
+    # undocking out at once with 0 s, and a quaternion of zeros is no rotation.
+    assert (undock, undock_goal) == ("undock_robot", {"dock_type": "", "max_undocking_time": 30.0})
     zero = {"x": 0.0, "y": 0.0, "z": 0.0}
     assert (dock, dock_goal) == ("dock_robot", {  # the binding's fixed field, the input at dock_id, defaults
-        "use_dock_id": True, "dock_id": "home_dock", "dock_type": "", "max_staging_time": 0.0,
-        "navigate_to_staging_pose": False,
+        "use_dock_id": True, "dock_id": "home_dock", "dock_type": "", "max_staging_time": 1000.0,
+        "navigate_to_staging_pose": True,
         "dock_pose": {"header": {"stamp": {"sec": 0, "nanosec": 0}, "frame_id": ""},
-                      "pose": {"position": zero, "orientation": {**zero, "w": 0.0}}}})
+                      "pose": {"position": zero, "orientation": {**zero, "w": 1.0}}}})
     assert nav2.ended == [f"undock_robot {undock_id}", f"dock_robot {dock_id}"]
     transitions = [e.transition for e in nav2.events.wait(lambda items: len(items) >= 5, timeout=20)]
     assert transitions == [None, "undock_robot.start", "undock_robot.success.undocked", "dock_robot.start",
