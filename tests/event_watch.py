@@ -35,6 +35,11 @@ class Messages(Generic[M]):
             assert self._cond.wait_for(lambda: predicate(self.items), timeout), self.items
             return list(self.items)
 
+    def seen(self, predicate: Callable[[list[M]], bool], timeout: float) -> bool:
+        """Whether the messages satisfy ``predicate`` within ``timeout`` seconds."""
+        with self._cond:
+            return self._cond.wait_for(lambda: predicate(self.items), timeout)
+
 
 class Events(Messages[CanonicalEvent]):
     """Canonical events of a system, in arrival order."""

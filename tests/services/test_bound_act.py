@@ -49,8 +49,14 @@ class Rig:
         self.robot = BoundSimulator(open_(), system, bindings, style=style)
         self.events = Events(open_(), system.name)
         self.bridge = start_bound_bridge(open_(), system, bindings, style=style, settle=0.1, retry=0.1)
-        self.robot.publish_topics(FIRST)
-        self.events.wait(lambda items: [e.info for e in items] == ["initial status"], timeout=20)
+        # A robot publishes its battery and e-stop topics again and again: until the bridge, whose subscriptions
+        # may not have reached the router yet, has made its initial status from them.
+        deadline = time.monotonic() + 20
+        while True:
+            self.robot.publish_topics(FIRST)
+            if self.events.seen(lambda items: bool(items), 0.5) or time.monotonic() > deadline:
+                break
+        self.events.wait(lambda items: [e.info for e in items] == ["initial status"], timeout=5)
 
     def transitions(self) -> list[str | None]:
         return [e.transition for e in self.events.items]

@@ -227,8 +227,10 @@ def test_router_restart_between_a_bound_robot_and_the_bridge_is_read_again(outag
     robot = BoundSimulator(sim_s, system, bindings)
     bridge = start_bound_bridge(bridge_s, system, bindings, settle=0.2, retry=0.2, source="bridge_ros2/b")
     try:
-        time.sleep(0.5)
-        robot.publish_topics(FIRST)
+        deadline = time.monotonic() + 20
+        while not got and time.monotonic() < deadline:  # periodic topics: again until the bridge subscribed
+            robot.publish_topics(FIRST)
+            time.sleep(0.5)
         wait_until(lambda: len(got) == 1, 5, "the initial status")
         outage.down()
         robot.lifecycle("nav2", "navigator", "Inactive")
