@@ -30,7 +30,7 @@ from skinet.plan.goal import Goal
 from skinet.plan.policy import Plan, Stats
 from skinet.plan.solve import cyclic, strong
 from skinet.system import System, marking_problems
-from skinet.verify.explore import DEFAULT_MEMORY_LIMIT, Deadline
+from skinet.verify.explore import DEFAULT_MEMORY_LIMIT, Deadline, resident_bytes
 
 ENGINES = ("auto", "explicit", "symbolic")
 # Up to this many markings in the product, the explicit engine answers faster than the BDDs.
@@ -119,17 +119,18 @@ class Planner:
             return Plan(goal, arena, start, "none",
                         f"the robot is in a marking forced for {_forced_words(arena, start)}: "
                         "no plan can promise safety from here", stats())
+        stop = _Stop(deadline, self.memory_limit)
         for answer, solve in (("strong", strong), ("cyclic", cyclic)):
-            layers = solve(game, deadline.expired)
+            layers = solve(game, stop)
             if layers is None:
-                return Plan(goal, arena, start, "unknown", _cut_short(markings, complete, cut), stats())
+                return Plan(goal, arena, start, "unknown", _cut_short(markings, complete, cut, stop), stats())
             if game.member(layers[-1], start):
                 return Plan(goal, arena, start, answer, None, stats(), game, layers)  # type: ignore[arg-type]
         if not complete:
             return Plan(goal, arena, start, "unknown",
                         f"no plan within the {markings} markings explored: the exploration was cut by the "
                         f"{'memory limit' if cut == 'memory' else cut}", stats())
-        return Plan(goal, arena, start, "none", diagnose(arena, goal, game, relaxed, deadline.expired), stats())
+        return Plan(goal, arena, start, "none", diagnose(arena, goal, game, relaxed, stop), stats())
 
     def admissible(self, marking: Mapping[str, int]) -> list[tuple[str, str]]:
         """The commands at ``marking`` after which every result is in Safe, ``(skillset, transition)``
@@ -159,8 +160,26 @@ class Planner:
         return plans
 
 
-def _cut_short(markings: int, complete: bool, cut: str | None) -> str:
+class _Stop:
+    """When the fixpoints stop: the deadline, or this process's resident memory past the limit (read once per
+    fixpoint iteration, about 20 us; the BDDs of the symbolic engine are bounded this way only)."""
+
+    def __init__(self, deadline: Deadline, memory_limit: int | None):
+        self.deadline, self.memory_limit = deadline, memory_limit
+        self.memory = False  # stopped by the memory limit
+
+    def __call__(self) -> bool:
+        if self.deadline.expired():
+            return True
+        self.memory = self.memory_limit is not None and resident_bytes() > self.memory_limit
+        return self.memory
+
+
+def _cut_short(markings: int, complete: bool, cut: str | None, stop: _Stop) -> str:
     searched = f"{markings} markings, complete" if complete else f"{markings} markings, exploration cut by the {cut}"
+    if stop.memory:
+        return (f"the memory limit ({(stop.memory_limit or 0) >> 20} MiB, the whole process) was reached before the "
+                f"fixpoints ended ({searched})")
     return f"the budget ran out before the fixpoints ended ({searched})"
 
 

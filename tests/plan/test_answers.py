@@ -194,6 +194,20 @@ def test_a_cut_exploration_answers_unknown_never_none() -> None:
     assert (near.moves, repr(near.steps)) == (whole.moves, repr(whole.steps))
 
 
+@pytest.mark.skipif(not available(), reason="no dd.cudd")
+def test_the_symbolic_engine_keeps_to_the_memory_limit_with_unknown() -> None:
+    """The BDDs have no exploration to cut: the fixpoints stop once the process's resident memory passes the
+    limit, and the answer is unknown with that reason, never none.  A limit below what is resident now stops
+    them at their first iteration; with room, the same question is answered."""
+    system = corpus(2, 2)
+    text = "reach spot:i_go_to_waypoint and not manipulator:Hp"  # none after a complete search
+    tight = Planner(system, "symbolic", memory_limit=resident_bytes() // 2).plan(parse_goal(system, text), budget=30)
+    assert tight.answer == "unknown" and tight.stats.engine == "symbolic"
+    assert tight.reason.startswith("the memory limit (") and tight.reason.endswith(
+        " MiB, the whole process) was reached before the fixpoints ended (246016 markings, complete)"), tight.reason
+    assert Planner(system, "symbolic").plan(parse_goal(system, text), budget=30).answer == "none"
+
+
 @pytest.mark.parametrize("engine", ENGINES)
 def test_a_deadline_at_any_step_never_contradicts_the_answer(engine: str) -> None:
     """Cut the budget after every number of deadline checks: the answer is the full one or unknown
