@@ -7,6 +7,7 @@ import json
 import os
 from pathlib import Path
 
+import msgpack
 import pytest
 
 from skinet_cli.main import main
@@ -106,6 +107,31 @@ def test_two_skillset_file_travels_to_the_predictor(tmp_path: Path) -> None:
         rebuilt = system_from_bundle(b)
         assert [(c.name, c.manager) for c in rebuilt.components] == [(n, f"/{n}") for n in picked]
         assert bundle(rebuilt).digest == b.digest
+
+
+def test_commanded_events_travel_to_the_predictor() -> None:
+    """A binding's commanded events (SPEC §9) are in the model bundle, so the predictor's rebuilt system has the
+    same controllable transitions; a system without any keeps its digest's form (no field, nothing hashed)."""
+    from skinet.wire.codec import decode, encode
+    from skinet.wire.convert import bundle, system_from_bundle
+    from skinet.wire.messages import ModelBundle
+
+    nav2, _ = load_system(ROOT / "examples" / "nav2" / "nav2.toml")
+    b = decode(encode(bundle(nav2)), ModelBundle)
+    assert b.commanded == {"nav2": ["navigator_activated", "navigator_cleaned_up", "navigator_configured",
+                                    "navigator_deactivated", "navigator_shut_down"]}
+    rebuilt = system_from_bundle(b)
+    assert bundle(rebuilt).digest == b.digest
+    assert [(t.name, t.controllable) for t in rebuilt.component("nav2").net.transitions] == [
+        (t.name, t.controllable) for t in nav2.component("nav2").net.transitions]
+    without = b.model_copy(update={"commanded": {}})
+    assert not any(t.controllable for t in system_from_bundle(without).component("nav2").net.transitions
+                   if t.kind == "event")
+    paper, _ = load_system(ROOT / "skillsets" / "spot_arm.toml")
+    assert "commanded" not in msgpack.unpackb(encode(bundle(paper)))
+    bad = b.model_copy(update={"commanded": {"nav2": ["navigator_flown"], "arm": ["x"]}})
+    assert error(system_from_bundle, bad) == ("<model bundle>: error: commanded events name what skillset 'nav2' "
+                                              "does not declare: navigator_flown")
 
 
 def test_explore_accepts_a_two_skillset_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -12,6 +12,7 @@ import json
 from pathlib import PurePath
 from collections.abc import Iterable, Mapping
 from functools import lru_cache
+from typing import Any
 
 from skinet.errors import SkinetError, SourceError
 from skinet.net.semantics import steps
@@ -53,17 +54,22 @@ def bundle(system: System) -> ModelBundle:
         entries.append((name, text, c.manager))
     props_name = next((n for n in system.sources if n not in files), "properties")
     props = system.sources.get(props_name, "")
-    digest = _digest(system.name, entries, props_name, props)
-    return ModelBundle(system=system.name, digest=digest, skillsets=entries, properties=props, properties_name=props_name)
+    commanded = {c.name: sorted(c.commanded) for c in system.components if c.commanded}
+    digest = _digest(system.name, entries, props_name, props, commanded)
+    return ModelBundle(system=system.name, digest=digest, skillsets=entries, properties=props, properties_name=props_name,
+                       commanded=commanded)
 
 
 def bundle_digest(b: ModelBundle) -> str:
     """The digest ``b``'s sources hash to, computed without parsing them (cost: one sha256)."""
-    return _digest(b.system, [tuple(e) for e in b.skillsets], b.properties_name, b.properties)
+    return _digest(b.system, [tuple(e) for e in b.skillsets], b.properties_name, b.properties, b.commanded)
 
 
-def _digest(name: str, entries: list[tuple[str, str, str]], props_name: str, props: str) -> str:
-    canonical = json.dumps([name, entries, props_name, props], separators=(",", ":"))
+def _digest(name: str, entries: list[tuple[str, str, str]], props_name: str, props: str,
+            commanded: Mapping[str, list[str]]) -> str:
+    # Commanded events only when there are some: the digests of systems without bindings stay as they were.
+    parts: list[Any] = [name, entries, props_name, props] + ([dict(sorted(commanded.items()))] if commanded else [])
+    canonical = json.dumps(parts, separators=(",", ":"))
     return hashlib.sha256(canonical.encode()).hexdigest()[:32]
 
 
@@ -88,7 +94,14 @@ def system_from_bundle(b: ModelBundle) -> System:
             raise SourceError.at(file, None, f"model bundle names skillset '{wanted}', which this file does not declare")
         skillsets.append((declared[0], manager))
     sources = {name.partition("#")[0]: text for name, text, _ in b.skillsets} | {b.properties_name: b.properties}
-    return build_system(b.system, skillsets, b.properties, b.properties_name, sources)
+    commanded = {name: frozenset(events) for name, events in b.commanded.items()}
+    for name, events in commanded.items():
+        declared = {e.name for ss, _ in skillsets if ss.name == name for e in ss.events}
+        unknown = sorted(events - declared) if any(ss.name == name for ss, _ in skillsets) else [f"skillset {name}"]
+        if unknown:
+            raise SourceError.at("<model bundle>", None, f"commanded events name what skillset '{name}' does not "
+                                                         f"declare: {', '.join(unknown)}")
+    return build_system(b.system, skillsets, b.properties, b.properties_name, sources, commanded=commanded)
 
 
 def request_options(system: System, request: PredictRequest) -> PredictionOptions:

@@ -160,11 +160,15 @@ class StateSpaceReport(_Message):
 class ModelBundle(_Message):
     """Every source a predictor needs to rebuild the system."""
 
+    OMIT_AT_DEFAULT = ("commanded",)
     system: str
     digest: str
     skillsets: list[tuple[str, str, str]] = Field(description="(file name, .rl text, manager node)")
     properties: str
     properties_name: str = "properties"
+    commanded: dict[str, list[str]] = Field(
+        default_factory=dict, description="per skillset, the events its binding says are commanded (controllable, "
+                                          "SPEC §9), sorted; skillsets without any are left out")
 
 
 class PredictRequest(_Message):

@@ -50,7 +50,7 @@ def sample_messages(system: System) -> dict[str, BaseModel]:
             violated=["safety_guard"], literal_count=12, prediction_stale=False, state_stale=True,
             state_reason="manipulator lost since 22:13:20: its manager left", stale_since=1700000000.2),
         "StateSpaceReport": report,
-        "ModelBundle": b,
+        "ModelBundle": b.model_copy(update={"commanded": {"spot": ["battery_low"]}}),  # as a bound system sends it
         "PredictRequest": PredictRequest(system=system.name, digest=b.digest, seq=3, skillsets=skillsets, budget=0.5),
         "PredictReply": PredictReply(system=system.name, digest=b.digest, seq=3, ok=True, instance="p1",
                                      report=report, risks=found),
