@@ -30,11 +30,11 @@ written with mode 0600."""
 EXAMPLES = """\
 examples:
   skinet client-config --secrets observer --user observer     # writes observer.json5
-  skinet watch spot_arm -m client --zenoh-config observer.json5
+  skinet watch spot_arm --zenoh-config observer.json5
   skinet client-config --secrets /srv/skinet/predictor --user predictor \\
       --connect tls/robot.example:7447 -o predictor.json5
   skinet client-config --secrets operator --user operator     # an operator: may send the pilot goals
-  skinet goal spot_arm "run spot:init_power" --drive -m client --zenoh-config operator.json5
+  skinet goal spot_arm "run spot:init_power" --drive --zenoh-config operator.json5
 
 docs/deployment.md ("Host access"; "The pilot and its operators" for the
 operator's) shows how to get a user's folder out of a compose deployment; a
@@ -80,13 +80,13 @@ def cmd_client_config(args: argparse.Namespace) -> int:
         text = (f"// Zenoh client configuration of user '{args.user}' for the router at {args.connect},\n"
                 f"// written by `skinet client-config` from {folder.resolve()}.\n"
                 "// It holds the password: keep it private.  Use it with --zenoh-config, e.g.\n"
-                f"//   skinet watch SYSTEM_NAME -m client --zenoh-config {output}\n" + text)
+                f"//   skinet watch SYSTEM_NAME --zenoh-config {output}\n" + text)
     try:
         write_file(output, text.encode())
     except OSError as exc:
         raise SkinetError(f"cannot write {output}: {exc.strerror}") from None
     print(f"wrote {output}: user {args.user} at {args.connect} (password, CA, certificate and key of {folder})")
-    print(f"  skinet watch SYSTEM_NAME -m client --zenoh-config {output}")
+    print(f"  skinet watch SYSTEM_NAME --zenoh-config {output}")
     if args.user == OPERATOR:
-        print(f"  skinet goal SYSTEM_NAME GOAL... --drive -m client --zenoh-config {output}")
+        print(f"  skinet goal SYSTEM_NAME GOAL... --drive --zenoh-config {output}")
     return 0

@@ -221,9 +221,15 @@ def session_config(
 
 def session_mode(args: argparse.Namespace, connect: list[str]) -> str:
     """``--mode``, else ``$SKINET_ZENOH_MODE`` (checked: argparse does not check choices on a default from
-    the environment), else ``client`` when a user logs in to an endpoint of ``connect`` (a router: a
-    peer would reach no other peer through it, ZENOH.md), else ``peer``."""
+    the environment), else the ``mode`` the ``--zenoh-config`` file sets, else ``client`` when a user logs in
+    to an endpoint of ``connect`` (a router: a peer would reach no other peer through it, ZENOH.md), else
+    ``peer``."""
     if args.mode is None:
+        path = getattr(args, "zenoh_config", None)
+        if path:
+            mode = json.loads(load_config_file(path).get_json("mode"))
+            if mode != json.loads(zenoh.Config().get_json("mode")):
+                return str(mode)
         return "client" if getattr(args, "user", None) and connect else "peer"
     if args.mode not in MODES:
         raise ZenohSetupError(f"SKINET_ZENOH_MODE '{args.mode}' is not one of {', '.join(MODES)}")

@@ -40,7 +40,7 @@ def client_config(folder: Path, user: str, endpoint: str, output: Path) -> Path:
     assert (r.returncode, r.stderr) == (0, ""), r
     assert r.stdout.splitlines() == [
         f"wrote {output}: user {user} at {endpoint} (password, CA, certificate and key of {folder})",
-        f"  skinet watch SYSTEM_NAME -m client --zenoh-config {output}"]
+        f"  skinet watch SYSTEM_NAME --zenoh-config {output}"]
     return output
 
 
@@ -200,8 +200,8 @@ def test_an_operators_configuration_says_how_to_send_goals(vault: Path, tmp_path
     assert (r.returncode, r.stderr) == (0, ""), r
     assert r.stdout.splitlines() == [
         f"wrote operator.json5: user operator at tls/127.0.0.1:7447 (password, CA, certificate and key of {vault})",
-        "  skinet watch SYSTEM_NAME -m client --zenoh-config operator.json5",
-        "  skinet goal SYSTEM_NAME GOAL... --drive -m client --zenoh-config operator.json5"]
+        "  skinet watch SYSTEM_NAME --zenoh-config operator.json5",
+        "  skinet goal SYSTEM_NAME GOAL... --drive --zenoh-config operator.json5"]
     body = json.loads((tmp_path / "operator.json5").read_text().split("\n", 4)[4])
     assert body["transport"]["auth"]["usrpwd"] == {"user": "operator",
                                                    "password": (vault / "operator.password").read_text().strip()}

@@ -151,6 +151,18 @@ def test_user_with_connect_means_a_router_client(argv: list[str], mode: str, mon
     assert config_from_args(args).get_json("mode") == f'"{mode}"'
 
 
+@pytest.mark.parametrize(("flags", "mode"), [([], "client"), (["-m", "peer"], "peer")])
+def test_a_configuration_files_mode_is_the_sessions_unless_a_flag_says_otherwise(
+        flags: list[str], mode: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A file from ``skinet client-config`` sets ``mode: client``: no ``-m client`` needed beside it."""
+    for name in ("SKINET_ZENOH_MODE", "SKINET_ZENOH_USER", "SKINET_ZENOH_CONNECT"):
+        monkeypatch.delenv(name, raising=False)
+    path = tmp_path / "observer.json5"
+    path.write_text('{ mode: "client", connect: { endpoints: ["tcp/127.0.0.1:7447"] } }\n')
+    args = build_parser("watch").parse_args(["watch", "s", "--zenoh-config", str(path), *flags])
+    assert config_from_args(args).get_json("mode") == f'"{mode}"'
+
+
 def test_run_as_a_client_of_a_router(capsys: pytest.CaptureFixture[str]) -> None:
     from skinet_cli.main import main
 
