@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
 import zenoh
@@ -82,6 +82,7 @@ def run_pilot_chain(
     simulator: Simulator | None = None,
     style: KeyStyle = KeyStyle(),
     shared_predictor: bool = False,
+    on_status: Callable[[PilotStatus], None] | None = None,
 ) -> PilotRecord:
     """Send ``mission`` (a goals file's text) to a pilot on the whole chain and follow it to its end.
 
@@ -90,7 +91,8 @@ def run_pilot_chain(
     one new peer session with simulated managers on Zenoh; a caller may give the ``session`` and
     its own ``simulator`` (managers on DDS behind a gateway, or with ``rmw_zenoh`` keys: ``style``),
     which it then closes itself; ``shared_predictor``: a predictor already serves ``session`` (else one is
-    started: the pilot sends a command only from a step whose prediction came, so there is always one).
+    started: the pilot sends a command only from a step whose prediction came, so there is always one);
+    ``on_status``: called with each of the pilot's statuses as it comes (on Zenoh's thread: must not block).
     Raises :class:`~services.chain.ChainError` when the pilot refuses the mission or the chain does not
     settle.
     """
@@ -104,7 +106,7 @@ def run_pilot_chain(
         instance = run_instance()
         bridge = start_bridge(session, system, typemap, style=style, instance_id=instance)
         services.append(bridge)
-        watch = _Watch(session, system.name)
+        watch = _Watch(session, system.name, on_status)
         services.append(watch)
         actuator = ManagerActuator(session, system, typemap, style=style, instance=f"pilot-{instance}")
         pilot = start_pilot(session, system, instance=instance, actuator=actuator, typemap=typemap)
@@ -150,7 +152,8 @@ def ask_goal(session: zenoh.Session, key: str, request: PilotGoalRequest, timeou
 class _Watch:
     """The events, verdicts and pilot statuses of one system, as they are published."""
 
-    def __init__(self, session: zenoh.Session, system: str):
+    def __init__(self, session: zenoh.Session, system: str, on_status: Callable[[PilotStatus], None] | None = None):
+        self._on_status = on_status
         self._cond = threading.Condition()
         self.events: list[CanonicalEvent] = []
         self.violations: list[tuple[str, int]] = []
@@ -179,6 +182,8 @@ class _Watch:
                     self._holds[v.name] = v.holds
             else:
                 self.statuses.append(message)
+                if self._on_status is not None:
+                    self._on_status(message)
             self._cond.notify_all()
 
     def ended(self, goal_id: int) -> bool:

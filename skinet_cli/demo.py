@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING, Any
 
 from skinet.errors import SkinetError, SourceError
 from skinet_cli.demo_pilot import PilotEntry, Row, load_pilot_entry, play_pilot, table, tally
-from skinet_cli.live_demo import add_live_args, live_options_misused, play_live
+from skinet_cli.live_demo import add_live_args, live_options_misused, live_session, play_live
 from skinet_cli.options import add_no_properties_arg, load_live_system, require_properties
 from skinet.explain import plural, warning_line
 from skinet.files import load_bindings, load_goals, load_typemap, read_text
@@ -40,7 +40,8 @@ DESCRIPTION = (
     "(examples/nav2). A step the model does not allow then is shown as a model divergence. Exit status: 0; 3 when "
     "a run diverged at a step its scenario does not mark expect_divergence = true, or a marked step did not "
     "diverge, or a pilot run did not reach its goals, saw a violation or had a command denied; 1 on bad input. "
-    "With --live it plays one run (the paper's unassisted run by default) in real time, "
+    "With --live it plays one run (the paper's unassisted run by default; a pilot run too, each skill lasting "
+    "2 s at speed 1, the pilot's status printed as it changes) in real time, "
     "served on Zenoh for skinet watch, skinet dashboard and skinet check (it prints their lines), and with "
     "--dashboard PORT serves the dashboard itself.")
 
@@ -95,8 +96,6 @@ def cmd_demo(args: argparse.Namespace) -> int:
     for path in paths:  # every file checked before the first run starts
         text = read_text(path)
         if is_pilot_run(text):
-            if args.live:
-                raise SkinetError(f"--live plays scenarios; {path} is a pilot run (play it without --live)")
             runs.append(load_pilot_entry(path, text, args.no_properties))
             continue
         scenario = parse_scenario(text, str(path))
@@ -107,7 +106,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
             load_goals(path.parent / scenario.pilot, system, load_typemap(path.parent / scenario.system))
         runs.append((path, scenario, system))
     if args.live:
-        return _live(args, *runs[0])  # type: ignore[misc]
+        return _live_pilot(args, runs[0]) if isinstance(runs[0], PilotEntry) else _live(args, *runs[0])
     if args.core:
         return _play(args, runs, None)
     from services.chain import shared_session  # Zenoh only when the chain runs
@@ -195,6 +194,21 @@ def _live(args: argparse.Namespace, path: Path, scenario: Scenario, system: Syst
     then = _pilot_after_run(path, scenario, piloted, 2.0 / speed if speed > 0 else 0.05) if any(
         c.binding for c in system.components) else None  # a skill takes 2 s at speed 1
     play_live(args, path, scenario, system, header, lambda r: print(_line(r), flush=True), after, then)
+    return UNEXPECTED if surprises else 0
+
+
+def _live_pilot(args: argparse.Namespace, entry: PilotEntry) -> int:
+    """``--live`` on a pilot run: the pilot drives the run's goals on a live session, each change of its status
+    printed as it comes, the run printed at the end as without ``--live`` (skinet_cli.live_demo)."""
+    speed = 1.0 if args.speed is None else args.speed
+    header = f"== live at speed {speed:g}: the pilot drives the run below, its status as it changes"
+    with live_session(args, entry.system, header) as (session, linger):
+        scenario, records, row, surprises = play_pilot(args, entry, _line, session, live=True)
+        for line in surprises:
+            print(f"skinet demo: {entry.path}: {line}", file=sys.stderr, flush=True)
+        if (args.log or args.timeline) and records:
+            _write_run(args, entry.system, scenario, records)
+        linger()
     return UNEXPECTED if surprises else 0
 
 

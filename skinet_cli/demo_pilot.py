@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import threading
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -30,7 +31,10 @@ from skinet_cli.options import load_live_system, require_properties
 if TYPE_CHECKING:
     import zenoh
 
+    from skinet.wire.messages import PilotStatus
+
 SKILL_SECONDS = 0.05  # how long each simulated skill runs: the pilot's commands stay under the check's rate limit
+LIVE_SKILL_SECONDS = 2.0  # the same with --live, at speed 1
 
 
 @dataclass
@@ -70,12 +74,15 @@ def load_pilot_entry(path: Path, text: str, no_properties: bool) -> PilotEntry:
 
 
 def play_pilot(args: argparse.Namespace, entry: PilotEntry, line: Callable[[StepRecord], str],
-               session: zenoh.Session | None = None) -> tuple[Scenario, list[StepRecord], Row | None, list[str]]:
+               session: zenoh.Session | None = None, live: bool = False,
+               ) -> tuple[Scenario, list[StepRecord], Row | None, list[str]]:
     """Fly the pilot run (through the chain on ``session``, where a predictor runs unless ``--no-predict``;
     ``--core``: on the core), print it (``line`` formats one record), and return its scenario, records, table
     row (None when the chain did not let it end) and surprises (a mission not reached, a violation, a
     denied command, a run that did not end).  The chain always has a predictor: the pilot commands only
-    from a step whose prediction came."""
+    from a step whose prediction came.  ``live`` (``--live``): ``session`` is the live one, without a
+    predictor yet; each skill runs 2 s divided by ``--speed``, and each change of the pilot's status is
+    printed as it comes."""
     run, system = entry.run, entry.system
     failures = ", ".join(f"run {f.run} of {f.skillset}:{f.skill} ends {f.mode}" for f in run.failures) or "none"
     print(f"== {run.name} run ({entry.path}): {len(entry.goals)} goals ({entry.goals_path}), {run.mode} mode, "
@@ -92,10 +99,13 @@ def play_pilot(args: argparse.Namespace, entry: PilotEntry, line: Callable[[Step
         from services.chain import ChainError
         from services.pilot_chain import run_pilot_chain  # Zenoh only when the chain runs
 
+        speed = 1.0 if getattr(args, "speed", None) is None else args.speed
+        duration = (LIVE_SKILL_SECONDS / speed if speed > 0 else SKILL_SECONDS) if live else SKILL_SECONDS
         try:
             record = run_pilot_chain(system, load_typemap(entry.path.parent / run.system), run, entry.mission,
-                                     mission_name=str(entry.goals_path), duration=SKILL_SECONDS, session=session,
-                                     shared_predictor=session is not None and not args.no_predict)
+                                     mission_name=str(entry.goals_path), duration=duration, session=session,
+                                     shared_predictor=session is not None and not args.no_predict and not live,
+                                     timeout=120.0 + 200 * duration, on_status=_printer() if live else None)
         except ChainError as exc:  # the run did not end: said, and counted as a surprise
             print(f"   pilot: the run did not end: {exc}")
             return Scenario(run.name, run.system, ()), [], None, [f"the pilot run did not end: {exc}"]
@@ -124,6 +134,21 @@ def play_pilot(args: argparse.Namespace, entry: PilotEntry, line: Callable[[Step
     if monitor_violations is not None and replayed != monitor_violations:
         surprises.append(f"the monitor showed {monitor_violations} violations, the core replay {replayed}")
     return scenario, records, row, surprises
+
+
+def _printer() -> Callable[[PilotStatus], None]:
+    """Prints a line per change of the pilot's status, as ``skinet goal`` does (the statuses of a live run)."""
+    from skinet_cli.goal import status_change, status_line
+
+    shown: list[tuple | None] = [None]
+    lock = threading.Lock()
+
+    def on_status(status: PilotStatus) -> None:
+        with lock:
+            if status.goal_id and status_change(status, shown[0]) != shown[0]:
+                shown[0] = status_change(status, shown[0])
+                print(f"   pilot: {status_line(status)}", flush=True)
+    return on_status
 
 
 def tally(name: str, records: list[StepRecord], denied: int | None = None) -> Row:

@@ -17,7 +17,8 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -59,15 +60,12 @@ def live_options_misused(args: argparse.Namespace) -> str | None:
     return f"--{given[0].replace('_', '-')} needs --live" if given else None
 
 
-def play_live(args: argparse.Namespace, path: Path, scenario: Scenario, system: System, header: str,
-              on_record: Callable[[StepRecord], None], after: Callable[[list[StepRecord]], None],
-              then: Callable[[Any], None] | None = None) -> list[StepRecord]:
-    """Play ``scenario`` as the module docstring says: ``header`` printed once the session and the dashboard
-    are up, ``on_record`` after each step, ``then`` after the last step (a bound system's chain: the pilot's
-    goals, :func:`services.chain.run_bound_chain`), ``after`` once the run is over (then the chain keeps running
-    until Ctrl-C or ``--linger``).  Raises one-line
-    :class:`~skinet.errors.SkinetError` (unreachable endpoint, refused login, port in use)."""
-    from services.chain import run_bound_chain, run_chain
+@contextmanager
+def live_session(args: argparse.Namespace, system: System, header: str) -> Iterator[tuple[Any, Callable[[], None]]]:
+    """The session a live run plays on, as the module docstring says: yields it once the dashboard is up and the
+    connect lines and ``header`` are printed, with ``linger()``, which keeps the views running until Ctrl-C or
+    ``--linger``.  Raises one-line :class:`~skinet.errors.SkinetError` (unreachable endpoint, refused login,
+    port in use)."""
     from services.common.zenoh_config import (
         check_connected, client_name, config_from_args, open_session, wait_connected, warn_on_stderr,
     )
@@ -89,22 +87,37 @@ def play_live(args: argparse.Namespace, path: Path, scenario: Scenario, system: 
               file=sys.stderr, flush=True)
         print(header, flush=True)
 
-        def linger(records: list[StepRecord]) -> None:
+        def linger() -> None:
             stop = stop_on_signals()  # during the run Ctrl-C interrupts it (KeyboardInterrupt), SIGTERM ends it
-            after(records)
             print("skinet demo: the run is over; the chain keeps running for the views "
                   + ("(Ctrl-C stops it)" if args.linger is None else f"for {args.linger:g} s"),
                   file=sys.stderr, flush=True)
             stop.wait(args.linger)
 
-        speed = 1.0 if args.speed is None else args.speed
-        options = dict(session=session, speed=speed, on_record=on_record, after=linger)
-        if any(c.binding for c in system.components):
-            return run_bound_chain(system, load_bindings(system)[0], scenario, then=then,  # type: ignore[arg-type]
-                                   **options)
-        return run_chain(system, load_typemap(path.parent / scenario.system), scenario, **options)  # type: ignore[arg-type]
+        yield session, linger
     finally:
         if dashboard is not None:
             dashboard.close()
             dashboard.observer.close()
         session.close()
+
+
+def play_live(args: argparse.Namespace, path: Path, scenario: Scenario, system: System, header: str,
+              on_record: Callable[[StepRecord], None], after: Callable[[list[StepRecord]], None],
+              then: Callable[[Any], None] | None = None) -> list[StepRecord]:
+    """Play ``scenario`` on a :func:`live_session`: ``on_record`` after each step, ``then`` after the last step (a
+    bound system's chain: the pilot's goals, :func:`services.chain.run_bound_chain`), ``after`` once the run is
+    over (then the chain keeps running until Ctrl-C or ``--linger``)."""
+    from services.chain import run_bound_chain, run_chain
+
+    with live_session(args, system, header) as (session, linger):
+        def over(records: list[StepRecord]) -> None:
+            after(records)
+            linger()
+
+        speed = 1.0 if args.speed is None else args.speed
+        options = dict(session=session, speed=speed, on_record=on_record, after=over)
+        if any(c.binding for c in system.components):
+            return run_bound_chain(system, load_bindings(system)[0], scenario, then=then,  # type: ignore[arg-type]
+                                   **options)
+        return run_chain(system, load_typemap(path.parent / scenario.system), scenario, **options)  # type: ignore[arg-type]

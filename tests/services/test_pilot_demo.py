@@ -152,10 +152,7 @@ def test_a_pilot_run_that_does_not_end_is_said_not_crashed(monkeypatch: pytest.M
 
 
 def test_bad_pilot_runs_are_refused_before_anything_runs(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    """A pilot run's errors name the file, line and column (its goals file's too); --live plays scenarios only."""
-    assert main(["demo", "--live", "--no-multicast-scouting", str(PILOT)]) == 1
-    assert capsys.readouterr().err == f"skinet: error: --live plays scenarios; {PILOT} is a pilot run (play it " \
-                                      "without --live)\n"
+    """A pilot run's errors name the file, line and column (its goals file's too)."""
     bad = tmp_path / "bad.toml"
     bad.write_text(f'[pilot]\nname = "bad"\nsystem = "{MISSIONS.parent / "spot_arm.toml"}"\ngoals = "goals.toml"\n'
                    '\n[[failures]]\nskill = "manipulator:arm_ready"\nmode = "ready"\n')
@@ -169,3 +166,31 @@ def test_bad_pilot_runs_are_refused_before_anything_runs(tmp_path: Path, capsys:
     err = capsys.readouterr().err
     assert err == (f"{tmp_path / 'goals.toml'}:2:13: error: unknown skill 'fly' of 'spot' (expected one of: "
                    "init_power, safe_poweroff, stand_up, sit_down, go_to_waypoint, teleop)\n")
+
+
+def test_a_pilot_run_plays_live_with_each_change_of_the_pilots_status() -> None:
+    """``skinet demo --live`` on a pilot run: the chain listens for the views, the pilot's status is printed as it
+    changes (the lines ``skinet goal`` prints), then the run as without --live, and the chain lingers."""
+    import subprocess
+    import sys
+
+    done = subprocess.run([sys.executable, "-m", "skinet_cli.main", "demo", "--live", str(PILOT), "--speed", "0",
+                           "--linger", "0", "--no-multicast-scouting"], cwd=MISSIONS.parents[1], capture_output=True,
+                          text=True, timeout=300)
+    assert done.returncode == 0, done.stdout + done.stderr
+    lines = done.stdout.splitlines()
+    assert lines[:4] == [
+        "== live at speed 0: the pilot drives the run below, its status as it changes",
+        f"== pilot run ({PILOT}): 29 goals ({MISSIONS.parent / 'goals' / 'paper_mission.toml'}), drive mode, "
+        "system spot_arm",
+        "   failures injected: run 1 of manipulator:arm_ready ends blocked, run 2 of spot:go_to_waypoint ends "
+        "not_arrived",
+        "   pilot: driving \u2014 goal 1/29 reach spot:Standing, next spot:init_power.start, 4 moves left, "
+        "0 commands sent"]
+    statuses = [line for line in lines if line.startswith("   pilot: ") and "\u2014" in line]
+    assert statuses[-1] == "   pilot: reached \u2014 goal 29/29 run spot:teleop, 34 commands sent"
+    assert sum("waiting for outcome: the effect of" in line for line in statuses) == COMMANDS
+    assert f"   pilot: reached; 29 goals, {MOVES} moves, {COMMANDS} commands sent, 0 denied by the check, 2 retries" \
+        in lines and "   violations: 0" in lines
+    assert "  skinet watch spot_arm -e tcp/127.0.0.1:" in done.stderr
+    assert done.stderr.endswith("skinet demo: the run is over; the chain keeps running for the views for 0 s\n")

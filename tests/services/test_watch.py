@@ -11,6 +11,7 @@ from __future__ import annotations
 import re
 import subprocess
 import sys
+import threading
 import time
 
 import zenoh
@@ -37,22 +38,28 @@ def test_watch_in_a_pipe_prints_one_line_per_step(router: str, client: zenoh.Ses
     proc = subprocess.Popen([sys.executable, "-m", "skinet_cli.main", "watch", "spot_arm", "--duration", "60",
                              *client_args(router)], cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True)
+    printed: list[str] = []
+    reader = threading.Thread(target=lambda: printed.extend(iter(proc.stdout.readline, "")), daemon=True)  # type: ignore[union-attr]
+    reader.start()
     try:
         alive.wait(lambda names: bool(names))
         wait_until(lambda: monitor.snapshot().state_space is not None, 20, "the first prediction")
         time.sleep(2.0)  # the watcher's session is up and has read step 0 (its line waits for the next step)
-        for skillset, transition in STEPS:
+        for n, (skillset, transition) in enumerate(STEPS, 1):
             events.send(skillset, transition)
-            wait_until(lambda: not monitor.snapshot().unsafe.prediction_stale, 20, f"the prediction after {transition}")
-            time.sleep(0.3)  # the fresh report reaches the watcher
+            # Its line comes once the watcher has the step's fresh prediction (the next step would write it
+            # as it is): the next event waits for it, however loaded the machine.
+            wait_until(lambda: any(line.startswith(f"[{n}] ") for line in printed), 20, f"the line of step {n}")
     finally:
-        time.sleep(1.0)
         proc.terminate()
-        out, err = proc.communicate(timeout=20)
+        proc.wait(20)
+        reader.join(10)  # the pipe's last lines
+        err = proc.stderr.read()  # type: ignore[union-attr]
         monitor.close()
         predictor.close()
         alive.close()
         session.close()
+    out = "".join(printed)
     lines = out.splitlines()
     assert [int(re.match(r"\[(\d+)\]", line).group(1)) for line in lines] == [0, 1, 2, 3, 4], out + err
     assert all(line.endswith("prediction fresh") for line in lines), out
