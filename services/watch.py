@@ -54,6 +54,7 @@ def view_lines(board: Board, colour: bool = False) -> list[str]:
         out.append("  REPLAY of a recorded run (skinet replay), not the live robot")
     out.append(f"violations ({len(board.violations)})" + "".join(
         f"\n  {v['property']} at step {v['seq']}" + (f" by {v['event']}" if v["event"] else "")
+        + (" (already violated when this view joined)" if v.get("joined") else "")
         for v in board.violations[-10:]))
     return out + divergence_lines(list(board.divergences.values()), board.divergences_older)
 

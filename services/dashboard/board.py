@@ -5,7 +5,8 @@
 :class:`UnsafeReport` and :class:`StateSpaceReport`; the model bundle; the live
 service instances (liveliness tokens); one :class:`StepRecord`-like point per
 monitor step for the timeline (paper Fig. 3/4); the violations, each with
-the step and event where its property went from holding to failing; and the
+the step and event where its property went from holding to failing (``joined``: a property already
+violated at the first step this view saw, past step 0: its onset is not known here); and the
 model divergences and manager restarts of every monitor run it saw
 (:class:`Divergences`, kept by monitor instance and entry number, the last
 :data:`KEPT_DIVERGENCES`; issue 27 item 4); and the pilot's last status
@@ -167,11 +168,15 @@ class Board:
         now = {v.name: v.holds for v in msg.properties}
         point = self._point(msg.seq)
         for name, holds in now.items():
-            if self._holds.get(name, True) and not holds and not initial:
-                v = {"n": len(self.violations), "property": name, "seq": msg.seq, "epoch": self.epoch,
-                     "event": point["event"] if point else "", "t": point["t"] if point else msg.stamp}
-                self.violations.append(v)
-                out.append({"kind": "violation", "violation": v})
+            if holds or self._holds.get(name) is False:
+                continue
+            # Violated where this view knows nothing before (it joined late): not an onset at this step.
+            joined = name not in self._holds and msg.seq > 0
+            v = {"n": len(self.violations), "property": name, "seq": msg.seq, "epoch": self.epoch,
+                 "event": "" if joined or point is None else point["event"], "t": point["t"] if point else msg.stamp,
+                 "joined": joined}
+            self.violations.append(v)
+            out.append({"kind": "violation", "violation": v})
         self._holds = now
         if point is not None:
             point["holds"] = dict(now)

@@ -364,6 +364,27 @@ def test_board_joins_steps_in_any_order_and_counts_violations_once() -> None:
         (1, 1, {"p": False}, None), (2, 0, {}, None)]
 
 
+def test_a_late_view_says_a_violation_was_there_when_it_joined_not_that_it_began_then() -> None:
+    """A property already violated at the first step a view sees (past step 0) is listed as such, without an
+    event: its onset happened before the view joined.  Later onsets carry their step and event."""
+    def state(seq: int, event: str) -> LiveState:
+        return LiveState(system="s", seq=seq, stamp=100.0 + seq, skillsets={}, event=event)
+
+    def verdicts(seq: int, ok: bool) -> Verdicts:
+        return Verdicts(system="s", seq=seq, stamp=100.0 + seq, properties=[PropertyVerdict(name="p", holds=ok)])
+
+    for initial in (True, False):  # the start-up query's answer, or a live step first
+        board = Board("s")
+        board.feed(state(5, "a:x#4"), 0, initial=initial)
+        [update] = [u for u in board.feed(verdicts(5, False), 0, initial=initial) if u["kind"] == "violation"]
+        assert update["violation"] == {"n": 0, "property": "p", "seq": 5, "epoch": 0, "event": "", "t": 105.0,
+                                       "joined": True}
+        for seq, ok in ((6, False), (7, True), (8, False)):
+            board.feed(state(seq, f"a:y#{seq - 1}"), 0)
+            board.feed(verdicts(seq, ok), 0)
+        assert [(v["seq"], v["event"], v["joined"]) for v in board.violations] == [(5, "", True), (8, "a:y#7", False)]
+
+
 def test_board_keeps_the_pilots_last_status() -> None:
     """A late copy of the pilot's status (its answer to the start-up query) never hides a newer one; a
     restarted pilot (another instance) counts from 0 again."""

@@ -212,8 +212,9 @@ function renderViolations() {
   const vs = view.violations.filter(Boolean);
   document.getElementById("violation-count").textContent = `(${vs.length})`;
   const items = vs.map((v) => el("li", { "data-property": v.property, "data-seq": v.seq, "data-event": v.event,
-    "data-epoch": v.epoch }, el("strong", {}, v.property), ` violated at monitor step ${v.seq}`,
-    v.event ? ` by ${v.event}` : "", ` (${clock(v.t)})`));
+    "data-epoch": v.epoch, "data-joined": v.joined ? "1" : "0" }, el("strong", {}, v.property),
+    v.joined ? ` already violated at monitor step ${v.seq}, when this view joined (its onset is not known here)`
+      : ` violated at monitor step ${v.seq}`, v.event ? ` by ${v.event}` : "", ` (${clock(v.t)})`));
   fill("violations", ...(items.length ? items : [el("li", { class: "muted none" }, "none")]));
 }
 
