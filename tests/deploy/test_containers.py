@@ -520,7 +520,10 @@ def test_router_restart_loses_no_event(stack: tuple[Stack, str], observer: zenoh
         numbers = [int(e.rsplit("#", 1)[1]) for e in host]
         assert numbers == sorted(set(numbers)), f"host events out of order or twice: {numbers}"
         logs = s.compose("logs", "--no-color", "monitor", check=False).stdout
-        assert f"from '{source}'" not in logs, [line for line in logs.splitlines() if source in line]
+        # No gap, duplicate, reordering or lost stretch of the host's stream.  Its sync state may change (the
+        # restart can outlast --lost-after: "events from '<source>' again: waiting for its resync answer").
+        problems = re.compile(r"lost events|duplicate event|out-of-order event|sequence (jump|restarted)|did not come|new run")
+        assert [line for line in logs.splitlines() if source in line and problems.search(line)] == []
     finally:
         if paused:
             subprocess.run(["docker", "unpause", robot], capture_output=True)
