@@ -81,6 +81,20 @@ def open_client(endpoint: str) -> zenoh.Session:
     return zenoh.open(session_config("client", connect=[endpoint], multicast_scouting=False))
 
 
+def wait_queryable(session: zenoh.Session, key: str, timeout: float = 10.0) -> None:
+    """Until a queryable on ``key`` is reachable from ``session`` (one declared on another session reaches the
+    router a moment later)."""
+    querier = session.declare_querier(key)
+    deadline = time.monotonic() + timeout
+    try:
+        while not querier.matching_status.matching:
+            if time.monotonic() > deadline:
+                pytest.fail(f"no queryable on {key} reachable within {timeout:g} s")
+            time.sleep(0.005)
+    finally:
+        querier.undeclare()
+
+
 def start_skinet(*args: str) -> subprocess.Popen:
     """``skinet ARGS`` in its own process group, output (stderr too) on its text stdout."""
     return subprocess.Popen([sys.executable, "-m", "skinet_cli.main", *args], cwd=REPO, stdout=subprocess.PIPE,

@@ -33,6 +33,7 @@ from services.simulator.protocols import ActionLogic
 from skinet.files import load_bindings, load_system
 from skinet.ros.keys import KeyStyle
 from skinet_cli.main import main
+from tests.services.conftest import wait_queryable
 from tests.services.pilot_robot import Recording, Statuses, ask_goal, goal
 
 NAV2 = Path(__file__).resolve().parents[2] / "examples" / "nav2"
@@ -155,6 +156,7 @@ def test_an_action_server_that_accepts_and_then_says_nothing_fails_the_goal(
         stuck = ActionLogic(rig.bindings["nav2"].store, rig.bindings["nav2"].skill("undock_robot").type)
         server = client_factory().declare_queryable(
             "undock_robot/_action/send_goal", lambda q: q.reply(q.key_expr, stuck.send_goal(q.payload.to_bytes())[0]))
+        wait_queryable(rig.observer, "undock_robot/_action/send_goal")
         reply = ask_goal(rig.observer, goal("run nav2:dock_robot", system="nav2", inputs=DOCK, mode="drive"),
                          system="nav2")
         failed = rig.statuses.state("failed", reply.goal_id)
