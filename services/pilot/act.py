@@ -68,6 +68,13 @@ class Actuator(Protocol):
     def close(self) -> None: ...
 
 
+def inputs_problem(actuator: object, skillset: str, skill: str, inputs: Mapping[str, Any]) -> str | None:
+    """Why ``actuator`` could not send a start of ``skillset:skill`` with ``inputs``, when it can tell before
+    sending (its optional ``problem`` method: a bound skill's goal message, SPEC §9), else None."""
+    check = getattr(actuator, "problem", None)
+    return check(skillset, skill, inputs) if check is not None else None
+
+
 def route(system: System, skillset: str, skill: str) -> Literal["manager", "binding"]:
     """The protocol that carries ``skillset:skill``'s commands: ``binding`` when its skillset is bound to
     plain ROS 2 interfaces (SPEC §9: the binding's action), else ``manager`` (the manager's requests)."""
@@ -200,6 +207,14 @@ class Routed:
     def __init__(self, system: System, actuators: Mapping[str, Actuator]):
         self.system, self.actuators = system, dict(actuators)
 
+    def problem(self, skillset: str, skill: str, inputs: Mapping[str, Any]) -> str | None:
+        """What the actuator of the skill's route says of a start with ``inputs`` (see :func:`inputs_problem`)."""
+        try:
+            actuator = self.actuators.get(route(self.system, skillset, skill))
+        except KeyError:
+            return None
+        return inputs_problem(actuator, skillset, skill, inputs) if actuator is not None else None
+
     def send(self, command: PilotCommand) -> str:
         skill = command.transition.partition(".")[0]
         try:
@@ -240,5 +255,5 @@ def _inputs(inputs: Mapping[str, object]) -> str:
     return f", inputs {dict(inputs)}" if inputs else ""
 
 
-__all__ = ["ActError", "Actuator", "ManagerActuator", "Refused", "Routed", "default_actuator", "responder",
-           "route"]
+__all__ = ["ActError", "Actuator", "ManagerActuator", "Refused", "Routed", "default_actuator", "inputs_problem",
+           "responder", "route"]

@@ -88,14 +88,25 @@ class BoundActuator:
             return self._interrupt(command.skillset, binding, bound)
         raise ActError(f"{command.skillset}:{command.transition} is not a command (SKILL.start or SKILL.interrupt)")
 
-    def _start(self, skillset: str, binding: Binding, skill: SkillBinding, inputs: Mapping[str, Any]) -> str:
+    def problem(self, skillset: str, skill: str, inputs: Mapping[str, Any]) -> str | None:
+        """Why a start of ``skillset:skill`` with ``inputs`` could not be sent (its goal message), or None; the
+        pilot asks when it accepts a goal, before the robot moves for it."""
+        binding = self.bindings.get(skillset)
+        bound = binding.skill(skill) if binding is not None else None
+        if binding is None or bound is None:
+            return None  # not this actuator's: send says why
         try:
-            fields = skill.goal_fields(inputs)
+            fields = bound.goal_fields(inputs)
         except KeyError as exc:
-            raise ActError(f"{skillset}:{skill.skill}: {exc.args[0]}") from None
-        problem = message_problem(fields, f"{skill.type}_Goal", binding.store)
+            return f"{skillset}:{skill}: {exc.args[0]}"
+        problem = message_problem(fields, f"{bound.type}_Goal", binding.store)
+        return f"{skillset}:{skill}: the goal of {bound.action} cannot be sent: {problem}" if problem else None
+
+    def _start(self, skillset: str, binding: Binding, skill: SkillBinding, inputs: Mapping[str, Any]) -> str:
+        problem = self.problem(skillset, skill.skill, inputs)
         if problem:
-            raise ActError(f"{skillset}:{skill.skill}: the goal of {skill.action} cannot be sent: {problem}")
+            raise ActError(problem)
+        fields = skill.goal_fields(inputs)
         goal = SentGoal(uuid.uuid4().bytes)
         sent = f"send_goal {skill.action} goal {goal_text(goal.id)} {json.dumps(fields, sort_keys=True)}"
         try:

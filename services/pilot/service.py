@@ -44,7 +44,7 @@ from typing import Any
 import zenoh
 
 from services.common.zenoh_config import undeclare
-from services.pilot.act import ActError, Actuator, Refused, default_actuator, responder
+from services.pilot.act import ActError, Actuator, Refused, default_actuator, inputs_problem, responder
 from skinet.errors import SkinetError, SourceError
 from skinet.plan import Command, Goal, Plan, Planner, Reached, parse_goal, parse_goals
 from skinet.ros.keys import KeyStyle
@@ -340,6 +340,11 @@ class Pilot:
             return self._reject("no goals: give goals ('reach FORMULA', 'run SKILLSET:SKILL') or a mission")
         if len(goals) > MAX_GOALS:  # each is planned at once, within the budget
             return self._reject(f"{len(goals)} goals: a mission has at most {MAX_GOALS}")
+        for goal in goals:  # a bound skill's goal message: refused now, not after the robot moved for it
+            for (skillset, skill), values in goal.inputs.items():
+                problem = inputs_problem(self.actuator, skillset, skill, values)
+                if problem:
+                    return self._reject(f"'{goal.text}': {problem}")
         with self._lock:
             g = self._goal
             if g is not None and not g.end and not request.replace:

@@ -24,6 +24,7 @@ from services.bridge_ros2 import start_bridge
 from services.common.requests import Requests
 from services.monitor import start_monitor
 from services.pilot import Actuator, Pilot, default_actuator, start_pilot
+from services.pilot.act import inputs_problem
 from services.predictor.service import start_predictor
 from services.simulator import Simulator
 from skinet.ros.keys import KeyStyle
@@ -50,6 +51,9 @@ class Recording:
         self.sent.append(f"{command.skillset}:{command.transition}")
         self.inputs.append(command.inputs)
         return out
+
+    def problem(self, skillset: str, skill: str, inputs: dict[str, Any]) -> str | None:
+        return inputs_problem(self.inner, skillset, skill, inputs)
 
     def close(self) -> None:
         self.inner.close()

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import re
 import subprocess
+import time
 import threading
 import uuid
 from collections.abc import Callable, Iterator
@@ -125,6 +126,18 @@ def test_drive_docks_through_the_action_servers(nav2: Nav2) -> None:
     assert transitions == [None, "undock_robot.start", "undock_robot.success.undocked", "dock_robot.start",
                            "dock_robot.success.docked"]
     assert nav2.events.items[-1].status.resources["dock"] == "Docked"
+
+
+@pytest.mark.parametrize("nav2", [(KeyStyle(), True)], ids=["zenoh-bridge-ros2dds"], indirect=True)
+def test_an_input_the_goal_message_cannot_hold_is_refused_before_the_robot_moves(nav2: Nav2) -> None:
+    """The model does not say what a DockId is; the binding does (dock_id, a string).  A goal whose input the
+    goal message cannot hold is rejected when it is given, not after the pilot undocked the robot for it."""
+    reply = ask_goal(nav2.observer, goal("run nav2:dock_robot", system="nav2", inputs={"dock_robot": {"dock": 3}},
+                                         mode="drive"), system="nav2")
+    assert (reply.accepted, reply.reason) == (False, "'run nav2:dock_robot': nav2:dock_robot: the goal of /dock_robot "
+                                                     "cannot be sent: expected string at dock_id, got an integer")
+    time.sleep(0.5)
+    assert nav2.actuator.sent == [] and nav2.received() == []
 
 
 @pytest.mark.parametrize("nav2", [(KeyStyle(), False)], ids=["robot-idle"], indirect=True)
