@@ -234,23 +234,19 @@ def test_an_undecided_prediction_is_asked_again_until_a_predictor_decides_it(rou
     small = start_predictor(small_session, "small", memory_limit=1)  # every exploration cut at once
     big_session = open_client(router)
     try:
-        monitor = monitor_factory(system)
-        events = Events(session)
-        events.send("spot", "init_power.start")
-        cut = reports.wait("state_space", lambda m: m.timeout_reached, timeout=15)
+        monitor = monitor_factory(system, budget=5.0)  # room for a loaded machine: only the memory limit cuts
+        cut = reports.wait("state_space", lambda m: m.timeout_reached, timeout=30)
         assert cut.markings < 10
-        step = reports.wait("unsafe", lambda m: m.seq == 1 and not m.prediction_stale, timeout=10)
-        small.close()
-        start_predictor(big_session, "big")
         after = len(reports.items)
-        space = reports.wait("state_space", lambda m: not m.timeout_reached, timeout=15, after=after)
-        live = LiveSystem(system)
-        live.apply("spot", "init_power.start")
-        assert space.markings == forecast(system, live.marking, budget=5.0).space.markings
+        start_predictor(big_session, "big")  # its workers start while the small one still answers
+        wait_until(lambda: "big" in monitor.predictor_stats.instances, 20, "the big predictor in the pool")
+        small.close()
+        space = reports.wait("state_space", lambda m: not m.timeout_reached, timeout=60, after=after)
+        assert space.markings == forecast(system, system.initial_marking(), budget=5.0).space.markings
         fresh = reports.wait("unsafe", lambda m: not m.prediction_stale, timeout=5, after=after)
-        assert (fresh.seq, monitor.predictor_stats.last_instance) == (step.seq, "big")
+        assert (fresh.seq, monitor.predictor_stats.last_instance) == (0, "big")
         assert monitor.reasked >= 1
-        assert not any(t == "state" for t, _, _ in reports.items[after:]), "no new step: the same marking"
+        assert {m.seq for t, _, m in reports.items if t == "state"} == {0}, "no new step: the same marking"
     finally:
         small_session.close()
         big_session.close()
@@ -259,7 +255,7 @@ def test_an_undecided_prediction_is_asked_again_until_a_predictor_decides_it(rou
 def test_an_undecided_prediction_is_asked_again_five_times_then_left_undecided(router, monitor_factory, session,
                                                                             system, monkeypatch):
     """The re-asks back off (REASK_FIRST x 1, 2, 4, 8, 16) and stop after five: a predictor too small for a
-    system is not asked for ever; the answer stays undecided."""
+    system is not asked for ever; the answer stays undecided.  One marking (no event): six answers in all."""
     import services.monitor.service as monitor_service
 
     monkeypatch.setattr(monitor_service, "REASK_FIRST", 0.05)
@@ -267,18 +263,13 @@ def test_an_undecided_prediction_is_asked_again_five_times_then_left_undecided(r
     small_session = open_client(router)
     start_predictor(small_session, "small", memory_limit=1)
     try:
-        monitor = monitor_factory(system)
-        Events(session).send("spot", "init_power.start")
-        reports.wait("unsafe", lambda m: m.seq == 1 and not m.prediction_stale, timeout=15)
-        deadline = time.monotonic() + 20
-        while monitor.reasked < 5 and time.monotonic() < deadline:
-            time.sleep(0.05)
-        time.sleep(1.0)  # the sixth would have come 1.6 s after the first: none
+        monitor = monitor_factory(system, budget=5.0)
+        wait_until(lambda: monitor.reasked == 5 and monitor.predictor_stats.answered == 6, 60, "five re-asks")
+        time.sleep(2.0)  # a sixth would have come 1.6 s after the first at the latest: none
         stats = monitor.predictor_stats
-        assert monitor.reasked == 5
-        assert stats.answers == {"small": stats.answered} and stats.last_complete is False
+        assert (monitor.reasked, stats.answered, stats.answers, stats.last_complete) == (5, 6, {"small": 6}, False)
         spaces = [m for t, _, m in reports.items if t == "state_space"]
-        assert spaces and all(m.timeout_reached for m in spaces)
+        assert len(spaces) == 6 and all(m.timeout_reached for m in spaces)
     finally:
         small_session.close()
 
