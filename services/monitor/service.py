@@ -14,8 +14,8 @@ live marking arrives, the UnsafeReport of the same step is published again with
 Predictions are kept per marking (``prediction_cache``): a marking seen again is
 fresh at once and not queried again.  An undecided one (the predictor's exploration was cut by its budget or
 memory limit, ``StateSpaceReport.timeout_reached``) is asked again while its marking stays live, after 1, 2, 4,
-8 and 16 s (:data:`REASK_FIRST`): a loaded predictor may decide it later, and until then the check says
-"could not decide", never allow.  A gap, a jump, a restarted bridge or events
+8 and 16 s (:data:`REASK_FIRST`) and when a predictor appears: a loaded predictor may decide it later, and until
+then the check says "could not decide", never allow.  A gap, a jump, a restarted bridge or events
 that could not be recovered make it ask the bridge for the skillset's last status
 (``keys.resync``) and apply it (see :meth:`Engine.check_seq`).  Bad payloads are counted and logged,
 never raised (SPEC §7).
@@ -664,8 +664,8 @@ class Monitor:
         alive = sample.kind == zenoh.SampleKind.PUT
         self._predict.instance(str(sample.key_expr), alive)
         if alive:
-            with self._lock:
-                stale = self._engine.prediction() is None
+            with self._lock:  # a new predictor may also decide what another one could not
+                stale = self._engine.prediction() is None or self._engine.key in self._undecided
                 key, marking = self._engine.key, self._engine.marking()
             if stale:
                 self._predict.want(key, marking)

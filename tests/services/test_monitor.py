@@ -227,8 +227,9 @@ def _expect_prediction(reports: Reports, system: System, events: Events, steps: 
 def test_an_undecided_prediction_is_asked_again_until_a_predictor_decides_it(router, monitor_factory, session,
                                                                             system):
     """A prediction cut by the predictor's memory limit stays honest ("could not decide") and is asked again while
-    its marking stays live: once a predictor with room answers, the same step's report turns complete, with no
-    new event.  Before, the undecided answer was kept for its marking and a drive goal waited for ever."""
+    its marking stays live (on a timer, and when a predictor appears): once a predictor with room answers, the
+    same step's report turns complete, with no new event.  Before, the undecided answer was kept for its marking
+    and a drive goal waited for ever."""
     reports = Reports(session)
     small_session = open_client(router)
     small = start_predictor(small_session, "small", memory_limit=1)  # every exploration cut at once
@@ -245,7 +246,6 @@ def test_an_undecided_prediction_is_asked_again_until_a_predictor_decides_it(rou
         assert space.markings == forecast(system, system.initial_marking(), budget=5.0).space.markings
         fresh = reports.wait("unsafe", lambda m: not m.prediction_stale, timeout=5, after=after)
         assert (fresh.seq, monitor.predictor_stats.last_instance) == (0, "big")
-        assert monitor.reasked >= 1
         assert {m.seq for t, _, m in reports.items if t == "state"} == {0}, "no new step: the same marking"
     finally:
         small_session.close()
