@@ -14,10 +14,10 @@ model divergences and manager restarts of every monitor run it saw
 
 A monitor restart shows as a step counter going back: a new *epoch* starts, the
 timeline keeps the previous points.  The same step published again with a later
-stamp (its skillsets' sync states changed, SPEC §7) replaces the shown state.  Messages older than what is shown (a late
-reply to the start-up query) are ignored; a reply with an earlier step but a later stamp than the shown one comes
-from a restarted monitor whose publications the view missed, and starts a new epoch too.  Every :meth:`Board.feed` returns the
-updates to send to views, as JSON-able dicts ``{"kind": ..., ...}``; applying
+stamp (its skillsets' sync states changed, SPEC §7) replaces the shown state.  Messages older than what is
+shown (a late reply to the start-up query) are ignored; a reply with an earlier step but a later stamp than the
+shown one comes from a restarted monitor whose publications the view missed, and starts a new epoch too.  Every
+:meth:`Board.feed` returns the updates to send to views, as JSON-able dicts ``{"kind": ..., ...}``; applying
 them twice is harmless (points, violations and divergences carry their index).  Cost: O(1)
 per message (O(E) for a divergence list of E entries), O(H) memory for H timeline points (bounded).
 """

@@ -121,7 +121,8 @@ def _inputs_reason(arena: Arena, goal: Goal, relaxed: Any, layers: list[Any], an
 
 
 def _late() -> str:
-    return "no plan exists (the search was complete); the budget or the memory limit ran out before the reason was found"
+    return ("no plan exists (the search was complete); the budget or the memory limit ran out before the reason "
+            "was found")
 
 
 def _forced_words(arena: Arena, local: Local, moved: set[str] | None = None) -> str:

@@ -131,4 +131,5 @@ def defaults_of(store: Typestore, typename: str) -> Mapping[str, Any]:
     return {**(standard or {}), **found}
 
 
-__all__ = ["STANDARD_DEFAULTS", "DefaultError", "Defaults", "defaults_of", "definition_defaults", "message_defaults", "register"]
+__all__ = ["STANDARD_DEFAULTS", "DefaultError", "Defaults", "defaults_of", "definition_defaults", "message_defaults",
+           "register"]

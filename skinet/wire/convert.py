@@ -56,8 +56,8 @@ def bundle(system: System) -> ModelBundle:
     props = system.sources.get(props_name, "")
     commanded = {c.name: sorted(c.commanded) for c in system.components if c.commanded}
     digest = _digest(system.name, entries, props_name, props, commanded)
-    return ModelBundle(system=system.name, digest=digest, skillsets=entries, properties=props, properties_name=props_name,
-                       commanded=commanded)
+    return ModelBundle(system=system.name, digest=digest, skillsets=entries, properties=props,
+                       properties_name=props_name, commanded=commanded)
 
 
 def bundle_digest(b: ModelBundle) -> str:
