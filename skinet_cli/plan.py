@@ -92,6 +92,17 @@ def read_goals(args: argparse.Namespace, system: System) -> list[Goal]:
         goals.append(parse_goal(system, text, inputs, f"<goal {n}>" if several else "<goal>", types=types))
     if not goals:
         raise SkinetError("no goals: give GOAL arguments (e.g. \"reach spot:Standing\") or --goals FILE")
+    if any(c.binding for c in system.components):  # a bound skill's inputs: what its goal message can hold
+        from skinet.files import load_bindings
+
+        bindings, _ = load_bindings(system)
+        for goal in goals:
+            for (skillset, skill), values in goal.inputs.items():
+                binding = bindings.get(skillset)
+                bound = binding.skill(skill) if binding is not None else None
+                problem = bound.goal_problem(values, binding.store) if bound and binding.store else None
+                if problem:
+                    raise SkinetError(f"goal '{goal.text}': {skillset}:{skill}: {problem}")
     return goals
 
 

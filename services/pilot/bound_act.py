@@ -41,7 +41,6 @@ from services.common.ros_client import ServiceClient
 from services.common.ros_liveliness import declare_node
 from services.common.zenoh_config import undeclare
 from services.pilot.act import ActError, Refused
-from skinet.plan.inputs import message_problem
 from skinet.ros.actions import (
     SentGoal, cancel_goal_reply, cancel_goal_request, followed_goal, send_goal_reply, send_goal_request,
 )
@@ -95,12 +94,8 @@ class BoundActuator:
         bound = binding.skill(skill) if binding is not None else None
         if binding is None or bound is None:
             return None  # not this actuator's: send says why
-        try:
-            fields = bound.goal_fields(inputs)
-        except KeyError as exc:
-            return f"{skillset}:{skill}: {exc.args[0]}"
-        problem = message_problem(fields, f"{bound.type}_Goal", binding.store)
-        return f"{skillset}:{skill}: the goal of {bound.action} cannot be sent: {problem}" if problem else None
+        problem = bound.goal_problem(inputs, binding.store)
+        return f"{skillset}:{skill}: {problem}" if problem else None
 
     def _start(self, skillset: str, binding: Binding, skill: SkillBinding, inputs: Mapping[str, Any]) -> str:
         problem = self.problem(skillset, skill.skill, inputs)

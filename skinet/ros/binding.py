@@ -144,6 +144,15 @@ class SkillBinding:
             at[last] = value
         return out
 
+    def goal_problem(self, inputs: Mapping[str, Any], store: Typestore) -> str | None:
+        """Why a start with ``inputs`` could not be sent (its goal message, with the fixed fields), or None."""
+        try:
+            fields = self.goal_fields(inputs)
+        except KeyError as exc:
+            return str(exc.args[0])
+        problem = message_problem(fields, f"{self.type}_Goal", store)
+        return f"the goal of {self.action} cannot be sent: {problem}" if problem else None
+
     @property
     def needs_result(self) -> bool:
         """Whether a mode depends on the result (the bridge then asks ``get_result``)."""

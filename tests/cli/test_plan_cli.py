@@ -145,3 +145,14 @@ def test_the_papers_mission_as_goals_is_planned_whole(capsys: pytest.CaptureFixt
     assert [(b["transition"], b["then"]) for b in arm_ready] == [("arm_ready.failure.blocked", "route")]
     assert [s["action"] for s in arm_ready[0]["steps"]] == [
         "arm_moving_to_RD.start", "wait", "arm_RD_to_HP.start", "wait"]
+
+
+def test_a_bound_skills_input_is_checked_against_its_goal_message(capsys: pytest.CaptureFixture[str]) -> None:
+    """The model does not type nav2's DockId; the binding maps it to dock_id, a string: a plan (and skinet goal)
+    refuses an input the goal message cannot hold, as the pilot would."""
+    nav2 = str(ROOT / "examples" / "nav2" / "nav2.toml")
+    assert main(["plan", nav2, "run nav2:dock_robot", "--inputs", "dock_robot.dock = 3"]) == 1
+    assert capsys.readouterr().err == ("skinet: error: goal 'run nav2:dock_robot': nav2:dock_robot: the goal of "
+                                       "/dock_robot cannot be sent: expected string at dock_id, got an integer\n")
+    assert main(["plan", nav2, "run nav2:dock_robot", "--inputs", 'dock_robot.dock = "home_dock"']) == 0
+    assert capsys.readouterr().out.startswith("goal: run nav2:dock_robot\ncyclic: 4 moves")
