@@ -35,6 +35,7 @@ import zenoh
 from cyclonedds.core import Listener, Policy, Qos
 from cyclonedds.domain import Domain, DomainParticipant
 from cyclonedds.idl import IdlStruct, make_idl_struct, types
+from cyclonedds.internal import InvalidSample
 from cyclonedds.pub import DataWriter
 from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic
@@ -175,7 +176,8 @@ class DdsSimulator(Simulator):
     def _on_data(self, node: _Node, topic: Any) -> Callable[[DataReader], None]:
         def on_data_available(reader: DataReader) -> None:
             for sample in reader.take(N=64):
-                self._receive(node, topic, sample.serialize(use_version_2=False))
+                if not isinstance(sample, InvalidSample):  # a writer's disposal or unregistration: no data
+                    self._receive(node, topic, sample.serialize(use_version_2=False))
 
         return on_data_available
 

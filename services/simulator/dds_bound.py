@@ -33,6 +33,7 @@ from typing import Any
 from cyclonedds.core import Listener, Policy, Qos
 from cyclonedds.domain import Domain, DomainParticipant
 from cyclonedds.idl import IdlStruct, make_idl_struct, types
+from cyclonedds.internal import InvalidSample
 from cyclonedds.pub import DataWriter
 from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic
@@ -136,6 +137,8 @@ class DdsBoundRobot:
 
         def on_data_available(reader: DataReader) -> None:
             for sample in reader.take(N=64):
+                if isinstance(sample, InvalidSample):  # a writer's disposal or unregistration: no request
+                    continue
                 raw = sample.serialize(use_version_2=False)
                 header = raw[4:4 + HEADER]
 
