@@ -189,14 +189,16 @@ def test_a_flooding_client_is_limited_while_another_gets_fresh_predictions(route
         answers = flood.stop()
         flood_seconds, refusal_time, flood = flood.seconds, flood.refusal_time, None
 
-        def fresh_within(window: tuple[float, float], seconds: float = 1.0) -> tuple[int, int]:
+        # Isolation, not speed (bench_flood.py measures that): every step fresh within 2 s, where a starved client
+        # gets its predictions late or not at all (a step took just over 1 s once in ten loaded full runs).
+        def fresh_within(window: tuple[float, float], seconds: float = 2.0) -> tuple[int, int]:
             delays = {seq: d for seq, d in observer.fresh_delays(window[0]).items()
                       if seq in observer.states_between(*window)}
             return len(delays), sum(1 for d in delays.values() if d is not None and d <= seconds)
 
         steps_quiet, fresh_quiet = fresh_within(quiet)
         steps_flood, fresh_flood = fresh_within(during)
-        print(f"fresh within 1 s: quiet {fresh_quiet}/{steps_quiet}, during the flood {fresh_flood}/{steps_flood}; "
+        print(f"fresh within 2 s: quiet {fresh_quiet}/{steps_quiet}, during the flood {fresh_flood}/{steps_flood}; "
               f"flooder answers {dict(answers)} in {flood_seconds:.1f} s")
         assert (steps_quiet, steps_flood) == (12, 28)
         assert fresh_quiet == steps_quiet
