@@ -107,7 +107,7 @@ def drive_goals(chain: BoundChain, mission: str, mission_name: str, *, duration:
         with seen.lock:
             first = len(seen.events)
         request = PilotGoalRequest(system=system.name, mission=mission, mission_name=mission_name, mode="drive")
-        reply = ask_goal(session, keys.pilot_goal(system.name, keys.LOCAL_CLIENT), request, settle)
+        reply = ask_goal(session, request, settle)
         if not reply.accepted:
             raise ChainError(f"the pilot refused {mission_name}: {reply.reason}")
         wait_until(lambda: pilot.status.goal_id == reply.goal_id and pilot.status.state in ENDED, timeout,

@@ -27,16 +27,18 @@ import zenoh
 
 from services.bridge_ros2 import start_bridge
 from services.chain import ChainError, embedded_services, handled_all, run_instance, statuses_lost, wait_until
+from services.common.goals import ask_pilot
 from services.pilot import start_pilot
 from services.pilot.act import ManagerActuator
 from services.simulator import Simulator
 from services.simulator.world import End, World
 from skinet.mission import Scenario, Step
 from skinet.pilot_run import Outcomes, PilotRun
+from skinet.errors import SkinetError
 from skinet.ros.keys import KeyStyle
 from skinet.system import System
 from skinet.wire import keys
-from skinet.wire.codec import DecodeError, decode, encode
+from skinet.wire.codec import decode
 from skinet.wire.messages import CanonicalEvent, PilotGoalReply, PilotGoalRequest, PilotStatus, Verdicts
 
 ENDED = ("reached", "failed", "cancelled")
@@ -116,7 +118,7 @@ def run_pilot_chain(
         wait_until(lambda: pilot.status.state == "idle", settle, "the pilot to follow the monitor")
         request = PilotGoalRequest(system=system.name, mission=mission, mission_name=mission_name, mode=run.mode)
         started = time.monotonic()
-        reply = ask_goal(session, keys.pilot_goal(system.name, keys.LOCAL_CLIENT), request, settle)
+        reply = ask_goal(session, request, settle)
         if not reply.accepted:
             raise ChainError(f"the pilot refused the mission: {reply.reason}")
         try:
@@ -138,15 +140,13 @@ def run_pilot_chain(
         return watch.record(run, reply, pilot.status, simulator.commands_handled(), list(world.ends), seconds)
 
 
-def ask_goal(session: zenoh.Session, key: str, request: PilotGoalRequest, timeout: float) -> PilotGoalReply:
-    """The pilot's reply to ``request`` on ``key``; :class:`ChainError` when none comes within ``timeout``."""
-    for r in session.get(key, payload=encode(request), timeout=timeout):
-        if r.ok is not None:
-            try:
-                return decode(r.ok.payload.to_bytes(), PilotGoalReply)
-            except DecodeError as exc:
-                raise ChainError(f"the pilot's reply is not understood: {exc}") from None
-    raise ChainError(f"no pilot answered on {key} within {timeout:g} s")
+def ask_goal(session: zenoh.Session, request: PilotGoalRequest, timeout: float) -> PilotGoalReply:
+    """The in-process pilot's reply to ``request`` (:func:`~services.common.goals.ask_pilot` under the local
+    login); :class:`ChainError` when none comes within ``timeout`` or it does not decode."""
+    try:
+        return ask_pilot(session, request, keys.LOCAL_CLIENT, timeout)
+    except SkinetError as exc:
+        raise ChainError(str(exc)) from None
 
 
 class _Watch:

@@ -33,7 +33,7 @@ from services.embedded import CLEAR, Observed, divergence_line, divergence_lines
 from services.replay import INSTANCE_PREFIX as REPLAY
 from skinet.errors import SkinetError
 from skinet.wire.messages import PilotStatus
-from skinet_cli.goal import status_change, status_line
+from skinet_cli.goal import StatusLines, status_line
 
 
 def view_lines(board: Board, colour: bool = False) -> list[str]:
@@ -134,11 +134,10 @@ def watch(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     noted: deque[str] = deque()  # a pipe's lines of divergences and restarts not written yet
     first = [True]  # the first list: a watch that joined late says how many it cannot list
     in_order = threading.Lock()  # the lines of the snapshot before those of later updates
-    pilot_shown: list[tuple | None] = [None]  # what the pilot's last line showed
+    pilot_lines = StatusLines(say_mode=False)  # a pipe's line per change of the pilot's status
 
     def pilot(status: PilotStatus | None) -> None:
-        if status is not None and status_change(status, pilot_shown[0]) != pilot_shown[0]:
-            pilot_shown[0] = status_change(status, pilot_shown[0])
+        if status is not None and pilot_lines.line(status) is not None:
             noted.append(pilot_line(status))
 
     def note(added: list[dict], older: int) -> None:

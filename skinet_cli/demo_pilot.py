@@ -138,16 +138,16 @@ def play_pilot(args: argparse.Namespace, entry: PilotEntry, line: Callable[[Step
 
 def _printer() -> Callable[[PilotStatus], None]:
     """Prints a line per change of the pilot's status, as ``skinet goal`` does (the statuses of a live run)."""
-    from skinet_cli.goal import status_change, status_line
+    from skinet_cli.goal import StatusLines
 
-    shown: list[tuple | None] = [None]
+    lines = StatusLines(say_mode=False)
     lock = threading.Lock()
 
     def on_status(status: PilotStatus) -> None:
         with lock:
-            if status.goal_id and status_change(status, shown[0]) != shown[0]:
-                shown[0] = status_change(status, shown[0])
-                print(f"   pilot: {status_line(status)}", flush=True)
+            line = lines.line(status) if status.goal_id else None
+            if line is not None:
+                print(f"   pilot: {line}", flush=True)
     return on_status
 
 

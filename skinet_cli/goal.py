@@ -238,6 +238,24 @@ def status_change(s: PilotStatus, shown: tuple | None) -> tuple:
             tuple(sorted(s.retries.items())), s.commands, s.denied)
 
 
+class StatusLines:
+    """One line per change of the pilot's status, as ``skinet goal`` prints them (:func:`status_change`);
+    ``say_mode``: a line also says the mode when it has just changed."""
+
+    def __init__(self, say_mode: bool = True):
+        self.say_mode = say_mode
+        self.shown: tuple | None = None  # what the last line showed
+
+    def line(self, status: PilotStatus) -> str | None:
+        """The line ``status`` adds, or None when it shows nothing new."""
+        change = status_change(status, self.shown)
+        if change == self.shown:
+            return None
+        switched = self.say_mode and self.shown is not None and self.shown[3] != status.mode
+        self.shown = change
+        return status_line(status, switched)
+
+
 class _Follower:
     """The pilot's status changes and the pilots' liveliness, queued for the main thread (which sees Ctrl-C)."""
 
@@ -272,7 +290,7 @@ class _Follower:
         now = pilot_status(self.session, self.system)  # in case it ended before the subscriber's first sample
         if now is not None:
             self.queue.put(now)
-        shown: tuple | None = None
+        lines = StatusLines()
         seqs: dict[str, int] = {}
         ours = ""  # the pilot instance following the goal, once a status of it came
         cancelled = False
@@ -303,10 +321,9 @@ class _Follower:
                 print(f"goal {goal_id} was replaced by goal {status.goal_id}"
                       + (f" of {status.client}" if status.client else ""), file=sys.stderr)
                 return EXIT_ENDED
-            if status_change(status, shown) != shown:
-                switched = shown is not None and shown[3] != status.mode
-                shown = status_change(status, shown)
-                print(status_line(status, switched), flush=True)
+            line = lines.line(status)
+            if line is not None:
+                print(line, flush=True)
             if status.state in ("reached", "failed", "cancelled"):
                 return EXIT_REACHED if status.state == "reached" else EXIT_ENDED
 

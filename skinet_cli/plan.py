@@ -94,15 +94,14 @@ def read_goals(args: argparse.Namespace, system: System) -> list[Goal]:
         raise SkinetError("no goals: give GOAL arguments (e.g. \"reach spot:Standing\") or --goals FILE")
     if any(c.binding for c in system.components):  # a bound skill's inputs: what its goal message can hold
         from skinet.files import load_bindings
+        from skinet.ros.binding import bound_inputs_problem
 
         bindings, _ = load_bindings(system)
         for goal in goals:
             for (skillset, skill), values in goal.inputs.items():
-                binding = bindings.get(skillset)
-                bound = binding.skill(skill) if binding is not None else None
-                problem = bound.goal_problem(values, binding.store) if bound and binding.store else None
+                problem = bound_inputs_problem(bindings, skillset, skill, values)
                 if problem:
-                    raise SkinetError(f"goal '{goal.text}': {skillset}:{skill}: {problem}")
+                    raise SkinetError(f"goal '{goal.text}': {problem}")
     return goals
 
 

@@ -44,7 +44,7 @@ from services.pilot.act import ActError, Refused
 from skinet.ros.actions import (
     SentGoal, cancel_goal_reply, cancel_goal_request, followed_goal, send_goal_reply, send_goal_request,
 )
-from skinet.ros.binding import CANCEL_TYPE, STATUS_TYPE, Binding, SkillBinding
+from skinet.ros.binding import CANCEL_TYPE, STATUS_TYPE, Binding, SkillBinding, bound_inputs_problem
 from skinet.ros.bound import STATUS_NAMES, Goal, goal_text, goals_from_plain
 from skinet.ros.keys import KeyStyle, history_selector
 from skinet.ros.typestore import decode, to_plain
@@ -90,12 +90,7 @@ class BoundActuator:
     def problem(self, skillset: str, skill: str, inputs: Mapping[str, Any]) -> str | None:
         """Why a start of ``skillset:skill`` with ``inputs`` could not be sent (its goal message), or None; the
         pilot asks when it accepts a goal, before the robot moves for it."""
-        binding = self.bindings.get(skillset)
-        bound = binding.skill(skill) if binding is not None else None
-        if binding is None or bound is None:
-            return None  # not this actuator's: send says why
-        problem = bound.goal_problem(inputs, binding.store)
-        return f"{skillset}:{skill}: {problem}" if problem else None
+        return bound_inputs_problem(self.bindings, skillset, skill, inputs)  # not bound: send says why
 
     def _start(self, skillset: str, binding: Binding, skill: SkillBinding, inputs: Mapping[str, Any]) -> str:
         problem = self.problem(skillset, skill.skill, inputs)

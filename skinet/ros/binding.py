@@ -218,6 +218,18 @@ class Binding:
         return next((s for s in self.skills if s.skill == name), None)
 
 
+def bound_inputs_problem(bindings: Mapping[str, Binding], skillset: str, skill: str,
+                         inputs: Mapping[str, Any]) -> str | None:
+    """Why a start of ``skillset:skill`` with ``inputs`` could not be sent (``skillset:skill: why``), or None: it
+    could, or the skill is bound to no action (nothing to check here)."""
+    binding = bindings.get(skillset)
+    bound = binding.skill(skill) if binding is not None else None
+    if binding is None or bound is None or binding.store is None:
+        return None
+    problem = bound.goal_problem(inputs, binding.store)
+    return f"{skillset}:{skill}: {problem}" if problem else None
+
+
 def definitions_folder(text: str, source: str) -> str:
     """``[binding] definitions`` of a binding text ('' when absent), for the loader to read first."""
     data = parse_toml(text, source)
