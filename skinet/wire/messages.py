@@ -38,6 +38,24 @@ class SkillsetStatus(BaseModel):
     running: list[str] = Field(default_factory=list, description="skills running or interrupting")
 
 
+class MissedOutcome(BaseModel):
+    """A skill found ended after a gap while its response never came (docs/how-it-works.md, *Missed outcomes*).
+
+    The bridge names the skill and the gap; the monitor adds what the model infers
+    (:func:`skinet.net.outcomes.infer_outcomes`)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    skillset: str
+    skill: str
+    gap: str = Field(description="the gap it ended in, in the operator's words (e.g. 'the link to manager "
+                                 "/spot/spot_skillset_manager was down 12.4 s')")
+    outcome: str | None = Field(None, description="the outcome the model makes unique, a transition name such as "
+                                                  "'teleop.success.done' (None: unknown, or not inferred yet)")
+    candidates: list[str] = Field(default_factory=list, description=(
+        "the success and failure modes that explain the observed status (several: the model cannot tell them "
+        "apart; none: no mode does); empty in the bridge's events"))
+
+
 class CanonicalEvent(_Message):
     """A model-level event of one skillset, published by the bridge."""
 
@@ -56,8 +74,11 @@ class CanonicalEvent(_Message):
     divergence: str = Field("", description="a model divergence the bridge found (a binding's drift, SPEC §9), "
                                             "with the message that showed it; the monitor reports it even when "
                                             "the status matches its marking")
+    missed: list[MissedOutcome] = Field(
+        default_factory=list, description="running skills this status shows ended without their response "
+                                          "(missed outcomes, named with the gap; the monitor infers the outcome)")
 
-    OMIT_AT_DEFAULT = ("restart", "divergence")
+    OMIT_AT_DEFAULT = ("restart", "divergence", "missed")
 
 
 class PropertyVerdict(BaseModel):
@@ -81,7 +102,7 @@ class SkillsetSync(BaseModel):
 class LiveState(_Message):
     """The monitor's live marking after an event."""
 
-    OMIT_AT_DEFAULT = ("sync",)
+    OMIT_AT_DEFAULT = ("sync", "missed")
     system: str
     seq: int = Field(ge=0, description="monitor publication counter")
     stamp: float
@@ -91,6 +112,9 @@ class LiveState(_Message):
     sync: dict[str, SkillsetSync] = Field(
         default_factory=dict, description="per skillset, whether the monitor can vouch for its marking; every "
                                           "skillset is listed (absent: a monitor older than this field)")
+    missed: list[MissedOutcome] = Field(
+        default_factory=list, description="the missed outcomes this step found, with the monitor's inference "
+                                          "(outcome None: unknown; consumers must not assume one)")
 
 
 class Verdicts(_Message):
