@@ -10,7 +10,7 @@ from skinet.verify.predict import forecast
 from skinet.wire.convert import bundle, marking_of, risks, state_space_report, statuses
 from skinet.wire.messages import (
     CanonicalEvent, CheckReason, CheckReply, CheckRequest, Divergence, Divergences, Heartbeat, HeartbeatSkillset,
-    LiveState, PilotCommand, PilotGoalReply, PilotGoalRequest, PilotStatus, PlanBranch, PlanStep, PredictReply, PredictRequest, PropertyVerdict, RecoveryEntry, SkillsetStatus, SkillsetSync, UnsafeEntry,
+    LiveState, MissedOutcome, PilotCommand, PilotGoalReply, PilotGoalRequest, PilotStatus, PlanBranch, PlanStep, PredictReply, PredictRequest, PropertyVerdict, RecoveryEntry, SkillsetStatus, SkillsetSync, UnsafeEntry,
     UnsafeReport, Verdicts,
 )
 
@@ -32,12 +32,15 @@ def sample_messages(system: System) -> dict[str, BaseModel]:
         "CanonicalEvent": CanonicalEvent(
             system=system.name, skillset="manipulator", seq=7, stamp=1700000000.25, source="bridge-1",
             transition="arm_ready.start", status=skillsets["manipulator"], info="ok id=3", restart=True,
-            divergence="/arm/_action/status: goal 1 ACCEPTED: arm_ready started, but the model says it cannot"),
+            divergence="/arm/_action/status: goal 1 ACCEPTED: arm_ready started, but the model says it cannot",
+            missed=[MissedOutcome(skillset="manipulator", skill="arm_joystick", gap="the link was down 12.4 s")]),
         "LiveState": LiveState(system=system.name, seq=8, stamp=1700000000.3, skillsets=skillsets,
                                event="manipulator:arm_ready.start#7", divergence="no transition explains it",
                                sync={"spot": SkillsetSync(state="live", since=1700000000.1, source="bridge_ros2/b1"),
                                      "manipulator": SkillsetSync(state="lost", since=1700000000.2,
-                                                                 reason="its manager left", source="bridge_ros2/b1")}),
+                                                                 reason="its manager left", source="bridge_ros2/b1")},
+                               missed=[MissedOutcome(skillset="spot", skill="teleop", gap="the link was down 12.4 s",
+                                                     candidates=["teleop.success.done", "teleop.failure.link_lost"])]),
         "Verdicts": Verdicts(system=system.name, seq=8, stamp=1700000000.3,
                              properties=[PropertyVerdict(name="action_guard", holds=True)]),
         "UnsafeReport": UnsafeReport(
