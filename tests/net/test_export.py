@@ -25,6 +25,7 @@ from skinet.net.export.dot import to_dot
 from skinet.net.export.pnml import PNML_NS, PTNET_TYPE, to_pnml
 from skinet.net.export.tina import tina_name, to_tina
 from skinet.net.petrinet import PetriNet, Transition
+from tests.corpus import require_corpus
 
 CORPUS = Path(__file__).resolve().parents[3] / "shared" / "corpus"
 CORPUS_FILES = ["spot.rl", "manipulator.rl", "isae_robot/isae_robot.rl"]
@@ -113,7 +114,7 @@ def awkward() -> PetriNet:
 def _corpus_nets() -> list[PetriNet]:
     files = [CORPUS / f for f in CORPUS_FILES if (CORPUS / f).exists()]
     if not files:
-        pytest.skip(f"corpus not found at {CORPUS}")
+        require_corpus()
     nets = []
     for f in files:
         skillset = parse_skillset(f.read_text(), str(f))

@@ -14,6 +14,7 @@ from skinet.files import load_system
 from skinet.net.export.promela import to_promela
 from skinet.net.union import union
 from skinet.verify.explore import explore
+from tests.corpus import require_corpus
 
 ROOT = Path(__file__).resolve().parents[2]
 CORPUS = ROOT.parent / "shared" / "corpus"
@@ -21,7 +22,7 @@ CORPUS = ROOT.parent / "shared" / "corpus"
 
 def corpus_pair_file(folder: Path) -> Path:
     if not CORPUS.exists():
-        pytest.skip(f"{CORPUS} not found")
+        require_corpus()
     (folder / "pair.toml").write_text(
         f'[system]\nname = "pair"\nproperties = "{CORPUS / "spot_manipulator.props"}"\n'
         f'[[skillsets]]\nmodel = "{CORPUS / "spot.rl"}"\n[[skillsets]]\nmodel = "{CORPUS / "manipulator.rl"}"\n'

@@ -17,6 +17,7 @@ from skinet.net.semantics import steps
 from skinet.plan.goal import Goal, parse_goal
 from skinet.system import System, build_system
 from skinet.verify.forced import forced
+from tests.corpus import require_corpus
 
 ROOT = Path(__file__).resolve().parents[2]
 CORPUS = ROOT.parent / "shared" / "corpus"
@@ -33,7 +34,7 @@ def mobile() -> System:
 def corpus(n_spot: int = 1, n_arm: int = 1) -> System:
     """``n_spot`` copies of the corpus Spot and ``n_arm`` of its arm, renamed (spot, spot2, ...)."""
     if not CORPUS.exists():
-        pytest.skip(f"{CORPUS} not found")
+        require_corpus()
     out = []
     for file, name, n in (("spot.rl", "spot", n_spot), ("manipulator.rl", "manipulator", n_arm)):
         text = (CORPUS / file).read_text()

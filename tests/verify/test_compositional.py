@@ -16,6 +16,7 @@ from skinet.system import System, build_system
 from skinet.verify.compositional import CompositionalOracle, one_step
 from skinet.verify.explore import Deadline
 from skinet.verify.predict import forecast
+from tests.corpus import require_corpus
 
 ROOT = Path(__file__).resolve().parents[2]
 CORPUS = ROOT.parent / "shared" / "corpus"
@@ -23,7 +24,7 @@ CORPUS = ROOT.parent / "shared" / "corpus"
 
 def copies(folder: Path, props: str, n_spot: int, n_arm: int) -> System:
     if not folder.exists():
-        pytest.skip(f"{folder} not found")
+        require_corpus()
     spot, arm = (folder / "spot.rl").read_text(), (folder / "manipulator.rl").read_text()
     out = []
     for k in range(1, n_spot + 1):

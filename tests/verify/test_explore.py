@@ -18,6 +18,7 @@ from skinet.system import System, build_system
 from skinet.verify.component import CACHE_SIZE, explore_component, forget_component_graphs
 from skinet.verify.ctl import Kripke
 from skinet.verify.explore import StateSpace, explore
+from tests.corpus import require_corpus
 
 CORPUS = Path(__file__).resolve().parents[3] / "shared" / "corpus"
 
@@ -111,7 +112,7 @@ skillset fork {
 def corpus_skillset(name: str) -> Skillset:
     path = CORPUS / name
     if not path.exists():
-        pytest.skip(f"corpus not found at {CORPUS}")
+        require_corpus()
     return parse_skillset(path.read_text(), str(path))
 
 

@@ -21,6 +21,7 @@ from skinet.verify.component import forget_component_graphs
 from skinet.verify.ctl import Kripke, check
 from skinet.options import PredictionOptions, PropertyOptions
 from skinet.verify.predict import Forecast, forecast
+from tests.corpus import require_corpus
 
 LITERAL = PredictionOptions(PropertyOptions(af="literal"))
 
@@ -55,7 +56,7 @@ OVEN_FORMULAS = [
 
 def _load(folder: Path, props: str) -> System:
     if not folder.exists():
-        pytest.skip(f"{folder} not found")
+        require_corpus()
     skillsets = [parse_skillset((folder / f).read_text(), str(folder / f)) for f in ("spot.rl", "manipulator.rl")]
     return build_system(folder.name, [(s, "") for s in skillsets], (folder / props).read_text())
 

@@ -162,6 +162,7 @@ def _imports_scipy(system_expr: str) -> bool:
     return done.stdout.strip() == "True"
 
 
+@pytest.mark.corpus
 def test_scipy_only_for_large_graphs() -> None:
     assert not _imports_scipy("from skinet.files import load_system; system = load_system('skillsets/spot_arm.toml')[0]")
     assert _imports_scipy("from tests.verify.test_limits import pair_and_arm; system = pair_and_arm()")
