@@ -12,7 +12,6 @@ import re
 import subprocess
 import sys
 import threading
-import time
 
 import zenoh
 
@@ -44,7 +43,9 @@ def test_watch_in_a_pipe_prints_one_line_per_step(router: str, client: zenoh.Ses
     try:
         alive.wait(lambda names: bool(names))
         wait_until(lambda: monitor.snapshot().state_space is not None, 20, "the first prediction")
-        time.sleep(2.0)  # the watcher's session is up and has read step 0 (its line waits for the next step)
+        # Step 0's line, written once the watcher has step 0 with its fresh prediction: sending step 1 before
+        # (a fixed pause, once) lost it when the watcher started late on a loaded machine.
+        wait_until(lambda: any(line.startswith("[0] ") for line in printed), 30, "the line of step 0")
         for n, (skillset, transition) in enumerate(STEPS, 1):
             events.send(skillset, transition)
             # Its line comes once the watcher has the step's fresh prediction (the next step would write it

@@ -82,14 +82,18 @@ def test_successors_of_a_huge_system_are_decided() -> None:
 
 
 def test_algorithm1_on_a_huge_system_has_no_unknown() -> None:
-    """The predictor's answer on 4 + 4: exploration truncated, yet every successor decided."""
+    """The predictor's answer on 4 + 4: exploration truncated, yet every successor decided.
+
+    Truncated by depth, not by a time budget: on a loaded machine a budget leaves the compositional
+    verdicts no time, and then `unknown` is the right answer (what a budget promises is tested in
+    tests/verify/test_limits.py)."""
     from skinet.verify.algorithm1 import analyse
 
     system = copies(CORPUS, "spot_manipulator.props", 4, 4)
     marking = system.initial_marking()
     marking["spot"] = next(m for t, results in steps(system.component("spot").net, marking["spot"])
                            if t.name == "init_power.start" for m in results)
-    fc = forecast(system, marking, budget=4.0)
-    assert not fc.report()["complete"]
+    fc = forecast(system, marking, max_depth=4)
+    assert not fc.report()["complete"] and fc.report()["markings"] == 107889
     analysis = analyse(system, marking, fc)
     assert analysis.unsafe and all(u.constraint != "unknown" for u in analysis.unsafe)
