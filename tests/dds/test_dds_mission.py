@@ -31,6 +31,7 @@ from skinet.mission import StepRecord, parse_scenario, replay
 from skinet.ros.interfaces import status_request_topic
 from skinet.ros.keys import KeyStyle, manager_topics
 from skinet.ros.typestore import build_typestore, decode as decode_cdr, encode as cdr
+from skinet.wire import keys
 
 pytestmark = pytest.mark.slow
 
@@ -168,6 +169,13 @@ def test_command_line_simulator_on_dds_behind_the_plugin(gateway_factory, unassi
                                "--namespace", "/lab", "--instance", "cli", *zargs],
                               cwd=REPO, stdout=logs["bridge"], stderr=subprocess.STDOUT)
     try:
+        # The simulator plays once the bridge listens (its token): a loaded machine started it too late for a
+        # fixed delay once, and it missed the first steps.
+        token = keys.alive(system.name, "bridge_ros2", "cli")
+        deadline = time.monotonic() + 60
+        while not any(r.ok is not None for r in session.liveliness().get(token, timeout=1.0)):
+            assert time.monotonic() < deadline and bridge.poll() is None, "the bridge never declared its token"
+            time.sleep(0.1)
         sim = subprocess.run([sys.executable, "-m", "services.simulator", str(MISSIONS / "unassisted.toml"), "--dds",
                               "--domain", str(domain), "--ros-distro", "humble", "--namespace", "/lab",
                               "--speed", "0", "--start-delay", "3", "--linger", "1", *zargs],
