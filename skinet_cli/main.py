@@ -85,7 +85,8 @@ LAZY_COMMANDS: tuple[tuple[str, str, dict[str, str]], ...] = (
                                                "mission driven by the pilot, then the mobile manipulator's two (the "
                                                "main job)"}),
     ("skinet_cli.record", "add_parser",
-     {"record": "record the monitor's messages of a system into a JSON Lines log"}),
+     {"record": "record the monitor's messages of a system into a JSON Lines log",
+      "rosbag": "record the robot's ROS 2 topics the bridge reads into a rosbag2 (no ROS needed)"}),
     ("skinet_cli.timeline", "add_parser",
      {"timeline": "draw a monitor log (skinet record, skinet demo --log) as a timeline picture"}),
     ("skinet_cli.replay", "add_parser",

@@ -1,4 +1,6 @@
-"""``skinet record``: write what is published under ``skinet/<system>/**`` to a monitor log.
+"""``skinet record``: write what is published under ``skinet/<system>/**`` to a monitor log;
+``skinet rosbag``: write what the bridge reads to a rosbag2, without ROS
+(:mod:`services.bridge_ros2.record`).
 
 A thin Zenoh shell over :mod:`skinet.wire.log` and :mod:`skinet.wire.mcap_log`:
 every sample is decoded with the codec (the key says which message to expect)
@@ -11,6 +13,7 @@ every skill and resource of the system.
 from __future__ import annotations
 
 import argparse
+import os
 import signal
 import sys
 import threading
@@ -24,7 +27,10 @@ from pydantic import BaseModel
 from services.common.zenoh_config import (
     add_zenoh_args, config_from_args, connect_problems, open_session, warn_on_stderr,
 )
-from skinet_cli.options import count, key_name, seconds
+from services.bridge_ros2.record import STORAGES, BagRecorder, recorded_topics
+from services.common.cli import add_ros_key_args, key_style
+from skinet.files import load_bindings, load_typemap
+from skinet_cli.options import count, key_name, load_live_system, print_warnings, seconds
 from skinet.errors import SkinetError, SourceError
 from skinet.wire import keys
 from skinet.wire.codec import DecodeError, decode
@@ -57,6 +63,20 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     c.add_argument("--no-model", action="store_true", help="do not query the monitor's model bundle")
     add_zenoh_args(c)
     c.set_defaults(func=cmd_record)
+    b = sub.add_parser(
+        "rosbag", help="record the robot's ROS 2 topics the bridge reads into a rosbag2 (no ROS needed)",
+        description="Record, through Zenoh, every topic the bridge derives the system's events from (the skillset "
+                    "managers' status, event and skill-response topics; the bindings' action statuses, lifecycle "
+                    "transition events and bound topics) into a rosbag2 folder, MCAP storage by default. "
+                    "skinet conform replays it, and ros2 bag info/play read it. Stops on Ctrl-C, SIGTERM or "
+                    "--duration; exit 1 when nothing was recorded.")
+    b.add_argument("system", metavar="SYSTEM.toml", help="system file (bound skillsets name their binding file)")
+    b.add_argument("-o", "--output", required=True, metavar="BAG", help="rosbag2 folder to create (must not exist)")
+    b.add_argument("--storage", choices=sorted(STORAGES), default="mcap", help="storage plugin (default: mcap)")
+    b.add_argument("--duration", type=seconds(), help="stop after this many seconds (default: until Ctrl-C)")
+    add_ros_key_args(b)
+    add_zenoh_args(b)
+    b.set_defaults(func=cmd_rosbag)
 
 
 def message_type(system: str, key: str) -> type[BaseModel] | None:
@@ -194,6 +214,45 @@ def cmd_record(args: argparse.Namespace) -> int:
         raise SkinetError(f"nothing recorded in {args.output}: {why}")
     print(f"skinet record: {recorder.written} messages written to {args.output}"
           f" ({recorder.skipped} undecodable skipped)", file=sys.stderr)
+    return 0
+
+
+
+def cmd_rosbag(args: argparse.Namespace) -> int:
+    system, warnings = load_live_system(args.system)
+    bindings, more = load_bindings(system)
+    print_warnings([*warnings, *more])
+    topics = recorded_topics(system, load_typemap(args.system), bindings, key_style(args))
+    if os.path.lexists(args.output):
+        raise SourceError.at(args.output, None, "already exists: a rosbag2 is written to a new folder")
+    if not os.path.isdir(os.path.dirname(os.path.abspath(args.output))):
+        raise SourceError.at(args.output, None, "cannot write: No such file or directory")
+    session = open_session(config_from_args(args), warn_on_stderr("skinet rosbag"))
+    stop = threading.Event()
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    try:
+        try:
+            recorder = BagRecorder(session, args.output, topics, storage=args.storage)
+        except OSError as exc:
+            raise SourceError.at(args.output, None, f"cannot write: {exc.strerror or exc}") from None
+        print(f"skinet rosbag: recording {len(topics)} topics of {system.name} to {args.output} "
+              f"({args.storage})", file=sys.stderr)
+        try:
+            stop.wait(args.duration)
+        except KeyboardInterrupt:
+            pass
+        finally:
+            recorder.close()
+    finally:
+        session.close()
+    for name, n in recorder.counts.items():
+        print(f"  {n:6d}  {name}", file=sys.stderr)
+    if recorder.messages == 0:  # an empty bag is never a success
+        raise SkinetError(f"nothing recorded in {args.output}: no message on the {len(topics)} topics (is the robot "
+                          "or its gateway connected to this Zenoh network? check -e/--connect and --namespace)")
+    print(f"skinet rosbag: {recorder.messages} messages written to {args.output}; replay it with skinet conform "
+          f"{args.system} {args.output}", file=sys.stderr)
     return 0
 
 

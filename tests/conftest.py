@@ -20,7 +20,7 @@ from skinet.lang.model import Skillset
 from skinet.lang.parser import parse_skillset
 from skinet.system import System, build_system
 
-from tests.corpus import CORPUS, CORPUS_ABSENT, REPO
+from corpus import CORPUS, CORPUS_ABSENT, REPO
 
 CORPUS_FILES = ("spot.rl", "manipulator.rl", "isae_robot/isae_robot.rl")
 SKILLSETS = REPO / "skillsets"

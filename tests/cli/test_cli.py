@@ -303,7 +303,7 @@ def test_lazy_commands_list_their_modules_own_help() -> None:
     assert build_parser("").format_help() == full.format_help()  # skinet --help without importing them
     assert build_parser("unsafe").format_help() == full.format_help()
     names = [name for _, _, helps in LAZY_COMMANDS for name in helps]
-    assert names == ["demo", "record", "timeline", "replay", "conform", "run", "router", "fleet", "plan", "goal", "dashboard",
+    assert names == ["demo", "record", "rosbag", "timeline", "replay", "conform", "run", "router", "fleet", "plan", "goal", "dashboard",
                      "watch", "check", "client-config"]
     for name in names:
         lazy = build_parser(name)

@@ -50,10 +50,10 @@ FREE_TEXT = {
     ("skinet timeline", "--title"): "any text is a title (test_any_title_is_drawn)",
     ("python -m services.bridge_ros2", "--source"): "any text names the source inside the events' payload",
     **{(program, "--ros-distro"): "only humble changes the keys; any other name is a later one"
-       for program in ("python -m services.bridge_ros2", "python -m services.simulator", "skinet run",
+       for program in ("python -m services.bridge_ros2", "python -m services.simulator", "skinet run", "skinet rosbag",
                        "python -m services.pilot")},
     **{(program, option): "any user name and password is sent; the router judges them (tests/deploy/test_operator_acl.py)"
-       for program in ("skinet record", "skinet replay", "skinet run", "skinet router", "skinet watch", "skinet check",
+       for program in ("skinet record", "skinet rosbag", "skinet replay", "skinet run", "skinet router", "skinet watch", "skinet check",
                        "skinet goal",
                        "skinet demo",
                        "skinet dashboard", "python -m services.monitor", "python -m services.predictor",
@@ -274,6 +274,7 @@ def _cases() -> list[Case]:
     # skinet record, run, router, and every service: the Zenoh options
     zenoh_programs = {
         "skinet": (("record", "spot_arm", "-o", "{tmp}/rec.jsonl", "--duration", "1"),
+                   ("rosbag", SYSTEM, "-o", "{tmp}/bag", "--duration", "0.5"),
                    ("run", SYSTEM, "--once"), ("router",), ("watch", "spot_arm", "--wait", "0.5"),
                    ("check", "spot_arm", "spot:teleop.start", "--timeout", "0.5"),
                    ("goal", "spot_arm", "reach spot:Busy", "--timeout", "0.5"),
@@ -332,6 +333,21 @@ def _cases() -> list[Case]:
           "argument --duration: " + seconds.format("-1"))
     usage("skinet", "--count", ("record", "spot_arm", "-o", "{tmp}/rec.jsonl", "--count", "0"),
           "argument --count: expected an integer >= 1, got '0'")
+
+    add("skinet", "system", ("rosbag", "{tmp}/missing.toml", "-o", "{tmp}/bag"), 1, missing)
+    add("skinet", "-o", ("rosbag", SYSTEM, "-o", "{tmp}/list.json"), 1,
+        "{tmp}/list.json: error: already exists: a rosbag2 is written to a new folder")
+    add("skinet", "-o", ("rosbag", SYSTEM, "--no-multicast-scouting", "--duration", "1", "-o", "{tmp}/no/such/bag"), 1,
+        "{tmp}/no/such/bag: error: cannot write: No such file or directory")
+    usage("skinet", "--storage", ("rosbag", SYSTEM, "-o", "{tmp}/bag", "--storage", "db3"),
+          "argument --storage: invalid choice: 'db3' (choose from 'mcap', 'sqlite3')")
+    usage("skinet", "--duration", ("rosbag", SYSTEM, "-o", "{tmp}/bag", "--duration", "0"),
+          "argument --duration: " + seconds.format("0"))
+    usage("skinet", "--namespace", ("rosbag", SYSTEM, "-o", "{tmp}/bag", "--namespace", "robot/*"),
+          "argument --namespace: namespace 'robot/*' cannot be used in a Zenoh key "
+          "(/-separated names of letters, digits, _ - .)")
+    usage("skinet", "--domain", ("rosbag", SYSTEM, "-o", "{tmp}/bag", "--domain", "233"),
+          "argument --domain: expected an integer from 0 to 232, got '233'")
 
     add("skinet", "system", ("run", "{tmp}/missing.toml"), 1, missing)
     add("skinet", "system", ("run", "{tmp}/badname.toml"), 1, bad_name)
