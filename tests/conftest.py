@@ -31,6 +31,11 @@ PAPER_MANAGERS = {"spot": "/spot/spot_skillset_manager", "manipulator": "/kinova
 CORPUS_FIXTURES = frozenset({"corpus_dir", "corpus_skillset"})
 
 
+def pytest_configure(config: pytest.Config) -> None:
+    config.addinivalue_line("markers", "corpus: reads the third-party test corpus ../shared/corpus (skipped, in one "
+                                       "summary line, where it is absent)")
+
+
 def needs_corpus(item: pytest.Item) -> bool:
     """Whether ``item`` reads the corpus: marked ``corpus``, using a corpus fixture, or in a module that
     holds a path to the corpus and marks none of its tests (a new module that forgot the mark)."""

@@ -687,15 +687,24 @@ def test_any_title_is_drawn(files: Path, capsys: pytest.CaptureFixture[str]) -> 
     assert (code, capsys.readouterr().err) == (0, "")
 
 
-def test_missing_corpus_is_named(tmp_path: Path) -> None:
-    """Without ../shared beside the repository, the test run stops with one line saying what is missing."""
+def test_missing_corpus_skips_only_the_tests_that_read_it_in_one_line(tmp_path: Path) -> None:
+    """Without ../shared beside the repository, the tests that read the corpus are skipped, summed up in one line,
+    and the others run (issue 32, item 1)."""
     tests = tmp_path / "repo" / "tests"
     tests.mkdir(parents=True)
-    (tests / "conftest.py").write_text((ROOT / "tests" / "conftest.py").read_text())
-    (tests / "test_nothing.py").write_text("def test_nothing():\n    pass\n")
-    r = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", str(tests)],
+    for name in ("conftest.py", "corpus.py"):
+        (tests / name).write_text((ROOT / "tests" / name).read_text())
+    (tests / "test_some.py").write_text(
+        "import pytest\nfrom corpus import require_corpus\n\n"
+        "def test_nothing():\n    pass\n\n"
+        "def test_fixture(corpus_dir):\n    assert False\n\n"
+        "def test_helper():\n    require_corpus()\n    assert False\n\n"
+        "@pytest.mark.corpus\ndef test_marked():\n    assert False\n")
+    r = subprocess.run([sys.executable, "-m", "pytest", "-q", "-ra", "-p", "no:cacheprovider", "-p", "no:xdist", str(tests)],
                        capture_output=True, text=True, timeout=120, cwd=tests.parent)
-    assert r.returncode == 4
-    assert (f"ERROR: the test corpus is missing: {tmp_path / 'shared' / 'corpus'} does not exist. The tests read "
-            "real skillset files") in r.stderr
-    assert "Traceback" not in r.stderr + r.stdout and "FileNotFoundError" not in r.stderr + r.stdout
+    assert r.returncode == 0, r.stdout + r.stderr
+    skipped = [line for line in r.stdout.splitlines() if line.startswith("SKIPPED")]
+    assert skipped == ["SKIPPED [3] tests/conftest.py: needs the third-party test corpus ../shared/corpus "
+                       f"({tmp_path / 'shared' / 'corpus'}), absent here: put the project's shared/ folder beside the "
+                       "repository to run these (CI has it)"], r.stdout
+    assert r.stdout.splitlines()[-1].startswith("1 passed, 3 skipped in ")
