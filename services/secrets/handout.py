@@ -46,20 +46,33 @@ def service_files(vault: Path, name: str) -> list[str]:
     return [f"{name}.password", "tls/ca.pem", f"tls/{name}.pem", f"tls/{name}.key"]
 
 
-def _copy(source: Path, target: Path) -> None:
-    """``target`` with ``source``'s bytes, 0644 for certificates and 0600 for the rest."""
-    mode = 0o644 if target.suffix == ".pem" else 0o600
-    data = source.read_bytes()
-    if not target.exists() or target.read_bytes() != data:
-        write_file(target, data, mode)
-    os.chmod(target, mode)
+def _copy(source: Path, target: Path, out: Path) -> None:
+    """``target`` (below ``out``) with ``source``'s bytes, 0644 for certificates and 0600 for the
+    rest, written afresh through no link (:func:`services.common.security.write_file`)."""
+    try:
+        write_file(target, source.read_bytes(), 0o644 if target.suffix == ".pem" else 0o600, base=out)
+    except OSError as exc:
+        raise SkinetError(f"cannot write {target}: {exc.strerror}") from None
+
+
+def _remove_strays(folder: Path, keep: list[str]) -> None:
+    """Remove every file of ``folder`` but ``keep``, walking by descriptors (``os.fwalk``): a
+    link in the folder is removed itself, never followed."""
+    for root, _, files, root_fd in os.fwalk(folder, follow_symlinks=False):
+        for name in files:
+            if os.path.relpath(os.path.join(root, name), folder) not in keep:
+                os.unlink(name, dir_fd=root_fd)
 
 
 def hand_out(vault: Path, out: Path) -> dict[str, list[str]]:
     """Copy each service's files from ``vault`` into ``out/<service>`` for every folder
-    already in ``out`` (compose mounts one volume there per service); returns what each got."""
+    already in ``out`` (compose mounts one volume there per service); returns what each got.
+
+    Nothing is written through a link: a link as a service's folder, as ``tls/`` or
+    ``fleet/`` in it, or at a file's name is refused (:class:`SkinetError`, one line)
+    and the vault is left as it was."""
     handed: dict[str, list[str]] = {}
-    for folder in sorted(p for p in out.iterdir() if p.is_dir()):
+    for folder in sorted(p for p in out.iterdir() if p.is_dir() or p.is_symlink()):
         if folder.name != ROUTER and folder.name not in USERS:
             raise SkinetError(f"{folder}: a service's folder is named {ROUTER} or for its user ({', '.join(USERS)})")
         files = service_files(vault, folder.name)
@@ -67,12 +80,9 @@ def hand_out(vault: Path, out: Path) -> dict[str, list[str]]:
         if missing:
             raise SkinetError(f"{vault} has no {', '.join(missing)} for {folder.name}")
         for name in files:
-            target = folder / name
-            target.parent.mkdir(mode=0o700, exist_ok=True)
-            _copy(vault / name, target)
+            _copy(vault / name, folder / name, out)
         if folder.name != ROUTER:
-            for stray in [p for p in folder.rglob("*") if p.is_file() and str(p.relative_to(folder)) not in files]:
-                stray.unlink()
+            _remove_strays(folder, files)
         handed[folder.name] = files
     return handed
 
