@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import datetime
 import os
+import stat
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -85,6 +86,33 @@ def hand_out(vault: Path, out: Path) -> dict[str, list[str]]:
             _remove_strays(folder, files)
         handed[folder.name] = files
     return handed
+
+
+def take_handed(handed: Path, folder: Path) -> list[str]:
+    """Copy every regular file below ``handed`` (the router's hand-out, mounted read-only)
+    into ``folder`` (the router's own, writable), through no link; returns the names.
+
+    The job writes into a folder the router cannot write, and the router keeps its
+    own state (``hub/``, ``robots/``, ``tls/trusted.pem``, ``users.txt`` with a
+    fleet's ``hub`` password) in a folder the job never writes (docs/deployment.md,
+    "Secrets").  Links in ``handed`` are skipped, not followed.  Cost: the files' bytes.
+    """
+    if not handed.is_dir():
+        raise SkinetError(f"handed-out secrets folder {handed} does not exist")
+    folder.mkdir(mode=0o700, parents=True, exist_ok=True)
+    copied = []
+    for root, _, files, root_fd in os.fwalk(handed, follow_symlinks=False):
+        for name in sorted(files):
+            st = os.stat(name, dir_fd=root_fd, follow_symlinks=False)
+            if not stat.S_ISREG(st.st_mode):
+                continue
+            fd = os.open(name, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC, dir_fd=root_fd)
+            with os.fdopen(fd, "rb") as f:
+                data = f.read()
+            relative = os.path.relpath(os.path.join(root, name), handed)
+            write_file(folder / relative, data, stat.S_IMODE(st.st_mode) & 0o644, base=folder)
+            copied.append(relative)
+    return sorted(copied)
 
 
 @dataclass(frozen=True)

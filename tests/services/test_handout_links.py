@@ -10,16 +10,20 @@ every link it would have written through is refused with one line.
 
 from __future__ import annotations
 
+import json
 import os
+import signal
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
+import zenoh
 
 from services.common.security import USERS, ensure_tls, ensure_users, write_file
-from services.secrets.handout import ROUTER, hand_out, service_files
+from services.secrets.handout import ROUTER, hand_out, service_files, take_handed
 from skinet.errors import SkinetError
+from tests.services.conftest import free_port, start_skinet
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -107,3 +111,40 @@ def test_write_file_replaces_a_file_and_refuses_links(tmp_path: Path) -> None:
         assert str(info.value) == message.format(shown)
     assert (tmp_path / "victim").read_bytes() == b"victim\n"
     assert sorted(os.listdir(tmp_path / "real")) == ["a.key", "b.key", "pipe"]
+
+
+def test_the_router_copies_its_read_only_hand_out_into_its_own_folder(vault: Path, tmp_path: Path) -> None:
+    """compose mounts the router's hand-out read-only (``--handed``); the router works on a copy
+    in its own folder, where the job never writes, and logs in its users with it."""
+    out, own = tmp_path / "out", tmp_path / "own"
+    (out / ROUTER).mkdir(parents=True)
+    hand_out(vault, out)
+    (out / ROUTER / "tls" / "stray.pem").symlink_to(vault / "tls" / "ca.key")  # never followed
+    handed = out / ROUTER
+    os.chmod(handed / "tls", 0o500)
+    os.chmod(handed, 0o500)  # read-only, as mounted
+    try:
+        assert take_handed(handed, own) == ["tls/ca.pem", "tls/router.key", "tls/router.pem", "users.txt"]
+    finally:
+        os.chmod(handed, 0o700)
+        os.chmod(handed / "tls", 0o700)
+    assert snapshot(own) == {k: v for k, v in snapshot(handed).items() if k != "tls/stray.pem"}
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    router = start_skinet("router", "--listen", endpoint, "--secrets", str(own), "--handed", str(handed))
+    try:
+        assert router.stdout is not None
+        line = router.stdout.readline()
+        assert line.startswith("zenoh router ") and f"users and passwords in {own}" in line, line
+        config = zenoh.Config()
+        config.insert_json5("mode", '"client"')
+        config.insert_json5("connect/endpoints", json.dumps([endpoint]))
+        config.insert_json5("transport/auth/usrpwd/user", '"observer"')
+        config.insert_json5("transport/auth/usrpwd/password",
+                            json.dumps((vault / "observer.password").read_text().strip()))
+        zenoh.open(config).close()
+    finally:
+        router.send_signal(signal.SIGTERM)
+        assert router.wait(timeout=10) == 0
+    with pytest.raises(SkinetError) as info:
+        take_handed(tmp_path / "none", own)
+    assert str(info.value) == f"handed-out secrets folder {tmp_path / 'none'} does not exist"
