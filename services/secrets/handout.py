@@ -32,8 +32,10 @@ from cryptography.x509.oid import NameOID
 
 from services.common.security import FLEET, USERS, write_file
 from skinet.errors import SkinetError
+from skinet.files import FileRefused, read_bytes
 
 ROUTER = "router"
+MAX_SECRET_FILE = 1 << 20  # bytes: a password, a certificate chain or a key is a few KiB
 CLIENT_LAYOUT = "<user>.password, tls/ca.pem, tls/<user>.pem and tls/<user>.key"
 
 
@@ -127,12 +129,12 @@ class ClientFiles:
 
 
 def _read(path: Path, user: str) -> bytes:
-    if not path.is_file():
+    if not path.exists():
         raise SkinetError(f"{path} is missing (the secrets of user '{user}' are {CLIENT_LAYOUT.replace('<user>', user)})")
     try:
-        return path.read_bytes()
-    except OSError as exc:
-        raise SkinetError(f"cannot read {path}: {exc.strerror}") from None
+        return read_bytes(path, MAX_SECRET_FILE)[0]
+    except FileRefused as exc:  # a FIFO, a huge file: refused, never waited on
+        raise SkinetError(f"cannot read {path}: {exc.reason.removeprefix('cannot read file: ')}") from None
 
 
 def _certificate(path: Path, user: str) -> x509.Certificate:

@@ -148,3 +148,25 @@ def test_the_router_copies_its_read_only_hand_out_into_its_own_folder(vault: Pat
     with pytest.raises(SkinetError) as info:
         take_handed(tmp_path / "none", own)
     assert str(info.value) == f"handed-out secrets folder {tmp_path / 'none'} does not exist"
+
+
+def test_a_fifo_as_a_password_or_key_file_is_refused_not_waited_on(vault: Path, tmp_path: Path) -> None:
+    """The same reader as the model files (skinet.files.read_bytes): nothing blocks on a FIFO."""
+    import argparse
+
+    from services.common.zenoh_config import login
+    from services.secrets.handout import client_files
+
+    os.mkfifo(tmp_path / "pw")
+    with pytest.raises(SkinetError) as info:
+        login(argparse.Namespace(user="observer", password=None, password_file=str(tmp_path / "pw")))
+    assert str(info.value) == f"cannot read password file {tmp_path / 'pw'}: not a regular file"
+    out = tmp_path / "out"
+    (out / "observer").mkdir(parents=True)
+    hand_out(vault, out)
+    key = out / "observer" / "tls" / "observer.key"
+    key.unlink()
+    os.mkfifo(key)
+    with pytest.raises(SkinetError) as info:
+        client_files(out / "observer", "observer")
+    assert str(info.value) == f"cannot read {key}: not a regular file"
