@@ -69,7 +69,8 @@ def read_bytes(path: str | Path, limit: int | None = None, root: Path | None = N
     ``root`` (a resolved folder), the descriptor's own path
     (``/proc/self/fd/N``) must lie inside it, so a folder of the path swapped
     for a link between resolving and opening is caught too.  Everything is then
-    read from that descriptor (docs/deployment.md, "Files read on request").
+    read from that descriptor (docs/deployment.md, "Files read and secrets written
+    through no link").
     :class:`FileRefused` otherwise, never an ``OSError``.  Cost: one
     ``realpath``, one ``open``, one ``fstat``, the read.
     """
