@@ -359,6 +359,10 @@ def router(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     table = json.loads(config.get_json("transport/auth/usrpwd/dictionary_file") or "null")
     if table and not args.no_auth:
         folder = Path(table).parent
+    if getattr(args, "handed", None):  # compose: the job's hand-out, read-only here, copied into the router's own
+        from services.secrets.handout import take_handed
+
+        take_handed(Path(args.handed), folder)
     certificates = folder / "tls"
     # The router's own files handed out by the compose job `secrets`: no CA key, no client's password file.
     handed_out = (certificates / "ca.pem").exists() and not (certificates / "ca.key").exists()

@@ -5,6 +5,15 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 
+MAX_SHOWN = 200  # characters of a name (a path, an include) an error shows
+
+
+def shown(text: str, limit: int = MAX_SHOWN) -> str:
+    """``text``, or its first ``limit`` characters and its length when longer: an error
+    echoing a name given as input stays short (a 5 000-character include name)."""
+    return text if len(text) <= limit else f"{text[:limit]}… ({len(text)} characters)"
+
+
 @dataclass(frozen=True)
 class Pos:
     """A position in a source text (1-based line and column)."""
@@ -27,9 +36,9 @@ class Diagnostic:
     message: str
 
     def __str__(self) -> str:
-        where = self.file
+        where = shown(self.file)
         if self.pos is not None:
-            where = f"{self.file}:{self.pos.line}:{self.pos.column}"
+            where = f"{where}:{self.pos.line}:{self.pos.column}"
         return f"{where}: {self.level}: {self.message}"
 
 

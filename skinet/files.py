@@ -23,15 +23,17 @@ reads it.
 
 from __future__ import annotations
 
+import errno
 import json
 import os
 import re
+import stat
 from collections.abc import Mapping
 from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from skinet.errors import Diagnostic, Pos, SourceError
+from skinet.errors import Diagnostic, Pos, SkinetError, SourceError, shown
 from skinet.lang.larkerrors import MAX_SOURCE_CHARS
 from skinet.lang.model import Model, Skillset
 from skinet.lang.parser import link, parse_unit
@@ -46,33 +48,97 @@ if TYPE_CHECKING:
     from skinet.plan.goal import Goal
 
 
-def read_text(path: str | Path, limit: int | None = None) -> str:
-    """File contents, or a :class:`SourceError` naming the file and the OS reason.
+class FileRefused(SkinetError):
+    """A file :func:`read_bytes` would not read; ``reason`` is one line without the path."""
+
+    def __init__(self, reason: str):
+        super().__init__(reason)
+        self.reason = reason
+
+
+_OPEN_FLAGS = (os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_NOCTTY | getattr(os, "O_CLOEXEC", 0))
+
+
+def read_bytes(path: str | Path, limit: int | None = None, root: Path | None = None) -> tuple[bytes, os.stat_result]:
+    """A regular file's bytes and status, opened once and checked on the open descriptor.
+
+    The path is resolved (links followed) and the resolved name opened with
+    ``O_NOFOLLOW`` (a link swapped in since is refused, not followed) and
+    ``O_NONBLOCK`` (a FIFO cannot block the opening); ``fstat`` of that
+    descriptor must show a regular file within ``limit`` bytes, and, with
+    ``root`` (a resolved folder), the descriptor's own path
+    (``/proc/self/fd/N``) must lie inside it, so a folder of the path swapped
+    for a link between resolving and opening is caught too.  Everything is then
+    read from that descriptor (docs/deployment.md, "Files read and secrets written
+    through no link").
+    :class:`FileRefused` otherwise, never an ``OSError``.  Cost: one
+    ``realpath``, one ``open``, one ``fstat``, the read.
+    """
+    try:
+        resolved = os.path.realpath(path)
+        if root is not None and not Path(resolved).is_relative_to(root):
+            raise FileRefused(f"it lies outside {root}")
+        fd = os.open(resolved, _OPEN_FLAGS)
+    except (OSError, ValueError) as exc:  # ValueError: a NUL in the path
+        raise FileRefused(f"cannot read file: {_reason(exc)}") from None
+    try:
+        if root is not None and not _opened_inside(fd, resolved, root):
+            raise FileRefused(f"it lies outside {root}")
+        st = os.fstat(fd)
+        if stat.S_ISDIR(st.st_mode):
+            raise FileRefused(f"cannot read file: {os.strerror(errno.EISDIR)}")
+        if not stat.S_ISREG(st.st_mode):
+            raise FileRefused("not a regular file")
+        if limit is not None and st.st_size > limit:
+            raise FileRefused(f"file too large: {st.st_size} bytes (the limit is {limit})")
+        chunks, total = [], 0
+        while chunk := os.read(fd, 1 << 20 if limit is None else min(1 << 20, limit + 1 - total)):
+            chunks.append(chunk)
+            total += len(chunk)
+            if limit is not None and total > limit:  # a file growing while read is bounded too
+                raise FileRefused(f"file too large: {total} bytes (the limit is {limit})")
+        return b"".join(chunks), st
+    except OSError as exc:
+        raise FileRefused(f"cannot read file: {_reason(exc)}") from None
+    finally:
+        os.close(fd)
+
+
+def _opened_inside(fd: int, resolved: str, root: Path) -> bool:
+    """Whether the open ``fd`` is a file inside ``root``: by its ``/proc/self/fd`` name,
+    else (no ``/proc``) by device and inode against ``resolved``, re-resolved."""
+    try:
+        return Path(os.readlink(f"/proc/self/fd/{fd}")).is_relative_to(root)
+    except OSError:
+        st, again = os.fstat(fd), os.path.realpath(resolved)
+        try:
+            named = os.stat(again, follow_symlinks=False)
+        except OSError:
+            return False
+        return Path(again).is_relative_to(root) and (st.st_dev, st.st_ino) == (named.st_dev, named.st_ino)
+
+
+def _reason(exc: BaseException) -> str:
+    return exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
+
+
+def read_text(path: str | Path, limit: int | None = None, root: Path | None = None) -> str:
+    """UTF-8 text of a file read by :func:`read_bytes`, or a :class:`SourceError`
+    naming the file and the reason.
 
     A file larger than ``limit`` bytes is refused before it is read, so a huge
     file costs no memory.
     """
     try:
-        with open(path, "rb") as f:
-            if limit is None:
-                return f.read().decode("utf-8")
-            size = os.fstat(f.fileno()).st_size
-            data = f.read(limit + 1) if size <= limit else b""  # a pipe or a growing file is bounded too
-        if size > limit or len(data) > limit:
-            raise SourceError.at(
-                str(path), None, f"file too large: {max(size, len(data))} bytes (the limit is {limit})"
-            )
-        return data.decode("utf-8")
-    except (OSError, UnicodeDecodeError, ValueError) as exc:  # ValueError: a NUL in the path
-        reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
-        if isinstance(exc, UnicodeDecodeError):  # its text quotes the byte: no content in an error
-            reason = f"not UTF-8 text (byte {exc.start})"
-        raise SourceError.at(str(path), None, f"cannot read file: {reason}") from None
+        data, _ = read_bytes(path, limit, root)
+    except FileRefused as exc:
+        raise SourceError.at(str(path), None, exc.reason) from None
+    return _utf8(data, str(path))
 
 
-def read_source(path: str | Path) -> str:
+def read_source(path: str | Path, root: Path | None = None) -> str:
     """A model, properties, system or state file: at most MAX_SOURCE_CHARS bytes."""
-    return read_text(path, MAX_SOURCE_CHARS)
+    return read_text(path, MAX_SOURCE_CHARS, root)
 
 
 # The folder that included files must lie in, when not the model's own (issue 25).
@@ -87,16 +153,20 @@ def load_model(path: str | Path, include_root: str | Path | None = None) -> Mode
 def _load_linked(path: Path, include_root: str | Path | None = None) -> tuple[Model, dict[str, str]]:
     """A model file linked with every file it includes, and each file's text by source.
 
-    ``include "name"`` is relative to the including file; each file is read once
-    (so include cycles end).  Included files must lie, symbolic links resolved,
-    inside ``include_root`` (default: ``$SKINET_INCLUDE_ROOT``, else the model
-    file's folder), and be regular files; their syntax errors give the position
-    but quote no text, so an include can never show what another file holds.
+    ``include "name"`` is relative to the including file; each file is parsed once
+    (so include cycles end), known by the device and inode of what was opened.
+    Included files must lie, symbolic links resolved, inside ``include_root``
+    (default: ``$SKINET_INCLUDE_ROOT``, else the model file's folder), and be
+    regular files, checked on the open descriptor (:func:`read_bytes`); their
+    syntax errors give the position but quote no text, so an include can never
+    show what another file holds, and an error shows at most
+    :data:`skinet.errors.MAX_SHOWN` characters of a name.
     """
-    text = read_source(path)
+    data, st = _read_source_bytes(path, None)
+    text = _utf8(data, str(path))
     units = [parse_unit(text, str(path))]
     texts = {str(path): text}
-    seen = {path.resolve()}
+    seen = {(st.st_dev, st.st_ino)}
     root = Path(include_root or os.environ.get(INCLUDE_ROOT_ENV) or path.parent).resolve()
     i = 0
     while i < len(units):
@@ -105,22 +175,41 @@ def _load_linked(path: Path, include_root: str | Path | None = None) -> tuple[Mo
         for name, pos in units[i - 1][0].includes:
             target = including.parent / name
             try:
-                resolved = target.resolve()
-                if resolved in seen:
-                    continue
-                if not resolved.is_relative_to(root):
-                    raise SourceError.at(str(target), None, f"it lies outside {root} (included files stay in "
-                                                            f"the model's folder, or in ${INCLUDE_ROOT_ENV})")
-                if resolved.exists() and not resolved.is_file():
-                    raise SourceError.at(str(target), None, "not a regular file")
-                seen.add(resolved)
-                included = read_source(target)
-            except (SourceError, OSError, RuntimeError, ValueError) as exc:  # RuntimeError: a symlink loop
-                reason = exc.diagnostics[0].message if isinstance(exc, SourceError) else f"cannot read file: {exc}"
-                raise SourceError.at(str(including), pos, f"cannot include '{name}': {reason}") from None
+                data, st = _read_source_bytes(target, root)
+            except FileRefused as exc:
+                reason = exc.reason
+                if reason.startswith("it lies outside"):
+                    reason += f" (included files stay in the model's folder, or in ${INCLUDE_ROOT_ENV})"
+                raise SourceError.at(str(including), pos, f"cannot include '{shown(name)}': {reason}") from None
+            if (st.st_dev, st.st_ino) in seen:  # the identity of what was opened: a cycle ends
+                continue
+            seen.add((st.st_dev, st.st_ino))
+            try:
+                included = _utf8(data, str(target))
+            except SourceError as exc:
+                raise SourceError.at(str(including), pos,
+                                     f"cannot include '{shown(name)}': {exc.diagnostics[0].message}") from None
             units.append(parse_unit(included, str(target), library=True))
             texts[str(target)] = included
     return link(units), texts
+
+
+def _read_source_bytes(path: Path, root: Path | None) -> tuple[bytes, os.stat_result]:
+    """:func:`read_bytes` of a source file (at most MAX_SOURCE_CHARS bytes); a refused
+    top-level file is a :class:`SourceError` naming it, a refused include a :class:`FileRefused`."""
+    if root is not None:
+        return read_bytes(path, MAX_SOURCE_CHARS, root)
+    try:
+        return read_bytes(path, MAX_SOURCE_CHARS)
+    except FileRefused as exc:
+        raise SourceError.at(str(path), None, exc.reason) from None
+
+
+def _utf8(data: bytes, source: str) -> str:
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:  # its text quotes the byte: no content in an error
+        raise SourceError.at(source, None, f"cannot read file: not UTF-8 text (byte {exc.start})") from None
 
 
 SYSTEM_TABLES = ("[system]", "[[skillsets]]", "[prediction]")
@@ -218,11 +307,12 @@ def _entry_skillsets(entry: dict[str, object], n: int, model: Model, where: str)
         for ss in model.skillsets:
             if ss.name == expected:
                 return [ss]
-        raise SourceError.at(where, None, f"skillsets entry {n} names '{expected}' but {entry['model']} declares {declared}")
+        raise SourceError.at(where, None, f"skillsets entry {n} names '{shown(str(expected))}' but "
+                             f"{shown(str(entry['model']))} declares {declared}")
     if len(model.skillsets) > 1 and ("manager" in entry or "binding" in entry):
         raise SourceError.at(
             where, None,
-            f"skillsets entry {n}: {entry['model']} declares {len(model.skillsets)} skillsets ({declared});"
+            f"skillsets entry {n}: {shown(str(entry['model']))} declares {len(model.skillsets)} skillsets ({declared});"
             " give one entry per skillset, each with its 'name' and 'manager'",
         )
     return list(model.skillsets)
@@ -270,15 +360,17 @@ def load_bindings(system: System) -> tuple[dict[str, Binding], list[Diagnostic]]
 
 
 def _read_definitions(folder: Path, binding: str) -> tuple[dict[str, str], dict[str, str]]:
-    """Every definition file below ``folder`` by type name, and the file of each."""
+    """Every definition file below ``folder`` by type name, and the file of each; each
+    must lie, links resolved, inside the folder (:func:`read_bytes` checks what it opened)."""
     if not folder.is_dir():
-        raise SourceError.at(binding, None, f"definitions folder {folder} is not a folder")
+        raise SourceError.at(binding, None, f"definitions folder {shown(str(folder))} is not a folder")
+    root = folder.resolve()
     texts: dict[str, str] = {}
     sources: dict[str, str] = {}
     for kind in KINDS:
         for file in sorted(folder.glob(f"*/{kind}/*.{kind}")):
             name = f"{file.parent.parent.name}/{kind}/{file.stem}"
-            texts[name], sources[name] = read_source(file), str(file)
+            texts[name], sources[name] = read_source(file, root), str(file)
     return texts, sources
 
 

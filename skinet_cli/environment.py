@@ -123,6 +123,7 @@ VARIABLES: dict[str, Variable] = {
                                "docker/entrypoint.sh, compose.yaml: the secrets folder (compose: the vault)"),
     "SKINET_TLS_HOSTNAMES": Variable("skinet router, python -m services.secrets: names in the certificates they make"),
     "SKINET_FLEET_ROBOTS": Variable("skinet router --robots, compose.yaml"),
+    "SKINET_HANDED_SECRETS": Variable("skinet router --handed, compose.yaml: the router's hand-out, read-only"),
     # services
     "SKINET_LOG_LEVEL": Variable("--log-level of the services, compose.yaml"),
     "SKINET_INSTANCE": Variable("--instance of the bridge, the predictor and the pilot"),

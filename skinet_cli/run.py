@@ -56,6 +56,9 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     c.add_argument("--secrets", default=os.environ.get("SKINET_SECRETS"),
                    help="folder of users.txt and <user>.password, made at first start when missing "
                         "(default: $SKINET_SECRETS or ~/.config/skinet/secrets)")
+    c.add_argument("--handed", default=os.environ.get("SKINET_HANDED_SECRETS") or None, metavar="DIR",
+                   help="copy the files of DIR (the router's hand-out of the compose job secrets, mounted read-only) "
+                        "into --secrets at start (default: $SKINET_HANDED_SECRETS)")
     c.add_argument("--no-auth", action="store_true",
                    help="accept sessions without user/password (tests on a closed machine only)")
     c.add_argument("--robots", default=os.environ.get("SKINET_FLEET_ROBOTS"), metavar="ENDPOINTS",

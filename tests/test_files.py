@@ -12,7 +12,7 @@ import pytest
 
 from skinet_cli.main import main
 from skinet.errors import SourceError
-from skinet.files import load_model, load_state, load_system, load_typemap
+from skinet.files import load_goals, load_model, load_state, load_system, load_typemap
 from skinet.system import marking_problems
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -342,3 +342,21 @@ def test_nul_in_a_path(tmp_path: Path) -> None:
     assert error(load_system, toml) == f"{tmp_path / 'a'}\x00b.rl: error: cannot read file: embedded null byte"
     rl = write(tmp_path, "i.rl", 'include "a\x00b.rl"\nskillset s {}\n')
     assert error(load_model, rl) == f"{rl}:1:9: error: cannot include 'a\x00b.rl': cannot read file: embedded null byte"
+
+
+def test_errors_echo_a_long_name_shortened(tmp_path: Path) -> None:
+    """An include, model or binding name of 5 000 characters shows its first 200 (issue 31, item 5)."""
+    long = "a" * 5000
+    rl = write(tmp_path, "m.rl", f'include "{long}"\nskillset s {{}}\n')
+    assert error(load_model, rl) == (f"{rl}:1:9: error: cannot include '{'a' * 200}… (5000 characters)': "
+                                     "cannot read file: File name too long")
+    write(tmp_path, "s.rl", "skillset s { resource r { state { A } initial A } }\n")
+    toml = write(tmp_path, "s.toml", f'[system]\nname = "x"\n[[skillsets]]\nmodel = "s.rl"\nbinding = "{long}"\n')
+    path = str(tmp_path / long)
+    assert error(load_system, toml) == f"{path[:200]}… ({len(path)} characters): error: cannot read file: File name too long"
+    toml = write(tmp_path, "s.toml", f'[system]\nname = "x"\n[[skillsets]]\nmodel = "{long}"\n')
+    assert error(load_system, toml) == f"{path[:200]}… ({len(path)} characters): error: cannot read file: File name too long"
+    toml = write(tmp_path, "s.toml", f'[system]\nname = "x"\n[[skillsets]]\nmodel = "s.rl"\nname = "{long}"\n')
+    assert error(load_system, toml) == f"{toml}: error: skillsets entry 1 names '{'a' * 200}… (5000 characters)' but s.rl declares 's'"
+    system, _ = load_system(SYSTEM)
+    assert error(load_goals, path, system) == f"{path[:200]}… ({len(path)} characters): error: cannot read file: File name too long"

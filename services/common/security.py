@@ -36,6 +36,7 @@ import json
 import os
 import re
 import secrets
+import stat
 from collections.abc import Iterable
 from pathlib import Path
 
@@ -50,21 +51,98 @@ USERS = ("bridge", "monitor", "predictor", "robot", "observer", "hub", "pilot", 
 DAY = datetime.timedelta(days=1)
 
 
-def write_file(path: Path, data: bytes, mode: int = 0o600) -> None:
+class LinkRefused(SkinetError):
+    """A secret would have been written through a link, or over what is not a file."""
+
+
+_NOFOLLOW_DIR = os.O_RDONLY | os.O_DIRECTORY | os.O_NOFOLLOW | os.O_CLOEXEC
+
+
+def _open_folder(folder: Path, base: Path | None) -> int:
+    """A descriptor of ``folder``, opened without following a link: ``folder`` itself
+    and, with ``base``, every folder below ``base`` on the way (made 0700 when missing).
+    ``base`` is trusted (opened as it is named)."""
+    if base is None:
+        return _open_part(folder, None, folder)
+    fd = os.open(base, os.O_RDONLY | os.O_DIRECTORY | os.O_CLOEXEC)
+    try:
+        here = base
+        for part in folder.relative_to(base).parts:
+            here = here / part
+            try:
+                os.mkdir(part, 0o700, dir_fd=fd)
+            except FileExistsError:
+                pass
+            inner = _open_part(Path(part), fd, here)
+            os.close(fd)
+            fd = inner
+        return fd
+    except BaseException:
+        os.close(fd)
+        raise
+
+
+def _open_part(name: Path, dir_fd: int | None, shown_as: Path) -> int:
+    try:
+        return os.open(name, _NOFOLLOW_DIR, dir_fd=dir_fd)
+    except OSError:
+        if os.path.islink(shown_as):
+            raise LinkRefused(f"{shown_as} is a link: secrets are never written through a link") from None
+        raise
+
+
+def write_file(path: Path, data: bytes, mode: int = 0o600, base: Path | None = None) -> None:
     """``path`` with ``data`` and ``mode`` (0600 by default), replaced at once: never half written
-    nor, for a moment, readable by others."""
-    tmp = path.with_name(path.name + ".tmp")
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, mode)
-    with os.fdopen(fd, "wb") as f:
-        f.write(data)
-    os.chmod(tmp, mode)
-    tmp.replace(path)
+    nor, for a moment, readable by others, and never through a link.
+
+    The folder is opened without following a link (with ``base``: every folder from
+    ``base`` down, made when missing); the data goes to a new file of a random name
+    there, made exclusively (``O_CREAT|O_EXCL|O_NOFOLLOW``), then renamed over
+    ``path``.  A link (or anything but a regular file) at ``path`` or as its folder is
+    refused: :class:`LinkRefused`, nothing written.  Cost: a few system calls and the write.
+    """
+    fd = _open_folder(path.parent, base)
+    tmp = f".{path.name}.{secrets.token_hex(8)}.tmp"
+    try:
+        try:
+            st = os.stat(path.name, dir_fd=fd, follow_symlinks=False)
+        except FileNotFoundError:
+            st = None
+        if st is not None and stat.S_ISLNK(st.st_mode):
+            raise LinkRefused(f"{path} is a link: secrets are never written through a link")
+        if st is not None and not stat.S_ISREG(st.st_mode):
+            raise LinkRefused(f"{path} is not a regular file: a secret is written as a file only")
+        out = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW | os.O_CLOEXEC, mode, dir_fd=fd)
+        try:
+            with os.fdopen(out, "wb", closefd=False) as f:
+                f.write(data)
+            os.fchmod(out, mode)  # the umask may have narrowed or the old file widened it
+        finally:
+            os.close(out)
+        os.rename(tmp, path.name, src_dir_fd=fd, dst_dir_fd=fd)  # a link put there since is replaced, not followed
+    except BaseException:
+        try:
+            os.unlink(tmp, dir_fd=fd)
+        except OSError:
+            pass
+        raise
+    finally:
+        os.close(fd)
 
 
 def private(path: Path) -> None:
-    """Make an existing secret file 0600 if group or others may read it (files of older versions)."""
-    if path.stat().st_mode & 0o077:
-        os.chmod(path, 0o600)
+    """Make an existing secret file 0600 if group or others may read it (files of older versions);
+    a link or what is not a regular file is left alone (its mode is not the file's to change)."""
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC)
+    except OSError:
+        return
+    try:
+        st = os.fstat(fd)
+        if stat.S_ISREG(st.st_mode) and st.st_mode & 0o077:
+            os.fchmod(fd, 0o600)
+    finally:
+        os.close(fd)
 
 
 def ensure_users(folder: Path, users: Iterable[str] = USERS, fixed: dict[str, str] | None = None,

@@ -25,8 +25,8 @@ from collections.abc import Callable
 import zenoh
 
 from services.common.session import connect_problem, login_refused, unconnected
-from skinet.errors import Pos, SkinetError, SourceError
-from skinet.files import read_text
+from skinet.errors import Pos, SkinetError, SourceError, shown
+from skinet.files import FileRefused, read_bytes, read_text
 from skinet.wire import keys
 from skinet_cli.environment import flag
 
@@ -39,6 +39,7 @@ MODES = ("peer", "client", "router")
 _IP_PROTOCOLS = {"tcp", "udp", "tls", "quic", "ws"}
 _ENDPOINT = re.compile(r"^(?P<proto>[a-z][a-z0-9+\-]*)/(?P<address>[^?#]+)(?:\?[^#]*)?(?:#.*)?$")
 _HOST_PORT = re.compile(r"^(?P<host>\[[0-9A-Fa-f:.]+\]|[^:\[\]]+):(?P<port>[^:]*)$")
+MAX_PASSWORD_FILE = 4096  # bytes: a password file is one line
 _RUST_PLACE = re.compile(r"\s+at \S+\.rs:\d+\.?")  # " at /root/.cargo/.../x.rs:62." in ZError texts
 _JSON_MESSAGE = re.compile(r'msg: "(?P<msg>(?:[^"\\]|\\.)*)", location: Some\(Location \{ line: (?P<line>\d+), '
                            r"column: (?P<col>\d+)")
@@ -165,10 +166,10 @@ def login(args: argparse.Namespace) -> dict[str, str | None]:
     path = getattr(args, "password_file", None)
     if path:
         try:
-            with open(path, encoding="utf-8") as f:
-                password = f.read().strip()
-        except OSError as exc:
-            raise SkinetError(f"cannot read password file {path}: {exc.strerror}") from None
+            password = read_bytes(path, MAX_PASSWORD_FILE)[0].decode("utf-8", errors="replace").strip()
+        except FileRefused as exc:  # a FIFO or a folder too: refused, never waited on
+            raise SkinetError(f"cannot read password file {shown(path)}: "
+                              f"{exc.reason.removeprefix('cannot read file: ')}") from None
     return {"user": user, "password": password}
 
 

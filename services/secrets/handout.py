@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import datetime
 import os
+import stat
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -31,8 +32,10 @@ from cryptography.x509.oid import NameOID
 
 from services.common.security import FLEET, USERS, write_file
 from skinet.errors import SkinetError
+from skinet.files import FileRefused, read_bytes
 
 ROUTER = "router"
+MAX_SECRET_FILE = 1 << 20  # bytes: a password, a certificate chain or a key is a few KiB
 CLIENT_LAYOUT = "<user>.password, tls/ca.pem, tls/<user>.pem and tls/<user>.key"
 
 
@@ -46,20 +49,33 @@ def service_files(vault: Path, name: str) -> list[str]:
     return [f"{name}.password", "tls/ca.pem", f"tls/{name}.pem", f"tls/{name}.key"]
 
 
-def _copy(source: Path, target: Path) -> None:
-    """``target`` with ``source``'s bytes, 0644 for certificates and 0600 for the rest."""
-    mode = 0o644 if target.suffix == ".pem" else 0o600
-    data = source.read_bytes()
-    if not target.exists() or target.read_bytes() != data:
-        write_file(target, data, mode)
-    os.chmod(target, mode)
+def _copy(source: Path, target: Path, out: Path) -> None:
+    """``target`` (below ``out``) with ``source``'s bytes, 0644 for certificates and 0600 for the
+    rest, written afresh through no link (:func:`services.common.security.write_file`)."""
+    try:
+        write_file(target, source.read_bytes(), 0o644 if target.suffix == ".pem" else 0o600, base=out)
+    except OSError as exc:
+        raise SkinetError(f"cannot write {target}: {exc.strerror}") from None
+
+
+def _remove_strays(folder: Path, keep: list[str]) -> None:
+    """Remove every file of ``folder`` but ``keep``, walking by descriptors (``os.fwalk``): a
+    link in the folder is removed itself, never followed."""
+    for root, _, files, root_fd in os.fwalk(folder, follow_symlinks=False):
+        for name in files:
+            if os.path.relpath(os.path.join(root, name), folder) not in keep:
+                os.unlink(name, dir_fd=root_fd)
 
 
 def hand_out(vault: Path, out: Path) -> dict[str, list[str]]:
     """Copy each service's files from ``vault`` into ``out/<service>`` for every folder
-    already in ``out`` (compose mounts one volume there per service); returns what each got."""
+    already in ``out`` (compose mounts one volume there per service); returns what each got.
+
+    Nothing is written through a link: a link as a service's folder, as ``tls/`` or
+    ``fleet/`` in it, or at a file's name is refused (:class:`SkinetError`, one line)
+    and the vault is left as it was."""
     handed: dict[str, list[str]] = {}
-    for folder in sorted(p for p in out.iterdir() if p.is_dir()):
+    for folder in sorted(p for p in out.iterdir() if p.is_dir() or p.is_symlink()):
         if folder.name != ROUTER and folder.name not in USERS:
             raise SkinetError(f"{folder}: a service's folder is named {ROUTER} or for its user ({', '.join(USERS)})")
         files = service_files(vault, folder.name)
@@ -67,14 +83,38 @@ def hand_out(vault: Path, out: Path) -> dict[str, list[str]]:
         if missing:
             raise SkinetError(f"{vault} has no {', '.join(missing)} for {folder.name}")
         for name in files:
-            target = folder / name
-            target.parent.mkdir(mode=0o700, exist_ok=True)
-            _copy(vault / name, target)
+            _copy(vault / name, folder / name, out)
         if folder.name != ROUTER:
-            for stray in [p for p in folder.rglob("*") if p.is_file() and str(p.relative_to(folder)) not in files]:
-                stray.unlink()
+            _remove_strays(folder, files)
         handed[folder.name] = files
     return handed
+
+
+def take_handed(handed: Path, folder: Path) -> list[str]:
+    """Copy every regular file below ``handed`` (the router's hand-out, mounted read-only)
+    into ``folder`` (the router's own, writable), through no link; returns the names.
+
+    The job writes into a folder the router cannot write, and the router keeps its
+    own state (``hub/``, ``robots/``, ``tls/trusted.pem``, ``users.txt`` with a
+    fleet's ``hub`` password) in a folder the job never writes (docs/deployment.md,
+    "Secrets").  Links in ``handed`` are skipped, not followed.  Cost: the files' bytes.
+    """
+    if not handed.is_dir():
+        raise SkinetError(f"handed-out secrets folder {handed} does not exist")
+    folder.mkdir(mode=0o700, parents=True, exist_ok=True)
+    copied = []
+    for root, _, files, root_fd in os.fwalk(handed, follow_symlinks=False):
+        for name in sorted(files):
+            st = os.stat(name, dir_fd=root_fd, follow_symlinks=False)
+            if not stat.S_ISREG(st.st_mode):
+                continue
+            fd = os.open(name, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC, dir_fd=root_fd)
+            with os.fdopen(fd, "rb") as f:
+                data = f.read()
+            relative = os.path.relpath(os.path.join(root, name), handed)
+            write_file(folder / relative, data, stat.S_IMODE(st.st_mode) & 0o644, base=folder)
+            copied.append(relative)
+    return sorted(copied)
 
 
 @dataclass(frozen=True)
@@ -89,12 +129,12 @@ class ClientFiles:
 
 
 def _read(path: Path, user: str) -> bytes:
-    if not path.is_file():
+    if not path.exists():
         raise SkinetError(f"{path} is missing (the secrets of user '{user}' are {CLIENT_LAYOUT.replace('<user>', user)})")
     try:
-        return path.read_bytes()
-    except OSError as exc:
-        raise SkinetError(f"cannot read {path}: {exc.strerror}") from None
+        return read_bytes(path, MAX_SECRET_FILE)[0]
+    except FileRefused as exc:  # a FIFO, a huge file: refused, never waited on
+        raise SkinetError(f"cannot read {path}: {exc.reason.removeprefix('cannot read file: ')}") from None
 
 
 def _certificate(path: Path, user: str) -> x509.Certificate:

@@ -522,6 +522,8 @@ def _cases() -> list[Case]:
     # skinet router --robots, skinet fleet
     add("skinet", "--robots", ("router", "--no-auth", "--robots", "tcp/robot2:7447"), 1,
         "skinet: error: robot endpoint 'tcp/robot2:7447' must be tls/HOST:PORT (a robot's router accepts TLS only)")
+    add("skinet", "--handed", ("router", "--no-auth", "--secrets", "{tmp}/own", "--handed", "{tmp}/no/such/dir"), 1,
+        "skinet: error: handed-out secrets folder {tmp}/no/such/dir does not exist")
     add("skinet", "host", ("fleet", "--secrets", "{tmp}/fleet", "add", "bad host/x"), 1,
         "skinet: error: robot name 'bad host/x' must be the host of its endpoint (letters, digits, '.', '-')")
     # skinet client-config

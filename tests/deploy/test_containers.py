@@ -37,6 +37,7 @@ pytestmark = pytest.mark.slow
 
 IMAGE = os.environ.get("SKINET_TEST_IMAGE", "skinet-live:local")  # own tag per checkout under test
 SECRETS_IN_IMAGE = "/var/lib/skinet/secrets"  # each service's own files (the job's vault, in its container)
+HANDED_IN_IMAGE = "/var/lib/skinet/handed"  # the router's hand-out, read-only (compose.yaml)
 USER_SERVICE = {"bridge": "bridge", "monitor": "monitor", "predictor": "predictor", "robot": "simulator",
                 "observer": "dashboard", "pilot": "pilot"}  # the compose service holding each user's files
 BUILD_TIMEOUT = 2400  # a first build (debootstrap, wheels, image) took 20 min on a loaded 2-core machine
@@ -260,9 +261,11 @@ for root, dirs, files in os.walk('/'):
 
 
 def _own_files(user: str) -> set[str]:
+    """The router also sees the job's hand-out, read-only, of which its own folder holds a copy (issue 31)."""
     names = ({"users.txt": "600", "tls/router.pem": "644", "tls/router.key": "600"} if user == "router" else
              {f"{user}.password": "600", f"tls/{user}.pem": "644", f"tls/{user}.key": "600"})
-    return {f"{SECRETS_IN_IMAGE}/{n} 0o{m} 10001" for n, m in {**names, "tls/ca.pem": "644"}.items()}
+    folders = [SECRETS_IN_IMAGE, HANDED_IN_IMAGE] if user == "router" else [SECRETS_IN_IMAGE]
+    return {f"{f}/{n} 0o{m} 10001" for f in folders for n, m in {**names, "tls/ca.pem": "644"}.items()}
 
 
 def test_each_service_holds_only_its_own_credentials(stack: tuple[Stack, str], observer: zenoh.Session) -> None:
@@ -288,6 +291,15 @@ def test_each_service_holds_only_its_own_credentials(stack: tuple[Stack, str], o
             mounted.add((info["Config"]["Labels"]["com.docker.compose.service"], info["HostConfig"]["NetworkMode"],
                          info["State"]["Status"], info["State"]["ExitCode"]))
     assert mounted == {("secrets", "none", "exited", 0)}
+    # What the job writes into is read-only wherever else it is mounted: no service can plant a link there.
+    handed = {f"{s.project}_{user}-secrets" for user in ("router", *USER_SERVICE)}
+    writable = set()
+    for container in [c for svc in ("router", *USER_SERVICE.values()) for c in s.containers(svc, running=False)]:
+        info = json.loads(subprocess.run(["docker", "inspect", container], capture_output=True, text=True,
+                                         check=True).stdout)[0]
+        writable |= {(info["Config"]["Labels"]["com.docker.compose.service"], m["Name"]) for m in info["Mounts"]
+                     if m.get("Name") in handed and m.get("RW")}
+    assert writable == set()
 
 
 def test_unassisted_mission_gives_the_in_process_verdicts(stack: tuple[Stack, str], observer: zenoh.Session) -> None:
