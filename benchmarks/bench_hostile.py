@@ -67,7 +67,7 @@ from services.monitor import start_monitor  # noqa: E402
 from services.predictor import start_predictor  # noqa: E402
 from skinet.files import load_system  # noqa: E402
 from skinet.wire import keys  # noqa: E402
-from skinet.wire.codec import DecodeError, decode  # noqa: E402
+from skinet.wire.codec import DecodeError, decode, encode  # noqa: E402
 from skinet.wire.convert import bundle, statuses, system_from_bundle  # noqa: E402
 from skinet.wire.messages import CheckReply, PredictReply, PredictRequest  # noqa: E402
 from tests.bridge_side import BridgeSide  # noqa: E402
@@ -171,7 +171,7 @@ def rotating(endpoint: str, seconds: float, threads: int, out: "multiprocessing.
     """In another process: check requests from ``threads`` threads, each under a new client name, for
     ``seconds``; counts the answers by their first words."""
     session = zenoh.open(session_config("client", connect=[endpoint], multicast_scouting=False))
-    payload = msgpack.packb(CHECK.model_dump(mode="json", exclude_defaults=True))
+    payload = encode(CHECK)
     counts: dict[str, int] = {}
     lock = threading.Lock()
     end = time.monotonic() + seconds
@@ -202,7 +202,7 @@ def hog(endpoint: str, system: str, seconds: float, out: "multiprocessing.Queue[
     """In another process: requests that ask to wait 30 s, 40 a second under 10 names (within every rate
     limit), for ``seconds``; counts those answered before their wait was over."""
     session = zenoh.open(session_config("client", connect=[endpoint], multicast_scouting=False))
-    payload = msgpack.packb({**CHECK.model_dump(mode="json", exclude_defaults=True), "wait": 30.0})
+    payload = encode(CHECK.model_copy(update={"wait": 30.0}))
     early = [0]
     start, n = time.monotonic(), 0
 
@@ -224,8 +224,7 @@ class GoodClient:
 
     def __init__(self, session: zenoh.Session, system: str = "spot_arm", gap: float = 0.1, wait: float = 0.0):
         self.session, self.key, self.gap = session, keys.check(system, "good"), gap
-        self.payload = msgpack.packb({**CHECK.model_dump(mode="json", exclude_defaults=True),
-                                      **({"wait": wait} if wait else {})})
+        self.payload = encode(CHECK.model_copy(update={"wait": wait}))
         self.times: list[float] = []
         self.outcomes: dict[str, int] = {}
         self._stop = threading.Event()
@@ -279,7 +278,7 @@ def main() -> None:
     monitor = start_monitor(session, system, budget=0.5)
     side = BridgeSide(session, "spot_arm", source="bench", model=system)  # the monitor syncs from it first
     rows = []
-    feed = Feed(int(5 * args.seconds / 0.005) + 100)  # the events of every phase
+    feed = Feed(int(7 * args.seconds / 0.005) + 100)  # the events of every phase
     try:
         quiet = feed.latencies(session, args.seconds)
         rows.append(row("quiet", quiet))
