@@ -5,7 +5,8 @@ the bridge's cache (:mod:`services.common.events`); per event it publishes
 :class:`LiveState`, :class:`Verdicts` and :class:`UnsafeReport` (one step;
 the three share the step's ``seq``).  It answers the model queryable, the command
 check (``skinet/<system>/check/<client>``, :mod:`services.monitor.check`, with a request budget
-per client: :class:`~services.common.ratelimit.RateLimiter`, issue 14) and ``get`` on its
+per client, for new names and for all clients together: :class:`~services.common.ratelimit.RateLimiter`,
+issues 14 and 31; its waiting requests shared fairly: :mod:`services.monitor.slots`) and ``get`` on its
 five result keys (the last publication, for late joiners), holds a
 liveliness token and asks the predictor for the live marking without ever
 waiting for it (:mod:`services.monitor.prediction`); when a prediction for the
@@ -778,8 +779,8 @@ def start_monitor(session: zenoh.Session, system: System, **options: object) -> 
     which doubles burst throughput, see ``benchmarks/bench_latency.py``), ``check_policy``
     (a :class:`~services.monitor.check.Policy` for ``skinet/<system>/check``; default: warn,
     never deny), ``client`` (the client chunk of its predict queries: its router login,
-    default ``local``), ``check_rate_limit`` (check requests per second per client, 0: no
-    limit; default 20), ``lost_after`` (seconds of silence from a skillset's source after
+    default ``local``), ``check_rate_limit`` (check requests per second per client and new client names per
+    second, five times as many from all clients together; 0: no limit; default 20), ``lost_after`` (seconds of silence from a skillset's source after
     which it is lost, default 2; SPEC §7).
     """
     return Monitor(session, system, **options)  # type: ignore[arg-type]
