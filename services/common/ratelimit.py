@@ -145,7 +145,8 @@ class RateLimiter:
 def add_rate_args(parser: argparse.ArgumentParser, *, predict: bool = True, check: bool = True) -> None:
     """``--rate-limit`` (the predictor's, ``$SKINET_RATE_LIMIT``) and ``--check-rate-limit``
     (the monitor's command check, ``$SKINET_CHECK_RATE_LIMIT``): requests per second per client."""
-    what = " per client (the key's client chunk: its router login); beyond it 'rate limited' at once; 0: no limit"
+    what = (" per client (the key's client chunk: its router login), and as many new client names per second; "
+            "beyond it 'rate limited' at once; 0: no limit")
     if predict:
         parser.add_argument("--rate-limit", type=number(0, "SKINET_RATE_LIMIT"), metavar="PER_S",
                             default=os.environ.get("SKINET_RATE_LIMIT", PREDICT_RATE_LIMIT),
@@ -154,5 +155,6 @@ def add_rate_args(parser: argparse.ArgumentParser, *, predict: bool = True, chec
     if check:
         parser.add_argument("--check-rate-limit", type=number(0, "SKINET_CHECK_RATE_LIMIT"), metavar="PER_S",
                             default=os.environ.get("SKINET_CHECK_RATE_LIMIT", CHECK_RATE_LIMIT),
-                            help=f"command check requests per second{what} "
+                            help=f"command check requests per second{what}; 5 times as many from all clients "
+                                 f"together "
                                  f"(default: $SKINET_CHECK_RATE_LIMIT or {CHECK_RATE_LIMIT:g})")
