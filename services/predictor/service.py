@@ -21,9 +21,9 @@ the reply is sent (ZENOH.md).
 Per-client rate limit (issue 14): ``<client>`` is the querier's router login (the
 access control lets user ``U`` query only ``.../predict/U``); each client has a
 token bucket (:class:`~services.common.ratelimit.RateLimiter`, ``rate_limit``
-requests/s), and a query over it is answered at once with ``ok=False`` and
-``rate limited: ...``, before it is even decoded, so a flooding client neither
-queues behind nor ahead of the others.  ``max_pending`` still bounds the whole
+requests/s; new client names share a budget of as many names/s, issue 31), and a query over it is
+answered at once with ``ok=False`` and ``rate limited: ...``, before it is even decoded, so a flooding
+client neither queues behind nor ahead of the others.  ``max_pending`` still bounds the whole
 instance, and one client may hold at most half of it (``busy: client ... has its
 share``), so requests that are slow to answer cannot fill it either.
 
