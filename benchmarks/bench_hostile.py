@@ -16,7 +16,15 @@ and the latency event -> Verdicts is measured.  Phases, in one run:
 - *isolated*: the attack against our predictor (worker processes with a memory
   limit, killed at budget + grace);
 - *in-process peer*: what building the same model does to the monitor when it
-  runs on a thread of the monitor's process, as the predictor did before.
+  runs on a thread of the monitor's process, as the predictor did before;
+- *rotating names* (issue 31, item 4): another process asks the command check from
+  ``--flood-threads`` threads as fast as it can, each request under a new client name
+  (``check/bad{i}``), while a well-behaved client asks under its own name 10 times a
+  second; its check latency is compared with the same client's in a quiet phase;
+- *wait slots* (issue 31, item 4): on a second monitor that cannot vouch for its state
+  (no bridge), another process keeps its 256 waiting slots full (requests with
+  ``wait: 30`` under 10 names, 40 a second, within every rate limit), while the
+  well-behaved client asks with ``wait: 1`` twice a second: is its wait honoured?
 
 Printed: verdict p50/p99/max per phase, the predictor's peak memory (its process,
 which here also holds the monitor, and its largest worker) against the limit, and
@@ -24,16 +32,20 @@ how many hostile requests were answered and how fast; per kind of bad request, h
 many were refused, how fast, and the first error.  Targets: p99 under the hostile
 model <= max(2 x quiet p99, 5 ms); under bad requests <= 2 x quiet p99; every bad
 request refused, p99 <= 0.1 s; worker peak <= the limit; every hostile request
-answered within budget + grace + 1 s (plus a replacement's start-up).  Whatever the
+answered within budget + grace + 1 s (plus a replacement's start-up); under the
+rotating names, the good client's check p90 <= 2 x quiet and every one of its requests
+answered, and the flood's answers within the new names' budget; under the wait-slot
+flood, every wait of the good client honoured.  Whatever the
 tree's check does with an oversized request (a size limit, a decoding error, an
 unknown name with suggestions), it is timed and its reply shown.
 
-    python benchmarks/bench_hostile.py [--seconds 10] [--memory-mb 512] [--rate 40]
+    python benchmarks/bench_hostile.py [--seconds 10] [--memory-mb 512] [--rate 40] [--flood-threads 4]
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import multiprocessing
 import resource
 import socket
@@ -48,12 +60,14 @@ import msgpack  # noqa: E402
 import zenoh  # noqa: E402
 
 from bench_latency import Arrivals, events, ping_pong  # noqa: E402
+from services.common.ratelimit import CHECK_RATE_LIMIT  # noqa: E402
 from services.common.zenoh_config import session_config  # noqa: E402
+from services.monitor.check import parse_command  # noqa: E402
 from services.monitor import start_monitor  # noqa: E402
 from services.predictor import start_predictor  # noqa: E402
 from skinet.files import load_system  # noqa: E402
 from skinet.wire import keys  # noqa: E402
-from skinet.wire.codec import DecodeError, decode  # noqa: E402
+from skinet.wire.codec import DecodeError, decode, encode  # noqa: E402
 from skinet.wire.convert import bundle, statuses, system_from_bundle  # noqa: E402
 from skinet.wire.messages import CheckReply, PredictReply, PredictRequest  # noqa: E402
 from tests.bridge_side import BridgeSide  # noqa: E402
@@ -150,6 +164,89 @@ def flood(endpoint: str, service: str, seconds: float, rate: float, out: "multip
         out.put(result)
 
 
+CHECK = parse_command("spot:init_power.start")
+
+
+def rotating(endpoint: str, seconds: float, threads: int, out: "multiprocessing.Queue[dict]") -> None:
+    """In another process: check requests from ``threads`` threads, each under a new client name, for
+    ``seconds``; counts the answers by their first words."""
+    session = zenoh.open(session_config("client", connect=[endpoint], multicast_scouting=False))
+    payload = encode(CHECK)
+    counts: dict[str, int] = {}
+    lock = threading.Lock()
+    end = time.monotonic() + seconds
+
+    def run(t: int) -> None:
+        n = 0
+        while time.monotonic() < end:
+            n += 1
+            what = "no reply"
+            for reply in session.get(keys.check("spot_arm", f"bad{t}x{n}"), payload=payload, timeout=10.0):
+                msg = decode(reply.ok.payload.to_bytes(), CheckReply) if reply.ok is not None else None
+                what = "error reply" if msg is None else "answered" if msg.ok else msg.error.split(":")[0] + (
+                    ": new names" if "new clients" in msg.error else ": all clients" if "all clients" in msg.error
+                    else ": its own budget")
+            with lock:
+                counts[what] = counts.get(what, 0) + 1
+
+    workers = [threading.Thread(target=run, args=(t,)) for t in range(threads)]
+    for w in workers:
+        w.start()
+    for w in workers:
+        w.join()
+    session.close()
+    out.put(counts)
+
+
+def hog(endpoint: str, system: str, seconds: float, out: "multiprocessing.Queue[dict]") -> None:
+    """In another process: requests that ask to wait 30 s, 40 a second under 10 names (within every rate
+    limit), for ``seconds``; counts those answered before their wait was over."""
+    session = zenoh.open(session_config("client", connect=[endpoint], multicast_scouting=False))
+    payload = encode(CHECK.model_copy(update={"wait": 30.0}))
+    early = [0]
+    start, n = time.monotonic(), 0
+
+    def count(reply: zenoh.Reply) -> None:
+        if time.monotonic() < end - 1.0:
+            early[0] += 1
+
+    end = start + seconds
+    while time.monotonic() < end:
+        session.get(keys.check(system, f"hog{n % 10}"), zenoh.handlers.Callback(count), payload=payload, timeout=60)
+        n += 1
+        time.sleep(max(0.0, start + n / 40 - time.monotonic()))
+    session.close()
+    out.put({"sent": n, "answered early": early[0]})
+
+
+class GoodClient:
+    """A well-behaved client of the command check: one request every ``gap`` s under its own name, timed."""
+
+    def __init__(self, session: zenoh.Session, system: str = "spot_arm", gap: float = 0.1, wait: float = 0.0):
+        self.session, self.key, self.gap = session, keys.check(system, "good"), gap
+        self.payload = encode(CHECK.model_copy(update={"wait": wait}))
+        self.times: list[float] = []
+        self.outcomes: dict[str, int] = {}
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run)
+        self._thread.start()
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            t0 = time.perf_counter()
+            replies = list(self.session.get(self.key, payload=self.payload, timeout=40.0))
+            self.times.append(time.perf_counter() - t0)
+            msg = decode(replies[0].ok.payload.to_bytes(), CheckReply) if replies and replies[0].ok else None
+            what = "no reply" if msg is None else "answered" if msg.ok else msg.error[:60]
+            self.outcomes[what] = self.outcomes.get(what, 0) + 1
+            self._stop.wait(self.gap)
+
+    def stop(self) -> "GoodClient":
+        self._stop.set()
+        self._thread.join()
+        return self
+
+
 def free_endpoint() -> str:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
@@ -166,6 +263,8 @@ def main() -> None:
     ap.add_argument("--seconds", type=float, default=10.0, help="length of each phase (default: 10)")
     ap.add_argument("--memory-mb", type=int, default=512)
     ap.add_argument("--rate", type=float, default=40.0, help="bad requests per second (default: 40)")
+    ap.add_argument("--flood-threads", type=int, default=4,
+                    help="threads of the rotating-name flood (default: 4)")
     args = ap.parse_args()
 
     endpoint = free_endpoint()
@@ -179,7 +278,7 @@ def main() -> None:
     monitor = start_monitor(session, system, budget=0.5)
     side = BridgeSide(session, "spot_arm", source="bench", model=system)  # the monitor syncs from it first
     rows = []
-    feed = Feed(int(5 * args.seconds / 0.005) + 100)  # the events of every phase
+    feed = Feed(int(7 * args.seconds / 0.005) + 100)  # the events of every phase
     try:
         quiet = feed.latencies(session, args.seconds)
         rows.append(row("quiet", quiet))
@@ -224,6 +323,40 @@ def main() -> None:
         inproc = feed.latencies(session, 3.0)  # about the build's length
         building.join()
         rows.append(row("in-process peer (the same model built on a thread)", inproc))
+
+        spawn = multiprocessing.get_context("spawn")
+        good = GoodClient(session)
+        checks_quiet = feed.latencies(session, args.seconds)
+        good_quiet = good.stop()
+        rows.append(row("quiet, with the good check client", checks_quiet))
+        results = spawn.Queue()
+        flooder = spawn.Process(target=rotating, args=(endpoint, args.seconds + 1.5, args.flood_threads, results))
+        rate_limited_before = monitor.check_counters.rate_limited
+        flooder.start()
+        time.sleep(1.5)  # the flooder's session is up and sending
+        good = GoodClient(session)
+        checks_rotating = feed.latencies(session, args.seconds)
+        good_rotating = good.stop()
+        rotated = results.get(timeout=120)
+        flooder.join(10)
+        rotated_refused = monitor.check_counters.rate_limited - rate_limited_before
+        rows.append(row(f"rotating names ({args.flood_threads} threads of check/bad{{i}})", checks_rotating))
+
+        waits = start_monitor(session, dataclasses.replace(system, name="spot_arm_waits"), budget=0.5)
+        results = spawn.Queue()
+        hogging = spawn.Process(target=hog, args=(endpoint, "spot_arm_waits", args.seconds + 8.0, results))
+        hogging.start()
+        deadline = time.monotonic() + 30
+        while len(waits._waiting) < 256 and time.monotonic() < deadline:  # the slots full: the attack is on
+            time.sleep(0.1)
+        full_after = len(waits._waiting)
+        good = GoodClient(session, "spot_arm_waits", gap=0.5, wait=1.0)
+        time.sleep(args.seconds)
+        good_waits = good.stop()
+        hogged = results.get(timeout=120)
+        hogging.join(10)
+        made_room = waits.check_counters.made_room
+        waits.close()
     finally:
         monitor.close()
         side.close()
@@ -269,6 +402,36 @@ def main() -> None:
         ["slowest hostile answer", f"{slowest:.2f} s", f"<= {bound:.2f} s (budget + grace + 1 s + restart)",
          verdict(slowest <= bound)],
         ["workers killed", str(predictor.counts["killed"]), "-", ""],
+    ]))
+
+    p90 = lambda xs: statistics.quantiles(xs, n=10, method="inclusive")[8]  # noqa: E731
+    sent = sum(rotated.values())
+    new_names = CHECK_RATE_LIMIT + CHECK_RATE_LIMIT * (args.seconds + 1.5)
+    honoured = sum(t >= 1.0 for t in good_waits.times)
+    print(f"\n### Check limits a client cannot dodge (issue 31): the good client asks check/good\n")
+    print(table(["figure", "value", "target", ""], [
+        ["good client's check p50, quiet", f"{statistics.median(good_quiet.times) * 1e3:.2f} ms", "-", ""],
+        ["good client's check p90, quiet", f"{p90(good_quiet.times) * 1e3:.2f} ms", "-", ""],
+        ["good client's check p90, rotating names",
+         f"{p90(good_rotating.times) * 1e3:.2f} ms ({p90(good_rotating.times) / p90(good_quiet.times):.2f} x quiet)",
+         "<= 2 x quiet", verdict(p90(good_rotating.times) <= 2 * p90(good_quiet.times))],
+        ["good client's check p50, rotating names", f"{statistics.median(good_rotating.times) * 1e3:.2f} ms "
+         f"({statistics.median(good_rotating.times) / statistics.median(good_quiet.times):.2f} x quiet)", "-", ""],
+        ["good client's requests answered, rotating names", f"{good_rotating.outcomes}",
+         f"all {len(good_rotating.times)}",
+         verdict(good_rotating.outcomes.get("answered", 0) == len(good_rotating.times))],
+        ["rotating names: flood's requests", f"{sent} ({sent / (args.seconds + 1.5):.0f}/s): {rotated}", "-", ""],
+        ["rotating names: flood answered", str(rotated.get("answered", 0)),
+         f"<= {new_names:.0f} (the new names' budget)", verdict(rotated.get("answered", 0) <= new_names)],
+        ["rotating names: refused (monitor's count)", str(rotated_refused), "-", ""],
+        ["verdict p99, rotating names", f"{q99(checks_rotating) * 1e3:.2f} ms "
+         f"({q99(checks_rotating) / q99(checks_quiet):.2f} x quiet with the good client)", "-", ""],
+        ["wait slots: waiting when the good client came", f"{full_after}", "256 (full)", verdict(full_after == 256)],
+        ["wait slots: hog's requests", f"{hogged['sent']}, {hogged['answered early']} answered before their wait",
+         "-", ""],
+        ["wait slots: good client's waits honoured (>= 1 s)", f"{honoured}/{len(good_waits.times)}", "all",
+         verdict(honoured == len(good_waits.times) > 0)],
+        ["wait slots: hog's requests answered early to make room", str(made_room), "-", ""],
     ]))
 
 

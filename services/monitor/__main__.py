@@ -77,9 +77,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         k = monitor.check_counters
         log.info("stopped: %d received, %d applied, %d malformed, %d duplicates, %d out of order, %d lost, "
                  "%d divergences; %d unrecovered, %d jumps, %d restarts, %d resyncs, %d history; checks: %d "
-                 "answered, %d errors, %d oversized, %d rate limited, %d waited", c.received, c.applied,
+                 "answered, %d errors, %d oversized, %d rate limited, %d waited (%d early, for another client's "
+                 "share of the waiting slots)", c.received, c.applied,
                  c.malformed, c.duplicates, c.out_of_order, c.lost, c.divergences, c.unrecovered, c.jumps,
-                 c.restarts, c.resyncs, c.history, k.answered, k.errors, k.oversized, k.rate_limited, k.waited)
+                 c.restarts, c.resyncs, c.history, k.answered, k.errors, k.oversized, k.rate_limited, k.waited,
+                 k.made_room)
     finally:
         session.close()
     return 0

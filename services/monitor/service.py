@@ -5,7 +5,8 @@ the bridge's cache (:mod:`services.common.events`); per event it publishes
 :class:`LiveState`, :class:`Verdicts` and :class:`UnsafeReport` (one step;
 the three share the step's ``seq``).  It answers the model queryable, the command
 check (``skinet/<system>/check/<client>``, :mod:`services.monitor.check`, with a request budget
-per client: :class:`~services.common.ratelimit.RateLimiter`, issue 14) and ``get`` on its
+per client, for new names and for all clients together: :class:`~services.common.ratelimit.RateLimiter`,
+issues 14 and 31; its waiting requests shared fairly: :mod:`services.monitor.slots`) and ``get`` on its
 five result keys (the last publication, for late joiners), holds a
 liveliness token and asks the predictor for the live marking without ever
 waiting for it (:mod:`services.monitor.prediction`); when a prediction for the
@@ -52,9 +53,10 @@ import zenoh
 from pydantic import BaseModel
 
 from services.common.events import event_subscriber
-from services.common.ratelimit import CHECK_RATE_LIMIT, RateLimiter
+from services.common.ratelimit import CHECK_RATE_LIMIT, CHECK_TOTAL_FACTOR, OK, RateLimiter
 from services.common.zenoh_config import undeclare
 from services.monitor.check import MAX_REQUEST, Checker, Policy, request_from
+from services.monitor.slots import FREE, fair_slot
 from services.monitor.divergences import DivergenceLog
 from services.monitor.engine import Counters, Engine, MarkingKey, Step
 from services.monitor.prediction import PredictionClient, PredictorStats
@@ -72,7 +74,7 @@ from skinet.wire.messages import (
 log = logging.getLogger("skinet.monitor")
 _LOG_FIRST = 10  # log the first occurrences of each problem, then every 1000th
 MAX_EVENT = 64 << 10  # bytes; a canonical event or a heartbeat is a few hundred
-MAX_WAITING = 256  # check requests waiting at once; more are answered at once
+MAX_WAITING = 256  # check requests waiting at once, shared fairly between clients (services.monitor.slots)
 MAX_REASON = 512  # bytes of a resync error reply kept as the skillset's reason
 TICK = 0.1  # seconds between the watchdog's looks at silences and waiting checks
 DIVERGENCES_PERIOD = 0.1  # seconds between publications of the divergence list (a burst is one message)
@@ -91,6 +93,7 @@ class CheckCounters:
     oversized: int = 0  # payloads or parameters over MAX_REQUEST bytes, refused before decoding
     rate_limited: int = 0  # refused by the per-client budget
     waited: int = 0  # answered after waiting for a synced state or a fresh prediction
+    made_room: int = 0  # answered before their wait was over, for another client below its share of the slots
 
 
 @dataclass
@@ -137,7 +140,7 @@ class Monitor:
         self._engine = Engine(system, prediction_cache=prediction_cache)
         self.checker = Checker(system, check_policy)
         self.client = keys.check_chunk(client, "client name")
-        self.check_limiter = RateLimiter(check_rate_limit)
+        self.check_limiter = RateLimiter(check_rate_limit, total=CHECK_TOTAL_FACTOR * check_rate_limit)
         self._lock = threading.Lock()
         self._changed = threading.Condition(self._lock)
         self._version = 0
@@ -582,11 +585,12 @@ class Monitor:
                            max(size, len(parameters)), client, MAX_REQUEST)
             return self._refusal(f"check request of {max(size, len(parameters))} bytes refused (limit "
                                  f"{MAX_REQUEST} bytes)"), None
-        if not self.check_limiter.allow(client):
+        why = self.check_limiter.take(client)
+        if why != OK:
             with self._lock:
                 c.rate_limited += 1
-                self._warn(c.rate_limited, "check requests of '%s' over its rate limit refused", client)
-            return self._refusal(self.check_limiter.refusal(client)), None
+                self._warn(c.rate_limited, "check requests of '%s' over the rate limit (%s) refused", client, why)
+            return self._refusal(self.check_limiter.refusal(client, why)), None
         payload = query.payload.to_bytes() if query.payload is not None else None
         request = request_from(self.system.name, payload, parameters)
         reply = request if isinstance(request, CheckReply) else self.check(request)
@@ -603,11 +607,21 @@ class Monitor:
 
     def _keep(self, query: zenoh.Query, request: CheckRequest, client: str) -> bool:
         """Keep ``query`` until the state is synced and the prediction fresh, or ``request.wait`` s (the watchdog
-        answers it); False when too many wait already (answered at once)."""
+        answers it); False when the client has its share of the slots already (answered at once).  A client
+        below its share takes the oldest slot of the client holding the most when all are taken: that request
+        is answered now, as it stands."""
         with self._lock:
-            if len(self._waiting) >= MAX_WAITING or self._closed:
+            if self._closed:
                 return False
+            slot = fair_slot([w.client for w in self._waiting], client, MAX_WAITING)
+            if slot is None:
+                return False
+            evicted = self._waiting.pop(slot) if slot != FREE else None
+            if evicted is not None:
+                self.check_counters.made_room += 1
             self._waiting.append(_Waiting(time.monotonic() + request.wait, query, request, client))
+        if evicted is not None:
+            self._answer(evicted)
         self._wake.set()
         return True
 
@@ -621,15 +635,19 @@ class Monitor:
             due = [w for w in self._waiting if ready or now >= w.deadline]
             self._waiting = [w for w in self._waiting if w not in due]
         for w in due:
-            try:
-                reply = self.check(w.request)
-                with self._lock:
-                    self.check_counters.waited += 1
-                w.query.reply(keys.check(self.system.name, w.client), encode(reply))
-            except Exception:
-                log.exception("error while answering a check query")
-            finally:
-                w.query.drop()
+            self._answer(w)
+
+    def _answer(self, w: _Waiting) -> None:
+        """Answer a waiting check with the state as it is now."""
+        try:
+            reply = self.check(w.request)
+            with self._lock:
+                self.check_counters.waited += 1
+            w.query.reply(keys.check(self.system.name, w.client), encode(reply))
+        except Exception:
+            log.exception("error while answering a check query")
+        finally:
+            w.query.drop()
 
     def _watch(self) -> None:
         """The watchdog: silences past the bound (lost skillsets), resyncs due again, waiting checks."""
@@ -761,8 +779,8 @@ def start_monitor(session: zenoh.Session, system: System, **options: object) -> 
     which doubles burst throughput, see ``benchmarks/bench_latency.py``), ``check_policy``
     (a :class:`~services.monitor.check.Policy` for ``skinet/<system>/check``; default: warn,
     never deny), ``client`` (the client chunk of its predict queries: its router login,
-    default ``local``), ``check_rate_limit`` (check requests per second per client, 0: no
-    limit; default 20), ``lost_after`` (seconds of silence from a skillset's source after
+    default ``local``), ``check_rate_limit`` (check requests per second per client and new client names per
+    second, five times as many from all clients together; 0: no limit; default 20), ``lost_after`` (seconds of silence from a skillset's source after
     which it is lost, default 2; SPEC §7).
     """
     return Monitor(session, system, **options)  # type: ignore[arg-type]

@@ -21,9 +21,9 @@ the reply is sent (ZENOH.md).
 Per-client rate limit (issue 14): ``<client>`` is the querier's router login (the
 access control lets user ``U`` query only ``.../predict/U``); each client has a
 token bucket (:class:`~services.common.ratelimit.RateLimiter`, ``rate_limit``
-requests/s), and a query over it is answered at once with ``ok=False`` and
-``rate limited: ...``, before it is even decoded, so a flooding client neither
-queues behind nor ahead of the others.  ``max_pending`` still bounds the whole
+requests/s; new client names share a budget of as many names/s, issue 31), and a query over it is
+answered at once with ``ok=False`` and ``rate limited: ...``, before it is even decoded, so a flooding
+client neither queues behind nor ahead of the others.  ``max_pending`` still bounds the whole
 instance, and one client may hold at most half of it (``busy: client ... has its
 share``), so requests that are slow to answer cannot fill it either.
 
@@ -46,7 +46,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import zenoh
 
-from services.common.ratelimit import PREDICT_RATE_LIMIT as RATE_LIMIT, RateLimiter
+from services.common.ratelimit import OK, PREDICT_RATE_LIMIT as RATE_LIMIT, RateLimiter
 from services.common.zenoh_config import undeclare
 from services.sandbox import Worker, WorkerError
 from skinet.verify.explore import DEFAULT_MEMORY_LIMIT
@@ -143,10 +143,11 @@ class Predictor:
                     self._count("failed")
                     query.reply_err(f"key '{key}': the client chunk must be a name (skinet/<system>/predict/<client>)")
                 return
-            if not self.limiter.allow(client):  # before anything else: a refusal must stay cheap
+            why = self.limiter.take(client)
+            if why != OK:  # before anything else: a refusal must stay cheap
                 with query:
                     system = key.split("/")[1] if "*" not in key.split("/")[1] else keys.ANY_SYSTEM
-                    self._reply(query, self._failure(system, "", 0, self.limiter.refusal(client)), "limited")
+                    self._reply(query, self._failure(system, "", 0, self.limiter.refusal(client, why)), "limited")
                 return
             request = self._decode(query, key)
             if isinstance(request, PredictReply):

@@ -22,13 +22,14 @@ from deploy_support import (
     REPO, SYSTEM, MissionObserver, Services, Tokens, acl_router_config, free_port, login, wait_until,
 )
 from services.monitor import start_monitor
+from services.monitor.check import parse_command
 from skinet.files import load_system
 from skinet.live import LiveSystem
 from skinet.system import System, marking_to_json
 from skinet.wire import keys
 from skinet.wire.codec import decode, encode
 from skinet.wire.convert import bundle, statuses
-from skinet.wire.messages import CanonicalEvent, PredictReply, PredictRequest, SkillsetStatus
+from skinet.wire.messages import CanonicalEvent, CheckReply, PredictReply, PredictRequest, SkillsetStatus
 from tests.bridge_side import BridgeSide
 
 USERS = ("bridge", "monitor", "predictor", "robot", "observer", "hub", "pilot", "operator")
@@ -114,6 +115,37 @@ def test_a_forged_client_chunk_is_refused_by_the_acl(router: str) -> None:
         for q in queryables:
             q.undeclare()
         for s in (*sessions.values(), *servers.values()):
+            s.close()
+
+
+def test_a_logged_in_client_rotating_names_reaches_the_check_under_its_own_name_only(router: str) -> None:
+    """Issue 31: the flood under ``check/bad{i}`` that an unauthenticated peer lets through.  Behind the
+    router every name but the user's own is dropped before the monitor sees it, so the monitor's buckets are
+    the logged-in users' and the flood costs the monitor nothing."""
+    system, _ = load_system(REPO / "skillsets" / "spot_arm.toml")
+    sessions = {user: login(router, user) for user in ("monitor", "observer", "operator")}
+    monitor = start_monitor(sessions["monitor"], system, client="monitor")
+    request = encode(parse_command("spot:init_power.start"))
+
+    def outcome(session: zenoh.Session, client: str) -> str:
+        replies = list(session.get(keys.check(SYSTEM, client), payload=request, timeout=2.0))
+        if not replies:
+            return "dropped"
+        reply = decode(replies[0].ok.payload.to_bytes(), CheckReply) if replies[0].ok is not None else None
+        return "answered" if reply is not None and reply.ok else f"refused {replies}"
+
+    try:
+        wait_until(lambda: outcome(sessions["operator"], "operator") == "answered", 10, "the check's queryable")
+        flood = [sessions["observer"].get(keys.check(SYSTEM, name), payload=request, timeout=2.0)
+                 for name in [f"bad{i}" for i in range(200)] + ["operator", "monitor", "local"] * 10]
+        assert [len(list(replies)) for replies in flood] == [0] * 230, "the router drops every other name"
+        assert outcome(sessions["observer"], "observer") == "answered"
+        c = monitor.check_counters
+        assert (c.answered, c.rate_limited, c.errors) == (2, 0, 0), c  # the operator's and the observer's own
+        assert monitor.check_limiter.tracked() == 2
+    finally:
+        monitor.close()
+        for s in sessions.values():
             s.close()
 
 

@@ -435,3 +435,21 @@ def test_rate_limit_per_client(client: zenoh.Session, predictor: Launcher, syste
     answers, _ = ask(client, payload, client="*")
     assert answers == ["error: key 'skinet/spot_arm/predict/*': the client chunk must be a name "
                        "(skinet/<system>/predict/<client>)"]
+
+
+def test_new_client_names_share_one_budget(client: zenoh.Session, predictor: Launcher, system: System,
+                                           model: ModelBundle) -> None:
+    """Issue 31: a client asking under a new name each time gets the new names' budget (the burst, then
+    ``--rate-limit`` names a second), not a full bucket per name."""
+    ModelServer(client, model)
+    predictor("p1", "--rate-limit", "2", "--rate-burst", "3")
+    payload = encode(request(system, model.digest))
+    t0 = time.monotonic()
+    flood = [ask(client, payload, client=f"bad{i}") for i in range(10)]
+    seconds = time.monotonic() - t0
+    replies = [a for (answers, _) in flood for a in answers if isinstance(a, PredictReply)]
+    oks = [a for a in replies if a.ok]
+    refused = {a.error for a in replies if not a.ok}
+    assert len(replies) == 10 and 3 <= len(oks) <= 3 + 2 * seconds, (seconds, flood)
+    assert refused == {"rate limited: too many new clients (more than 2 new names/s, 1024 clients at most); "
+                       "ask again under a name already used"}
