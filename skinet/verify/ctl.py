@@ -15,8 +15,10 @@ Sistla (1986) on predecessors generated from the product structure; ``AF`` and
 the box, "has a successor in Z" is one vectorised pass over slices of the box
 per component edge, with no index arithmetic at all.  Cost:
 linear in the stored markings and edges; memory: a few bytes per index (one
-per boolean array, one for ``outdeg``, one or two for ranks) plus chunks.  The
-space's deadline is checked per chunk, so the budget bounds the fixpoints too.
+per boolean array, one for ``outdeg``, one or two for ranks) plus chunks.  One
+deadline (the space's) bounds the whole evaluation: every fixpoint and every
+pass over the markings checks it per chunk, and past it each remaining operator
+costs O(1) (docs/how-it-works.md, "One deadline bounds the whole evaluation").
 """
 
 from __future__ import annotations
@@ -34,6 +36,13 @@ from skinet.verify.explore import CHUNK, StateSpace, expand_codes, expand_edges,
 
 
 UNREACHED = np.iinfo(np.int32).max  # distance or rank of a marking from which the target is not known reachable
+# Atoms of a state formula evaluated whatever the deadline (one pass over the markings each);
+# past the deadline, a state formula with more is undecided: the work stays bounded.
+GRACE_ATOMS = 8
+
+
+class _Late(Exception):
+    """The deadline passed while a state formula was being evaluated."""
 
 
 @dataclass
@@ -537,25 +546,20 @@ def check(kripke: Kripke, formula: Expr) -> Result:
 
     On a complete exploration ``lower`` and ``upper`` are one array unless the
     deadline cut a fixpoint.  A formula that needs no exploration
-    (:func:`constant`) is answered exactly whatever was explored; once the
-    deadline has passed, a formula with a temporal operator is answered
-    undecided at once (no fixpoint is started), so nested operators cost
-    nothing more past the budget.  Cost: one fixpoint per temporal operator,
-    each linear in the stored markings and edges.
+    (:func:`constant`) is answered exactly whatever was explored.  Once the
+    deadline has passed, every operator not yet computed, and every operator
+    whose operands return after it, is undecided at once (no fixpoint and no
+    pass over the markings is started), and a state formula is evaluated only
+    up to :data:`GRACE_ATOMS` atoms: the work past the budget is bounded by a
+    constant, not by the formula (README, ``skinet ctl``).  Cost: one fixpoint
+    per temporal operator, each linear in the stored markings and edges.
     """
-    s = kripke.space
     st = kripke.stored
     value = constant(formula)
     if value is not None:
         return _constant_result(kripke, formula, value)
     if isinstance(formula, (PlaceAtom, Const)) or not is_temporal(formula):
-        if s.codes is None:  # on the box, atoms broadcast along their component's axis: one array at the end
-            v = evaluate(formula, lambda a: place_values(s, a, flat=False))
-            v = np.broadcast_to(np.asarray(v, dtype=bool), s.shape).reshape(-1) & st
-        else:
-            v = evaluate(formula, lambda a: place_values(s, a))
-            v = np.broadcast_to(np.asarray(v, dtype=bool), (s.size,)) & st
-        return Result(v, v)
+        return _state_formula(kripke, formula)
     if kripke._expired():
         return _undecided(kripke)
     if isinstance(formula, Not):
@@ -599,6 +603,32 @@ def check(kripke: Kripke, formula: Expr) -> Result:
         if op == "AG":  # AG f = not EF not f, from f's result (checking f again would double the work per level)
             return _negate(kripke, _ef(kripke, _negate(kripke, a)))
     raise TypeError(f"not a CTL formula: {formula!r}")
+
+
+def _state_formula(kripke: Kripke, formula: Expr) -> Result:
+    """A formula without temporal operator, exact at every stored marking; undecided if late.
+
+    Its first :data:`GRACE_ATOMS` atoms are evaluated whatever the deadline (a
+    formula such as ``spot:Busy`` is still answered after a cut exploration);
+    each further atom checks it.  Cost: one pass over the markings per atom
+    (on the box, per local state) and per connective.
+    """
+    s = kripke.space
+    box = s.codes is None  # on the box, atoms broadcast along their component's axis: one array at the end
+    atoms = [0]
+
+    def atom(a: PlaceAtom) -> np.ndarray:
+        atoms[0] += 1
+        if atoms[0] > GRACE_ATOMS and kripke._expired():
+            raise _Late
+        return place_values(s, a, flat=not box)
+
+    try:
+        v = evaluate(formula, atom)
+    except _Late:
+        return _undecided(kripke)
+    v = np.broadcast_to(np.asarray(v, dtype=bool), s.shape if box else (s.size,)).reshape(-1) & kripke.stored
+    return Result(v, v)
 
 
 def _constant_result(kripke: Kripke, formula: Expr, value: bool) -> Result:
