@@ -63,14 +63,15 @@ def _positive_seconds(text: str) -> float:
 
 
 def _budget(text: str) -> float:
-    from skinet.wire.limits import MIN_BUDGET
+    from skinet.wire.limits import MAX_BUDGET, MIN_BUDGET
 
     try:
         value = float(text)
     except ValueError:
         value = float("nan")
-    if not MIN_BUDGET <= value < float("inf"):
-        raise ValueError(f"expected a number of seconds >= {MIN_BUDGET:g} (the predictor's minimum budget)")
+    if not MIN_BUDGET <= value <= MAX_BUDGET:
+        raise ValueError(f"expected a number of seconds from {MIN_BUDGET:g} (the predictor's minimum budget) to "
+                         f"{MAX_BUDGET:g} (one day)")
     return value
 
 

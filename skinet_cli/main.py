@@ -30,7 +30,7 @@ from skinet.verify.explore import Deadline, explore
 from skinet.verify.predict import Forecast, forecast
 from skinet_cli.environment import check_environment
 from skinet_cli.options import ArgumentParser, count, load_live_system, print_warnings, state_marking
-from skinet_cli.options import seconds as duration
+from skinet_cli.options import seconds as duration, time_budget
 from skinet_cli.memory import add_memory_arg, memory_limit
 from skinet_cli.render import analysis_text, seconds, table
 
@@ -208,7 +208,8 @@ def _system_args(c: argparse.ArgumentParser) -> None:
         "--what-if", action="store_true",
         help="accept a --state the robot cannot be in (an invariant violated, or unreachable) for what-if analysis",
     )
-    c.add_argument("--budget", type=duration(), default=10.0, help="exploration time budget in seconds (default: 10)")
+    c.add_argument("--budget", type=time_budget(), default=10.0,
+                   help="exploration time budget in seconds, at most 86400 (default: 10)")
     c.add_argument("--max-depth", type=count(0), help="expand at most this many breadth-first layers")
     add_memory_arg(c)
     c.add_argument("--no-seeds", action="store_true", help="do not seed exploration with firable events")

@@ -23,7 +23,7 @@ from skinet.files import load_state, load_system, parse_state, read_text
 from skinet.system import Marking, System
 from skinet.tomltext import locate, parse_toml
 from skinet.wire.keys import check_chunk
-from skinet.wire.limits import MIN_BUDGET
+from skinet.wire.limits import MAX_BUDGET, MIN_BUDGET
 
 
 class ArgumentParser(argparse.ArgumentParser):
@@ -72,9 +72,15 @@ def seconds_within(low: float, high: float, env: str | None = None) -> Callable[
 
 
 def budget(env: str | None = None) -> Callable[[str], float]:
-    """A prediction budget in seconds: at least the predictor's minimum (SPEC §6.1)."""
-    return _number(float, f"a number of seconds >= {MIN_BUDGET:g} (the predictor's minimum budget)",
-                   MIN_BUDGET, False, None, env)
+    """A prediction budget in seconds: at least the predictor's minimum (SPEC §6.1), at most one day."""
+    return _number(float, f"a number of seconds from {MIN_BUDGET:g} (the predictor's minimum budget) to "
+                          f"{MAX_BUDGET:g} (one day)", MIN_BUDGET, False, MAX_BUDGET, env)
+
+
+def time_budget(env: str | None = None) -> Callable[[str], float]:
+    """An exploration or planning budget in seconds: > 0, at most one day (``MAX_BUDGET``)."""
+    return _number(float, f"a number of seconds > 0 and at most {MAX_BUDGET:g} (one day)", 0.0, True, MAX_BUDGET,
+                   env)
 
 
 def number(low: float, env: str | None = None) -> Callable[[str], float]:

@@ -20,7 +20,7 @@ if TYPE_CHECKING:  # pydantic only for the types: `skinet plan` does not import 
     from skinet.wire.messages import PlanBranch, PlanStep
 from skinet_cli.memory import add_memory_arg, memory_limit
 from skinet_cli.options import load_live_system, print_warnings, state_marking
-from skinet_cli.options import seconds as duration
+from skinet_cli.options import seconds as duration, time_budget
 from skinet_cli.render import seconds
 
 HELP = "plan the commands that reach a goal without violating any property (SPEC §8)"
@@ -54,7 +54,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     c.add_argument("--state", metavar="STATE",
                    help="start marking: a JSON file, or the JSON itself ('{\"spot\": {...}}'); omitted resources are "
                         "initial, omitted skills idle (default: the initial marking)")
-    c.add_argument("--budget", type=duration(), default=10.0,
+    c.add_argument("--budget", type=time_budget(), default=10.0,
                    help="time budget per goal in seconds (default: 10); past it the answer is unknown")
     add_memory_arg(c)
     c.add_argument("--engine", choices=ENGINES, default="auto",

@@ -30,7 +30,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     c.add_argument("--once", action="store_true", help="print one view (after the first prediction) and exit")
     c.add_argument("--duration", type=seconds(), help="stop after this many seconds")
     c.add_argument("--budget", type=budget(), default=1.0,
-                   help="prediction budget in seconds, at least 0.05 (default: 1)")
+                   help="prediction budget in seconds, from 0.05 to 86400 (default: 1)")
     c.add_argument("--dashboard", type=count(0, 65535), metavar="PORT",
                    help="also serve the live web dashboard on this port (0: a free one; see skinet dashboard)")
     c.add_argument("--dashboard-host", default="127.0.0.1", help="address of --dashboard (default: 127.0.0.1)")

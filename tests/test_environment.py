@@ -56,8 +56,10 @@ def test_every_variable_the_repository_names_is_in_the_table() -> None:
      "port from 1 to 65535, e.g. 127.0.0.1:7447, got '0.0.0.0:'"),
     ("SKINET_ONBOARD_ENDPOINT", "robot:7447", "environment variable SKINET_ONBOARD_ENDPOINT: an endpoint is "
      "PROTOCOL/ADDRESS, e.g. tcp/127.0.0.1:7447, got 'robot:7447'"),
-    ("SKINET_PREDICT_BUDGET", "0.01", "environment variable SKINET_PREDICT_BUDGET: expected a number of seconds >= "
-     "0.05 (the predictor's minimum budget), got '0.01'"),
+    ("SKINET_PREDICT_BUDGET", "0.01", "environment variable SKINET_PREDICT_BUDGET: expected a number of seconds from "
+     "0.05 (the predictor's minimum budget) to 86400 (one day), got '0.01'"),
+    ("SKINET_PREDICT_BUDGET", "1e308", "environment variable SKINET_PREDICT_BUDGET: expected a number of seconds from "
+     "0.05 (the predictor's minimum budget) to 86400 (one day), got '1e308'"),
     ("SKINET_INCLUDE_ROOT", "/no/such/folder", "environment variable SKINET_INCLUDE_ROOT: expected an existing "
      "folder, got '/no/such/folder'"),
 ])

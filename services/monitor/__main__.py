@@ -28,7 +28,7 @@ def build_parser() -> ArgumentParser:
     p.add_argument("system", help="system file (.toml), e.g. skillsets/spot_arm.toml")
     p.add_argument("--id", dest="instance_id", type=key_name("instance id"), help="instance id in the liveliness token (default: random)")
     p.add_argument("--budget", type=budget(), default=1.0,
-                   help="predictor exploration budget, seconds, at least 0.05 (default: 1)")
+                   help="predictor exploration budget, seconds, from 0.05 to 86400 (default: 1)")
     p.add_argument("--query-timeout", type=seconds(),
                    help="predict query timeout, seconds (default: 1.25 x budget + 3: the predictor answers within "
                         "its budget, the first query also waits for the model bundle)")

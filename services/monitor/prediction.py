@@ -38,7 +38,7 @@ from skinet.system import Marking, System
 from skinet.wire import keys
 from skinet.wire.codec import DecodeError, decode, encode
 from skinet.wire.convert import statuses
-from skinet.wire.limits import MIN_BUDGET
+from skinet.wire.limits import MAX_BUDGET, MIN_BUDGET
 from skinet.wire.messages import PredictReply, PredictRequest
 
 log = logging.getLogger("skinet.monitor")
@@ -85,6 +85,8 @@ def check_budget(budget: float, timeout: float | None = None) -> None:
     if not budget >= MIN_BUDGET:
         raise ValueError(f"budget {budget:g} s is below the predictor's minimum of {MIN_BUDGET:g} s: "
                          "no prediction could ever be asked for")
+    if not budget <= MAX_BUDGET:
+        raise ValueError(f"budget {budget:g} s is above the maximum of {MAX_BUDGET:g} s (one day)")
     if timeout is not None and not timeout > budget:
         raise ValueError(f"query timeout {timeout:g} s is not above the budget {budget:g} s: "
                          "no prediction could ever arrive in time")

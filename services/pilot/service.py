@@ -51,6 +51,7 @@ from skinet.ros.keys import KeyStyle
 from skinet.system import System
 from skinet.wire import keys
 from skinet.wire.codec import DecodeError, decode, encode
+from skinet.wire.limits import MAX_BUDGET
 from skinet.wire.convert import marking_of, plan_steps
 from skinet.wire.messages import (
     CheckReply, CheckRequest, LiveState, PilotCommand, PilotGoalReply, PilotGoalRequest, PilotStatus, PlanStep,
@@ -116,6 +117,8 @@ class Pilot:
         self.name = keys.check_chunk(system.name, "system name")
         self.instance = keys.check_chunk(instance or uuid.uuid4().hex[:8], "instance id")
         self.client = keys.check_chunk(client or keys.LOCAL_CLIENT, "client name")
+        if not 0 < budget <= MAX_BUDGET:  # a NaN fails too
+            raise ValueError(f"planning budget {budget:g} s is not from 0 to {MAX_BUDGET:g} s (one day)")
         self.response_timeout, self.budget = response_timeout, budget
         self.typemap = dict(typemap or {})
         self.actuator: Actuator = actuator if actuator is not None else default_actuator(

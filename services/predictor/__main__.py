@@ -36,7 +36,7 @@ def build_parser() -> ArgumentParser:
     parser.add_argument("--fetch-timeout", type=seconds(), default=2.0,
                         help="seconds to wait for a model bundle (default: 2)")
     parser.add_argument("--max-budget", type=budget(), default=10.0,
-                        help="cap on a request's budget, seconds, at least 0.05 (default: 10)")
+                        help="cap on a request's budget, seconds, from 0.05 to 86400 (default: 10)")
     parser.add_argument("--memory-limit", type=memory_size, default=DEFAULT_MEMORY_LIMIT, metavar="SIZE",
                         help="peak memory of the process, shared by the workers, e.g. 2GiB (default: 1GiB); "
                              "beyond it answers are truncated, never refused")

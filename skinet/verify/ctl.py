@@ -15,8 +15,10 @@ Sistla (1986) on predecessors generated from the product structure; ``AF`` and
 the box, "has a successor in Z" is one vectorised pass over slices of the box
 per component edge, with no index arithmetic at all.  Cost:
 linear in the stored markings and edges; memory: a few bytes per index (one
-per boolean array, one for ``outdeg``, one or two for ranks) plus chunks.  The
-space's deadline is checked per chunk, so the budget bounds the fixpoints too.
+per boolean array, one for ``outdeg``, one or two for ranks) plus chunks.  One
+deadline (the space's) bounds the whole evaluation: every fixpoint and every
+pass over the markings checks it per chunk, and past it each remaining operator
+costs O(1) (docs/how-it-works.md, "One deadline bounds the whole evaluation").
 """
 
 from __future__ import annotations
@@ -34,6 +36,13 @@ from skinet.verify.explore import CHUNK, StateSpace, expand_codes, expand_edges,
 
 
 UNREACHED = np.iinfo(np.int32).max  # distance or rank of a marking from which the target is not known reachable
+# Atoms of a state formula evaluated whatever the deadline (one pass over the markings each);
+# past the deadline, a state formula with more is undecided: the work stays bounded.
+GRACE_ATOMS = 8
+
+
+class _Late(Exception):
+    """The deadline passed while a state formula was being evaluated."""
 
 
 @dataclass
@@ -83,12 +92,19 @@ class Kripke:
                 dead &= x.reshape(view)
             dead = dead.reshape(-1) & self.expanded
         else:
-            outdeg, loop = self._local_degrees()
+            degrees = self._local_degrees(timed=False)  # once per structure, whatever the deadline
+            assert degrees is not None
+            outdeg, loop = degrees
             dead = (outdeg == 0) & ~loop & self.expanded
         return dead if dead.any() else none
 
-    def _local_degrees(self) -> tuple[np.ndarray, np.ndarray]:
-        """Out-degree without self-loops and self-loop flag, from the components' graphs."""
+    def _local_degrees(self, timed: bool = True) -> tuple[np.ndarray, np.ndarray] | None:
+        """Out-degree without self-loops and self-loop flag, from the components' graphs.
+
+        ``None`` when ``timed`` and the deadline expires during the pass (checked
+        per component on the box, per chunk elsewhere): partial degrees would
+        discharge markings too early in the counting fixpoints.
+        """
         s = self.space
         dtype = self.degree_dtype
         if s.codes is None:
@@ -99,6 +115,8 @@ class Kripke:
                 view[i] = s.shape[i]
                 outdeg += g.csr()[2].astype(dtype).reshape(view)
                 loop |= g.loop.reshape(view)
+                if timed and self._expired():
+                    return None
             return outdeg.reshape(-1), loop.reshape(-1)
         outdeg = np.zeros(s.size, dtype=dtype)
         loop = np.zeros(s.size, dtype=bool)
@@ -108,21 +126,42 @@ class Kripke:
                 digit = (codes // s.strides[i]) % s.shape[i]
                 outdeg[lo:lo + CHUNK] += g.csr()[2].astype(dtype)[digit]
                 loop[lo:lo + CHUNK] |= g.loop[digit]
+            if timed and self._expired():
+                return None
         return outdeg, loop
 
     @cached_property
     def loop(self) -> np.ndarray:
-        """A step back to itself (deadlocks included: they are sinks)."""
-        return self._local_degrees()[1] | self.deadlock
+        """A step back to itself (deadlocks included: they are sinks); computed once, whatever the deadline."""
+        degrees = self._local_degrees(timed=False)
+        assert degrees is not None
+        return degrees[1] | self.deadlock
+
+    def timed_loop(self) -> np.ndarray | None:
+        """:attr:`loop`, or ``None`` when the deadline expires before it is known (it is kept once known)."""
+        if "loop" not in self.__dict__:
+            degrees = self._local_degrees()
+            if degrees is None:
+                return None
+            self.__dict__["loop"] = degrees[1] | self.deadlock
+        return self.loop
 
     @cached_property
     def outdeg(self) -> np.ndarray:
         """Successors, self-loop included."""
-        return self.fresh_outdeg()
+        degrees = self._local_degrees(timed=False)
+        assert degrees is not None
+        return self._with_loops(*degrees)
 
-    def fresh_outdeg(self) -> np.ndarray:
-        """A new :attr:`outdeg` array (the counting fixpoints consume one each; not kept)."""
-        outdeg, loop = self._local_degrees()
+    def fresh_outdeg(self) -> np.ndarray | None:
+        """A new :attr:`outdeg` array (the counting fixpoints consume one each; not kept).
+
+        ``None`` when the deadline expires during the pass.
+        """
+        degrees = self._local_degrees()
+        return None if degrees is None else self._with_loops(*degrees)
+
+    def _with_loops(self, outdeg: np.ndarray, loop: np.ndarray) -> np.ndarray:
         loop |= self.deadlock
         outdeg += loop
         return outdeg
@@ -138,15 +177,27 @@ class Kripke:
         return False
 
     def _initial(self, g: np.ndarray, extra: np.ndarray | None) -> Iterator[np.ndarray]:
-        """Indices of ``(g & stored) | extra``, block by block (no copy of the whole set)."""
+        """Indices of ``(g & stored) | extra``, block by block (no copy of the whole set).
+
+        Stops early once the deadline has expired (the caller checks it after the loop).
+        """
         step = CHUNK * 32
         for lo in range(0, self.space.size, step):
+            if self._expired():
+                return
             block = g[lo:lo + step] & self.stored[lo:lo + step]
             if extra is not None:
                 block |= extra[lo:lo + step]
             idx = np.flatnonzero(block)
             if idx.size:
                 yield idx + lo
+
+    def _chunks(self, mask: np.ndarray) -> Iterator[np.ndarray]:
+        """:func:`_nonzero_chunks`, stopping early once the deadline has expired (the caller checks it after)."""
+        for idx in _nonzero_chunks(mask):
+            if self._expired():
+                return
+            yield idx
 
     def _all(self) -> np.ndarray:
         return np.array(self.stored, dtype=bool)
@@ -190,14 +241,14 @@ class Kripke:
         return cache
 
     def _ex(self, z: np.ndarray, frontier_value: bool, over: bool) -> np.ndarray:
-        out = self.loop & z
-        for mask_idx in _nonzero_chunks(z & self.stored):
+        loop = self.timed_loop()
+        out = np.zeros(self.space.size, dtype=bool) if loop is None else loop & z
+        for mask_idx in self._chunks(z & self.stored):
             for p in self.predecessor_chunks(mask_idx):
                 out[p] = True
-            if self._expired():
-                if over:
-                    return self._all()
-                break
+        if self._expired():  # out is what was proven so far: an under-approximation
+            if over:
+                return self._all()
         out &= self.expanded
         if frontier_value:
             out |= self.frontier
@@ -228,8 +279,8 @@ class Kripke:
                     p = unique_codes(p[ok[p] & ~sat[p]])
                     sat[p] = True
                     found.append(p)
-                if self._expired():
-                    return self._all() if frontier_value else sat
+            if self._expired():
+                return self._all() if frontier_value else sat
             if not found:
                 return sat
             layers = [np.concatenate(found)]
@@ -245,6 +296,9 @@ class Kripke:
         hold the dtype's maximum.
         """
         remaining = self.fresh_outdeg()
+        if remaining is None:  # nothing proven (lower), everything possible (upper)
+            unranked = np.full(self.space.size, np.iinfo(np.uint8).max, dtype=np.uint8) if ranks else None
+            return (self._all() if frontier_value else np.zeros(self.space.size, dtype=bool)), unranked
         rank = np.full(self.space.size, np.iinfo(np.uint8).max, dtype=np.uint8) if ranks else None
         sat = g & self.stored
         if rank is not None:
@@ -269,8 +323,8 @@ class Kripke:
                     if rank is not None:
                         rank[p] = level
                     found.append(p)
-                if self._expired():
-                    return (self._all() if frontier_value else sat), rank
+            if self._expired():
+                return (self._all() if frontier_value else sat), rank
             if not found:
                 return sat, rank
             layers = [np.concatenate(found)]
@@ -307,12 +361,14 @@ class Kripke:
             del has, drop
         else:
             removed = []
-            for block in _nonzero_chunks(sat & self.expanded):
+            for block in self._chunks(sat & self.expanded):
                 for lo in range(0, block.size, CHUNK):
                     idx = block[lo:lo + CHUNK]
                     removed.append(idx[~self.successor_in(sat, idx)])
                     if self._expired():
                         return cut()
+            if self._expired():
+                return cut()
             for idx in removed:
                 sat[idx] = False
         while removed:
@@ -324,6 +380,8 @@ class Kripke:
             for lo in range(0, todo.size, CHUNK):
                 idx = todo[lo:lo + CHUNK]
                 removed.append(idx[~self.successor_in(sat, idx)])
+                if self._expired():
+                    return cut()
             for idx in removed:
                 sat[idx] = False
             removed = [idx for idx in removed if idx.size]
@@ -488,31 +546,29 @@ def check(kripke: Kripke, formula: Expr) -> Result:
 
     On a complete exploration ``lower`` and ``upper`` are one array unless the
     deadline cut a fixpoint.  A formula that needs no exploration
-    (:func:`constant`) is answered exactly whatever was explored; once the
-    deadline has passed, a formula with a temporal operator is answered
-    undecided at once (no fixpoint is started), so nested operators cost
-    nothing more past the budget.  Cost: one fixpoint per temporal operator,
-    each linear in the stored markings and edges.
+    (:func:`constant`) is answered exactly whatever was explored.  Once the
+    deadline has passed, every operator not yet computed, and every operator
+    whose operands return after it, is undecided at once (no fixpoint and no
+    pass over the markings is started), and a state formula is evaluated only
+    up to :data:`GRACE_ATOMS` atoms: the work past the budget is bounded by a
+    constant, not by the formula (README, ``skinet ctl``).  Cost: one fixpoint
+    per temporal operator, each linear in the stored markings and edges.
     """
-    s = kripke.space
     st = kripke.stored
     value = constant(formula)
     if value is not None:
         return _constant_result(kripke, formula, value)
     if isinstance(formula, (PlaceAtom, Const)) or not is_temporal(formula):
-        if s.codes is None:  # on the box, atoms broadcast along their component's axis: one array at the end
-            v = evaluate(formula, lambda a: place_values(s, a, flat=False))
-            v = np.broadcast_to(np.asarray(v, dtype=bool), s.shape).reshape(-1) & st
-        else:
-            v = evaluate(formula, lambda a: place_values(s, a))
-            v = np.broadcast_to(np.asarray(v, dtype=bool), (s.size,)) & st
-        return Result(v, v)
+        return _state_formula(kripke, formula)
     if kripke._expired():
         return _undecided(kripke)
     if isinstance(formula, Not):
-        return _negate(kripke, check(kripke, formula.arg))
+        a = check(kripke, formula.arg)
+        return _undecided(kripke) if kripke._expired() else _negate(kripke, a)
     if isinstance(formula, (And, Or, Implies)):
         a, b = check(kripke, formula.left), check(kripke, formula.right)
+        if kripke._expired():  # combining costs passes over the markings: none past the deadline
+            return _undecided(kripke)
         same = a.lower is a.upper and b.lower is b.upper
         if isinstance(formula, And):
             lo = a.lower & b.lower
@@ -524,11 +580,15 @@ def check(kripke: Kripke, formula: Expr) -> Result:
         return Result(lo, lo if same else (~a.lower & st) | b.upper)
     if isinstance(formula, Until):
         a, b = check(kripke, formula.left), check(kripke, formula.right)
+        if kripke._expired():
+            return _undecided(kripke)
         if formula.quantifier == "E":
             return _pair(kripke, a, b, lambda f, g, up: (kripke.eu(f, g, up), None))
         return _pair(kripke, a, b, lambda f, g, up: kripke.au(f, g, up, ranks=not up))
     if isinstance(formula, Temporal):
         a = check(kripke, formula.arg)
+        if kripke._expired():
+            return _undecided(kripke)
         op = formula.op
         if op == "EX":
             return _pair(kripke, a, a, lambda _, z, up: (kripke.ex(z, up), None))
@@ -543,6 +603,32 @@ def check(kripke: Kripke, formula: Expr) -> Result:
         if op == "AG":  # AG f = not EF not f, from f's result (checking f again would double the work per level)
             return _negate(kripke, _ef(kripke, _negate(kripke, a)))
     raise TypeError(f"not a CTL formula: {formula!r}")
+
+
+def _state_formula(kripke: Kripke, formula: Expr) -> Result:
+    """A formula without temporal operator, exact at every stored marking; undecided if late.
+
+    Its first :data:`GRACE_ATOMS` atoms are evaluated whatever the deadline (a
+    formula such as ``spot:Busy`` is still answered after a cut exploration);
+    each further atom checks it.  Cost: one pass over the markings per atom
+    (on the box, per local state) and per connective.
+    """
+    s = kripke.space
+    box = s.codes is None  # on the box, atoms broadcast along their component's axis: one array at the end
+    atoms = [0]
+
+    def atom(a: PlaceAtom) -> np.ndarray:
+        atoms[0] += 1
+        if atoms[0] > GRACE_ATOMS and kripke._expired():
+            raise _Late
+        return place_values(s, a, flat=not box)
+
+    try:
+        v = evaluate(formula, atom)
+    except _Late:
+        return _undecided(kripke)
+    v = np.broadcast_to(np.asarray(v, dtype=bool), s.shape if box else (s.size,)).reshape(-1) & kripke.stored
+    return Result(v, v)
 
 
 def _constant_result(kripke: Kripke, formula: Expr, value: bool) -> Result:
@@ -580,10 +666,16 @@ def af(kripke: Kripke, g: Result, ranks: bool = True) -> Result:
 
 
 def _pair(kripke: Kripke, a: Result, b: Result, op) -> Result:
-    """``op(f, g, upper)`` on the lower then the upper operands (once when exact and not cut)."""
+    """``op(f, g, upper)`` on the lower then the upper operands (once when exact and not cut).
+
+    Past the deadline the upper run is not started: every stored marking stays
+    possible, and ``lo`` (sound whatever cut it) is kept.
+    """
     lo, rank = op(a.lower, b.lower, False)
     if kripke.exact and a.lower is a.upper and b.lower is b.upper and not kripke.cut:
         return Result(lo, lo, rank)
+    if kripke._expired():
+        return Result(lo, kripke.stored.view(), rank)
     hi, _ = op(a.upper, b.upper, True)
     return Result(lo, hi, rank)
 

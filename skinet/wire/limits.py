@@ -9,6 +9,11 @@ from __future__ import annotations
 # only be "undecided" everywhere, so a monitor refuses to start with a smaller one.
 MIN_BUDGET = 0.05
 
+# The largest time budget any command, service or request accepts, seconds: one day.
+# Past it a deadline or a query timeout computed from the budget would mean "never"
+# (1e308 seconds overflows the timers it is handed to), so it is refused, not clamped.
+MAX_BUDGET = 86400.0
+
 # The largest PredictRequest payload a predictor decodes, bytes.  A request carries the
 # live marking only: the paper's system takes about 300 bytes, 8 corpus skillsets about
 # 3 KB, so 64 KiB leaves room for a few hundred skillsets.

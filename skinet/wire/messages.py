@@ -17,7 +17,7 @@ from typing import Any, ClassVar, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from skinet.wire.limits import MIN_BUDGET
+from skinet.wire.limits import MAX_BUDGET, MIN_BUDGET
 
 SCHEMA_VERSION = 1
 MAX_CHECK_WAIT = 30.0  # seconds a check request may wait for a synced state and a fresh prediction
@@ -202,8 +202,8 @@ class PredictRequest(_Message):
     digest: str
     seq: int = Field(ge=0, description="monitor query counter")
     skillsets: dict[str, SkillsetStatus] = Field(description="the live marking")
-    budget: float = Field(1.0, ge=MIN_BUDGET, allow_inf_nan=False,
-                          description="exploration time budget, seconds (a number; at least 0.05)")
+    budget: float = Field(1.0, ge=MIN_BUDGET, le=MAX_BUDGET, allow_inf_nan=False,
+                          description="exploration time budget, seconds (a number from 0.05 to 86400)")
     af: dict[str, Literal["fair", "literal"]] = Field(
         default_factory=dict, description="AF per property (SPEC §6.2); properties not listed use fair AF")
 

@@ -116,7 +116,8 @@ def _cases() -> list[Case]:
     bad_name = ("{tmp}/badname.toml:2:8: error: system name 'has space/slash' cannot be used in a Zenoh key "
                 "(letters, digits, _ - . only)")
     seconds = "expected a number of seconds > 0, got '{}'"
-    budget = "expected a number of seconds >= 0.05 (the predictor's minimum budget), got '{}'"
+    budget = "expected a number of seconds from 0.05 (the predictor's minimum budget) to 86400 (one day), got '{}'"
+    time_budget = "expected a number of seconds > 0 and at most 86400 (one day), got '{}'"
 
     # skinet parse / net
     add("skinet", "file", ("parse", "{tmp}/missing.rl"), 1,
@@ -138,9 +139,10 @@ def _cases() -> list[Case]:
         add("skinet", "system", (cmd, "{tmp}/badname.toml", *extra), 1, bad_name)
         add("skinet", "--state", (cmd, SYSTEM, "--state", "{tmp}/missing.json", *extra), 1,
             "{tmp}/missing.json: error: cannot read file: No such file or directory")
-        for bad in ("-5", "0", "nan", "inf", "soon"):
+        # Past one day a deadline would mean "never" (issue 30): 1e308 is refused, not clamped.
+        for bad in ("-5", "0", "nan", "inf", "soon", "1e308", "86400.5"):
             usage("skinet", "--budget", (cmd, SYSTEM, "--budget", bad, *extra),
-                  "argument --budget: " + seconds.format(bad))
+                  "argument --budget: " + time_budget.format(bad))
         for bad in ("-1", "1.5"):
             usage("skinet", "--max-depth", (cmd, SYSTEM, "--max-depth", bad, *extra),
                   f"argument --max-depth: expected an integer >= 0, got '{bad}'")
@@ -215,9 +217,9 @@ def _cases() -> list[Case]:
     add("skinet", "--state", ("plan", SYSTEM, "reach spot:Busy", "--state", '{"spot": {"running": ["stand_up"]}}'), 1,
         "<state>: error: impossible state: 'spot' is not stable: invariant violated (stand_up.inv.powered); the manager "
         "never publishes such a state")
-    for bad in ("0", "-1", "never"):
+    for bad in ("0", "-1", "never", "1e308"):
         usage("skinet", "--budget", ("plan", SYSTEM, "reach spot:Busy", "--budget", bad),
-              "argument --budget: " + seconds.format(bad))
+              "argument --budget: " + time_budget.format(bad))
     usage("skinet", "--memory-limit", ("plan", SYSTEM, "reach spot:Busy", "--memory-limit", "much"),
           "argument --memory-limit: not a size: 'much' (e.g. 1GiB, 512MiB, 2GB)")
     usage("skinet", "--engine", ("plan", SYSTEM, "reach spot:Busy", "--engine", "fast"),
@@ -357,6 +359,7 @@ def _cases() -> list[Case]:
     usage("skinet", "--budget", ("run", SYSTEM, "--budget", "0"), "argument --budget: " + budget.format("0"))
     # Below the predictor's minimum the monitor would never ask, and every check would look fresh (issue 25).
     usage("skinet", "--budget", ("run", SYSTEM, "--budget", "0.01"), "argument --budget: " + budget.format("0.01"))
+    usage("skinet", "--budget", ("run", SYSTEM, "--budget", "1e308"), "argument --budget: " + budget.format("1e308"))
     usage("skinet", "--memory-limit", ("run", SYSTEM, "--memory-limit", "tiny"),
           "argument --memory-limit: not a size: 'tiny' (e.g. 1GiB, 512MiB, 2GB)")
 
@@ -444,11 +447,13 @@ def _cases() -> list[Case]:
         add(program, "system", ("{tmp}/badname.toml",), 1, bad_name)
     usage(pilot, "--instance", (SYSTEM, "--instance", "a/b"), f"argument --instance: instance id 'a/b' {not_a_key}")
     usage(pilot, "--budget", (SYSTEM, "--budget", "0.01"), "argument --budget: " + budget.format("0.01"))
+    usage(pilot, "--budget", (SYSTEM, "--budget", "1e308"), "argument --budget: " + budget.format("1e308"))
     usage(pilot, "--response-timeout", (SYSTEM, "--response-timeout", "-1"),
           "argument --response-timeout: " + seconds.format("-1"))
     usage(mon, "--id", (SYSTEM, "--id", "a b"), f"argument --id: instance id 'a b' {not_a_key}")
     usage(mon, "--budget", (SYSTEM, "--budget", "-1"), "argument --budget: " + budget.format("-1"))
     usage(mon, "--budget", (SYSTEM, "--budget", "0.049"), "argument --budget: " + budget.format("0.049"))
+    usage(mon, "--budget", (SYSTEM, "--budget", "86401"), "argument --budget: " + budget.format("86401"))
     usage(mon, "--query-timeout", (SYSTEM, "--query-timeout", "0"), "argument --query-timeout: " + seconds.format("0"))
     usage(mon, "--query-timeout", (SYSTEM, "--budget", "2", "--query-timeout", "1.5"),
           "argument --query-timeout: 1.5 s is not above --budget 2 s: no prediction could ever arrive in time")
@@ -470,6 +475,7 @@ def _cases() -> list[Case]:
         usage(pred, option, (option, "0"), f"argument {option}: expected an integer >= 1, got '0'")
     usage(pred, "--fetch-timeout", ("--fetch-timeout", "-2"), "argument --fetch-timeout: " + seconds.format("-2"))
     usage(pred, "--max-budget", ("--max-budget", "0.01"), "argument --max-budget: " + budget.format("0.01"))
+    usage(pred, "--max-budget", ("--max-budget", "1e308"), "argument --max-budget: " + budget.format("1e308"))
     usage(pred, "--memory-limit", ("--memory-limit", "1 GiBi"),
           "argument --memory-limit: not a size: '1 GiBi' (e.g. 1GiB, 512MiB, 2GB)")
     usage(pred, "--max-request", ("--max-request", "lots"),

@@ -463,3 +463,17 @@ def test_a_start_the_manager_refuses_is_asked_again_then_ends_the_goal(robot: Ro
     failed = robot.statuses.state("failed", reply.goal_id)
     assert failed.reason == refused.reason + " (2 times)"
     assert (robot.actuator.sent, failed.commands) == ([], 2)  # sent, refused: the recording keeps what went through
+
+
+@pytest.mark.parametrize("budget", [1e308, 86400.5, 0.0, float("nan")])
+def test_a_planning_budget_past_one_day_is_refused(budget: float) -> None:
+    """Past one day a planning deadline would mean "never" (issue 30); refused before any session is used."""
+    from pathlib import Path
+
+    from services.pilot.service import Pilot
+    from skinet.files import load_system
+
+    system, _ = load_system(Path(__file__).resolve().parents[2] / "skillsets" / "spot_arm.toml")
+    with pytest.raises(ValueError) as info:
+        Pilot(None, system, budget=budget)  # type: ignore[arg-type]
+    assert str(info.value) == f"planning budget {budget:g} s is not from 0 to 86400 s (one day)"

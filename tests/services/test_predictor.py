@@ -384,6 +384,9 @@ def test_monitor_refuses_a_budget_below_the_predictors_minimum(peer: zenoh.Sessi
     with pytest.raises(ValueError) as info:
         start_monitor(peer, system, budget=1.0, query_timeout=1.0)
     assert str(info.value) == "query timeout 1 s is not above the budget 1 s: no prediction could ever arrive in time"
+    with pytest.raises(ValueError) as info:  # past one day the query timeout would mean "never" (issue 30)
+        start_monitor(peer, system, budget=1e308)
+    assert str(info.value) == "budget 1e+308 s is above the maximum of 86400 s (one day)"
 
 
 def test_model_bundle_includes_are_never_read(peer: zenoh.Session, system: System,

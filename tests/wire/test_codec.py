@@ -99,6 +99,7 @@ def test_wrong_version(samples: dict[str, BaseModel], version: object, error: st
         ("PredictRequest", {"digest": _DELETE}, "invalid PredictRequest: digest: Field required"),
         ("PredictRequest", {"seq": -1}, "invalid PredictRequest: seq: Input should be greater than or equal to 0"),
         ("PredictRequest", {"budget": 0}, "invalid PredictRequest: budget: Input should be greater than or equal to 0.05"),
+        ("PredictRequest", {"budget": 1e308}, "invalid PredictRequest: budget: Input should be less than or equal to 86400"),
         # Strict: no conversion of a string, a boolean or a float where the contract says otherwise (issue 25).
         ("PredictRequest", {"budget": "2.0"}, "invalid PredictRequest: budget: Input should be a valid number"),
         ("PredictRequest", {"seq": "3"}, "invalid PredictRequest: seq: Input should be a valid integer"),
