@@ -37,7 +37,8 @@ import logging
 import threading
 import time
 import uuid
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -47,6 +48,7 @@ from services.common.zenoh_config import undeclare
 from services.pilot.act import ActError, Actuator, Refused, default_actuator, inputs_problem, responder
 from skinet.errors import SkinetError, SourceError
 from skinet.plan import Command, Goal, Plan, Planner, Reached, parse_goal, parse_goals
+from skinet.plan.goalfile import count_goals
 from skinet.ros.keys import KeyStyle
 from skinet.system import System
 from skinet.wire import keys
@@ -62,6 +64,7 @@ TICK = 0.1  # seconds between the worker's looks at timeouts
 CHECK_WAIT = 1.0  # seconds the check may wait for a synced state and a fresh prediction
 MAX_REQUEST = 256 << 10  # bytes of a goal request (a mission file's text)
 MAX_GOALS = 32  # goals of one request
+MAX_LOGGED = 300  # characters of a goal's text in the log
 MAX_STATE = 1 << 20  # bytes of a LiveState or UnsafeReport read
 PENDING_GRACE = 0.5  # seconds a step's prediction may take before the pilot says it is paused for it
 RETRY_REFUSED = 1.0  # seconds before a check that gave no decision is asked again at the same step
@@ -140,6 +143,7 @@ class Pilot:
         self._status = PilotStatus(system=self.name, pilot=self.instance, seq=0, stamp=time.time(),
                                    state="waiting for monitor", reason=self._no_monitor())
         self._payload = encode(self._status)
+        self._parser = ThreadPoolExecutor(1, thread_name_prefix="skinet-pilot-goals")  # new goals, in order
         self._pub = session.declare_publisher(keys.pilot_status(self.name),
                                               congestion_control=zenoh.CongestionControl.BLOCK, express=True)
         self._state_sub = session.declare_subscriber(keys.state(self.name), self._on_state)
@@ -169,6 +173,7 @@ class Pilot:
             self._closed = True
         self._wake.set()
         self._worker.join(CHECK_WAIT + 3.0)
+        self._parser.shutdown(wait=False, cancel_futures=True)
         undeclare(self._token, self._goal_q, self._status_q, self._monitor_sub, self._unsafe_sub, self._state_sub)
         self.actuator.close()
         with self._lock:
@@ -276,9 +281,27 @@ class Pilot:
     # -- goal requests ------------------------------------------------------------------
 
     def _on_goal_query(self, query: zenoh.Query) -> None:
+        """Answer a goal request: a new goal on the parser thread (parsing and planning take time, and a
+        Zenoh callback that blocks holds up the session's later queries, cancels included), anything
+        else at once."""
+        try:
+            answer = self._answer(query)
+        except Exception:  # a bug must not stop the pilot; the client gets a reason
+            log.exception("error while answering a goal request")
+            answer = self._reject("internal error in the pilot (see its log)")
+        if isinstance(answer, PilotGoalReply):
+            self._reply(query, lambda: answer)
+        else:
+            request, client = answer
+            try:
+                self._parser.submit(self._reply, query, lambda: self._set_goal(request, client))
+            except RuntimeError:  # closing
+                self._reply(query, lambda: self._reject("the pilot is stopping"))
+
+    def _reply(self, query: zenoh.Query, answer: Callable[[], PilotGoalReply]) -> None:
         with query:
             try:
-                reply = self._answer(query)
+                reply = answer()
             except Exception:  # a bug must not stop the pilot; the client gets a reason
                 log.exception("error while answering a goal request")
                 reply = self._reject("internal error in the pilot (see its log)")
@@ -291,7 +314,8 @@ class Pilot:
     def _reject(self, reason: str) -> PilotGoalReply:
         return PilotGoalReply(system=self.name, accepted=False, reason=reason)
 
-    def _answer(self, query: zenoh.Query) -> PilotGoalReply:
+    def _answer(self, query: zenoh.Query) -> PilotGoalReply | tuple[PilotGoalRequest, str]:
+        """The reply to ``query``, or a goal request and its client, to be set by :meth:`_set_goal`."""
         client = keys.client_of(str(query.key_expr))
         if client is None:
             return self._reject(f"key '{query.key_expr}': the client chunk must be a name "
@@ -308,7 +332,7 @@ class Pilot:
         if request.system != self.name:
             return self._reject(f"unknown system '{request.system}': this pilot serves '{self.name}'")
         if request.op == "goal":
-            return self._set_goal(request, client)
+            return request, client
         with self._lock:
             g = self._goal
             if g is None or g.end:
@@ -328,18 +352,19 @@ class Pilot:
             return PilotGoalReply(system=self.name, accepted=True, goal_id=g.id)
 
     def _set_goal(self, request: PilotGoalRequest, client: str) -> PilotGoalReply:
-        try:
+        try:  # the goals counted before any is parsed: each is planned at once, within the budget
+            count = len(request.goals) + (count_goals(request.mission, request.mission_name) if request.mission else 0)
+            if count > MAX_GOALS:
+                return self._reject(f"{count} goals: a mission has at most {MAX_GOALS}")
             several = len(request.goals) > 1
             goals = [parse_goal(self.system, text, request.inputs or None, f"<goal {n}>" if several else "<goal>",
                                 types=self.typemap) for n, text in enumerate(request.goals, 1)]
             if request.mission:
-                goals += parse_goals(request.mission, self.system, request.mission_name, self.typemap)
+                goals += parse_goals(request.mission, self.system, request.mission_name, self.typemap, MAX_GOALS)
         except SourceError as exc:
             return self._reject(str(exc))
         if not goals:
             return self._reject("no goals: give goals ('reach FORMULA', 'run SKILLSET:SKILL') or a mission")
-        if len(goals) > MAX_GOALS:  # each is planned at once, within the budget
-            return self._reject(f"{len(goals)} goals: a mission has at most {MAX_GOALS}")
         for goal in goals:  # a bound skill's goal message: refused now, not after the robot moved for it
             for (skillset, skill), values in goal.inputs.items():
                 problem = inputs_problem(self.actuator, skillset, skill, values)
@@ -367,7 +392,8 @@ class Pilot:
             self._goal = _Goal(self._goals, client, request.mode, goals, request.max_retries, since,
                                plan=plans[0] if plans else None, plans=plans)
             self._asked = None
-            log.info("goal %d of %s (%s): %s", self._goals, client, request.mode, "; ".join(x.text for x in goals))
+            log.info("goal %d of %s (%s): %s", self._goals, client, request.mode,
+                     _cut("; ".join(x.text for x in goals), MAX_LOGGED))
             self._decide()
             first = plans[0] if plans else None
             return PilotGoalReply(system=self.name, accepted=True, goal_id=self._goals,
@@ -610,6 +636,12 @@ class Pilot:
             except SkinetError:
                 self._marked = (st, None)
         return self._marked[1]
+
+
+def _cut(text: str, limit: int) -> str:
+    """``text`` on one line, cut to ``limit`` characters with the count of those left out."""
+    flat = " ".join(text.split())
+    return flat if len(flat) <= limit else f"{flat[:limit]}… ({len(flat) - limit} more characters)"
 
 
 def start_pilot(session: zenoh.Session, system: System, instance: str | None = None,

@@ -463,3 +463,33 @@ def test_a_start_the_manager_refuses_is_asked_again_then_ends_the_goal(robot: Ro
     failed = robot.statuses.state("failed", reply.goal_id)
     assert failed.reason == refused.reason + " (2 times)"
     assert (robot.actuator.sent, failed.commands) == ([], 2)  # sent, refused: the recording keeps what went through
+
+
+def test_a_huge_mission_is_refused_by_its_goal_count_and_a_cancel_right_after_is_answered(robot: Robot) -> None:
+    """5 000 goals (160 KB): counted before any is parsed (parsing them took minutes: every goal's
+    position was searched from the top of the text), and parsed off the queryable's thread."""
+    assert ask_goal(robot.observer, goal("reach spot:Standing")).accepted
+    robot.statuses.state("guiding", 1)
+    mission = '[[goals]]\nreach = "spot:Standing"\n' * 5000
+    assert 150_000 < len(mission) < 256 << 10
+    huge: list = []
+    sender = threading.Thread(target=lambda: huge.append(ask_goal(
+        robot.observer, PilotGoalRequest(system="spot_arm", mission=mission, mission_name="m.toml", replace=True))))
+    sender.start()
+    cancel = ask_goal(robot.observer, PilotGoalRequest(system="spot_arm", op="cancel"), client="operator2")
+    sender.join(15.0)
+    assert cancel.accepted
+    assert robot.statuses.state("cancelled", 1).reason == "cancelled by operator2"
+    assert [(r.accepted, r.reason) for r in huge] == [(False, "5000 goals: a mission has at most 32")]
+
+
+def test_a_mission_past_the_limit_is_refused_at_the_first_goal_too_many() -> None:
+    from skinet.errors import SourceError
+    from skinet.files import load_system
+    from skinet.plan import parse_goals
+
+    system, typemap = load_system("skillsets/spot_arm.toml")
+    with pytest.raises(SourceError) as refused:
+        parse_goals('[[goals]]\nreach = "spot:Standing"\n' * 4, system, "m.toml", typemap, max_goals=3)
+    assert str(refused.value) == "m.toml:7:1: error: 4 goals: a mission has at most 3"
+    assert len(parse_goals('[[goals]]\nreach = "spot:Standing"\n' * 3, system, "m.toml", typemap, 3)) == 3
