@@ -177,6 +177,14 @@ class ManagerActuator:
             return f"{command.transition} (running id '{id_}') on {key}"
         raise ActError(f"{skillset}:{command.transition} is not a command (SKILL.start or SKILL.interrupt)")
 
+    def ask_status(self, skillset: str) -> str:
+        """Ask ``skillset``'s manager for its status (``status_request``); what was sent, for the log."""
+        if skillset not in self._stores:
+            raise ActError(self._problems.get(skillset) or f"{skillset} has no manager this actuator speaks to")
+        c = self.system.component(skillset)
+        key = self._requests.put(skillset, *status_request(self._stores[skillset], c.skillset))
+        return f"status_request on {key}"
+
     def _shows(self, skillset: str, skill: str, id_: str) -> bool:
         """Whether the manager's last status shows ``id_`` as ``skill``'s execution (lock held)."""
         view = self._ids.get(skillset, {}).get(skill)
@@ -214,6 +222,13 @@ class Routed:
         except KeyError:
             return None
         return inputs_problem(actuator, skillset, skill, inputs) if actuator is not None else None
+
+    def ask_status(self, skillset: str) -> str:
+        """Ask ``skillset``'s manager for its status (a bound skillset has none: :class:`ActError`)."""
+        ask = getattr(self.actuators.get("manager"), "ask_status", None)
+        if ask is None:
+            raise ActError(f"this pilot cannot ask {skillset} for its status")
+        return str(ask(skillset))
 
     def send(self, command: PilotCommand) -> str:
         skill = command.transition.partition(".")[0]

@@ -82,21 +82,28 @@ def test_guide_sends_nothing_and_publishes_the_exact_next_command(robot: Robot) 
         impl.close()
 
 
-def test_the_operator_acts_and_the_pilot_plans_again_from_what_they_caused(robot: Robot) -> None:
-    """Spot is standing up (held) when the operator interrupts it: the pilot plans again from there
-    and stands it up again; an interrupt is no failure."""
+def test_the_operators_interrupt_of_the_pilots_skill_is_reported_counted_and_not_restarted_unasked(
+        robot: Robot) -> None:
+    """Spot is standing up (held) when the operator interrupts it: the pilot says so, counts it against
+    the retries and waits for `resume`; then it plans again from there and stands it up again."""
     impl = Implementations(robot.sim, robot.system, hold=[("spot", "stand_up")])
     gui = Gui(robot.observer, robot)
     try:
         reply = ask_goal(robot.observer, goal("run spot:go_to_waypoint", inputs=WALK, mode="drive"))
         robot.statuses.first(lambda s: s.reason == "the outcome of spot:stand_up")  # the pilot saw it start
         gui.interrupt("spot", "stand_up")
+        held = robot.statuses.state("paused", reply.goal_id)
+        assert held.reason == "spot:stand_up interrupted by the operator (1 of 3 tries): resume to go on"
+        assert (held.retries, held.commands, held.notes) == (
+            {"spot:stand_up": 1}, 2, ["spot:stand_up interrupted by the operator"])
+        assert robot.actuator.sent == ["spot:init_power.start", "spot:stand_up.start"]
+        assert ask_goal(robot.observer, PilotGoalRequest(system="spot_arm", op="resume")).accepted
         robot.statuses.first(lambda s: s.commands == 3, what="a third command")
         impl.release("spot", "stand_up")
         done = robot.statuses.state("reached", reply.goal_id)
         assert robot.actuator.sent == ["spot:init_power.start", "spot:stand_up.start", "spot:stand_up.start",
                                        "spot:go_to_waypoint.start"]
-        assert (done.commands, done.denied, done.retries) == (4, 0, {})
+        assert (done.commands, done.denied, done.retries) == (4, 0, {"spot:stand_up": 1})
     finally:
         gui.close()
         impl.close()
