@@ -148,6 +148,7 @@ class Pilot:
         self.actuator: Actuator = actuator if actuator is not None else default_actuator(
             session, system, typemap, style, instance=f"pilot-{self.instance}")
         self.planner = Planner(system)
+        self._names = {name: {t.name for t in net.transitions} for name, net in system.nets.items()}
         self._lock = threading.Lock()
         self._wake = threading.Event()
         self._closed = False
@@ -267,9 +268,12 @@ class Pilot:
                 r.marking, r.monitor = marking[r.skillset], self._runs
                 continue
             listed = any((m.skillset, m.skill) == (r.skillset, r.skill) for m in state.missed)
-            if listed or gap or (transition == "resync" and skillset == r.skillset) or r.monitor != self._runs:
+            own = skillset == r.skillset
+            modelled = own and transition in self._names[skillset]  # a step of the model, not a status adopted
+            if listed or gap or r.monitor != self._runs or (own and not modelled) or \
+                    (r.marking is not None and not modelled):
                 del g.running[key]
-                self._missed(g, r, state, marking[r.skillset], "resync" if transition == "resync" else "")
+                self._missed(g, r, state, marking[r.skillset], transition if own else "", gap)
             elif r.marking is not None:
                 del g.running[key]  # ended by a step the monitor explained (an invariant, an event's cascade)
             if g.end:
@@ -304,20 +308,21 @@ class Pilot:
         wanted = f"{suggested.skillset}:{suggested.transition.removesuffix('.start')}"
         self._notes(g, f"the operator {did} {skillset}:{skill}, not {wanted}: plan again")
 
-    def _missed(self, g: _Goal, r: _Running, state: LiveState, after: int, why: str) -> None:
+    def _missed(self, g: _Goal, r: _Running, state: LiveState, after: int, step: str, gap: bool) -> None:
         """``r`` ended while the pilot did not see it: go on from the outcome the monitor or the model
         infers, else hold the goal until an operator says what it was (lock held)."""
         m = next((x for x in state.missed if (x.skillset, x.skill) == (r.skillset, r.skill)), None)
         if m is None:
             net = self.system.nets[r.skillset]
-            gap = ("while the monitor was restarted" if r.monitor != self._runs else
-                   f"while the monitor resynced {r.skillset}" if why == "resync" else
-                   f"in steps of the monitor the pilot did not get (before step {state.seq})")
+            how = ("while the monitor was restarted" if r.monitor != self._runs else
+                   f"in steps of the monitor the pilot did not get (before step {state.seq})" if gap else
+                   f"while the monitor resynced {r.skillset}" if step == "resync" else
+                   f"without its response ({r.skillset}'s status at step {state.seq} shows it ended)")
             if r.marking is None:  # started, never seen running: it may have run, or not
                 found = Inference(r.skill, None, modes(net, r.skill))
             else:
                 found = infer_outcomes(net, r.marking, after, [r.skill])[0]
-            m = MissedOutcome(skillset=r.skillset, skill=r.skill, gap=gap, outcome=found.outcome,
+            m = MissedOutcome(skillset=r.skillset, skill=r.skill, gap=how, outcome=found.outcome,
                               candidates=list(found.candidates))
         name = f"{r.skillset}:{r.skill}"
         if m.outcome is None:

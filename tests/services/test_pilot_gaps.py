@@ -13,6 +13,7 @@ import zenoh
 from skinet.ros.interfaces import status_request_topic
 from skinet.wire.messages import MissedOutcome, PilotGoalRequest
 from tests.services.pilot_robot import WALK, Gui, Implementations, Robot, ask_goal, goal
+from tests.services.test_monitor import wait_until
 
 
 @pytest.fixture
@@ -122,3 +123,28 @@ def test_guide_mode_names_a_command_other_than_the_one_suggested(robot: Robot) -
         assert (told.state, told.reason) == ("waiting for outcome", "the outcome of manipulator:arm_ready")
     finally:
         gui.close()
+
+
+def test_an_outcome_lost_on_the_way_is_found_by_the_status_request(
+        client_factory: Callable[[], zenoh.Session], spot_arm: tuple) -> None:
+    """teleop ends on the robot but its response and status never leave the manager (a link down): the
+    status request after the outcome timeout brings the status, and the pilot asks about the outcome."""
+    robot = Robot(client_factory, *spot_arm, outcome_timeout=1.0)
+    impl = Implementations(robot.sim, robot.system, hold=[("spot", "teleop")])
+    try:
+        ask_goal(robot.observer, goal("run spot:teleop", mode="drive"))
+        robot.statuses.first(lambda s: s.reason == "the outcome of spot:teleop", what="teleop running")
+        node = robot.sim.nodes["spot"]
+        with node.lock:
+            assert node.manager.terminate("teleop", "success", "done")  # its messages are lost
+        paused = robot.statuses.first(lambda s: s.unknown is not None, what="an unknown outcome")
+        assert paused.unknown is not None and paused.unknown.gap.startswith("without its response (spot's status at "
+                                                                            "step "), paused.unknown
+        assert robot.actuator.asked and robot.actuator.sent.count("spot:teleop.start") == 1
+        assert ask_goal(robot.observer, PilotGoalRequest(system="spot_arm", op="confirm", answer="rerun")).accepted
+        again = robot.statuses.first(lambda s: s.commands == 4, what="teleop started again")
+        assert again.notes[-1].endswith(": rerun confirmed by operator1")
+        wait_until(lambda: robot.actuator.sent.count("spot:teleop.start") == 2, 30.0, "teleop sent again")
+    finally:
+        impl.close()
+        robot.close()
