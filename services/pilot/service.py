@@ -353,10 +353,16 @@ class Pilot:
         goal = g.goals[g.index]
         if not goal.target(skillset, transition):
             return
-        given = goal.given(skillset, skill) or {}
-        if r is not None and r.inputs is not None and dict(r.inputs) != dict(given):
-            self._notes(g, f"{name} succeeded with inputs {r.inputs}, not the goal's {dict(given)}: it does not "
-                           f"count for '{goal.text}'")
+        given = dict(goal.given(skillset, skill) or {})
+        if r is not None and r.ours:
+            other = None if r.inputs == given else r.inputs
+        else:  # someone else's start: the inputs its request carried, when the actuator heard it
+            check = getattr(self.actuator, "start_inputs", None)
+            seen = check(skillset, skill, given) if check is not None else None
+            other = None if seen is None or seen[0] else seen[1]
+        if other is not None:
+            self._notes(g, f"{name} ended in {outcome} after a start with inputs {other}, not the goal's {given}: it "
+                           f"does not count for '{goal.text}'")
             return
         self._next_goal(g, how and f"{goal.text} reached by an outcome not seen: {how}")
 

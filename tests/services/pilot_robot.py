@@ -56,6 +56,9 @@ class Recording:
     def problem(self, skillset: str, skill: str, inputs: dict[str, Any]) -> str | None:
         return inputs_problem(self.inner, skillset, skill, inputs)
 
+    def start_inputs(self, skillset: str, skill: str, given: dict[str, Any]) -> Any:
+        return self.inner.start_inputs(skillset, skill, given)  # type: ignore[attr-defined]
+
     def ask_status(self, skillset: str) -> str:
         self.asked.append(skillset)
         return self.inner.ask_status(skillset)  # type: ignore[attr-defined]

@@ -148,3 +148,32 @@ def test_an_outcome_lost_on_the_way_is_found_by_the_status_request(
     finally:
         impl.close()
         robot.close()
+
+
+def test_a_run_goal_is_reached_only_by_a_start_with_its_inputs(robot: Robot) -> None:
+    """The operator walks spot elsewhere: the pilot names the start, does not count it, and suggests the
+    goal's walk again."""
+    impl = Implementations(robot.sim, robot.system)
+    gui = Gui(robot.observer, robot)
+    elsewhere = {"target": {"x": 1.0, "y": 2.0, "z": 0.0}}
+    try:
+        reply = ask_goal(robot.observer, goal("run spot:go_to_waypoint", inputs=WALK))
+        gui.start("spot", "init_power")
+        robot.statuses.first(lambda s: s.next is not None and s.next.transition == "stand_up.start")
+        gui.start("spot", "stand_up")
+        robot.statuses.first(lambda s: s.next is not None and s.next.transition == "go_to_waypoint.start")
+        gui.start("spot", "go_to_waypoint", elsewhere)
+        told = robot.statuses.first(lambda s: bool(s.notes), what="a note")
+        assert told.notes == ["spot:go_to_waypoint ended in success.arrived after a start with inputs "
+                              "{'target': {'x': 1.0, 'y': 2.0, 'z': 0.0}}, not the goal's "
+                              "{'target': {'x': 12.0, 'y': 3.5, 'z': 0.0}}: it does not count for "
+                              "'run spot:go_to_waypoint'"]
+        again = robot.statuses.first(lambda s: s.state == "guiding" and s.next is not None and
+                                     s.next.transition == "go_to_waypoint.start" and bool(s.notes))
+        assert (again.goal_id, again.next.inputs) == (reply.goal_id, WALK["go_to_waypoint"])
+        gui.start("spot", "go_to_waypoint", WALK["go_to_waypoint"])
+        done = robot.statuses.state("reached", reply.goal_id)
+        assert (done.commands, robot.actuator.sent) == (0, [])
+    finally:
+        gui.close()
+        impl.close()
