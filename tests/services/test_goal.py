@@ -356,3 +356,49 @@ def test_skinet_watch_in_a_pipe_prints_a_line_per_change_of_the_pilots_status(ro
     assert [p for p in pilot[1:] if not PENDING.match(p.removeprefix(head))] == [
         head + c for c in status_lines(done.stdout) if not PENDING.match(c)], out + err
     assert pilot[-1] == head + "reached \u2014 2 commands sent"
+
+
+def test_skinet_goal_follows_the_pilot_through_a_router_restart_and_ctrl_c_still_cancels(spot_arm) -> None:
+    """Every token goes away while the router is down (the pilot's too): no 'the pilot stopped' but a
+    line saying the link is down, the follow goes on once it is back, and a Ctrl-C then cancels the goal
+    (asked again until the pilot answers)."""
+    from tests.services.test_outage import Outage
+
+    outage = Outage()
+    sessions: list[zenoh.Session] = []
+
+    def login() -> zenoh.Session:
+        sessions.append(open_client(outage.endpoint))
+        return sessions[-1]
+
+    robot = Robot(login, *spot_arm)
+    proc = start_skinet("goal", "spot_arm", "reach spot:Standing", *client_args(outage.endpoint))
+    try:
+        lines: list[str] = []
+        while not any(line.startswith("guiding") for line in lines):
+            line = proc.stdout.readline()
+            assert line, "".join(lines)
+            lines.append(line)
+        outage.down()
+        while not any(line.startswith("the link to the router is down") for line in lines):
+            line = proc.stdout.readline()  # before: "the pilot stopped before goal 1 ended", and the end
+            assert line, "".join(lines)
+            lines.append(line)
+        outage.up()
+        robot.statuses.first(lambda s: s.state == "guiding" and robot.pilot.status.state == "guiding",
+                             what="the pilot after the restart")
+        proc.send_signal(signal.SIGINT)
+        out, _ = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+        robot.close()
+        for s in reversed(sessions):
+            s.close()
+        outage.close()
+    lines += out.splitlines(keepends=True)
+    text = "".join(lines)
+    assert "the pilot stopped" not in text, text
+    assert proc.returncode == 1, text
+    assert "cancelled by Ctrl-C: asking the pilot to cancel the goal\n" in lines
+    assert lines[-1].startswith("cancelled"), text
+    assert robot.pilot.status.state == "cancelled"
