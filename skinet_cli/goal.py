@@ -59,6 +59,10 @@ to drive and resume it (it then sends the commands itself):
   skinet goal spot_arm --set-mode drive -e tcp/127.0.0.1:7447
   skinet goal spot_arm --resume -e tcp/127.0.0.1:7447
 
+a skill the pilot started that ended while nobody could see it (a monitor restart, a link down) and
+whose outcome the resources cannot tell pauses it with 'outcome unknown'; answer how it ended:
+  skinet goal spot_arm --confirm success -e tcp/127.0.0.1:7447
+
 Through a router with logins, log in as an operator-role user (--user operator --password-file
 ~/.config/skinet/secrets/operator.password, or --zenoh-config from skinet client-config --user
 operator): the router lets no other user send goals, and says nothing to them (no pilot answers)."""
@@ -88,6 +92,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     ops.add_argument("--resume", dest="op", action="store_const", const="resume", help="resume a paused goal")
     ops.add_argument("--set-mode", choices=("guide", "drive"), metavar="MODE",
                      help="switch the goal that runs to guide or drive")
+    ops.add_argument("--confirm", choices=("success", "failure", "rerun"), metavar="ANSWER",
+                     help="answer the pilot paused with 'outcome unknown' (a skill ended unseen): success or "
+                          "failure (how it ended), or rerun (it did not do its work: start it again)")
     c.add_argument("--timeout", type=seconds(), default=10.0,
                    help="seconds to wait for the pilot's reply (it plans first; default: 10)")
     add_zenoh_args(c)
@@ -104,8 +111,9 @@ def cmd_goal(args: argparse.Namespace) -> int:
     from skinet.wire.messages import PilotGoalReply, PilotGoalRequest
 
     name, system = resolve_system(args.system)
-    op = "mode" if args.set_mode else args.op
-    request = PilotGoalRequest(system=name, op=op or "goal", mode=args.set_mode or ("drive" if args.drive else "guide"))
+    op = "mode" if args.set_mode else "confirm" if args.confirm else args.op
+    request = PilotGoalRequest(system=name, op=op or "goal", mode=args.set_mode or ("drive" if args.drive else "guide"),
+                               answer=args.confirm)
     if op is None:
         request = request.model_copy(update=_goal_fields(args, system))
     elif args.goals or args.goals_file or args.inputs:
@@ -154,7 +162,7 @@ def _goal_fields(args: argparse.Namespace, system: Any) -> dict[str, Any]:
 
     if not args.goals and not args.goals_file:
         raise SkinetError("no goals: give GOAL arguments (e.g. \"reach spot:Standing\") or --goals FILE "
-                          "(or --cancel, --pause, --resume, --set-mode for the goal that runs)")
+                          "(or --cancel, --pause, --resume, --set-mode, --confirm for the goal that runs)")
     if system is not None:
         read_goals(argparse.Namespace(system=args.system, goals_file=args.goals_file, inputs=args.inputs,
                                       goals=args.goals), system)
@@ -171,7 +179,8 @@ def _operate(session: Any, request: Any, ask: Any) -> int:
     from services.common.goals import pilot_status
 
     reply = ask(request)
-    what = f"mode {request.mode}" if request.op == "mode" else request.op
+    what = f"mode {request.mode}" if request.op == "mode" else \
+        f"confirm {request.answer}" if request.op == "confirm" else request.op
     if not reply.accepted:
         print(f"{what} rejected by the pilot: {reply.reason}", file=sys.stderr)
         return EXIT_REJECTED

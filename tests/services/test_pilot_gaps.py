@@ -4,6 +4,8 @@ while it could not see it is never started again silently.  The paper's robot th
 
 from __future__ import annotations
 
+import subprocess
+import sys
 import time
 from collections.abc import Callable, Iterator
 
@@ -12,6 +14,7 @@ import zenoh
 
 from skinet.ros.interfaces import status_request_topic
 from skinet.wire.messages import MissedOutcome, PilotGoalRequest
+from tests.services.conftest import REPO, client_args
 from tests.services.pilot_robot import WALK, Gui, Implementations, Robot, ask_goal, goal
 from tests.services.test_monitor import wait_until
 
@@ -36,7 +39,8 @@ def restart_monitor_while(robot: Robot, impl: Implementations, skill: str) -> No
     robot.start_monitor()
 
 
-def test_a_skill_that_ended_during_a_monitor_restart_is_not_started_again_but_asked_about(robot: Robot) -> None:
+def test_a_skill_that_ended_during_a_monitor_restart_is_not_started_again_but_asked_about(robot: Robot,
+                                                                                          router: str) -> None:
     """teleop's success and failure leave the same resources: the pilot cannot tell, pauses, and goes on
     after the operator's answer (before: teleop was started twice, 'reached — 2 commands sent')."""
     impl = Implementations(robot.sim, robot.system, hold=[("spot", "teleop")])
@@ -55,10 +59,13 @@ def test_a_skill_that_ended_during_a_monitor_restart_is_not_started_again_but_as
         assert robot.actuator.sent == ["spot:init_power.start", "spot:stand_up.start", "spot:teleop.start"]
         bad = ask_goal(robot.observer, PilotGoalRequest(system="spot_arm", op="confirm"))
         assert (bad.accepted, bad.reason) == (False, "confirm needs an answer: success, failure or rerun")
-        assert ask_goal(robot.observer, PilotGoalRequest(system="spot_arm", op="confirm", answer="success")).accepted
+        answered = subprocess.run([sys.executable, "-m", "skinet_cli.main", "goal", "spot_arm", "--confirm", "success",
+                                   *client_args(router)], cwd=REPO, capture_output=True, text=True, timeout=60)
+        assert (answered.returncode, answered.stdout.splitlines()[0]) == (0, "confirm success: done (goal 1)"), \
+            answered.stdout + answered.stderr
         done = robot.statuses.state("reached", reply.goal_id)
         assert done.reason == ("run spot:teleop reached by an outcome not seen: spot:teleop ended while the monitor "
-                               "was restarted: success confirmed by operator1")
+                               "was restarted: success confirmed by local")
         assert (done.commands, done.unknown, robot.actuator.sent.count("spot:teleop.start")) == (3, None, 1)
         again = ask_goal(robot.observer, PilotGoalRequest(system="spot_arm", op="confirm", answer="success"))
         assert again.reason == "no goal is being followed: nothing to confirm"
