@@ -55,6 +55,7 @@ from skinet.system import System
 from skinet.wire import keys
 from skinet.wire.codec import DecodeError, decode, encode
 from skinet.wire.convert import marking_of, plan_steps
+from skinet.wire.limits import PILOT_OUTCOME_TIMEOUT
 from skinet.wire.messages import (
     CheckReply, CheckRequest, LiveState, MissedOutcome, PilotCommand, PilotGoalReply, PilotGoalRequest, PilotStatus,
     PlanStep, UnsafeReport,
@@ -69,7 +70,7 @@ MAX_LOGGED = 300  # characters of a goal's text in the log
 MAX_STATE = 1 << 20  # bytes of a LiveState or UnsafeReport read
 PENDING_GRACE = 0.5  # seconds a step's prediction may take before the pilot says it is paused for it
 RETRY_REFUSED = 1.0  # seconds before a check that gave no decision is asked again at the same step
-OUTCOME_TIMEOUT = 60.0  # seconds a skill the pilot started may run before its manager is asked for its status
+OUTCOME_TIMEOUT = PILOT_OUTCOME_TIMEOUT  # seconds a skill it started may run before its manager is asked its status
 MAX_NOTES = 16  # notes a status lists (the goal's last ones)
 
 
