@@ -257,6 +257,12 @@ def test_the_goal_box_places_errors_in_the_box() -> None:
     request = goal_request("spot_arm", {"goals": " reach spot:Standing \n", "mode": "drive", "replace": True}, None)
     assert request == PilotGoalRequest(system="spot_arm", goals=["reach spot:Standing"], mode="drive", replace=True)
     assert place("no plan: the goal is unsafe", [1]) == Placed("no plan: the goal is unsafe")
+    # the buttons that answer an unknown outcome
+    assert goal_request("spot_arm", {"op": "confirm", "answer": "rerun", "mode": "drive"}, system) == \
+        PilotGoalRequest(system="spot_arm", op="confirm", answer="rerun", mode="drive")
+    with pytest.raises(GoalFormError) as caught:
+        goal_request("spot_arm", {"op": "confirm", "answer": "maybe"}, system)
+    assert caught.value.placed == Placed("unknown answer 'maybe': success, failure or rerun")
 
 
 def test_ask_pilot_without_a_pilot_raises_the_message(router) -> None:
