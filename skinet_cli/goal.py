@@ -282,7 +282,8 @@ class _Follower:
 
     A pilot's token that goes away is not yet a pilot that stopped: a router restart takes every token
     away until the sessions are linked again.  The pilot is called stopped only when this session is
-    linked to a router (or a peer) and the token has stayed away ``GONE_GRACE`` seconds."""
+    linked to a router (or a peer) and the token has stayed away ``GONE_GRACE`` seconds.  The link is
+    looked at every ``POLL`` seconds: its loss is said once, and its return asks the pilot's status again."""
 
     def __init__(self, session: Any, system: str):
         import zenoh
@@ -294,7 +295,8 @@ class _Follower:
         self._sub = session.declare_subscriber(keys.pilot_status(system), self._on_status)
         self._tokens = session.liveliness().declare_subscriber(
             keys.alive(system, "pilot", "*"),
-            lambda s: self.queue.put((s.kind == zenoh.SampleKind.PUT, str(s.key_expr).rsplit("/", 1)[-1])))
+            lambda s: self.queue.put((s.kind == zenoh.SampleKind.PUT, str(s.key_expr).rsplit("/", 1)[-1])),
+            history=True)  # the tokens there now: a subscriber that never saw one may miss its deletion
 
     def _on_status(self, sample: Any) -> None:
         from skinet.wire.codec import DecodeError, decode
@@ -322,7 +324,7 @@ class _Follower:
         answered: float | None = None  # when the pilot answered the cancel
         asked = 0.0  # when the cancel was last asked
         gone: float | None = None  # since when the pilot's token is away while this session is linked
-        unlinked = False  # the link to the router is down (said once)
+        unlinked = False  # the link to the router is down (said once per outage)
         while True:
             if len(ctrl_c) > 1:
                 raise KeyboardInterrupt
@@ -336,13 +338,19 @@ class _Follower:
                 if answered is not None and time.monotonic() > answered + CANCEL_WAIT:
                     print("the pilot did not report the goal cancelled", file=sys.stderr)
                     return EXIT_ENDED
+                linked = self._linked()
+                if linked == unlinked:  # the link went down, or came back
+                    unlinked = not linked
+                    if unlinked:
+                        print("the link to the router is down: waiting for it (Ctrl-C cancels the goal)",
+                              file=sys.stderr, flush=True)
+                    else:
+                        again = pilot_status(self.session, self.system)  # what it said while the link was down
+                        if again is not None:
+                            self.queue.put(again)
                 if gone is not None and time.monotonic() - gone >= GONE_GRACE:
-                    if not self._linked():
+                    if not linked:
                         gone = time.monotonic()  # nothing can be known of the pilot now: wait for the link
-                        if not unlinked:
-                            unlinked = True
-                            print("the link to the router is down: waiting for it (Ctrl-C cancels the goal)",
-                                  file=sys.stderr, flush=True)
                     elif self._pilots(ours):
                         gone = None
                     else:
@@ -354,10 +362,7 @@ class _Follower:
                 if ours and pilot != ours:
                     continue
                 if there:
-                    gone, unlinked = None, False
-                    again = pilot_status(self.session, self.system)  # what it said while the link was down
-                    if again is not None:
-                        self.queue.put(again)
+                    gone = None
                 elif gone is None:
                     gone = time.monotonic()
                 continue

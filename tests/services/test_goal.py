@@ -169,14 +169,27 @@ def test_no_pilot_or_no_router_is_one_clear_line_and_exit_1(router) -> None:
         "(or the router refused user 'observer': only operator-role users may send goals)")
 
 
+def read_until(proc: subprocess.Popen, lines: list[str], start: str, timeout: float = 60.0) -> None:
+    """Read ``proc``'s lines into ``lines`` until one starts with ``start``; fails at its end, and kills it
+    when no such line comes within ``timeout`` seconds (a follow that would wait for ever)."""
+    import threading
+
+    watchdog = threading.Timer(timeout, proc.kill)
+    watchdog.start()
+    try:
+        while not any(line.startswith(start) for line in lines):
+            line = proc.stdout.readline()
+            assert line, f"no line starting with {start!r} (within {timeout:g} s); so far:\n" + "".join(lines)
+            lines.append(line)
+    finally:
+        watchdog.cancel()
+
+
 def test_ctrl_c_cancels_the_goal(robot, router) -> None:
     proc = start_skinet("goal", "spot_arm", "reach spot:Standing", *client_args(router))  # guide: waits for you
     try:
         lines: list[str] = []
-        while not any(line.startswith("guiding") for line in lines):
-            line = proc.stdout.readline()
-            assert line, "".join(lines)
-            lines.append(line)
+        read_until(proc, lines, "guiding")
         proc.send_signal(signal.SIGINT)
         out, _ = proc.communicate(timeout=20)
     finally:
@@ -385,15 +398,9 @@ def test_skinet_goal_follows_the_pilot_through_a_router_restart_and_ctrl_c_still
     proc = start_skinet("goal", "spot_arm", "reach spot:Standing", *client_args(outage.endpoint))
     try:
         lines: list[str] = []
-        while not any(line.startswith("guiding") for line in lines):
-            line = proc.stdout.readline()
-            assert line, "".join(lines)
-            lines.append(line)
+        read_until(proc, lines, "guiding")
         outage.down()
-        while not any(line.startswith("the link to the router is down") for line in lines):
-            line = proc.stdout.readline()  # before: "the pilot stopped before goal 1 ended", and the end
-            assert line, "".join(lines)
-            lines.append(line)
+        read_until(proc, lines, "the link to the router is down")  # before: "the pilot stopped ...", and the end
         outage.up()
         robot.statuses.first(lambda s: s.state == "guiding" and robot.pilot.status.state == "guiding",
                              what="the pilot after the restart")
