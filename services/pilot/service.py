@@ -20,6 +20,19 @@ after the step it was planned from); never two commands in flight; no reaction w
 robot refuses (:class:`~services.pilot.act.Refused`) is asked again, and ends the goal after
 ``max_retries`` refusals.
 
+Every skill seen running during a goal (and every start it sent) is followed to its end
+(docs/pilot.md, *Missed outcomes*): one gone from a live step without its own outcome event
+(a resync, a status the bridge derived, a new monitor, steps not received, the monitor's
+``LiveState.missed``) goes on from the outcome the monitor or
+:func:`~skinet.net.outcomes.infer_outcomes` makes unique, said in the status's ``notes``;
+otherwise the goal holds with ``unknown`` until an operator's ``confirm`` (success, failure,
+rerun): the pilot never starts such a skill again on its own.  A skill it started that runs
+``outcome_timeout`` s makes it ask the manager for its status.  The operator's interrupt of
+the pilot's skill counts against the retries and holds the goal until ``resume``; in guide
+mode a command other than the one suggested is named; a ``run`` goal counts only a start
+with its inputs (the actuator hears the requests).  New goals are counted before they are
+parsed, and parsed and planned on a thread of their own, so cancels are answered meanwhile.
+
 A skillset that is not ``live``, a model divergence (until the next step, or ``resume``),
 a prediction still pending ``PENDING_GRACE`` after its step (when a command is due) or an
 operator's ``pause`` pause it.  A
@@ -28,7 +41,9 @@ skill that fails ``max_retries`` times in one goal ends it ``failed``.  The stat
 ``get``.  Bad requests, an unknown system, a goal without a plan, no monitor, a manager
 that is gone: a reason in the reply or the status, never a command, never a crash.
 Cost per marking change: one ``plan.action`` (a few set lookups) while the plan covers
-the marking, else one plan (:mod:`skinet.plan.planner`); one check query per command.
+the marking, else one plan (:mod:`skinet.plan.planner`); one check query per command; a
+pass over the skills followed (at most the system's skills), and per missed outcome one
+:func:`~skinet.net.outcomes.infer_outcomes` of a single skill (``k`` firings).
 """
 
 from __future__ import annotations
