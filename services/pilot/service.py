@@ -344,11 +344,11 @@ class Pilot:
         if m.outcome is None:
             if r.ours or g.mode == "guide" or self._concerns(g, r):
                 g.unknown = m
-                self._notes(g, f"{name} ended {m.gap}: outcome unknown")
+                self._notes(g, f"{ended(m)}: outcome unknown")
                 log.warning("goal %d: %s ended %s: outcome unknown (%s)", g.id, name, m.gap,
                             ", ".join(m.candidates) or "no mode explains the resources")
             return
-        self._notes(g, f"{name} ended {m.gap}: {m.outcome.partition('.')[2]} inferred from the resources")
+        self._notes(g, f"{ended(m)}: {m.outcome.partition('.')[2]} inferred from the resources")
         log.warning("goal %d: %s", g.id, g.note)
         self._outcome(g, r.skillset, m.outcome, r, g.note)
 
@@ -527,9 +527,8 @@ class Pilot:
             return "no outcome is awaiting an answer: nothing to confirm"
         if answer is None:
             return "confirm needs an answer: success, failure or rerun"
-        name = f"{m.skillset}:{m.skill}"
         g.unknown = None
-        self._notes(g, f"{name} ended {m.gap}: {answer} confirmed by {client}")
+        self._notes(g, f"{ended(m)}: {answer} confirmed by {client}")
         log.info("goal %d: %s", g.id, g.note)
         if answer == "rerun":
             return ""
@@ -879,11 +878,18 @@ class Pilot:
         return self._marked[1]
 
 
+def ended(m: MissedOutcome) -> str:
+    """``SKILLSET:SKILL ended <the gap>``: the pilot's own gaps read as such ('while the monitor was
+    restarted'); the monitor's, a phrase of their own, in parentheses."""
+    how = m.gap if m.gap.startswith(("while ", "without ", "in ", "during ")) else f"unseen ({m.gap})"
+    return f"{m.skillset}:{m.skill} ended {how}"
+
+
 def unknown_reason(m: MissedOutcome) -> str:
     """The status's reason while the outcome of ``m`` awaits an operator's answer."""
     told = (f"{' or '.join(c.partition('.')[2] for c in m.candidates)} would explain the resources"
             if m.candidates else "no outcome of the model explains the resources")
-    return (f"outcome unknown: {m.skillset}:{m.skill} ended {m.gap}; {told}: confirm success, failure or rerun "
+    return (f"outcome unknown: {ended(m)}; {told}: confirm success, failure or rerun "
             "(the pilot does not start it again on its own)")
 
 
