@@ -43,6 +43,15 @@ class Component:
         """The full net without its commanded events: what may happen with no command (SPEC §8, §9)."""
         return build_net(self.skillset, without=self.commanded) if self.commanded else self.net
 
+    @cached_property
+    def commanding(self) -> PetriNet:
+        """The eventless net plus the commanded events: what a plan may send and wait for when events are not
+        counted as uncontrollable (docs/planning.md: commanded events are commands of the game)."""
+        if not self.commanded:
+            return self.eventless
+        others = frozenset(e.name for e in self.skillset.events) - self.commanded
+        return build_net(self.skillset, commanded=self.commanded, without=others)
+
 
 @dataclass(frozen=True)
 class System:

@@ -76,13 +76,37 @@ def test_a_plan_may_navigate_only_when_nobody_but_an_operator_deactivates_the_na
     ready = marking_from_json(system, READY)
     plan = Planner(system, engine=engine).plan(parse_goal(system, "run nav2:navigate"), ready)
     admissible = Planner(system).admissible(ready)
-    if commanded:  # nor a step of a plan: a commanded event is nobody's outcome, and the pilot commands no node
+    if commanded:  # a commanded event is nobody's outcome: the plan needs no deactivation, and sends none
         assert (plan.answer, [(s.skillset, s.action) for s in plan.steps]) == (
             "cyclic", [("nav2", "navigate.start"), ("nav2", "wait")])
-        assert admissible == [("nav2", "navigate.start"), ("nav2", "dock_robot.start")]
+        # commanded events are commands of the game: safe to send while nothing navigates
+        assert admissible == [("nav2", "navigator_deactivated"), ("nav2", "navigator_shut_down"),
+                              ("nav2", "navigate.start"), ("nav2", "dock_robot.start")]
     else:
         assert (plan.answer, plan.reason) == (
             "none", "the goal is unsafe: every marking where nav2:navigate can succeed is forced for nav_needs_active "
                     "(event navigator_deactivated may occur (1 step) and leave nav2 navigate runs and nav2 navigator "
                     "at Inactive)")
         assert admissible == [("nav2", "dock_robot.start")]
+
+
+@pytest.mark.parametrize("engine", ["explicit", "symbolic"])
+@pytest.mark.parametrize("events", [False, True], ids=["eventless", "events uncontrollable"])
+def test_a_plan_activates_a_commanded_navigator_before_navigating(tmp_path: Path, engine: str, events: bool) -> None:
+    """The events a binding commands are commands of the game (docs/planning.md): from an inactive navigator the
+    plan activates it, then navigates; from the initial marking it configures it first."""
+    system = nav2(tmp_path, commanded=True)
+    if not events:
+        system = load_system(NAV2 / "nav2.toml")[0]
+    planner = Planner(system, engine=engine)
+    goal = parse_goal(system, "run nav2:navigate")
+    inactive = marking_from_json(system, {"nav2": {"resources": {**READY["nav2"]["resources"], "navigator": "Inactive"}}})
+    plan = planner.plan(goal, inactive)
+    assert plan.answer == "cyclic"
+    assert [(s.skillset, s.action) for s in plan.steps] == [
+        ("nav2", "navigator_activated"), ("nav2", "navigate.start"), ("nav2", "wait")]
+    assert plan.steps[0].inputs is None and plan.steps[0].expect is None
+    first = plan.action(inactive)
+    assert (first.skillset, first.transition, dict(first.inputs)) == ("nav2", "navigator_activated", {})
+    initial = planner.plan(goal)
+    assert [s.action for s in initial.steps][:2] == ["navigator_configured", "navigator_activated"]
