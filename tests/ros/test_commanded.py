@@ -110,3 +110,20 @@ def test_a_plan_activates_a_commanded_navigator_before_navigating(tmp_path: Path
     assert (first.skillset, first.transition, dict(first.inputs)) == ("nav2", "navigator_activated", {})
     initial = planner.plan(goal)
     assert [s.action for s in initial.steps][:2] == ["navigator_configured", "navigator_activated"]
+
+
+@pytest.mark.parametrize("engine", ["explicit", "symbolic"])
+def test_no_plan_because_an_event_is_not_commanded_says_so(tmp_path: Path, engine: str) -> None:
+    """The navigator the robot's own and events not counted: from an inactive navigator nothing activates it, and
+    the reason names the event a plan would send if the binding commanded it."""
+    binding = (NAV2 / "nav2.binding.toml").read_text().replace("commanded = true", "commanded = false")
+    (tmp_path / "b.toml").write_text(binding)
+    (tmp_path / "s.toml").write_text(f'[system]\nname = "s"\nproperties = "{NAV2 / "nav2.props"}"\n[[skillsets]]\n'
+                                     f'model = "{NAV2 / "nav2.rl"}"\nbinding = "b.toml"\n')
+    system = load_system(tmp_path / "s.toml")[0]
+    inactive = marking_from_json(system, {"nav2": {"resources": {**READY["nav2"]["resources"], "navigator": "Inactive"}}})
+    plan = Planner(system, engine=engine).plan(parse_goal(system, "run nav2:navigate"), inactive)
+    assert (plan.answer, plan.reason) == (
+        "none", "nav2:navigate never runs from here: no reachable marking lets it start; a plan needs "
+                "nav2:navigator_activated, which no binding commands (a plan sends an event only when its binding "
+                "says the resource it changes is commanded)")
