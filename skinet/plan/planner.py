@@ -89,7 +89,9 @@ class Planner:
     def plan(self, goal: Goal, marking: Mapping[str, int] | None = None, budget: float | None = None) -> Plan:
         """The answer to ``goal`` from ``marking`` (default: initial) within ``budget`` seconds."""
         started = time.perf_counter()
-        deadline = Deadline.after(budget, started)
+        return self._plan(goal, marking, Deadline.after(budget, started), started)
+
+    def _plan(self, goal: Goal, marking: Mapping[str, int] | None, deadline: Deadline, started: float) -> Plan:
         marking = dict(marking or self.system.initial_marking())
         entry = self._entry(marking)
         arena: Arena = entry["arena"]
@@ -142,8 +144,8 @@ class Planner:
         return Plan(goal, arena, start, "none", reason, stats())
 
     def _uncommanded_needed(self, goal: Goal, marking: Mapping[str, int], deadline: Deadline) -> list[str]:
-        """The events (``skillset:event``) that a plan sends when every event is commanded, and that no binding
-        commands here: why there is no plan when a command is not available (docs/planning.md).  Empty when
+        """The events (``skillset:event``) that a plan sends when every event of a bound component is commanded
+        (a manager reports its skillset's events: nobody commands them), and that no binding commands here: why there is no plan when a command is not available (docs/planning.md).  Empty when
         every event is commanded already, no such plan exists, or the budget runs out.  Cost: one more plan,
         on the arena where every event is a command, and a walk of its policy."""
         if not self._uncommanded_reason or deadline.expired():
@@ -151,15 +153,14 @@ class Planner:
         components = []
         for c in self.system.components:
             every = frozenset(e.name for e in c.skillset.events)
-            components.append(c if every <= c.commanded else dataclasses.replace(
+            components.append(c if not c.binding or every <= c.commanded else dataclasses.replace(
                 c, net=build_net(c.skillset, commanded=every), commanded=every))
         if all(a is b for a, b in zip(components, self.system.components)):
             return []
         relaxed = Planner(dataclasses.replace(self.system, components=tuple(components)), self.engine,
                           self.memory_limit)
         relaxed._uncommanded_reason = False
-        left = deadline.left()
-        plan = relaxed.plan(goal, marking, None if left == float("inf") else max(left, 0.0))
+        plan = relaxed._plan(goal, marking, _Within(deadline), time.perf_counter())
         if plan.answer not in ("strong", "cyclic"):
             return []
         needed: list[str] = []
@@ -196,6 +197,18 @@ class Planner:
                 break
             here = plan.end or here
         return plans
+
+
+class _Within(Deadline):
+    """The caller's deadline, for a second search inside the same budget."""
+
+    def __init__(self, outer: Deadline):
+        super().__init__(getattr(outer, "at", None))
+        self.outer = outer
+
+    def expired(self) -> bool:
+        self.hit = self.hit or self.outer.expired()
+        return self.hit
 
 
 class _Stop:
