@@ -19,6 +19,16 @@ on the keys of :class:`~skinet.ros.keys.KeyStyle` (``zenoh-bridge-ros2dds`` or
   :class:`ActError`; a cancel the server refuses (``ERROR_REJECTED``,
   ``ERROR_UNKNOWN_GOAL_ID``, ``ERROR_GOAL_TERMINATED``) :class:`Refused`, with its code.
 
+- an event the binding commands (docs/robot.md, *Commanded resources*): the resource it
+  changes is a lifecycle node's, so the actuator asks the node its state (``get_state``)
+  and calls ``<node>/change_state`` (``lifecycle_msgs/srv/ChangeState``) with the
+  transition that leads to the primary state the event's effect maps to
+  (:func:`~skinet.ros.actions.lifecycle_transition`); a reply with ``success`` false is a
+  :class:`Refused`.  A commanded topic resource gets one message on its topic: the
+  value its binding's condition for the target state makes unique
+  (:func:`~skinet.ros.condition.unique_message`); a condition that names no single value
+  raises :class:`ActError`, for the command cannot be sent.
+
 On ``rmw_zenoh`` keys the actuator shows in the ROS graph as rmw_zenoh clients do: a
 node ``/skinet_pilot_<n>`` with a service client token for each action's
 ``send_goal`` and ``cancel_goal``.  What a start or an interrupt caused is not this
@@ -41,13 +51,19 @@ from services.common.ros_client import ServiceClient
 from services.common.ros_liveliness import declare_node
 from services.common.zenoh_config import undeclare
 from services.pilot.act import ActError, Refused
+from skinet.lang.model import Skillset
 from skinet.ros.actions import (
-    SentGoal, cancel_goal_reply, cancel_goal_request, followed_goal, send_goal_reply, send_goal_request,
+    SentGoal, cancel_goal_reply, cancel_goal_request, change_state_reply, change_state_request, followed_goal,
+    get_state_reply, get_state_request, lifecycle_transition, message, send_goal_reply, send_goal_request,
 )
-from skinet.ros.binding import CANCEL_TYPE, STATUS_TYPE, Binding, SkillBinding, bound_inputs_problem
+from skinet.ros.binding import (
+    CANCEL_TYPE, CHANGE_STATE_TYPE, GET_STATE_TYPE, LIFECYCLE_STATES, STATUS_TYPE, Binding, ResourceBinding,
+    SkillBinding, bound_inputs_problem,
+)
+from skinet.ros.condition import unique_message
 from skinet.ros.bound import STATUS_NAMES, Goal, goal_text, goals_from_plain
 from skinet.ros.keys import KeyStyle, history_selector
-from skinet.ros.typestore import decode, to_plain
+from skinet.ros.typestore import decode, encode, to_plain
 from skinet.wire.messages import PilotCommand
 
 
@@ -56,12 +72,14 @@ _nodes = itertools.count(1)  # node names of the actuators of this process
 
 class BoundActuator:
     """Sends the pilot's commands to the action servers of the bound skillsets ``bindings`` (skillset name ->
-    its binding) through ``session``; ``timeout``: seconds to wait for a server's reply."""
+    its binding) through ``session``; ``timeout``: seconds to wait for a server's reply; ``skillsets``: the models
+    (skillset name -> :class:`~skinet.lang.model.Skillset`), for the effects of the events a binding commands."""
 
     def __init__(self, session: zenoh.Session, bindings: Mapping[str, Binding], *, style: KeyStyle = KeyStyle(),
-                 timeout: float = 5.0):
+                 timeout: float = 5.0, skillsets: Mapping[str, Skillset] | None = None):
         self.session = session
         self.bindings = dict(bindings)
+        self.skillsets = dict(skillsets or {})
         self.style = style
         self.timeout = timeout
         self.client = ServiceClient(session, style)
@@ -77,6 +95,8 @@ class BoundActuator:
         """Send ``command`` (``SKILL.start`` or ``SKILL.interrupt``); returns what was sent, for the log."""
         skill, _, kind = command.transition.partition(".")
         binding = self.bindings.get(command.skillset)
+        if binding is not None and not kind and command.transition in binding.commanded:
+            return self._event(command.skillset, binding, command.transition)
         bound = binding.skill(skill) if binding is not None else None
         if binding is None or bound is None:
             raise ActError(f"{command.skillset}:{skill} is bound to no action" + (
@@ -143,6 +163,68 @@ class BoundActuator:
         if code != "ERROR_NONE" or target not in canceling:
             raise Refused(f"{sent}: the action server of {skill.action} refused: {code}")
         return f"{sent}: canceling"
+
+    def _event(self, skillset: str, binding: Binding, event: str) -> str:
+        """Command ``event``: the change of the commanded resource its effect names, through its interface."""
+        model = self.skillsets.get(skillset)
+        if model is None:
+            raise ActError(f"{skillset}:{event}: this pilot has not the model of {skillset}: it cannot tell what the "
+                           "event commands")
+        effects = {e.resource: e.state for e in model.event(event).effects}
+        rb = next((r for r in binding.resources if r.commanded and r.resource in effects), None)
+        if rb is None:
+            raise ActError(f"{skillset}:{event} sets no resource that its binding commands: the pilot cannot send it")
+        target = effects[rb.resource]
+        if rb.lifecycle:
+            return self._lifecycle(skillset, binding, rb, event, target)
+        return self._topic(skillset, binding, rb, event, target)
+
+    def _lifecycle(self, skillset: str, binding: Binding, rb: ResourceBinding, event: str, target: str) -> str:
+        goal = dict(rb.states).get(target)
+        labels = {i: name for name, i in LIFECYCLE_STATES.items()}
+        if goal is None:
+            raise ActError(f"{skillset}:{event}: state {target} of {rb.resource} is no lifecycle state of "
+                           f"{rb.lifecycle}: the pilot cannot command it")
+        reply = self.client.call(rb.get_state, GET_STATE_TYPE, get_state_request(binding.store), self.timeout)
+        if reply is None:
+            raise ActError(f"{skillset}:{event}: no reply from {rb.get_state} within {self.timeout:g} s")
+        try:
+            now, _ = get_state_reply(binding.store, reply)
+        except Exception as exc:
+            raise ActError(f"{skillset}:{event}: the reply of {rb.get_state} does not decode: {exc}") from None
+        transition = lifecycle_transition(now, goal)
+        if transition is None:
+            raise Refused(f"{skillset}:{event}: {rb.lifecycle} is {labels.get(now, now)}, and no lifecycle "
+                          f"transition leads from there to {labels[goal]}")
+        number, label = transition
+        sent = f"change_state {rb.lifecycle} {label} (transition {number}, {labels.get(now, now)} -> {labels[goal]})"
+        reply = self.client.call(rb.change_state, CHANGE_STATE_TYPE, change_state_request(binding.store, number, label),
+                                 self.timeout)
+        if reply is None:
+            raise ActError(f"{sent}: no reply from {rb.change_state} within {self.timeout:g} s")
+        try:
+            success = change_state_reply(binding.store, reply)
+        except Exception as exc:
+            raise ActError(f"{sent}: the reply of {rb.change_state} does not decode: {exc}") from None
+        if not success:
+            raise Refused(f"{sent}: {rb.lifecycle} refused the transition")
+        return f"{sent}: done"
+
+    def _topic(self, skillset: str, binding: Binding, rb: ResourceBinding, event: str, target: str) -> str:
+        condition = dict(rb.states).get(target)
+        fields = unique_message(condition, binding.store) if condition is not None else None
+        if condition is None or fields is None:
+            shown = f"'{condition.text}'" if condition is not None else "no condition"
+            raise ActError(f"{skillset}:{event} cannot be sent: the binding maps {rb.resource} {target} to {shown} "
+                           f"on {rb.topic}, which names no single message to publish")
+        msg = message(binding.store, rb.type, fields)
+        plain = to_plain(msg)
+        if not condition.holds(plain) or any(c.holds(plain) for s, c in rb.states if s != target):
+            raise ActError(f"{skillset}:{event} cannot be sent: no message on {rb.topic} makes {rb.resource} "
+                           f"{target} alone")
+        payload = encode(binding.store, rb.type, msg)
+        self.session.put(self.style.name_key(rb.topic, rb.type, binding.store), payload)
+        return f"publish {rb.topic} {json.dumps(fields, sort_keys=True)}"
 
     def _status(self, binding: Binding, skill: SkillBinding) -> list[Goal]:
         """The goals of the action's last status (its transient-local cache); none when it never had one."""

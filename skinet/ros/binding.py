@@ -79,6 +79,7 @@ LIFECYCLE_STATES: dict[str, int] = {"unconfigured": 1, "inactive": 2, "active": 
 STATUS_TYPE = "action_msgs/msg/GoalStatusArray"
 TRANSITION_EVENT_TYPE = "lifecycle_msgs/msg/TransitionEvent"
 GET_STATE_TYPE = "lifecycle_msgs/srv/GetState"
+CHANGE_STATE_TYPE = "lifecycle_msgs/srv/ChangeState"
 CANCEL_TYPE = "action_msgs/srv/CancelGoal"
 ROS_NAME = re.compile(r"/?[A-Za-z_~][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*")
 
@@ -177,6 +178,10 @@ class ResourceBinding:
     @property
     def get_state(self) -> str:
         return f"{self.lifecycle}/get_state"
+
+    @property
+    def change_state(self) -> str:
+        return f"{self.lifecycle}/change_state"
 
     def lifecycle_state(self, state_id: int) -> str | None:
         """The model state of a primary lifecycle state id (``None``: not mapped)."""
@@ -562,6 +567,6 @@ def definition_folder_of(head: Mapping[str, Any]) -> str:
 
 __all__ = [
     "Binding", "CANCEL_TYPE", "EventBinding", "GET_STATE_TYPE", "LIFECYCLE_STATES", "Outcome", "ResourceBinding",
-    "STATUS_TYPE", "SkillBinding", "TRANSITION_EVENT_TYPE", "changing", "commanded_events", "definitions_folder",
+    "STATUS_TYPE", "CHANGE_STATE_TYPE", "SkillBinding", "TRANSITION_EVENT_TYPE", "changing", "commanded_events", "definitions_folder",
     "parse_binding",
 ]
