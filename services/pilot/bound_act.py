@@ -51,6 +51,7 @@ from services.common.ros_client import ServiceClient
 from services.common.ros_liveliness import declare_node
 from services.common.zenoh_config import undeclare
 from services.pilot.act import ActError, Refused
+from skinet.lang.dnf import dnf
 from skinet.lang.model import Skillset
 from skinet.ros.actions import (
     SentGoal, cancel_goal_reply, cancel_goal_request, change_state_reply, change_state_request, followed_goal,
@@ -175,11 +176,16 @@ class BoundActuator:
         if rb is None:
             raise ActError(f"{skillset}:{event} sets no resource that its binding commands: the pilot cannot send it")
         target = effects[rb.resource]
+        ev = model.event(event)
+        states = {r.name: r.states for r in model.resources}
+        sources = {c.get(rb.resource) for c in dnf(ev.guard, states)}
+        sources = set(states[rb.resource]) if None in sources else sources  # where the event may happen
         if rb.lifecycle:
-            return self._lifecycle(skillset, binding, rb, event, target)
+            return self._lifecycle(skillset, binding, rb, event, target, sources)
         return self._topic(skillset, binding, rb, event, target)
 
-    def _lifecycle(self, skillset: str, binding: Binding, rb: ResourceBinding, event: str, target: str) -> str:
+    def _lifecycle(self, skillset: str, binding: Binding, rb: ResourceBinding, event: str, target: str,
+                   sources: set[str]) -> str:
         goal = dict(rb.states).get(target)
         labels = {i: name for name, i in LIFECYCLE_STATES.items()}
         if goal is None:
@@ -192,6 +198,10 @@ class BoundActuator:
             now, _ = get_state_reply(binding.store, reply)
         except Exception as exc:
             raise ActError(f"{skillset}:{event}: the reply of {rb.get_state} does not decode: {exc}") from None
+        state = rb.lifecycle_state(now)
+        if state not in sources:  # the node moved since the plan was made: this event is not what it would do now
+            raise Refused(f"{skillset}:{event}: {rb.lifecycle} is {labels.get(now, now)}, where {event} cannot "
+                          f"happen ({rb.resource} must be {' or '.join(sorted(sources))})")
         transition = lifecycle_transition(now, goal)
         if transition is None:
             raise Refused(f"{skillset}:{event}: {rb.lifecycle} is {labels.get(now, now)}, and no lifecycle "
