@@ -93,11 +93,16 @@ class BoundActuator:
             _, self._tokens = declare_node(session, style.domain, f"/skinet_pilot_{next(_nodes)}", clients)
 
     def send(self, command: PilotCommand) -> str:
-        """Send ``command`` (``SKILL.start`` or ``SKILL.interrupt``); returns what was sent, for the log."""
+        """Send ``command`` (``SKILL.start``, ``SKILL.interrupt`` or a commanded event); returns what was sent,
+        for the log."""
         skill, _, kind = command.transition.partition(".")
         binding = self.bindings.get(command.skillset)
         if binding is not None and not kind and command.transition in binding.commanded:
             return self._event(command.skillset, binding, command.transition)
+        model = self.skillsets.get(command.skillset)
+        if binding is not None and not kind and model is not None and any(e.name == skill for e in model.events):
+            raise ActError(f"{command.skillset}:{skill} is an event its binding does not command (the robot's own): "
+                           "the pilot cannot send it")
         bound = binding.skill(skill) if binding is not None else None
         if binding is None or bound is None:
             raise ActError(f"{command.skillset}:{skill} is bound to no action" + (

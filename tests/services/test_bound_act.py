@@ -288,6 +288,10 @@ def test_a_commanded_topic_resource_is_sent_only_when_its_binding_names_one_mess
         act.send(PilotCommand(skillset="nav2", transition="battery_low"))
     assert str(info.value) == ("nav2:battery_low cannot be sent: the binding maps battery Low to 'percentage < 0.2' "
                                "on /battery_state, which names no single message to publish")
+    with pytest.raises(ActError) as info:
+        act.send(PilotCommand(skillset="nav2", transition="charging_started"))
+    assert str(info.value) == ("nav2:charging_started is an event its binding does not command (the robot's own): "
+                               "the pilot cannot send it")
     deadline = time.monotonic() + 20
     while not seen and time.monotonic() < deadline:  # until the subscription has reached the router
         assert act.send(PilotCommand(skillset="nav2", transition="emergency_stop")) == 'publish /motion {"data": false}'
