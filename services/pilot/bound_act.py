@@ -42,8 +42,8 @@ from __future__ import annotations
 import itertools
 import json
 import uuid
-from collections.abc import Mapping
-from typing import Any
+from collections.abc import Callable, Mapping
+from typing import Any, TypeVar
 
 import zenoh
 
@@ -68,6 +68,7 @@ from skinet.ros.typestore import decode, encode, to_plain
 from skinet.wire.messages import PilotCommand
 
 
+T = TypeVar("T")
 _nodes = itertools.count(1)  # node names of the actuators of this process
 
 
@@ -129,13 +130,9 @@ class BoundActuator:
             request = send_goal_request(binding.store, skill.type, goal.id, fields)
         except Exception as exc:  # a value the type check let through that CDR refuses: never crash the pilot
             raise ActError(f"{sent}: cannot be encoded: {exc}") from None
-        reply = self.client.call(skill.name("send_goal"), f"{skill.type}_SendGoal", request, self.timeout)
-        if reply is None:
-            raise ActError(f"{sent}: no reply from the action server of {skill.action} within {self.timeout:g} s")
-        try:
-            accepted, _ = send_goal_reply(binding.store, skill.type, reply)
-        except Exception as exc:
-            raise ActError(f"{sent}: the reply of {skill.action} does not decode: {exc}") from None
+        accepted, _ = self._call(skill.name("send_goal"), f"{skill.type}_SendGoal", request, sent,
+                                 f"the action server of {skill.action}", skill.action,
+                                 lambda reply: send_goal_reply(binding.store, skill.type, reply))
         goal.on_reply(accepted)
         if not accepted:  # nothing changed on the robot: the pilot may ask again (Refused)
             raise Refused(f"{sent}: the action server of {skill.action} rejected the goal")
@@ -158,14 +155,9 @@ class BoundActuator:
                                f"{_shown(goals)}): nothing to cancel")
             target, whose = followed.id, "the goal the bridge follows"
         sent = f"cancel_goal {skill.action} goal {goal_text(target)} ({whose})"
-        reply = self.client.call(skill.name("cancel_goal"), CANCEL_TYPE, cancel_goal_request(binding.store, target),
-                                 self.timeout)
-        if reply is None:
-            raise ActError(f"{sent}: no reply from the action server of {skill.action} within {self.timeout:g} s")
-        try:
-            code, canceling = cancel_goal_reply(binding.store, reply)
-        except Exception as exc:
-            raise ActError(f"{sent}: the reply of {skill.action} does not decode: {exc}") from None
+        code, canceling = self._call(skill.name("cancel_goal"), CANCEL_TYPE, cancel_goal_request(binding.store, target),
+                                     sent, f"the action server of {skill.action}", skill.action,
+                                     lambda reply: cancel_goal_reply(binding.store, reply))
         if code != "ERROR_NONE" or target not in canceling:
             raise Refused(f"{sent}: the action server of {skill.action} refused: {code}")
         return f"{sent}: canceling"
@@ -196,13 +188,8 @@ class BoundActuator:
         if goal is None:
             raise ActError(f"{skillset}:{event}: state {target} of {rb.resource} is no lifecycle state of "
                            f"{rb.lifecycle}: the pilot cannot command it")
-        reply = self.client.call(rb.get_state, GET_STATE_TYPE, get_state_request(binding.store), self.timeout)
-        if reply is None:
-            raise ActError(f"{skillset}:{event}: no reply from {rb.get_state} within {self.timeout:g} s")
-        try:
-            now, _ = get_state_reply(binding.store, reply)
-        except Exception as exc:
-            raise ActError(f"{skillset}:{event}: the reply of {rb.get_state} does not decode: {exc}") from None
+        now, _ = self._call(rb.get_state, GET_STATE_TYPE, get_state_request(binding.store), f"{skillset}:{event}",
+                            rb.get_state, rb.get_state, lambda reply: get_state_reply(binding.store, reply))
         state = rb.lifecycle_state(now)
         if state not in sources:  # the node moved since the plan was made: this event is not what it would do now
             raise Refused(f"{skillset}:{event}: {rb.lifecycle} is {labels.get(now, now)}, where {event} cannot "
@@ -213,14 +200,9 @@ class BoundActuator:
                           f"transition leads from there to {labels[goal]}")
         number, label = transition
         sent = f"change_state {rb.lifecycle} {label} (transition {number}, {labels.get(now, now)} -> {labels[goal]})"
-        reply = self.client.call(rb.change_state, CHANGE_STATE_TYPE, change_state_request(binding.store, number, label),
-                                 self.timeout)
-        if reply is None:
-            raise ActError(f"{sent}: no reply from {rb.change_state} within {self.timeout:g} s")
-        try:
-            success = change_state_reply(binding.store, reply)
-        except Exception as exc:
-            raise ActError(f"{sent}: the reply of {rb.change_state} does not decode: {exc}") from None
+        request = change_state_request(binding.store, number, label)
+        success = self._call(rb.change_state, CHANGE_STATE_TYPE, request, sent, rb.change_state, rb.change_state,
+                             lambda reply: change_state_reply(binding.store, reply))
         if not success:
             raise Refused(f"{sent}: {rb.lifecycle} refused the transition")
         return f"{sent}: done"
@@ -240,6 +222,18 @@ class BoundActuator:
         payload = encode(binding.store, rb.type, msg)
         self.session.put(self.style.name_key(rb.topic, rb.type, binding.store), payload)
         return f"publish {rb.topic} {json.dumps(fields, sort_keys=True)}"
+
+    def _call(self, name: str, typename: str, payload: bytes, sent: str, server: str, source: str,
+              read: Callable[[bytes], T]) -> T:
+        """One service call: its reply read by ``read``; no reply or one that does not decode raises :class:`ActError`
+        (``sent``: what was asked, ``server``: who must answer, ``source``: whose reply it is, for the reason)."""
+        reply = self.client.call(name, typename, payload, self.timeout)
+        if reply is None:
+            raise ActError(f"{sent}: no reply from {server} within {self.timeout:g} s")
+        try:
+            return read(reply)
+        except Exception as exc:
+            raise ActError(f"{sent}: the reply of {source} does not decode: {exc}") from None
 
     def _status(self, binding: Binding, skill: SkillBinding) -> list[Goal]:
         """The goals of the action's last status (its transient-local cache); none when it never had one."""

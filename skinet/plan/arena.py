@@ -94,8 +94,9 @@ def local_game(component: Component, marking: int, events: bool = False) -> Loca
             entry = grouped.setdefault(t.name, (t.kind, t.skill, set()))
             entry[2].update(graph.index[r] for r in results)
         moves = [Move(name, kind, skill, tuple(sorted(res))) for name, (kind, skill, res) in grouped.items()]
-        commands.append(tuple(mv for mv in moves if _command(mv.kind, mv.name, component)))
-        outcomes.append(tuple(mv for mv in moves if mv.kind in uncontrollable and not _command(mv.kind, mv.name, component)))
+        ours = {mv.name for mv in moves if _command(mv.kind, mv.name, component)}
+        commands.append(tuple(mv for mv in moves if mv.name in ours))
+        outcomes.append(tuple(mv for mv in moves if mv.kind in uncontrollable and mv.name not in ours))
     names = tuple(dict.fromkeys(t.name for t in net.transitions if _command(t.kind, t.name, component)))
     game = LocalGame(graph, tuple(commands), tuple(outcomes), names)
     cache[marking] = game

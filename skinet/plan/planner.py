@@ -145,9 +145,10 @@ class Planner:
 
     def _uncommanded_needed(self, goal: Goal, marking: Mapping[str, int], deadline: Deadline) -> list[str]:
         """The events (``skillset:event``) that a plan sends when every event of a bound component is commanded
-        (a manager reports its skillset's events: nobody commands them), and that no binding commands here: why there is no plan when a command is not available (docs/planning.md).  Empty when
-        every event is commanded already, no such plan exists, or the budget runs out.  Cost: one more plan,
-        on the arena where every event is a command, and a walk of its policy."""
+        (a manager reports its skillset's events: nobody commands them), and that no binding commands here: why
+        there is no plan when a command is not available (docs/planning.md).  Empty when every event is commanded
+        already, no such plan exists, or the budget runs out.  Cost: one more plan, on the arena where every
+        event of a bound component is a command, and a walk of its policy."""
         if not self._uncommanded_reason or deadline.expired():
             return []
         components = []
