@@ -144,17 +144,17 @@ class Planner:
         return Plan(goal, arena, start, "none", reason, stats())
 
     def _uncommanded_needed(self, goal: Goal, marking: Mapping[str, int], deadline: Deadline) -> list[str]:
-        """The events (``skillset:event``) that a plan sends when every event of a bound component is commanded
-        (a manager reports its skillset's events: nobody commands them), and that no binding commands here: why
-        there is no plan when a command is not available (docs/planning.md).  Empty when every event is commanded
-        already, no such plan exists, or the budget runs out.  Cost: one more plan, on the arena where every
-        event of a bound component is a command, and a walk of its policy."""
+        """The events (``skillset:event``) that a plan sends when every event that changes a resource bound to a
+        lifecycle node is commanded (``Component.commandable``; a battery running low is nobody's command), and
+        that no binding commands here: why there is no plan when a command is not available (docs/planning.md).
+        Empty when those are all commanded already, no such plan exists, or the budget runs out.  Cost: one
+        more plan, on the arena where they are commands, and a walk of its policy."""
         if not self._uncommanded_reason or deadline.expired():
             return []
         components = []
         for c in self.system.components:
-            every = frozenset(e.name for e in c.skillset.events)
-            components.append(c if not c.binding or every <= c.commanded else dataclasses.replace(
+            every = c.commanded | c.commandable
+            components.append(c if every <= c.commanded else dataclasses.replace(
                 c, net=build_net(c.skillset, commanded=every), commanded=every))
         if all(a is b for a, b in zip(components, self.system.components)):
             return []

@@ -560,6 +560,20 @@ def commanded_events(text: str, source: str, skillset: Skillset) -> frozenset[st
     return out
 
 
+def lifecycle_events(text: str, source: str, skillset: Skillset) -> frozenset[str]:
+    """The events of ``skillset`` that change a resource a binding text binds to a lifecycle node: those a
+    lifecycle manager could command (a plan's ``none`` names them when it needs them, docs/planning.md).
+    Malformed tables are skipped: :func:`parse_binding` reports them."""
+    data = parse_toml(text, source)
+    tables = data.get("resources")
+    names = {r.name for r in skillset.resources}
+    out: frozenset[str] = frozenset()
+    for name, table in (tables.items() if isinstance(tables, dict) else ()):
+        if name in names and isinstance(table, dict) and table.get("lifecycle"):
+            out |= changing(skillset, name)
+    return out
+
+
 def definition_folder_of(head: Mapping[str, Any]) -> str:
     folder = head.get("definitions", "")
     return folder if isinstance(folder, str) else ""
@@ -568,5 +582,6 @@ def definition_folder_of(head: Mapping[str, Any]) -> str:
 __all__ = [
     "Binding", "CANCEL_TYPE", "EventBinding", "GET_STATE_TYPE", "LIFECYCLE_STATES", "Outcome", "ResourceBinding",
     "STATUS_TYPE", "CHANGE_STATE_TYPE", "SkillBinding", "TRANSITION_EVENT_TYPE", "changing", "commanded_events", "definitions_folder",
+    "lifecycle_events",
     "parse_binding",
 ]

@@ -127,3 +127,9 @@ def test_no_plan_because_an_event_is_not_commanded_says_so(tmp_path: Path, engin
         "none", "nav2:navigate never runs from here: no reachable marking lets it start; a plan needs "
                 "nav2:navigator_activated, which no binding commands (a plan sends an event only when its binding "
                 "says the resource it changes is commanded)")
+    # Only what a lifecycle manager could command is named: a battery recharging is nobody's command.
+    low = marking_from_json(system, {"nav2": {"resources": {**READY["nav2"]["resources"], "battery": "Low"}}})
+    plan = Planner(system, engine=engine).plan(parse_goal(system, "run nav2:navigate"), low)
+    assert (plan.answer, plan.reason) == (
+        "none", "the goal is unsafe: every marking where nav2:navigate can succeed is forced for dock_when_low "
+                "(violated there: nav2 battery at Low while nav2 navigate runs)")
