@@ -38,7 +38,7 @@ from skinet.lang.larkerrors import MAX_SOURCE_CHARS
 from skinet.lang.model import Model, Skillset
 from skinet.lang.parser import link, parse_unit
 from skinet.options import parse_prediction
-from skinet.ros.binding import Binding, commanded_events, definitions_folder, parse_binding
+from skinet.ros.binding import Binding, commanded_events, definitions_folder, lifecycle_events, parse_binding
 from skinet.ros.definitions import KINDS
 from skinet.ros.typemap import TypeMap, parse_typemap
 from skinet.tomltext import check_keys, check_tables, locate, parse_toml
@@ -240,6 +240,7 @@ def load_system(path: str | Path) -> tuple[System, list[Diagnostic]]:
         raise SourceError.at(where, None, "missing [[skillsets]] entries (each with 'model' and 'manager')")
     skillsets: list[tuple[Skillset, str, str]] = []
     commanded: dict[str, frozenset[str]] = {}  # skillset -> events its binding says are commanded
+    commandable: dict[str, frozenset[str]] = {}  # skillset -> events that change a lifecycle node's resource
     warnings: list[Diagnostic] = []
     sources: dict[str, str] = {}
     models: dict[Path, tuple[Model, dict[str, str]]] = {}
@@ -261,14 +262,17 @@ def load_system(path: str | Path) -> tuple[System, list[Diagnostic]]:
             skillsets.append((ss, str(entry.get("manager", "")), binding))
             sources[Path(ss.source).name] = texts[ss.source]
             if binding:  # its commanded resources make events controllable (SPEC §9); load_bindings checks the rest
-                commanded[ss.name] = commanded_events(read_source(Path(binding)), binding, ss)
+                binding_text = read_source(Path(binding))
+                commanded[ss.name] = commanded_events(binding_text, binding, ss)
+                commandable[ss.name] = lifecycle_events(binding_text, binding, ss)
     props_name = system.get("properties")
     props_text, props_source = "", "<no properties>"
     if props_name is not None:
         props_path = path.parent / str(props_name)
         props_text, props_source = read_source(props_path), str(props_path)
         sources[props_path.name] = props_text
-    built = build_system(system["name"], skillsets, props_text, props_source, sources, commanded=commanded)
+    built = build_system(system["name"], skillsets, props_text, props_source, sources, commanded=commanded,
+                         commandable=commandable)
     options = parse_prediction(data.get("prediction"), [p.name for p in built.properties], where, text)
     return replace(built, prediction=options), warnings
 

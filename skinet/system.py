@@ -33,6 +33,7 @@ class Component:
     manager: str = ""  # ROS 2 node of the skillset manager, e.g. /spot/spot_skillset_manager
     binding: str = ""  # binding file (SPEC §9), when plain ROS 2 interfaces stand for a manager
     commanded: frozenset[str] = frozenset()  # events its binding says are commanded (controllable, SPEC §9)
+    commandable: frozenset[str] = frozenset()  # events that change a lifecycle node's resource (could be commanded)
 
     @property
     def name(self) -> str:
@@ -42,6 +43,15 @@ class Component:
     def uncommanded(self) -> PetriNet:
         """The full net without its commanded events: what may happen with no command (SPEC §8, §9)."""
         return build_net(self.skillset, without=self.commanded) if self.commanded else self.net
+
+    @cached_property
+    def commanding(self) -> PetriNet:
+        """The eventless net plus the commanded events: what a plan may send and wait for when events are not
+        counted as uncontrollable (docs/planning.md: commanded events are commands of the game)."""
+        if not self.commanded:
+            return self.eventless
+        others = frozenset(e.name for e in self.skillset.events) - self.commanded
+        return build_net(self.skillset, commanded=self.commanded, without=others)
 
 
 @dataclass(frozen=True)
@@ -80,10 +90,12 @@ def build_system(
     sources: Mapping[str, str] | None = None,
     prediction: PredictionOptions | None = None,
     commanded: Mapping[str, frozenset[str]] | None = None,
+    commandable: Mapping[str, frozenset[str]] | None = None,
 ) -> System:
     """Assemble a system from parsed skillsets (each with its manager node, and its binding file
     if it has one) and properties text; ``commanded``: per skillset, the events its binding says
-    are commanded (controllable, SPEC §9)."""
+    are commanded (controllable, SPEC §9); ``commandable``: per skillset, the events that change a resource bound
+    to a lifecycle node (a plan's ``none`` names those it would need commanded, docs/planning.md)."""
     seen: set[str] = set()
     components = []
     for ss, manager, *binding in skillsets:
@@ -92,7 +104,8 @@ def build_system(
         seen.add(ss.name)
         events = (commanded or {}).get(ss.name, frozenset())
         components.append(Component(ss, build_net(ss, commanded=events), build_net(ss, eventless=True), manager,
-                                    *binding, commanded=events))
+                                    *binding, commanded=events,
+                                    commandable=(commandable or {}).get(ss.name, frozenset())))
     props = parse_properties(properties_text, {s[0].name: s[0] for s in skillsets}, properties_source)
     return System(name, tuple(components), tuple(props), dict(sources or {}), prediction or PredictionOptions())
 

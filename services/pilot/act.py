@@ -1,14 +1,16 @@
 """How the pilot acts on the robot (SPEC §8, *The pilot*; §9, *Acting*).
 
 An :class:`Actuator` sends one :class:`~skinet.wire.messages.PilotCommand`
-(``SKILL.start`` with its inputs, or ``SKILL.interrupt``) and says what it sent,
+(``SKILL.start`` with its inputs, ``SKILL.interrupt``, or an event a binding commands)
+and says what it sent,
 for the log; it raises :class:`ActError` with the reason when it cannot.  Which
 protocol carries a skill is decided in one place, :func:`route`, and
 :class:`Routed` (the pilot's :func:`default_actuator`) sends each command
 through the actuator of its route: the :class:`ManagerActuator` speaks a
 generated skillset manager's request protocol, as an operator GUI does
-(:mod:`skinet.ros.requests`); skills bound to ROS 2 actions (SPEC §9) go to the
-:class:`~services.pilot.bound_act.BoundActuator` (a goal, a cancel request).
+(:mod:`skinet.ros.requests`); skills bound to ROS 2 actions (SPEC §9) and the events
+a binding commands go to the :class:`~services.pilot.bound_act.BoundActuator` (a goal,
+a cancel request, a lifecycle transition, a topic message).
 
 An interrupt needs the running execution's id.  The manager's own
 ``SkillsetStatus`` says it: the actuator follows each manager's status topic and,
@@ -86,6 +88,8 @@ def responder(system: System, skillset: str, skill: str) -> str:
     """Who must react to a command of ``skillset:skill``, in the operator's words (``no response from ...``):
     its manager node, or, for a bound skill (:func:`route`), its action server."""
     if route(system, skillset, skill) == "binding":
+        if skill in system.component(skillset).commanded:  # a commanded event: its resource's interface
+            return f"the interface of {skillset}'s commanded resource ({skill})"
         return f"the action server of {skillset}:{skill}"
     return system.component(skillset).manager or skillset
 
@@ -295,7 +299,8 @@ def default_actuator(session: zenoh.Session, system: System, typemap: Mapping[st
 
         if bindings is None:
             bindings, _ = load_bindings(system)
-        actuators["binding"] = BoundActuator(session, bindings, style=style)
+        actuators["binding"] = BoundActuator(session, bindings, style=style,
+                                             skillsets={c.name: c.skillset for c in system.components})
     return Routed(system, actuators)
 
 

@@ -19,6 +19,16 @@ on the keys of :class:`~skinet.ros.keys.KeyStyle` (``zenoh-bridge-ros2dds`` or
   :class:`ActError`; a cancel the server refuses (``ERROR_REJECTED``,
   ``ERROR_UNKNOWN_GOAL_ID``, ``ERROR_GOAL_TERMINATED``) :class:`Refused`, with its code.
 
+- an event the binding commands (docs/robot.md, *Commanded resources*): the resource it
+  changes is a lifecycle node's, so the actuator asks the node its state (``get_state``)
+  and calls ``<node>/change_state`` (``lifecycle_msgs/srv/ChangeState``) with the
+  transition that leads to the primary state the event's effect maps to
+  (:func:`~skinet.ros.actions.lifecycle_transition`); a reply with ``success`` false is a
+  :class:`Refused`.  A commanded topic resource gets one message on its topic: the
+  value its binding's condition for the target state makes unique
+  (:func:`~skinet.ros.condition.unique_message`); a condition that names no single value
+  raises :class:`ActError`, for the command cannot be sent.
+
 On ``rmw_zenoh`` keys the actuator shows in the ROS graph as rmw_zenoh clients do: a
 node ``/skinet_pilot_<n>`` with a service client token for each action's
 ``send_goal`` and ``cancel_goal``.  What a start or an interrupt caused is not this
@@ -32,8 +42,8 @@ from __future__ import annotations
 import itertools
 import json
 import uuid
-from collections.abc import Mapping
-from typing import Any
+from collections.abc import Callable, Mapping
+from typing import Any, TypeVar
 
 import zenoh
 
@@ -41,27 +51,37 @@ from services.common.ros_client import ServiceClient
 from services.common.ros_liveliness import declare_node
 from services.common.zenoh_config import undeclare
 from services.pilot.act import ActError, Refused
+from skinet.lang.dnf import dnf
+from skinet.lang.model import Skillset
 from skinet.ros.actions import (
-    SentGoal, cancel_goal_reply, cancel_goal_request, followed_goal, send_goal_reply, send_goal_request,
+    SentGoal, cancel_goal_reply, cancel_goal_request, change_state_reply, change_state_request, followed_goal,
+    get_state_reply, get_state_request, lifecycle_transition, message, send_goal_reply, send_goal_request,
 )
-from skinet.ros.binding import CANCEL_TYPE, STATUS_TYPE, Binding, SkillBinding, bound_inputs_problem
+from skinet.ros.binding import (
+    CANCEL_TYPE, CHANGE_STATE_TYPE, GET_STATE_TYPE, LIFECYCLE_STATES, STATUS_TYPE, Binding, ResourceBinding,
+    SkillBinding, bound_inputs_problem,
+)
+from skinet.ros.condition import unique_message
 from skinet.ros.bound import STATUS_NAMES, Goal, goal_text, goals_from_plain
 from skinet.ros.keys import KeyStyle, history_selector
-from skinet.ros.typestore import decode, to_plain
+from skinet.ros.typestore import decode, encode, to_plain
 from skinet.wire.messages import PilotCommand
 
 
+T = TypeVar("T")
 _nodes = itertools.count(1)  # node names of the actuators of this process
 
 
 class BoundActuator:
     """Sends the pilot's commands to the action servers of the bound skillsets ``bindings`` (skillset name ->
-    its binding) through ``session``; ``timeout``: seconds to wait for a server's reply."""
+    its binding) through ``session``; ``timeout``: seconds to wait for a server's reply; ``skillsets``: the models
+    (skillset name -> :class:`~skinet.lang.model.Skillset`), for the effects of the events a binding commands."""
 
     def __init__(self, session: zenoh.Session, bindings: Mapping[str, Binding], *, style: KeyStyle = KeyStyle(),
-                 timeout: float = 5.0):
+                 timeout: float = 5.0, skillsets: Mapping[str, Skillset] | None = None):
         self.session = session
         self.bindings = dict(bindings)
+        self.skillsets = dict(skillsets or {})
         self.style = style
         self.timeout = timeout
         self.client = ServiceClient(session, style)
@@ -74,9 +94,16 @@ class BoundActuator:
             _, self._tokens = declare_node(session, style.domain, f"/skinet_pilot_{next(_nodes)}", clients)
 
     def send(self, command: PilotCommand) -> str:
-        """Send ``command`` (``SKILL.start`` or ``SKILL.interrupt``); returns what was sent, for the log."""
+        """Send ``command`` (``SKILL.start``, ``SKILL.interrupt`` or a commanded event); returns what was sent,
+        for the log."""
         skill, _, kind = command.transition.partition(".")
         binding = self.bindings.get(command.skillset)
+        if binding is not None and not kind and command.transition in binding.commanded:
+            return self._event(command.skillset, binding, command.transition)
+        model = self.skillsets.get(command.skillset)
+        if binding is not None and not kind and model is not None and any(e.name == skill for e in model.events):
+            raise ActError(f"{command.skillset}:{skill} is an event its binding does not command (the robot's own): "
+                           "the pilot cannot send it")
         bound = binding.skill(skill) if binding is not None else None
         if binding is None or bound is None:
             raise ActError(f"{command.skillset}:{skill} is bound to no action" + (
@@ -103,13 +130,9 @@ class BoundActuator:
             request = send_goal_request(binding.store, skill.type, goal.id, fields)
         except Exception as exc:  # a value the type check let through that CDR refuses: never crash the pilot
             raise ActError(f"{sent}: cannot be encoded: {exc}") from None
-        reply = self.client.call(skill.name("send_goal"), f"{skill.type}_SendGoal", request, self.timeout)
-        if reply is None:
-            raise ActError(f"{sent}: no reply from the action server of {skill.action} within {self.timeout:g} s")
-        try:
-            accepted, _ = send_goal_reply(binding.store, skill.type, reply)
-        except Exception as exc:
-            raise ActError(f"{sent}: the reply of {skill.action} does not decode: {exc}") from None
+        accepted, _ = self._call(skill.name("send_goal"), f"{skill.type}_SendGoal", request, sent,
+                                 f"the action server of {skill.action}", skill.action,
+                                 lambda reply: send_goal_reply(binding.store, skill.type, reply))
         goal.on_reply(accepted)
         if not accepted:  # nothing changed on the robot: the pilot may ask again (Refused)
             raise Refused(f"{sent}: the action server of {skill.action} rejected the goal")
@@ -132,17 +155,85 @@ class BoundActuator:
                                f"{_shown(goals)}): nothing to cancel")
             target, whose = followed.id, "the goal the bridge follows"
         sent = f"cancel_goal {skill.action} goal {goal_text(target)} ({whose})"
-        reply = self.client.call(skill.name("cancel_goal"), CANCEL_TYPE, cancel_goal_request(binding.store, target),
-                                 self.timeout)
-        if reply is None:
-            raise ActError(f"{sent}: no reply from the action server of {skill.action} within {self.timeout:g} s")
-        try:
-            code, canceling = cancel_goal_reply(binding.store, reply)
-        except Exception as exc:
-            raise ActError(f"{sent}: the reply of {skill.action} does not decode: {exc}") from None
+        code, canceling = self._call(skill.name("cancel_goal"), CANCEL_TYPE, cancel_goal_request(binding.store, target),
+                                     sent, f"the action server of {skill.action}", skill.action,
+                                     lambda reply: cancel_goal_reply(binding.store, reply))
         if code != "ERROR_NONE" or target not in canceling:
             raise Refused(f"{sent}: the action server of {skill.action} refused: {code}")
         return f"{sent}: canceling"
+
+    def _event(self, skillset: str, binding: Binding, event: str) -> str:
+        """Command ``event``: the change of the commanded resource its effect names, through its interface."""
+        model = self.skillsets.get(skillset)
+        if model is None:
+            raise ActError(f"{skillset}:{event}: this pilot has not the model of {skillset}: it cannot tell what the "
+                           "event commands")
+        effects = {e.resource: e.state for e in model.event(event).effects}
+        rb = next((r for r in binding.resources if r.commanded and r.resource in effects), None)
+        if rb is None:
+            raise ActError(f"{skillset}:{event} sets no resource that its binding commands: the pilot cannot send it")
+        target = effects[rb.resource]
+        ev = model.event(event)
+        states = {r.name: r.states for r in model.resources}
+        sources = {c.get(rb.resource) for c in dnf(ev.guard, states)}
+        sources = set(states[rb.resource]) if None in sources else sources  # where the event may happen
+        if rb.lifecycle:
+            return self._lifecycle(skillset, binding, rb, event, target, sources)
+        return self._topic(skillset, binding, rb, event, target)
+
+    def _lifecycle(self, skillset: str, binding: Binding, rb: ResourceBinding, event: str, target: str,
+                   sources: set[str]) -> str:
+        goal = dict(rb.states).get(target)
+        labels = {i: name for name, i in LIFECYCLE_STATES.items()}
+        if goal is None:
+            raise ActError(f"{skillset}:{event}: state {target} of {rb.resource} is no lifecycle state of "
+                           f"{rb.lifecycle}: the pilot cannot command it")
+        now, _ = self._call(rb.get_state, GET_STATE_TYPE, get_state_request(binding.store), f"{skillset}:{event}",
+                            rb.get_state, rb.get_state, lambda reply: get_state_reply(binding.store, reply))
+        state = rb.lifecycle_state(now)
+        if state not in sources:  # the node moved since the plan was made: this event is not what it would do now
+            raise Refused(f"{skillset}:{event}: {rb.lifecycle} is {labels.get(now, now)}, where {event} cannot "
+                          f"happen ({rb.resource} must be {' or '.join(sorted(sources))})")
+        transition = lifecycle_transition(now, goal)
+        if transition is None:
+            raise Refused(f"{skillset}:{event}: {rb.lifecycle} is {labels.get(now, now)}, and no lifecycle "
+                          f"transition leads from there to {labels[goal]}")
+        number, label = transition
+        sent = f"change_state {rb.lifecycle} {label} (transition {number}, {labels.get(now, now)} -> {labels[goal]})"
+        request = change_state_request(binding.store, number, label)
+        success = self._call(rb.change_state, CHANGE_STATE_TYPE, request, sent, rb.change_state, rb.change_state,
+                             lambda reply: change_state_reply(binding.store, reply))
+        if not success:
+            raise Refused(f"{sent}: {rb.lifecycle} refused the transition")
+        return f"{sent}: done"
+
+    def _topic(self, skillset: str, binding: Binding, rb: ResourceBinding, event: str, target: str) -> str:
+        condition = dict(rb.states).get(target)
+        fields = unique_message(condition, binding.store) if condition is not None else None
+        if condition is None or fields is None:
+            shown = f"'{condition.text}'" if condition is not None else "no condition"
+            raise ActError(f"{skillset}:{event} cannot be sent: the binding maps {rb.resource} {target} to {shown} "
+                           f"on {rb.topic}, which names no single message to publish")
+        msg = message(binding.store, rb.type, fields)
+        plain = to_plain(msg)
+        if not condition.holds(plain) or any(c.holds(plain) for s, c in rb.states if s != target):
+            raise ActError(f"{skillset}:{event} cannot be sent: no message on {rb.topic} makes {rb.resource} "
+                           f"{target} alone")
+        payload = encode(binding.store, rb.type, msg)
+        self.session.put(self.style.name_key(rb.topic, rb.type, binding.store), payload)
+        return f"publish {rb.topic} {json.dumps(fields, sort_keys=True)}"
+
+    def _call(self, name: str, typename: str, payload: bytes, sent: str, server: str, source: str,
+              read: Callable[[bytes], T]) -> T:
+        """One service call: its reply read by ``read``; no reply or one that does not decode raises :class:`ActError`
+        (``sent``: what was asked, ``server``: who must answer, ``source``: whose reply it is, for the reason)."""
+        reply = self.client.call(name, typename, payload, self.timeout)
+        if reply is None:
+            raise ActError(f"{sent}: no reply from {server} within {self.timeout:g} s")
+        try:
+            return read(reply)
+        except Exception as exc:
+            raise ActError(f"{sent}: the reply of {source} does not decode: {exc}") from None
 
     def _status(self, binding: Binding, skill: SkillBinding) -> list[Goal]:
         """The goals of the action's last status (its transient-local cache); none when it never had one."""

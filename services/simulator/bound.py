@@ -13,7 +13,8 @@ the real protocols with CDR payloads on the keys of :class:`~skinet.ros.keys.Key
   and a cancel request makes it CANCELING then CANCELED at once; a ``get_result`` for
   an active goal is answered when it ends.  ``status_first`` publishes the status
   before the reply to ``send_goal`` (the race a client must stand);
-- per lifecycle resource, a lifecycle node: ``<node>/get_state`` and
+- per lifecycle resource, a lifecycle node: ``<node>/get_state``, ``<node>/change_state``
+  (a transition from the node's state succeeds, others answer ``success`` false) and
   ``<node>/transition_event`` through the transition states (configuring, ...);
 - every bound topic, published with the step's ``message`` fields.
 
@@ -53,7 +54,7 @@ from skinet.mission import Scenario, step_numbers
 from services.simulator.protocols import ABORTED, SUCCEEDED, ActionLogic, LifecycleLogic
 from skinet.ros.actions import cancel_goal_request, message, send_goal_reply, send_goal_request
 from skinet.ros.binding import (
-    CANCEL_TYPE, GET_STATE_TYPE, STATUS_TYPE, TRANSITION_EVENT_TYPE, Binding, ResourceBinding, SkillBinding,
+    CANCEL_TYPE, CHANGE_STATE_TYPE, GET_STATE_TYPE, STATUS_TYPE, TRANSITION_EVENT_TYPE, Binding, ResourceBinding, SkillBinding,
 )
 from skinet.ros.bound import goal_text
 from skinet.ros.keys import KeyStyle, rmw_attachment
@@ -166,10 +167,22 @@ class _LifecycleNode:
         self.events = sim.publisher(resource.transition_event, TRANSITION_EVENT_TYPE, binding.store)
         self.queryable = sim.session.declare_queryable(sim.key(resource.get_state, GET_STATE_TYPE, binding.store),
                                                        self._get_state)
+        self.changes = sim.session.declare_queryable(
+            sim.key(resource.change_state, CHANGE_STATE_TYPE, binding.store), self._change_state)
 
     def _get_state(self, query: zenoh.Query) -> None:
         with query, self.logic.lock:
             query.reply(query.key_expr, self.logic.get_state(), attachment=self.sim.reply_attachment(query))
+
+    def _change_state(self, query: zenoh.Query) -> None:
+        """A lifecycle manager's request: the transition, if it starts from the node's state (else success false)."""
+        with query:
+            payload = query.payload.to_bytes() if query.payload is not None else b""
+            with self.logic.lock:
+                reply, events = self.logic.change_state(payload)
+                for event in events:
+                    self.events.put(event)
+            query.reply(query.key_expr, reply, attachment=self.sim.reply_attachment(query))
 
     def transition(self, target: int) -> None:
         """Go to the primary state ``target`` through its transition state, publishing both events."""
@@ -178,7 +191,7 @@ class _LifecycleNode:
                 self.events.put(payload)
 
     def close(self) -> None:
-        undeclare(self.queryable)
+        undeclare(self.queryable, self.changes)
 
 
 class BoundSimulator:
@@ -215,8 +228,10 @@ class BoundSimulator:
                 if r.lifecycle:
                     initial = dict(r.states).get(skillset.resource(r.resource).initial, 1)
                     self.nodes[(name, r.resource)] = _LifecycleNode(self, b, r, initial)
-                    entities += [("SS", r.get_state, GET_STATE_TYPE, self._hash(b, GET_STATE_TYPE))]
+                    entities += [("SS", r.get_state, GET_STATE_TYPE, self._hash(b, GET_STATE_TYPE)),
+                                 ("SS", r.change_state, CHANGE_STATE_TYPE, self._hash(b, CHANGE_STATE_TYPE))]
                     self._route("SS", r.get_state, GET_STATE_TYPE)
+                    self._route("SS", r.change_state, CHANGE_STATE_TYPE)
                 else:
                     self.publisher(r.topic, r.type, b.store)
             for e in b.events:
@@ -246,9 +261,11 @@ class BoundSimulator:
         """``resource``'s lifecycle node restarts, unconfigured: its token leaves and comes back."""
         node = self.nodes[(skillset, resource)]
         node.close()
-        undeclare(self._routes.pop(node.resource.get_state), self.publishers.pop(node.resource.transition_event).pub)
+        undeclare(self._routes.pop(node.resource.get_state), self._routes.pop(node.resource.change_state, None),
+                  self.publishers.pop(node.resource.transition_event).pub)
         self.nodes[(skillset, resource)] = _LifecycleNode(self, self.bindings[skillset], node.resource, 1)
         self._route("SS", node.resource.get_state, GET_STATE_TYPE)
+        self._route("SS", node.resource.change_state, CHANGE_STATE_TYPE)
 
     def _hash(self, binding: Binding, typename: str) -> str:
         return self.style.type_hash(binding.store, typename) if binding.store is not None else "*"

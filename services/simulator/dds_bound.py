@@ -15,7 +15,7 @@ so that ``zenoh-bridge-ros2dds`` routes them to Zenoh exactly as it routes a rob
   local, keep last 1) and ``rt/A/_action/feedback``: with all five, the gateway
   creates an action server route (``AS`` liveliness token, queryables, a cached
   status publisher);
-- a lifecycle node ``N``: the service ``N/get_state`` and the writer of
+- a lifecycle node ``N``: the services ``N/get_state`` and ``N/change_state`` and the writer of
   ``rt/N/transition_event``; bound topics: a writer each;
 - ``ros_discovery_info`` lists the nodes (one per action server, one per lifecycle
   node, ``/robot_topics`` for the topics) with their readers' and writers' GIDs.
@@ -42,7 +42,8 @@ from services.simulator.dds import DISCOVERY_TOPIC, discovery_types, gid_size, i
 from services.simulator.protocols import ABORTED, SUCCEEDED, ActionLogic, LifecycleLogic
 from skinet.ros.actions import message
 from skinet.ros.binding import (
-    CANCEL_TYPE, GET_STATE_TYPE, STATUS_TYPE, TRANSITION_EVENT_TYPE, Binding, SkillBinding,
+    CANCEL_TYPE, CHANGE_STATE_TYPE, GET_STATE_TYPE, STATUS_TYPE, TRANSITION_EVENT_TYPE, Binding, ResourceBinding,
+    SkillBinding,
 )
 from skinet.ros.definitions import rihs01
 from skinet.ros.keys import dds_type_name
@@ -93,6 +94,8 @@ class DdsBoundRobot:
                     self.lifecycles[(name, r.resource)] = lifecycle
                     self._service(r.lifecycle, r.get_state, GET_STATE_TYPE, store,
                                   lambda data, reply, lc=lifecycle: self._get_state(lc, reply))
+                    self._service(r.lifecycle, r.change_state, CHANGE_STATE_TYPE, store,
+                                  lambda data, reply, lc=lifecycle, rb=r: self._change_state(lc, rb, data, reply))
                     self._writer(r.lifecycle, r.transition_event, TRANSITION_EVENT_TYPE, store)
                 else:
                     self._writer("/robot_topics", r.topic, r.type, store)
@@ -217,6 +220,14 @@ class DdsBoundRobot:
     def _get_state(lifecycle: LifecycleLogic, reply: Callable[[bytes], None]) -> None:
         with lifecycle.lock:
             reply(lifecycle.get_state())
+
+    def _change_state(self, lifecycle: LifecycleLogic, resource: ResourceBinding, data: bytes,
+                      reply: Callable[[bytes], None]) -> None:
+        with lifecycle.lock:
+            answer, events = lifecycle.change_state(data)
+            for payload in events:
+                self._write(resource.transition_event, payload)
+            reply(answer)
 
     # -- the robot's side -------------------------------------------------------------------------
 

@@ -8,8 +8,10 @@ CDR requests in (``send_goal``, ``cancel_goal``, ``get_result``), CDR replies an
 then EXECUTING, one feedback message), ends when the robot says so (SUCCEEDED or
 ABORTED with a result), and a cancel request makes it CANCELING then CANCELED at
 once; a ``get_result`` for an active goal is answered when it ends.
-:class:`LifecycleLogic` is one lifecycle node: ``get_state`` and the
-``TransitionEvent`` pairs through a transition state (configuring, activating, ...).
+:class:`LifecycleLogic` is one lifecycle node: ``get_state``, ``change_state`` (a
+transition that starts from the node's primary state succeeds; another answers
+``success`` false and changes nothing) and the ``TransitionEvent`` pairs through a
+transition state (configuring, activating, ...).
 
 The transports (:mod:`services.simulator.bound` on Zenoh keys,
 :mod:`services.simulator.dds_bound` on DDS) only move the bytes.  Not thread-safe:
@@ -26,8 +28,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from skinet.ros.actions import goal_uuid, message
-from skinet.ros.binding import CANCEL_TYPE, GET_STATE_TYPE, LIFECYCLE_STATES, STATUS_TYPE, TRANSITION_EVENT_TYPE
+from skinet.ros.actions import LIFECYCLE_TRANSITIONS, goal_uuid, message
+from skinet.ros.binding import CANCEL_TYPE, CHANGE_STATE_TYPE, GET_STATE_TYPE, LIFECYCLE_STATES, STATUS_TYPE, TRANSITION_EVENT_TYPE
 from skinet.ros.typestore import Typestore, decode, default_instance, encode, to_plain
 
 log = logging.getLogger("skinet.simulator")
@@ -184,6 +186,19 @@ class LifecycleLogic:
         typename = f"{GET_STATE_TYPE}_Response"
         return encode(self.store, typename, default_instance(self.store, typename,
                                                              current_state=self._state(self.state)))
+
+    def change_state(self, request: bytes) -> tuple[bytes, list[bytes]]:
+        """The reply to a ``ChangeState`` request, and the transition events it causes (none when it fails)."""
+        try:
+            transition = int(decode(self.store, f"{CHANGE_STATE_TYPE}_Request", request).transition.id)
+        except Exception as exc:  # a malformed request: refused, logged, the node stays as it is
+            log.warning("change_state: a request that does not decode: %s", exc)
+            transition = -1
+        target = next((t for (s, t), (i, _) in LIFECYCLE_TRANSITIONS.items() if s == self.state and i == transition),
+                      None)
+        events = self.transition(target) if target is not None else []
+        typename = f"{CHANGE_STATE_TYPE}_Response"
+        return encode(self.store, typename, default_instance(self.store, typename, success=target is not None)), events
 
     def transition(self, target: int) -> list[bytes]:
         """The two ``TransitionEvent`` messages taking the node to the primary state ``target``."""

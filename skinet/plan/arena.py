@@ -5,8 +5,9 @@ is the asynchronous product of the components' graphs (SPEC §6.4).  So the
 arena is kept per component, as a :class:`LocalGame`: the component's stable
 markings reachable from its live marking (:mod:`skinet.verify.component`;
 invariant cascades and priorities are inside its steps) and, at each one,
-its *commands* (``k.start``, ``k.interrupt``) and *outcomes* (``k.success.m``,
-``k.failure.m``, and events when they count as uncontrollable, SPEC §6.3),
+its *commands* (``k.start``, ``k.interrupt``, and the events a binding commands,
+docs/planning.md) and *outcomes* (``k.success.m``, ``k.failure.m``, and the other
+events when they count as uncontrollable, SPEC §6.3),
 each with every stable marking it may lead to.  Variants of one logical
 transition are one move: the controller sends ``k.start``, not a variant, so
 ``Post(m, k.start)`` is the union of its variants' results.
@@ -73,11 +74,12 @@ class LocalGame:
 def local_game(component: Component, marking: int, events: bool = False) -> LocalGame:
     """The local game of ``component`` from its ``marking`` (memoised on the net).
 
-    With ``events``, the graph is the full net's and events are outcomes, but for
-    the commanded ones (SPEC §9: they happen only when someone commands them, and a
-    plan never does); otherwise it is the eventless net's (SPEC §8: the eventless union).
+    With ``events``, the graph is the full net's and events are outcomes; otherwise it is
+    the eventless net's (SPEC §8: the eventless union).  Either way the commanded events
+    (SPEC §9) are in it as commands: they happen only when someone commands them, and the
+    pilot does so through the binding (docs/planning.md).
     """
-    net = component.uncommanded if events else component.eventless
+    net = component.net if events else component.commanding
     cache: OrderedDict[int, LocalGame] = net.__dict__.setdefault("_local_games", OrderedDict())
     if marking in cache:
         cache.move_to_end(marking)
@@ -92,14 +94,20 @@ def local_game(component: Component, marking: int, events: bool = False) -> Loca
             entry = grouped.setdefault(t.name, (t.kind, t.skill, set()))
             entry[2].update(graph.index[r] for r in results)
         moves = [Move(name, kind, skill, tuple(sorted(res))) for name, (kind, skill, res) in grouped.items()]
-        commands.append(tuple(mv for mv in moves if mv.kind in COMMANDS))
-        outcomes.append(tuple(mv for mv in moves if mv.kind in uncontrollable))
-    names = tuple(dict.fromkeys(t.name for t in net.transitions if t.kind in COMMANDS))
+        ours = {mv.name for mv in moves if _command(mv.kind, mv.name, component)}
+        commands.append(tuple(mv for mv in moves if mv.name in ours))
+        outcomes.append(tuple(mv for mv in moves if mv.kind in uncontrollable and mv.name not in ours))
+    names = tuple(dict.fromkeys(t.name for t in net.transitions if _command(t.kind, t.name, component)))
     game = LocalGame(graph, tuple(commands), tuple(outcomes), names)
     cache[marking] = game
     while len(cache) > CACHE_SIZE:
         cache.popitem(last=False)
     return game
+
+
+def _command(kind: str, name: str, component: Component) -> bool:
+    """Whether a move is the controller's: a skill start or interrupt, or a commanded event."""
+    return kind in COMMANDS or (kind == "event" and name in component.commanded)
 
 
 DONE = None

@@ -4,7 +4,8 @@
 marking and keeps it (the arena, the explored graph or its BDDs), so that the
 pilot may ask at every marking change.  Per question: strong first, then
 strong cyclic (:mod:`skinet.plan.solve`); ``none`` only after a complete search
-(:mod:`skinet.plan.diagnose` says why); ``unknown`` when the budget or the
+(:mod:`skinet.plan.diagnose` says why, and :meth:`Planner.plan` adds the events a plan
+would need that no binding commands); ``unknown`` when the budget or the
 memory limit cut the search and no plan lies within what was searched.
 
 Engines: ``explicit`` on the explored graph (:mod:`skinet.plan.explicit`),
@@ -18,16 +19,18 @@ start marking.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections import OrderedDict
 from collections.abc import Hashable, Mapping, Sequence
 from typing import Any
 
 from skinet.errors import SkinetError
+from skinet.net.build import build_net
 from skinet.plan.arena import Arena
 from skinet.plan.diagnose import _forced_words, diagnose
 from skinet.plan.goal import Goal
-from skinet.plan.policy import Plan, Stats
+from skinet.plan.policy import Command, Plan, Stats
 from skinet.plan.solve import cyclic, strong
 from skinet.system import System, marking_problems
 from skinet.verify.explore import DEFAULT_MEMORY_LIMIT, Deadline, resident_bytes
@@ -57,6 +60,7 @@ class Planner:
         opts = system.prediction
         self.events = opts.default.events_uncontrollable or any(o.events_uncontrollable for o in opts.overrides.values())
         self._cache: OrderedDict[Hashable, dict[str, Any]] = OrderedDict()
+        self._uncommanded_reason = True  # off in the planner that asks with every event commanded
 
     def arena(self, marking: Mapping[str, int]) -> Arena:
         """The arena from ``marking`` (kept for the next questions from the same marking)."""
@@ -85,7 +89,9 @@ class Planner:
     def plan(self, goal: Goal, marking: Mapping[str, int] | None = None, budget: float | None = None) -> Plan:
         """The answer to ``goal`` from ``marking`` (default: initial) within ``budget`` seconds."""
         started = time.perf_counter()
-        deadline = Deadline.after(budget, started)
+        return self._plan(goal, marking, Deadline.after(budget, started), started)
+
+    def _plan(self, goal: Goal, marking: Mapping[str, int] | None, deadline: Deadline, started: float) -> Plan:
         marking = dict(marking or self.system.initial_marking())
         entry = self._entry(marking)
         arena: Arena = entry["arena"]
@@ -130,7 +136,41 @@ class Planner:
             return Plan(goal, arena, start, "unknown",
                         f"no plan within the {markings} markings explored: the exploration was cut by the "
                         f"{'memory limit' if cut == 'memory' else cut}", stats())
-        return Plan(goal, arena, start, "none", diagnose(arena, goal, game, relaxed, stop), stats())
+        reason = diagnose(arena, goal, game, relaxed, stop)
+        needed = self._uncommanded_needed(goal, marking, deadline)
+        if needed:
+            reason += (f"; a plan needs {', '.join(needed)}, which no binding commands (a plan sends an event only "
+                       "when its binding says the resource it changes is commanded)")
+        return Plan(goal, arena, start, "none", reason, stats())
+
+    def _uncommanded_needed(self, goal: Goal, marking: Mapping[str, int], deadline: Deadline) -> list[str]:
+        """The events (``skillset:event``) that a plan sends when every event that changes a resource bound to a
+        lifecycle node is commanded (``Component.commandable``; a battery running low is nobody's command), and
+        that no binding commands here: why there is no plan when a command is not available (docs/planning.md).
+        Empty when those are all commanded already, no such plan exists, or the budget runs out.  Cost: one
+        more plan, on the arena where they are commands, and a walk of its policy."""
+        if not self._uncommanded_reason or deadline.expired():
+            return []
+        components = []
+        for c in self.system.components:
+            every = c.commanded | c.commandable
+            components.append(c if every <= c.commanded else dataclasses.replace(
+                c, net=build_net(c.skillset, commanded=every), commanded=every))
+        if all(a is b for a, b in zip(components, self.system.components)):
+            return []
+        relaxed = Planner(dataclasses.replace(self.system, components=tuple(components)), self.engine,
+                          self.memory_limit)
+        relaxed._uncommanded_reason = False
+        plan = relaxed._plan(goal, marking, _Within(deadline), time.perf_counter())
+        if plan.answer not in ("strong", "cyclic"):
+            return []
+        needed: list[str] = []
+        for _, action, _ in plan.policy()[0]:
+            if isinstance(action, Command):
+                c = self.system.component(action.skillset)
+                if action.transition not in c.commanded and any(e.name == action.transition for e in c.skillset.events):
+                    needed.append(f"{action.skillset}:{action.transition}")
+        return list(dict.fromkeys(needed))
 
     def admissible(self, marking: Mapping[str, int]) -> list[tuple[str, str]]:
         """The commands at ``marking`` after which every result is in Safe, ``(skillset, transition)``
@@ -158,6 +198,18 @@ class Planner:
                 break
             here = plan.end or here
         return plans
+
+
+class _Within(Deadline):
+    """The caller's deadline, for a second search inside the same budget."""
+
+    def __init__(self, outer: Deadline):
+        super().__init__(getattr(outer, "at", None))
+        self.outer = outer
+
+    def expired(self) -> bool:
+        self.hit = self.hit or self.outer.expired()
+        return self.hit
 
 
 class _Stop:

@@ -10,7 +10,10 @@ What a client puts on the wire to act through a binding, and reads back:
   now canceling;
 - :func:`get_result_request` / :func:`get_result_reply`: a terminal goal's status and
   result (the bridge names a mode from it);
-- :func:`get_state_request` / :func:`get_state_reply`: a lifecycle node's state.
+- :func:`get_state_request` / :func:`get_state_reply`: a lifecycle node's state;
+- :func:`lifecycle_transition`, :func:`change_state_request` / :func:`change_state_reply`:
+  the transition that takes a lifecycle node from one primary state to another, and the
+  ``change_state`` call that asks for it (a commanded event, docs/robot.md).
 
 :class:`SentGoal` follows one goal a client sent, whichever comes first of the
 server's reply and its status array (each crosses a gateway on its own route).
@@ -32,7 +35,7 @@ import numpy as np
 from rosbags.typesys.base import normalize_fieldname
 from rosbags.typesys.store import Typestore
 
-from skinet.ros.binding import CANCEL_TYPE, GET_STATE_TYPE
+from skinet.ros.binding import CANCEL_TYPE, CHANGE_STATE_TYPE, GET_STATE_TYPE
 from skinet.ros.bound import ACTIVE, STATUS_NAMES, TERMINAL, Goal
 from skinet.ros.typestore import decode, default_instance, encode, to_plain
 
@@ -120,6 +123,37 @@ def get_state_reply(store: Typestore, payload: bytes) -> tuple[int, str]:
     return int(msg.current_state.id), str(msg.current_state.label)
 
 
+LIFECYCLE_TRANSITIONS: dict[tuple[int, int], tuple[int, str]] = {
+    (1, 2): (1, "configure"), (2, 1): (2, "cleanup"), (2, 3): (3, "activate"), (3, 2): (4, "deactivate"),
+    (1, 4): (5, "unconfigured_shutdown"), (2, 4): (6, "inactive_shutdown"), (3, 4): (7, "active_shutdown"),
+}
+"""(start, target primary state id) -> the lifecycle_msgs/msg/Transition id and label that leads there."""
+
+
+def lifecycle_transition(start: int, target: int) -> tuple[int, str] | None:
+    """The transition (id, label) from the primary state ``start`` to ``target``; None when none leads there.
+
+    Examples:
+        >>> lifecycle_transition(2, 3)
+        (3, 'activate')
+        >>> lifecycle_transition(1, 3) is None
+        True
+    """
+    return LIFECYCLE_TRANSITIONS.get((start, target))
+
+
+def change_state_request(store: Typestore, transition: int, label: str = "") -> bytes:
+    """CDR of ``lifecycle_msgs/srv/ChangeState_Request`` for one transition id."""
+    typename = f"{CHANGE_STATE_TYPE}_Request"
+    return encode(store, typename, default_instance(store, typename, transition=default_instance(
+        store, "lifecycle_msgs/msg/Transition", id=transition, label=label)))
+
+
+def change_state_reply(store: Typestore, payload: bytes) -> bool:
+    """Whether a ``ChangeState_Response`` says the transition succeeded."""
+    return bool(decode(store, f"{CHANGE_STATE_TYPE}_Response", payload).success)
+
+
 def followed_goal(goals: Sequence[Goal]) -> Goal | None:
     """The active goal (ACCEPTED, EXECUTING, CANCELING) with the earliest stamp: the one the bridge takes
     for the skill's run (a later concurrent goal is a drift, SPEC §9); ``None`` when none is active.
@@ -169,5 +203,6 @@ class SentGoal:
 
 __all__ = [
     "CANCEL_CODES", "SentGoal", "cancel_goal_reply", "cancel_goal_request", "followed_goal", "get_result_reply",
-    "get_result_request", "get_state_reply", "get_state_request", "goal_uuid", "message", "send_goal_reply", "send_goal_request",
+    "LIFECYCLE_TRANSITIONS", "change_state_reply", "change_state_request", "get_result_request",
+    "get_state_reply", "lifecycle_transition", "get_state_request", "goal_uuid", "message", "send_goal_reply", "send_goal_request",
 ]

@@ -79,6 +79,7 @@ LIFECYCLE_STATES: dict[str, int] = {"unconfigured": 1, "inactive": 2, "active": 
 STATUS_TYPE = "action_msgs/msg/GoalStatusArray"
 TRANSITION_EVENT_TYPE = "lifecycle_msgs/msg/TransitionEvent"
 GET_STATE_TYPE = "lifecycle_msgs/srv/GetState"
+CHANGE_STATE_TYPE = "lifecycle_msgs/srv/ChangeState"
 CANCEL_TYPE = "action_msgs/srv/CancelGoal"
 ROS_NAME = re.compile(r"/?[A-Za-z_~][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*")
 
@@ -177,6 +178,10 @@ class ResourceBinding:
     @property
     def get_state(self) -> str:
         return f"{self.lifecycle}/get_state"
+
+    @property
+    def change_state(self) -> str:
+        return f"{self.lifecycle}/change_state"
 
     def lifecycle_state(self, state_id: int) -> str | None:
         """The model state of a primary lifecycle state id (``None``: not mapped)."""
@@ -555,6 +560,20 @@ def commanded_events(text: str, source: str, skillset: Skillset) -> frozenset[st
     return out
 
 
+def lifecycle_events(text: str, source: str, skillset: Skillset) -> frozenset[str]:
+    """The events of ``skillset`` that change a resource a binding text binds to a lifecycle node: those a
+    lifecycle manager could command (a plan's ``none`` names them when it needs them, docs/planning.md).
+    Malformed tables are skipped: :func:`parse_binding` reports them."""
+    data = parse_toml(text, source)
+    tables = data.get("resources")
+    names = {r.name for r in skillset.resources}
+    out: frozenset[str] = frozenset()
+    for name, table in (tables.items() if isinstance(tables, dict) else ()):
+        if name in names and isinstance(table, dict) and table.get("lifecycle"):
+            out |= changing(skillset, name)
+    return out
+
+
 def definition_folder_of(head: Mapping[str, Any]) -> str:
     folder = head.get("definitions", "")
     return folder if isinstance(folder, str) else ""
@@ -562,6 +581,7 @@ def definition_folder_of(head: Mapping[str, Any]) -> str:
 
 __all__ = [
     "Binding", "CANCEL_TYPE", "EventBinding", "GET_STATE_TYPE", "LIFECYCLE_STATES", "Outcome", "ResourceBinding",
-    "STATUS_TYPE", "SkillBinding", "TRANSITION_EVENT_TYPE", "changing", "commanded_events", "definitions_folder",
+    "STATUS_TYPE", "CHANGE_STATE_TYPE", "SkillBinding", "TRANSITION_EVENT_TYPE", "changing", "commanded_events", "definitions_folder",
+    "lifecycle_events",
     "parse_binding",
 ]

@@ -15,6 +15,11 @@ Errors point into the file that holds the condition: ``at`` is the position of i
 first character there.  Cost: parsing linear in the text; evaluation one dict
 lookup per path element and one comparison per atom.
 
+:func:`unique_message` goes the other way, for a commanded topic resource (the pilot
+publishes the state it commands, docs/robot.md): the fields a condition pins to one
+value each (``mode == 3``, ``data``, ``not data``, joined by ``and``), or None when
+it leaves a choice (``or``, ``!=``, ``<``...).
+
 Examples:
     >>> from skinet.ros.definitions import build_store
     >>> c = parse_condition("percentage < 0.2 and present", "sensor_msgs/msg/BatteryState", build_store())
@@ -239,4 +244,91 @@ def parse_condition(text: str, typename: str, store: Typestore, source: str = "<
     return Condition(text, typename, tuple(dict.fromkeys(compiler.paths)), test)
 
 
-__all__ = ["Condition", "MAX_CONDITION_CHARS", "parse_condition"]
+
+
+def unique_message(condition: Condition, store: Typestore) -> dict[str, Any] | None:
+    """The fields (nested dicts for paths) that ``condition`` pins, each to one value; None when it does not
+    name a single value for every field it reads (module docstring).
+
+    Examples:
+        >>> from skinet.ros.definitions import build_store
+        >>> store = build_store()
+        >>> unique_message(parse_condition("data", "std_msgs/msg/Bool", store), store)
+        {'data': True}
+        >>> unique_message(parse_condition("power_supply_status == POWER_SUPPLY_STATUS_FULL and not present",
+        ...                                "sensor_msgs/msg/BatteryState", store), store)
+        {'power_supply_status': 4, 'present': False}
+        >>> unique_message(parse_condition("percentage < 0.2", "sensor_msgs/msg/BatteryState", store), store) is None
+        True
+    """
+    tree = _lark().parse(condition.text)
+    pinned: dict[tuple[str, ...], Any] = {}
+    todo: list[Any] = [tree]
+    while todo:
+        node = todo.pop(0)
+        if not isinstance(node, Tree):
+            node = Tree("truth", [node])
+        if node.data == "and_":
+            todo[:0] = node.children
+            continue
+        found = _pin(node, condition.typename, store)
+        if found is None or pinned.get(found[0], found[1]) != found[1]:
+            return None
+        pinned[found[0]] = found[1]
+    out: dict[str, Any] = {}
+    for path, value in pinned.items():
+        inner = out
+        for name in path[:-1]:
+            inner = inner.setdefault(name, {})
+        inner[path[-1]] = value
+    return out
+
+
+def _pin(node: Tree, typename: str, store: Typestore) -> tuple[tuple[str, ...], Any] | None:
+    """(field path, value) of ``path``, ``not path`` or ``path == value`` (either side); None otherwise."""
+    if node.data == "not_":
+        inner = node.children[0]
+        if isinstance(inner, Tree) and inner.data == "truth" and _is_path(inner.children[0], typename, store):
+            return tuple(str(t) for t in inner.children[0].children), False
+        if isinstance(inner, Tree) and inner.data == "path" and _is_path(inner, typename, store):
+            return tuple(str(t) for t in inner.children), False
+        return None
+    if node.data == "truth" and _is_path(node.children[0], typename, store):
+        return tuple(str(t) for t in node.children[0].children), True
+    if node.data == "path" and _is_path(node, typename, store):
+        return tuple(str(t) for t in node.children), True
+    if node.data != "compare" or str(node.children[1]) != "==":
+        return None
+    left, _, right = node.children
+    for path, other in ((left, right), (right, left)):
+        if _is_path(path, typename, store):
+            value = _value(other, typename, store)
+            return None if value is None else (tuple(str(t) for t in path.children), value[0])
+    return None
+
+
+def _is_path(node: Any, typename: str, store: Typestore) -> bool:
+    """Whether ``node`` is a field path (not a lone constant of the message)."""
+    return isinstance(node, Tree) and node.data == "path" and not (
+        len(node.children) == 1 and _constant(store, typename, str(node.children[0])) is not None)
+
+
+def _value(node: Any, typename: str, store: Typestore) -> tuple[Any] | None:
+    """The literal or constant value of ``node``, in a 1-tuple; None for a field path."""
+    if not isinstance(node, Tree):
+        return None
+    if node.data in ("number", "negative"):
+        text = str(node.children[0])
+        number = float(text) if any(c in text for c in ".eE") else int(text)
+        return (-number if node.data == "negative" else number,)
+    if node.data == "string":
+        return (str(node.children[0])[1:-1],)
+    if node.data in ("true", "false"):
+        return (node.data == "true",)
+    if node.data == "path" and len(node.children) == 1:
+        const = _constant(store, typename, str(node.children[0]))
+        return None if const is None else (const[1],)
+    return None
+
+
+__all__ = ["Condition", "MAX_CONDITION_CHARS", "parse_condition", "unique_message"]

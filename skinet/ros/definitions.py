@@ -6,7 +6,7 @@ action.  :func:`build_store` starts from its Humble store and registers:
 
 - the standard services the action and lifecycle protocols use, written here from
   their documented fields (:data:`STANDARD`): ``action_msgs/srv/CancelGoal``,
-  ``lifecycle_msgs/srv/GetState``;
+  ``lifecycle_msgs/srv/GetState``, ``lifecycle_msgs/srv/ChangeState``;
 - every definition a binding brings (``.msg``, ``.srv``, ``.action`` texts by type
   name, read from its ``definitions`` folder by :mod:`skinet.files`), with the
   default values of its fields (:mod:`skinet.ros.defaults`).
@@ -67,6 +67,7 @@ STANDARD: dict[str, str] = {
         "action_msgs/GoalInfo[] goals_canceling\n"
     ),
     "lifecycle_msgs/srv/GetState": "---\nlifecycle_msgs/State current_state\n",
+    "lifecycle_msgs/srv/ChangeState": "lifecycle_msgs/Transition transition\n---\nbool success\n",
 }
 _EVENT_INFO_TEXT = "uint8 event_type\nbuiltin_interfaces/Time stamp\nuint8[16] client_gid\nint64 sequence_number\n"
 

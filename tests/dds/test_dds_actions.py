@@ -3,7 +3,7 @@
 A CycloneDDS participant plays the Nav2 example's robot as rmw_cyclonedds lays it out
 (:class:`services.simulator.dds_bound.DdsBoundRobot`: action servers as rq/rr service
 topics with rmw_cyclonedds' request header and a transient-local status writer, a
-lifecycle node with get_state and transition_event, the battery topic, and
+lifecycle node with get_state, change_state and transition_event, the battery topic, and
 ``ros_discovery_info``).  The plugin routes them: action server routes (AS tokens,
 send_goal/cancel_goal/get_result queryables, the status cached for late joiners),
 service routes, topics.  The test's operator sends goals and cancels through the
@@ -69,6 +69,29 @@ def call(session: zenoh.Session, key: str, payload: bytes, timeout: float = 10.0
                 return reply.ok.payload.to_bytes()
         time.sleep(0.2)
     raise AssertionError(f"no reply on {key}")
+
+
+def behind_the_plugin(gateway_factory, system, bindings):  # type: ignore[no-untyped-def]
+    """The Nav2 robot on DDS (jazzy) behind a gateway, with two client sessions (the bridge's and the pilot's),
+    the bridge's events and the bridge."""
+    domain = free_domain()
+    gateway = gateway_factory(domain=domain, distro="jazzy")
+    robot = DdsBoundRobot(system, bindings, domain=domain, distro="jazzy")
+    session, pilot = client(gateway.endpoint), client(gateway.endpoint)
+    events = Events(session, system.name)
+    return robot, session, pilot, events, start_bound_bridge(session, system, bindings, settle=0.5, retry=0.3)
+
+
+def send_when_routed(act: BoundActuator, transition: str, inputs: dict) -> str:
+    """The actuator's command, sent again while no reply comes (until the plugin's route to the DDS server exists)."""
+    deadline = time.monotonic() + 10
+    while True:
+        try:
+            return act.send(PilotCommand(skillset="nav2", transition=transition, inputs=inputs))
+        except ActError as exc:
+            if "no reply" not in str(exc) or time.monotonic() > deadline:
+                raise
+            time.sleep(0.3)
 
 
 @pytest.mark.parametrize("distro,namespace", [("jazzy", ""), ("humble", "/robot1")], ids=["jazzy", "humble-namespace"])
@@ -151,23 +174,11 @@ def test_the_pilot_s_goals_and_cancel_requests_cross_the_plugin(gateway_factory,
     the docking goals (the binding's goal fields, the input at dock_id) to the DDS action servers, then cancels
     the docking goal it sent; the bridge derives start, success, start, interrupt."""
     system, bindings = nav2
-    domain = free_domain()
-    gateway = gateway_factory(domain=domain, distro="jazzy")
-    robot = DdsBoundRobot(system, bindings, domain=domain, distro="jazzy")
-    session, pilot = client(gateway.endpoint), client(gateway.endpoint)
-    events = Events(session, system.name)
-    bridge = start_bound_bridge(session, system, bindings, settle=0.5, retry=0.3)
+    robot, session, pilot, events, bridge = behind_the_plugin(gateway_factory, system, bindings)
     act = BoundActuator(pilot, bindings, timeout=2.0)
 
     def send(transition: str, **inputs: str) -> str:
-        deadline = time.monotonic() + 10  # until the plugin's route to the DDS server exists
-        while True:
-            try:
-                return act.send(PilotCommand(skillset="nav2", transition=transition, inputs=inputs))
-            except ActError as exc:
-                if "no reply" not in str(exc) or time.monotonic() > deadline:
-                    raise
-                time.sleep(0.3)
+        return send_when_routed(act, transition, inputs)
 
     try:
         initial_status(robot, events, {"percentage": 0.9, "power_supply_status": 1})
@@ -199,3 +210,30 @@ def test_the_pilot_s_goals_and_cancel_requests_cross_the_plugin(gateway_factory,
                                            "dock_robot.start", "dock_robot.interrupt", "dock_robot.start",
                                            "dock_robot.interrupt"]
     assert bridge.counters.drifts == 0 and bridge.counters.malformed == 0 and not bridge.counters.bad
+
+
+def test_the_pilot_s_lifecycle_transitions_cross_the_plugin(gateway_factory, nav2) -> None:
+    """A commanded event through the real plugin: the pilot reads bt_navigator's state and calls its change_state
+    (configure, then activate) on the DDS lifecycle node; the bridge derives both events from its TransitionEvents."""
+    system, bindings = nav2
+    robot, session, pilot, events, bridge = behind_the_plugin(gateway_factory, system, bindings)
+    act = BoundActuator(pilot, bindings, timeout=2.0, skillsets={c.name: c.skillset for c in system.components})
+
+    def send(transition: str) -> str:
+        return send_when_routed(act, transition, {})
+
+    try:
+        initial_status(robot, events, {"percentage": 0.9, "power_supply_status": 1})
+        assert send("navigator_configured") == (
+            "change_state /bt_navigator configure (transition 1, unconfigured -> inactive): done")
+        events.wait(lambda items: [e.transition for e in items][-1:] == ["navigator_configured"], timeout=10)
+        assert send("navigator_activated") == (
+            "change_state /bt_navigator activate (transition 3, inactive -> active): done")
+        got = events.wait(lambda items: [e.transition for e in items][-1:] == ["navigator_activated"], timeout=10)
+    finally:
+        bridge.close()
+        robot.close()
+        session.close()
+        pilot.close()
+    assert [e.transition for e in got] == [None, "navigator_configured", "navigator_activated"]
+    assert robot.lifecycles[("nav2", "navigator")].state == 3

@@ -76,13 +76,60 @@ def test_a_plan_may_navigate_only_when_nobody_but_an_operator_deactivates_the_na
     ready = marking_from_json(system, READY)
     plan = Planner(system, engine=engine).plan(parse_goal(system, "run nav2:navigate"), ready)
     admissible = Planner(system).admissible(ready)
-    if commanded:  # nor a step of a plan: a commanded event is nobody's outcome, and the pilot commands no node
+    if commanded:  # a commanded event is nobody's outcome: the plan needs no deactivation, and sends none
         assert (plan.answer, [(s.skillset, s.action) for s in plan.steps]) == (
             "cyclic", [("nav2", "navigate.start"), ("nav2", "wait")])
-        assert admissible == [("nav2", "navigate.start"), ("nav2", "dock_robot.start")]
+        # commanded events are commands of the game: safe to send while nothing navigates
+        assert admissible == [("nav2", "navigator_deactivated"), ("nav2", "navigator_shut_down"),
+                              ("nav2", "navigate.start"), ("nav2", "dock_robot.start")]
     else:
         assert (plan.answer, plan.reason) == (
             "none", "the goal is unsafe: every marking where nav2:navigate can succeed is forced for nav_needs_active "
                     "(event navigator_deactivated may occur (1 step) and leave nav2 navigate runs and nav2 navigator "
                     "at Inactive)")
         assert admissible == [("nav2", "dock_robot.start")]
+
+
+@pytest.mark.parametrize("engine", ["explicit", "symbolic"])
+@pytest.mark.parametrize("events", [False, True], ids=["eventless", "events uncontrollable"])
+def test_a_plan_activates_a_commanded_navigator_before_navigating(tmp_path: Path, engine: str, events: bool) -> None:
+    """The events a binding commands are commands of the game (docs/planning.md): from an inactive navigator the
+    plan activates it, then navigates; from the initial marking it configures it first."""
+    system = nav2(tmp_path, commanded=True)
+    if not events:
+        system = load_system(NAV2 / "nav2.toml")[0]
+    planner = Planner(system, engine=engine)
+    goal = parse_goal(system, "run nav2:navigate")
+    inactive = marking_from_json(system, {"nav2": {"resources": {**READY["nav2"]["resources"], "navigator": "Inactive"}}})
+    plan = planner.plan(goal, inactive)
+    assert plan.answer == "cyclic"
+    assert [(s.skillset, s.action) for s in plan.steps] == [
+        ("nav2", "navigator_activated"), ("nav2", "navigate.start"), ("nav2", "wait")]
+    assert plan.steps[0].inputs is None and plan.steps[0].expect is None
+    first = plan.action(inactive)
+    assert (first.skillset, first.transition, dict(first.inputs)) == ("nav2", "navigator_activated", {})
+    initial = planner.plan(goal)
+    assert [s.action for s in initial.steps][:2] == ["navigator_configured", "navigator_activated"]
+
+
+@pytest.mark.parametrize("engine", ["explicit", "symbolic"])
+def test_no_plan_because_an_event_is_not_commanded_says_so(tmp_path: Path, engine: str) -> None:
+    """The navigator the robot's own and events not counted: from an inactive navigator nothing activates it, and
+    the reason names the event a plan would send if the binding commanded it."""
+    binding = (NAV2 / "nav2.binding.toml").read_text().replace("commanded = true", "commanded = false")
+    (tmp_path / "b.toml").write_text(binding)
+    (tmp_path / "s.toml").write_text(f'[system]\nname = "s"\nproperties = "{NAV2 / "nav2.props"}"\n[[skillsets]]\n'
+                                     f'model = "{NAV2 / "nav2.rl"}"\nbinding = "b.toml"\n')
+    system = load_system(tmp_path / "s.toml")[0]
+    inactive = marking_from_json(system, {"nav2": {"resources": {**READY["nav2"]["resources"], "navigator": "Inactive"}}})
+    plan = Planner(system, engine=engine).plan(parse_goal(system, "run nav2:navigate"), inactive)
+    assert (plan.answer, plan.reason) == (
+        "none", "nav2:navigate never runs from here: no reachable marking lets it start; a plan needs "
+                "nav2:navigator_activated, which no binding commands (a plan sends an event only when its binding "
+                "says the resource it changes is commanded)")
+    # Only what a lifecycle manager could command is named: a battery recharging is nobody's command.
+    low = marking_from_json(system, {"nav2": {"resources": {**READY["nav2"]["resources"], "battery": "Low"}}})
+    plan = Planner(system, engine=engine).plan(parse_goal(system, "run nav2:navigate"), low)
+    assert (plan.answer, plan.reason) == (
+        "none", "the goal is unsafe: every marking where nav2:navigate can succeed is forced for dock_when_low "
+                "(violated there: nav2 battery at Low while nav2 navigate runs)")

@@ -233,3 +233,68 @@ def test_on_rmw_zenoh_the_actuator_shows_as_an_action_client_in_the_ros_graph(na
                                         for service in ("send_goal", "cancel_goal")}
     act.close()
     assert settled(0) == set()
+
+
+@pytest.mark.parametrize("rig", STYLES, ids=IDS, indirect=True)
+def test_a_commanded_event_is_the_lifecycle_transition_to_its_state(rig: Rig, nav2, client_factory) -> None:  # type: ignore[no-untyped-def]
+    """bt_navigator is commanded: navigator_configured and navigator_activated are change_state calls with the
+    transitions configure and activate, read from the node's state; the bridge reports each event.  An event
+    whose guard the node's state no longer satisfies is refused, and the node stays as it is."""
+    system, bindings = nav2
+    act = BoundActuator(client_factory(), bindings, style=rig.bridge.style,
+                        skillsets={c.name: c.skillset for c in system.components})
+    node = rig.robot.nodes[("nav2", "navigator")].logic
+    with pytest.raises(Refused) as info:
+        act.send(PilotCommand(skillset="nav2", transition="navigator_activated"))
+    assert str(info.value) == ("nav2:navigator_activated: /bt_navigator is unconfigured, where navigator_activated "
+                               "cannot happen (navigator must be Inactive)")
+    assert node.state == 1
+    assert act.send(PilotCommand(skillset="nav2", transition="navigator_configured")) == (
+        "change_state /bt_navigator configure (transition 1, unconfigured -> inactive): done")
+    rig.wait_for("navigator_configured")
+    assert act.send(PilotCommand(skillset="nav2", transition="navigator_activated")) == (
+        "change_state /bt_navigator activate (transition 3, inactive -> active): done")
+    rig.wait_for("navigator_activated")
+    assert node.state == 3 and rig.transitions() == [None, "navigator_configured", "navigator_activated"]
+    assert rig.events.items[-1].status.resources["navigator"] == "Active"
+    assert act.send(PilotCommand(skillset="nav2", transition="navigator_shut_down")) == (
+        "change_state /bt_navigator active_shutdown (transition 7, active -> finalized): done")
+    rig.wait_for("navigator_shut_down")
+
+
+def test_a_commanded_topic_resource_is_sent_only_when_its_binding_names_one_message(
+        tmp_path: Path, client_factory) -> None:  # type: ignore[no-untyped-def]
+    """A commanded resource on a topic: the pilot publishes the message its state's condition pins
+    (``data`` for On), and refuses a state whose condition leaves a choice (``percentage < 0.2``)."""
+    binding = (NAV2 / "nav2.binding.toml").read_text().replace(
+        'states = { Low = "percentage < 0.2", Ok = "percentage >= 0.2" }',
+        'states = { Low = "percentage < 0.2", Ok = "percentage >= 0.2" }\ncommanded = true')
+    binding = binding.replace('[resources.navigator]', '[resources.motion]\ntopic = "/motion"\n'
+                              'type = "std_msgs/msg/Bool"\nstates = { Moving = "data", Still = "not data" }\n'
+                              'commanded = true\n\n[resources.navigator]')
+    binding = binding[:binding.index("[events.emergency_stop]")]  # the stop is now a command, no longer seen
+    (tmp_path / "nav2.binding.toml").write_text(binding)
+    (tmp_path / "interfaces").symlink_to(NAV2 / "interfaces")
+    (tmp_path / "s.toml").write_text(
+        f'[system]\nname = "nav2"\nproperties = "{NAV2 / "nav2.props"}"\n[[skillsets]]\nmodel = "{NAV2 / "nav2.rl"}"\n'
+        'binding = "nav2.binding.toml"\n')
+    system, _ = load_system(tmp_path / "s.toml")
+    bindings, _ = load_bindings(system)
+    watcher = client_factory()
+    seen: list[bytes] = []
+    sub = watcher.declare_subscriber("motion", lambda sample: seen.append(sample.payload.to_bytes()))
+    act = BoundActuator(client_factory(), bindings, skillsets={c.name: c.skillset for c in system.components})
+    with pytest.raises(ActError) as info:
+        act.send(PilotCommand(skillset="nav2", transition="battery_low"))
+    assert str(info.value) == ("nav2:battery_low cannot be sent: the binding maps battery Low to 'percentage < 0.2' "
+                               "on /battery_state, which names no single message to publish")
+    with pytest.raises(ActError) as info:
+        act.send(PilotCommand(skillset="nav2", transition="charging_started"))
+    assert str(info.value) == ("nav2:charging_started is an event its binding does not command (the robot's own): "
+                               "the pilot cannot send it")
+    deadline = time.monotonic() + 20
+    while not seen and time.monotonic() < deadline:  # until the subscription has reached the router
+        assert act.send(PilotCommand(skillset="nav2", transition="emergency_stop")) == 'publish /motion {"data": false}'
+        time.sleep(0.05)
+    assert seen and seen[-1] == bytes([0, 1, 0, 0, 0])  # CDR little endian, data false
+    sub.undeclare()

@@ -128,6 +128,38 @@ def test_drive_docks_through_the_action_servers(nav2: Nav2) -> None:
     assert nav2.events.items[-1].status.resources["dock"] == "Docked"
 
 
+@pytest.mark.parametrize("nav2", [(KeyStyle(), True), (KeyStyle(rmw_zenoh=True, domain=3), True)],
+                         ids=["zenoh-bridge-ros2dds", "rmw_zenoh"], indirect=True)
+def test_drive_activates_the_commanded_navigator_then_navigates(nav2: Nav2) -> None:
+    """bt_navigator is commanded (nav2.binding.toml): from an inactive navigator, `run nav2:navigate` activates it
+    through its change_state service, then navigates; reached, the node active (docs/robot.md)."""
+    nav2.robot.publish_topics({"/battery_state": {"percentage": 0.9, "power_supply_status": 2}})
+    nav2.robot.lifecycle("nav2", "navigator", "Inactive")
+    # Guided first, asked again at each new live state of the pilot's until it has both changes (before, the
+    # battery is low and no plan navigates): its first step is then the activation.
+    deadline = time.monotonic() + 30
+    while True:
+        guide = ask_goal(nav2.observer, goal("run nav2:navigate", system="nav2", replace=True), system="nav2")
+        if guide.accepted and guide.steps and guide.steps[0].action == "navigator_activated":
+            break
+        assert time.monotonic() < deadline, guide
+        last = max((st.state_seq for st in nav2.statuses.items), default=0)
+        nav2.statuses.seen(lambda items: any(st.state_seq > last for st in items), 5)
+    assert nav2.actuator.sent == []
+    reply = ask_goal(nav2.observer, goal("run nav2:navigate", system="nav2", mode="drive", replace=True),
+                     system="nav2")
+    assert (reply.accepted, reply.reason, reply.answer) == (True, "", "cyclic")
+    assert [(s.action, s.expect) for s in reply.steps] == [  # docked but not charging: it may leave the dock
+        ("navigator_activated", None), ("navigate.start", None), ("wait", "navigate.success.arrived")]
+    done = nav2.statuses.state("reached", reply.goal_id)
+    assert (done.commands, done.denied, done.retries) == (2, 0, {})
+    assert nav2.actuator.sent == ["nav2:navigator_activated", "nav2:navigate.start"]
+    assert nav2.robot.nodes[("nav2", "navigator")].logic.state == 3  # active
+    assert [skill for skill, _, _ in nav2.received()] == ["navigate"]
+    transitions = [e.transition for e in nav2.events.of("nav2")]
+    assert transitions[-3:] == ["navigator_activated", "navigate.start", "navigate.success.arrived"]
+
+
 @pytest.mark.parametrize("nav2", [(KeyStyle(), True)], ids=["zenoh-bridge-ros2dds"], indirect=True)
 def test_an_input_the_goal_message_cannot_hold_is_refused_before_the_robot_moves(nav2: Nav2) -> None:
     """The model does not say what a DockId is; the binding does (dock_id, a string).  A goal whose input the
