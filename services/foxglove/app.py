@@ -1,0 +1,75 @@
+"""The Foxglove connection as a command: ``skinet foxglove SYSTEM`` and ``python -m services.foxglove``.
+
+Opens a Zenoh session (a read-only observer), serves the system's channels over
+the Foxglove WebSocket protocol (:class:`~services.foxglove.server.FoxgloveView`),
+warns when no monitor of the system shows up, and runs until ``stop`` is set.
+Errors (port in use, no router, refused login, bad system file) are raised as
+one-line :class:`~skinet.errors.SkinetError` for the caller's handler.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import sys
+import threading
+
+from services.common.cli import add_log_arg, setup_logging
+from services.common.zenoh_config import add_zenoh_args, check_connected, client_name, config_from_args, open_session
+from services.dashboard.app import no_monitor_message, resolve_system
+from services.dashboard.observer import Observer
+from skinet.errors import SkinetError
+from skinet_cli.options import count, seconds
+
+DEFAULT_PORT = 8765  # Foxglove's usual WebSocket port
+
+
+def add_foxglove_args(p: argparse.ArgumentParser) -> None:
+    """The command's arguments, its log level and the Zenoh flags."""
+    p.add_argument("system", metavar="SYSTEM",
+                   help="system file (.toml) or system name")
+    p.add_argument("--host", default=os.environ.get("SKINET_FOXGLOVE_HOST", "127.0.0.1"),
+                   help="address to serve on (default: $SKINET_FOXGLOVE_HOST or 127.0.0.1; 0.0.0.0 exposes it)")
+    p.add_argument("--port", "-p", type=count(0, 65535, env="SKINET_FOXGLOVE_PORT"),
+                   default=os.environ.get("SKINET_FOXGLOVE_PORT", str(DEFAULT_PORT)),
+                   help=f"TCP port (default: $SKINET_FOXGLOVE_PORT or {DEFAULT_PORT}; 0 picks a free one)")
+    p.add_argument("--wait", type=seconds(zero=True), default=5.0,
+                   help="seconds before warning that no monitor of the system is alive (default: 5)")
+    add_log_arg(p)
+    add_zenoh_args(p)
+
+
+def start_foxglove(observer: Observer, host: str, port: int):  # -> FoxgloveView
+    """A :class:`~services.foxglove.server.FoxgloveView` of ``observer`` (the SDK imported only here)."""
+    from services.foxglove.server import FoxgloveView
+
+    return FoxgloveView(observer, host, port)
+
+
+def serve(args: argparse.Namespace, stop: threading.Event) -> int:
+    """Serve until ``stop``; returns the exit status."""
+    setup_logging(args)
+    log = logging.getLogger("skinet.foxglove")
+    name, system = resolve_system(args.system)
+    config = config_from_args(args)
+    session = open_session(config)
+    observer = Observer(session, name, system, client=client_name(config))
+    try:
+        view = start_foxglove(observer, args.host, args.port)
+    except SkinetError:
+        observer.close()
+        session.close()
+        raise
+    print(f"skinet foxglove: system {name} on {view.url} (Foxglove: Open connection, Foxglove WebSocket; "
+          "layout docs/foxglove-layout.json)", file=sys.stderr, flush=True)
+    try:
+        if not observer.wait_monitor(args.wait) and not stop.is_set():
+            check_connected(session, config)
+            log.warning("%s", no_monitor_message(session, name))
+        stop.wait()
+    finally:
+        view.close()
+        observer.close()
+        session.close()
+    return 0
