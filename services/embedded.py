@@ -187,12 +187,16 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
     monitor: Monitor | None = None
     predictor = None
     dashboard = None
+    foxglove = None
     pilot = None
     try:
         if args.dashboard is not None:  # first: a port in use stops the run before anything starts
             dashboard = start_dashboard(session, system.name, args.dashboard_host, args.dashboard,
                                         client_name(config), system)
             print(f"dashboard on {dashboard.url}", file=sys.stderr, flush=True)
+        if getattr(args, "foxglove", None) is not None:  # a port in use stops the run too
+            foxglove = start_foxglove_view(session, system, args.foxglove_host, args.foxglove, client_name(config))
+            print(f"foxglove on {foxglove.url}", file=sys.stderr, flush=True)
         predictor = start_predictor(session, f"embedded-{os.getpid()}",  # before the monitor: it asks at once
                                     memory_limit=memory_limit(args), rate_limit=args.rate_limit)
         monitor = start_monitor(session, system, budget=args.budget, check_policy=args.check_policy,
@@ -219,6 +223,9 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
         if dashboard is not None:
             dashboard.close()
             dashboard.observer.close()
+        if foxglove is not None:
+            foxglove.close()
+            foxglove.observer.close()
         if pilot is not None:
             pilot.close()
         if monitor is not None:
@@ -301,6 +308,20 @@ def start_dashboard(session: zenoh.Session, name: str, host: str, port: int, cli
         observer.close()
         raise
     return dashboard
+
+
+def start_foxglove_view(session: zenoh.Session, system: System, host: str, port: int, client: str) -> Any:
+    """The Foxglove view of ``system`` on the shared session (:mod:`services.foxglove`); raises
+    :class:`SkinetError` (port in use)."""
+    from services.dashboard.observer import Observer
+    from services.foxglove.app import start_foxglove
+
+    observer = Observer(session, system.name, system, client=client)
+    try:
+        return start_foxglove(observer, host, port)
+    except Exception:
+        observer.close()
+        raise
 
 
 def _follow(monitor: Monitor, stop: threading.Event, duration: float | None, out: TextIO) -> None:

@@ -39,6 +39,10 @@ def add_dashboard_args(p: argparse.ArgumentParser) -> None:
                    help="TCP port (default: $SKINET_DASHBOARD_PORT or 8080; 0 picks a free one)")
     p.add_argument("--wait", type=seconds(zero=True), default=5.0,
                    help="seconds before warning that no monitor of the system is alive (default: 5)")
+    p.add_argument("--foxglove", type=count(0, 65535, env="SKINET_DASHBOARD_FOXGLOVE"),
+                   default=os.environ.get("SKINET_DASHBOARD_FOXGLOVE") or None, metavar="PORT",
+                   help="also serve the system to Foxglove (WebSocket, on --host) on this port (default: "
+                        "$SKINET_DASHBOARD_FOXGLOVE, else none; see skinet foxglove)")
     add_log_arg(p)
     add_zenoh_args(p)
 
@@ -72,12 +76,20 @@ def serve(args: argparse.Namespace, stop: threading.Event) -> int:
         session.close()
         raise
     print(f"skinet dashboard: system {name} on {dashboard.url}", file=sys.stderr, flush=True)
+    foxglove = None
     try:
+        if args.foxglove is not None:
+            from services.foxglove.app import start_foxglove
+
+            foxglove = start_foxglove(observer, args.host, args.foxglove)
+            print(f"skinet dashboard: Foxglove on {foxglove.url}", file=sys.stderr, flush=True)
         if not observer.wait_monitor(args.wait) and not stop.is_set():
             check_connected(session, config)  # an explicit endpoint still unreached: exit 1 with the reason
             log.warning("%s", no_monitor_message(session, name))
         stop.wait()
     finally:
+        if foxglove is not None:
+            foxglove.close()
         dashboard.close()
         observer.close()
         session.close()

@@ -304,7 +304,7 @@ def test_lazy_commands_list_their_modules_own_help() -> None:
     assert build_parser("unsafe").format_help() == full.format_help()
     names = [name for _, _, helps in LAZY_COMMANDS for name in helps]
     assert names == ["demo", "record", "timeline", "replay", "conform", "run", "router", "fleet", "plan", "goal", "dashboard",
-                     "watch", "check", "client-config"]
+                     "watch", "check", "foxglove", "client-config"]
     for name in names:
         lazy = build_parser(name)
         assert lazy.format_help() == full.format_help()

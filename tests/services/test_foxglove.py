@@ -89,3 +89,27 @@ def test_a_port_in_use_is_a_one_line_error(router) -> None:
     assert errors == [f"python -m services.foxglove: error: cannot serve Foxglove on 127.0.0.1:{port}: "
                       + errors[0].split(f"127.0.0.1:{port}: ", 1)[1]]
     assert "Traceback" not in done.stderr
+
+
+def test_skinet_run_serves_foxglove_and_a_late_subscriber_gets_the_last_state() -> None:
+    port = free_port()
+    proc = subprocess.Popen([sys.executable, "-m", "skinet_cli.main", "run", str(SYSTEM_FILE), "--duration", "30",
+                             "--no-multicast-scouting", "--no-pilot", "--foxglove", str(port)], cwd=REPO,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    client = None
+    try:
+        assert proc.stderr.readline().strip() == f"foxglove on ws://127.0.0.1:{port}"
+        client = FoxgloveClient(f"ws://127.0.0.1:{port}")
+        # No bridge: step 0 only, published before the client came; it is sent again on subscription,
+        # saying that the monitor cannot vouch for the marking.
+        client.wait(lambda c: c.on(fx.STATE) and c.on(fx.STATE_SPACE), "the state and the state space")
+        state = client.on(fx.STATE)[-1]
+        assert state["seq"] == 0 and {n: s["state"] for n, s in state["sync"].items()} == {
+            "spot": "syncing", "manipulator": "syncing"}
+        assert client.on(fx.STATE_SPACE)[-1]["markings"] > 0
+        assert client.invalid == []
+    finally:
+        if client is not None:
+            client.close()
+        proc.terminate()
+        assert proc.wait(15) == 0
