@@ -113,3 +113,17 @@ def test_skinet_run_serves_foxglove_and_a_late_subscriber_gets_the_last_state() 
             client.close()
         proc.terminate()
         assert proc.wait(15) == 0
+
+
+def test_the_layout_opens_a_panel_on_every_channel_and_names_no_other_topic() -> None:
+    import json
+    import re
+
+    layout = json.loads((REPO / "docs" / "foxglove-layout.json").read_text())
+    used = set()
+    for config in layout["configById"].values():
+        paths = [config.get("topicPath"), config.get("topicToRender"), *(p["value"] for p in config.get("paths", []))]
+        used |= {re.match(r"(/skinet/\w+)", p).group(1) for p in paths if p}  # type: ignore[union-attr]
+    assert used == {s.topic for s in fx.channels()}
+    panels = set(re.findall(r'"(\w+![\w-]+)"', json.dumps(layout["layout"])))
+    assert panels == set(layout["configById"])
