@@ -23,7 +23,25 @@ def skinet(*args: str) -> subprocess.CompletedProcess:
                           timeout=300)
 
 
-def record(router: str, run: str, path: Path, system: str = "spot_arm") -> list:
+def play_any(scenario_path: Path, router: str) -> list:
+    """A mission through the whole chain (a bound system's through its bindings) on a client of ``router``."""
+    from services.chain import run_bound_chain, run_chain
+    from skinet.files import load_bindings, load_system, load_typemap, read_text
+    from skinet.mission import parse_scenario
+
+    scenario = parse_scenario(read_text(scenario_path), str(scenario_path))
+    system_file = scenario_path.parent / scenario.system
+    system, _ = load_system(system_file)
+    session = open_client(router)
+    try:
+        if any(c.binding for c in system.components):
+            return run_bound_chain(system, load_bindings(system)[0], scenario, session=session)
+        return run_chain(system, load_typemap(system_file), scenario, session=session)
+    finally:
+        session.close()
+
+
+def record(router: str, run: str | Path, path: Path, system: str = "spot_arm") -> list:
     proc = subprocess.Popen([sys.executable, "-m", "skinet_cli.main", "record", system, "--bundle", str(path),
                              *client_args(router)], cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True)
@@ -31,7 +49,8 @@ def record(router: str, run: str, path: Path, system: str = "spot_arm") -> list:
     watch = LivelinessWatch(session, f"skinet/{system}/alive/recorder/*")
     try:
         watch.wait(lambda alive: bool(alive), timeout=30)
-        records = play(run, router, lambda r: None)
+        records = (play(run, router, lambda r: None) if isinstance(run, str)
+                   else play_any(run, router) if isinstance(run, Path) else run(router))
     finally:
         watch.close()
         session.close()
@@ -155,3 +174,52 @@ def test_bad_bundles_are_one_line_errors(unassisted: Path, tmp_path: Path, damag
                 "not mcap": f"skinet: error: {bad}: not an MCAP file",
                 "no file": f"skinet: error: {bad}: cannot read file: No such file or directory"}[damage]
     assert done.stderr.startswith(expected), done.stderr
+
+
+@pytest.mark.parametrize("scenario, system, divergences", [
+    ("skillsets/missions/assisted.toml", "spot_arm", 0),
+    ("examples/nav2/missions/nav2_run.toml", "nav2", 0),
+], ids=["assisted", "nav2"])
+def test_bundles_of_other_runs_verify(router, tmp_path: Path, scenario: str, system: str, divergences: int) -> None:
+    from mcap.reader import make_reader
+
+    path = tmp_path / "run.mcap"
+    record(router, REPO / scenario, path, system)
+    done = skinet("replay", str(path), "--verify")
+    assert (done.returncode, done.stdout) == (0, "0 differences\n"), done.stderr
+    with path.open("rb") as f:
+        shown = [m for _, _, m in make_reader(f).iter_messages(topics=[fx.DIVERGENCES])]
+    assert len(shown) == divergences
+
+
+def test_a_bundle_with_an_injected_fault_verifies_and_shows_the_divergence(router, client_factory, tmp_path) -> None:
+    """A faulty bridge reports an outcome of a skill never started (a model divergence), then ten good events."""
+    from mcap.reader import make_reader
+
+    from services.monitor import start_monitor
+    from skinet.files import load_system
+    from tests.services.test_divergences import TEN
+    from tests.services.test_monitor import SYSTEM_FILE, Events, wait_until
+
+    path = tmp_path / "fault.mcap"
+    system, _ = load_system(SYSTEM_FILE)
+
+    def faulty(_router: str) -> list:
+        monitor = start_monitor(client_factory(), system)
+        try:
+            events = Events(client_factory())
+            events.send("spot", "init_power.success.powered_on")  # init_power never started
+            for skillset, transition in TEN:
+                events.send(skillset, transition)
+            wait_until(lambda: monitor.snapshot().state.seq == 11 and monitor.divergences_published == 1, 10,
+                       "eleven steps and the divergence")
+            return []
+        finally:
+            monitor.close()
+
+    record(router, faulty, path)  # type: ignore[arg-type]
+    done = skinet("replay", str(path), "--verify")
+    assert (done.returncode, done.stdout) == (0, "0 differences\n"), done.stderr
+    with path.open("rb") as f:
+        shown = [json.loads(m.data) for _, _, m in make_reader(f).iter_messages(topics=[fx.DIVERGENCES])]
+    assert [(d["seq"], d["event"]) for d in shown] == [(1, "spot:init_power.success.powered_on#1")]
