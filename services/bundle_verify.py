@@ -4,7 +4,8 @@ The system is rebuilt from the bundle's model attachment (its digests checked
 by :func:`skinet.wire.bundle.read_bundle`); the recorded canonical events, in
 the order the monitor received them, go through a fresh
 :class:`~services.monitor.engine.Engine` (the monitor's own fast path, in
-process: sequence check, live marking, Algorithm 1).  At each step the engine
+process: sequence check, live marking, Algorithm 1).  A bundle of a stretch (an incident's) starts from
+its first recorded state: the engine takes that marking and step number, and the events after it.  At each step the engine
 makes, its verdicts are compared with the last recorded ones of that step, and
 its unsafe report with the last recorded one: where that one was fresh, the
 prediction is computed here too (:func:`skinet.verify.predict.forecast`, the
@@ -23,8 +24,8 @@ from dataclasses import dataclass
 from services.monitor.engine import Engine
 from skinet.wire.bundle import Bundle
 from skinet.wire.codec import decode
-from skinet.wire.convert import RiskTable, risks, system_from_bundle
-from skinet.wire.messages import CanonicalEvent, UnsafeReport, Verdicts
+from skinet.wire.convert import RiskTable, marking_of, risks, system_from_bundle
+from skinet.wire.messages import CanonicalEvent, LiveState, UnsafeReport, Verdicts
 from skinet.verify.predict import forecast
 
 BUDGET = 10.0  # seconds of exploration per marking when the bundle does not say the monitor's budget
@@ -55,8 +56,14 @@ def verify(bundle: Bundle) -> tuple[int, list[Difference]]:
     verdicts: dict[int, Verdicts] = {}
     unsafe: dict[int, UnsafeReport] = {}
     events: list[CanonicalEvent] = []
+    start = next((e for e in bundle.entries if isinstance(e.message, LiveState)), None)
+    floor = start.message.seq + 1 if start is not None and start.message.seq > 0 else 0
     for e in bundle.entries:
         m = e.message
+        if start is not None and start.message.seq > 0 and e.t <= start.t:
+            continue  # a stretch: the run before its first state is summed up by that state
+        if isinstance(m, (Verdicts, UnsafeReport)) and m.seq < floor:
+            continue  # of the stretch's first state, or older
         if isinstance(m, Verdicts):
             verdicts[m.seq] = m
         elif isinstance(m, UnsafeReport):
@@ -68,7 +75,12 @@ def verify(bundle: Bundle) -> tuple[int, list[Difference]]:
     engine = Engine(system)
     tables: dict[tuple[int, ...], RiskTable] = {}
     differences: list[Difference] = []
-    steps = [engine.initial()]
+    steps = []
+    if start is not None and start.message.seq > 0:  # an incident's stretch starts from the state it begins at
+        engine.live.marking.update(marking_of(system, start.message.skillsets))
+        engine.seq = start.message.seq
+    else:
+        steps.append(engine.initial())
     for ev in events:
         ok, _note, _resync = engine.check_seq(ev)
         if ok:

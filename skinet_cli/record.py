@@ -36,7 +36,7 @@ from skinet.wire.messages import (
 )
 
 if TYPE_CHECKING:
-    from skinet_cli.bundle import BundleSink
+    from services.foxglove.bundle import BundleSink
 
 BY_KEY: dict[str, type[BaseModel]] = {
     "events": CanonicalEvent, "state": LiveState, "verdicts": Verdicts, "unsafe": UnsafeReport,
@@ -176,7 +176,7 @@ def cmd_record(args: argparse.Namespace) -> int:
     mcap = (args.format or ("mcap" if args.output.endswith(".mcap") else "jsonl")) == "mcap"
     try:
         if args.bundle is not None:
-            from skinet_cli.bundle import BundleSink
+            from services.foxglove.bundle import BundleSink
 
             sink: JsonlSink | McapSink | BundleSink = BundleSink(open(args.output, "wb"), system)
         else:

@@ -204,20 +204,24 @@ def test_a_bundle_with_an_injected_fault_verifies_and_shows_the_divergence(route
     path = tmp_path / "fault.mcap"
     system, _ = load_system(SYSTEM_FILE)
 
+    monitors = []
+
     def faulty(_router: str) -> list:
         monitor = start_monitor(client_factory(), system)
-        try:
-            events = Events(client_factory())
-            events.send("spot", "init_power.success.powered_on")  # init_power never started
-            for skillset, transition in TEN:
-                events.send(skillset, transition)
-            wait_until(lambda: monitor.snapshot().state.seq == 11 and monitor.divergences_published == 1, 10,
-                       "eleven steps and the divergence")
-            return []
-        finally:
-            monitor.close()
+        monitors.append(monitor)  # kept until the recorder stopped: it fetches the model from it
+        events = Events(client_factory())
+        events.send("spot", "init_power.success.powered_on")  # init_power never started
+        for skillset, transition in TEN:
+            events.send(skillset, transition)
+        wait_until(lambda: monitor.snapshot().state.seq == 11 and monitor.divergences_published == 1, 10,
+                   "eleven steps and the divergence")
+        return []
 
-    record(router, faulty, path)  # type: ignore[arg-type]
+    try:
+        record(router, faulty, path)  # type: ignore[arg-type]
+    finally:
+        for m in monitors:
+            m.close()
     done = skinet("replay", str(path), "--verify")
     assert (done.returncode, done.stdout) == (0, "0 differences\n"), done.stderr
     with path.open("rb") as f:

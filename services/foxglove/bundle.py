@@ -1,4 +1,4 @@
-"""``skinet record --bundle FILE``: a whole recorded run as one incident bundle (docs/foxglove.md).
+"""Incident bundles written from what a Zenoh view receives (docs/foxglove.md): ``skinet record --bundle``, ``--incidents``.
 
 :class:`BundleSink` takes the messages ``skinet record`` receives: it writes each
 wire message as it came, feeds a :class:`~services.dashboard.board.Board` and a
