@@ -188,6 +188,7 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
     predictor = None
     dashboard = None
     foxglove = None
+    incidents = None
     pilot = None
     try:
         if args.dashboard is not None:  # first: a port in use stops the run before anything starts
@@ -202,6 +203,9 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
         monitor = start_monitor(session, system, budget=args.budget, check_policy=args.check_policy,
                                 client=client_name(config), check_rate_limit=args.check_rate_limit,
                                 lost_after=args.lost_after)
+        from services.incidents import start_incidents
+
+        incidents = start_incidents(session, system, args)
         if not args.no_pilot:
             from services.pilot import start_pilot
 
@@ -220,6 +224,8 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
         _follow(monitor, stop, args.duration, out)
         return 0
     finally:
+        if incidents is not None:
+            incidents.close()
         if dashboard is not None:
             dashboard.close()
             dashboard.observer.close()

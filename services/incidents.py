@@ -18,6 +18,7 @@ about 1 KB for the paper's system), whatever the window.
 
 from __future__ import annotations
 
+import argparse
 import logging
 import threading
 import time
@@ -28,7 +29,10 @@ import zenoh
 
 from services.common.zenoh_config import undeclare
 from services.foxglove.bundle import BundleSink
+from skinet.errors import SkinetError
+from skinet.system import System
 from skinet.wire import keys
+from skinet.wire.convert import bundle
 from skinet.wire.codec import DecodeError, decode
 from skinet.wire.messages import (
     CanonicalEvent, Divergences, LiveState, ModelBundle, PilotStatus, StateSpaceReport, UnsafeReport, Verdicts,
@@ -157,3 +161,34 @@ class Incidents:
         self.written.append(path)
         log.warning("incident (%s): bundle %s written, %d messages from %.0f s before to %.0f s after",
                     "; ".join(what), path, kept, self.window, self.window)
+
+
+def add_incidents_args(p: argparse.ArgumentParser) -> None:
+    """``--incidents DIR`` and ``--incident-window S``."""
+    p.add_argument("--incidents", metavar="DIR",
+                   help="write an incident bundle (MCAP; skinet replay FILE --verify re-runs it) into DIR around each "
+                        "violation, model divergence, manager restart or pilot failure: the --incident-window "
+                        "seconds before and after it")
+    p.add_argument("--incident-window", type=_window, default=30.0, metavar="S",
+                   help="seconds kept before an incident and recorded after it (default: 30)")
+
+
+def _window(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = -1.0
+    if not 0 < value <= 3600:
+        raise argparse.ArgumentTypeError(f"'{text}' is not a number of seconds from 0 (excluded) to 3600")
+    return value
+
+
+def start_incidents(session: zenoh.Session, system: System, args: argparse.Namespace) -> Incidents | None:
+    """The incident writer ``args`` asks for (None without ``--incidents``); a folder that cannot be made is a
+    one-line :class:`SkinetError`."""
+    if getattr(args, "incidents", None) is None:
+        return None
+    try:
+        return Incidents(session, bundle(system), Path(args.incidents), args.incident_window)
+    except OSError as exc:
+        raise SkinetError(f"--incidents {args.incidents}: cannot make the folder: {exc.strerror}") from None

@@ -38,6 +38,9 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
                    help="also serve the system to Foxglove (WebSocket) on this port (0: a free one; see skinet "
                         "foxglove)")
     c.add_argument("--foxglove-host", default="127.0.0.1", help="address of --foxglove (default: 127.0.0.1)")
+    from services.incidents import add_incidents_args
+
+    add_incidents_args(c)
     c.add_argument("--no-pilot", action="store_true",
                    help="do not start the pilot (SPEC §8: goals on skinet/<system>/pilot/goal/<client>, guided or "
                         "driven with the strict check; see docs/pilot.md)")

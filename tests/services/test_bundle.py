@@ -227,3 +227,30 @@ def test_a_bundle_with_an_injected_fault_verifies_and_shows_the_divergence(route
     with path.open("rb") as f:
         shown = [json.loads(m.data) for _, _, m in make_reader(f).iter_messages(topics=[fx.DIVERGENCES])]
     assert [(d["seq"], d["event"]) for d in shown] == [(1, "spot:init_power.success.powered_on#1")]
+
+
+def test_incidents_are_written_around_the_violations_and_verify(router, client_factory, tmp_path) -> None:
+    from mcap.reader import make_reader
+
+    from services.incidents import Incidents
+    from skinet.files import load_system
+    from skinet.wire.convert import bundle
+    from tests.services.test_dashboard import SYSTEM_FILE
+
+    system, _ = load_system(SYSTEM_FILE)
+    folder = tmp_path / "incidents"
+    incidents = Incidents(client_factory(), bundle(system), folder, window=1.0)
+    try:
+        play("unassisted", router, lambda r: None)
+    finally:
+        incidents.close()
+    assert incidents.failed == 0 and incidents.written and sorted(folder.iterdir()) == sorted(incidents.written)
+    triggers = []
+    for path in incidents.written:
+        with path.open("rb") as f:
+            triggers.append({m.name: m.metadata for m in make_reader(f).iter_metadata()}["skinet"]["trigger"])
+        done = skinet("replay", str(path), "--verify")
+        assert (done.returncode, done.stdout) == (0, "0 differences\n"), done.stderr
+    said = "; ".join(triggers)
+    assert [f"violation of {p} at step {i}" in said for p, i, _ in VIOLATIONS] == [True] * 3
+    assert triggers[0].startswith(f"violation of {VIOLATIONS[0][0]} at step {VIOLATIONS[0][1]}")
