@@ -11,31 +11,21 @@ from __future__ import annotations
 
 import argparse
 import logging
-import os
 import sys
 import threading
 
 from services.common.cli import add_log_arg, setup_logging
 from services.common.zenoh_config import add_zenoh_args, check_connected, client_name, config_from_args, open_session
-from services.dashboard.app import no_monitor_message, resolve_system
+from services.dashboard.app import add_view_args, no_monitor_message, resolve_system
 from services.dashboard.observer import Observer
 from skinet.errors import SkinetError
-from skinet_cli.options import count, seconds
 
 DEFAULT_PORT = 8765  # Foxglove's usual WebSocket port
 
 
 def add_foxglove_args(p: argparse.ArgumentParser) -> None:
     """The command's arguments, its log level and the Zenoh flags."""
-    p.add_argument("system", metavar="SYSTEM",
-                   help="system file (.toml) or system name")
-    p.add_argument("--host", default=os.environ.get("SKINET_FOXGLOVE_HOST", "127.0.0.1"),
-                   help="address to serve on (default: $SKINET_FOXGLOVE_HOST or 127.0.0.1; 0.0.0.0 exposes it)")
-    p.add_argument("--port", "-p", type=count(0, 65535, env="SKINET_FOXGLOVE_PORT"),
-                   default=os.environ.get("SKINET_FOXGLOVE_PORT", str(DEFAULT_PORT)),
-                   help=f"TCP port (default: $SKINET_FOXGLOVE_PORT or {DEFAULT_PORT}; 0 picks a free one)")
-    p.add_argument("--wait", type=seconds(zero=True), default=5.0,
-                   help="seconds before warning that no monitor of the system is alive (default: 5)")
+    add_view_args(p, "SKINET_FOXGLOVE", DEFAULT_PORT, "system file (.toml) or system name")
     add_log_arg(p)
     add_zenoh_args(p)
 
