@@ -127,3 +127,18 @@ def test_the_layout_opens_a_panel_on_every_channel_and_names_no_other_topic() ->
     assert used == {s.topic for s in fx.channels()}
     panels = set(re.findall(r'"(\w+![\w-]+)"', json.dumps(layout["layout"])))
     assert panels == set(layout["configById"])
+
+
+def test_skinet_run_with_a_foxglove_port_in_use_stops_with_one_line() -> None:
+    import socket
+
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        port = busy.getsockname()[1]
+        done = subprocess.run([sys.executable, "-m", "skinet_cli.main", "run", str(SYSTEM_FILE), "--once",
+                               "--no-multicast-scouting", "--no-pilot", "--foxglove", str(port)], cwd=REPO,
+                              capture_output=True, text=True, timeout=120)
+    assert done.returncode == 1 and "Traceback" not in done.stderr
+    assert done.stderr.startswith(f"skinet: error: --foxglove: cannot serve Foxglove on 127.0.0.1:{port}: ")
+    assert len(done.stderr.splitlines()) == 1, done.stderr
