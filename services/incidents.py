@@ -10,8 +10,9 @@ seconds after the first incident, a bundle of the ring from ``window`` seconds
 before it to then is written by :class:`~services.foxglove.bundle.BundleSink`
 in its own thread (incidents in between go in the same bundle); written and
 failed bundles are counted and logged, never raised.  Cost on the event path:
-one bounded deque append per sample; only verdicts, divergence lists and pilot
-statuses are decoded at once (the rest when a bundle is written).  Memory:
+none in the publishing thread (samples go through a Zenoh ring channel to a
+thread of this writer), then one bounded deque append per sample; only verdicts,
+divergence lists and pilot statuses are decoded at once (the rest when a bundle is written).  Memory:
 at most :data:`MAX_ENTRIES` payloads (each under the codec's size limit;
 about 1 KB for the paper's system), whatever the window.
 """
@@ -40,6 +41,8 @@ from skinet.wire.messages import (
 
 RECORDED = {"events": CanonicalEvent, "state": LiveState, "verdicts": Verdicts, "unsafe": UnsafeReport,
             "state_space": StateSpaceReport, "divergences": Divergences, "pilot": PilotStatus}
+CHANNEL = 4096  # samples waiting for the ring's thread
+POLL = 0.005  # seconds between looks at an empty channel
 MAX_ENTRIES = 100_000  # payloads kept in the ring, whatever the window
 log = logging.getLogger("skinet.incidents")
 
@@ -61,18 +64,35 @@ class Incidents:
         self._pending: tuple[float, list[str]] | None = None  # (first incident's time, what happened)
         self._wake = threading.Event()
         self._closed = False
-        self._sub = session.declare_subscriber(f"{keys.ROOT}/{self.system}/**", self._on_sample)
+        # A ring channel, drained by a thread of this writer: no Python runs in the thread that published
+        # (a callback on the monitor's own session runs inside its put, on the event path); a backlog past
+        # CHANNEL drops the oldest samples.
+        self._stopping = threading.Event()
+        self._sub = session.declare_subscriber(f"{keys.ROOT}/{self.system}/**", zenoh.handlers.RingChannel(CHANNEL))
+        self._drain = threading.Thread(target=self._take, name="skinet-incidents-ring", daemon=True)
+        self._drain.start()
         self._thread = threading.Thread(target=self._run, name="skinet-incidents", daemon=True)
         self._thread.start()
 
+    def _take(self) -> None:
+        # Polled: a thread blocked in recv() holds the subscriber, which then cannot be undeclared.
+        while not self._stopping.is_set():
+            sample = self._sub.try_recv()
+            if sample is None:
+                self._stopping.wait(POLL)
+            else:
+                self._on_sample(sample)
+
     def close(self) -> None:
         """Stop; a pending incident is written with what the ring holds now."""
+        self._stopping.set()
+        self._drain.join(timeout=5)
         undeclare(self._sub)
         self._closed = True
         self._wake.set()
         self._thread.join(timeout=30)
 
-    # -- Zenoh's thread: O(1) unless the sample may be an incident ----------------------
+    # -- the ring's thread: O(1) unless the sample may be an incident ------------------------
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
         if sample.kind != zenoh.SampleKind.PUT:
