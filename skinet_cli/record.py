@@ -207,6 +207,15 @@ def cmd_record(args: argparse.Namespace) -> int:
     except KeyboardInterrupt:
         pass
     finally:
+        if args.bundle is not None and not recorder.has_model and not args.no_model:
+            try:  # a last, blocking ask: a short run may end before the retry (the monitor may still answer)
+                for reply in session.get(keys.model(system), timeout=MODEL_RETRY):
+                    if reply.ok is not None and not recorder.has_model:  # after the stop: past Recorder.add
+                        recorder.sink.write(str(reply.ok.key_expr), decode(reply.ok.payload.to_bytes(), ModelBundle),
+                                            time.time())
+                        recorder.has_model = True
+            except Exception:  # the session closing under a signal: the bundle says it has no model
+                pass
         try:
             recorder.close()  # a bundle without a model: a one-line error
         finally:
