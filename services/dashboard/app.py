@@ -16,6 +16,8 @@ import sys
 import threading
 from pathlib import Path
 
+import zenoh
+
 from services.common.cli import add_log_arg, setup_logging
 from services.common.zenoh_config import (
     add_zenoh_args, check_connected, client_name, config_from_args, open_session,
@@ -70,10 +72,8 @@ def serve(args: argparse.Namespace, stop: threading.Event) -> int:
     (one line: a bad system file or name, no router, a refused login, a port in use)."""
     setup_logging(args)
     log = logging.getLogger("skinet.dashboard")
-    name, system = resolve_system(args.system)
-    config = config_from_args(args)
-    session = open_session(config)
-    observer = Observer(session, name, system, client=client_name(config))
+    config, session, observer = observe(args)
+    name = observer.name
     dashboard = Dashboard(observer, args.host, args.port)
     try:
         dashboard.start()
@@ -89,10 +89,7 @@ def serve(args: argparse.Namespace, stop: threading.Event) -> int:
 
             foxglove = start_foxglove(observer, args.host, args.foxglove)
             print(f"skinet dashboard: Foxglove on {foxglove.url}", file=sys.stderr, flush=True)
-        if not observer.wait_monitor(args.wait) and not stop.is_set():
-            check_connected(session, config)  # an explicit endpoint still unreached: exit 1 with the reason
-            log.warning("%s", no_monitor_message(session, name))
-        stop.wait()
+        follow(observer, config, args.wait, stop, log)
     finally:
         if foxglove is not None:
             foxglove.close()
@@ -100,6 +97,24 @@ def serve(args: argparse.Namespace, stop: threading.Event) -> int:
         observer.close()
         session.close()
     return 0
+
+
+def observe(args: argparse.Namespace) -> tuple[zenoh.Config, zenoh.Session, Observer]:
+    """A served view's Zenoh configuration, session and observer of the system ``args.system`` names."""
+    name, system = resolve_system(args.system)
+    config = config_from_args(args)
+    session = open_session(config)
+    return config, session, Observer(session, name, system, client=client_name(config))
+
+
+def follow(observer: Observer, config: zenoh.Config, wait: float, stop: threading.Event,
+           log: logging.Logger) -> None:
+    """Until ``stop``: warn once when no monitor shows up within ``wait`` seconds (an explicit endpoint still
+    unreached is a one-line error instead)."""
+    if not observer.wait_monitor(wait) and not stop.is_set():
+        check_connected(observer.session, config)
+        log.warning("%s", no_monitor_message(observer.session, observer.name))
+    stop.wait()
 
 
 def no_monitor_message(session, name: str) -> str:

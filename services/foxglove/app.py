@@ -15,8 +15,8 @@ import sys
 import threading
 
 from services.common.cli import add_log_arg, setup_logging
-from services.common.zenoh_config import add_zenoh_args, check_connected, client_name, config_from_args, open_session
-from services.dashboard.app import add_view_args, no_monitor_message, resolve_system
+from services.common.zenoh_config import add_zenoh_args
+from services.dashboard.app import add_view_args, follow, observe
 from services.dashboard.observer import Observer
 from skinet.errors import SkinetError
 
@@ -41,10 +41,8 @@ def serve(args: argparse.Namespace, stop: threading.Event) -> int:
     """Serve until ``stop``; returns the exit status."""
     setup_logging(args)
     log = logging.getLogger("skinet.foxglove")
-    name, system = resolve_system(args.system)
-    config = config_from_args(args)
-    session = open_session(config)
-    observer = Observer(session, name, system, client=client_name(config))
+    config, session, observer = observe(args)
+    name = observer.name
     try:
         view = start_foxglove(observer, args.host, args.port)
     except SkinetError:
@@ -54,10 +52,7 @@ def serve(args: argparse.Namespace, stop: threading.Event) -> int:
     print(f"skinet foxglove: system {name} on {view.url} (Foxglove: Open connection, Foxglove WebSocket; "
           "layout docs/foxglove-layout.json)", file=sys.stderr, flush=True)
     try:
-        if not observer.wait_monitor(args.wait) and not stop.is_set():
-            check_connected(session, config)
-            log.warning("%s", no_monitor_message(session, name))
-        stop.wait()
+        follow(observer, config, args.wait, stop, log)
     finally:
         view.close()
         observer.close()
