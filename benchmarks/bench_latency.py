@@ -18,12 +18,16 @@ publications (default) and with ``--no-express`` (Zenoh batches the three
 messages of a step).  The burst row gives the CPU time per event of each
 process, which on a small machine is what bounds the rate.
 
-    python benchmarks/bench_latency.py [--events 2000] [--burst 20000] [--profile]
+The in-process monitor also runs without and with incident bundles and the Foxglove view on its session
+(alternated three times), target: p99 with them within 10 % of without.
+
+    python benchmarks/bench_latency.py [--events 2000] [--burst 20000] [--profile] [--views-only]
 """
 
 from __future__ import annotations
 
 import argparse
+import asyncio
 import cProfile
 import pstats
 import os
@@ -207,6 +211,111 @@ def in_process(n: int, profile: bool) -> list[list[object]]:
     return rows
 
 
+def with_views(n: int, rounds: int = 3) -> list[list[object]]:
+    """The in-process monitor's event -> UnsafeReport latency without and with incident bundles (``--incidents``:
+    the ring on the monitor's session) and the Foxglove view (an observer and its WebSocket server, one client
+    subscribed to every channel) on the same session, alternated ``rounds`` times so that a busy machine loads
+    both alike; target: p99 with them within 10 % of p99 without."""
+    import json as json_
+    import tempfile
+
+    import aiohttp
+
+    from services.dashboard.observer import Observer
+    from services.foxglove.server import FoxgloveView
+    from services.incidents import Incidents
+    from skinet.wire.convert import bundle
+
+    system = load_system(SYSTEM_FILE)[0]
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    session = zenoh.open(session_config("peer", listen=[endpoint], multicast_scouting=False))
+    samples: dict[str, list[float]] = {m: [] for m in MODES}
+    try:
+        for _ in range(rounds):
+            for views in MODES:
+                monitor = start_monitor(session, system)
+                side = BridgeSide(session, "spot_arm", source="bench", model=system)
+                folder = tempfile.TemporaryDirectory()
+                incidents = Incidents(session, bundle(system), Path(folder.name), window=30.0) \
+                    if "incidents" in views else None
+                view = proc = None
+                if "another process" in views:
+                    port = free_port()
+                    proc = spawn(["-m", "services.foxglove", str(SYSTEM_FILE), "--port", str(port), "--mode", "peer",
+                                  "-e", endpoint, "--no-multicast-scouting", "--wait", "0"])
+                    stop = threading.Event()
+                    client = threading.Thread(target=lambda: asyncio.run(_fox_client(
+                        f"ws://127.0.0.1:{port}", stop, aiohttp, json_, retry=True)), daemon=True)
+                    client.start()
+                    wait_token(session, keys.alive("spot_arm", "monitor", "*"))
+                    time.sleep(1.0)  # the view's start-up queries answered before measuring
+                elif "Foxglove" in views:
+                    observer = Observer(session, "spot_arm", system)
+                    view = FoxgloveView(observer, "127.0.0.1", 0)
+                    stop = threading.Event()
+                    client = threading.Thread(target=lambda: asyncio.run(_fox_client(view.url, stop, aiohttp,
+                                                                                     json_)), daemon=True)
+                    client.start()
+                payloads = events(n + 200)
+                publishers = {k: session.declare_publisher(k, **BLOCK) for k in {k for k, _ in payloads}}
+                reports = Arrivals(session, keys.unsafe("spot_arm"))
+                samples[views] += ping_pong(lambda i: publishers[payloads[i][0]].put(payloads[i][1]), reports, n)
+                reports.close()
+                if incidents is not None:
+                    incidents.close()
+                if proc is not None:
+                    stop.set()
+                    client.join(5)
+                    terminate([proc])
+                if view is not None:
+                    stop.set()
+                    client.join(5)
+                    view.close()
+                    observer.close()
+                folder.cleanup()
+                monitor.close()
+                side.close()
+                for p in publishers.values():
+                    p.undeclare()
+    finally:
+        session.close()
+    p99 = {v: statistics.quantiles(s, n=100, method="inclusive")[98] for v, s in samples.items()}
+    base = p99[MODES[0]]
+    return [["in-process", f"monitor: event -> UnsafeReport, {MODES[0]}", *stats(samples[MODES[0]]), "baseline", ""],
+            *[["in-process", f"  {m}", *stats(samples[m]), f"p99 <= {1.1 * base * 1e6:.0f}",
+               verdict(p99[m] <= 1.1 * base)] for m in MODES[1:]]]
+
+
+MODES = ("no view", "with --incidents", "with skinet foxglove in another process (1 client)",
+         "with the Foxglove view in process (1 client)")
+
+
+async def _fox_client(url: str, stop: threading.Event, aiohttp, json_, retry: bool = False) -> None:
+    """A Foxglove client subscribed to every channel, reading every message until ``stop``."""
+    async with aiohttp.ClientSession() as http:
+        while True:
+            try:
+                ws = await http.ws_connect(url, protocols=("foxglove.sdk.v1",))
+                break
+            except aiohttp.ClientError:
+                if not retry or stop.is_set():
+                    raise
+                await asyncio.sleep(0.1)
+        async with ws:
+            while not stop.is_set():
+                try:
+                    msg = await ws.receive(timeout=0.2)
+                except asyncio.TimeoutError:
+                    continue
+                if msg.type == aiohttp.WSMsgType.TEXT:
+                    op = json_.loads(msg.data)
+                    if op["op"] == "advertise":
+                        await ws.send_str(json_.dumps({"op": "subscribe", "subscriptions": [
+                            {"id": c["id"], "channelId": c["id"]} for c in op["channels"]]}))
+                elif msg.type in (aiohttp.WSMsgType.CLOSED, aiohttp.WSMsgType.ERROR):
+                    return
+
+
 # -- across processes ------------------------------------------------------------------
 
 
@@ -345,12 +454,16 @@ def main() -> None:
     parser.add_argument("--events", type=int, default=2000, help="ping-pong events per latency row")
     parser.add_argument("--burst", type=int, default=20000, help="events of the throughput burst")
     parser.add_argument("--profile", action="store_true", help="cProfile the in-process monitor run")
+    parser.add_argument("--views-only", action="store_true",
+                        help="only the rows without and with --incidents and the Foxglove view")
     parser.add_argument("--echo", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.echo:
         return echo_process(args.echo)
-    rows = in_process(args.events, args.profile)
-    rows += across_processes(args.events, args.burst)
+    rows = [] if args.views_only else in_process(args.events, args.profile)
+    rows += with_views(args.events)
+    if not args.views_only:
+        rows += across_processes(args.events, args.burst)
     print(f"\nlatency over {args.events} events after 200 warm-up (µs), loopback, no predictor")
     print(table(["where", "path", "p50", "p99", "max", "target", ""], rows))
 

@@ -187,17 +187,25 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
     monitor: Monitor | None = None
     predictor = None
     dashboard = None
+    foxglove = None
+    incidents = None
     pilot = None
     try:
         if args.dashboard is not None:  # first: a port in use stops the run before anything starts
             dashboard = start_dashboard(session, system.name, args.dashboard_host, args.dashboard,
                                         client_name(config), system)
             print(f"dashboard on {dashboard.url}", file=sys.stderr, flush=True)
+        if getattr(args, "foxglove", None) is not None:  # a port in use stops the run too
+            foxglove = spawn_foxglove(args, mode, listening)
+            print(f"foxglove on {foxglove.url}", file=sys.stderr, flush=True)
         predictor = start_predictor(session, f"embedded-{os.getpid()}",  # before the monitor: it asks at once
                                     memory_limit=memory_limit(args), rate_limit=args.rate_limit)
         monitor = start_monitor(session, system, budget=args.budget, check_policy=args.check_policy,
                                 client=client_name(config), check_rate_limit=args.check_rate_limit,
                                 lost_after=args.lost_after)
+        from services.incidents import start_incidents
+
+        incidents = start_incidents(session, system, args)
         if not args.no_pilot:
             from services.pilot import start_pilot
 
@@ -217,9 +225,13 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
         _follow(monitor, stop, args.duration, out)
         return 0
     finally:
+        if incidents is not None:
+            incidents.close()
         if dashboard is not None:
             dashboard.close()
             dashboard.observer.close()
+        if foxglove is not None:
+            foxglove.close()
         if pilot is not None:
             pilot.close()
         if monitor is not None:
@@ -302,6 +314,74 @@ def start_dashboard(session: zenoh.Session, name: str, host: str, port: int, cli
         observer.close()
         raise
     return dashboard
+
+
+FOXGLOVE_START = 30.0  # seconds for the Foxglove view's process to say where it serves
+
+
+@dataclasses.dataclass
+class FoxgloveProcess:
+    """``python -m services.foxglove`` beside ``skinet run``: a process of its own, so that its Python work never
+    holds the monitor's interpreter (benchmarks/bench_latency.py: in the same process, p99 several times the
+    monitor's; in another, within its noise)."""
+
+    proc: Any
+    url: str
+
+    def close(self) -> None:
+        self.proc.terminate()
+        try:
+            self.proc.wait(10)
+        except Exception:
+            self.proc.kill()
+
+
+def spawn_foxglove(args: argparse.Namespace, mode: str, listening: list[str]) -> FoxgloveProcess:
+    """Start the Foxglove view of ``skinet run`` (a peer of its listen endpoint, or a client of the same router
+    with the same login); raises a one-line :class:`SkinetError` with the view's own error (port in use)."""
+    import subprocess
+
+    from skinet.errors import SkinetError
+
+    zenoh_args = ["--no-multicast-scouting"]
+    if mode == "peer":
+        endpoint = next((e for e in listening if e.startswith("tcp/")), None)
+        if endpoint is None:
+            raise SkinetError("--foxglove needs a tcp/ listen endpoint (--listen tcp/127.0.0.1:0)")
+        endpoint = re.sub(r"^tcp/0\.0\.0\.0:", "tcp/127.0.0.1:", re.sub(r"^tcp/\[::\]:", "tcp/[::1]:", endpoint))
+        zenoh_args += ["--mode", "peer", "-e", endpoint]
+    else:
+        zenoh_args += ["--mode", "client", *(x for e in args.connect or [] for x in ("-e", e))]
+        for option in ("zenoh_config", "user", "password_file"):
+            if getattr(args, option, None):
+                zenoh_args += [f"--{option.replace('_', '-')}", str(getattr(args, option))]
+    proc = subprocess.Popen([sys.executable, "-m", "services.foxglove", str(args.system), "--host", args.foxglove_host,
+                             "--port", str(args.foxglove), "--wait", "30", *zenoh_args],
+                            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                            env={**os.environ, **({"SKINET_ZENOH_PASSWORD": args.password}
+                                                  if getattr(args, "password", None) else {})})
+    lines: list[str] = []
+    deadline = time.monotonic() + FOXGLOVE_START
+    while time.monotonic() < deadline:
+        line = proc.stderr.readline() if proc.stderr else ""
+        if not line:
+            break
+        lines.append(line.strip())
+        m = re.search(r" on (ws://\S+)", line)
+        if line.startswith("skinet foxglove:") and m:
+            threading.Thread(target=_drain, args=(proc.stderr,), daemon=True).start()
+            return FoxgloveProcess(proc, m.group(1))
+    proc.kill()
+    proc.wait()
+    error = next((x for x in reversed(lines) if "error" in x), lines[-1] if lines else "it stopped at once")
+    raise SkinetError(f"--foxglove: {error.split('error: ', 1)[-1]}")
+
+
+def _drain(stream: TextIO) -> None:
+    """Pass the view's later lines (warnings) on to this process's standard error."""
+    for line in stream:
+        if "foxglove.websocket.server INFO" not in line:
+            sys.stderr.write(line)
 
 
 def _follow(monitor: Monitor, stop: threading.Event, duration: float | None, out: TextIO) -> None:

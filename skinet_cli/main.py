@@ -107,6 +107,8 @@ LAZY_COMMANDS: tuple[tuple[str, str, dict[str, str]], ...] = (
         "watch": "terminal live view of a running system (any deployment)",
         "check": "ask a running monitor whether a command is safe now (skinet/<system>/check)",
     }),
+    ("skinet_cli.foxglove", "add_parser",
+     {"foxglove": "serve a running system to Foxglove (WebSocket on 127.0.0.1:8765)"}),
     ("skinet_cli.client_config", "add_parser", {
         "client-config": "write the Zenoh client configuration (TLS, login) of one user from a deployment's secrets",
     }),

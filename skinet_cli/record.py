@@ -19,7 +19,7 @@ import sys
 import threading
 import time
 import uuid
-from typing import BinaryIO, TextIO
+from typing import TYPE_CHECKING, BinaryIO, TextIO
 
 import zenoh
 from pydantic import BaseModel
@@ -37,12 +37,16 @@ from skinet.wire.codec import DecodeError, decode
 from skinet.wire.log import log_line
 from skinet.wire.mcap_log import McapLogWriter
 from skinet.wire.messages import (
-    MESSAGES, CanonicalEvent, Divergences, LiveState, ModelBundle, StateSpaceReport, UnsafeReport, Verdicts,
+    MESSAGES, CanonicalEvent, Divergences, LiveState, ModelBundle, PilotStatus, StateSpaceReport, UnsafeReport,
+    Verdicts,
 )
+
+if TYPE_CHECKING:
+    from services.foxglove.bundle import BundleSink
 
 BY_KEY: dict[str, type[BaseModel]] = {
     "events": CanonicalEvent, "state": LiveState, "verdicts": Verdicts, "unsafe": UnsafeReport,
-    "state_space": StateSpaceReport, "model": ModelBundle, "divergences": Divergences,
+    "state_space": StateSpaceReport, "model": ModelBundle, "divergences": Divergences, "pilot": PilotStatus,
 }
 SHOW_SKIPPED = 5  # undecodable payloads reported on standard error, then only counted
 MODEL_RETRY = 2.0  # seconds between model queries while none answered
@@ -52,8 +56,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     c = sub.add_parser("record", help="record the monitor's messages of a system into a JSON Lines log")
     c.add_argument("system", metavar="SYSTEM_NAME", type=key_name("system name"),
                    help="system name, as in skinet/<system>/... keys")
-    c.add_argument("-o", "--output", required=True, metavar="LOG.jsonl|LOG.mcap",
-                   help="log file to write (overwritten)")
+    out = c.add_mutually_exclusive_group(required=True)
+    out.add_argument("-o", "--output", metavar="LOG.jsonl|LOG.mcap", help="log file to write (overwritten)")
+    out.add_argument("--bundle", metavar="FILE.mcap",
+                     help="write an incident bundle instead (overwritten): MCAP with the model as attachments and "
+                          "their digests, the events, verdicts, unsafe reports, divergences and pilot statuses, and "
+                          "the Foxglove channels of skinet foxglove; skinet replay FILE --verify re-runs it")
     c.add_argument("--format", choices=["jsonl", "mcap"],
                    help="JSON Lines, or MCAP with JSON schemas (Foxglove, other robotics tools); default: from "
                         "the extension of --output (.mcap: mcap, else jsonl). MCAP is finished on Ctrl-C, "
@@ -131,11 +139,12 @@ class McapSink:
 class Recorder:
     """Writes decoded samples to ``sink`` (thread-safe); ``done`` is set after ``count`` messages."""
 
-    def __init__(self, sink: JsonlSink | McapSink, system: str, count: int | None = None):
+    def __init__(self, sink: JsonlSink | McapSink | BundleSink, system: str, count: int | None = None):
         self.sink, self.system, self.count = sink, system, count
         self.written = 0
         self.skipped = 0
         self.has_model = False
+        self.want_model = threading.Event()  # a monitor published: ask for its model now, not at the next retry
         self.done = threading.Event()
         self._lock = threading.Lock()
 
@@ -160,6 +169,8 @@ class Recorder:
         with self._lock:
             if self.done.is_set():
                 return
+            if isinstance(message, LiveState) and not self.has_model:
+                self.want_model.set()
             if isinstance(message, ModelBundle):
                 if self.has_model:
                     return
@@ -180,9 +191,16 @@ def cmd_record(args: argparse.Namespace) -> int:
     system = args.system
     config = config_from_args(args)
     session = open_session(config, warn_on_stderr("skinet record"))
+    if args.bundle is not None:
+        args.output = args.bundle
     mcap = (args.format or ("mcap" if args.output.endswith(".mcap") else "jsonl")) == "mcap"
     try:
-        sink = McapSink(open(args.output, "wb")) if mcap else JsonlSink(open(args.output, "w", encoding="utf-8"))
+        if args.bundle is not None:
+            from services.foxglove.bundle import BundleSink
+
+            sink: JsonlSink | McapSink | BundleSink = BundleSink(open(args.output, "wb"), system)
+        else:
+            sink = McapSink(open(args.output, "wb")) if mcap else JsonlSink(open(args.output, "w", encoding="utf-8"))
     except OSError as exc:
         session.close()
         raise SourceError.at(args.output, None, f"cannot write file: {exc.strerror}") from None
@@ -200,16 +218,29 @@ def cmd_record(args: argparse.Namespace) -> int:
             now = time.monotonic()
             if deadline is not None and now >= deadline:
                 break
-            if not args.no_model and not recorder.has_model and now - asked >= MODEL_RETRY:
+            if not args.no_model and not recorder.has_model and (now - asked >= MODEL_RETRY
+                                                                   or recorder.want_model.is_set()):
                 asked = now
+                recorder.want_model.clear()
                 session.get(keys.model(system), handler=recorder.on_reply, timeout=MODEL_RETRY)
             stop.wait(0.1 if deadline is None else max(0.0, min(0.1, deadline - now)))
     except KeyboardInterrupt:
         pass
     finally:
-        recorder.close()
-        why = _nothing_recorded(session, config, system) if recorder.written == 0 else None
-        session.close()
+        if args.bundle is not None and not recorder.has_model and not args.no_model:
+            try:  # a last, blocking ask: a short run may end before the retry (the monitor may still answer)
+                for reply in session.get(keys.model(system), timeout=MODEL_RETRY):
+                    if reply.ok is not None and not recorder.has_model:  # after the stop: past Recorder.add
+                        recorder.sink.write(str(reply.ok.key_expr), decode(reply.ok.payload.to_bytes(), ModelBundle),
+                                            time.time())
+                        recorder.has_model = True
+            except Exception:  # the session closing under a signal: the bundle says it has no model
+                pass
+        try:
+            recorder.close()  # a bundle without a model: a one-line error
+        finally:
+            why = _nothing_recorded(session, config, system) if recorder.written == 0 else None
+            session.close()
     if why is not None:  # an empty log is never a success
         raise SkinetError(f"nothing recorded in {args.output}: {why}")
     print(f"skinet record: {recorder.written} messages written to {args.output}"

@@ -37,11 +37,18 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     c.add_argument("--dashboard", type=count(0, 65535), metavar="PORT",
                    help="also serve the live web dashboard of the replay on this port (0: a free one)")
     c.add_argument("--dashboard-host", default="127.0.0.1", help="address of --dashboard (default: 127.0.0.1)")
+    c.add_argument("--verify", action="store_true",
+                   help="LOG is an incident bundle (skinet record --bundle): rebuild the system from its attachments "
+                        "(refused when a digest does not match), re-run its events on a fresh monitor engine in this "
+                        "process and compare every verdict and unsafe report step by step; prints '0 differences' "
+                        "or each one, exit status 3 on a difference. Publishes nothing")
     add_zenoh_args(c)
     c.set_defaults(func=cmd_replay)
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
+    if args.verify:
+        return cmd_verify(args)
     from services.common.zenoh_config import (
         check_connected, client_name, config_from_args, open_session, wait_connected, warn_on_stderr,
     )
@@ -86,3 +93,27 @@ def cmd_replay(args: argparse.Namespace) -> int:
         if replay is not None:
             replay.close()
         session.close()
+
+
+DIFFERENT = 3  # exit status of a bundle whose re-run differs
+
+
+def cmd_verify(args: argparse.Namespace) -> int:
+    """``skinet replay BUNDLE --verify``: see the ``--verify`` help; one-line errors for bad files."""
+    from services.bundle_verify import verify
+    from skinet.errors import SkinetError
+    from skinet.wire.bundle import read_bundle
+
+    try:
+        stream = open(args.log, "rb")
+    except OSError as exc:
+        raise SkinetError(f"{args.log}: cannot read file: {exc.strerror}") from None
+    with stream:
+        bundle = read_bundle(stream, args.log)
+    steps, differences = verify(bundle)
+    print(f"skinet replay: {args.log}: system {bundle.model.system}, {steps} steps re-run and compared",
+          file=sys.stderr)
+    for d in differences:
+        print(d.line())
+    print(f"{len(differences)} difference{'' if len(differences) == 1 else 's'}")
+    return DIFFERENT if differences else 0

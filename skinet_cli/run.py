@@ -34,6 +34,13 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     c.add_argument("--dashboard", type=count(0, 65535), metavar="PORT",
                    help="also serve the live web dashboard on this port (0: a free one; see skinet dashboard)")
     c.add_argument("--dashboard-host", default="127.0.0.1", help="address of --dashboard (default: 127.0.0.1)")
+    c.add_argument("--foxglove", type=count(0, 65535), metavar="PORT",
+                   help="also serve the system to Foxglove (WebSocket) on this port (0: a free one; see skinet "
+                        "foxglove)")
+    c.add_argument("--foxglove-host", default="127.0.0.1", help="address of --foxglove (default: 127.0.0.1)")
+    from services.incidents import add_incidents_args
+
+    add_incidents_args(c)
     c.add_argument("--no-pilot", action="store_true",
                    help="do not start the pilot (SPEC §8: goals on skinet/<system>/pilot/goal/<client>, guided or "
                         "driven with the strict check; see docs/pilot.md)")

@@ -139,7 +139,7 @@ TABLE = [u for text in PAGES.values() for u in _table_commands(text)]
 def test_the_tables_name_every_command() -> None:
     named = {u.split()[1] if u.startswith("skinet") else u.split()[2] for u in TABLE}
     assert named == {"demo", "conform", "run", "router", "record", "rosbag", "timeline", "replay", "parse", "net", "unsafe",
-                     "explore", "ctl", "plan", "goal", "dashboard", "watch", "check", "client-config", *SERVICES}
+                     "explore", "ctl", "plan", "goal", "dashboard", "watch", "check", "foxglove", "client-config", *SERVICES}
 
 
 @pytest.mark.parametrize("usage", TABLE, ids=[u.split(" [")[0] for u in TABLE])

@@ -16,6 +16,8 @@ import sys
 import threading
 from pathlib import Path
 
+import zenoh
+
 from services.common.cli import add_log_arg, setup_logging
 from services.common.zenoh_config import (
     add_zenoh_args, check_connected, client_name, config_from_args, open_session,
@@ -28,17 +30,27 @@ from skinet.system import System
 from skinet.wire import keys
 
 
-def add_dashboard_args(p: argparse.ArgumentParser) -> None:
-    """The dashboard's arguments, its log level and the Zenoh flags."""
-    p.add_argument("system", metavar="SYSTEM",
-                   help="system file (.toml, gives the name and the timeline's lanes) or system name")
-    p.add_argument("--host", default=os.environ.get("SKINET_DASHBOARD_HOST", "127.0.0.1"),
-                   help="address to serve on (default: $SKINET_DASHBOARD_HOST or 127.0.0.1; 0.0.0.0 exposes it)")
-    p.add_argument("--port", "-p", type=count(0, 65535, env="SKINET_DASHBOARD_PORT"),
-                   default=os.environ.get("SKINET_DASHBOARD_PORT", "8080"),
-                   help="TCP port (default: $SKINET_DASHBOARD_PORT or 8080; 0 picks a free one)")
+def add_view_args(p: argparse.ArgumentParser, env: str, port: int, system_help: str) -> None:
+    """A served view's SYSTEM, ``--host`` and ``--port`` (defaults from ``$<env>_HOST`` and ``$<env>_PORT``) and
+    ``--wait``: the dashboard's and the Foxglove view's."""
+    p.add_argument("system", metavar="SYSTEM", help=system_help)
+    p.add_argument("--host", default=os.environ.get(f"{env}_HOST", "127.0.0.1"),
+                   help=f"address to serve on (default: ${env}_HOST or 127.0.0.1; 0.0.0.0 exposes it)")
+    p.add_argument("--port", "-p", type=count(0, 65535, env=f"{env}_PORT"),
+                   default=os.environ.get(f"{env}_PORT", str(port)),
+                   help=f"TCP port (default: ${env}_PORT or {port}; 0 picks a free one)")
     p.add_argument("--wait", type=seconds(zero=True), default=5.0,
                    help="seconds before warning that no monitor of the system is alive (default: 5)")
+
+
+def add_dashboard_args(p: argparse.ArgumentParser) -> None:
+    """The dashboard's arguments, its log level and the Zenoh flags."""
+    add_view_args(p, "SKINET_DASHBOARD", 8080,
+                  "system file (.toml, gives the name and the timeline's lanes) or system name")
+    p.add_argument("--foxglove", type=count(0, 65535, env="SKINET_DASHBOARD_FOXGLOVE"),
+                   default=os.environ.get("SKINET_DASHBOARD_FOXGLOVE") or None, metavar="PORT",
+                   help="also serve the system to Foxglove (WebSocket, on --host) on this port (default: "
+                        "$SKINET_DASHBOARD_FOXGLOVE, else none; see skinet foxglove)")
     add_log_arg(p)
     add_zenoh_args(p)
 
@@ -60,10 +72,8 @@ def serve(args: argparse.Namespace, stop: threading.Event) -> int:
     (one line: a bad system file or name, no router, a refused login, a port in use)."""
     setup_logging(args)
     log = logging.getLogger("skinet.dashboard")
-    name, system = resolve_system(args.system)
-    config = config_from_args(args)
-    session = open_session(config)
-    observer = Observer(session, name, system, client=client_name(config))
+    config, session, observer = observe(args)
+    name = observer.name
     dashboard = Dashboard(observer, args.host, args.port)
     try:
         dashboard.start()
@@ -72,16 +82,39 @@ def serve(args: argparse.Namespace, stop: threading.Event) -> int:
         session.close()
         raise
     print(f"skinet dashboard: system {name} on {dashboard.url}", file=sys.stderr, flush=True)
+    foxglove = None
     try:
-        if not observer.wait_monitor(args.wait) and not stop.is_set():
-            check_connected(session, config)  # an explicit endpoint still unreached: exit 1 with the reason
-            log.warning("%s", no_monitor_message(session, name))
-        stop.wait()
+        if args.foxglove is not None:
+            from services.foxglove.app import start_foxglove
+
+            foxglove = start_foxglove(observer, args.host, args.foxglove)
+            print(f"skinet dashboard: Foxglove on {foxglove.url}", file=sys.stderr, flush=True)
+        follow(observer, config, args.wait, stop, log)
     finally:
+        if foxglove is not None:
+            foxglove.close()
         dashboard.close()
         observer.close()
         session.close()
     return 0
+
+
+def observe(args: argparse.Namespace) -> tuple[zenoh.Config, zenoh.Session, Observer]:
+    """A served view's Zenoh configuration, session and observer of the system ``args.system`` names."""
+    name, system = resolve_system(args.system)
+    config = config_from_args(args)
+    session = open_session(config)
+    return config, session, Observer(session, name, system, client=client_name(config))
+
+
+def follow(observer: Observer, config: zenoh.Config, wait: float, stop: threading.Event,
+           log: logging.Logger) -> None:
+    """Until ``stop``: warn once when no monitor shows up within ``wait`` seconds (an explicit endpoint still
+    unreached is a one-line error instead)."""
+    if not observer.wait_monitor(wait) and not stop.is_set():
+        check_connected(observer.session, config)
+        log.warning("%s", no_monitor_message(observer.session, observer.name))
+    stop.wait()
 
 
 def no_monitor_message(session, name: str) -> str:

@@ -11,6 +11,7 @@ from collections.abc import Sequence
 from services.common.cli import add_log_arg, one_line_errors, setup_logging
 from services.common.zenoh_config import add_zenoh_args, client_name, config_from_args, open_session
 from services.common.ratelimit import add_rate_args
+from services.incidents import add_incidents_args, start_incidents
 from services.monitor.check import add_policy_arg
 from services.monitor.service import start_monitor
 from services.monitor.sync import add_lost_after_arg
@@ -37,6 +38,7 @@ def build_parser() -> ArgumentParser:
                         "and the query goes to another one (default: 0.5; instances reply every 0.1 s)")
     p.add_argument("--no-express", dest="express", action="store_false",
                    help="let Zenoh batch publications (higher burst throughput; default: express)")
+    add_incidents_args(p)
     add_no_properties_arg(p)
     add_policy_arg(p)
     add_lost_after_arg(p)
@@ -70,8 +72,11 @@ def main(argv: Sequence[str] | None = None) -> int:
                                 check_policy=args.check_policy, client=client_name(config),
                                 check_rate_limit=args.check_rate_limit, lost_after=args.lost_after)
         log.info("monitoring %s (model %s) as %s", system.name, monitor.digest, monitor.instance_id)
+        incidents = start_incidents(session, system, args)
         while not stop.wait(0.5):
             pass
+        if incidents is not None:
+            incidents.close()
         monitor.close()
         c = monitor.counters
         k = monitor.check_counters

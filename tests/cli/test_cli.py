@@ -304,7 +304,7 @@ def test_lazy_commands_list_their_modules_own_help() -> None:
     assert build_parser("unsafe").format_help() == full.format_help()
     names = [name for _, _, helps in LAZY_COMMANDS for name in helps]
     assert names == ["demo", "record", "rosbag", "timeline", "replay", "conform", "run", "router", "fleet", "plan", "goal", "dashboard",
-                     "watch", "check", "client-config"]
+                     "watch", "check", "foxglove", "client-config"]
     for name in names:
         lazy = build_parser(name)
         assert lazy.format_help() == full.format_help()
@@ -320,8 +320,13 @@ def test_lazy_command_runs_its_module(capsys: pytest.CaptureFixture[str]) -> Non
         main(["record"])
     out, err = capsys.readouterr()
     assert info.value.code == 2 and out == ""
-    assert err.splitlines()[-1] == ("skinet record: error: the following arguments are required: SYSTEM_NAME, "
-                                    "-o/--output (see skinet record --help)")
+    assert err.splitlines()[-1] == ("skinet record: error: the following arguments are required: SYSTEM_NAME "
+                                    "(see skinet record --help)")
+    with pytest.raises(SystemExit) as info:
+        main(["record", "spot_arm"])
+    out, err = capsys.readouterr()
+    assert err.splitlines()[-1] == ("skinet record: error: one of the arguments -o/--output --bundle is required "
+                                    "(see skinet record --help)")
 
 
 def test_unsafe_imports_no_service_module() -> None:

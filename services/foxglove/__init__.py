@@ -1,0 +1,1 @@
+"""The live Foxglove connection of a monitored system (docs/foxglove.md)."""

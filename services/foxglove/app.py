@@ -1,0 +1,60 @@
+"""The Foxglove connection as a command: ``skinet foxglove SYSTEM`` and ``python -m services.foxglove``.
+
+Opens a Zenoh session (a read-only observer), serves the system's channels over
+the Foxglove WebSocket protocol (:class:`~services.foxglove.server.FoxgloveView`),
+warns when no monitor of the system shows up, and runs until ``stop`` is set.
+Errors (port in use, no router, refused login, bad system file) are raised as
+one-line :class:`~skinet.errors.SkinetError` for the caller's handler.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+import threading
+
+from services.common.cli import add_log_arg, setup_logging
+from services.common.zenoh_config import add_zenoh_args
+from services.dashboard.app import add_view_args, follow, observe
+from services.dashboard.observer import Observer
+from skinet.errors import SkinetError
+
+DEFAULT_PORT = 8765  # Foxglove's usual WebSocket port
+
+
+def add_foxglove_args(p: argparse.ArgumentParser) -> None:
+    """The command's arguments, its log level and the Zenoh flags."""
+    add_view_args(p, "SKINET_FOXGLOVE", DEFAULT_PORT, "system file (.toml) or system name")
+    add_log_arg(p)
+    add_zenoh_args(p)
+
+
+def start_foxglove(observer: Observer, host: str, port: int):  # -> FoxgloveView
+    """A :class:`~services.foxglove.server.FoxgloveView` of ``observer`` (the SDK imported only here)."""
+    from services.foxglove.server import FoxgloveView
+
+    return FoxgloveView(observer, host, port)
+
+
+def serve(args: argparse.Namespace, stop: threading.Event) -> int:
+    """Serve until ``stop``; returns the exit status."""
+    setup_logging(args)
+    log = logging.getLogger("skinet.foxglove")
+    config, session, observer = observe(args)
+    name = observer.name
+    try:
+        view = start_foxglove(observer, args.host, args.port)
+    except SkinetError:
+        observer.close()
+        session.close()
+        raise
+    print(f"skinet foxglove: system {name} on {view.url} (Foxglove: Open connection, Foxglove WebSocket; "
+          "layout docs/foxglove-layout.json)", file=sys.stderr, flush=True)
+    try:
+        follow(observer, config, args.wait, stop, log)
+    finally:
+        view.close()
+        observer.close()
+        session.close()
+    return 0

@@ -1,0 +1,214 @@
+"""``--incidents DIR``: incident bundles written around each incident of a live run (docs/foxglove.md).
+
+:class:`Incidents` subscribes to ``skinet/<system>/**`` on a session (the
+monitor's own: it sees what the monitor publishes and the events it receives)
+and keeps a ring of the last ``window`` seconds of raw payloads (key, bytes,
+receive time), at most :data:`MAX_ENTRIES` of them.  An incident is a property
+going from holding to failing (``Verdicts``), a new model divergence or manager
+restart (``Divergences``), or the pilot failing (``PilotStatus``).  ``window``
+seconds after the first incident, a bundle of the ring from ``window`` seconds
+before it to then is written by :class:`~services.foxglove.bundle.BundleSink`
+in its own thread (incidents in between go in the same bundle); written and
+failed bundles are counted and logged, never raised.  Cost on the event path:
+none in the publishing thread (samples go through a Zenoh ring channel to a
+thread of this writer), then one bounded deque append per sample; only verdicts,
+divergence lists and pilot statuses are decoded at once (the rest when a bundle is written).  Memory:
+at most :data:`MAX_ENTRIES` payloads (each under the codec's size limit;
+about 1 KB for the paper's system), whatever the window.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import threading
+import time
+from collections import deque
+from pathlib import Path
+
+import zenoh
+
+from services.common.zenoh_config import undeclare
+from services.foxglove.bundle import BundleSink
+from skinet.errors import SkinetError
+from skinet.system import System
+from skinet.wire import keys
+from skinet.wire.convert import bundle
+from skinet.wire.codec import DecodeError, decode
+from skinet.wire.messages import (
+    CanonicalEvent, Divergences, LiveState, ModelBundle, PilotStatus, StateSpaceReport, UnsafeReport, Verdicts,
+)
+
+RECORDED = {"events": CanonicalEvent, "state": LiveState, "verdicts": Verdicts, "unsafe": UnsafeReport,
+            "state_space": StateSpaceReport, "divergences": Divergences, "pilot": PilotStatus}
+CHANNEL = 4096  # samples waiting for the ring's thread
+POLL = 0.005  # seconds between looks at an empty channel
+MAX_ENTRIES = 100_000  # payloads kept in the ring, whatever the window
+log = logging.getLogger("skinet.incidents")
+
+
+class Incidents:
+    """Writes incident bundles of ``model``'s system into ``folder``."""
+
+    def __init__(self, session: zenoh.Session, model: ModelBundle, folder: Path, window: float = 30.0):
+        self.model, self.folder, self.window = model, Path(folder), window
+        self.folder.mkdir(parents=True, exist_ok=True)
+        self.system = model.system
+        self.written: list[Path] = []
+        self.failed = 0
+        self._ring: deque[tuple[str, bytes, float]] = deque(maxlen=MAX_ENTRIES)
+        self._lock = threading.Lock()
+        self._holds: dict[str, bool] = {}
+        self._noted: dict[str, int] = {}  # monitor run -> divergences noted
+        self._pilot_failed: tuple[str, int] | None = None
+        self._pending: tuple[float, list[str]] | None = None  # (first incident's time, what happened)
+        self._wake = threading.Event()
+        self._closed = False
+        # A ring channel, drained by a thread of this writer: no Python runs in the thread that published
+        # (a callback on the monitor's own session runs inside its put, on the event path); a backlog past
+        # CHANNEL drops the oldest samples.
+        self._stopping = threading.Event()
+        self._sub = session.declare_subscriber(f"{keys.ROOT}/{self.system}/**", zenoh.handlers.RingChannel(CHANNEL))
+        self._drain = threading.Thread(target=self._take, name="skinet-incidents-ring", daemon=True)
+        self._drain.start()
+        self._thread = threading.Thread(target=self._run, name="skinet-incidents", daemon=True)
+        self._thread.start()
+
+    def _take(self) -> None:
+        # Polled: a thread blocked in recv() holds the subscriber, which then cannot be undeclared.
+        while not self._stopping.is_set():
+            sample = self._sub.try_recv()
+            if sample is None:
+                self._stopping.wait(POLL)
+            else:
+                self._on_sample(sample)
+
+    def close(self) -> None:
+        """Stop; a pending incident is written with what the ring holds now."""
+        self._stopping.set()
+        self._drain.join(timeout=5)
+        undeclare(self._sub)
+        self._closed = True
+        self._wake.set()
+        self._thread.join(timeout=30)
+
+    # -- the ring's thread: O(1) unless the sample may be an incident ------------------------
+
+    def _on_sample(self, sample: zenoh.Sample) -> None:
+        if sample.kind != zenoh.SampleKind.PUT:
+            return
+        key, payload, t = str(sample.key_expr), sample.payload.to_bytes(), time.time()
+        kind = key.split("/")[2] if key.count("/") >= 2 else ""
+        with self._lock:
+            self._ring.append((key, payload, t))
+            cutoff = t - self.window - 1.0
+            while self._ring and self._ring[0][2] < cutoff and self._pending is None:
+                self._ring.popleft()
+        what = self._incident(kind, payload)
+        if what:
+            with self._lock:
+                if self._pending is None:
+                    self._pending = (t, [what])
+                else:
+                    self._pending[1].append(what)
+            self._wake.set()
+
+    def _incident(self, kind: str, payload: bytes) -> str | None:
+        try:
+            if kind == "verdicts":
+                v = decode(payload, Verdicts)
+                onsets = [p.name for p in v.properties if not p.holds and self._holds.get(p.name, True)]
+                self._holds = {p.name: p.holds for p in v.properties}
+                return f"violation of {', '.join(onsets)} at step {v.seq}" if onsets else None
+            if kind == "divergences":
+                d = decode(payload, Divergences)
+                noted = d.older + len(d.entries)
+                before = self._noted.get(d.monitor, 0)
+                self._noted[d.monitor] = max(before, noted)
+                if noted > before:
+                    kinds = sorted({e.kind for e in d.entries if e.n >= before}) or ["divergence"]
+                    return f"{' and '.join('manager restart' if k == 'restart' else 'model divergence' for k in kinds)}"
+                return None
+            if kind == "pilot":
+                p = decode(payload, PilotStatus)
+                if p.state == "failed" and self._pilot_failed != (p.pilot, p.goal_id):
+                    self._pilot_failed = (p.pilot, p.goal_id)
+                    return f"pilot failed goal {p.goal_id}: {p.reason}"
+        except DecodeError:
+            return None
+        return None
+
+    # -- the writer's thread -----------------------------------------------------------------
+
+    def _run(self) -> None:
+        while True:
+            with self._lock:
+                pending = self._pending
+            wait = None if pending is None else max(0.0, pending[0] + self.window - time.time())
+            if not self._closed and (pending is None or wait):
+                self._wake.wait(wait)
+                self._wake.clear()
+                continue
+            if pending is not None:
+                self._write(pending[0], pending[1])
+            if self._closed:
+                return
+
+    def _write(self, t0: float, what: list[str]) -> None:
+        with self._lock:
+            entries = [e for e in self._ring if e[2] >= t0 - self.window]
+            self._pending = None
+        stamp = time.strftime("%Y%m%d-%H%M%S", time.localtime(t0))
+        path = self.folder / f"{self.system}-{stamp}-{int(t0 * 1000) % 1000:03d}.mcap"
+        sink = BundleSink(path.open("wb"), self.system, trigger="; ".join(what))
+        sink.write(keys.model(self.system, self.model.digest), self.model, t0)
+        kept = 0
+        try:
+            for key, payload, t in entries:
+                kind = RECORDED.get(key.split("/")[2] if key.count("/") >= 2 else "")
+                if kind is None or (kind is PilotStatus and not key.endswith("/status")):
+                    continue
+                try:
+                    sink.write(key, decode(payload, kind), t)
+                    kept += 1
+                except DecodeError:
+                    continue
+            sink.close()
+        except Exception as exc:  # a full disk, a folder removed: counted and logged, the monitor goes on
+            self.failed += 1
+            log.error("cannot write the incident bundle %s: %s", path, exc)
+            return
+        self.written.append(path)
+        log.warning("incident (%s): bundle %s written, %d messages from %.0f s before to %.0f s after",
+                    "; ".join(what), path, kept, self.window, self.window)
+
+
+def add_incidents_args(p: argparse.ArgumentParser) -> None:
+    """``--incidents DIR`` and ``--incident-window S``."""
+    p.add_argument("--incidents", metavar="DIR",
+                   help="write an incident bundle (MCAP; skinet replay FILE --verify re-runs it) into DIR around each "
+                        "violation, model divergence, manager restart or pilot failure: the --incident-window "
+                        "seconds before and after it")
+    p.add_argument("--incident-window", type=_window, default=30.0, metavar="S",
+                   help="seconds kept before an incident and recorded after it (default: 30)")
+
+
+def _window(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = -1.0
+    if not 0 < value <= 3600:
+        raise argparse.ArgumentTypeError(f"'{text}' is not a number of seconds from 0 (excluded) to 3600")
+    return value
+
+
+def start_incidents(session: zenoh.Session, system: System, args: argparse.Namespace) -> Incidents | None:
+    """The incident writer ``args`` asks for (None without ``--incidents``); a folder that cannot be made is a
+    one-line :class:`SkinetError`."""
+    if getattr(args, "incidents", None) is None:
+        return None
+    try:
+        return Incidents(session, bundle(system), Path(args.incidents), args.incident_window)
+    except OSError as exc:
+        raise SkinetError(f"--incidents {args.incidents}: cannot make the folder: {exc.strerror}") from None

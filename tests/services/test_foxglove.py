@@ -1,0 +1,144 @@
+"""SkiNet Live in Foxglove: ``python -m services.foxglove`` seen by a ``foxglove.websocket.v1`` client.
+
+The server runs as its own process, a read-only client of a loopback router;
+the paper's unassisted run is played through simulator, bridge, monitor and
+predictor on another client; a protocol client (tests/services/foxglove_client.py)
+subscribes to every advertised channel and decodes each message against its schema.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from collections.abc import Callable, Iterator
+
+import pytest
+
+from skinet.mission import StepRecord
+from skinet.wire import foxglove as fx
+from tests.services.conftest import REPO, client_args, free_port
+from tests.services.foxglove_client import FoxgloveClient
+from tests.services.test_dashboard import SYSTEM_FILE, VIOLATIONS, play
+
+
+@pytest.fixture
+def foxglove(spawn: Callable, router: str) -> Iterator[Callable[[], FoxgloveClient]]:
+    clients: list[FoxgloveClient] = []
+
+    def start() -> FoxgloveClient:
+        port = free_port()
+        spawn("services.foxglove", str(SYSTEM_FILE), "--port", str(port), "--wait", "1", *client_args(router))
+        client = FoxgloveClient(f"ws://127.0.0.1:{port}")
+        clients.append(client)
+        return client
+
+    yield start
+    for c in clients:
+        c.close()
+
+
+def test_the_unassisted_run_in_foxglove_shows_each_violation_at_its_step(foxglove, router) -> None:
+    client = foxglove()
+    client.wait(lambda c: len(c.channels) == len(fx.channels()), "every channel advertised")
+    advertised = client.topics()
+    assert {t: (c["encoding"], c["schemaName"], c["schemaEncoding"]) for t, c in advertised.items()} == {
+        s.topic: ("json", s.schema_name, "jsonschema") for s in fx.channels()}
+    assert client.protocol == "foxglove.sdk.v1"
+    assert client.server_info is not None and client.server_info["name"] == "SkiNet Live spot_arm"
+    seen: list[tuple[str, int, str]] = []
+
+    def after(record: StepRecord) -> None:
+        client.wait(lambda c: any(m["seq"] == record.index for m in c.on(fx.SERIES)), f"the series of step "
+                    f"{record.index}")
+        expected = [v for v in VIOLATIONS if v[1] <= record.index]
+        client.wait(lambda c: len(c.on(fx.VIOLATIONS)) == len(expected),
+                    f"{len(expected)} violation(s) after step {record.index}")
+        if record.violations:
+            v = client.on(fx.VIOLATIONS)[-1]
+            seen.append((v["property"], v["seq"], v["event"].split("#")[0]))
+
+    records = play("unassisted", router, after)
+    assert seen == VIOLATIONS
+    assert [(p, r.index) for r in records for p in r.violations] == [(p, i) for p, i, _ in VIOLATIONS]
+    assert client.invalid == []
+    # Plot series: violations so far counted up at each onset.
+    series = {m["seq"]: m for m in client.on(fx.SERIES)}
+    assert [series[i]["violations"] for _, i, _ in VIOLATIONS] == [1, 2, 3]
+    assert series[VIOLATIONS[0][1] - 1]["violations"] == 0
+    # One foxglove.Log line per step, an error line per violation.
+    lines = [m["message"] for m in client.on(fx.LOG)]
+    assert sum(line.startswith(f"step {records[-1].index}: ") for line in lines) >= 1
+    assert [line for line in lines if "VIOLATED" in line] == [
+        f"step {i}: VIOLATED {p} at {e}" for p, i, e in
+        [(v["property"], v["seq"], v["event"]) for v in client.on(fx.VIOLATIONS)]]
+    assert any(m["properties"] for m in client.on(fx.VERDICTS))
+    assert client.on(fx.STATE_SPACE) and client.on(fx.STATE)[-1]["seq"] == records[-1].index
+
+
+def test_a_port_in_use_is_a_one_line_error(router) -> None:
+    import socket
+
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        port = busy.getsockname()[1]
+        done = subprocess.run([sys.executable, "-m", "services.foxglove", str(SYSTEM_FILE), "--port", str(port),
+                               *client_args(router)], cwd=REPO, capture_output=True, text=True, timeout=60)
+    assert done.returncode == 1
+    errors = [line for line in done.stderr.splitlines() if "error" in line]
+    assert errors == [f"python -m services.foxglove: error: cannot serve Foxglove on 127.0.0.1:{port}: "
+                      + errors[0].split(f"127.0.0.1:{port}: ", 1)[1]]
+    assert "Traceback" not in done.stderr
+
+
+def test_skinet_run_serves_foxglove_and_a_late_subscriber_gets_the_last_state() -> None:
+    port = free_port()
+    proc = subprocess.Popen([sys.executable, "-m", "skinet_cli.main", "run", str(SYSTEM_FILE), "--duration", "30",
+                             "--no-multicast-scouting", "--no-pilot", "--foxglove", str(port)], cwd=REPO,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    client = None
+    try:
+        assert proc.stderr.readline().strip() == f"foxglove on ws://127.0.0.1:{port}"
+        client = FoxgloveClient(f"ws://127.0.0.1:{port}")
+        # No bridge: step 0 only, published before the client came; it is sent again on subscription,
+        # saying that the monitor cannot vouch for the marking.
+        client.wait(lambda c: c.on(fx.STATE) and c.on(fx.STATE_SPACE), "the state and the state space")
+        state = client.on(fx.STATE)[-1]
+        assert state["seq"] == 0 and {n: s["state"] for n, s in state["sync"].items()} == {
+            "spot": "syncing", "manipulator": "syncing"}
+        assert client.on(fx.STATE_SPACE)[-1]["markings"] > 0
+        assert client.invalid == []
+    finally:
+        if client is not None:
+            client.close()
+        proc.terminate()
+        assert proc.wait(15) == 0
+
+
+def test_the_layout_opens_a_panel_on_every_channel_and_names_no_other_topic() -> None:
+    import json
+    import re
+
+    layout = json.loads((REPO / "docs" / "foxglove-layout.json").read_text())
+    used = set()
+    for config in layout["configById"].values():
+        paths = [config.get("topicPath"), config.get("topicToRender"), *(p["value"] for p in config.get("paths", []))]
+        used |= {re.match(r"(/skinet/\w+)", p).group(1) for p in paths if p}  # type: ignore[union-attr]
+    assert used == {s.topic for s in fx.channels()}
+    panels = set(re.findall(r'"(\w+![\w-]+)"', json.dumps(layout["layout"])))
+    assert panels == set(layout["configById"])
+
+
+def test_skinet_run_with_a_foxglove_port_in_use_stops_with_one_line() -> None:
+    import socket
+
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        port = busy.getsockname()[1]
+        done = subprocess.run([sys.executable, "-m", "skinet_cli.main", "run", str(SYSTEM_FILE), "--once",
+                               "--no-multicast-scouting", "--no-pilot", "--foxglove", str(port)], cwd=REPO,
+                              capture_output=True, text=True, timeout=120)
+    assert done.returncode == 1 and "Traceback" not in done.stderr
+    assert done.stderr.startswith(f"skinet: error: --foxglove: cannot serve Foxglove on 127.0.0.1:{port}: ")
+    assert len(done.stderr.splitlines()) == 1, done.stderr
