@@ -53,7 +53,7 @@ FREE_TEXT = {
        for program in ("python -m services.bridge_ros2", "python -m services.simulator", "skinet run", "skinet rosbag",
                        "python -m services.pilot")},
     **{(program, option): "any user name and password is sent; the router judges them (tests/deploy/test_operator_acl.py)"
-       for program in ("skinet record", "skinet rosbag", "skinet replay", "skinet run", "skinet router", "skinet watch", "skinet check",
+       for program in ("skinet record", "skinet rosbag", "skinet foxglove", "skinet replay", "skinet run", "skinet router", "skinet watch", "skinet check",
                        "skinet goal",
                        "skinet demo",
                        "skinet dashboard", "python -m services.monitor", "python -m services.predictor",
@@ -285,6 +285,7 @@ def _cases() -> list[Case]:
                    ("check", "spot_arm", "spot:teleop.start", "--timeout", "0.5"),
                    ("goal", "spot_arm", "reach spot:Busy", "--timeout", "0.5"),
                    ("dashboard", "spot_arm", "--port", "0", "--wait", "0"),
+                   ("foxglove", "spot_arm", "--port", "0", "--wait", "0"),
                    ("replay", "{tmp}/run.jsonl", "--linger", "0"), ("demo", "--live", "--linger", "0")),
         "python -m services.monitor": ((SYSTEM,),),
         "python -m services.predictor": ((),),
@@ -417,6 +418,36 @@ def _cases() -> list[Case]:
         1, "skinet: error: cannot listen on 999.0.0.1:0: Name or service not known")
     usage("skinet", "--log-level", ("dashboard", "spot_arm", "--log-level", "LOUD"),
           "argument --log-level: expected one of DEBUG, INFO, WARNING, ERROR, CRITICAL, got 'LOUD'")
+    usage("skinet", "--foxglove", ("dashboard", "spot_arm", "--foxglove", "70000"),
+          "argument --foxglove: expected an integer from 0 to 65535, got '70000'")
+    add("skinet", "system", ("foxglove", "a/b"), 1,
+        "skinet: error: system name 'a/b' cannot be used in a Zenoh key (letters, digits, _ - . only)")
+    add("skinet", "system", ("foxglove", "{tmp}/missing.toml"), 1, missing)
+    usage("skinet", "--port", ("foxglove", "spot_arm", "--port", "70000"),
+          "argument --port/-p: expected an integer from 0 to 65535, got '70000'")
+    usage("skinet", "--wait", ("foxglove", "spot_arm", "--wait", "-1"),
+          "argument --wait: expected a number of seconds >= 0, got '-1'")
+    add("skinet", "--host", ("foxglove", "spot_arm", "--no-multicast-scouting", "--port", "0", "--host", "999.0.0.1"),
+        1, "skinet: error: cannot serve Foxglove on 999.0.0.1:0: FoxgloveError: Failed to bind port: failed to lookup "
+           "address information: Name or service not known")
+    usage("skinet", "--log-level", ("foxglove", "spot_arm", "--log-level", "LOUD"),
+          "argument --log-level: expected one of DEBUG, INFO, WARNING, ERROR, CRITICAL, got 'LOUD'")
+    add("skinet", "--bundle", ("record", "spot_arm", "--no-multicast-scouting", "--duration", "1", "--bundle",
+                               "{tmp}/no/such/b.mcap"), 1, "{tmp}/no/such/b.mcap: error: cannot write file: No such file "
+                                                          "or directory")
+    usage("skinet", "--foxglove", ("run", SYSTEM, "--foxglove", "-1"),
+          "argument --foxglove: expected an integer from 0 to 65535, got '-1'")
+    add("skinet", "--foxglove-host", ("run", SYSTEM, "--once", "--no-multicast-scouting", "--foxglove", "0",
+                                      "--foxglove-host", "999.0.0.1"), 1,
+        "skinet: error: --foxglove: cannot serve Foxglove on 999.0.0.1:0: FoxgloveError: Failed to bind port: failed to "
+        "lookup address information: Name or service not known")
+    for program, base, prefix in (("skinet", ("run", SYSTEM, "--once"), "skinet: error: "),
+                                  ("python -m services.monitor", (SYSTEM,), "python -m services.monitor: error: ")):
+        command = "skinet run" if program == "skinet" else program
+        usage(program, "--incident-window", (*base, "--incident-window", "0"),
+              "argument --incident-window: '0' is not a number of seconds from 0 (excluded) to 3600")
+        add(program, "--incidents", (*base, "--no-multicast-scouting", "--incidents", "{tmp}/list.json"), 1,
+            prefix + "--incidents {tmp}/list.json: cannot make the folder: File exists")
 
     # skinet timeline
     add("skinet", "log", ("timeline", "{tmp}/missing.jsonl", "-o", "{tmp}/t.png"), 1,
