@@ -147,7 +147,8 @@ class SyncTracker:
             refused = refusal(hb.source, name, outdated)
             if beat.manager is False:
                 if s.state != LOST or s.source == hb.source:
-                    self._set(name, LOST, f"its manager left (said '{hb.source}')", hb.source)
+                    self._set(name, LOST, refused if outdated else f"its manager left (said '{hb.source}')",
+                              hb.source)
             elif s.state == LOST and (s.source in ("", hb.source) or not self._heard_recently(s.source)):
                 self._set(name, SYNCING, refused if outdated else
                           f"'{hb.source}' is heard again: waiting for its resync answer")
@@ -198,7 +199,9 @@ class SyncTracker:
         src = self._heard(source)
         s.behind = None
         if src.managers.get(name) is False:
-            self._set(name, LOST, f"its manager left (said '{source}')", source)
+            why = src.pending.get(name, "")
+            self._set(name, LOST, refusal(source, name, why) if why else f"its manager left (said '{source}')",
+                      source)
         elif src.token and src.token in self.gone:
             self._set(name, LOST, f"the liveliness token of '{source}' is gone (it stopped, or its link did)", source)
         elif upto is not None:
