@@ -32,8 +32,9 @@ from skinet.live import LiveSystem
 from skinet.system import Marking, System, marking_from_json
 from skinet.verify.algorithm1 import Analysis, analyse
 from skinet.wire.convert import RiskTable, analysis_bodies, statuses
+from skinet.net.outcomes import infer_outcomes
 from skinet.wire.messages import (
-    CanonicalEvent, LiveState, SkillsetSync, UnsafeReport, Verdicts,
+    CanonicalEvent, LiveState, MissedOutcome, SkillsetSync, UnsafeReport, Verdicts,
 )
 
 MarkingKey = tuple[int, ...]
@@ -278,9 +279,30 @@ class Engine:
         divergence = _divergence(hit[2], ev)
         if divergence is not None:
             self.counters.divergences += 1
-        if ev.transition is None and not hit[1] and divergence is None:
+        missed = self._missed(ev, before)
+        if ev.transition is None and not hit[1] and divergence is None and not missed:
             return None
-        return self._step(event_name(ev), hit[1], divergence, hit[2] or ev.divergence or None)
+        return self._step(event_name(ev), hit[1], divergence, hit[2] or ev.divergence or None, missed)
+
+    def _missed(self, ev: CanonicalEvent, before: int | None) -> list[MissedOutcome]:
+        """The event's missed outcomes with the model's inference from the marking before it to the live
+        one after it (docs/how-it-works.md, *Missed outcomes*)."""
+        if not ev.missed:
+            return []
+        after = self.live.marking.get(ev.skillset)
+        skills = [m.skill for m in ev.missed]
+        try:
+            net = self.system.component(ev.skillset).net
+            found = {i.skill: i for i in infer_outcomes(net, before, after, skills)} \
+                if before is not None and after is not None else {}
+        except (KeyError, ValueError):  # a skill the model lacks: nothing to infer
+            found = {}
+        out = []
+        for m in ev.missed:
+            i = found.get(m.skill)
+            out.append(m.model_copy(update={"outcome": i.outcome if i else None,
+                                            "candidates": list(i.candidates) if i else []}))
+        return out
 
     def prediction(self, key: MarkingKey | None = None) -> Prediction | None:
         """The prediction for the live marking (``key`` when known), if any (SPEC §5)."""
@@ -313,18 +335,21 @@ class Engine:
 
     def republish(self) -> Step:
         """The messages of the current step again (same seq, a new stamp), e.g. with a new sync state."""
-        return self._fill(False, self._last["event"], self._last["divergence"])
+        return self._fill(False, self._last["event"], self._last["divergence"], self._last.get("missed"))
 
-    def _step(self, event: str, changed: bool, divergence: str | None, reason: str | None = None) -> Step:
+    def _step(self, event: str, changed: bool, divergence: str | None, reason: str | None = None,
+              missed: list[MissedOutcome] | None = None) -> Step:
         self.seq += 1
-        self._last = {"event": event, "divergence": divergence}
-        step = self._fill(changed, event, divergence)
+        self._last = {"event": event, "divergence": divergence, "missed": missed or []}
+        step = self._fill(changed, event, divergence, missed or [])
         return step if reason is None else replace(step, reason=reason)
 
-    def _fill(self, changed: bool, event: str, divergence: str | None) -> Step:
+    def _fill(self, changed: bool, event: str, divergence: str | None,
+              missed: list[MissedOutcome] | None = None) -> Step:
         key = self.key
         frame = self._frame(key)
-        values = {"seq": self.seq, "stamp": time.time(), "event": event, "divergence": divergence, **self.sync}
+        values = {"seq": self.seq, "stamp": time.time(), "event": event, "divergence": divergence, **self.sync,
+                  "missed": [m.model_dump(mode="json") for m in missed] if missed else OMIT}
         fill = self._packer
         return Step(self.seq, key, changed, divergence, frame.live.fill(fill, values),
                     frame.verdicts.fill(fill, values), frame.unsafe.fill(fill, values))
@@ -348,7 +373,7 @@ class Engine:
         step = ("seq", "stamp")
         return Frame(
             Template(LiveState(system=name, seq=0, stamp=0.0, skillsets=statuses(self.system, marking))
-                     .model_dump(mode="json"), (*step, "event", "divergence", "sync")),
+                     .model_dump(mode="json"), (*step, "event", "divergence", "sync", "missed")),
             Template(Verdicts(system=name, seq=0, stamp=0.0, properties=props).model_dump(mode="json"), step),
             Template(UnsafeReport(system=name, seq=0, stamp=0.0, unsafe=unsafe, recovery=recovery,
                                   violated=analysis.violated, literal_count=len(analysis.unsafe),

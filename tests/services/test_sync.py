@@ -217,3 +217,19 @@ def test_a_divergence_names_the_message_that_showed_it() -> None:
     step = engine.apply(drift)  # the status matches the marking: a step all the same
     assert step is not None and step.divergence == "/arm: x, but y" and engine.counters.divergences == 2
     assert engine.apply(drift.model_copy(update={"seq": 2, "info": "", "divergence": ""})) is None
+
+
+def test_a_silent_manager_loses_its_skillset_with_the_bridges_words() -> None:
+    """The bridge's polls found the manager silent: lost, saying what was asked and who did not answer."""
+    t = tracker(Clock())
+    t.synced("spot", B1, 7)
+    t.synced("manipulator", B1, 7)
+    why = "manager /spot/spot_skillset_manager answered none of the last 3 status requests (1 s apart)"
+    t.heartbeat(Heartbeat(system="spot_arm", source=B1, epoch=7, period=0.5, token=TOKEN,
+                          skillsets={"spot": HeartbeatSkillset(seq=3, manager=False),
+                                     "manipulator": HeartbeatSkillset(seq=0, manager=None)},
+                          pending={"spot": why}))
+    assert states(t) == {"spot": ("lost", f"'bridge_ros2/b1' has no current status of spot: {why}"),
+                         "manipulator": ("live", "")}
+    t.heartbeat(beat(manager=None))  # it answers again: syncing until the status that closes the gap
+    assert states(t)["spot"] == ("syncing", "'bridge_ros2/b1' is heard again: waiting for its resync answer")
