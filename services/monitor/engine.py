@@ -8,9 +8,14 @@ The work per event is compiled once per marking, in the spirit of rosbags'
 generated deserialisers: the result of ``LiveSystem.apply`` is cached per
 (skillset marking, transition, observed status), and the msgpack bytes of the
 three messages per (combined marking, prediction) with holes for the fields of
-a step (seq, stamp, event, divergence, and the sync states of SPEC §7, left out
-while they hold their default).  Both caches are bounded and exact (the core
+a step (seq, stamp, event, divergence, missed outcomes, and the sync states of
+SPEC §7, left out while they hold their default).  Both caches are bounded and exact (the core
 functions are pure); a step packs a few small values and joins bytes.
+
+An event naming skills found ended without their response (``missed``) gets the
+model's inference of each outcome (:func:`skinet.net.outcomes.infer_outcomes`,
+docs/how-it-works.md, *Missed outcomes*) in its step's ``LiveState.missed``; cost:
+that function's, only for such events.
 
 A resync answer adopted while a skillset was not live (:meth:`Engine.adopt`) sets
 its marking without judging how the robot got there, and the events of its
@@ -113,6 +118,7 @@ class Step:
     verdicts: bytes
     unsafe: bytes
     reason: str | None = None  # the divergence alone (the live nets' reason, or the bridge's drift): the list's
+    missed: tuple[MissedOutcome, ...] = ()  # as LiveState.missed lists them (for the monitor's log)
 
 
 @dataclass
@@ -342,6 +348,8 @@ class Engine:
         self.seq += 1
         self._last = {"event": event, "divergence": divergence, "missed": missed or []}
         step = self._fill(changed, event, divergence, missed or [])
+        if missed:
+            step = replace(step, missed=tuple(missed))
         return step if reason is None else replace(step, reason=reason)
 
     def _fill(self, changed: bool, event: str, divergence: str | None,

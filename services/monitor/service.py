@@ -63,7 +63,7 @@ from skinet.errors import SourceError
 from skinet.system import Marking, System
 from skinet.wire import keys
 from skinet.wire.codec import DecodeError, decode, encode
-from skinet.wire.convert import RiskTable, bundle
+from skinet.wire.convert import RiskTable, bundle, missed_line
 from skinet.wire.messages import (
     CanonicalEvent, CheckReply, CheckRequest, Divergences, Heartbeat, LiveState, PredictReply, SkillsetSync,
     StateSpaceReport, UnsafeReport, Verdicts,
@@ -478,6 +478,8 @@ class Monitor:
         self._publish(step)
         if step.divergence:
             self._warn(engine.counters.divergences, "divergence at %s#%d: %s", ev.skillset, ev.seq, step.divergence)
+        for m in step.missed:
+            log.warning("%s", missed_line(m))
         self._note(ev, step.reason, step.seq)  # the list shows the bridge's info beside it
         if engine.prediction(step.key) is None:
             self._predict.want(step.key, engine.marking())

@@ -135,3 +135,17 @@ def test_a_silent_manager_is_lost_with_why_and_its_successor_is_a_restart_with_m
         sim.close()
         if fresh is not None:
             fresh.close()
+
+
+def test_missed_outcome_lines_say_the_inference_or_why_there_is_none() -> None:
+    from skinet.wire.convert import missed_line
+    known = MissedOutcome(skillset="spot", skill="init_power", gap=GAP, outcome="init_power.success.powered_on",
+                          candidates=["init_power.success.powered_on"])
+    unknown = MissedOutcome(skillset="spot", skill="teleop", gap=GAP,
+                            candidates=["teleop.success.done", "teleop.failure.link_lost"])
+    assert missed_line(known) == f"missed outcome: spot:init_power ended without its response ({GAP}): " \
+                                 "init_power.success.powered_on inferred from the resources"
+    assert missed_line(unknown) == f"missed outcome: spot:teleop ended without its response ({GAP}): outcome " \
+                                   "unknown, the model cannot tell teleop.success.done from teleop.failure.link_lost"
+    assert missed_line(MissedOutcome(skillset="spot", skill="teleop", gap=GAP)).endswith(
+        "outcome unknown, no mode of the model explains the status")
