@@ -220,7 +220,8 @@ class Bridge:
                     self.worker.put(lambda: self.feed.feed(skillset, topic, payload, attachment))
                 else:
                     def returned() -> list[CanonicalEvent]:
-                        self.feed.resync(skillset, back)
+                        if self.feed.managers[skillset].resync in ("", back[1]):  # a cut link says so itself
+                            self.feed.resync(skillset, back[0])
                         return self.feed.feed(skillset, topic, payload, attachment)
                     self.worker.put(returned)
                     self._notice()
@@ -249,9 +250,9 @@ class Bridge:
                 query.reply(keys.resync(self.system.name, skillset), wire_encode(ev))
             self.request_status(skillset)
 
-    def _answered(self, skillset: str) -> str | None:
+    def _answered(self, skillset: str) -> tuple[str, str] | None:
         """A status of ``skillset`` came (on Zenoh's thread): its manager answers.  Returns the gap it
-        closes when the manager had fallen silent (None otherwise)."""
+        closes and why the manager was silent, when it had fallen silent (None otherwise)."""
         with self._lock:
             self._unanswered[skillset] = 0
             self._last_answer[skillset] = time.monotonic()
@@ -262,7 +263,7 @@ class Bridge:
         manager = self._requests[skillset][0]
         gap = f"the link to {manager} was down {time.monotonic() - silent[1]:.1f} s"
         log.warning("%s: manager %s answers again (%s)", skillset, manager, gap)
-        return gap
+        return gap, silent[0]
 
     def _outdated(self, skillset: str) -> str:
         """Why ``skillset``'s last status is not its manager's current one ('' when it may be)."""
@@ -412,7 +413,8 @@ class Bridge:
         log.warning("%s: %s", skillset, why)
 
         def gap() -> list[CanonicalEvent]:
-            self.feed.resync(skillset, why)
+            if not self.feed.managers[skillset].resync:  # a cut link already said why
+                self.feed.resync(skillset, why)
             return []
         self.worker.put(gap)
         self._notice()
