@@ -89,30 +89,37 @@ PLUGIN_TOKENS = "@/*/@ros2_lv/MS/**"  # zenoh-bridge-ros2dds: one token per rout
 def default_poll() -> float:
     """``$SKINET_STATUS_POLL`` (seconds between status requests) when set to a positive number, else :data:`POLL`:
     how ``skinet run``, the embedded chain and the compose services set the period of a bridge they start."""
+    text = os.environ.get("SKINET_STATUS_POLL", "")
+    return poll_seconds(text, " (from $SKINET_STATUS_POLL)") if text else POLL
+
+
+def poll_seconds(text: str, origin: str = "") -> float:
+    """A status-request period in seconds, 0.05 to 3600; raises ValueError with a one-line reason."""
     try:
-        value = float(os.environ.get("SKINET_STATUS_POLL", ""))
+        value = float(text)
     except ValueError:
-        return POLL
-    return value if 0.05 <= value <= 3600 else POLL
+        raise ValueError(f"the status-request period must be a number of seconds, got '{text}'{origin}") from None
+    if not 0.05 <= value <= 3600:
+        raise ValueError(f"the status-request period must be 0.05 to 3600 s, got '{text}'{origin}")
+    return value
 
 
 def add_status_poll_args(parser: argparse.ArgumentParser) -> None:
     """``--status-poll S`` and ``--silent-after N`` (the bridge's anti-entropy)."""
+    env = os.environ.get("SKINET_STATUS_POLL")
+
     def period(text: str) -> float:
         try:
-            value = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"not a number of seconds: '{text}'") from None
-        if not 0.05 <= value <= 3600:
-            raise argparse.ArgumentTypeError(f"{text} s is outside 0.05-3600 s")
-        return value
+            return poll_seconds(text, " (from $SKINET_STATUS_POLL)" if env == text else "")
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
 
     def count(text: str) -> int:
         if not text.isdigit() or not 1 <= int(text) <= 1000:
             raise argparse.ArgumentTypeError(f"not a count from 1 to 1000: '{text}'")
         return int(text)
 
-    parser.add_argument("--status-poll", type=period, default=default_poll(), metavar="S",
+    parser.add_argument("--status-poll", type=period, default=env or str(POLL), metavar="S",
                         help="seconds between status requests to each manager (anti-entropy: a manager publishes "
                              f"on change only); default $SKINET_STATUS_POLL or {POLL:g}")
     parser.add_argument("--silent-after", type=count, default=SILENT_AFTER, metavar="N",
