@@ -119,6 +119,7 @@ class Step:
     unsafe: bytes
     reason: str | None = None  # the divergence alone (the live nets' reason, or the bridge's drift): the list's
     missed: tuple[MissedOutcome, ...] = ()  # as LiveState.missed lists them (for the monitor's log)
+    unchecked: str = ""  # a resync step: the events its answer covers, which were not checked
 
 
 @dataclass
@@ -249,17 +250,27 @@ class Engine:
     def adopt(self, ev: CanonicalEvent) -> Step | None:
         """Take a resync answer's status as ``ev.skillset``'s marking without judging how the robot got
         there (the monitor did not know: SPEC §7 syncing), and count later events of its stream up to
-        ``ev.seq`` as history (:meth:`check_seq`).  A step when the marking changed, else None.
+        ``ev.seq`` as history (:meth:`check_seq`).  A step when the marking changed or events of the
+        stream that this monitor did not check are covered (its event says which), else None.
         Raises :class:`~skinet.errors.SourceError` for a status the model cannot read."""
         target = self.status_marking(ev)
         stream = (ev.skillset, ev.source)
+        prev = self.last_seq.get(stream)
+        first = prev[1] + 1 if prev is not None and prev[0] == ev.epoch else 1  # #0: the bridge's first status
         self.last_seq[stream] = self.covered[stream] = (ev.epoch, ev.seq)
         self.last_seq.move_to_end(stream)
         self.counters.resyncs += 1
-        if self.live.marking[ev.skillset] == target:
+        # The events the answer covers were not checked here: the step says so plainly (a violation
+        # among them cannot show), and is published even when the marking did not move.
+        unchecked = "" if first > ev.seq else \
+            f"event #{first} of '{ev.source}' not checked" if first == ev.seq else \
+            f"events #{first}-#{ev.seq} of '{ev.source}' not checked"
+        if self.live.marking[ev.skillset] == target and not unchecked:
             return None
+        changed = self.live.marking[ev.skillset] != target
         self.live.marking[ev.skillset] = target
-        return self._step(f"{ev.skillset}:resync#{ev.seq}", True, None)
+        name = f"{ev.skillset}:resync#{ev.seq}" + (f" ({unchecked})" if unchecked else "")
+        return replace(self._step(name, changed, None), unchecked=unchecked)
 
     def apply(self, ev: CanonicalEvent) -> Step | None:
         """Advance the live marking by ``ev`` (already seq-checked) and build its step.

@@ -464,6 +464,9 @@ class Monitor:
         self._sync_fields()  # before the step's messages are built
         step = self._engine.adopt(ev)
         if step is not None:
+            if step.unchecked:
+                log.warning("%s synced from '%s' at #%d: %s (what the robot did then is adopted, not judged)",
+                            ev.skillset, ev.source, ev.seq, step.unchecked)
             self._publish(step)
             if self._engine.prediction(step.key) is None:
                 self._predict.want(step.key, self._engine.marking())

@@ -149,3 +149,20 @@ def test_missed_outcome_lines_say_the_inference_or_why_there_is_none() -> None:
                                    "unknown, the model cannot tell teleop.success.done from teleop.failure.link_lost"
     assert missed_line(MissedOutcome(skillset="spot", skill="teleop", gap=GAP)).endswith(
         "outcome unknown, no mode of the model explains the status")
+
+
+def test_a_resync_answer_says_which_events_were_not_checked() -> None:
+    """Issue 30: the robot's first events before the monitor synced became one silent resync step."""
+    engine = Engine(SYSTEM)
+    answer = spot(5, None, ON_IDLE, [])
+    step = engine.adopt(answer)
+    assert step is not None and step.unchecked == f"events #1-#5 of '{SOURCE}' not checked"
+    state = decode(step.live, LiveState)
+    assert state.event == f"spot:resync#5 (events #1-#5 of '{SOURCE}' not checked)"
+    again = engine.adopt(spot(6, None, ON_IDLE, []))  # the same run: only #6 was not seen
+    assert again is not None and decode(again.live, LiveState).event == \
+        f"spot:resync#6 (event #6 of '{SOURCE}' not checked)"
+    assert engine.adopt(spot(6, None, ON_IDLE, [])) is None  # nothing new, nothing moved: no step
+    fresh = Engine(SYSTEM)
+    assert fresh.adopt(spot(0, None, {"power_status": "PowerOff", "posture": "Sitting", "control_mode": "Idle"},
+                            [])) is None  # the bridge's first status covers nothing
