@@ -145,7 +145,8 @@ def test_what_the_resync_answer_covers_is_history_whatever_the_stamps() -> None:
     assert engine.check_seq(event(6)) == (False, "duplicate event spot#6 from 'bridge_ros2/b1' ignored", False)
     assert engine.check_seq(event(4)) == (False, None, False) and engine.counters.history == 4
     assert engine.check_seq(event(0, epoch=8))[0]  # another run of the source: not covered
-    assert engine.adopt(event(9, epoch=8, status=ON)) is None  # the same marking: no step
+    step = engine.adopt(event(9, epoch=8, status=ON))  # the same marking, but #1-#9 were never checked here
+    assert step is not None and not step.changed and step.unchecked == "events #1-#9 of 'bridge_ros2/b1' not checked"
 
 
 RESTARTED = "its manager restarted (the manager (or its gateway) came back): waiting for its new status"
