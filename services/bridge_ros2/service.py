@@ -348,7 +348,8 @@ class Bridge:
     def _beat(self) -> dict[str, HeartbeatSkillset]:
         """Per skillset, the seq of its last event and whether its manager is present (the heartbeat)."""
         with self._lock:
-            present, gone = set(self._present), self._gone | set(self._silent)
+            present, gone = set(self._present) - set(self._silent), self._gone | set(self._silent)
+        # A silent manager is gone even while its token stays (a frozen process holds it for the lease).
         return {name: HeartbeatSkillset(seq=m.seq - 1 if m.seq else None,
                                         manager=True if name in present else False if name in gone else None)
                 for name, m in self.feed.managers.items()}

@@ -166,3 +166,24 @@ def test_a_resync_answer_says_which_events_were_not_checked() -> None:
     fresh = Engine(SYSTEM)
     assert fresh.adopt(spot(0, None, {"power_status": "PowerOff", "posture": "Sitting", "control_mode": "Idle"},
                             [])) is None  # the bridge's first status covers nothing
+
+
+def test_a_silent_rmw_zenoh_manager_is_gone_while_its_token_stays(client_factory, spot_arm):
+    """rmw_zenoh: a frozen managers' process keeps its liveliness tokens for the lease; its silence tells."""
+    from skinet.ros.keys import KeyStyle
+
+    system, typemap = spot_arm
+    style = KeyStyle(rmw_zenoh=True, domain=9)
+    beats = Beats(client_factory(), SOURCE)
+    sim = Simulator(client_factory(), system, typemap, style=style)
+    bridge = start_bridge(client_factory(), system, typemap, source=SOURCE, style=style, poll=0.2)
+    try:
+        beats.wait(lambda b: b.skillsets["spot"].manager is True and not b.pending, "with spot's manager there")
+        for node in sim.nodes.values():  # deaf, its tokens kept: as a frozen process looks until its lease ends
+            node.manager.status_request = lambda: []
+        beat = beats.wait(lambda b: b.skillsets["spot"].manager is False, "with spot's manager silent")
+        assert beat.pending["spot"] == \
+            "manager /spot/spot_skillset_manager answered none of the last 3 status requests (0.2 s apart)"
+    finally:
+        bridge.close()
+        sim.close()
