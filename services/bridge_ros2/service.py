@@ -66,7 +66,7 @@ from services.bridge_ros2.link import watch_link
 from services.bridge_ros2.worker import Worker
 from services.common.cli import default_instance_id
 from services.common.events import event_publisher
-from services.common.heartbeat import refusal
+from services.common.heartbeat import refusal, silence
 from services.common.zenoh_config import undeclare
 from services.common.ros_liveliness import declare_node
 from skinet.ros.keys import (
@@ -414,8 +414,7 @@ class Bridge:
         """``skillset``'s manager answered none of the last ``silent_after`` requests: gone (heartbeat),
         its last status outdated, and its next status closes a gap."""
         manager = self._requests[skillset][0]
-        why = f"manager {manager} answered none of the last {self.silent_after} status requests " \
-              f"({self.poll:g} s apart)"
+        why = silence(manager, self.silent_after, self.poll)
         with self._lock:
             self._silent[skillset] = (why, self._last_answer.get(skillset, time.monotonic()))
         log.warning("%s: %s", skillset, why)

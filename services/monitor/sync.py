@@ -36,7 +36,7 @@ from collections import deque
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 
-from services.common.heartbeat import refusal
+from services.common.heartbeat import is_silence, refusal
 from skinet.wire import keys
 from skinet.wire.messages import CanonicalEvent, Heartbeat, SkillsetSync
 
@@ -147,8 +147,8 @@ class SyncTracker:
             refused = refusal(hb.source, name, outdated)
             if beat.manager is False:
                 if s.state != LOST or s.source == hb.source:
-                    self._set(name, LOST, refused if outdated else f"its manager left (said '{hb.source}')",
-                              hb.source)
+                    self._set(name, LOST, refused if is_silence(outdated) else
+                              f"its manager left (said '{hb.source}')", hb.source)
             elif s.state == LOST and (s.source in ("", hb.source) or not self._heard_recently(s.source)):
                 self._set(name, SYNCING, refused if outdated else
                           f"'{hb.source}' is heard again: waiting for its resync answer")
@@ -200,8 +200,8 @@ class SyncTracker:
         s.behind = None
         if src.managers.get(name) is False:
             why = src.pending.get(name, "")
-            self._set(name, LOST, refusal(source, name, why) if why else f"its manager left (said '{source}')",
-                      source)
+            self._set(name, LOST, refusal(source, name, why) if is_silence(why) else
+                      f"its manager left (said '{source}')", source)
         elif src.token and src.token in self.gone:
             self._set(name, LOST, f"the liveliness token of '{source}' is gone (it stopped, or its link did)", source)
         elif upto is not None:
