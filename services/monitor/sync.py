@@ -12,14 +12,16 @@ Each skillset is
   its last status not known by the source to be outdated (``Heartbeat.pending``:
   a restarted manager not heard yet, a cut link; the source then refuses the
   resync query with the same reason until the new status comes);
-- ``lost`` when one of those fails, with since when and why.
+- ``lost`` when one of those fails, with since when and why (a manager that fell
+  silent, answering none of the bridge's last status requests, is lost with the
+  bridge's own words: :func:`~services.common.heartbeat.silence`).
 
 History is told from sources and sequence numbers, never from an event's stamp:
 events of a skillset that is not live wait in its buffer (at most ``buffer``, the
 oldest dropped first) until the resync answers; the service then applies the
 answer and hands the buffered events to :meth:`Engine.check_seq`, which counts
 those the answer covers (same source and epoch, seq up to the answer's) as
-history (:meth:`Engine.adopt`).  Time here is the monitor's own monotonic clock,
+history (:meth:`Engine.adopt`, whose step names the events it did not check).  Time here is the monitor's own monotonic clock,
 used only to measure silences; ``since`` is its wall clock, for people.
 
 Cost: O(1) per event, heartbeat entry and token change; :meth:`SyncTracker.tick`
