@@ -20,7 +20,7 @@ import zenoh
 from services.bridge_ros2.bound import replay_bags
 from services.bridge_ros2.bound_live import start_bound_bridge
 from services.bridge_ros2.replay import monitor_log, replay_bag
-from services.bridge_ros2.service import default_source, start_bridge
+from services.bridge_ros2.service import add_status_poll_args, default_source, start_bridge
 from services.bridge_ros2.worker import Worker
 from services.common.cli import (
     add_instance_arg, add_log_arg, add_ros_key_args, key_style, one_line_errors, setup_logging,
@@ -55,6 +55,7 @@ def build_parser() -> ArgumentParser:
     parser.add_argument("--settle", type=seconds(zero=True), default=0.5,
                         help="bound skillsets: seconds after an action server appears before its empty status cache "
                              "is read as 'no goal yet' (default: 0.5)")
+    add_status_poll_args(parser)
     add_log_arg(parser)
     add_zenoh_args(parser)
     return parser
@@ -90,7 +91,8 @@ def main(argv: list[str] | None = None) -> int:
         worker = Worker()
         if managed:
             bridge = start_bridge(session, system, typemap, source=source, instance_id=args.instance, hold=args.hold,
-                                  style=style, worker=worker)  # errors: one line
+                                  style=style, worker=worker, poll=args.status_poll,
+                                  silent_after=args.silent_after)  # errors: one line
             log.info("bridging the managers of %s (%s) as %s", system.name, ", ".join(managed), args.instance)
         bound = start_bound_bridge(session, system, bindings, source=source, instance_id=args.instance,
                                    hold=args.hold, settle=args.settle, style=style, worker=worker) if bindings else None

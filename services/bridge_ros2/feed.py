@@ -26,7 +26,7 @@ from skinet.ros.interfaces import status_field
 from skinet.ros.keys import ManagerTopic, manager_topics, parse_rmw_attachment, topic_fqn
 from skinet.ros.typestore import Typestore, build_typestore, decode, to_plain
 from skinet.system import Component, System
-from skinet.wire.messages import CanonicalEvent, SkillsetStatus
+from skinet.wire.messages import CanonicalEvent, MissedOutcome, SkillsetStatus
 
 log = logging.getLogger("skinet.bridge_ros2")
 
@@ -163,7 +163,7 @@ class Feed:
             if m.held is not None and now >= m.held.since + self.hold:
                 log.warning("%s: status derived without %s (not received within %.2f s)", name, m.held.awaits,
                             self.hold)
-                self._release(m)
+                self._release(m, f"the response did not come within {self.hold:g} s")
         return self._drain()
 
     def flush(self) -> list[CanonicalEvent]:
@@ -180,11 +180,11 @@ class Feed:
         else:
             self.order.place(events)
 
-    def _release(self, m: _Manager) -> None:
-        """Derive ``m``'s held status in its place."""
+    def _release(self, m: _Manager, gap: str = "") -> None:
+        """Derive ``m``'s held status in its place; ``gap``: why a response it waited for may be missing."""
         assert m.held is not None
         held, m.held = m.held, None
-        self.order.close(held.slot, self._status(m, held.status))
+        self.order.close(held.slot, self._status(m, held.status, gap))
 
     def _drain(self) -> list[CanonicalEvent]:
         """The events whose turn has come: up to the first held status (or bound skillset waiting)."""
@@ -273,22 +273,30 @@ class Feed:
         if reset:
             self.restarted(m.component.name, f"skill ids reset: {', '.join(reset)}")
 
-    def _status(self, m: _Manager, status: derive.Status) -> list[CanonicalEvent]:
+    def _status(self, m: _Manager, status: derive.Status, gap: str = "") -> list[CanonicalEvent]:
+        """Events of one status; ``gap``: what a skill found ended without its response is put down to
+        (a resync's or a restart's reason comes first)."""
         self.statuses[m.component.name] += 1
         if m.resync and not m.restart:
-            return self._emit(m, self._resynced(m, status))
+            gap = m.resync
+            return self._emit(m, self._resynced(m, status), gap=gap)
         m.resync = ""  # a restart is the stronger news
         if not m.restart:
-            return self._emit(m, m.deriver.on_status(status))
+            return self._emit(m, m.deriver.on_status(status), gap=gap or "the response was not received")
         last, m.deriver = m.deriver.last, derive.Deriver(m.component.skillset, m.component.net)
         out = m.deriver.on_status(status)
+        if last is not None and out.events:  # skills it ran before are over (a new process runs none of them)
+            ended = tuple(k for k, v in last.skills.items() if v.state != derive.READY and
+                          (status.skills[k].state == derive.READY or status.skills[k].id != v.id))
+            out.events[-1] = replace(out.events[-1], missed=ended)
+            gap = f"manager {m.component.manager} restarted ({m.restart})"
         diverged = differences(last.wire(), status.wire()) if last is not None else "nothing known before"
         info = f"manager restarted ({m.restart}); state now differs: {diverged}" if diverged else \
             f"manager restarted ({m.restart}); same state as before"
         log.warning("%s: %s", m.component.name, info)
         out.events = [replace(d, info=info) for d in out.events]
         m.restart = ""
-        return self._emit(m, out, restart=True)
+        return self._emit(m, out, restart=True, gap=gap)
 
     def _resynced(self, m: _Manager, status: derive.Status) -> derive.Output:
         """The status after a gap, derived from the last one; every event says so, and an
@@ -305,8 +313,9 @@ class Feed:
             out.events = [replace(d, info="; ".join(x for x in (info, d.info) if x)) for d in out.events]
         return out
 
-    def _emit(self, m: _Manager, out: derive.Output, restart: bool = False) -> list[CanonicalEvent]:
-        """``out``'s events numbered and stamped for the wire; ``restart``: they follow a restart of the manager."""
+    def _emit(self, m: _Manager, out: derive.Output, restart: bool = False, gap: str = "") -> list[CanonicalEvent]:
+        """``out``'s events numbered and stamped for the wire; ``restart``: they follow a restart of the manager;
+        ``gap``: why the skills an event names as ended without their response missed it (its ``missed``)."""
         for note in out.notes:
             log.info("%s", note)
         events = []
@@ -314,7 +323,11 @@ class Feed:
             events.append(CanonicalEvent(system=self.system.name, skillset=m.component.name, seq=m.seq,
                                          stamp=d.stamp, source=self.source, epoch=self.epoch,
                                          transition=d.transition,
-                                         status=d.status, info=d.info, restart=restart))
+                                         status=d.status, info=d.info, restart=restart,
+                                         missed=[MissedOutcome(skillset=m.component.name, skill=k, gap=gap)
+                                                 for k in d.missed]))
+            for k in d.missed:
+                log.warning("%s: missed outcome of %s (%s)", m.component.name, k, gap)
             m.seq += 1
             self.counters.unexplained += d.transition is None
         self.counters.events += len(events)

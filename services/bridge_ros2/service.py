@@ -7,9 +7,17 @@ Subscribes to each manager's ``status``, ``event_request``, ``event_response`` a
 with ``CongestionControl.BLOCK`` (ZENOH.md) and a cache from which a monitor
 recovers what it missed during an outage (:mod:`services.common.events`).
 
-The manager's status is volatile (corpus README): the bridge sends
-``status_request`` at start-up and repeats it every second until each manager has
-answered.  It also asks as soon as a manager can hear it: liveliness tokens announce
+The manager's status is volatile (corpus README) and published on change only: the
+bridge sends ``status_request`` at start-up, repeats it every 0.5 s up to every
+``poll`` seconds until each manager has answered, then goes on asking every ``poll``
+seconds (anti-entropy, default 1 s; ``--status-poll``).  Any status counts as an
+answer.  A manager that answered none of the last ``silent_after`` requests (default
+3) is listed as gone in the heartbeat, with why in its ``pending`` (the monitor then
+counts its skillset ``lost``); its next status closes the gap as after a cut link, and
+a skill found ended in that status without its response is named in the event's
+``missed`` with the gap (docs/how-it-works.md, *Missed outcomes*).  This is the one
+way to know a manager is there in the plain ``zenoh-bridge-ros2dds`` layout, where
+nothing announces it; its cost is one request and one status per manager and poll.  It also asks as soon as a manager can hear it: liveliness tokens announce
 the manager's ``status_request`` subscription (``rmw_zenoh``: the node's own token,
 whose type hash also gives the key on Humble; ``zenoh-bridge-ros2dds``: the token of
 the gateway's route).  A token that comes back, a status from a new publisher GID or
@@ -42,6 +50,7 @@ order, so derivation never runs on Zenoh's threads.
 
 from __future__ import annotations
 
+import argparse
 import logging
 import os
 import re
@@ -57,7 +66,7 @@ from services.bridge_ros2.link import watch_link
 from services.bridge_ros2.worker import Worker
 from services.common.cli import default_instance_id
 from services.common.events import event_publisher
-from services.common.heartbeat import refusal
+from services.common.heartbeat import refusal, silence
 from services.common.zenoh_config import undeclare
 from services.common.ros_liveliness import declare_node
 from skinet.ros.keys import (
@@ -72,7 +81,50 @@ from skinet.wire.messages import CanonicalEvent, HeartbeatSkillset
 
 log = logging.getLogger("skinet.bridge_ros2")
 
+POLL = 1.0  # seconds between status requests to each manager (anti-entropy; $SKINET_STATUS_POLL)
+SILENT_AFTER = 3  # unanswered status requests after which a manager counts as gone
 PLUGIN_TOKENS = "@/*/@ros2_lv/MS/**"  # zenoh-bridge-ros2dds: one token per route to a DDS subscription
+
+
+def default_poll() -> float:
+    """``$SKINET_STATUS_POLL`` (seconds between status requests) when set to a positive number, else :data:`POLL`:
+    how ``skinet run``, the embedded chain and the compose services set the period of a bridge they start."""
+    text = os.environ.get("SKINET_STATUS_POLL", "")
+    return poll_seconds(text, " (from $SKINET_STATUS_POLL)") if text else POLL
+
+
+def poll_seconds(text: str, origin: str = "") -> float:
+    """A status-request period in seconds, 0.05 to 3600; raises ValueError with a one-line reason."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise ValueError(f"the status-request period must be a number of seconds, got '{text}'{origin}") from None
+    if not 0.05 <= value <= 3600:
+        raise ValueError(f"the status-request period must be 0.05 to 3600 s, got '{text}'{origin}")
+    return value
+
+
+def add_status_poll_args(parser: argparse.ArgumentParser) -> None:
+    """``--status-poll S`` and ``--silent-after N`` (the bridge's anti-entropy)."""
+    env = os.environ.get("SKINET_STATUS_POLL")
+
+    def period(text: str) -> float:
+        try:
+            return poll_seconds(text, " (from $SKINET_STATUS_POLL)" if env == text else "")
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+
+    def count(text: str) -> int:
+        if not text.isdigit() or not 1 <= int(text) <= 1000:
+            raise argparse.ArgumentTypeError(f"not a count from 1 to 1000: '{text}'")
+        return int(text)
+
+    parser.add_argument("--status-poll", type=period, default=env or str(POLL), metavar="S",
+                        help="seconds between status requests to each manager (anti-entropy: a manager publishes "
+                             f"on change only); default $SKINET_STATUS_POLL or {POLL:g}")
+    parser.add_argument("--silent-after", type=count, default=SILENT_AFTER, metavar="N",
+                        help="unanswered status requests after which a manager's skillset is lost "
+                             f"(default: {SILENT_AFTER})")
 
 
 def default_source(instance: str | None = None) -> str:
@@ -88,7 +140,7 @@ class Bridge:
     def __init__(self, session: zenoh.Session, system: System, typemap: Mapping[str, str], *,
                  style: KeyStyle = KeyStyle(), instance_id: str | None = None, source: str | None = None,
                  request_status: bool = True, retry: float = 0.5, extra_types: Mapping[str, str] | None = None,
-                 hold: float = 0.5, worker: Worker | None = None):
+                 hold: float = 0.5, worker: Worker | None = None, poll: float | None = None, silent_after: int = SILENT_AFTER):
         self.session = session
         self.system = system
         self.style = style
@@ -108,6 +160,11 @@ class Bridge:
         self._gone: set[str] = set()  # skillsets whose manager's token went away (and has not come back)
         self._cuts = 0  # times the link to every router was lost (see _on_cut)
         self._cuts_seen: dict[str, int] = {}  # skillset -> _cuts when its manager's token last appeared
+        self.poll, self.silent_after = default_poll() if poll is None else poll, silent_after
+        self._unanswered: dict[str, int] = {}  # skillset -> status requests sent since its last status
+        self._silent: dict[str, tuple[str, float]] = {}  # skillset -> (why, clock time of its last status)
+        self._last_answer: dict[str, float] = {}  # skillset -> clock time of its manager's last status
+        self.polls: dict[str, list[int]] = {}  # skillset -> [status requests sent, statuses received]
         self._sequence = 0
         self._gid = os.urandom(16)  # rmw_zenoh attachments of the status requests
         own: list[tuple[EntityKind, str, str, str]] = []  # rmw_zenoh graph entities of the bridge
@@ -165,7 +222,16 @@ class Bridge:
             if topic is not None:
                 attachment = sample.attachment.to_bytes() if sample.attachment is not None else None
                 payload = sample.payload.to_bytes()
-                self.worker.put(lambda: self.feed.feed(skillset, topic, payload, attachment))
+                back = self._answered(skillset) if topic.kind == "status" else None
+                if back is None:
+                    self.worker.put(lambda: self.feed.feed(skillset, topic, payload, attachment))
+                else:
+                    def returned() -> list[CanonicalEvent]:
+                        if self.feed.managers[skillset].resync in ("", back[1]):  # a cut link says so itself
+                            self.feed.resync(skillset, back[0])
+                        return self.feed.feed(skillset, topic, payload, attachment)
+                    self.worker.put(returned)
+                    self._notice()
 
         return on_sample
 
@@ -191,10 +257,28 @@ class Bridge:
                 query.reply(keys.resync(self.system.name, skillset), wire_encode(ev))
             self.request_status(skillset)
 
+    def _answered(self, skillset: str) -> tuple[str, str] | None:
+        """A status of ``skillset`` came (on Zenoh's thread): its manager answers.  Returns the gap it
+        closes and why the manager was silent, when it had fallen silent (None otherwise)."""
+        with self._lock:
+            self._unanswered[skillset] = 0
+            self._last_answer[skillset] = time.monotonic()
+            self.polls.setdefault(skillset, [0, 0])[1] += 1
+            silent = self._silent.pop(skillset, None)
+        if silent is None:
+            return None
+        manager = self._requests[skillset][0]
+        gap = f"the link to {manager} was down {time.monotonic() - silent[1]:.1f} s"
+        log.warning("%s: manager %s answers again (%s)", skillset, manager, gap)
+        return gap, silent[0]
+
     def _outdated(self, skillset: str) -> str:
         """Why ``skillset``'s last status is not its manager's current one ('' when it may be)."""
         with self._lock:
             gone = skillset in self._gone
+            silent = self._silent.get(skillset)
+        if silent is not None:
+            return silent[0]
         if gone:
             return f"its manager {self._requests[skillset][0]} left"
         return self.feed.outdated(skillset)
@@ -264,7 +348,8 @@ class Bridge:
     def _beat(self) -> dict[str, HeartbeatSkillset]:
         """Per skillset, the seq of its last event and whether its manager is present (the heartbeat)."""
         with self._lock:
-            present, gone = set(self._present), set(self._gone)
+            present, gone = set(self._present) - set(self._silent), self._gone | set(self._silent)
+        # A silent manager is gone even while its token stays (a frozen process holds it for the lease).
         return {name: HeartbeatSkillset(seq=m.seq - 1 if m.seq else None,
                                         manager=True if name in present else False if name in gone else None)
                 for name, m in self.feed.managers.items()}
@@ -305,14 +390,41 @@ class Bridge:
         self.session.put(key, payload, attachment=attachment, congestion_control=zenoh.CongestionControl.BLOCK)
 
     def _ask_status(self, retry: float) -> None:
-        """Ask every manager whose status is unknown, every ``retry`` seconds up to every second."""
+        """Ask every manager for its status (polls counted in :attr:`polls`): every ``retry`` seconds, doubling up to every ``poll``
+        seconds, while one has not answered yet; then every ``poll`` seconds (anti-entropy).  A manager
+        that answered before and none of the last ``silent_after`` requests falls silent (:meth:`_fall_silent`)."""
         delay = retry
         while not self._stop.is_set():
             missing = [n for n in self.feed.managers if not self.feed.has_status(n)]
-            for name in missing:
+            for name in self.feed.managers:
+                with self._lock:
+                    unanswered = self._unanswered.get(name, 0)
+                    heard = self.polls.get(name, [0, 0])[1] > 0
+                    silent = name in self._silent
+                if heard and not silent and unanswered >= self.silent_after:
+                    self._fall_silent(name)
+                with self._lock:
+                    self._unanswered[name] = self._unanswered.get(name, 0) + 1
+                    self.polls.setdefault(name, [0, 0])[0] += 1
                 self.request_status(name)
-            delay = min(delay * 2, 1.0) if missing else retry
+            delay = min(delay * 2, self.poll) if missing else self.poll
             self._stop.wait(delay)
+
+    def _fall_silent(self, skillset: str) -> None:
+        """``skillset``'s manager answered none of the last ``silent_after`` requests: gone (heartbeat),
+        its last status outdated, and its next status closes a gap."""
+        manager = self._requests[skillset][0]
+        why = silence(manager, self.silent_after, self.poll)
+        with self._lock:
+            self._silent[skillset] = (why, self._last_answer.get(skillset, time.monotonic()))
+        log.warning("%s: %s", skillset, why)
+
+        def gap() -> list[CanonicalEvent]:
+            if not self.feed.managers[skillset].resync:  # a cut link already said why
+                self.feed.resync(skillset, why)
+            return []
+        self.worker.put(gap)
+        self._notice()
 
     def wait_statuses(self, counts: Mapping[str, int], timeout: float = 5.0) -> bool:
         """Wait until ``counts[skillset]`` statuses of each skillset were handled and their events published.
@@ -348,4 +460,4 @@ def start_bridge(session: zenoh.Session, system: System, typemap: Mapping[str, s
     return Bridge(session, system, typemap, **options)
 
 
-__all__ = ["Bridge", "default_source", "start_bridge"]
+__all__ = ["POLL", "SILENT_AFTER", "Bridge", "default_source", "start_bridge"]

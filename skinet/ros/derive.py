@@ -108,6 +108,7 @@ class Derived:
     stamp: float
     info: str = ""
     divergence: str = ""  # a model divergence found while deriving it, with the message that showed it (SPEC §9)
+    missed: tuple[str, ...] = ()  # skills this status shows ended without their response (missed outcomes)
 
 
 @dataclass
@@ -289,7 +290,9 @@ class Deriver:
         single = triggers[0].names[0] if len(triggers) == 1 and triggers[0].known and not unexplained else None
         seen = ", ".join(t.what for t in triggers)
         info = "; ".join(x for x in (info, f"model cannot order: {seen}" if seen else "") if x)
-        out.events.append(Derived(single, st.wire(), st.stamp, info))
+        missed = tuple(k for k, before in prev.skills.items() if before.state != READY and
+                       f"{k} stopped without a response" in unexplained)
+        out.events.append(Derived(single, st.wire(), st.stamp, info, missed=missed))
         out.notes.append(f"{self.skillset.name}: status not explained by the model ({info})")
         return out
 

@@ -633,7 +633,7 @@ def test_a_bridge_started_before_the_managers_asks_them_when_they_appear(client_
     system, typemap = spot_arm
     style = KeyStyle(rmw_zenoh=True, domain=7, humble=True)
     events = Events(client_factory(), system.name)
-    bridge = start_bridge(client_factory(), system, typemap, style=style, source=SOURCE, retry=60.0)
+    bridge = start_bridge(client_factory(), system, typemap, style=style, source=SOURCE, retry=60.0, poll=60.0)
     time.sleep(1.0)  # the bridge's first requests went nowhere; its next retry is a minute away
     started = time.monotonic()
     sim = Simulator(client_factory(), system, typemap, style=style)
