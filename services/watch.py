@@ -125,7 +125,7 @@ class StepLines:
 def watch(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     """Run the view until interrupted or ``--duration``; ``--once`` prints one view (after the
     first fresh prediction, or ``--wait`` seconds) and returns.  Returns the exit status."""
-    config = config_from_args(args)
+    config = config_from_args(args, command=True)
     session = open_session(config, warn_on_stderr("skinet watch"))
     changed = threading.Event()
     observer = Observer(session, args.system, client=client_name(config))
