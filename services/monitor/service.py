@@ -366,21 +366,26 @@ class Monitor:
         with self._lock:
             if self._closed or not self._sync.asking(skillset):
                 return
-        replied, refused = [False], [""]
+        replied, refused, failed = [False], [""], [""]
+        key = keys.resync(self.system.name, skillset)
 
         def on_reply(reply: zenoh.Reply) -> None:
-            if reply.err is not None:  # the bridge knows its last status is outdated: still syncing
-                refused[0] = reply.err.payload.to_bytes()[:MAX_REASON].decode("utf-8", "replace")
+            if reply.err is not None:
+                text = reply.err.payload.to_bytes()[:MAX_REASON].decode("utf-8", "replace")
+                if reply.replier_id is None:  # Zenoh's own error (Timeout): said with what was asked
+                    failed[0] = text
+                else:  # the bridge knows its last status is outdated: still syncing
+                    refused[0] = text
             replied[0] = self._on_resync(reply) or replied[0]
 
         def done() -> None:
             with self._lock:
-                self._sync.answered(skillset, replied[0], refused[0])
+                self._sync.answered(skillset, replied[0], refused[0], failed[0], key, self.resync_timeout)
                 if not self._closed:
                     self._settle()
 
         try:
-            self.session.get(keys.resync(self.system.name, skillset), zenoh.handlers.Callback(on_reply, done),
+            self.session.get(key, zenoh.handlers.Callback(on_reply, done),
                              timeout=self.resync_timeout)
         except zenoh.ZError as exc:  # session closed under us
             log.warning("cannot ask for a resync of %s: %s", skillset, exc)

@@ -217,3 +217,24 @@ def test_a_divergence_names_the_message_that_showed_it() -> None:
     step = engine.apply(drift)  # the status matches the marking: a step all the same
     assert step is not None and step.divergence == "/arm: x, but y" and engine.counters.divergences == 2
     assert engine.apply(drift.model_copy(update={"seq": 2, "info": "", "divergence": ""})) is None
+
+
+def test_a_zenoh_error_is_never_the_whole_reason() -> None:
+    """Issue 30: "spot syncing since …: Timeout" said neither what was asked nor of whom."""
+    clock = Clock()
+    t = tracker(clock)
+    t.heartbeat(beat(spot=3))
+    key = "skinet/spot_arm/resync/spot"
+    t.asking("spot")
+    t.answered("spot", replied=False, failed="Timeout", key=key, timeout=2.0)
+    assert states(t)["spot"] == ("syncing", "the resync query to 'bridge_ros2/b1' on skinet/spot_arm/resync/spot "
+                                            "got no answer within 2 s (Timeout)")
+    since = time.strftime("%H:%M:%S", time.localtime(1100.0))
+    assert t.stale()[0].startswith(f"spot syncing since {since}: the resync query to 'bridge_ros2/b1' on {key} got "
+                                   "no answer within 2 s (Timeout); ")
+    t.asking("spot")
+    t.answered("spot", replied=False, failed="routing failed", key=key, timeout=2.0)
+    assert states(t)["spot"] == ("syncing", f"the resync query to 'bridge_ros2/b1' on {key} failed: routing failed")
+    t.asking("spot")
+    t.answered("spot", replied=False, key=key, timeout=2.0)  # heard, but no reply at all
+    assert states(t)["spot"] == ("syncing", f"the resync query to 'bridge_ros2/b1' on {key} got no answer within 2 s")
