@@ -55,7 +55,8 @@ from services.common.events import event_subscriber
 from services.common.ratelimit import CHECK_RATE_LIMIT, RateLimiter
 from services.common.zenoh_config import undeclare
 from services.monitor.check import MAX_REQUEST, Checker, Policy, request_from
-from services.monitor.divergences import DivergenceLog
+from services.monitor.divergences import DivergenceLog, event_name
+from services.monitor.violations import ViolationOnsets, onset_reason
 from services.monitor.engine import Counters, Engine, MarkingKey, Step
 from services.monitor.prediction import PredictionClient, PredictorStats
 from services.monitor.sync import BOUND, SYNCING, SyncTracker
@@ -153,6 +154,7 @@ class Monitor:
         self._wake = threading.Event()  # something changed that a waiting check may want
         self._behind: dict[str, tuple[float, CanonicalEvent]] = {}  # skillset -> (deadline, resync answer ahead)
         self._divergences = DivergenceLog(name, self.instance_id)
+        self._onsets = ViolationOnsets()  # listed in the divergence list (kind violation)
         self._divergences_due = False  # the list changed since it was published
         self._divergences_sent = float("-inf")  # monotonic time of its last publication
         self._divergences_published = 0  # entries noted (listed or older) when it was last published
@@ -470,6 +472,7 @@ class Monitor:
         step = self._engine.adopt(ev)
         if step is not None:
             self._publish(step)
+            self._note_onsets(ev, step.seq)
             if self._engine.prediction(step.key) is None:
                 self._predict.want(step.key, self._engine.marking())
 
@@ -484,6 +487,7 @@ class Monitor:
         if step.divergence:
             self._warn(engine.counters.divergences, "divergence at %s#%d: %s", ev.skillset, ev.seq, step.divergence)
         self._note(ev, step.reason, step.seq)  # the list shows the bridge's info beside it
+        self._note_onsets(ev, step.seq)
         if engine.prediction(step.key) is None:
             self._predict.want(step.key, engine.marking())
 
@@ -695,6 +699,15 @@ class Monitor:
     def _note(self, ev: CanonicalEvent, divergence: str | None, seq: int) -> None:
         """Keep ``ev`` in the divergence list if it diverged or follows a manager restart (lock held)."""
         if self._divergences.note(ev, divergence, seq, time.time()) is not None:
+            self._divergences_due = True
+            self._publish_divergences()
+
+    def _note_onsets(self, ev: CanonicalEvent, seq: int) -> None:
+        """List the properties this step made violated (lock held): views that join later see them."""
+        onsets = self._onsets.step(self._engine.analysis()[0].violated)
+        for prop in onsets:
+            self._divergences.add("violation", seq, time.time(), ev.skillset, event_name(ev), onset_reason(prop))
+        if onsets:
             self._divergences_due = True
             self._publish_divergences()
 
