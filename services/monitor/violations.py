@@ -35,3 +35,9 @@ class ViolationOnsets:
 def onset_reason(prop: str) -> str:
     """The listed entry's reason for an onset of ``prop``."""
     return f"{prop} is violated from this step"
+
+
+def onset_property(reason: str) -> str | None:
+    """The property of an onset's reason (:func:`onset_reason`); None for another text."""
+    suffix = " is violated from this step"
+    return reason[:-len(suffix)] if reason.endswith(suffix) and len(reason) > len(suffix) else None

@@ -216,6 +216,8 @@ def test_a_violation_that_began_and_ended_is_listed_to_a_view_that_joins_later(r
                                 *client_args(router)], cwd=REPO, capture_output=True, text=True, timeout=60)
         assert watch.returncode == 0, watch
         lines = watch.stdout.splitlines()
+        at = lines.index("violations (1)")
+        assert lines[at + 1] == f"  {AG} at step 10 by manipulator:arm_ready.start#{seqs[9]}", watch.stdout
         at = lines.index("divergences and manager restarts (1)")
         assert re.fullmatch(rf"  violation at step 10 \(\d\d:\d\d:\d\d\): manipulator:arm_ready\.start#{seqs[9]}: "
                             rf"{AG} is violated from this step", lines[at + 1]), watch.stdout
