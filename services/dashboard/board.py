@@ -173,6 +173,9 @@ class Board:
                 continue
             # Violated where this view knows nothing before (it joined late): not an onset at this step.
             joined = name not in self._holds and msg.seq > 0
+            if any(v["property"] == name and (v["seq"] == msg.seq or joined) and v.get("listed")
+                   for v in self.violations):
+                continue  # the monitor's list named its onset already (its step, its event)
             v = {"n": len(self.violations), "property": name, "seq": msg.seq, "epoch": self.epoch,
                  "event": "" if joined or point is None else point["event"], "t": point["t"] if point else msg.stamp,
                  "joined": joined}
