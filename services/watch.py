@@ -181,8 +181,8 @@ def watch(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
             changed.clear()
             lines, line, key, fresh = observer.read(lambda b: _look(b, tty))  # type: ignore[misc]
             done = stop.is_set() or (end is not None and time.monotonic() >= end)
-            if args.once:
-                if lines and (fresh or done):
+            if args.once:  # after the first fetch: its list holds what happened before this view joined
+                if lines and (fresh and observer.fetched.is_set() or done):
                     print("\n".join(lines), file=out, flush=True)
                     return 0
             elif tty and lines and key != shown:
