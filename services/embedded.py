@@ -152,6 +152,8 @@ def divergence_line(d: Mapping[str, Any], loud: bool = False) -> str:
     the event, why."""
     if d["kind"] == "restart":
         what, words = "manager restart", [d["info"], d["reason"] and f"model divergence: {d['reason']}"]
+    elif d["kind"] == "violation":
+        what, words = "violation", [d["reason"], d["info"]]
     else:
         what, words = "model divergence", [d["reason"], d["info"]]
     why = "; ".join(w for w in words if w)

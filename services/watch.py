@@ -125,7 +125,7 @@ class StepLines:
 def watch(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     """Run the view until interrupted or ``--duration``; ``--once`` prints one view (after the
     first fresh prediction, or ``--wait`` seconds) and returns.  Returns the exit status."""
-    config = config_from_args(args)
+    config = config_from_args(args, command=True)
     session = open_session(config, warn_on_stderr("skinet watch"))
     changed = threading.Event()
     observer = Observer(session, args.system, client=client_name(config))
@@ -181,8 +181,8 @@ def watch(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
             changed.clear()
             lines, line, key, fresh = observer.read(lambda b: _look(b, tty))  # type: ignore[misc]
             done = stop.is_set() or (end is not None and time.monotonic() >= end)
-            if args.once:
-                if lines and (fresh or done):
+            if args.once:  # after the first fetch: its list holds what happened before this view joined
+                if lines and (fresh and observer.fetched.is_set() or done):
                     print("\n".join(lines), file=out, flush=True)
                     return 0
             elif tty and lines and key != shown:

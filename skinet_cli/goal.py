@@ -118,7 +118,7 @@ def cmd_goal(args: argparse.Namespace) -> int:
         request = request.model_copy(update=_goal_fields(args, system))
     elif args.goals or args.goals_file or args.inputs:
         raise SkinetError(f"--{'set-mode' if op == 'mode' else op} takes no goals: it acts on the goal that runs")
-    config = config_from_args(args)
+    config = config_from_args(args, command=True)
     session = open_session(config, warn_on_stderr("skinet goal"))
 
     def ask(request: PilotGoalRequest, timeout: float = args.timeout) -> PilotGoalReply:

@@ -96,7 +96,7 @@ def cmd_check(args: argparse.Namespace) -> int:
             parse_policy(args.policy)
     except ValueError as exc:
         raise SkinetError(str(exc)) from None
-    config = config_from_args(args)
+    config = config_from_args(args, command=True)
     key = keys.check(args.system, client_name(config))
     session = open_session(config, warn_on_stderr("skinet check"))
     try:

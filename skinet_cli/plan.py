@@ -213,6 +213,7 @@ def plan_json(system: System, plan: Plan) -> dict[str, Any]:
         "moves": plan.moves,
         "reason": plan.reason,
         "retries": plan.retries,
+        "recovery": [{"skillset": c, "action": t} for c, t in plan.recovery],
         "steps": [_step_json(s) for s in plan.steps],
         "policy": [{"state": marking_to_json(system, m), "action": _action_json(a), "rank": r} for m, a, r in policy],
         "policy_complete": whole,

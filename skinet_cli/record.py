@@ -189,7 +189,7 @@ class Recorder:
 
 def cmd_record(args: argparse.Namespace) -> int:
     system = args.system
-    config = config_from_args(args)
+    config = config_from_args(args, command=True)
     session = open_session(config, warn_on_stderr("skinet record"))
     if args.bundle is not None:
         args.output = args.bundle

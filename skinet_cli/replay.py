@@ -57,7 +57,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
     from skinet_cli.timeline import load_log
 
     rec = recording(load_log(args.log), args.log)
-    config = config_from_args(args)
+    config = config_from_args(args, command=True)
     listening = fix_free_ports(config) if json.loads(config.get_json("mode")) == "peer" else []
     stop = stop_on_signals()
     session = open_session(config, warn_on_stderr("skinet replay"))

@@ -220,18 +220,21 @@ def session_config(
     return config
 
 
-def session_mode(args: argparse.Namespace, connect: list[str]) -> str:
+def session_mode(args: argparse.Namespace, connect: list[str], command: bool = False) -> str:
     """``--mode``, else ``$SKINET_ZENOH_MODE`` (checked: argparse does not check choices on a default from
     the environment), else the ``mode`` the ``--zenoh-config`` file sets, else ``client`` when a user logs in
-    to an endpoint of ``connect`` (a router: a peer would reach no other peer through it, ZENOH.md), else
-    ``peer``."""
+    to an endpoint of ``connect`` (a router: a peer would reach no other peer through it), or when
+    ``command`` (a command line's session) connects to any endpoint and listens on none: a peer session
+    through a router reaches the router's clients only now and then (docs/deployment.md), else ``peer``."""
     if args.mode is None:
         path = getattr(args, "zenoh_config", None)
         if path:
             mode = json.loads(load_config_file(path).get_json("mode"))
             if mode != json.loads(zenoh.Config().get_json("mode")):
                 return str(mode)
-        return "client" if getattr(args, "user", None) and connect else "peer"
+        if connect and (getattr(args, "user", None) or command):
+            return "client"
+        return "peer"
     if args.mode not in MODES:
         raise ZenohSetupError(f"SKINET_ZENOH_MODE '{args.mode}' is not one of {', '.join(MODES)}")
     return str(args.mode)
@@ -242,14 +245,15 @@ def warn_on_stderr(prog: str) -> Callable[[str], None]:
     return lambda message: print(f"{prog}: warning: {message}", file=sys.stderr, flush=True)
 
 
-def config_from_args(args: argparse.Namespace) -> zenoh.Config:
-    """The session configuration of a service's flags; bad environment values are named as such."""
+def config_from_args(args: argparse.Namespace, command: bool = False) -> zenoh.Config:
+    """The session configuration of a service's flags (``command``: a command line's, see
+    :func:`session_mode`); bad environment values are named as such."""
     endpoints = {}
     for option, env in (("connect", "SKINET_ZENOH_CONNECT"), ("listen", "SKINET_ZENOH_LISTEN")):
         endpoints[option] = getattr(args, option)
         if endpoints[option] is None:
             endpoints[option] = [check_endpoint(e, env) for e in _env_list(env)]
-    mode = session_mode(args, endpoints["connect"])
+    mode = session_mode(args, endpoints["connect"], command and not endpoints["listen"])
     return session_config(mode, endpoints["connect"], endpoints["listen"], args.zenoh_config,
                           args.multicast_scouting, **login(args))
 

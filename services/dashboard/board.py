@@ -29,6 +29,7 @@ from typing import Any
 
 from pydantic import BaseModel
 
+from services.monitor.violations import onset_property
 from skinet.errors import SkinetError
 from skinet.system import System
 from skinet.wire.convert import system_from_bundle
@@ -172,6 +173,9 @@ class Board:
                 continue
             # Violated where this view knows nothing before (it joined late): not an onset at this step.
             joined = name not in self._holds and msg.seq > 0
+            if any(v["property"] == name and (v["seq"] == msg.seq or joined) and v.get("listed")
+                   for v in self.violations):
+                continue  # the monitor's list named its onset already (its step, its event)
             v = {"n": len(self.violations), "property": name, "seq": msg.seq, "epoch": self.epoch,
                  "event": "" if joined or point is None else point["event"], "t": point["t"] if point else msg.stamp,
                  "joined": joined}
@@ -225,7 +229,24 @@ class Board:
                 added.append(self.divergences[key])
         while len(self.divergences) > KEPT_DIVERGENCES:
             self.divergences.popitem(last=False)
-        return [{"kind": "divergences", "added": added, "older": self.divergences_older}]
+        out: list[Update] = [{"kind": "divergences", "added": added, "older": self.divergences_older}]
+        return out + self._listed_violations(added)
+
+    def _listed_violations(self, added: list[dict[str, Any]]) -> list[Update]:
+        """Violation onsets of the monitor's list this view did not see happen (it joined later): added to
+        :attr:`violations` with their step and event, once (a view that saw the step has it already)."""
+        out: list[Update] = []
+        seen = {(v["property"], v["seq"]) for v in self.violations}
+        for d in added:
+            prop = onset_property(d["reason"]) if d["kind"] == "violation" else None
+            if prop is None or (prop, d["seq"]) in seen:
+                continue
+            v = {"n": len(self.violations), "property": prop, "seq": d["seq"], "epoch": self.epoch,
+                 "event": d["event"], "t": d["stamp"], "joined": False, "listed": True}
+            self.violations.append(v)
+            seen.add((prop, d["seq"]))
+            out.append({"kind": "violation", "violation": v})
+        return out
 
     @property
     def divergences_older(self) -> int:

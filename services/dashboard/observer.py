@@ -69,6 +69,7 @@ class Observer:
         self._resync = threading.Event()
         self._closed = threading.Event()
         self._monitor_seen = threading.Event()
+        self.fetched = threading.Event()  # the last publications were asked for once (a view's first picture)
         self._subs = [session.declare_subscriber(key(self.name), self._on_sample(kind)) for key, kind in RESULTS]
         live = session.liveliness()
         self._tokens = [live.declare_subscriber(k, self._on_token, history=True)
@@ -187,6 +188,7 @@ class Observer:
                 self._fetch(keys.model(self.name), ModelBundle)
                 for key, kind in RESULTS:
                     self._fetch(key(self.name), kind)
+                self.fetched.set()
             except zenoh.ZError:
                 return  # session closed under us
 

@@ -1,4 +1,4 @@
-"""The monitor's list of model divergences and manager restarts (SPEC §7), without I/O.
+"""The monitor's list of model divergences, manager restarts and violation onsets (SPEC §7), without I/O.
 
 The step that meets a divergence says so in its :class:`~skinet.wire.messages.LiveState`,
 and the next step no longer does; operator views need the whole run's list, and a view
@@ -60,9 +60,14 @@ class DivergenceLog:
         self._noted[key] = None
         if len(self._noted) > REMEMBERED:
             self._noted.popitem(last=False)
-        entry = Divergence(n=self.total, kind="restart" if ev.restart else "divergence", seq=seq, stamp=stamp,
-                           skillset=_cut(ev.skillset), event=_cut(event_name(ev)), reason=_cut(divergence or ""),
-                           info=_cut(ev.info))
+        return self.add("restart" if ev.restart else "divergence", seq, stamp, ev.skillset, event_name(ev),
+                        divergence or "", ev.info)
+
+    def add(self, kind: str, seq: int, stamp: float, skillset: str, event: str, reason: str = "",
+            info: str = "") -> Divergence:
+        """List one entry as it is (a violation onset: :mod:`services.monitor.violations`)."""
+        entry = Divergence(n=self.total, kind=kind, seq=seq, stamp=stamp, skillset=_cut(skillset),  # type: ignore[arg-type]
+                           event=_cut(event), reason=_cut(reason), info=_cut(info))
         self.entries.append((entry, self._packer.pack(entry.model_dump(mode="json"))))
         self.total += 1
         return entry

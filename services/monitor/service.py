@@ -57,7 +57,8 @@ from services.common.ratelimit import CHECK_RATE_LIMIT, CHECK_TOTAL_FACTOR, OK, 
 from services.common.zenoh_config import undeclare
 from services.monitor.check import MAX_REQUEST, Checker, Policy, request_from
 from services.monitor.slots import FREE, fair_slot
-from services.monitor.divergences import DivergenceLog
+from services.monitor.divergences import DivergenceLog, event_name
+from services.monitor.violations import ViolationOnsets, onset_reason
 from services.monitor.engine import Counters, Engine, MarkingKey, Step
 from services.monitor.prediction import PredictionClient, PredictorStats
 from services.monitor.sync import BOUND, SYNCING, SyncTracker
@@ -156,6 +157,7 @@ class Monitor:
         self._wake = threading.Event()  # something changed that a waiting check may want
         self._behind: dict[str, tuple[float, CanonicalEvent]] = {}  # skillset -> (deadline, resync answer ahead)
         self._divergences = DivergenceLog(name, self.instance_id)
+        self._onsets = ViolationOnsets()  # listed in the divergence list (kind violation)
         self._divergences_due = False  # the list changed since it was published
         self._divergences_sent = float("-inf")  # monotonic time of its last publication
         self._divergences_published = 0  # entries noted (listed or older) when it was last published
@@ -369,21 +371,26 @@ class Monitor:
         with self._lock:
             if self._closed or not self._sync.asking(skillset):
                 return
-        replied, refused = [False], [""]
+        replied, refused, failed = [False], [""], [""]
+        key = keys.resync(self.system.name, skillset)
 
         def on_reply(reply: zenoh.Reply) -> None:
-            if reply.err is not None:  # the bridge knows its last status is outdated: still syncing
-                refused[0] = reply.err.payload.to_bytes()[:MAX_REASON].decode("utf-8", "replace")
+            if reply.err is not None:
+                text = reply.err.payload.to_bytes()[:MAX_REASON].decode("utf-8", "replace")
+                if reply.replier_id is None:  # Zenoh's own error (Timeout): said with what was asked
+                    failed[0] = text
+                else:  # the bridge knows its last status is outdated: still syncing
+                    refused[0] = text
             replied[0] = self._on_resync(reply) or replied[0]
 
         def done() -> None:
             with self._lock:
-                self._sync.answered(skillset, replied[0], refused[0])
+                self._sync.answered(skillset, replied[0], refused[0], failed[0], key, self.resync_timeout)
                 if not self._closed:
                     self._settle()
 
         try:
-            self.session.get(keys.resync(self.system.name, skillset), zenoh.handlers.Callback(on_reply, done),
+            self.session.get(key, zenoh.handlers.Callback(on_reply, done),
                              timeout=self.resync_timeout)
         except zenoh.ZError as exc:  # session closed under us
             log.warning("cannot ask for a resync of %s: %s", skillset, exc)
@@ -471,6 +478,7 @@ class Monitor:
                 log.warning("%s synced from '%s' at #%d: %s (what the robot did then is adopted, not judged)",
                             ev.skillset, ev.source, ev.seq, step.unchecked)
             self._publish(step)
+            self._note_onsets(ev, step.seq)
             if self._engine.prediction(step.key) is None:
                 self._predict.want(step.key, self._engine.marking())
 
@@ -487,6 +495,7 @@ class Monitor:
         for m in step.missed:
             log.warning("%s", missed_line(m))
         self._note(ev, step.reason, step.seq)  # the list shows the bridge's info beside it
+        self._note_onsets(ev, step.seq)
         if engine.prediction(step.key) is None:
             self._predict.want(step.key, engine.marking())
 
@@ -713,6 +722,15 @@ class Monitor:
     def _note(self, ev: CanonicalEvent, divergence: str | None, seq: int) -> None:
         """Keep ``ev`` in the divergence list if it diverged or follows a manager restart (lock held)."""
         if self._divergences.note(ev, divergence, seq, time.time()) is not None:
+            self._divergences_due = True
+            self._publish_divergences()
+
+    def _note_onsets(self, ev: CanonicalEvent, seq: int) -> None:
+        """List the properties this step made violated (lock held): views that join later see them."""
+        onsets = self._onsets.step(self._engine.analysis()[0].violated)
+        for prop in onsets:
+            self._divergences.add("violation", seq, time.time(), ev.skillset, event_name(ev), onset_reason(prop))
+        if onsets:
             self._divergences_due = True
             self._publish_divergences()
 

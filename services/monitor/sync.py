@@ -229,9 +229,12 @@ class SyncTracker:
         s.asking, s.asked = True, self.clock()
         return True
 
-    def answered(self, name: str, replied: bool, refused: str = "") -> None:
+    def answered(self, name: str, replied: bool, refused: str = "", failed: str = "", key: str = "",
+                 timeout: float = 0.0) -> None:
         """The resync query of ``name`` ended; ``replied``: an answer was applied; ``refused``: the error
-        a source answered instead (its status is outdated, and why)."""
+        a source answered instead (its status is outdated, and why); ``failed``: the error Zenoh itself
+        answered (``Timeout``: a source is there but did not answer), never shown bare: the reason says
+        what was asked (``key``), of whom, and for how long (``timeout`` seconds)."""
         s = self.skillsets.get(name)
         if s is None:
             return
@@ -239,14 +242,22 @@ class SyncTracker:
         if replied or s.state == LIVE or s.behind is not None:
             return
         heard = [(n, src) for n, src in self.sources.items() if name in src.seqs and self._heard_recently(n)]
+        on = f" on {key}" if key else ""
+        within = f" within {timeout:g} s" if timeout > 0 else ""
         if refused:
             why = refused
+        elif failed:
+            who = f"'{heard[0][0]}'" if heard else "the bridge"
+            if failed == "Timeout":
+                why = f"the resync query to {who}{on} got no answer{within} (Timeout)"
+            else:
+                why = f"the resync query to {who}{on} failed: {failed}"
         elif not heard:
             why = "no bridge answered the resync query"
         elif heard[0][1].seqs[name] is None:
             why = f"'{heard[0][0]}' has no status of {name} yet (its manager has not answered)"
         else:
-            why = f"'{heard[0][0]}' did not answer the resync query"
+            why = f"the resync query to '{heard[0][0]}'{on} got no answer{within}"
         if s.state == SYNCING and s.reason != why:
             self._set(name, SYNCING, why)
 

@@ -26,6 +26,7 @@ SPEC §3 *Postconditions*), so ``postcondition`` is true unless unsatisfiable.
 
 from __future__ import annotations
 
+import logging
 import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
@@ -39,9 +40,12 @@ from skinet.lang.model import Effect, Mode, Skill, Skillset
 from skinet.ros.interfaces import (
     EVENT_RESULTS, RESULTS, SKILL_STATES, event_response_topic, skill_topic, skill_type, status_field, status_topic,
 )
+from skinet.ros.stamp import ros_time
 from skinet.ros.typestore import Typestore, default_instance, msg_typename
 
 READY, RUNNING, INTERRUPTING = (SKILL_STATES[s] for s in ("READY", "RUNNING", "INTERRUPTING"))
+
+log = logging.getLogger("skinet.simulator")
 
 
 @dataclass(frozen=True)
@@ -68,6 +72,7 @@ class Manager:
         self.store = store
         self.info = info
         self.clock = clock
+        self.clamped = 0  # status stamps outside ROS Time's int32 seconds, sent clamped (logged once)
         self.resources = {r.name: r.initial for r in skillset.resources}
         self.skills = {
             k.name: _SkillState(READY, "", default_instance(store, self._type(skill_type(k, "Input"))))
@@ -140,9 +145,12 @@ class Manager:
     # -- status and responses -------------------------------------------------------------
 
     def status(self) -> Message:
-        now = self.clock()
-        sec = int(now)
-        stamp = default_instance(self.store, "builtin_interfaces/msg/Time", sec=sec, nanosec=int((now - sec) * 1e9))
+        sec, nanosec, problem = ros_time(self.clock())
+        if problem:
+            self.clamped += 1
+            if self.clamped == 1:
+                log.warning("%s: %s (and every later one like it)", self.skillset.name, problem)
+        stamp = default_instance(self.store, "builtin_interfaces/msg/Time", sec=sec, nanosec=nanosec)
         resources = [
             default_instance(self.store, self._type("ResourceState"), name=r, state=s)
             for r, s in self.resources.items()

@@ -30,6 +30,7 @@ from typing import Any
 
 from skinet.ros.actions import LIFECYCLE_TRANSITIONS, goal_uuid, message
 from skinet.ros.binding import CANCEL_TYPE, CHANGE_STATE_TYPE, GET_STATE_TYPE, LIFECYCLE_STATES, STATUS_TYPE, TRANSITION_EVENT_TYPE
+from skinet.ros.stamp import ros_time
 from skinet.ros.typestore import Typestore, decode, default_instance, encode, to_plain
 
 log = logging.getLogger("skinet.simulator")
@@ -72,10 +73,10 @@ class ActionLogic:
     def status_array(self) -> bytes:
         items = []
         for g in self.goals.values():
-            sec = int(g.stamp)
+            sec, nanosec, _ = ros_time(g.stamp)  # clamped past 2038: said when the goal came
             info = default_instance(self.store, "action_msgs/msg/GoalInfo", goal_id=goal_uuid(self.store, g.id),
                                     stamp=default_instance(self.store, "builtin_interfaces/msg/Time", sec=sec,
-                                                           nanosec=int((g.stamp - sec) * 1e9)))
+                                                           nanosec=nanosec))
             items.append(default_instance(self.store, "action_msgs/msg/GoalStatus", goal_info=info, status=g.status))
         return encode(self.store, STATUS_TYPE, default_instance(self.store, STATUS_TYPE, status_list=items))
 
@@ -89,9 +90,12 @@ class ActionLogic:
         goal = Goal(bytes(request.goal_id.uuid), time.time())
         self.received.append((goal.id, to_plain(request.goal)))
         typename = f"{self.action}_SendGoal_Response"
+        sec, nanosec, problem = ros_time(goal.stamp)
+        if problem:
+            log.warning("%s: goal accepted with %s", self.action, problem)
         reply = encode(self.store, typename, default_instance(
             self.store, typename, accepted=self.accepting,
-            stamp=default_instance(self.store, "builtin_interfaces/msg/Time", sec=int(goal.stamp))))
+            stamp=default_instance(self.store, "builtin_interfaces/msg/Time", sec=sec, nanosec=nanosec)))
         if not self.accepting:
             return reply, []
         self.goals[goal.id] = goal

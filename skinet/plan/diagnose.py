@@ -125,16 +125,22 @@ def _late() -> str:
             "was found")
 
 
-def _forced_words(arena: Arena, local: Local, moved: set[str] | None = None) -> str:
-    """``safety_guard (it is violated at once: ...)`` for the first property ``local`` is forced for."""
+def _forced_words(arena: Arena, local: Local, moved: set[str] | None = None, every: bool = False) -> str:
+    """``safety_guard (it is violated at once: ...)`` for the first property ``local`` is forced for
+    (``every``: for each of them, joined by ``; ``)."""
     system = arena.system
     marking = arena.marking(local)
-    prop = system.property(arena.forced_for(local)[0])
-    verdict = oracle(system, arena.events).verdict(prop, marking)
-    if verdict is None or verdict.steps == 0:
-        first, rest = explain.violation_words(system, prop, marking, moved or set())
-        return f"{prop.name} (violated there: {' while '.join(first + rest)})"
-    return f"{prop.name} ({explain.forced_reason(system, prop, verdict.witness, verdict.reached)})"
+    forced = arena.forced_for(local)
+    out = []
+    for name in forced if every else forced[:1]:
+        prop = system.property(name)
+        verdict = oracle(system, arena.events).verdict(prop, marking)
+        if verdict is None or verdict.steps == 0:
+            first, rest = explain.violation_words(system, prop, marking, moved or set())
+            out.append(f"{prop.name} (violated there: {' while '.join(first + rest)})")
+        else:
+            out.append(f"{prop.name} ({explain.forced_reason(system, prop, verdict.witness, verdict.reached)})")
+    return "; ".join(out)
 
 
 def _shortest(arena: Arena, goal: Goal, game: Any, target: Any, allowed: bool,

@@ -122,9 +122,17 @@ class Planner:
 
         start = arena.root
         if not arena.safe_at(start):
-            return Plan(goal, arena, start, "none",
-                        f"the robot is in a marking forced for {_forced_words(arena, start)}: "
-                        "no plan can promise safety from here", stats())
+            recovery = self.admissible(marking)
+            back = (f"; recover first with one of {', '.join(f'{c}:{t}' for c, t in recovery)} (each leads "
+                    "back into Safe whatever its outcome), then plan again" if recovery else
+                    "; no command leads back into Safe whatever its outcome")
+            n = len(arena.forced_for(start))
+            plan = Plan(goal, arena, start, "none",
+                        f"the robot is in a marking forced for {f'{n} properties: ' if n > 1 else ''}"
+                        f"{_forced_words(arena, start, every=True)}: no plan can promise safety from here{back}",
+                        stats())
+            plan.recovery = recovery
+            return plan
         stop = _Stop(deadline, self.memory_limit)
         for answer, solve in (("strong", strong), ("cyclic", cyclic)):
             layers = solve(game, stop)

@@ -90,6 +90,9 @@ class Plan:
         self.answer = answer
         self.reason = reason
         self.stats = stats
+        # From a start forced for a property: the admissible commands (every result in Safe) that recover
+        # from it, (skillset, transition) in the planner's fixed order (docs/planning.md); else empty.
+        self.recovery: list[tuple[str, str]] = []
         self._game = game
         self._layers = layers or []
         self._allowed = arena.enabled(goal) if layers else None

@@ -37,6 +37,7 @@ from rosbags.typesys.store import Typestore
 
 from skinet.ros.binding import CANCEL_TYPE, CHANGE_STATE_TYPE, GET_STATE_TYPE
 from skinet.ros.bound import ACTIVE, STATUS_NAMES, TERMINAL, Goal
+from skinet.ros.stamp import ros_time
 from skinet.ros.typestore import decode, default_instance, encode, to_plain
 
 CANCEL_CODES = {0: "ERROR_NONE", 1: "ERROR_REJECTED", 2: "ERROR_UNKNOWN_GOAL_ID", 3: "ERROR_GOAL_TERMINATED"}
@@ -86,10 +87,9 @@ def cancel_goal_request(store: Typestore, goal_id: bytes, stamp: float = 0.0) ->
 
     (A zero goal id with a stamp cancels every goal accepted before it, as ROS 2 defines it.)
     """
-    sec = int(stamp)
+    sec, nanosec, _ = ros_time(stamp)  # clamped: every goal stamp past 2038 is clamped the same way
     info = default_instance(store, "action_msgs/msg/GoalInfo", goal_id=goal_uuid(store, goal_id),
-                            stamp=default_instance(store, "builtin_interfaces/msg/Time", sec=sec,
-                                                   nanosec=int(round((stamp - sec) * 1e9))))
+                            stamp=default_instance(store, "builtin_interfaces/msg/Time", sec=sec, nanosec=nanosec))
     return encode(store, f"{CANCEL_TYPE}_Request", default_instance(store, f"{CANCEL_TYPE}_Request", goal_info=info))
 
 

@@ -309,13 +309,15 @@ class Heartbeat(_Message):
 
 
 class Divergence(BaseModel):
-    """One model divergence or manager restart the monitor met (SPEC §7), as operator views list it."""
+    """One model divergence, manager restart or violation onset the monitor met (SPEC §7), as operator views
+    list it."""
 
     model_config = ConfigDict(extra="forbid", frozen=True)
     n: int = Field(ge=0, description="its number in the monitor's run, from 0")
-    kind: Literal["divergence", "restart"] = Field(
+    kind: Literal["divergence", "restart", "violation"] = Field(
         description="divergence: the model could not explain the event; restart: the skillset's manager "
-                    "restarted (reason then says whether the model could explain its new state)")
+                    "restarted (reason then says whether the model could explain its new state); violation: "
+                    "a property became violated at this step (reason names it), kept for views that join later")
     seq: int = Field(ge=0, description="the monitor step it made, or the step shown when it made none")
     stamp: float = Field(description="when the monitor met it (its clock, seconds since the epoch)")
     skillset: str
@@ -325,7 +327,8 @@ class Divergence(BaseModel):
 
 
 class Divergences(_Message):
-    """The model divergences and manager restarts of the monitor's run so far, the last ``MAX_DIVERGENCES``
+    """The model divergences, manager restarts and violation onsets of the monitor's run so far, the last
+    ``MAX_DIVERGENCES``
     (SPEC §7): published on ``skinet/<system>/divergences`` when the list changes, and answered on ``get``."""
 
     system: str

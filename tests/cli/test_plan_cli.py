@@ -156,3 +156,18 @@ def test_a_bound_skills_input_is_checked_against_its_goal_message(capsys: pytest
                                        "/dock_robot cannot be sent: expected string at dock_id, got an integer\n")
     assert main(["plan", nav2, "run nav2:dock_robot", "--inputs", 'dock_robot.dock = "home_dock"']) == 0
     assert capsys.readouterr().out.startswith("goal: run nav2:dock_robot\ncyclic: 4 moves")
+
+
+def test_from_a_violation_every_property_and_the_way_back_are_named(capsys: pytest.CaptureFixture[str]) -> None:
+    """Issue 30: from the paper's violation (teleop while the arm joystick runs), ``reach true`` answered
+    none with no way out; the recovery commands are in the reason and in the JSON's ``recovery``."""
+    state = str(ROOT / "skillsets" / "states" / "teleop_during_joystick.json")
+    reason = ("the robot is in a marking forced for action_guard (violated there: spot control_mode at Busy while "
+              "manipulator mutex at Busy): no plan can promise safety from here; recover first with one of "
+              "spot:teleop.interrupt, manipulator:arm_joystick.interrupt (each leads back into Safe whatever its "
+              "outcome), then plan again")
+    lines = run(capsys, SYSTEM, "reach true", "--state", state).splitlines()
+    assert lines[:2] == ["goal: reach true", f"none: {reason}"] and len(lines) == 3
+    [plan] = json.loads(run(capsys, SYSTEM, "reach true", "--state", state, "--json"))
+    assert (plan["answer"], plan["reason"], plan["recovery"]) == ("none", reason, [
+        {"skillset": "spot", "action": "teleop.interrupt"}, {"skillset": "manipulator", "action": "arm_joystick.interrupt"}])

@@ -162,7 +162,9 @@ def test_unreachable_goals_and_forced_starts(engine: str) -> None:
     off = marking_from_json(system, {"cart": {"resources": {"power": "Off"}}})
     plan = planner.plan(parse_goal(system, "reach cart:Dock"), off)
     assert (plan.answer, plan.reason) == ("none", "the robot is in a marking forced for powered (violated there: "
-                                                  "cart power at Off): no plan can promise safety from here")
+                                                  "cart power at Off): no plan can promise safety from here; no "
+                                                  "command leads back into Safe whatever its outcome")
+    assert plan.recovery == []
 
 
 # -- unknown, never none, when the search is cut -----------------------------------------------
@@ -382,3 +384,31 @@ def test_engines_need_cudd_or_say_so() -> None:
         with pytest.raises(SkinetError, match="the symbolic engine needs dd's CUDD extension"):
             Planner(paper(), "symbolic")
         assert Planner(corpus(2, 2)).engine_for(Planner(corpus(2, 2)).arena(corpus(2, 2).initial_marking())) == "explicit"
+
+
+def test_every_violated_marking_of_the_paper_names_each_violation_and_a_way_back() -> None:
+    """Issue 30: from a violated marking the answer named only the first property, and no way out.  Now it
+    names every violated property and the admissible commands (every result in Safe, SPEC §8) that recover;
+    each really leads into Safe (checked on the plain-sets game of tests/plan/brute.py)."""
+    from skinet.props.evaluate import holds
+
+    system = paper()
+    planner = Planner(system)
+    brute = Brute(system, system.initial_marking())
+    violated = {m: [p.name for p in system.properties if not holds(p.expr, brute.as_dict(m), system.nets)]
+                for m in sorted(brute.markings)}
+    violated = {m: names for m, names in violated.items() if names}
+    assert len(violated) == 26 and max(len(n) for n in violated.values()) == 2
+    for m, names in violated.items():
+        plan = planner.plan(parse_goal(system, "reach true"), brute.as_dict(m))
+        assert plan.answer == "none", m
+        head = f"{len(names)} properties: " if len(names) > 1 else ""
+        assert plan.reason.startswith(f"the robot is in a marking forced for {head}"), plan.reason
+        assert all(f"{n} (violated there: " in plan.reason for n in names), (names, plan.reason)
+        assert plan.recovery, m
+        for skillset, transition in plan.recovery:
+            i = brute.names.index(skillset)
+            results = brute.commands[m][(i, transition)]
+            assert results and results <= brute.safe, (m, skillset, transition)
+        assert plan.reason.endswith("recover first with one of " + ", ".join(f"{c}:{t}" for c, t in plan.recovery)
+                                    + " (each leads back into Safe whatever its outcome), then plan again")

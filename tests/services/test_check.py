@@ -245,3 +245,24 @@ def test_forced_constraint_is_denied_under_the_strict_policy(monitor_factory, se
         ("stowed_drive", "forced", decision, 1, ["arm:unfold.success.unfolded"]),
         ("", "prediction_pending", "warn", None, [])]
     assert reply.reasons[0].reason
+
+
+def test_a_resync_query_nobody_answers_is_named_with_its_key_and_timeout(monitor_factory, session, system) -> None:
+    """Issue 30: a frozen bridge made the reason "spot syncing since …: Timeout" (Zenoh's bare error)."""
+    frozen = session.declare_queryable(keys.resync("spot_arm", "spot"), zenoh.handlers.FifoChannel(64))
+    try:
+        monitor_factory(system, resync_timeout=0.5)
+        expected = re.compile(r"spot syncing since \d\d:\d\d:\d\d: the resync query to the bridge on "
+                              r"skinet/spot_arm/resync/spot got no answer within 0\.5 s \(Timeout\); "
+                              r"manipulator syncing since \d\d:\d\d:\d\d: no bridge answered the resync query")
+        deadline = time.monotonic() + 30
+        seen: list[str] = []
+        while not (seen and expected.fullmatch(seen[-1])) and time.monotonic() < deadline:
+            reply = check(session, "spot:init_power.start")
+            if not seen or seen[-1] != reply.state_reason:
+                seen.append(reply.state_reason)
+            time.sleep(0.05)
+        assert expected.fullmatch(seen[-1]), seen
+        assert not any(r.endswith(": Timeout") or ": Timeout;" in r for r in seen), seen  # never bare
+    finally:
+        frozen.undeclare()

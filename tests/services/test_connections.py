@@ -21,7 +21,7 @@ import pytest
 from services.common.zenoh_config import config_from_args
 from skinet_cli.main import build_parser
 from tests.processes import Watched
-from tests.services.conftest import REPO, free_port
+from tests.services.conftest import REPO, client_args, free_port, wait_queryable
 
 SYSTEM = str(REPO / "skillsets" / "spot_arm.toml")
 
@@ -41,10 +41,10 @@ def _dead() -> str:
     ("dashboard", "spot_arm", "--port", "0", "--wait", "8"),
 ])
 def test_an_unreachable_endpoint_is_reported_at_once_then_fails(command: tuple[str, ...], tmp_path: Path) -> None:
-    """Peer mode (the default): the old behaviour was no word at all, and record's "0 messages
+    """Peer mode (a command given --connect is a client unless -m peer says so): the old behaviour was no word at all, and record's "0 messages
     written", exit 0."""
     endpoint = _dead()
-    proc = skinet(*(a.replace("{tmp}", str(tmp_path)) for a in command), "--connect", endpoint)
+    proc = skinet(*(a.replace("{tmp}", str(tmp_path)) for a in command), "--connect", endpoint, "-m", "peer")
     code = proc.wait(60)
     problem = f"cannot connect to {endpoint}: nothing answers there"
     warnings = [(t, line) for t, line in proc.timed if problem in line and "keeps trying" in line]
@@ -58,7 +58,7 @@ def test_an_unreachable_endpoint_is_reported_at_once_then_fails(command: tuple[s
 
 def test_a_peer_connects_when_the_endpoint_comes_up_later() -> None:
     endpoint = _dead()
-    watch = skinet("watch", "spot_arm", "--once", "--wait", "30", "-e", endpoint)
+    watch = skinet("watch", "spot_arm", "--once", "--wait", "30", "-e", endpoint, "-m", "peer")
     watch.wait_for(lambda text: "keeps trying" in text, "warning")
     run = skinet("run", SYSTEM, "--listen", endpoint, "--duration", "60")
     try:
@@ -109,6 +109,31 @@ def test_record_with_no_monitor_is_an_error(router: str, tmp_path: Path) -> None
                               "'spot_arm' published anything (no monitor is reachable)")
 
 
+def test_a_service_given_connect_alone_stays_a_peer(monkeypatch: pytest.MonkeyPatch) -> None:
+    from services.monitor.__main__ import build_parser as monitor_parser
+
+    for name in ("SKINET_ZENOH_MODE", "SKINET_ZENOH_USER", "SKINET_ZENOH_CONNECT"):
+        monkeypatch.delenv(name, raising=False)
+    args = monitor_parser().parse_args([SYSTEM, "-e", "tcp/127.0.0.1:7447"])
+    assert config_from_args(args).get_json("mode") == '"peer"'
+
+
+def test_check_through_a_router_without_user_reaches_its_monitor_every_time(router: str, client, spawn) -> None:
+    """Issue 30: ``skinet check --connect ROUTER`` without ``--user`` was a peer and now and then found no
+    monitor (3 of 6 tries); a command line given --connect is a client: answered in 5 of 5."""
+    spawn("services.monitor", SYSTEM, *client_args(router))
+    wait_queryable(client, "skinet/spot_arm/check/x", timeout=60)
+    answers = []
+    for _ in range(5):
+        check = subprocess.run([sys.executable, "-m", "skinet_cli.main", "check", "spot_arm", "spot:init_power.start",
+                                "--connect", router, "--no-multicast-scouting", "--timeout", "20"],
+                               cwd=REPO, capture_output=True, text=True, timeout=60)
+        answers.append((check.returncode, check.stdout.split("\n", 1)[0], check.stderr))
+    assert answers == [(3, "spot:init_power.start: WARN at step 0 (STATE NOT LIVE: about the last marking known) "
+                           "(prediction stale: explicit and forced constraints only)",
+                        "")] * 5
+
+
 def test_run_prints_where_it_listens_and_lines_that_work() -> None:
     run = skinet("run", SYSTEM, "--duration", "120")
     try:
@@ -139,7 +164,8 @@ def test_run_prints_where_it_listens_and_lines_that_work() -> None:
     (["watch", "s", "--user", "observer"], "peer"),  # nobody to log in to
     (["watch", "s", "--user", "observer", "-e", "tcp/127.0.0.1:7447"], "client"),
     (["watch", "s", "--user", "observer", "-e", "tcp/127.0.0.1:7447", "-m", "peer"], "peer"),
-    (["watch", "s", "-e", "tcp/127.0.0.1:7447"], "peer"),
+    (["watch", "s", "-e", "tcp/127.0.0.1:7447"], "client"),  # a command line given --connect: a client
+    (["watch", "s", "-e", "tcp/127.0.0.1:7447", "-m", "peer"], "peer"),
 ])
 def test_user_with_connect_means_a_router_client(argv: list[str], mode: str, monkeypatch: pytest.MonkeyPatch) -> None:
     from services.common.zenoh_config import session_mode
@@ -147,8 +173,8 @@ def test_user_with_connect_means_a_router_client(argv: list[str], mode: str, mon
     for name in ("SKINET_ZENOH_MODE", "SKINET_ZENOH_USER", "SKINET_ZENOH_CONNECT"):
         monkeypatch.delenv(name, raising=False)
     args = build_parser("watch").parse_args(argv)
-    assert session_mode(args, args.connect or []) == mode
-    assert config_from_args(args).get_json("mode") == f'"{mode}"'
+    assert session_mode(args, args.connect or [], command=True) == mode
+    assert config_from_args(args, command=True).get_json("mode") == f'"{mode}"'
 
 
 @pytest.mark.parametrize(("flags", "mode"), [([], "client"), (["-m", "peer"], "peer")])
@@ -160,7 +186,7 @@ def test_a_configuration_files_mode_is_the_sessions_unless_a_flag_says_otherwise
     path = tmp_path / "observer.json5"
     path.write_text('{ mode: "client", connect: { endpoints: ["tcp/127.0.0.1:7447"] } }\n')
     args = build_parser("watch").parse_args(["watch", "s", "--zenoh-config", str(path), *flags])
-    assert config_from_args(args).get_json("mode") == f'"{mode}"'
+    assert config_from_args(args, command=True).get_json("mode") == f'"{mode}"'
 
 
 def test_run_as_a_client_of_a_router(capsys: pytest.CaptureFixture[str]) -> None:

@@ -189,3 +189,37 @@ def test_the_board_keeps_each_monitor_runs_list_and_ignores_older_copies() -> No
     assert [(d["monitor"], d["n"], d["seq"]) for d in snap["divergences"]] == [
         ("m1", 0, 1), ("m1", 1, 2), ("m1", 2, 3), ("m1", 3, 4), ("m2", 5, 6)]
     assert snap["divergences_older"] == 5
+
+
+def test_a_violation_that_began_and_ended_is_listed_to_a_view_that_joins_later(router, client_factory) -> None:
+    """Issue 30: a view that joined after the paper's violation (arm_ready started while teleop runs, step 10)
+    had ended (step 11) never listed it; the monitor now keeps its onset in the run's list."""
+    import re
+    import subprocess
+    import sys
+
+    from tests.services.conftest import REPO, client_args
+    from tests.services.test_monitor import AG, PAPER_STEPS
+
+    system, _ = load_system(SYSTEM_FILE)
+    session = client_factory()
+    monitor = start_monitor(session, system)
+    try:
+        events = Events(client_factory())
+        seqs = [events.send(skillset, transition) for skillset, transition, _, _ in PAPER_STEPS]
+        wait_until(lambda: monitor.snapshot().state.seq == 11 and monitor.divergences().entries, 10,
+                   "the eleven steps and the list")
+        [entry] = monitor.divergences().entries
+        assert (entry.n, entry.kind, entry.seq, entry.skillset, entry.event, entry.reason) == (
+            0, "violation", 10, "manipulator", f"manipulator:arm_ready.start#{seqs[9]}", f"{AG} is violated from this step")
+        watch = subprocess.run([sys.executable, "-m", "skinet_cli.main", "watch", "spot_arm", "--once", "--wait", "30",
+                                *client_args(router)], cwd=REPO, capture_output=True, text=True, timeout=60)
+        assert watch.returncode == 0, watch
+        lines = watch.stdout.splitlines()
+        at = lines.index("violations (1)")
+        assert lines[at + 1] == f"  {AG} at step 10 by manipulator:arm_ready.start#{seqs[9]}", watch.stdout
+        at = lines.index("divergences and manager restarts (1)")
+        assert re.fullmatch(rf"  violation at step 10 \(\d\d:\d\d:\d\d\): manipulator:arm_ready\.start#{seqs[9]}: "
+                            rf"{AG} is violated from this step", lines[at + 1]), watch.stdout
+    finally:
+        monitor.close()

@@ -162,9 +162,8 @@ def test_no_pilot_or_no_router_is_one_clear_line_and_exit_1(router) -> None:
     done = subprocess.run([sys.executable, "-m", "skinet_cli.main", "goal", "spot_arm", "reach spot:Standing", "-e",
                            endpoint], cwd=REPO, capture_output=True, text=True, timeout=60)
     assert (done.returncode, done.stdout) == (1, "")
-    assert done.stderr == (f"skinet goal: warning: cannot connect to {endpoint}: nothing answers there; Zenoh keeps "
-                           f"trying in the background\nskinet: error: cannot connect to {endpoint}: nothing answers "
-                           "there\n")
+    # A command line given --connect is a client (issue 30): it fails at once, in one line.
+    assert done.stderr == f"skinet: error: cannot open the Zenoh session: nothing answers at {endpoint}\n"
     assert no_pilot_message("spot_arm", "observer").endswith(
         "(or the router refused user 'observer': only operator-role users may send goals)")
 

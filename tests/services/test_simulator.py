@@ -387,3 +387,28 @@ def test_the_world_ends_each_started_skill_as_the_outcomes_say(client_factory, s
         world.close()
         operator.close()
         sim.close()
+
+
+def test_stamps_past_2038_are_clamped_with_one_warning(spot_arm, caplog) -> None:
+    """Issue 30: ROS Time seconds are int32; a clock past 2038-01-19 made the status fail to encode."""
+    from skinet.ros.stamp import ros_time
+    from skinet.ros.typestore import encode
+
+    assert ros_time(1.25) == (1, 250_000_000, "")
+    assert ros_time(2**31 - 0.5) == (2**31 - 1, 500_000_000, "")
+    assert ros_time(2**31 + 5.0) == (2**31 - 1, 999_999_999, "stamp 2147483653 s is past the int32 seconds of ROS "
+                                                               "Time (2038-01-19 03:14:07 UTC): clamped to it")
+    assert ros_time(float("inf"))[:2] == (0, 0)
+    system, typemap = spot_arm
+    ss = system.component("spot").skillset
+    store = build_typestore(ss, typemap)
+    m = Manager(ss, store, info="/spot/spot_skillset_manager", clock=lambda: 2**31 + 5.0)
+    caplog.set_level("WARNING", logger="skinet.simulator")
+    for _ in range(2):
+        status = m.status()
+        back = to_plain(decode(store, status.typename, encode(store, status.typename, status.msg)))
+        assert back["stamp"] == {"sec": 2**31 - 1, "nanosec": 999_999_999}
+    assert [r.getMessage() for r in caplog.records] == [
+        "spot: stamp 2147483653 s is past the int32 seconds of ROS Time (2038-01-19 03:14:07 UTC): clamped to it "
+        "(and every later one like it)"]
+    assert m.clamped == 2

@@ -234,3 +234,24 @@ def test_a_silent_manager_loses_its_skillset_with_the_bridges_words() -> None:
                          "manipulator": ("live", "")}
     t.heartbeat(beat(manager=None))  # it answers again: syncing until the status that closes the gap
     assert states(t)["spot"] == ("syncing", "'bridge_ros2/b1' is heard again: waiting for its resync answer")
+
+
+def test_a_zenoh_error_is_never_the_whole_reason() -> None:
+    """Issue 30: "spot syncing since …: Timeout" said neither what was asked nor of whom."""
+    clock = Clock()
+    t = tracker(clock)
+    t.heartbeat(beat(spot=3))
+    key = "skinet/spot_arm/resync/spot"
+    t.asking("spot")
+    t.answered("spot", replied=False, failed="Timeout", key=key, timeout=2.0)
+    assert states(t)["spot"] == ("syncing", "the resync query to 'bridge_ros2/b1' on skinet/spot_arm/resync/spot "
+                                            "got no answer within 2 s (Timeout)")
+    since = time.strftime("%H:%M:%S", time.localtime(1100.0))
+    assert t.stale()[0].startswith(f"spot syncing since {since}: the resync query to 'bridge_ros2/b1' on {key} got "
+                                   "no answer within 2 s (Timeout); ")
+    t.asking("spot")
+    t.answered("spot", replied=False, failed="routing failed", key=key, timeout=2.0)
+    assert states(t)["spot"] == ("syncing", f"the resync query to 'bridge_ros2/b1' on {key} failed: routing failed")
+    t.asking("spot")
+    t.answered("spot", replied=False, key=key, timeout=2.0)  # heard, but no reply at all
+    assert states(t)["spot"] == ("syncing", f"the resync query to 'bridge_ros2/b1' on {key} got no answer within 2 s")

@@ -236,6 +236,11 @@ function addDivergences(added, older) {
   view.divergencesOlder = older;
 }
 
+// What a listed entry is, in the operator's words (kind violation: a property became violated at that step).
+function divergenceKind(d) {
+  return { restart: "manager restart", violation: "violation" }[d.kind] || "model divergence";
+}
+
 function divergenceText(d) {
   const words = d.kind === "restart" ? [d.info, d.reason && `model divergence: ${d.reason}`] : [d.reason, d.info];
   return words.filter(Boolean).join("; ");
@@ -246,7 +251,7 @@ function renderDivergences() {
   document.getElementById("divergence-count").textContent = `(${total})`;
   const items = ds.map((d) => el("li", { "data-kind": d.kind, "data-seq": d.seq, "data-skillset": d.skillset,
     "data-event": d.event, "data-monitor": d.monitor, "data-n": d.n },
-    el("strong", {}, d.kind === "restart" ? "manager restart" : "model divergence"),
+    el("strong", {}, divergenceKind(d)),
     ` at monitor step ${d.seq} (${clock(d.stamp)}): `, el("span", { class: "mono" }, d.event), ` \u2014 ${divergenceText(d)}`));
   if (view.divergencesOlder) items.unshift(el("li", { class: "muted older" }, `${view.divergencesOlder} earlier not listed`));
   fill("divergences", ...(items.length ? items : [el("li", { class: "muted none" }, "none")]));
@@ -259,7 +264,7 @@ function drawDivergences(plot, x, v0, v1, top, bottom) {
     const dx = x(d.stamp);
     const mark = svg("path", { d: `M${dx - 5},${top - 15}L${dx + 5},${top - 15}L${dx},${top - 8}Z`,
       class: `divergence-mark divergence-${d.kind}`, "data-n": d.n, "data-kind": d.kind, "data-seq": d.seq });
-    mark.append(svg("title", {}, `${d.kind === "restart" ? "manager restart" : "model divergence"} at step ${d.seq}: `
+    mark.append(svg("title", {}, `${divergenceKind(d)} at step ${d.seq}: `
       + `${d.event} \u2014 ${divergenceText(d)}`));
     plot.append(svg("line", { x1: dx, x2: dx, y1: top - 8, y2: bottom, class: `divergence-line divergence-${d.kind}` }), mark);
   }
