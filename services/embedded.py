@@ -202,7 +202,8 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
             from services.pilot import start_pilot
 
             pilot = start_pilot(session, system, instance=f"embedded-{os.getpid()}", client=client_name(config),
-                                typemap=load_typemap(args.system), style=key_style(args))
+                                typemap=load_typemap(args.system), style=key_style(args),
+                                outcome_timeout=args.outcome_timeout)
         print("\n".join(connect_lines(args, system, mode, listening, pilot=pilot is not None)), file=sys.stderr,
               flush=True)
         if args.once:

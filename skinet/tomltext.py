@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import re
 import tomllib
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 
 from skinet.closenames import unknown
 from skinet.errors import Pos, SourceError
@@ -52,8 +52,27 @@ def locate(text: str, table: Path = (), key: str | None = None) -> Pos | None:
 
     Follows ``[a.b]`` and ``[[a]]`` headers (the n-th ``[[a]]`` is ``("a", n)``,
     from 0) and skips multi-line strings; dotted keys and inline tables are
-    found by their first name only.
+    found by their first name only.  For many look-ups in one text, build
+    :class:`Locations` once (each call here scans the text).
     """
+    return next((pos for t, k, pos in _positions(text) if t == tuple(table) and k == key), None)
+
+
+class Locations:
+    """Every position :func:`locate` can give for ``text``, found in one pass (cost linear in the text);
+    ``get(table, key)`` answers as ``locate(text, table, key)`` does, in constant time."""
+
+    def __init__(self, text: str):
+        self._at: dict[tuple[Path, str | None], Pos] = {}
+        for table, key, pos in _positions(text):
+            self._at.setdefault((table, key), pos)
+
+    def get(self, table: Path = (), key: str | None = None) -> Pos | None:
+        return self._at.get((tuple(table), key))
+
+
+def _positions(text: str) -> Iterator[tuple[Path, str | None, Pos]]:
+    """Each table header (key None) and each key line's first name, with its table, in text order."""
     current: Path = ()
     counts: dict[Path, int] = {}
     in_string: str | None = None  # the quotes of a multi-line string left open
@@ -70,14 +89,12 @@ def locate(text: str, table: Path = (), key: str | None = None) -> Pos | None:
                 counts[names] = counts.get(names, -1) + 1
                 names = (*names, counts[names])
             current = names
-            if key is None and current == tuple(table):
-                return Pos(n, line.index("[") + 1)
+            yield current, None, Pos(n, line.index("[") + 1)
             continue
         found = _KEY.match(line)
-        if key is not None and found and current == tuple(table) and key in found.groups():
+        if found:
             group = next(i for i in (1, 2, 3) if found.group(i) is not None)
-            return Pos(n, found.start(group) + (1 if group == 3 else 0))  # a quoted key: at its quote
-    return None
+            yield current, found.group(group), Pos(n, found.start(group) + (1 if group == 3 else 0))  # quoted: its quote
 
 
 def check_tables(data: Mapping[str, object], tables: Sequence[str], source: str, text: str) -> None:

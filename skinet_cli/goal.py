@@ -59,13 +59,19 @@ to drive and resume it (it then sends the commands itself):
   skinet goal spot_arm --set-mode drive -e tcp/127.0.0.1:7447
   skinet goal spot_arm --resume -e tcp/127.0.0.1:7447
 
+a skill the pilot started that ended while nobody could see it (a monitor restart, a link down) and
+whose outcome the resources cannot tell pauses it with 'outcome unknown'; answer how it ended:
+  skinet goal spot_arm --confirm success -e tcp/127.0.0.1:7447
+
 Through a router with logins, log in as an operator-role user (--user operator --password-file
 ~/.config/skinet/secrets/operator.password, or --zenoh-config from skinet client-config --user
 operator): the router lets no other user send goals, and says nothing to them (no pilot answers)."""
 
 EXIT_REACHED, EXIT_ENDED, EXIT_REJECTED = 0, 1, 2
 POLL = 0.2  # seconds between looks at Ctrl-C while waiting for a status
-CANCEL_WAIT = 3.0  # seconds to wait for the pilot's `cancelled` after Ctrl-C
+CANCEL_WAIT = 3.0  # seconds to wait for the pilot's `cancelled` after it answered the cancel
+CANCEL_RETRY = 1.0  # seconds between cancels the pilot did not answer (a router restarting)
+GONE_GRACE = 5.0  # seconds the pilot's token may stay away, this session linked, before it is called stopped
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -86,6 +92,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     ops.add_argument("--resume", dest="op", action="store_const", const="resume", help="resume a paused goal")
     ops.add_argument("--set-mode", choices=("guide", "drive"), metavar="MODE",
                      help="switch the goal that runs to guide or drive")
+    ops.add_argument("--confirm", choices=("success", "failure", "rerun"), metavar="ANSWER",
+                     help="answer the pilot paused with 'outcome unknown' (a skill ended unseen): success or "
+                          "failure (how it ended), or rerun (it did not do its work: start it again)")
     c.add_argument("--timeout", type=seconds(), default=10.0,
                    help="seconds to wait for the pilot's reply (it plans first; default: 10)")
     add_zenoh_args(c)
@@ -102,8 +111,9 @@ def cmd_goal(args: argparse.Namespace) -> int:
     from skinet.wire.messages import PilotGoalReply, PilotGoalRequest
 
     name, system = resolve_system(args.system)
-    op = "mode" if args.set_mode else args.op
-    request = PilotGoalRequest(system=name, op=op or "goal", mode=args.set_mode or ("drive" if args.drive else "guide"))
+    op = "mode" if args.set_mode else "confirm" if args.confirm else args.op
+    request = PilotGoalRequest(system=name, op=op or "goal", mode=args.set_mode or ("drive" if args.drive else "guide"),
+                               answer=args.confirm)
     if op is None:
         request = request.model_copy(update=_goal_fields(args, system))
     elif args.goals or args.goals_file or args.inputs:
@@ -134,7 +144,8 @@ def cmd_goal(args: argparse.Namespace) -> int:
                 print(f"goal rejected by the pilot: {reply.reason}", file=sys.stderr)
                 return EXIT_REJECTED
             _print_reply(reply, request.mode)
-            return follower.follow(reply.goal_id, lambda: _cancel(name, ask), ctrl_c)
+            said: list[bool] = []
+            return follower.follow(reply.goal_id, lambda: _cancel(name, ask, said), ctrl_c)
         finally:
             signal.signal(signal.SIGINT, previous)
             follower.close()
@@ -151,7 +162,7 @@ def _goal_fields(args: argparse.Namespace, system: Any) -> dict[str, Any]:
 
     if not args.goals and not args.goals_file:
         raise SkinetError("no goals: give GOAL arguments (e.g. \"reach spot:Standing\") or --goals FILE "
-                          "(or --cancel, --pause, --resume, --set-mode for the goal that runs)")
+                          "(or --cancel, --pause, --resume, --set-mode, --confirm for the goal that runs)")
     if system is not None:
         read_goals(argparse.Namespace(system=args.system, goals_file=args.goals_file, inputs=args.inputs,
                                       goals=args.goals), system)
@@ -168,7 +179,8 @@ def _operate(session: Any, request: Any, ask: Any) -> int:
     from services.common.goals import pilot_status
 
     reply = ask(request)
-    what = f"mode {request.mode}" if request.op == "mode" else request.op
+    what = f"mode {request.mode}" if request.op == "mode" else \
+        f"confirm {request.answer}" if request.op == "confirm" else request.op
     if not reply.accepted:
         print(f"{what} rejected by the pilot: {reply.reason}", file=sys.stderr)
         return EXIT_REJECTED
@@ -179,13 +191,22 @@ def _operate(session: Any, request: Any, ask: Any) -> int:
     return 0
 
 
-def _cancel(system: str, ask: Any) -> None:
+def _cancel(system: str, ask: Any, said: list[bool]) -> bool:
+    """Ask the pilot to cancel; whether it answered (no answer: the router may be restarting, ask again)."""
+    from skinet.errors import SkinetError
     from skinet.wire.messages import PilotGoalRequest
 
-    print("cancelled by Ctrl-C: asking the pilot to cancel the goal", flush=True)
-    reply = ask(PilotGoalRequest(system=system, op="cancel"), CANCEL_WAIT)
+    if not said:
+        said.append(True)
+        print("cancelled by Ctrl-C: asking the pilot to cancel the goal", flush=True)
+    try:
+        reply = ask(PilotGoalRequest(system=system, op="cancel"), CANCEL_WAIT)
+    except SkinetError as exc:  # no pilot answered, or the router is not reached
+        print(f"the pilot did not answer the cancel ({exc}): asking again", file=sys.stderr, flush=True)
+        return False
     if not reply.accepted:
         print(f"the pilot did not cancel: {reply.reason}", file=sys.stderr)
+    return True
 
 
 def _print_reply(reply: PilotGoalReply, mode: str) -> None:
@@ -257,7 +278,12 @@ class StatusLines:
 
 
 class _Follower:
-    """The pilot's status changes and the pilots' liveliness, queued for the main thread (which sees Ctrl-C)."""
+    """The pilot's status changes and the pilots' liveliness, queued for the main thread (which sees Ctrl-C).
+
+    A pilot's token that goes away is not yet a pilot that stopped: a router restart takes every token
+    away until the sessions are linked again.  The pilot is called stopped only when this session is
+    linked to a router (or a peer) and the token has stayed away ``GONE_GRACE`` seconds.  The link is
+    looked at every ``POLL`` seconds: its loss is said once, and its return asks the pilot's status again."""
 
     def __init__(self, session: Any, system: str):
         import zenoh
@@ -265,11 +291,12 @@ class _Follower:
         from skinet.wire import keys
 
         self.session, self.system = session, system
-        self.queue: queue.Queue[PilotStatus | str] = queue.Queue()  # a status, or the id of a pilot that left
+        self.queue: queue.Queue[PilotStatus | tuple[bool, str]] = queue.Queue()  # a status, or (token there?, pilot)
         self._sub = session.declare_subscriber(keys.pilot_status(system), self._on_status)
         self._tokens = session.liveliness().declare_subscriber(
             keys.alive(system, "pilot", "*"),
-            lambda s: self.queue.put(str(s.key_expr).rsplit("/", 1)[-1]) if s.kind == zenoh.SampleKind.DELETE else None)
+            lambda s: self.queue.put((s.kind == zenoh.SampleKind.PUT, str(s.key_expr).rsplit("/", 1)[-1])),
+            history=True)  # the tokens there now: a subscriber that never saw one may miss its deletion
 
     def _on_status(self, sample: Any) -> None:
         from skinet.wire.codec import DecodeError, decode
@@ -284,7 +311,8 @@ class _Follower:
 
     def follow(self, goal_id: int, cancel: Any, ctrl_c: list[float]) -> int:
         """Print the changes of goal ``goal_id`` until it ends.  ``ctrl_c`` grows at each Ctrl-C: the first
-        calls ``cancel`` and waits for the end, a second one gives up waiting (KeyboardInterrupt)."""
+        calls ``cancel`` (asked again each second until the pilot answers: the router may be restarting)
+        and waits for the end, a second one gives up waiting (KeyboardInterrupt)."""
         from services.common.goals import pilot_status
 
         now = pilot_status(self.session, self.system)  # in case it ended before the subscriber's first sample
@@ -293,30 +321,57 @@ class _Follower:
         lines = StatusLines()
         seqs: dict[str, int] = {}
         ours = ""  # the pilot instance following the goal, once a status of it came
-        cancelled = False
+        answered: float | None = None  # when the pilot answered the cancel
+        asked = 0.0  # when the cancel was last asked
+        gone: float | None = None  # since when the pilot's token is away while this session is linked
+        unlinked = False  # the link to the router is down (said once per outage)
         while True:
             if len(ctrl_c) > 1:
                 raise KeyboardInterrupt
-            if ctrl_c and not cancelled:
-                cancelled = True
-                cancel()
+            if ctrl_c and answered is None and time.monotonic() - asked >= CANCEL_RETRY:
+                asked = time.monotonic()
+                if cancel():
+                    answered = time.monotonic()
             try:
                 status = self.queue.get(timeout=POLL)
             except queue.Empty:
-                if cancelled and time.monotonic() > ctrl_c[0] + CANCEL_WAIT:
+                if answered is not None and time.monotonic() > answered + CANCEL_WAIT:
                     print("the pilot did not report the goal cancelled", file=sys.stderr)
                     return EXIT_ENDED
+                linked = self._linked()
+                if linked == unlinked:  # the link went down, or came back
+                    unlinked = not linked
+                    if unlinked:
+                        print("the link to the router is down: waiting for it (Ctrl-C cancels the goal)",
+                              file=sys.stderr, flush=True)
+                    else:
+                        again = pilot_status(self.session, self.system)  # what it said while the link was down
+                        if again is not None:
+                            self.queue.put(again)
+                if gone is not None and time.monotonic() - gone >= GONE_GRACE:
+                    if not linked:
+                        gone = time.monotonic()  # nothing can be known of the pilot now: wait for the link
+                    elif self._pilots(ours):
+                        gone = None
+                    else:
+                        print(f"the pilot stopped before goal {goal_id} ended", file=sys.stderr)
+                        return EXIT_ENDED
                 continue
-            if isinstance(status, str):  # a pilot left: ours (or, not knowing ours yet, the last one)?
-                still_there = status != ours if ours else self._pilots()
-                if still_there:
+            if isinstance(status, tuple):  # a pilot's token came or went: ours (or, not knowing ours yet, any)?
+                there, pilot = status
+                if ours and pilot != ours:
                     continue
-                print(f"the pilot stopped before goal {goal_id} ended", file=sys.stderr)
-                return EXIT_ENDED
+                if there:
+                    gone = None
+                elif gone is None:
+                    gone = time.monotonic()
+                continue
             if status.goal_id < goal_id or status.seq <= seqs.get(status.pilot, -1):
                 continue  # an earlier goal's, or an older copy
             seqs[status.pilot] = status.seq
             ours = ours or (status.pilot if status.goal_id == goal_id else "")
+            if status.pilot == ours:
+                gone = None
             if status.goal_id > goal_id:
                 print(f"goal {goal_id} was replaced by goal {status.goal_id}"
                       + (f" of {status.client}" if status.client else ""), file=sys.stderr)
@@ -327,11 +382,17 @@ class _Follower:
             if status.state in ("reached", "failed", "cancelled"):
                 return EXIT_REACHED if status.state == "reached" else EXIT_ENDED
 
-    def _pilots(self) -> bool:
+    def _linked(self) -> bool:
+        """Whether this session is linked to a router or a peer now."""
+        info = self.session.info
+        return bool(list(info.routers_zid()) or list(info.peers_zid()))
+
+    def _pilots(self, pilot: str) -> bool:
+        """Whether the token of ``pilot`` (any pilot when '') is there."""
         from skinet.wire import keys
 
-        return any(r.ok is not None for r in self.session.liveliness().get(keys.alive(self.system, "pilot", "*"),
-                                                                         timeout=1.0))
+        return any(r.ok is not None for r in self.session.liveliness().get(
+            keys.alive(self.system, "pilot", pilot or "*"), timeout=1.0))
 
     def close(self) -> None:
         from services.common.zenoh_config import undeclare

@@ -77,6 +77,15 @@ def budget(env: str | None = None) -> Callable[[str], float]:
                    MIN_BUDGET, False, None, env)
 
 
+def add_outcome_timeout_arg(parser: argparse.ArgumentParser) -> None:
+    """The pilot's ``--outcome-timeout S`` (docs/pilot.md, *Missed outcomes*)."""
+    from skinet.wire.limits import PILOT_OUTCOME_TIMEOUT
+
+    parser.add_argument("--outcome-timeout", type=seconds(), default=PILOT_OUTCOME_TIMEOUT, metavar="S",
+                        help="seconds a skill the pilot started may run without an outcome before the pilot asks "
+                             f"its manager for its status, and again after as long (default: {PILOT_OUTCOME_TIMEOUT:g})")
+
+
 def number(low: float, env: str | None = None) -> Callable[[str], float]:
     """A finite number >= ``low``."""
     return _number(float, f"a number >= {low:g}", low, False, None, env)

@@ -11,7 +11,7 @@ from services.common.zenoh_config import add_login_args
 from services.monitor.check import add_policy_arg
 from services.monitor.sync import add_lost_after_arg
 from skinet_cli.memory import add_memory_arg
-from skinet_cli.options import add_no_properties_arg, budget, count, seconds
+from skinet_cli.options import add_no_properties_arg, add_outcome_timeout_arg, budget, count, seconds
 
 
 def _zenoh_args(c: argparse.ArgumentParser, listen_help: str) -> None:
@@ -37,6 +37,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     c.add_argument("--no-pilot", action="store_true",
                    help="do not start the pilot (SPEC §8: goals on skinet/<system>/pilot/goal/<client>, guided or "
                         "driven with the strict check; see docs/pilot.md)")
+    add_outcome_timeout_arg(c)
     add_no_properties_arg(c)
     add_policy_arg(c)
     add_lost_after_arg(c)

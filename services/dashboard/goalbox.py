@@ -63,12 +63,18 @@ def _source(n: int, several: bool) -> str:
 
 
 def goal_request(system_name: str, form: dict[str, Any], model: System | None) -> PilotGoalRequest:
-    """The request for a submitted form (``op``, ``goals``, ``inputs``, ``mode``, ``replace``);
+    """The request for a submitted form (``op``, ``goals``, ``inputs``, ``mode``, ``replace``; ``answer`` for
+    ``confirm``);
     raises :class:`GoalFormError` for what cannot be sent, placed in the form."""
     op = form.get("op", "goal")
     mode = form.get("mode", "guide")
-    if op not in ("goal", "mode", "cancel", "pause", "resume") or mode not in ("guide", "drive"):
+    if op not in ("goal", "mode", "cancel", "pause", "resume", "confirm") or mode not in ("guide", "drive"):
         raise GoalFormError(Placed(f"unknown operation '{op}' or mode '{mode}'"))
+    if op == "confirm":  # the answer about an outcome the pilot could not see
+        answer = form.get("answer")
+        if answer not in ("success", "failure", "rerun"):
+            raise GoalFormError(Placed(f"unknown answer '{answer}': success, failure or rerun"))
+        return PilotGoalRequest(system=system_name, op=op, mode=mode, answer=answer)
     if op != "goal":
         return PilotGoalRequest(system=system_name, op=op, mode=mode)
     text, inputs_text = str(form.get("goals", "")), str(form.get("inputs", "") or "")

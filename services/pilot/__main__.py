@@ -15,7 +15,7 @@ from services.pilot.service import start_pilot
 from skinet.files import load_typemap
 from skinet.wire import keys
 from skinet_cli.options import (
-    ArgumentParser, add_no_properties_arg, budget, load_live_system, require_properties, seconds,
+    ArgumentParser, add_no_properties_arg, add_outcome_timeout_arg, budget, load_live_system, require_properties, seconds,
 )
 
 
@@ -34,6 +34,7 @@ def build_parser() -> ArgumentParser:
                    help="planning budget per goal, seconds (default: 1); past it the plan is unknown and the goal fails")
     p.add_argument("--response-timeout", type=seconds(), default=5.0,
                    help="seconds a manager has to react to a command before the goal fails (default: 5)")
+    add_outcome_timeout_arg(p)
     add_ros_key_args(p)
     add_no_properties_arg(p)
     add_log_arg(p)
@@ -55,7 +56,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         pilot = start_pilot(session, system, instance=args.instance, response_timeout=args.response_timeout,
                             budget=args.budget, client=client_name(config), typemap=typemap,
-                            style=key_style(args))
+                            style=key_style(args), outcome_timeout=args.outcome_timeout)
         log.info("pilot %s of %s: goals on %s, status on %s", pilot.instance, system.name,
                  keys.pilot_goal(system.name, "<client>"), keys.pilot_status(system.name))
         while not stop.wait(0.5):

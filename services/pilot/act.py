@@ -34,7 +34,7 @@ from skinet.errors import SkinetError
 from skinet.ros.derive import SkillView
 from skinet.ros.keys import KeyStyle, manager_topics
 from skinet.ros.requests import (
-    skill_ids, skill_interrupt, skill_request, start_refusal, status_request,
+    plain_inputs, request_inputs, skill_ids, skill_interrupt, skill_request, start_refusal, status_request,
 )
 from skinet.ros.typestore import Typestore, build_typestore
 from skinet.system import Component, System
@@ -44,6 +44,7 @@ log = logging.getLogger("skinet.pilot")
 STATUS_WAIT = 1.0  # seconds an interrupt waits for a manager's status when it has seen none
 REACT_WAIT = 1.0  # seconds a start waits for the manager's answer (its status, or a refusal) before it returns
 READY = 0  # SkillXStatus.state
+MAX_REQUESTS = 64  # start requests remembered per skill (their inputs, by execution id)
 
 
 class ActError(Exception):
@@ -116,6 +117,7 @@ class ManagerActuator:
         self._ids: dict[str, dict[str, SkillView]] = {}  # skillset -> skill -> state and id, from its status
         self._count = 0
         self._starts: dict[str, tuple[str, str, str]] = {}  # start id -> (skillset, skill, refusal or "")
+        self._requested: dict[tuple[str, str], dict[str, dict[str, Any]]] = {}  # (skillset, skill) -> id -> inputs
         # One subscriber per manager keeps its messages in order: a refusal comes before the status after it.
         self.style = style
         self._topics = {c.name: {t.topic: t for t in manager_topics(c.skillset)} for c, _ in nodes}
@@ -124,10 +126,19 @@ class ManagerActuator:
 
     def _on_sample(self, component: Component, sample: zenoh.Sample) -> None:
         topic = self._topics[component.name].get(self.style.topic(component.manager, str(sample.key_expr)) or "")
-        if topic is None or topic.kind not in ("status", "skill_response"):
-            return  # requests (ours too) and the other outputs
+        if topic is None or topic.kind not in ("status", "skill_response", "skill_request"):
+            return  # interrupts and the other outputs
         store, skillset = self._stores[component.name], component.skillset
         try:
+            if topic.kind == "skill_request":  # anyone's start (ours too): its inputs, by execution id
+                id_, inputs = request_inputs(store, skillset, topic.skill or "", sample.payload.to_bytes())
+                with self._lock:
+                    seen = self._requested.setdefault((component.name, topic.skill or ""), {})
+                    seen.pop(id_, None)
+                    seen[id_] = inputs
+                    while len(seen) > MAX_REQUESTS:
+                        del seen[next(iter(seen))]
+                return
             if topic.kind == "status":
                 ids = skill_ids(store, skillset, sample.payload.to_bytes())
                 with self._lock:
@@ -177,6 +188,30 @@ class ManagerActuator:
             return f"{command.transition} (running id '{id_}') on {key}"
         raise ActError(f"{skillset}:{command.transition} is not a command (SKILL.start or SKILL.interrupt)")
 
+    def start_inputs(self, skillset: str, skill: str, given: Mapping[str, Any]) -> tuple[bool, dict[str, Any]] | None:
+        """Whether the execution of ``skillset:skill`` its manager's last status shows (running, or the last
+        one) was started with ``given`` (fields left out at their defaults), with the inputs its request
+        carried; None when that request was not heard (or the status not seen)."""
+        store = self._stores.get(skillset)
+        with self._lock:
+            view = self._ids.get(skillset, {}).get(skill)
+            inputs = None if view is None else self._requested.get((skillset, skill), {}).get(view.id)
+        if store is None or inputs is None:
+            return None
+        try:
+            wanted = plain_inputs(store, self.system.component(skillset).skillset, skill, given)
+        except (ValueError, KeyError, TypeError):
+            return False, inputs
+        return wanted == inputs, inputs
+
+    def ask_status(self, skillset: str) -> str:
+        """Ask ``skillset``'s manager for its status (``status_request``); what was sent, for the log."""
+        if skillset not in self._stores:
+            raise ActError(self._problems.get(skillset) or f"{skillset} has no manager this actuator speaks to")
+        c = self.system.component(skillset)
+        key = self._requests.put(skillset, *status_request(self._stores[skillset], c.skillset))
+        return f"status_request on {key}"
+
     def _shows(self, skillset: str, skill: str, id_: str) -> bool:
         """Whether the manager's last status shows ``id_`` as ``skill``'s execution (lock held)."""
         view = self._ids.get(skillset, {}).get(skill)
@@ -214,6 +249,19 @@ class Routed:
         except KeyError:
             return None
         return inputs_problem(actuator, skillset, skill, inputs) if actuator is not None else None
+
+    def start_inputs(self, skillset: str, skill: str, given: Mapping[str, Any]) -> tuple[bool, dict[str, Any]] | None:
+        """What the managers' actuator says of the inputs of ``skillset:skill``'s last start (see
+        :meth:`ManagerActuator.start_inputs`); None for a bound skill."""
+        check = getattr(self.actuators.get("manager"), "start_inputs", None)
+        return None if check is None else check(skillset, skill, given)  # type: ignore[no-any-return]
+
+    def ask_status(self, skillset: str) -> str:
+        """Ask ``skillset``'s manager for its status (a bound skillset has none: :class:`ActError`)."""
+        ask = getattr(self.actuators.get("manager"), "ask_status", None)
+        if ask is None:
+            raise ActError(f"this pilot cannot ask {skillset} for its status")
+        return str(ask(skillset))
 
     def send(self, command: PilotCommand) -> str:
         skill = command.transition.partition(".")[0]

@@ -37,7 +37,8 @@ import logging
 import threading
 import time
 import uuid
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -46,15 +47,18 @@ import zenoh
 from services.common.zenoh_config import undeclare
 from services.pilot.act import ActError, Actuator, Refused, default_actuator, inputs_problem, responder
 from skinet.errors import SkinetError, SourceError
+from skinet.net.outcomes import Inference, infer_outcomes, modes
 from skinet.plan import Command, Goal, Plan, Planner, Reached, parse_goal, parse_goals
+from skinet.plan.goalfile import count_goals
 from skinet.ros.keys import KeyStyle
 from skinet.system import System
 from skinet.wire import keys
 from skinet.wire.codec import DecodeError, decode, encode
 from skinet.wire.convert import marking_of, plan_steps
+from skinet.wire.limits import PILOT_OUTCOME_TIMEOUT
 from skinet.wire.messages import (
-    CheckReply, CheckRequest, LiveState, PilotCommand, PilotGoalReply, PilotGoalRequest, PilotStatus, PlanStep,
-    UnsafeReport,
+    CheckReply, CheckRequest, LiveState, MissedOutcome, PilotCommand, PilotGoalReply, PilotGoalRequest, PilotStatus,
+    PlanStep, UnsafeReport,
 )
 
 log = logging.getLogger("skinet.pilot")
@@ -62,9 +66,26 @@ TICK = 0.1  # seconds between the worker's looks at timeouts
 CHECK_WAIT = 1.0  # seconds the check may wait for a synced state and a fresh prediction
 MAX_REQUEST = 256 << 10  # bytes of a goal request (a mission file's text)
 MAX_GOALS = 32  # goals of one request
+MAX_LOGGED = 300  # characters of a goal's text in the log
 MAX_STATE = 1 << 20  # bytes of a LiveState or UnsafeReport read
 PENDING_GRACE = 0.5  # seconds a step's prediction may take before the pilot says it is paused for it
 RETRY_REFUSED = 1.0  # seconds before a check that gave no decision is asked again at the same step
+OUTCOME_TIMEOUT = PILOT_OUTCOME_TIMEOUT  # seconds a skill it started may run before its manager is asked its status
+MAX_NOTES = 16  # notes a status lists (the goal's last ones)
+
+
+@dataclass
+class _Running:
+    """A skill seen running (or started by the pilot) during a goal, whose end the pilot has not seen."""
+
+    skillset: str
+    skill: str
+    ours: bool  # the pilot started it
+    inputs: dict[str, Any] | None  # its start's inputs, when known
+    marking: int | None = None  # its skillset's last live marking where it ran (None: not seen running yet)
+    monitor: int = 0  # the monitor run (Pilot._runs) that showed it running last
+    since: float = field(default_factory=time.monotonic)  # when it was started or first seen running
+    asked: float = 0.0  # when its manager was last asked for its status (monotonic; 0: never)
 
 
 @dataclass
@@ -85,6 +106,11 @@ class _Goal:
     commands: int = 0
     denied: int = 0
     paused_by: str = ""  # the client that paused it
+    held: str = ""  # why it waits for `resume` (the operator interrupted the pilot's skill)
+    running: dict[str, _Running] = field(default_factory=dict)  # 'skillset:skill' -> seen running, end not seen
+    unknown: MissedOutcome | None = None  # an outcome that ended unseen and cannot be told: awaits `confirm`
+    notes: list[str] = field(default_factory=list)  # what it assumed or was told (PilotStatus.notes)
+    note: str = ""  # the last note while it matters: shown as the status's reason when there is no other
     accepted_divergence: int = -1  # the step whose divergence `resume` accepted
     end: str = ""  # reached, failed or cancelled
     reason: str = ""
@@ -111,8 +137,10 @@ class Pilot:
 
     def __init__(self, session: zenoh.Session, system: System, *, instance: str | None = None,
                  actuator: Actuator | None = None, response_timeout: float = 5.0, budget: float = 1.0,
-                 client: str | None = None, typemap: Mapping[str, str] | None = None, style: KeyStyle = KeyStyle()):
+                 client: str | None = None, typemap: Mapping[str, str] | None = None, style: KeyStyle = KeyStyle(),
+                 outcome_timeout: float = OUTCOME_TIMEOUT):
         self.session, self.system = session, system
+        self.outcome_timeout = outcome_timeout
         self.name = keys.check_chunk(system.name, "system name")
         self.instance = keys.check_chunk(instance or uuid.uuid4().hex[:8], "instance id")
         self.client = keys.check_chunk(client or keys.LOCAL_CLIENT, "client name")
@@ -121,6 +149,7 @@ class Pilot:
         self.actuator: Actuator = actuator if actuator is not None else default_actuator(
             session, system, typemap, style, instance=f"pilot-{self.instance}")
         self.planner = Planner(system)
+        self._names = {name: {t.name for t in net.transitions} for name, net in system.nets.items()}
         self._lock = threading.Lock()
         self._wake = threading.Event()
         self._closed = False
@@ -128,6 +157,8 @@ class Pilot:
         self._unsafe: UnsafeReport | None = None
         self._heard = {"state": 0, "unsafe": 0}  # publications the subscribers gave (to date a get's answers)
         self._monitors: set[str] = set()
+        self._runs = 0  # monitors that appeared: a skill last seen under an earlier one ended across a restart
+        self._ask: list[str] = []  # skillsets whose manager is to be asked for its status (outcome timeout)
         self._goal: _Goal | None = None
         self._goals = 0
         self._inflight: _InFlight | None = None
@@ -140,6 +171,7 @@ class Pilot:
         self._status = PilotStatus(system=self.name, pilot=self.instance, seq=0, stamp=time.time(),
                                    state="waiting for monitor", reason=self._no_monitor())
         self._payload = encode(self._status)
+        self._parser = ThreadPoolExecutor(1, thread_name_prefix="skinet-pilot-goals")  # new goals, in order
         self._pub = session.declare_publisher(keys.pilot_status(self.name),
                                               congestion_control=zenoh.CongestionControl.BLOCK, express=True)
         self._state_sub = session.declare_subscriber(keys.state(self.name), self._on_state)
@@ -169,6 +201,7 @@ class Pilot:
             self._closed = True
         self._wake.set()
         self._worker.join(CHECK_WAIT + 3.0)
+        self._parser.shutdown(wait=False, cancel_futures=True)
         undeclare(self._token, self._goal_q, self._status_q, self._monitor_sub, self._unsafe_sub, self._state_sub)
         self.actuator.close()
         with self._lock:
@@ -207,21 +240,142 @@ class Pilot:
         skillset, _, rest = state.event.partition(":")
         transition = rest.partition("#")[0]
         flight = self._inflight
+        mine = None  # the pilot's command this event answers
         if flight is not None and skillset == flight.command.skillset and state.seq > flight.seq:
             self._inflight = None  # its effect (or an event that changed what it would do): plan again
+            mine = flight.command
         g = self._goal
-        if g is None or g.end or state.seq <= g.since or not transition:
+        if g is None or g.end or state.seq <= g.since:
             return
-        skill, _, outcome = transition.partition(".")
-        if outcome.startswith("failure"):
-            name = f"{skillset}:{skill}"
-            g.retries[name] = g.retries.get(name, 0) + 1
-            if g.retries[name] >= g.max_retries:
-                mode = outcome.partition(".")[2] or "failure"
-                self._end(g, "failed", f"{name} failed {g.retries[name]} times (last: {mode})")
+        gap = last is not None and state.seq > last.seq + 1  # publications the pilot did not get
+        self._follow(g, state, skillset, transition, mine, gap)
+
+    def _follow(self, g: _Goal, state: LiveState, skillset: str, transition: str, mine: PilotCommand | None,
+                gap: bool) -> None:
+        """What one step means for the goal (lock held): outcomes, the operator's own commands, and the
+        skills that ended unseen (docs/pilot.md, *Missed outcomes*)."""
+        skill, _, rest = transition.partition(".")
+        kind = rest.partition(".")[0]
+        name = f"{skillset}:{skill}"
+        if kind in ("start", "interrupt"):
+            self._operator_command(g, skillset, skill, kind, mine)
+        ended = g.running.pop(name, None) if kind in ("success", "failure", "interrupt") else None
+        marking = self._marking()
+        for key, r in list(g.running.items()):
+            sync, status = state.sync.get(r.skillset), state.skillsets.get(r.skillset)
+            if sync is None or sync.state != "live" or status is None or marking is None:
+                continue  # the monitor cannot vouch for this skillset now
+            if r.skill in status.running:
+                r.marking, r.monitor = marking[r.skillset], self._runs
+                continue
+            listed = any((m.skillset, m.skill) == (r.skillset, r.skill) for m in state.missed)
+            own = skillset == r.skillset
+            modelled = own and transition in self._names[skillset]  # a step of the model, not a status adopted
+            if listed or gap or r.monitor != self._runs or (own and not modelled) or \
+                    (r.marking is not None and not modelled):
+                del g.running[key]
+                self._missed(g, r, state, marking[r.skillset], transition if own else "", gap)
+            elif r.marking is not None:
+                del g.running[key]  # ended by a step the monitor explained (an invariant, an event's cascade)
+            if g.end:
                 return
-        if g.goals[g.index].target(skillset, transition):
-            self._next_goal(g)
+        for ss, status in state.skillsets.items():  # skills running now: their outcome is awaited
+            sync = state.sync.get(ss)
+            if sync is None or sync.state != "live" or marking is None:
+                continue
+            for k in status.running:
+                r = g.running.setdefault(f"{ss}:{k}", _Running(ss, k, False, None))
+                r.marking, r.monitor = marking[ss], self._runs
+        if kind == "interrupt" and ended is not None and g.mode == "drive" and ended.ours and \
+                (mine is None or mine.transition != f"{skill}.interrupt"):
+            self._count_failure(g, name, f"{name} interrupted by the operator")
+            if not g.end:
+                g.held = (f"{name} interrupted by the operator ({g.retries[name]} of {g.max_retries} tries): resume "
+                          "to go on")
+                self._notes(g, f"{name} interrupted by the operator")
+            return
+        if kind in ("success", "failure"):
+            self._outcome(g, skillset, transition, ended, "")
+
+    def _operator_command(self, g: _Goal, skillset: str, skill: str, kind: str, mine: PilotCommand | None) -> None:
+        """A start or interrupt seen: in guide mode, one other than the command suggested is named (lock held)."""
+        if g.mode != "guide":
+            return
+        suggested = self._status.next if self._status.goal_id == g.id else None
+        if suggested is None or (suggested.skillset, suggested.transition) == (skillset, f"{skill}.{kind}"):
+            g.note = ""
+            return
+        did = "started" if kind == "start" else "interrupted"
+        wanted = f"{suggested.skillset}:{suggested.transition.removesuffix('.start')}"
+        self._notes(g, f"the operator {did} {skillset}:{skill}, not {wanted}: plan again")
+
+    def _missed(self, g: _Goal, r: _Running, state: LiveState, after: int, step: str, gap: bool) -> None:
+        """``r`` ended while the pilot did not see it: go on from the outcome the monitor or the model
+        infers, else hold the goal until an operator says what it was (lock held)."""
+        m = next((x for x in state.missed if (x.skillset, x.skill) == (r.skillset, r.skill)), None)
+        if m is None:
+            net = self.system.nets[r.skillset]
+            how = ("while the monitor was restarted" if r.monitor != self._runs else
+                   f"in steps of the monitor the pilot did not get (before step {state.seq})" if gap else
+                   f"while the monitor resynced {r.skillset}" if step == "resync" else
+                   f"without its response ({r.skillset}'s status at step {state.seq} shows it ended)")
+            if r.marking is None:  # started, never seen running: it may have run, or not
+                found = Inference(r.skill, None, modes(net, r.skill))
+            else:
+                found = infer_outcomes(net, r.marking, after, [r.skill])[0]
+            m = MissedOutcome(skillset=r.skillset, skill=r.skill, gap=how, outcome=found.outcome,
+                              candidates=list(found.candidates))
+        name = f"{r.skillset}:{r.skill}"
+        if m.outcome is None:
+            if r.ours or g.mode == "guide" or self._concerns(g, r):
+                g.unknown = m
+                self._notes(g, f"{name} ended {m.gap}: outcome unknown")
+                log.warning("goal %d: %s ended %s: outcome unknown (%s)", g.id, name, m.gap,
+                            ", ".join(m.candidates) or "no mode explains the resources")
+            return
+        self._notes(g, f"{name} ended {m.gap}: {m.outcome.partition('.')[2]} inferred from the resources")
+        log.warning("goal %d: %s", g.id, g.note)
+        self._outcome(g, r.skillset, m.outcome, r, g.note)
+
+    def _concerns(self, g: _Goal, r: _Running) -> bool:
+        """Whether the goal being followed is a ``run`` of ``r``'s skill."""
+        goal = g.goals[g.index]
+        return goal.kind == "run" and (goal.skillset, goal.skill) == (r.skillset, r.skill)
+
+    def _outcome(self, g: _Goal, skillset: str, transition: str, r: _Running | None, how: str) -> None:
+        """An outcome of ``skillset``: a failure counts against the retries; a success may reach a ``run``
+        goal, if its start had the goal's inputs; ``how``: the note of an outcome not seen (lock held)."""
+        skill, _, outcome = transition.partition(".")
+        name = f"{skillset}:{skill}"
+        if outcome.startswith("failure"):
+            self._count_failure(g, name, f"{name} failed", outcome.partition(".")[2] or "failure")
+            if g.end:
+                return
+        goal = g.goals[g.index]
+        if not goal.target(skillset, transition):
+            return
+        given = dict(goal.given(skillset, skill) or {})
+        if r is not None and r.ours:
+            other = None if r.inputs == given else r.inputs
+        else:  # someone else's start: the inputs its request carried, when the actuator heard it
+            check = getattr(self.actuator, "start_inputs", None)
+            seen = check(skillset, skill, given) if check is not None else None
+            other = None if seen is None or seen[0] else seen[1]
+        if other is not None:
+            self._notes(g, f"{name} ended in {outcome} after a start with inputs {other}, not the goal's {given}: it "
+                           f"does not count for '{goal.text}'")
+            return
+        self._next_goal(g, how and f"{goal.text} reached by an outcome not seen: {how}")
+
+    def _count_failure(self, g: _Goal, name: str, what: str, mode: str = "") -> None:
+        g.retries[name] = g.retries.get(name, 0) + 1
+        if g.retries[name] >= g.max_retries:
+            last = f" (last: {mode})" if mode else ""
+            self._end(g, "failed", f"{what} {g.retries[name]} times{last}")
+
+    def _notes(self, g: _Goal, note: str) -> None:
+        g.note = note
+        g.notes = (g.notes + [note])[-MAX_NOTES:]
 
     def _on_unsafe(self, sample: zenoh.Sample) -> None:
         report = self._read(sample.payload, UnsafeReport, "unsafe report")
@@ -238,6 +392,7 @@ class Pilot:
         with self._lock:
             if sample.kind == zenoh.SampleKind.PUT:
                 self._monitors.add(key)
+                self._runs += 1
                 self._state = self._unsafe = None  # a new monitor counts its steps from 0: ask it
                 if self._inflight is not None:
                     self._inflight.seq = -1
@@ -276,9 +431,27 @@ class Pilot:
     # -- goal requests ------------------------------------------------------------------
 
     def _on_goal_query(self, query: zenoh.Query) -> None:
+        """Answer a goal request: a new goal on the parser thread (parsing and planning take time, and a
+        Zenoh callback that blocks holds up the session's later queries, cancels included), anything
+        else at once."""
+        try:
+            answer = self._answer(query)
+        except Exception:  # a bug must not stop the pilot; the client gets a reason
+            log.exception("error while answering a goal request")
+            answer = self._reject("internal error in the pilot (see its log)")
+        if isinstance(answer, PilotGoalReply):
+            self._reply(query, lambda: answer)
+        else:
+            request, client = answer
+            try:
+                self._parser.submit(self._reply, query, lambda: self._set_goal(request, client))
+            except RuntimeError:  # closing
+                self._reply(query, lambda: self._reject("the pilot is stopping"))
+
+    def _reply(self, query: zenoh.Query, answer: Callable[[], PilotGoalReply]) -> None:
         with query:
             try:
-                reply = self._answer(query)
+                reply = answer()
             except Exception:  # a bug must not stop the pilot; the client gets a reason
                 log.exception("error while answering a goal request")
                 reply = self._reject("internal error in the pilot (see its log)")
@@ -291,7 +464,8 @@ class Pilot:
     def _reject(self, reason: str) -> PilotGoalReply:
         return PilotGoalReply(system=self.name, accepted=False, reason=reason)
 
-    def _answer(self, query: zenoh.Query) -> PilotGoalReply:
+    def _answer(self, query: zenoh.Query) -> PilotGoalReply | tuple[PilotGoalRequest, str]:
+        """The reply to ``query``, or a goal request and its client, to be set by :meth:`_set_goal`."""
         client = keys.client_of(str(query.key_expr))
         if client is None:
             return self._reject(f"key '{query.key_expr}': the client chunk must be a name "
@@ -308,38 +482,65 @@ class Pilot:
         if request.system != self.name:
             return self._reject(f"unknown system '{request.system}': this pilot serves '{self.name}'")
         if request.op == "goal":
-            return self._set_goal(request, client)
+            return request, client
         with self._lock:
             g = self._goal
             if g is None or g.end:
                 return self._reject(f"no goal is being followed: nothing to {request.op}")
-            if request.op == "mode":
+            if request.op == "confirm":
+                problem = self._confirm(g, request.answer, client)
+                if problem:
+                    return self._reject(problem)
+            elif request.op == "mode":
                 g.mode = request.mode
             elif request.op == "cancel":
                 self._end(g, "cancelled", f"cancelled by {client}")
             elif request.op == "pause":
                 g.paused_by = client
             else:  # resume: also accepts the divergence shown now
-                g.paused_by = ""
+                g.paused_by = g.held = ""
                 if self._state is not None and self._state.divergence:
                     g.accepted_divergence = self._state.seq
             self._asked = None
             self._decide()
             return PilotGoalReply(system=self.name, accepted=True, goal_id=g.id)
 
+    def _confirm(self, g: _Goal, answer: str | None, client: str) -> str:
+        """The operator's answer about the outcome awaited; a reason when there is nothing to answer (lock held)."""
+        m = g.unknown
+        if m is None:
+            return "no outcome is awaiting an answer: nothing to confirm"
+        if answer is None:
+            return "confirm needs an answer: success, failure or rerun"
+        name = f"{m.skillset}:{m.skill}"
+        g.unknown = None
+        self._notes(g, f"{name} ended {m.gap}: {answer} confirmed by {client}")
+        log.info("goal %d: %s", g.id, g.note)
+        if answer == "rerun":
+            return ""
+        net = self.system.nets[m.skillset]
+        pool = [t for t in (m.candidates or modes(net, m.skill)) if t.startswith(f"{m.skill}.{answer}")] or \
+            [t for t in modes(net, m.skill) if t.startswith(f"{m.skill}.{answer}")]
+        goal = g.goals[g.index]
+        wanted = f"{m.skill}.success.{goal.mode}" if goal.kind == "run" and goal.mode else ""
+        transition = wanted if wanted in pool else pool[0] if pool else f"{m.skill}.{answer}"
+        self._outcome(g, m.skillset, transition, None, g.note)
+        return ""
+
     def _set_goal(self, request: PilotGoalRequest, client: str) -> PilotGoalReply:
-        try:
+        try:  # the goals counted before any is parsed: each is planned at once, within the budget
+            count = len(request.goals) + (count_goals(request.mission, request.mission_name) if request.mission else 0)
+            if count > MAX_GOALS:
+                return self._reject(f"{count} goals: a mission has at most {MAX_GOALS}")
             several = len(request.goals) > 1
             goals = [parse_goal(self.system, text, request.inputs or None, f"<goal {n}>" if several else "<goal>",
                                 types=self.typemap) for n, text in enumerate(request.goals, 1)]
             if request.mission:
-                goals += parse_goals(request.mission, self.system, request.mission_name, self.typemap)
+                goals += parse_goals(request.mission, self.system, request.mission_name, self.typemap, MAX_GOALS)
         except SourceError as exc:
             return self._reject(str(exc))
         if not goals:
             return self._reject("no goals: give goals ('reach FORMULA', 'run SKILLSET:SKILL') or a mission")
-        if len(goals) > MAX_GOALS:  # each is planned at once, within the budget
-            return self._reject(f"{len(goals)} goals: a mission has at most {MAX_GOALS}")
         for goal in goals:  # a bound skill's goal message: refused now, not after the robot moved for it
             for (skillset, skill), values in goal.inputs.items():
                 problem = inputs_problem(self.actuator, skillset, skill, values)
@@ -367,7 +568,8 @@ class Pilot:
             self._goal = _Goal(self._goals, client, request.mode, goals, request.max_retries, since,
                                plan=plans[0] if plans else None, plans=plans)
             self._asked = None
-            log.info("goal %d of %s (%s): %s", self._goals, client, request.mode, "; ".join(x.text for x in goals))
+            log.info("goal %d of %s (%s): %s", self._goals, client, request.mode,
+                     _cut("; ".join(x.text for x in goals), MAX_LOGGED))
             self._decide()
             first = plans[0] if plans else None
             return PilotGoalReply(system=self.name, accepted=True, goal_id=self._goals,
@@ -392,6 +594,9 @@ class Pilot:
                     fetched = True
                 with self._lock:
                     due = None if self._closed else self._decide()
+                    ask, self._ask = self._ask, []
+                for skillset in dict.fromkeys(ask):
+                    self._ask_status(skillset)
                 if due is not None:
                     self._act(due)
             except Exception:  # a bug must not stop the pilot
@@ -425,6 +630,7 @@ class Pilot:
             return self._show(g.end, g.reason)
         if why:
             return self._show("paused", why)
+        self._outcome_timeouts(g)
         if flight is not None:
             return self._show("waiting for outcome", f"the effect of {flight.command.skillset}:"
                                                      f"{flight.command.transition}", next_=flight.command)
@@ -451,7 +657,7 @@ class Pilot:
                 return self._show(g.end, g.reason)
         if not isinstance(action, Command):
             running = ", ".join(f"{n}:{k}" for n, ss in st.skillsets.items() for k in ss.running)
-            return self._show("waiting for outcome", f"the outcome of {running}")
+            return self._show("waiting for outcome", f"the outcome of {running}{self._overdue(g)}")
         command = PilotCommand(skillset=action.skillset, transition=action.transition, inputs=dict(action.inputs))
         if g.mode == "guide":
             return self._show("guiding", next_=command)
@@ -468,7 +674,38 @@ class Pilot:
         self._show("driving", next_=command)
         return _Due(command, st.seq, g.id, u)
 
+    def _outcome_timeouts(self, g: _Goal) -> None:
+        """Ask the manager of each skill the pilot started that has run ``outcome_timeout`` s without an
+        outcome (or since it was last asked) for its status: a response lost while its link was down is
+        then found (lock held; only while the goal is not paused, so its skillset is live)."""
+        now = time.monotonic()
+        for r in g.running.values():
+            if r.ours and r.marking is not None and now - max(r.since, r.asked) >= self.outcome_timeout:
+                r.asked = now
+                self._ask.append(r.skillset)
+                log.info("goal %d: no outcome of %s:%s within %g s: asking %s for its status", g.id, r.skillset,
+                         r.skill, self.outcome_timeout, responder(self.system, r.skillset, r.skill))
+
+    def _overdue(self, g: _Goal) -> str:
+        asked = [f"{r.skillset}:{r.skill}" for r in g.running.values() if r.asked]
+        return (f" (none seen within {self.outcome_timeout:g} s: status asked of its manager: "
+                f"{', '.join(asked)})") if asked else ""
+
+    def _ask_status(self, skillset: str) -> None:
+        ask = getattr(self.actuator, "ask_status", None)
+        if ask is None:
+            log.warning("this pilot's actuator cannot ask %s for its status", skillset)
+            return
+        try:
+            log.info("asked for its status: %s", ask(skillset))
+        except ActError as exc:
+            log.warning("cannot ask %s for its status: %s", skillset, exc.reason)
+
     def _paused(self, g: _Goal, st: LiveState) -> str:
+        if g.unknown is not None:
+            return unknown_reason(g.unknown)
+        if g.held:
+            return g.held
         if g.paused_by:
             return f"paused by {g.paused_by}"
         if not st.sync:
@@ -521,9 +758,14 @@ class Pilot:
                 self._refuse(g, due, f"the check answered {reply.decision} for {what} at step {due.seq}: {why}",
                              again=False)
                 return
-            manager = responder(self.system, c.skillset, c.transition.partition(".")[0])
+            skill, _, kind = c.transition.partition(".")
+            manager = responder(self.system, c.skillset, skill)
             self._inflight = _InFlight(c, due.seq, time.monotonic() + self.response_timeout, manager)
             g.commands += 1
+            g.note = ""
+            if kind == "start":
+                g.running[f"{c.skillset}:{skill}"] = _Running(c.skillset, skill, True, dict(c.inputs),
+                                                              monitor=self._runs)
             self._show("waiting for outcome", f"the effect of {what}", c)
         try:
             sent = self.actuator.send(c)
@@ -534,6 +776,7 @@ class Pilot:
                 self._inflight = None
                 g = self._goal
                 if g is not None and g.id == due.goal and not g.end:
+                    self._forget(g, c)
                     name = f"{c.skillset}:{c.transition}"
                     g.refused[name] = g.refused.get(name, 0) + 1
                     if g.refused[name] >= g.max_retries:
@@ -546,8 +789,16 @@ class Pilot:
                 self._inflight = None
                 g = self._goal
                 if g is not None and g.id == due.goal and not g.end:
+                    self._forget(g, c)
                     self._end(g, "failed", f"cannot send {c.skillset}:{c.transition}: {exc.reason}")
                     self._decide()
+
+    def _forget(self, g: _Goal, c: PilotCommand) -> None:
+        """A start that was not sent, or that the robot refused: no outcome of it to await (lock held)."""
+        skill = c.transition.partition(".")[0]
+        r = g.running.get(f"{c.skillset}:{skill}")
+        if c.transition.endswith(".start") and r is not None and r.ours and r.marking is None:
+            del g.running[f"{c.skillset}:{skill}"]
 
     def _refuse(self, g: _Goal, due: _Due, reason: str, again: bool = True) -> None:
         """Hold ``due`` back: asked again at the next step or report, or (``again``) after RETRY_REFUSED s."""
@@ -555,9 +806,9 @@ class Pilot:
         self._asked, self._refusal = (g.id, due.seq, due.unsafe, until), reason
         self._decide()
 
-    def _next_goal(self, g: _Goal) -> None:
+    def _next_goal(self, g: _Goal, reason: str = "") -> None:
         if g.index + 1 == len(g.goals):
-            self._end(g, "reached", "")
+            self._end(g, "reached", reason)
             return
         g.index += 1
         # The next goal's plan from when the mission was set: it serves wherever it covers the marking (a
@@ -579,7 +830,8 @@ class Pilot:
         fields: dict[str, Any] = dict(state=state, reason=reason, next=next_, state_seq=st.seq if st else 0)
         if g is not None:
             fields.update(goal_id=g.id, client=g.client, mode=g.mode, goals=[x.text for x in g.goals], index=g.index,
-                          retries=dict(g.retries), commands=g.commands, denied=g.denied)
+                          retries=dict(g.retries), commands=g.commands, denied=g.denied, unknown=g.unknown,
+                          notes=list(g.notes), reason=reason or (g.note if not g.end else ""))
             plan = g.plan
             if plan is not None:
                 if self._steps[0] is not plan:
@@ -612,10 +864,24 @@ class Pilot:
         return self._marked[1]
 
 
+def unknown_reason(m: MissedOutcome) -> str:
+    """The status's reason while the outcome of ``m`` awaits an operator's answer."""
+    told = (f"{' or '.join(c.partition('.')[2] for c in m.candidates)} would explain the resources"
+            if m.candidates else "no outcome of the model explains the resources")
+    return (f"outcome unknown: {m.skillset}:{m.skill} ended {m.gap}; {told}: confirm success, failure or rerun "
+            "(the pilot does not start it again on its own)")
+
+
+def _cut(text: str, limit: int) -> str:
+    """``text`` on one line, cut to ``limit`` characters with the count of those left out."""
+    flat = " ".join(text.split())
+    return flat if len(flat) <= limit else f"{flat[:limit]}… ({len(flat) - limit} more characters)"
+
+
 def start_pilot(session: zenoh.Session, system: System, instance: str | None = None,
                 actuator: Actuator | None = None, response_timeout: float = 5.0, budget: float = 1.0,
                 client: str | None = None, typemap: Mapping[str, str] | None = None,
-                style: KeyStyle = KeyStyle()) -> Pilot:
+                style: KeyStyle = KeyStyle(), outcome_timeout: float = OUTCOME_TIMEOUT) -> Pilot:
     """Start a pilot of ``system`` on ``session`` (which may be shared, SPEC §7).
 
     ``instance``: its id in the liveliness token and the status (default: random);
@@ -623,7 +889,9 @@ def start_pilot(session: zenoh.Session, system: System, instance: str | None = N
     ``style``: the managers' request topics, which need the system's ``typemap``, and the bound skills'
     actions); ``response_timeout``: seconds a manager has to react to a command; ``budget``: planning
     seconds per goal; ``client``: its
-    router login, the client chunk of its check queries (default ``local``).
+    router login, the client chunk of its check queries (default ``local``); ``outcome_timeout``: seconds a
+    skill it started may run without an outcome before its manager is asked for its status (and again
+    after as many seconds).
     """
     return Pilot(session, system, instance=instance, actuator=actuator, response_timeout=response_timeout,
-                 budget=budget, client=client, typemap=typemap, style=style)
+                 budget=budget, client=client, typemap=typemap, style=style, outcome_timeout=outcome_timeout)

@@ -25,14 +25,23 @@ from skinet.errors import Pos, SourceError
 from skinet.plan.goal import Goal, parse_goal
 from skinet.plan.inputs import parse_inputs
 from skinet.system import System
-from skinet.tomltext import check_keys, check_tables, locate, parse_toml
+from skinet.tomltext import Locations, check_keys, check_tables, locate, parse_toml
 
 GOAL_KEYS = ("reach", "run", "inputs")
 
 
+def count_goals(text: str, source: str = "<goals>") -> int:
+    """How many ``[[goals]]`` tables a goals file has (0 when it has none, or ``goals`` is not a list of
+    tables); its TOML decoded, nothing else checked.  Cost: linear in the text.  Raises ``SourceError``
+    on invalid TOML."""
+    entries = parse_toml(text, source).get("goals")
+    return len(entries) if isinstance(entries, list) else 0
+
+
 def parse_goals(text: str, system: System, source: str = "<goals>",
-                types: Mapping[str, str] | None = None) -> list[Goal]:
-    """The goals of a goals file, in order; ``types`` is the system's type map (for inputs)."""
+                types: Mapping[str, str] | None = None, max_goals: int | None = None) -> list[Goal]:
+    """The goals of a goals file, in order; ``types`` is the system's type map (for inputs); more than
+    ``max_goals`` goals are refused before any goal is parsed."""
     data = parse_toml(text, source)
     check_tables(data, ["[[goals]]"], source, text)
     entries = data.get("goals")
@@ -40,25 +49,29 @@ def parse_goals(text: str, system: System, source: str = "<goals>",
         raise SourceError.at(source, locate(text, (), "goals") or Pos(1, 1),
                              "no goals: a goals file lists [[goals]] tables, each with reach = \"FORMULA\" or "
                              "run = \"SKILLSET:SKILL\"")
+    if max_goals is not None and len(entries) > max_goals:
+        raise SourceError.at(source, locate(text, ("goals", max_goals)),
+                             f"{len(entries)} goals: a mission has at most {max_goals}")
     lines = text.splitlines()
+    where = Locations(text)
     goals = []
     for n, entry in enumerate(entries):
         table = ("goals", n)
-        header = locate(text, table)
+        header = where.get(table)
         check_keys(entry, GOAL_KEYS, source, text, table, "[[goals]]")
         kinds = [k for k in ("reach", "run") if k in entry]
         if len(kinds) != 1:
             problem = "has both reach and run" if kinds else "needs reach = \"FORMULA\" or run = \"SKILLSET:SKILL\""
-            raise SourceError.at(source, locate(text, table, kinds[1]) if kinds else header, f"goal {n + 1} {problem}")
+            raise SourceError.at(source, where.get(table, kinds[1]) if kinds else header, f"goal {n + 1} {problem}")
         kind = kinds[0]
-        at = locate(text, table, kind) or header
+        at = where.get(table, kind) or header
         value = entry[kind]
         if not isinstance(value, str):
             raise SourceError.at(source, at, f"goal {n + 1}: {kind} must be a string")
         inputs = {}
         if "inputs" in entry:
-            where = locate(text, table, "inputs") or header
-            inputs = parse_inputs(system, entry["inputs"], source, lambda keys: nested(lines, where, keys), types)
+            start = where.get(table, "inputs") or header
+            inputs = parse_inputs(system, entry["inputs"], source, lambda keys: nested(lines, start, keys), types)
         goals.append(parse_goal(system, f"{kind} {value}", inputs, source, _value_start(lines, at, len(kind) + 1), types))
     return goals
 

@@ -73,6 +73,24 @@ def skill_request(store: Typestore, skillset: Skillset, skill: str, id_: str,
     return topic, encode(store, topic.typename, default_instance(store, topic.typename, id=id_, input=input_))
 
 
+def request_inputs(store: Typestore, skillset: Skillset, skill: str, payload: bytes) -> tuple[str, dict[str, Any]]:
+    """``(id, inputs)`` of a CDR ``Skill<K>Request`` (every input field, as plain values); ``ValueError`` when
+    the payload is not one."""
+    topic = topic_of(skillset, "skill_request", skill)
+    try:
+        msg = decode(store, topic.typename, payload)
+        return str(msg.id), to_plain(msg.input)
+    except (SerdeError, AttributeError) as exc:
+        raise ValueError(f"not a request of {skillset.name}:{skill}: {exc}") from None
+
+
+def plain_inputs(store: Typestore, skillset: Skillset, skill: str, inputs: Mapping[str, Any] | None) -> dict[str, Any]:
+    """``inputs`` as :func:`request_inputs` reads them back from a request (fields left out at their
+    defaults), to compare a start's inputs with a goal's."""
+    k = skillset.skill(skill)
+    return to_plain(message(store, msg_typename(skillset, skill_type(k, "Input")), inputs or {}))
+
+
 def skill_interrupt(store: Typestore, skillset: Skillset, skill: str, id_: str) -> tuple[ManagerTopic, bytes]:
     """``SkillInterrupt`` with the running execution's ``id_`` (the manager ignores any other)."""
     topic = topic_of(skillset, "skill_interrupt", skill)
@@ -142,5 +160,5 @@ class Writer:
         return rmw_attachment(self.sequence, timestamp_ns, self.gid)
 
 
-__all__ = ["REFUSALS", "Writer", "event_request", "skill_ids", "skill_interrupt", "skill_request", "start_refusal",
-           "status_request", "topic_of"]
+__all__ = ["REFUSALS", "Writer", "event_request", "plain_inputs", "request_inputs", "skill_ids", "skill_interrupt",
+           "skill_request", "start_refusal", "status_request", "topic_of"]

@@ -13,3 +13,8 @@ MIN_BUDGET = 0.05
 # live marking only: the paper's system takes about 300 bytes, 8 corpus skillsets about
 # 3 KB, so 64 KiB leaves room for a few hundred skillsets.
 MAX_PREDICT_REQUEST = 1 << 16
+
+# Seconds a skill the pilot started may run without an outcome before the pilot asks its
+# manager for its status (a response lost while a link was down is then found); the
+# pilot's --outcome-timeout.  The models give no skill a duration, so one bound serves all.
+PILOT_OUTCOME_TIMEOUT = 60.0

@@ -377,9 +377,11 @@ class PilotGoalRequest(_Message):
     switch mode, cancel, pause or resume.  ``goals`` (goal texts) and ``mission`` (a goals file's TOML
     text) are read as ``skinet plan`` reads them; errors come back with ``mission_name:line:col``."""
 
+    OMIT_AT_DEFAULT = ("answer",)
     system: str
-    op: Literal["goal", "mode", "cancel", "pause", "resume"] = Field(
-        "goal", description="goal: set goals (or mission); mode: switch to `mode`; cancel, pause, resume the goal")
+    op: Literal["goal", "mode", "cancel", "pause", "resume", "confirm"] = Field(
+        "goal", description="goal: set goals (or mission); mode: switch to `mode`; cancel, pause, resume the goal; "
+                            "confirm: answer the outcome the pilot awaits (`answer`)")
     goals: list[str] = Field(default_factory=list, description="'reach FORMULA', 'run SKILLSET:SKILL[.success.MODE]'")
     inputs: dict[str, dict[str, Any]] = Field(default_factory=dict, description="skill -> its input values "
                                                                                 "(for the goals given as text)")
@@ -390,6 +392,9 @@ class PilotGoalRequest(_Message):
                                                                  "drive: also send it to the robot")
     replace: bool = Field(False, description="replace a goal that runs (otherwise such a request is rejected)")
     max_retries: int = Field(3, ge=1, le=100, description="failures of one skill after which the goal fails")
+    answer: Literal["success", "failure", "rerun"] | None = Field(
+        None, description="confirm: how the skill whose outcome is unknown ended (success, failure), or rerun: it "
+                          "did not do its work, start it again (no retry counted)")
 
 
 class PilotGoalReply(_Message):
@@ -409,6 +414,7 @@ class PilotStatus(_Message):
     """The pilot's status (SPEC §8): published on ``skinet/<system>/pilot/status`` at every change, and
     answered on ``get`` there."""
 
+    OMIT_AT_DEFAULT = ("unknown", "notes")
     system: str
     pilot: str = Field(description="the pilot's instance id")
     seq: int = Field(ge=0, description="publication counter")
@@ -431,6 +437,12 @@ class PilotStatus(_Message):
     commands: int = Field(0, ge=0, description="commands sent to the robot for this goal")
     denied: int = Field(0, ge=0, description="commands the check denied (a defect: never sent)")
     state_seq: int = Field(0, ge=0, description="the monitor's LiveState.seq this status is about")
+    unknown: MissedOutcome | None = Field(None, description=(
+        "a skill that ended unseen and whose outcome the pilot cannot tell: it is paused until an operator "
+        "answers with op confirm"))
+    notes: list[str] = Field(default_factory=list, description=(
+        "what the pilot assumed or was told during this goal, oldest first (its last ones): outcomes inferred "
+        "after a gap, the operator's interrupts and answers, commands other than the one it suggested"))
 
 
 MESSAGES: dict[str, type[BaseModel]] = {

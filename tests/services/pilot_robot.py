@@ -45,6 +45,7 @@ class Recording:
         self.inner = inner
         self.sent: list[str] = []
         self.inputs: list[dict[str, Any]] = []
+        self.asked: list[str] = []  # skillsets whose manager was asked for its status
 
     def send(self, command: PilotCommand) -> str:
         out = self.inner.send(command)
@@ -54,6 +55,13 @@ class Recording:
 
     def problem(self, skillset: str, skill: str, inputs: dict[str, Any]) -> str | None:
         return inputs_problem(self.inner, skillset, skill, inputs)
+
+    def start_inputs(self, skillset: str, skill: str, given: dict[str, Any]) -> Any:
+        return self.inner.start_inputs(skillset, skill, given)  # type: ignore[attr-defined]
+
+    def ask_status(self, skillset: str) -> str:
+        self.asked.append(skillset)
+        return self.inner.ask_status(skillset)  # type: ignore[attr-defined]
 
     def close(self) -> None:
         self.inner.close()

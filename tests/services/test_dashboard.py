@@ -762,3 +762,31 @@ def test_the_goal_box_drives_a_goal_with_the_next_step_highlighted(browser, dash
     finally:
         impl.close()
         robot.close()
+
+
+def test_the_goal_box_asks_how_a_skill_that_ended_unseen_ended(browser, dashboard, client_factory, spot_arm) -> None:
+    """teleop ends while the monitor restarts: the box shows the skill and the gap with three answers, and
+    'It succeeded' lets the pilot reach the goal without starting teleop again."""
+    from tests.services.pilot_robot import Implementations, Robot
+    from tests.services.test_pilot_gaps import restart_monitor_while
+
+    robot = Robot(client_factory, *spot_arm)
+    impl = Implementations(robot.sim, robot.system, hold=[("spot", "teleop")])
+    try:
+        browser.get(dashboard())
+        until(browser, lambda d: pilot_state(d) == "idle", "the idle pilot")
+        assert css(browser, "#goal-unknown[hidden]")
+        click(browser, "input[name=goal-mode][value=drive]")
+        type_goal(browser, "run spot:teleop")
+        robot.statuses.first(lambda s: s.reason == "the outcome of spot:teleop", what="teleop running")
+        restart_monitor_while(robot, impl, "teleop")
+        until(browser, lambda d: css(d, "#goal-unknown:not([hidden])"), "the question", 60)
+        assert css(browser, "#goal-unknown-text")[0]["text"] == (
+            "How did spot:teleop end (while the monitor was restarted)?")
+        click(browser, ".goal-answer[data-answer=success]")
+        until(browser, lambda d: pilot_state(d) == "reached", "the goal reached", 60)
+        assert css(browser, "#goal-unknown[hidden]")
+        assert robot.actuator.sent.count("spot:teleop.start") == 1
+    finally:
+        impl.close()
+        robot.close()

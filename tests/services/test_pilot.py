@@ -82,21 +82,28 @@ def test_guide_sends_nothing_and_publishes_the_exact_next_command(robot: Robot) 
         impl.close()
 
 
-def test_the_operator_acts_and_the_pilot_plans_again_from_what_they_caused(robot: Robot) -> None:
-    """Spot is standing up (held) when the operator interrupts it: the pilot plans again from there
-    and stands it up again; an interrupt is no failure."""
+def test_the_operators_interrupt_of_the_pilots_skill_is_reported_counted_and_not_restarted_unasked(
+        robot: Robot) -> None:
+    """Spot is standing up (held) when the operator interrupts it: the pilot says so, counts it against
+    the retries and waits for `resume`; then it plans again from there and stands it up again."""
     impl = Implementations(robot.sim, robot.system, hold=[("spot", "stand_up")])
     gui = Gui(robot.observer, robot)
     try:
         reply = ask_goal(robot.observer, goal("run spot:go_to_waypoint", inputs=WALK, mode="drive"))
         robot.statuses.first(lambda s: s.reason == "the outcome of spot:stand_up")  # the pilot saw it start
         gui.interrupt("spot", "stand_up")
+        held = robot.statuses.state("paused", reply.goal_id)
+        assert held.reason == "spot:stand_up interrupted by the operator (1 of 3 tries): resume to go on"
+        assert (held.retries, held.commands, held.notes) == (
+            {"spot:stand_up": 1}, 2, ["spot:stand_up interrupted by the operator"])
+        assert robot.actuator.sent == ["spot:init_power.start", "spot:stand_up.start"]
+        assert ask_goal(robot.observer, PilotGoalRequest(system="spot_arm", op="resume")).accepted
         robot.statuses.first(lambda s: s.commands == 3, what="a third command")
         impl.release("spot", "stand_up")
         done = robot.statuses.state("reached", reply.goal_id)
         assert robot.actuator.sent == ["spot:init_power.start", "spot:stand_up.start", "spot:stand_up.start",
                                        "spot:go_to_waypoint.start"]
-        assert (done.commands, done.denied, done.retries) == (4, 0, {})
+        assert (done.commands, done.denied, done.retries) == (4, 0, {"spot:stand_up": 1})
     finally:
         gui.close()
         impl.close()
@@ -463,3 +470,33 @@ def test_a_start_the_manager_refuses_is_asked_again_then_ends_the_goal(robot: Ro
     failed = robot.statuses.state("failed", reply.goal_id)
     assert failed.reason == refused.reason + " (2 times)"
     assert (robot.actuator.sent, failed.commands) == ([], 2)  # sent, refused: the recording keeps what went through
+
+
+def test_a_huge_mission_is_refused_by_its_goal_count_and_a_cancel_right_after_is_answered(robot: Robot) -> None:
+    """5 000 goals (160 KB): counted before any is parsed (parsing them took minutes: every goal's
+    position was searched from the top of the text), and parsed off the queryable's thread."""
+    assert ask_goal(robot.observer, goal("reach spot:Standing")).accepted
+    robot.statuses.state("guiding", 1)
+    mission = '[[goals]]\nreach = "spot:Standing"\n' * 5000
+    assert 150_000 < len(mission) < 256 << 10
+    huge: list = []
+    sender = threading.Thread(target=lambda: huge.append(ask_goal(
+        robot.observer, PilotGoalRequest(system="spot_arm", mission=mission, mission_name="m.toml", replace=True))))
+    sender.start()
+    cancel = ask_goal(robot.observer, PilotGoalRequest(system="spot_arm", op="cancel"), client="operator2")
+    sender.join(15.0)
+    assert cancel.accepted
+    assert robot.statuses.state("cancelled", 1).reason == "cancelled by operator2"
+    assert [(r.accepted, r.reason) for r in huge] == [(False, "5000 goals: a mission has at most 32")]
+
+
+def test_a_mission_past_the_limit_is_refused_at_the_first_goal_too_many() -> None:
+    from skinet.errors import SourceError
+    from skinet.files import load_system
+    from skinet.plan import parse_goals
+
+    system, typemap = load_system("skillsets/spot_arm.toml")
+    with pytest.raises(SourceError) as refused:
+        parse_goals('[[goals]]\nreach = "spot:Standing"\n' * 4, system, "m.toml", typemap, max_goals=3)
+    assert str(refused.value) == "m.toml:7:1: error: 4 goals: a mission has at most 3"
+    assert len(parse_goals('[[goals]]\nreach = "spot:Standing"\n' * 3, system, "m.toml", typemap, 3)) == 3

@@ -81,14 +81,18 @@ def sample_messages(system: System) -> dict[str, BaseModel]:
                             "PowerOn -> PowerOff")]),
         "PilotGoalRequest": PilotGoalRequest(system=system.name, goals=["run spot:go_to_waypoint"],
                                              inputs={"go_to_waypoint": {"target": {"x": 12.0, "y": 3.5, "z": 0.0}}},
-                                             mode="drive", max_retries=2),
+                                             mode="drive", max_retries=2, answer="rerun"),
         "PilotGoalReply": PilotGoalReply(system=system.name, accepted=True, goal_id=1, answer="cyclic", moves=4,
                                          steps=[_STEP]),
         "PilotStatus": PilotStatus(system=system.name, pilot="p1", seq=3, stamp=1700000000.6, state="driving",
                                    goal_id=1, client="operator", mode="drive", goals=["reach spot:Standing"],
                                    answer="cyclic", moves_left=3, next=PilotCommand(skillset="spot",
                                                                                     transition="init_power.start"),
-                                   steps=[_STEP], retries={"spot:init_power": 1}, commands=1, state_seq=7),
+                                   steps=[_STEP], retries={"spot:init_power": 1}, commands=1, state_seq=7,
+                                   unknown=MissedOutcome(skillset="spot", skill="teleop",
+                                                         gap="while the monitor was restarted",
+                                                         candidates=["teleop.success.done", "teleop.failure.link_lost"]),
+                                   notes=["spot:teleop ended while the monitor was restarted: outcome unknown"]),
     }
 
 

@@ -582,6 +582,11 @@ function renderPilot() {
   document.getElementById("goal-pause").disabled = !active || p.state === "paused";
   document.getElementById("goal-resume").disabled = !(p && p.state === "paused");
   document.getElementById("goal-cancel").disabled = !active;
+  // A skill that ended unseen, its outcome unknown: the pilot waits for the operator's answer.
+  const unknown = p && active ? p.unknown : null;
+  document.getElementById("goal-unknown").hidden = !unknown;
+  document.getElementById("goal-unknown-text").textContent = unknown
+    ? `How did ${unknown.skillset}:${unknown.skill} end (${unknown.gap})?` : "";
   if (active && !modeClicked) for (const r of document.querySelectorAll("input[name=goal-mode]")) r.checked = r.value === p.mode;
   if (!p) { fill("pilot-status", el("span", { class: "muted" }, "no pilot status yet")); fill("plan"); return; }
   if (p.goal_id > plan.goal) Object.assign(plan, { goal: p.goal_id, steps: [], answer: null, moves: null, at: -1 });
@@ -600,6 +605,7 @@ function renderPilot() {
   const retries = Object.entries(p.retries || {});
   if (retries.length) fact("retries", "retries " + retries.map(([k, n]) => `${k} ${n}`).join(", "));
   fact("commands", `${p.commands} command${p.commands === 1 ? "" : "s"} sent`);
+  if ((p.notes || []).length) fact("note", p.notes[p.notes.length - 1]);
   if (p.denied) facts.push(el("span", { "data-fact": "denied", class: "denied" }, `${p.denied} denied by the check`));
   fill("pilot-status", el("span", { class: "pilot-state", "data-state": p.state, "data-goal": p.goal_id },
     p.state + (p.reason ? `: ${p.reason}` : "")), el("span", { class: "facts" }, ...facts));
@@ -666,6 +672,9 @@ function initGoalBox() {
   for (const id of ["goal-pause", "goal-resume", "goal-cancel"]) {
     const button = document.getElementById(id);
     button.addEventListener("click", () => askPilot({ op: button.dataset.op, mode: chosenMode() }));
+  }
+  for (const button of document.querySelectorAll(".goal-answer")) {
+    button.addEventListener("click", () => askPilot({ op: "confirm", answer: button.dataset.answer, mode: chosenMode() }));
   }
   for (const radio of document.querySelectorAll("input[name=goal-mode]")) {
     radio.addEventListener("change", async () => {  // a goal that runs switches at once; else the next goal's mode
