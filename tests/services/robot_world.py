@@ -5,12 +5,17 @@ simulated skillset managers (:class:`services.simulator.Simulator`, the managers
 bytes, status on change only) on a client session, and :class:`services.simulator.world.World` ending
 every skill started ``--duration`` seconds later in its favourable success mode.  Each start it receives
 is printed on standard output as ``start SKILLSET:SKILL ID`` at once, so the test that runs it records
-every skill the robot was asked to run, across its own restarts.  Runs until SIGTERM.
+every skill the robot was asked to run, across its own restarts.  Runs until SIGTERM, then prints
+``counts {...}``: per skillset, the status requests its manager answered and the statuses it published.
+
+For ``benchmarks/bench_outage.py``: SIGUSR1 starts ``spot:init_power`` as an operator would (the world
+ends it), SIGUSR2 restarts Spot's manager (back at its initial state, silent until asked).
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import signal
 import sys
 import threading
@@ -20,8 +25,20 @@ from services.common.zenoh_config import open_session, session_config
 from services.simulator import Simulator
 from services.simulator.world import World
 from skinet.files import load_system, load_typemap
+from skinet.mission import parse_scenario
 from skinet.pilot_run import Outcomes
 from skinet.ros.keys import KeyStyle
+
+
+POWER_ON = """[scenario]
+name = "power_on"
+system = "../spot_arm.toml"
+
+[[steps]]
+t = 0.0
+skillset = "spot"
+transition = "init_power.start"
+"""
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -38,10 +55,22 @@ def main(argv: list[str] | None = None) -> int:
     sim = Simulator(session, system, typemap, style=style)
     sim.on_start.append(lambda skillset, skill, id_: print(f"start {skillset}:{skill} {id_}", flush=True))
     world = World(sim, Outcomes(system, []), args.duration)
-    stop = threading.Event()
+    stop, power, reset = threading.Event(), threading.Event(), threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    signal.signal(signal.SIGUSR1, lambda *_: power.set())
+    signal.signal(signal.SIGUSR2, lambda *_: reset.set())
     print("ready", flush=True)
-    stop.wait()
+    while not stop.wait(0.02):
+        if reset.is_set():
+            reset.clear()
+            sim.restart("spot")
+        if power.is_set():
+            power.clear()
+            sim.drive(parse_scenario(POWER_ON, "power_on.toml"), speed=0)
+    counts = {name: {"status_requests": sum(n for topic, n in node.handled.items()
+                                            if node.topics[topic].kind == "status_request"),
+                     "statuses": sim.statuses_published()[name]} for name, node in sim.nodes.items()}
+    print(f"counts {json.dumps(counts)}", flush=True)
     world.close()
     sim.close()
     session.close()
