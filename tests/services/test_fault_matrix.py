@@ -1,4 +1,5 @@
-"""The fault matrix (issue 30, item 6; README "Faults"): the paper's mission, driven by the pilot, through each fault.
+"""The fault matrix (issue 30, item 6; docs/robot.md "Faults the suite drives"): the paper's mission,
+driven by the pilot, through each fault.
 
 Every part is a real process on one loopback router: the simulated robot
 (:mod:`tests.services.robot_world`: the managers' protocol, status on change only, every skill
