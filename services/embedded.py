@@ -38,6 +38,7 @@ from skinet_cli.render import seconds, table
 from skinet.files import load_typemap
 from skinet.system import System
 from skinet.wire import keys
+from skinet.wire.convert import missed_line
 from skinet.wire.messages import LiveState, StateSpaceReport, UnsafeReport, Verdicts
 
 if TYPE_CHECKING:
@@ -77,6 +78,7 @@ def render(view: MonitorView | Observed, colour: bool = False) -> list[str]:
     out += stale_lines(st, colour)
     if st.divergence:
         out.append(f"  MODEL DIVERGENCE: {st.divergence}")
+    out += [f"  {missed_line(m)}" for m in st.missed]
     out.append("skillsets")
     width = max(len(n) for n in st.skillsets)
     for name, s in st.skillsets.items():
@@ -136,6 +138,7 @@ def summary(view: MonitorView | Observed) -> str:
     props = " ".join(f"{v.name}={'ok' if v.holds else 'VIOLATED'}" for v in view.verdicts.properties)
     unsafe = ", ".join(f"{e.skillset}:{e.transition}({e.property} {e.constraint})" for e in u.unsafe) or "none"
     div = f" DIVERGENCE: {view.state.divergence}" if view.state.divergence else ""
+    div += "".join(f" | {missed_line(m)}" for m in view.state.missed)
     sync = view.state.sync
     stale = ", ".join(f"{n} {s.state} since {_clock(s.since)}" for n, s in sync.items() if s.state != "live")
     state = f" | STATE STALE: {stale}" if stale else "" if sync else " | state not vouched for"

@@ -129,6 +129,8 @@ VARIABLES: dict[str, Variable] = {
     "SKINET_CHECK_POLICY": Variable("--check-policy of the monitor and skinet run, compose.yaml"),
     "SKINET_CHECK_RATE_LIMIT": Variable("--check-rate-limit of the monitor and skinet run"),
     "SKINET_LOST_AFTER": Variable("--lost-after of the monitor and skinet run, compose.yaml"),
+    "SKINET_STATUS_POLL": Variable("--status-poll of the bridge; the period of a bridge skinet run or the embedded "
+                                   "chain starts, compose.yaml"),
     "SKINET_RATE_LIMIT": Variable("--rate-limit of the predictor and skinet run"),
     "SKINET_ROS_NAMESPACE": Variable("--namespace of the bridge, the pilot and skinet run, compose.yaml"),
     "SKINET_SPEED": Variable("--speed of the simulator, compose.yaml"),

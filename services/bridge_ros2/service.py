@@ -66,7 +66,7 @@ from services.bridge_ros2.link import watch_link
 from services.bridge_ros2.worker import Worker
 from services.common.cli import default_instance_id
 from services.common.events import event_publisher
-from services.common.heartbeat import refusal
+from services.common.heartbeat import refusal, silence
 from services.common.zenoh_config import undeclare
 from services.common.ros_liveliness import declare_node
 from skinet.ros.keys import (
@@ -89,30 +89,37 @@ PLUGIN_TOKENS = "@/*/@ros2_lv/MS/**"  # zenoh-bridge-ros2dds: one token per rout
 def default_poll() -> float:
     """``$SKINET_STATUS_POLL`` (seconds between status requests) when set to a positive number, else :data:`POLL`:
     how ``skinet run``, the embedded chain and the compose services set the period of a bridge they start."""
+    text = os.environ.get("SKINET_STATUS_POLL", "")
+    return poll_seconds(text, " (from $SKINET_STATUS_POLL)") if text else POLL
+
+
+def poll_seconds(text: str, origin: str = "") -> float:
+    """A status-request period in seconds, 0.05 to 3600; raises ValueError with a one-line reason."""
     try:
-        value = float(os.environ.get("SKINET_STATUS_POLL", ""))
+        value = float(text)
     except ValueError:
-        return POLL
-    return value if 0.05 <= value <= 3600 else POLL
+        raise ValueError(f"the status-request period must be a number of seconds, got '{text}'{origin}") from None
+    if not 0.05 <= value <= 3600:
+        raise ValueError(f"the status-request period must be 0.05 to 3600 s, got '{text}'{origin}")
+    return value
 
 
 def add_status_poll_args(parser: argparse.ArgumentParser) -> None:
     """``--status-poll S`` and ``--silent-after N`` (the bridge's anti-entropy)."""
+    env = os.environ.get("SKINET_STATUS_POLL")
+
     def period(text: str) -> float:
         try:
-            value = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"not a number of seconds: '{text}'") from None
-        if not 0.05 <= value <= 3600:
-            raise argparse.ArgumentTypeError(f"{text} s is outside 0.05-3600 s")
-        return value
+            return poll_seconds(text, " (from $SKINET_STATUS_POLL)" if env == text else "")
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
 
     def count(text: str) -> int:
         if not text.isdigit() or not 1 <= int(text) <= 1000:
             raise argparse.ArgumentTypeError(f"not a count from 1 to 1000: '{text}'")
         return int(text)
 
-    parser.add_argument("--status-poll", type=period, default=default_poll(), metavar="S",
+    parser.add_argument("--status-poll", type=period, default=env or str(POLL), metavar="S",
                         help="seconds between status requests to each manager (anti-entropy: a manager publishes "
                              f"on change only); default $SKINET_STATUS_POLL or {POLL:g}")
     parser.add_argument("--silent-after", type=count, default=SILENT_AFTER, metavar="N",
@@ -220,7 +227,8 @@ class Bridge:
                     self.worker.put(lambda: self.feed.feed(skillset, topic, payload, attachment))
                 else:
                     def returned() -> list[CanonicalEvent]:
-                        self.feed.resync(skillset, back)
+                        if self.feed.managers[skillset].resync in ("", back[1]):  # a cut link says so itself
+                            self.feed.resync(skillset, back[0])
                         return self.feed.feed(skillset, topic, payload, attachment)
                     self.worker.put(returned)
                     self._notice()
@@ -249,9 +257,9 @@ class Bridge:
                 query.reply(keys.resync(self.system.name, skillset), wire_encode(ev))
             self.request_status(skillset)
 
-    def _answered(self, skillset: str) -> str | None:
+    def _answered(self, skillset: str) -> tuple[str, str] | None:
         """A status of ``skillset`` came (on Zenoh's thread): its manager answers.  Returns the gap it
-        closes when the manager had fallen silent (None otherwise)."""
+        closes and why the manager was silent, when it had fallen silent (None otherwise)."""
         with self._lock:
             self._unanswered[skillset] = 0
             self._last_answer[skillset] = time.monotonic()
@@ -262,7 +270,7 @@ class Bridge:
         manager = self._requests[skillset][0]
         gap = f"the link to {manager} was down {time.monotonic() - silent[1]:.1f} s"
         log.warning("%s: manager %s answers again (%s)", skillset, manager, gap)
-        return gap
+        return gap, silent[0]
 
     def _outdated(self, skillset: str) -> str:
         """Why ``skillset``'s last status is not its manager's current one ('' when it may be)."""
@@ -340,7 +348,8 @@ class Bridge:
     def _beat(self) -> dict[str, HeartbeatSkillset]:
         """Per skillset, the seq of its last event and whether its manager is present (the heartbeat)."""
         with self._lock:
-            present, gone = set(self._present), self._gone | set(self._silent)
+            present, gone = set(self._present) - set(self._silent), self._gone | set(self._silent)
+        # A silent manager is gone even while its token stays (a frozen process holds it for the lease).
         return {name: HeartbeatSkillset(seq=m.seq - 1 if m.seq else None,
                                         manager=True if name in present else False if name in gone else None)
                 for name, m in self.feed.managers.items()}
@@ -405,14 +414,14 @@ class Bridge:
         """``skillset``'s manager answered none of the last ``silent_after`` requests: gone (heartbeat),
         its last status outdated, and its next status closes a gap."""
         manager = self._requests[skillset][0]
-        why = f"manager {manager} answered none of the last {self.silent_after} status requests " \
-              f"({self.poll:g} s apart)"
+        why = silence(manager, self.silent_after, self.poll)
         with self._lock:
             self._silent[skillset] = (why, self._last_answer.get(skillset, time.monotonic()))
         log.warning("%s: %s", skillset, why)
 
         def gap() -> list[CanonicalEvent]:
-            self.feed.resync(skillset, why)
+            if not self.feed.managers[skillset].resync:  # a cut link already said why
+                self.feed.resync(skillset, why)
             return []
         self.worker.put(gap)
         self._notice()

@@ -36,6 +36,17 @@ def refusal(source: str, skillset: str, why: str) -> str:
     return f"'{source}' has no current status of {skillset}: {why}"
 
 
+def silence(manager: str, requests: int, period: float) -> str:
+    """Why a bridge lists a manager as gone that answered none of its last status requests (its heartbeat's
+    ``pending``; the monitor's reason for the skillset then, as :func:`refusal` words it)."""
+    return f"manager {manager} answered none of the last {requests} status requests ({period:g} s apart)"
+
+
+def is_silence(why: str) -> bool:
+    """Whether ``why`` (a heartbeat's ``pending`` reason) is a :func:`silence`."""
+    return why.startswith("manager ") and " answered none of the last " in why
+
+
 Beat = Callable[[], dict[str, HeartbeatSkillset]]
 Pending = Callable[[], dict[str, str]]
 

@@ -8,9 +8,14 @@ The work per event is compiled once per marking, in the spirit of rosbags'
 generated deserialisers: the result of ``LiveSystem.apply`` is cached per
 (skillset marking, transition, observed status), and the msgpack bytes of the
 three messages per (combined marking, prediction) with holes for the fields of
-a step (seq, stamp, event, divergence, and the sync states of SPEC §7, left out
-while they hold their default).  Both caches are bounded and exact (the core
+a step (seq, stamp, event, divergence, missed outcomes, and the sync states of
+SPEC §7, left out while they hold their default).  Both caches are bounded and exact (the core
 functions are pure); a step packs a few small values and joins bytes.
+
+An event naming skills found ended without their response (``missed``) gets the
+model's inference of each outcome (:func:`skinet.net.outcomes.infer_outcomes`,
+docs/how-it-works.md, *Missed outcomes*) in its step's ``LiveState.missed``; cost:
+that function's, only for such events.
 
 A resync answer adopted while a skillset was not live (:meth:`Engine.adopt`) sets
 its marking without judging how the robot got there, and the events of its
@@ -32,8 +37,9 @@ from skinet.live import LiveSystem
 from skinet.system import Marking, System, marking_from_json
 from skinet.verify.algorithm1 import Analysis, analyse
 from skinet.wire.convert import RiskTable, analysis_bodies, statuses
+from skinet.net.outcomes import infer_outcomes
 from skinet.wire.messages import (
-    CanonicalEvent, LiveState, SkillsetSync, UnsafeReport, Verdicts,
+    CanonicalEvent, LiveState, MissedOutcome, SkillsetSync, UnsafeReport, Verdicts,
 )
 
 MarkingKey = tuple[int, ...]
@@ -112,6 +118,8 @@ class Step:
     verdicts: bytes
     unsafe: bytes
     reason: str | None = None  # the divergence alone (the live nets' reason, or the bridge's drift): the list's
+    missed: tuple[MissedOutcome, ...] = ()  # as LiveState.missed lists them (for the monitor's log)
+    unchecked: str = ""  # a resync step: the events its answer covers, which were not checked
 
 
 @dataclass
@@ -242,17 +250,27 @@ class Engine:
     def adopt(self, ev: CanonicalEvent) -> Step | None:
         """Take a resync answer's status as ``ev.skillset``'s marking without judging how the robot got
         there (the monitor did not know: SPEC §7 syncing), and count later events of its stream up to
-        ``ev.seq`` as history (:meth:`check_seq`).  A step when the marking changed, else None.
+        ``ev.seq`` as history (:meth:`check_seq`).  A step when the marking changed or events of the
+        stream that this monitor did not check are covered (its event says which), else None.
         Raises :class:`~skinet.errors.SourceError` for a status the model cannot read."""
         target = self.status_marking(ev)
         stream = (ev.skillset, ev.source)
+        prev = self.last_seq.get(stream)
+        first = prev[1] + 1 if prev is not None and prev[0] == ev.epoch else 1  # #0: the bridge's first status
         self.last_seq[stream] = self.covered[stream] = (ev.epoch, ev.seq)
         self.last_seq.move_to_end(stream)
         self.counters.resyncs += 1
-        if self.live.marking[ev.skillset] == target:
+        # The events the answer covers were not checked here: the step says so plainly (a violation
+        # among them cannot show), and is published even when the marking did not move.
+        unchecked = "" if first > ev.seq else \
+            f"event #{first} of '{ev.source}' not checked" if first == ev.seq else \
+            f"events #{first}-#{ev.seq} of '{ev.source}' not checked"
+        if self.live.marking[ev.skillset] == target and not unchecked:
             return None
+        changed = self.live.marking[ev.skillset] != target
         self.live.marking[ev.skillset] = target
-        return self._step(f"{ev.skillset}:resync#{ev.seq}", True, None)
+        name = f"{ev.skillset}:resync#{ev.seq}" + (f" ({unchecked})" if unchecked else "")
+        return replace(self._step(name, changed, None), unchecked=unchecked)
 
     def apply(self, ev: CanonicalEvent) -> Step | None:
         """Advance the live marking by ``ev`` (already seq-checked) and build its step.
@@ -278,9 +296,30 @@ class Engine:
         divergence = _divergence(hit[2], ev)
         if divergence is not None:
             self.counters.divergences += 1
-        if ev.transition is None and not hit[1] and divergence is None:
+        missed = self._missed(ev, before)
+        if ev.transition is None and not hit[1] and divergence is None and not missed:
             return None
-        return self._step(event_name(ev), hit[1], divergence, hit[2] or ev.divergence or None)
+        return self._step(event_name(ev), hit[1], divergence, hit[2] or ev.divergence or None, missed)
+
+    def _missed(self, ev: CanonicalEvent, before: int | None) -> list[MissedOutcome]:
+        """The event's missed outcomes with the model's inference from the marking before it to the live
+        one after it (docs/how-it-works.md, *Missed outcomes*)."""
+        if not ev.missed:
+            return []
+        after = self.live.marking.get(ev.skillset)
+        skills = [m.skill for m in ev.missed]
+        try:
+            net = self.system.component(ev.skillset).net
+            found = {i.skill: i for i in infer_outcomes(net, before, after, skills)} \
+                if before is not None and after is not None else {}
+        except (KeyError, ValueError):  # a skill the model lacks: nothing to infer
+            found = {}
+        out = []
+        for m in ev.missed:
+            i = found.get(m.skill)
+            out.append(m.model_copy(update={"outcome": i.outcome if i else None,
+                                            "candidates": list(i.candidates) if i else []}))
+        return out
 
     def prediction(self, key: MarkingKey | None = None) -> Prediction | None:
         """The prediction for the live marking (``key`` when known), if any (SPEC §5)."""
@@ -313,18 +352,23 @@ class Engine:
 
     def republish(self) -> Step:
         """The messages of the current step again (same seq, a new stamp), e.g. with a new sync state."""
-        return self._fill(False, self._last["event"], self._last["divergence"])
+        return self._fill(False, self._last["event"], self._last["divergence"], self._last.get("missed"))
 
-    def _step(self, event: str, changed: bool, divergence: str | None, reason: str | None = None) -> Step:
+    def _step(self, event: str, changed: bool, divergence: str | None, reason: str | None = None,
+              missed: list[MissedOutcome] | None = None) -> Step:
         self.seq += 1
-        self._last = {"event": event, "divergence": divergence}
-        step = self._fill(changed, event, divergence)
+        self._last = {"event": event, "divergence": divergence, "missed": missed or []}
+        step = self._fill(changed, event, divergence, missed or [])
+        if missed:
+            step = replace(step, missed=tuple(missed))
         return step if reason is None else replace(step, reason=reason)
 
-    def _fill(self, changed: bool, event: str, divergence: str | None) -> Step:
+    def _fill(self, changed: bool, event: str, divergence: str | None,
+              missed: list[MissedOutcome] | None = None) -> Step:
         key = self.key
         frame = self._frame(key)
-        values = {"seq": self.seq, "stamp": time.time(), "event": event, "divergence": divergence, **self.sync}
+        values = {"seq": self.seq, "stamp": time.time(), "event": event, "divergence": divergence, **self.sync,
+                  "missed": [m.model_dump(mode="json") for m in missed] if missed else OMIT}
         fill = self._packer
         return Step(self.seq, key, changed, divergence, frame.live.fill(fill, values),
                     frame.verdicts.fill(fill, values), frame.unsafe.fill(fill, values))
@@ -348,7 +392,7 @@ class Engine:
         step = ("seq", "stamp")
         return Frame(
             Template(LiveState(system=name, seq=0, stamp=0.0, skillsets=statuses(self.system, marking))
-                     .model_dump(mode="json"), (*step, "event", "divergence", "sync")),
+                     .model_dump(mode="json"), (*step, "event", "divergence", "sync", "missed")),
             Template(Verdicts(system=name, seq=0, stamp=0.0, properties=props).model_dump(mode="json"), step),
             Template(UnsafeReport(system=name, seq=0, stamp=0.0, unsafe=unsafe, recovery=recovery,
                                   violated=analysis.violated, literal_count=len(analysis.unsafe),

@@ -63,7 +63,7 @@ from skinet.errors import SourceError
 from skinet.system import Marking, System
 from skinet.wire import keys
 from skinet.wire.codec import DecodeError, decode, encode
-from skinet.wire.convert import RiskTable, bundle
+from skinet.wire.convert import RiskTable, bundle, missed_line
 from skinet.wire.messages import (
     CanonicalEvent, CheckReply, CheckRequest, Divergences, Heartbeat, LiveState, PredictReply, SkillsetSync,
     StateSpaceReport, UnsafeReport, Verdicts,
@@ -464,6 +464,9 @@ class Monitor:
         self._sync_fields()  # before the step's messages are built
         step = self._engine.adopt(ev)
         if step is not None:
+            if step.unchecked:
+                log.warning("%s synced from '%s' at #%d: %s (what the robot did then is adopted, not judged)",
+                            ev.skillset, ev.source, ev.seq, step.unchecked)
             self._publish(step)
             if self._engine.prediction(step.key) is None:
                 self._predict.want(step.key, self._engine.marking())
@@ -478,6 +481,8 @@ class Monitor:
         self._publish(step)
         if step.divergence:
             self._warn(engine.counters.divergences, "divergence at %s#%d: %s", ev.skillset, ev.seq, step.divergence)
+        for m in step.missed:
+            log.warning("%s", missed_line(m))
         self._note(ev, step.reason, step.seq)  # the list shows the bridge's info beside it
         if engine.prediction(step.key) is None:
             self._predict.want(step.key, engine.marking())

@@ -12,14 +12,16 @@ Each skillset is
   its last status not known by the source to be outdated (``Heartbeat.pending``:
   a restarted manager not heard yet, a cut link; the source then refuses the
   resync query with the same reason until the new status comes);
-- ``lost`` when one of those fails, with since when and why.
+- ``lost`` when one of those fails, with since when and why (a manager that fell
+  silent, answering none of the bridge's last status requests, is lost with the
+  bridge's own words: :func:`~services.common.heartbeat.silence`).
 
 History is told from sources and sequence numbers, never from an event's stamp:
 events of a skillset that is not live wait in its buffer (at most ``buffer``, the
 oldest dropped first) until the resync answers; the service then applies the
 answer and hands the buffered events to :meth:`Engine.check_seq`, which counts
 those the answer covers (same source and epoch, seq up to the answer's) as
-history (:meth:`Engine.adopt`).  Time here is the monitor's own monotonic clock,
+history (:meth:`Engine.adopt`, whose step names the events it did not check).  Time here is the monitor's own monotonic clock,
 used only to measure silences; ``since`` is its wall clock, for people.
 
 Cost: O(1) per event, heartbeat entry and token change; :meth:`SyncTracker.tick`
@@ -36,7 +38,7 @@ from collections import deque
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 
-from services.common.heartbeat import refusal
+from services.common.heartbeat import is_silence, refusal
 from skinet.wire import keys
 from skinet.wire.messages import CanonicalEvent, Heartbeat, SkillsetSync
 
@@ -147,8 +149,8 @@ class SyncTracker:
             refused = refusal(hb.source, name, outdated)
             if beat.manager is False:
                 if s.state != LOST or s.source == hb.source:
-                    self._set(name, LOST, refused if outdated else f"its manager left (said '{hb.source}')",
-                              hb.source)
+                    self._set(name, LOST, refused if is_silence(outdated) else
+                              f"its manager left (said '{hb.source}')", hb.source)
             elif s.state == LOST and (s.source in ("", hb.source) or not self._heard_recently(s.source)):
                 self._set(name, SYNCING, refused if outdated else
                           f"'{hb.source}' is heard again: waiting for its resync answer")
@@ -200,8 +202,8 @@ class SyncTracker:
         s.behind = None
         if src.managers.get(name) is False:
             why = src.pending.get(name, "")
-            self._set(name, LOST, refusal(source, name, why) if why else f"its manager left (said '{source}')",
-                      source)
+            self._set(name, LOST, refusal(source, name, why) if is_silence(why) else
+                      f"its manager left (said '{source}')", source)
         elif src.token and src.token in self.gone:
             self._set(name, LOST, f"the liveliness token of '{source}' is gone (it stopped, or its link did)", source)
         elif upto is not None:

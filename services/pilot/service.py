@@ -20,6 +20,19 @@ after the step it was planned from); never two commands in flight; no reaction w
 robot refuses (:class:`~services.pilot.act.Refused`) is asked again, and ends the goal after
 ``max_retries`` refusals.
 
+Every skill seen running during a goal (and every start it sent) is followed to its end
+(docs/pilot.md, *Missed outcomes*): one gone from a live step without its own outcome event
+(a resync, a status the bridge derived, a new monitor, steps not received, the monitor's
+``LiveState.missed``) goes on from the outcome the monitor or
+:func:`~skinet.net.outcomes.infer_outcomes` makes unique, said in the status's ``notes``;
+otherwise the goal holds with ``unknown`` until an operator's ``confirm`` (success, failure,
+rerun): the pilot never starts such a skill again on its own.  A skill it started that runs
+``outcome_timeout`` s makes it ask the manager for its status.  The operator's interrupt of
+the pilot's skill counts against the retries and holds the goal until ``resume``; in guide
+mode a command other than the one suggested is named; a ``run`` goal counts only a start
+with its inputs (the actuator hears the requests).  New goals are counted before they are
+parsed, and parsed and planned on a thread of their own, so cancels are answered meanwhile.
+
 A skillset that is not ``live``, a model divergence (until the next step, or ``resume``),
 a prediction still pending ``PENDING_GRACE`` after its step (when a command is due) or an
 operator's ``pause`` pause it.  A
@@ -28,7 +41,9 @@ skill that fails ``max_retries`` times in one goal ends it ``failed``.  The stat
 ``get``.  Bad requests, an unknown system, a goal without a plan, no monitor, a manager
 that is gone: a reason in the reply or the status, never a command, never a crash.
 Cost per marking change: one ``plan.action`` (a few set lookups) while the plan covers
-the marking, else one plan (:mod:`skinet.plan.planner`); one check query per command.
+the marking, else one plan (:mod:`skinet.plan.planner`); one check query per command; a
+pass over the skills followed (at most the system's skills), and per missed outcome one
+:func:`~skinet.net.outcomes.infer_outcomes` of a single skill (``k`` firings).
 """
 
 from __future__ import annotations
@@ -329,11 +344,11 @@ class Pilot:
         if m.outcome is None:
             if r.ours or g.mode == "guide" or self._concerns(g, r):
                 g.unknown = m
-                self._notes(g, f"{name} ended {m.gap}: outcome unknown")
+                self._notes(g, f"{ended(m)}: outcome unknown")
                 log.warning("goal %d: %s ended %s: outcome unknown (%s)", g.id, name, m.gap,
                             ", ".join(m.candidates) or "no mode explains the resources")
             return
-        self._notes(g, f"{name} ended {m.gap}: {m.outcome.partition('.')[2]} inferred from the resources")
+        self._notes(g, f"{ended(m)}: {m.outcome.partition('.')[2]} inferred from the resources")
         log.warning("goal %d: %s", g.id, g.note)
         self._outcome(g, r.skillset, m.outcome, r, g.note)
 
@@ -512,9 +527,8 @@ class Pilot:
             return "no outcome is awaiting an answer: nothing to confirm"
         if answer is None:
             return "confirm needs an answer: success, failure or rerun"
-        name = f"{m.skillset}:{m.skill}"
         g.unknown = None
-        self._notes(g, f"{name} ended {m.gap}: {answer} confirmed by {client}")
+        self._notes(g, f"{ended(m)}: {answer} confirmed by {client}")
         log.info("goal %d: %s", g.id, g.note)
         if answer == "rerun":
             return ""
@@ -864,11 +878,18 @@ class Pilot:
         return self._marked[1]
 
 
+def ended(m: MissedOutcome) -> str:
+    """``SKILLSET:SKILL ended <the gap>``: the pilot's own gaps read as such ('while the monitor was
+    restarted'); the monitor's, a phrase of their own, in parentheses."""
+    how = m.gap if m.gap.startswith(("while ", "without ", "in ", "during ")) else f"unseen ({m.gap})"
+    return f"{m.skillset}:{m.skill} ended {how}"
+
+
 def unknown_reason(m: MissedOutcome) -> str:
     """The status's reason while the outcome of ``m`` awaits an operator's answer."""
     told = (f"{' or '.join(c.partition('.')[2] for c in m.candidates)} would explain the resources"
             if m.candidates else "no outcome of the model explains the resources")
-    return (f"outcome unknown: {m.skillset}:{m.skill} ended {m.gap}; {told}: confirm success, failure or rerun "
+    return (f"outcome unknown: {ended(m)}; {told}: confirm success, failure or rerun "
             "(the pilot does not start it again on its own)")
 
 

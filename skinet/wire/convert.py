@@ -24,7 +24,7 @@ from skinet.lang.parser import parse_model, parse_skillset
 from skinet.verify.algorithm1 import Analysis, PredictionVerdict
 from skinet.verify.predict import Forecast
 from skinet.wire.messages import (
-    ModelBundle, PlanBranch, PlanStep, PredictRequest, PropertyVerdict, RecoveryEntry, Risk, SkillsetStatus,
+    MissedOutcome, ModelBundle, PlanBranch, PlanStep, PredictRequest, PropertyVerdict, RecoveryEntry, Risk, SkillsetStatus,
     StateSpaceReport, UnsafeEntry,
 )
 
@@ -172,6 +172,17 @@ def analysis_bodies(
         for p, rs in analysis.recovery.items() for r in rs
     ]
     return props, unsafe, recovery
+
+
+def missed_line(m: MissedOutcome) -> str:
+    """One line for a missed outcome (the monitor's log, ``skinet watch``, the dashboard): the skill, the gap,
+    and the outcome inferred or why none is (docs/how-it-works.md, *Missed outcomes*)."""
+    head = f"missed outcome: {m.skillset}:{m.skill} ended without its response ({m.gap})"
+    if m.outcome is not None:
+        return f"{head}: {m.outcome} inferred from the resources"
+    if m.candidates:
+        return f"{head}: outcome unknown, the model cannot tell {' from '.join(m.candidates)}"
+    return f"{head}: outcome unknown, no mode of the model explains the status"
 
 
 def plan_steps(steps: Iterable[Step]) -> list[PlanStep]:

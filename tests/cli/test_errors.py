@@ -235,7 +235,7 @@ def _cases() -> list[Case]:
         "<goal 2>:1:7: error: unknown name 'manipulator:Bussy' (candidates: manipulator:Busy)")
     add("skinet", "goals", ("goal", "spot_arm"), 1,
         'skinet: error: no goals: give GOAL arguments (e.g. "reach spot:Standing") or --goals FILE (or --cancel, '
-        "--pause, --resume, --set-mode for the goal that runs)")
+        "--pause, --resume, --set-mode, --confirm for the goal that runs)")
     add("skinet", "goals", ("goal", "spot_arm", "--cancel", "--inputs", "x = 1"), 1,
         "skinet: error: --cancel takes no goals: it acts on the goal that runs")
     add("skinet", "--goals", ("goal", SYSTEM, "--goals", "{tmp}/missing.toml"), 1, missing)
@@ -250,6 +250,10 @@ def _cases() -> list[Case]:
           "argument --max-retries: expected an integer from 1 to 100, got '0'")
     usage("skinet", "--set-mode", ("goal", "spot_arm", "--set-mode", "fly"),
           "argument --set-mode: invalid choice: 'fly' (choose from 'guide', 'drive')")
+    usage("skinet", "--confirm", ("goal", "spot_arm", "--confirm", "maybe"),
+          "argument --confirm: invalid choice: 'maybe' (choose from 'success', 'failure', 'rerun')")
+    add("skinet", "--confirm", ("goal", "spot_arm", "--confirm", "success", "--pause"), 2,
+        "skinet goal: error: argument --pause: not allowed with argument --confirm (see skinet goal --help)")
     add("skinet", "--set-mode", ("goal", "spot_arm", "reach spot:Busy", "--set-mode", "drive"), 1,
         "skinet: error: --set-mode takes no goals: it acts on the goal that runs")
     usage("skinet", "--timeout", ("goal", "spot_arm", "reach spot:Busy", "--timeout", "0"),
@@ -336,6 +340,8 @@ def _cases() -> list[Case]:
     add("skinet", "system", ("run", "{tmp}/missing.toml"), 1, missing)
     add("skinet", "system", ("run", "{tmp}/badname.toml"), 1, bad_name)
     usage("skinet", "--duration", ("run", SYSTEM, "--duration", "-1"), "argument --duration: " + seconds.format("-1"))
+    usage("skinet", "--outcome-timeout", ("run", SYSTEM, "--outcome-timeout", "0"),
+          "argument --outcome-timeout: " + seconds.format("0"))
     usage("skinet", "--mode", ("run", SYSTEM, "--mode", "router"),
           "argument --mode/-m: invalid choice: 'router' (choose from 'peer', 'client')")
     usage("skinet", "--budget", ("run", SYSTEM, "--budget", "0"), "argument --budget: " + budget.format("0"))
@@ -430,6 +436,8 @@ def _cases() -> list[Case]:
     usage(pilot, "--budget", (SYSTEM, "--budget", "0.01"), "argument --budget: " + budget.format("0.01"))
     usage(pilot, "--response-timeout", (SYSTEM, "--response-timeout", "-1"),
           "argument --response-timeout: " + seconds.format("-1"))
+    usage(pilot, "--outcome-timeout", (SYSTEM, "--outcome-timeout", "inf"),
+          "argument --outcome-timeout: " + seconds.format("inf"))
     usage(mon, "--id", (SYSTEM, "--id", "a b"), f"argument --id: instance id 'a b' {not_a_key}")
     usage(mon, "--budget", (SYSTEM, "--budget", "-1"), "argument --budget: " + budget.format("-1"))
     usage(mon, "--budget", (SYSTEM, "--budget", "0.049"), "argument --budget: " + budget.format("0.049"))

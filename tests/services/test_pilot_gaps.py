@@ -145,8 +145,9 @@ def test_an_outcome_lost_on_the_way_is_found_by_the_status_request(
         with node.lock:
             assert node.manager.terminate("teleop", "success", "done")  # its messages are lost
         paused = robot.statuses.first(lambda s: s.unknown is not None, what="an unknown outcome")
-        assert paused.unknown is not None and paused.unknown.gap.startswith("without its response (spot's status at "
-                                                                            "step "), paused.unknown
+        # the gap in the pilot's words, or the monitor's when it lists the missed outcome itself
+        assert paused.unknown is not None and (paused.unknown.skill, paused.unknown.candidates) == (
+            "teleop", ["teleop.success.done", "teleop.failure.link_lost"]), paused.unknown
         assert robot.actuator.asked and robot.actuator.sent.count("spot:teleop.start") == 1
         assert ask_goal(robot.observer, PilotGoalRequest(system="spot_arm", op="confirm", answer="rerun")).accepted
         again = robot.statuses.first(lambda s: s.commands == 4, what="teleop started again")
@@ -184,3 +185,18 @@ def test_a_run_goal_is_reached_only_by_a_start_with_its_inputs(robot: Robot) -> 
     finally:
         gui.close()
         impl.close()
+
+
+def test_the_monitors_words_for_a_gap_are_quoted_in_the_pilots() -> None:
+    from services.pilot.service import ended, unknown_reason
+
+    monitor = MissedOutcome(skillset="spot", skill="teleop", gap="the link to manager /spot/spot_skillset_manager "
+                                                                 "was down 12.4 s", candidates=["teleop.success.done"])
+    assert ended(monitor) == ("spot:teleop ended unseen (the link to manager /spot/spot_skillset_manager was down "
+                              "12.4 s)")
+    assert unknown_reason(monitor.model_copy(update={"candidates": []})) == (
+        "outcome unknown: spot:teleop ended unseen (the link to manager /spot/spot_skillset_manager was down 12.4 s); "
+        "no outcome of the model explains the resources: confirm success, failure or rerun (the pilot does not "
+        "start it again on its own)")
+    assert ended(monitor.model_copy(update={"gap": "while the monitor was restarted"})) == (
+        "spot:teleop ended while the monitor was restarted")

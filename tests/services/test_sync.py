@@ -145,7 +145,8 @@ def test_what_the_resync_answer_covers_is_history_whatever_the_stamps() -> None:
     assert engine.check_seq(event(6)) == (False, "duplicate event spot#6 from 'bridge_ros2/b1' ignored", False)
     assert engine.check_seq(event(4)) == (False, None, False) and engine.counters.history == 4
     assert engine.check_seq(event(0, epoch=8))[0]  # another run of the source: not covered
-    assert engine.adopt(event(9, epoch=8, status=ON)) is None  # the same marking: no step
+    step = engine.adopt(event(9, epoch=8, status=ON))  # the same marking, but #1-#9 were never checked here
+    assert step is not None and not step.changed and step.unchecked == "events #1-#9 of 'bridge_ros2/b1' not checked"
 
 
 RESTARTED = "its manager restarted (the manager (or its gateway) came back): waiting for its new status"
@@ -217,3 +218,19 @@ def test_a_divergence_names_the_message_that_showed_it() -> None:
     step = engine.apply(drift)  # the status matches the marking: a step all the same
     assert step is not None and step.divergence == "/arm: x, but y" and engine.counters.divergences == 2
     assert engine.apply(drift.model_copy(update={"seq": 2, "info": "", "divergence": ""})) is None
+
+
+def test_a_silent_manager_loses_its_skillset_with_the_bridges_words() -> None:
+    """The bridge's polls found the manager silent: lost, saying what was asked and who did not answer."""
+    t = tracker(Clock())
+    t.synced("spot", B1, 7)
+    t.synced("manipulator", B1, 7)
+    why = "manager /spot/spot_skillset_manager answered none of the last 3 status requests (1 s apart)"
+    t.heartbeat(Heartbeat(system="spot_arm", source=B1, epoch=7, period=0.5, token=TOKEN,
+                          skillsets={"spot": HeartbeatSkillset(seq=3, manager=False),
+                                     "manipulator": HeartbeatSkillset(seq=0, manager=None)},
+                          pending={"spot": why}))
+    assert states(t) == {"spot": ("lost", f"'bridge_ros2/b1' has no current status of spot: {why}"),
+                         "manipulator": ("live", "")}
+    t.heartbeat(beat(manager=None))  # it answers again: syncing until the status that closes the gap
+    assert states(t)["spot"] == ("syncing", "'bridge_ros2/b1' is heard again: waiting for its resync answer")

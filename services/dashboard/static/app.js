@@ -132,6 +132,13 @@ function renderHeader() {
   const div = document.getElementById("divergence");
   div.hidden = !(s && s.divergence);
   div.textContent = s && s.divergence ? `MODEL DIVERGENCE at step ${s.seq}: ${s.divergence}` : "";
+  // A missed outcome (LiveState.missed), in the monitor's words (skinet.wire.convert.missed_line).
+  const missed = document.getElementById("missed"), ms = (s && s.missed) || [];
+  missed.hidden = !ms.length;
+  missed.textContent = ms.map((m) => `MISSED OUTCOME at step ${s.seq}: ${m.skillset}:${m.skill} ended without its `
+    + `response (${m.gap}): ` + (m.outcome ? `${m.outcome} inferred from the resources`
+      : m.candidates.length ? `outcome unknown, the model cannot tell ${m.candidates.join(" from ")}`
+        : "outcome unknown, no mode of the model explains the status")).join("; ");
   const notice = document.getElementById("notice");
   const noMonitor = !monitors.length;
   notice.hidden = !(noMonitor || replay);
