@@ -5,7 +5,7 @@ opened again): the simulated robot (``tests/services/robot_world.py``: the manag
 protocol, status on change only), the bridge and the monitor.  This script watches the
 monitor's live state.
 
-Convergence.  Each repetition resets Spot's manager (back to PowerOff, idle), starts
+Convergence.  Each repetition starts a fresh chain (Spot at PowerOff, idle), starts
 ``spot:init_power`` (the robot ends it with success 1 s later) and, as soon as the monitor shows
 it running, injects a fault: the managers' process frozen 12 s (SIGSTOP, past Zenoh's 10 s lease),
 or the router closed 3 s (the skill ends while the link is down: its outcome is never delivered).
@@ -147,14 +147,14 @@ def converged(s: LiveState) -> bool:
 
 
 def convergence(poll: str, fault: str, reps: int, give_up: float) -> list[float | None]:
-    router = Router()
-    chain = Chain(router, poll)
+    """One fresh chain per repetition (with polling off, nothing would show a reset manager again)."""
     out: list[float | None] = []
-    try:
-        for _ in range(reps):
-            os.kill(chain.robot.pid, signal.SIGUSR2)
+    for _ in range(reps):
+        router = Router()
+        chain = Chain(router, poll)
+        try:
             if chain.wait(initial, 30) is None:
-                raise SystemExit(f"bench_outage: the monitor never showed Spot reset (poll {poll} s)")
+                raise SystemExit(f"bench_outage: the monitor never showed Spot live and idle (poll {poll} s)")
             os.kill(chain.robot.pid, signal.SIGUSR1)
             if chain.wait(running, 30) is None:
                 raise SystemExit(f"bench_outage: the monitor never showed init_power running (poll {poll} s)")
@@ -169,10 +169,10 @@ def convergence(poll: str, fault: str, reps: int, give_up: float) -> list[float 
             back = time.monotonic()
             at = chain.wait(converged, give_up)
             out.append(None if at is None else at - back)
-    finally:
-        chain.close()
-        if router.session is not None:
-            router.session.close()
+        finally:
+            chain.close()
+            if router.session is not None:
+                router.session.close()
     return out
 
 
