@@ -14,10 +14,10 @@ file (29 goals, 34 commands) would take a minute a case for no skill more.
 Each fault is timed on the mission: it strikes as soon as the robot received the start of a
 chosen skill, so that skill is in flight.  A killed process is started again 3 s later (the monitor
 is killed 0.5 s into teleop, before its 1 s end, and started 7 s later: the gap of the report that
-made the pilot run teleop twice); the managers' process is frozen 12 s (past Zenoh's 10 s lease).  Each case must end with no property
-violated, no skill started more often than the mission asks unless a pilot status names it
-(its reason or notes), and the goal reached, or paused or failed with a reason, within 30 s of
-the fault clearing.  A failure prints the faults injected, every pilot status and every start.
+made the pilot run teleop twice); the managers' process is frozen 12 s (past Zenoh's 10 s lease).
+Each case must end with no property violated, no skill started more often than the mission asks
+unless a pilot status names it (its reason or notes), and the goal reached, or paused or failed with
+a reason, within 30 s of the fault clearing.  The file runs in about 3 min.  A failure prints the faults injected, every pilot status and every start.
 """
 
 from __future__ import annotations
