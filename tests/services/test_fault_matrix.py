@@ -17,7 +17,8 @@ is killed 0.5 s into teleop, before its 1 s end, and started 7 s later: the gap 
 made the pilot run teleop twice); the managers' process is frozen 12 s (past Zenoh's 10 s lease).
 Each case must end with no property violated, no skill started more often than the mission asks
 unless a pilot status names it (its reason or notes), and the goal reached, or paused or failed with
-a reason, within 30 s of the fault clearing.  The file runs in about 3 min.  A failure prints the faults injected, every pilot status and every start.
+a reason, within 30 s of the fault clearing.  The file runs in about 3 min.  A failure prints the
+faults injected, every pilot status and every start.
 """
 
 from __future__ import annotations
