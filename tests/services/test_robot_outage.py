@@ -60,8 +60,10 @@ class States:
         return [a for a, b in zip(seen, [None, *seen]) if a != b]
 
     def missed(self) -> list[MissedOutcome]:
+        """The missed outcomes of each step (a step published again lists them again)."""
         with self._lock:
-            return [m for s in self.items for m in s.missed]
+            steps = {s.seq: s.missed for s in self.items}
+        return [m for missed in steps.values() for m in missed]
 
 
 @pytest.fixture
@@ -111,7 +113,8 @@ def test_frozen_managers_past_the_lease_converge_and_name_the_missed_outcome(
     resources = spot(monitor)[1]
     assert resources["control_mode"] == "Idle"
     assert resources["power_status"] == "PowerOn"
-    assert states.spot_changes()[-3:] == ["lost", "syncing", "live"]
+    wait_until(lambda: states.spot_changes()[-3:] == ["lost", "syncing", "live"], 10,
+               f"lost, syncing, live published ({states.spot_changes()})")
     # The outcome was published when the process woke: it reaches the bridge if the managers' session is
     # back by then (the step names it), else the status after the gap shows the skill ended (a missed outcome).
     missed = states.missed()
@@ -139,7 +142,8 @@ def test_a_managers_process_killed_and_started_again_is_adopted_as_a_restart(rob
     wait_until(lambda: spot(monitor)[0] == "live" and spot(monitor)[1]["power_status"] == "PowerOff", 30,
                "the new managers' state, live")
     assert spot(monitor) == ("live", {"power_status": "PowerOff", "posture": "Sitting", "control_mode": "Idle"}, [])
-    assert states.spot_changes()[-3:] == ["lost", "syncing", "live"]
+    wait_until(lambda: states.spot_changes()[-3:] == ["lost", "syncing", "live"], 10,
+               f"lost, syncing, live published ({states.spot_changes()})")
     restarts = [d for d in monitor.divergences().entries if d.skillset == "spot"]
     assert restarts and restarts[-1].info.startswith("manager restarted (")
 
@@ -174,7 +178,8 @@ def test_an_outcome_lost_with_the_managers_link_is_a_missed_outcome(spot_arm, sk
         wait_until(lambda: spot(monitor)[0] == "lost", 15, "spot lost")
         outage.up()
         wait_until(lambda: spot(monitor)[0] == "live" and spot(monitor)[2] == [], 30, "live again, the skill over")
-        assert states.spot_changes()[-2:] == ["syncing", "live"]
+        wait_until(lambda: states.spot_changes()[-2:] == ["syncing", "live"], 10,
+                   f"syncing, live published ({states.spot_changes()})")
         [m] = states.missed()
         assert m == MissedOutcome(skillset="spot", skill=skill, gap="the link to the managers was cut",
                                   outcome=outcome, candidates=candidates)
