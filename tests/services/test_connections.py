@@ -130,6 +130,11 @@ def test_run_prints_where_it_listens_and_lines_that_work() -> None:
         assert check.returncode == 3 and check.stdout.startswith(
             "spot:init_power.start: WARN at step 0 (STATE NOT LIVE: about the last marking known)"), check
         assert "\n  state_unknown (warn) — the live state is not known" in check.stdout, check
+        # A transition that cannot fire now is no allow: its own answer and exit status.
+        idle = subprocess.run([sys.executable, "-m", "skinet_cli.main", "check", "spot_arm", "spot:go_to_waypoint.start",
+                               "-e", endpoint], cwd=REPO, capture_output=True, text=True, timeout=60)
+        assert idle.returncode == 5 and idle.stdout.startswith(
+            "spot:go_to_waypoint.start: NOT FIRABLE at step 0 (not enabled at the live marking; if it were: "), idle
     finally:
         assert run.stop() == 0
 
