@@ -115,7 +115,9 @@ def test_a_clean_run_conforms(clean, storage: str, capsys: pytest.CaptureFixture
     assert out[0].endswith(": 21 messages, 12 events, 0 model divergences")
     # the run ends before docking (the pilot docks in `skinet demo nav2`): the dock server's status is not in it;
     # the result of the aborted goal is not in a bag: its mode came from the binding's default, said so
-    assert out[1:] == ["  not recorded: /dock_robot/_action/status", "  result not recorded: 1"]
+    assert out[1:] == ["  not recorded: /dock_robot/_action/status", "  result not recorded: 1 (goals that ended with no result in the bag "
+                       "(a rosbag records topics, and action results are services): their mode is the binding's "
+                       "default)"]
 
 
 def test_a_drifting_run_reports_each_divergence_with_its_time(drifting, capsys: pytest.CaptureFixture[str]) -> None:
