@@ -24,7 +24,7 @@ from collections import deque
 from typing import TextIO
 
 from services.common.zenoh_config import (
-    check_connected, client_name, config_from_args, open_session, warn_on_stderr,
+    check_connected, client_name, config_from_args, open_session, said_at_the_end,
 )
 from services.dashboard.board import Board
 from services.dashboard.observer import Observer
@@ -126,7 +126,7 @@ def watch(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     """Run the view until interrupted or ``--duration``; ``--once`` prints one view (after the
     first fresh prediction, or ``--wait`` seconds) and returns.  Returns the exit status."""
     config = config_from_args(args)
-    session = open_session(config, warn_on_stderr("skinet watch"))
+    session = open_session(config, said_at_the_end)
     changed = threading.Event()
     observer = Observer(session, args.system, client=client_name(config))
     tty = out.isatty()

@@ -83,7 +83,7 @@ def cmd_check(args: argparse.Namespace) -> int:
     import time
 
     from services.common.zenoh_config import (
-        check_connected, client_name, config_from_args, open_session, wait_connected, warn_on_stderr,
+        check_connected, client_name, config_from_args, open_session, said_at_the_end, wait_connected,
     )
     from services.dashboard.observer import monitored_systems
     from services.monitor.check import parse_command, parse_policy
@@ -100,7 +100,7 @@ def cmd_check(args: argparse.Namespace) -> int:
         raise SkinetError(str(exc)) from None
     config = config_from_args(args)
     key = keys.check(args.system, client_name(config))
-    session = open_session(config, warn_on_stderr("skinet check"))
+    session = open_session(config, said_at_the_end)
     try:
         deadline = time.monotonic() + args.timeout
         wait_connected(session, config, args.timeout)  # an endpoint Zenoh still tries may come up in time
