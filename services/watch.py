@@ -171,7 +171,7 @@ def watch(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
                 pilot(observer.board.pilot)
         if not observer.wait_monitor(args.wait):
             check_connected(session, config)
-            raise SkinetError(no_monitor_message(session, args.system).replace("; waiting for one", ""))
+            raise SkinetError(no_monitor_message(session, args.system, config).replace("; waiting for one", ""))
         stop = stop_on_signals()
         now = time.monotonic()
         end = now + args.wait if args.once else (None if args.duration is None else now + args.duration)

@@ -10,11 +10,13 @@ in use, no router, refused login, bad system file) are raised as one-line
 from __future__ import annotations
 
 import argparse
+import json
 import logging
 import os
 import sys
 import threading
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from services.common.cli import add_log_arg, setup_logging
 from services.common.zenoh_config import (
@@ -26,6 +28,9 @@ from skinet_cli.options import count, load_live_system, seconds
 from skinet.errors import SkinetError
 from skinet.system import System
 from skinet.wire import keys
+
+if TYPE_CHECKING:
+    import zenoh
 
 
 def add_dashboard_args(p: argparse.ArgumentParser) -> None:
@@ -75,7 +80,7 @@ def serve(args: argparse.Namespace, stop: threading.Event) -> int:
     try:
         if not observer.wait_monitor(args.wait) and not stop.is_set():
             check_connected(session, config)  # an explicit endpoint still unreached: exit 1 with the reason
-            log.warning("%s", no_monitor_message(session, name))
+            log.warning("%s", no_monitor_message(session, name, config))
         stop.wait()
     finally:
         dashboard.close()
@@ -84,8 +89,12 @@ def serve(args: argparse.Namespace, stop: threading.Event) -> int:
     return 0
 
 
-def no_monitor_message(session, name: str) -> str:
-    """One line for a system the observer cannot find, naming the systems it can."""
+def no_monitor_message(session, name: str, config: zenoh.Config | None = None) -> str:
+    """One line for a system the observer cannot find, naming the systems it can; with no ``connect``
+    endpoint in ``config`` (multicast scouting is off by default), how to reach ``skinet run``'s."""
     others = monitored_systems(session)
     seen = f"systems with a monitor: {', '.join(others)}" if others else "no monitor is reachable at all"
+    if not others and config is not None and not json.loads(config.get_json("connect/endpoints")):
+        seen += ("; no --connect/-e given: `skinet run` and `skinet demo --live` listen on a free port and print "
+                 "the -e ENDPOINT to pass")
     return f"no monitor of system '{name}' is alive ({seen}); waiting for one"

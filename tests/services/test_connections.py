@@ -196,3 +196,12 @@ def test_run_as_a_client_of_a_router(capsys: pytest.CaptureFixture[str]) -> None
     assert main(["run", SYSTEM, "--mode", "client"]) == 1
     assert capsys.readouterr().err == "skinet: error: --mode client needs the router's endpoint: --connect ENDPOINT\n"
 
+
+
+def test_watch_with_no_endpoint_says_where_to_find_one() -> None:
+    """``skinet run`` listens on a free port: a watch without ``-e`` reaches nothing, and says how to reach it."""
+    watch = skinet("watch", "spot_arm", "--once", "--wait", "0.5")
+    assert watch.wait(60) == 1
+    assert watch.lines == ["skinet: error: no monitor of system 'spot_arm' is alive (no monitor is reachable at all; "
+                           "no --connect/-e given: `skinet run` and `skinet demo --live` listen on a free port and "
+                           "print the -e ENDPOINT to pass)"]
