@@ -186,6 +186,17 @@ def test_bad_arguments_are_refused_in_one_line(vault: Path, tmp_path: Path, args
     assert list(tmp_path.glob("*.json*")) == []
 
 
+def test_a_routers_folder_without_certificates_says_how_to_get_them(tmp_path: Path) -> None:
+    """``skinet router --secrets DIR`` on tcp/ only writes no certificates: said in one line (issue 32, item 8)."""
+    ensure_users(tmp_path / "router")
+    r = skinet("client-config", "--secrets", str(tmp_path / "router"), "-o", str(tmp_path / "observer.json5"))
+    assert (r.returncode, r.stdout, r.stderr.splitlines()) == (1, "", [
+        f"skinet: error: {tmp_path / 'router'} has no tls/ folder: a router makes its certificates there when it "
+        "listens on a tls/ endpoint (skinet router --secrets DIR --listen tls/0.0.0.0:7447)"])
+    help_text = skinet("client-config", "--help").stdout
+    assert "the\nfolder of `skinet router --secrets DIR --listen tls/...` serves as it is" in help_text
+
+
 def test_the_default_output_is_the_users_file_here_and_never_names_the_ca_key(vault: Path, tmp_path: Path) -> None:
     r = skinet("client-config", "--secrets", str(vault), "--user", "bridge", cwd=tmp_path)
     assert r.returncode == 0, r
