@@ -11,6 +11,7 @@ web dashboard in headless Chromium.
 
 from __future__ import annotations
 
+import json
 import re
 import signal
 import subprocess
@@ -206,6 +207,38 @@ def test_replay_publishes_the_recorded_run_as_its_monitor_did(recording: dict[st
                            cwd=REPO, capture_output=True, text=True, timeout=120)
     assert drawn.returncode == 0, drawn.stderr
     assert picture.stat().st_size > 10_000
+
+
+def test_a_demo_log_replays_as_a_live_state_with_whole_property_names(browser, tmp_path: Path) -> None:
+    """A ``skinet demo --log`` log (issue 32, item 8): no "not vouched for" banner, every skillset live beside the
+    monitor, and property names on one line in a narrow window."""
+    scenario = REPO / "skillsets" / "missions" / "unassisted.toml"
+    made = subprocess.run([sys.executable, "-m", "skinet_cli.main", "demo", "--core", "--log", str(tmp_path / "logs"),
+                           str(scenario)], cwd=REPO, capture_output=True, text=True, timeout=300)
+    assert made.returncode == 0, made.stderr
+    log = tmp_path / "violated.jsonl"  # the run up to its first violation: a recovery column beside the names
+    log.write_text("".join(line + "\n" for line in (tmp_path / "logs" / "unassisted.jsonl").read_text().splitlines()
+                           if json.loads(line)["t"] <= 52.0))
+    out = tmp_path / "replay.out"
+    proc = skinet("replay", str(log), "--speed", "0", "--dashboard", "0", log=out)
+    try:
+        wait_until(lambda: "dashboard on http" in out.read_text(), "the dashboard's address")
+        url = out.read_text().split("dashboard on ")[1].split()[0]
+        wait_http(url + "api/snapshot")
+        browser.set_window_size(360, 900)
+        browser.get(url)
+        until(browser, lambda d: css(d, "#properties tr[data-property=action_guard][data-holds=false]"),
+              "the violated property")
+        assert "hidden" in css(browser, "#stale")[0]
+        assert {c["data-skillset"]: c["data-sync"] for c in css(browser, "#skillsets .card")} == {
+            "spot": "live", "manipulator": "live"}
+        lines = browser.execute_script(
+            "const r = document.createRange(); const td = document.querySelector("
+            "'#properties tr[data-property=action_guard] td'); r.selectNodeContents(td);"
+            "return new Set([...r.getClientRects()].map((x) => Math.round(x.top))).size")
+        assert lines == 1
+    finally:
+        stop(proc, out)
 
 
 def test_replay_with_dashboard_shows_the_run_live(recording: dict[str, Path], browser, tmp_path: Path) -> None:
