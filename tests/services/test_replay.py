@@ -232,6 +232,10 @@ def test_a_demo_log_replays_as_a_live_state_with_whole_property_names(browser, t
         assert "hidden" in css(browser, "#stale")[0]
         assert {c["data-skillset"]: c["data-sync"] for c in css(browser, "#skillsets .card")} == {
             "spot": "live", "manipulator": "live"}
+        placeholders = {e["id"]: e["placeholder"] for e in css(browser, "#goal-text, #goal-inputs, #check-command")}
+        assert placeholders == {"goal-text": "reach spot:PowerOn\nrun spot:init_power",
+                                "goal-inputs": "go_to_waypoint.target = ...",
+                                "check-command": "skillset:transition, e.g. spot:init_power.start"}
         lines = browser.execute_script(
             "const r = document.createRange(); const td = document.querySelector("
             "'#properties tr[data-property=action_guard] td'); r.selectNodeContents(td);"
@@ -270,6 +274,11 @@ def test_replay_with_dashboard_shows_the_run_live(recording: dict[str, Path], br
         assert "hidden" not in notice and notice["text"] == ("Replay of a recorded run (skinet replay), not the live "
                                                             "robot: times are the recording's.")
         assert css(browser, "#timeline .violation-label")
+        # The examples name this system's skillsets, not the paper robot's (issue 32, item 7).
+        placeholders = {e["id"]: e["placeholder"] for e in css(browser, "#goal-text, #goal-inputs, #check-command")}
+        assert placeholders == {"goal-text": "reach base:Moving\nrun base:undock",
+                                "goal-inputs": "no skill of this system takes inputs",
+                                "check-command": "skillset:transition, e.g. base:undock.start"}
         browser.execute_script("document.getElementById('check-command').value = 'arm:unfold.start';"
                                "document.querySelector('#check-form button').click();")
         error = until(browser, lambda d: css(d, "#check-result .error"), "the check's answer")

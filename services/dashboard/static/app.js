@@ -517,6 +517,22 @@ function updateNames() {
   for (const e of (view.unsafe ? view.unsafe.unsafe : [])) names.push(`${e.skillset}:${e.transition}`);
   for (const [ss, l] of Object.entries(lanes)) for (const k of l.skills) names.push(`${ss}:${k}.start`);
   list.replaceChildren(...[...new Set(names)].map((n) => el("option", { value: n })));
+  examples(lanes);
+}
+
+// The goal box's and the check's placeholders name the loaded system's skillsets, never another robot's.
+function examples(lanes) {
+  const [ss, l] = Object.entries(lanes).find(([, x]) => x.skills.length) || Object.entries(lanes)[0] || [];
+  if (!ss) return;
+  const skill = l.skills[0], [, states] = Object.entries(l.resources)[0] || [];
+  const goals = [states && states.length ? `reach ${ss}:${states[states.length - 1]}` : null,
+    skill ? `run ${ss}:${skill}` : null].filter(Boolean);
+  document.getElementById("goal-text").placeholder = goals.join("\n");
+  document.getElementById("check-command").placeholder =
+    `skillset:transition${skill ? `, e.g. ${ss}:${skill}.start` : ""}`;
+  const inputs = Object.values(lanes).flatMap((x) => Object.entries(x.inputs || {}))[0];
+  document.getElementById("goal-inputs").placeholder =
+    inputs ? `${inputs[0]}.${inputs[1][0]} = ...` : "no skill of this system takes inputs";
 }
 
 // -- the pilot: goal box, status, plan (SPEC §8) ---------------------------------------
