@@ -44,7 +44,8 @@ def view_lines(board: Board, colour: bool = False) -> list[str]:
         return []
     out = render(Observed(board.state, board.verdicts, board.unsafe, board.state_space), colour)
     alive = board.alive
-    out.append("services  " + ", ".join(f"{s}: {len(alive.get(s, ()))}"
+    off = not alive.get("pilot") and board.pilot is None  # never heard of: not started (demo --live), no failure
+    out.append("services  " + ", ".join(f"{s}: {'off' if s == 'pilot' and off else len(alive.get(s, ()))}"
                                         for s in ("monitor", "bridge_ros2", "predictor", "pilot")))
     if board.pilot is not None:
         out.append(pilot_line(board.pilot))

@@ -179,7 +179,7 @@ def test_replay_publishes_the_recorded_run_as_its_monitor_did(recording: dict[st
         assert watch.stdout.startswith(f"SkiNet Live  system {NAME}  step {LAST_STEP}  last event "
                                        f"{last_state.event}\n")
         assert "  stowed_drive: holds\n" in watch.stdout
-        assert "services  monitor: 1, bridge_ros2: 0, predictor: 0, pilot: 0\n  REPLAY of a recorded run (skinet replay), not the " \
+        assert "services  monitor: 1, bridge_ros2: 0, predictor: 0, pilot: off\n  REPLAY of a recorded run (skinet replay), not the " \
             "live robot\n" in watch.stdout
         check = subprocess.run([sys.executable, "-m", "skinet_cli.main", "check", NAME, "arm:unfold.start",
                                 *client_args(router)], cwd=REPO, capture_output=True, text=True, timeout=60)
@@ -232,6 +232,8 @@ def test_a_demo_log_replays_as_a_live_state_with_whole_property_names(browser, t
         assert "hidden" in css(browser, "#stale")[0]
         assert {c["data-skillset"]: c["data-sync"] for c in css(browser, "#skillsets .card")} == {
             "spot": "live", "manipulator": "live"}
+        pilot = css(browser, "#services [data-service=pilot]")[0]  # none in a demo's run: off, not a failure
+        assert (pilot["class"], pilot["text"]) == ("service off", "pilot: off")
         placeholders = {e["id"]: e["placeholder"] for e in css(browser, "#goal-text, #goal-inputs, #check-command")}
         assert placeholders == {"goal-text": "reach spot:PowerOn\nrun spot:init_power",
                                 "goal-inputs": "go_to_waypoint.target = ...",

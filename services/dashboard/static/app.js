@@ -113,8 +113,11 @@ function renderHeader() {
   const services = [["monitor", "monitor"], ["bridge_ros2", "bridge"], ["predictor", "predictors"], ["pilot", "pilot"]].map(([s, label]) => {
     const ids = view.alive[s] || [];
     const up = s === "predictor" ? ids.length : (s === "monitor" && replay ? "replay" : "up");
-    return el("span", { class: "service " + (ids.length ? "up" : "down"), "data-service": s, "data-alive": ids.length,
-      title: ids.join(", ") || "none alive" }, `${label}: ${ids.length ? up : "none"}`);
+    // A pilot never heard of was not started (skinet demo --live has none by design): off, not a failure.
+    const off = s === "pilot" && !ids.length && !view.pilot;
+    return el("span", { class: "service " + (ids.length ? "up" : off ? "off" : "down"), "data-service": s,
+      "data-alive": ids.length, title: ids.join(", ") || (off ? "no pilot started: skinet run starts one" : "none alive") },
+      `${label}: ${ids.length ? up : off ? "off" : "none"}`);
   });
   fill("services", ...services);
   const s = view.state;
