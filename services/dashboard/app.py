@@ -16,7 +16,8 @@ import os
 import sys
 import threading
 from pathlib import Path
-from typing import TYPE_CHECKING
+
+import zenoh
 
 from services.common.cli import add_log_arg, setup_logging
 from services.common.zenoh_config import (
@@ -29,8 +30,6 @@ from skinet.errors import SkinetError
 from skinet.system import System
 from skinet.wire import keys
 
-if TYPE_CHECKING:
-    import zenoh
 
 
 def add_dashboard_args(p: argparse.ArgumentParser) -> None:
@@ -44,8 +43,37 @@ def add_dashboard_args(p: argparse.ArgumentParser) -> None:
                    help="TCP port (default: $SKINET_DASHBOARD_PORT or 8080; 0 picks a free one)")
     p.add_argument("--wait", type=seconds(zero=True), default=5.0,
                    help="seconds before warning that no monitor of the system is alive (default: 5)")
+    g = p.add_argument_group("the goal box's own login (a secured deployment, whose observer may not send goals)")
+    g.add_argument("--goal-user", default=os.environ.get("SKINET_DASHBOARD_GOAL_USER") or None, metavar="USER",
+                   help="send the goal box's goals as USER, an operator-role router user, from a Zenoh session of "
+                        "its own (default: $SKINET_DASHBOARD_GOAL_USER; none: the page's own login)")
+    g.add_argument("--goal-secrets", default=os.environ.get("SKINET_DASHBOARD_GOAL_SECRETS") or None, metavar="DIR",
+                   help="folder of USER's secrets: USER.password, and for a tls/ endpoint tls/ca.pem, tls/USER.pem, "
+                        "tls/USER.key (default: $SKINET_DASHBOARD_GOAL_SECRETS, else $SKINET_SECRETS, else "
+                        "~/.config/skinet/secrets)")
     add_log_arg(p)
     add_zenoh_args(p)
+
+
+def goal_config(args: argparse.Namespace, config: zenoh.Config) -> zenoh.Config | None:
+    """The Zenoh configuration of the goal box's own login (``--goal-user``), at the router the page's
+    session connects to; ``None`` without one.  :class:`SkinetError` (one line) for what cannot log in."""
+    user = getattr(args, "goal_user", None)
+    if not user:
+        return None
+    from services.common.zenoh_config import login, session_config
+    from services.secrets.handout import client_config, client_files
+
+    connect = json.loads(config.get_json("connect/endpoints") or "[]")
+    if not connect:
+        raise SkinetError(f"--goal-user {user} logs in to a router: give its endpoint with --connect/-e")
+    folder = Path(args.goal_secrets or os.environ.get("SKINET_SECRETS")
+                  or Path.home() / ".config" / "skinet" / "secrets")
+    tls = [e for e in connect if e.startswith("tls/")]
+    if tls:  # the router binds certificates to users: the goal login brings its own
+        return zenoh.Config.from_json5(json.dumps(client_config(client_files(folder, user), tls[0])))
+    password = login(argparse.Namespace(user=user, password=None, password_file=str(folder / f"{user}.password")))
+    return session_config("client", connect, user=user, password=password["password"])
 
 
 def resolve_system(spec: str) -> tuple[str, System | None]:
@@ -67,16 +95,26 @@ def serve(args: argparse.Namespace, stop: threading.Event) -> int:
     log = logging.getLogger("skinet.dashboard")
     name, system = resolve_system(args.system)
     config = config_from_args(args)
+    goals = goal_config(args, config)  # before any session: a missing secret is one line
     session = open_session(config)
-    observer = Observer(session, name, system, client=client_name(config))
+    try:
+        goal_session = open_session(goals) if goals is not None else None
+    except SkinetError:
+        session.close()
+        raise
+    observer = Observer(session, name, system, client=client_name(config),
+                        goal_login=None if goal_session is None else (goal_session, client_name(goals)))
     dashboard = Dashboard(observer, args.host, args.port)
     try:
         dashboard.start()
     except SkinetError:
         observer.close()
         session.close()
+        if goal_session is not None:
+            goal_session.close()
         raise
-    print(f"skinet dashboard: system {name} on {dashboard.url}", file=sys.stderr, flush=True)
+    print(f"skinet dashboard: system {name} on {dashboard.url}"
+          + (f"; its goal box sends as user {args.goal_user}" if goals is not None else ""), file=sys.stderr, flush=True)
     try:
         if not observer.wait_monitor(args.wait) and not stop.is_set():
             check_connected(session, config)  # an explicit endpoint still unreached: exit 1 with the reason
@@ -86,6 +124,8 @@ def serve(args: argparse.Namespace, stop: threading.Event) -> int:
         dashboard.close()
         observer.close()
         session.close()
+        if goal_session is not None:
+            goal_session.close()
     return 0
 
 

@@ -116,7 +116,7 @@ def test_each_service_is_handed_its_own_files_only(tmp_path: Path) -> None:
                        capture_output=True, text=True, timeout=60)
     assert (r.returncode, r.stderr) == (1, f"python -m services.secrets: error: {out / 'nobody'}: a service's folder "
                                            "is named router or for its user (bridge, monitor, predictor, robot, "
-                                           "observer, hub, pilot, operator)\n")
+                                           "observer, hub, pilot, operator, goalbox)\n")
 
 
 def test_a_new_out_folder_gets_a_folder_for_each_service(tmp_path: Path) -> None:
