@@ -408,6 +408,11 @@ def _cases() -> list[Case]:
         1, "skinet: error: cannot listen on 999.0.0.1:0: Name or service not known")
     usage("skinet", "--log-level", ("dashboard", "spot_arm", "--log-level", "LOUD"),
           "argument --log-level: expected one of DEBUG, INFO, WARNING, ERROR, CRITICAL, got 'LOUD'")
+    add("skinet", "--goal-user", ("dashboard", "spot_arm", "--port", "0", "--goal-user", "goalbox"), 1,
+        "skinet: error: --goal-user goalbox logs in to a router: give its endpoint with --connect/-e")
+    add("skinet", "--goal-secrets", ("dashboard", "spot_arm", "--port", "0", "--goal-user", "goalbox", "-e",
+                                     "tcp/127.0.0.1:7447", "--goal-secrets", "{tmp}/none"), 1,
+        "skinet: error: cannot read password file {tmp}/none/goalbox.password: No such file or directory")
 
     # skinet timeline
     add("skinet", "log", ("timeline", "{tmp}/missing.jsonl", "-o", "{tmp}/t.png"), 1,
