@@ -506,8 +506,10 @@ async function check(event) {
     const reasons = r.reasons.map((x) => el("li", {}, `${x.property ? x.property + ": " : ""}${x.constraint} (${x.action})`,
       x.steps ? `, within ${x.steps} steps` : "", x.witness.length ? ` via ${x.witness.join(" \u2192 ")}` : "",
       x.reason ? ` \u2014 ${x.reason}` : ""));
-    out.replaceChildren(el("p", { class: `decision decision-${r.decision}`, "data-decision": r.decision },
-      `${r.skillset}:${r.transition}: ${r.decision.toUpperCase()}`, r.enabled ? "" : " (not firable now)"),
+    // As skinet check answers: a command that cannot fire now is no allow, whatever its decision.
+    out.replaceChildren(el("p", { class: `decision decision-${r.decision}`, "data-decision": r.decision,
+      "data-enabled": r.enabled }, `${r.skillset}:${r.transition}: ` + (r.enabled ? r.decision.toUpperCase()
+        : `NOT FIRABLE (not enabled at the live marking; if it were: ${r.decision.toUpperCase()})`)),
       el("ul", {}, ...reasons));
   } catch (e) {
     out.textContent = `check failed: ${e}`;
