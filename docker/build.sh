@@ -55,7 +55,7 @@ fi
 # base image and the build arguments.
 inputs() {
     {
-        find Dockerfile .dockerignore pyproject.toml skinet skinet_cli services skillsets docker/zenoh \
+        find Dockerfile .dockerignore pyproject.toml setup.py skinet skinet_cli services skillsets examples/nav2 docker/zenoh \
             docker/entrypoint.sh docker/build.sh -type f ! -path '*/__pycache__/*' ! -name '*.pyc' -print0 \
             | LC_ALL=C sort -z | xargs -0 sha256sum
         echo "base=${base:-default} $( [ -n "$base" ] && docker image inspect --format '{{.Id}}' "$base" 2>/dev/null)"

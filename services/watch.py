@@ -24,7 +24,7 @@ from collections import deque
 from typing import TextIO
 
 from services.common.zenoh_config import (
-    check_connected, client_name, config_from_args, open_session, warn_on_stderr,
+    check_connected, client_name, config_from_args, open_session, said_at_the_end,
 )
 from services.dashboard.board import Board
 from services.dashboard.observer import Observer
@@ -44,7 +44,8 @@ def view_lines(board: Board, colour: bool = False) -> list[str]:
         return []
     out = render(Observed(board.state, board.verdicts, board.unsafe, board.state_space), colour)
     alive = board.alive
-    out.append("services  " + ", ".join(f"{s}: {len(alive.get(s, ()))}"
+    off = not alive.get("pilot") and board.pilot is None  # never heard of: not started (demo --live), no failure
+    out.append("services  " + ", ".join(f"{s}: {'off' if s == 'pilot' and off else len(alive.get(s, ()))}"
                                         for s in ("monitor", "bridge_ros2", "predictor", "pilot")))
     if board.pilot is not None:
         out.append(pilot_line(board.pilot))
@@ -126,7 +127,7 @@ def watch(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     """Run the view until interrupted or ``--duration``; ``--once`` prints one view (after the
     first fresh prediction, or ``--wait`` seconds) and returns.  Returns the exit status."""
     config = config_from_args(args, command=True)
-    session = open_session(config, warn_on_stderr("skinet watch"))
+    session = open_session(config, said_at_the_end)
     changed = threading.Event()
     observer = Observer(session, args.system, client=client_name(config))
     tty = out.isatty()
@@ -171,7 +172,7 @@ def watch(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
                 pilot(observer.board.pilot)
         if not observer.wait_monitor(args.wait):
             check_connected(session, config)
-            raise SkinetError(no_monitor_message(session, args.system).replace("; waiting for one", ""))
+            raise SkinetError(no_monitor_message(session, args.system, config).replace("; waiting for one", ""))
         stop = stop_on_signals()
         now = time.monotonic()
         end = now + args.wait if args.once else (None if args.duration is None else now + args.duration)

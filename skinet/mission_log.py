@@ -23,11 +23,14 @@ from skinet.wire import keys
 from skinet.wire.convert import analysis_bodies, bundle, state_space_report, statuses
 from skinet.wire.log import Entry
 from skinet.wire.messages import (
-    CanonicalEvent, Divergence, Divergences, LiveState, UnsafeReport, Verdicts,
+    CanonicalEvent, Divergence, Divergences, LiveState, SkillsetSync, UnsafeReport, Verdicts,
 )
 
 SOURCE = "replay"
 MONITOR = "demo"  # the monitor instance id of the log's divergence list
+# A replayed scenario's marking is known at every step: each skillset is live from the run's start (t = 0), as
+# a synced monitor's (docs/operator.md, "Honest live state").
+_LIVE = SkillsetSync(state="live", since=0.0, source=SOURCE)
 
 
 def records_to_log(
@@ -84,7 +87,8 @@ def _monitor_step(system: System, marking: Marking, seq: int, t: float, event: s
     props, unsafe, recovery = analysis_bodies(system, analysis)
     out = [
         Entry(t, keys.state(name), "LiveState", LiveState(
-            system=name, seq=seq, stamp=t, skillsets=statuses(system, marking), event=event, divergence=divergence)),
+            system=name, seq=seq, stamp=t, skillsets=statuses(system, marking), event=event, divergence=divergence,
+            sync={k: _LIVE for k in statuses(system, marking)})),
         Entry(t, keys.verdicts(name), "Verdicts", Verdicts(system=name, seq=seq, stamp=t, properties=props)),
         Entry(t, keys.unsafe(name), "UnsafeReport", UnsafeReport(
             system=name, seq=seq, stamp=t, unsafe=unsafe, recovery=recovery, violated=analysis.violated,

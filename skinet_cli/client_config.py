@@ -37,8 +37,10 @@ examples:
   skinet goal spot_arm "run spot:init_power" --drive --zenoh-config operator.json5
 
 docs/deployment.md ("Host access"; "The pilot and its operators" for the
-operator's) shows how to get a user's folder out of a compose deployment; a
-folder of `skinet router --secrets DIR` serves as it is."""
+operator's) shows how to get a user's folder out of a compose deployment; the
+folder of `skinet router --secrets DIR --listen tls/...` serves as it is (a
+router makes the certificates, tls/ca.pem and one per user, when it listens on
+a tls/ endpoint; on tcp/ only, its folder holds no certificates)."""
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:

@@ -102,6 +102,13 @@ def _conform(bag: str, system: System, typemap: Mapping[str, str], bindings: Map
     }
 
 
+# What a count means where its name alone does not say it (the bridge logs the details, quiet here).
+_WHY = {
+    "result not recorded": "goals that ended with no result in the bag (a rosbag records topics, and action "
+                           "results are services): their mode is the binding's default",
+}
+
+
 def _text(r: dict) -> str:
     n = len(r["divergences"])
     lines = [f"{r['bag']}: {r['messages']} messages, {r['events']} events, "
@@ -114,7 +121,8 @@ def _text(r: dict) -> str:
     if r["malformed"]:
         lines.append(f"  malformed messages dropped: {r['malformed']}")
     for kind, count in sorted(r["bad_input"].items()):
-        lines.append(f"  {kind}: {count}")
+        why = _WHY.get(kind)
+        lines.append(f"  {kind}: {count}" + (f" ({why})" if why else ""))
     return "\n".join(lines)
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import importlib.resources
 import re
 import sys
 from pathlib import Path
@@ -46,9 +47,17 @@ DESCRIPTION = (
     "--dashboard PORT serves the dashboard itself.")
 
 
+def demo_roots() -> list[Path]:
+    """Where the demo's files are looked for, in order: the current folder (a checkout), the files an
+    installed wheel ships (``skinet_cli/demo_files``, copied by ``setup.py``), the checkout an editable
+    install runs from."""
+    shipped = Path(str(importlib.resources.files("skinet_cli"))) / "demo_files"
+    return [Path.cwd(), shipped, Path(__file__).resolve().parents[1]]
+
+
 def default_scenarios() -> list[Path]:
-    """The paper's runs: ``skillsets/missions/`` here, else beside the installed package."""
-    for root in (Path.cwd(), Path(__file__).resolve().parents[2]):
+    """The paper's runs: ``skillsets/missions/`` in the first of :func:`demo_roots` that has them all."""
+    for root in demo_roots():
         folder = root / "skillsets" / "missions"
         if all((folder / m).exists() for m in MISSIONS):
             return [folder / m for m in MISSIONS]
@@ -56,8 +65,8 @@ def default_scenarios() -> list[Path]:
 
 
 def example_scenario(name: str) -> Path:
-    """The scenario of a named example (``nav2``): here, else beside the installed package."""
-    for root in (Path.cwd(), Path(__file__).resolve().parents[1]):
+    """The scenario of a named example (``nav2``), in the first of :func:`demo_roots` that has it."""
+    for root in demo_roots():
         if (root / EXAMPLES[name]).exists():
             return root / EXAMPLES[name]
     return EXAMPLES[name]

@@ -138,6 +138,8 @@ VARIABLES: dict[str, Variable] = {
     "SKINET_SPEED": Variable("--speed of the simulator, compose.yaml"),
     "SKINET_DASHBOARD_HOST": Variable("--host of the dashboard"),
     "SKINET_DASHBOARD_PORT": Variable("--port of the dashboard, compose.yaml (the host port)"),
+    "SKINET_DASHBOARD_GOAL_USER": Variable("--goal-user of the dashboard, compose.yaml: its goal box's login"),
+    "SKINET_DASHBOARD_GOAL_SECRETS": Variable("--goal-secrets of the dashboard: the goal login's secrets"),
     "SKINET_TRACEBACK": Variable("skinet: print the traceback of an internal error"),
     "SKINET_INCLUDE_ROOT": Variable("skinet.files: the folder included model files must stay in (default: the "
                                     "including model's own)", _folder),

@@ -67,14 +67,14 @@ def live_session(args: argparse.Namespace, system: System, header: str) -> Itera
     ``--linger``.  Raises one-line :class:`~skinet.errors.SkinetError` (unreachable endpoint, refused login,
     port in use)."""
     from services.common.zenoh_config import (
-        check_connected, client_name, config_from_args, open_session, wait_connected, warn_on_stderr,
+        check_connected, client_name, config_from_args, open_session, said_at_the_end, wait_connected,
     )
     from services.embedded import connect_lines, fix_free_ports, start_dashboard, stop_on_signals
 
     config = config_from_args(args)
     mode = json.loads(config.get_json("mode"))
     listening = fix_free_ports(config) if mode == "peer" else []
-    session = open_session(config, warn_on_stderr("skinet demo"))
+    session = open_session(config, said_at_the_end)
     dashboard = None
     try:
         if not wait_connected(session, config, CONNECT_WAIT):  # a run nobody asked for where it was asked

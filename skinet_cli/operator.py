@@ -43,8 +43,9 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                                    "reasons. While the monitor cannot vouch for the live marking (a skillset "
                                    "syncing or lost) or the prediction is pending, the answer is at least warn "
                                    "(state_unknown, prediction_pending); --wait lets it wait for them first. "
-                                   "Exit status: 0 allow, 3 warn, 4 deny, 1 error (unknown name, no monitor, "
-                                   "no router).")
+                                   "A transition that cannot fire at the live marking answers NOT FIRABLE with "
+                                   "the decision it would get. Exit status: 0 allow, 3 warn, 4 deny, 5 not "
+                                   "firable now, 1 error (unknown name, no monitor, no router).")
     c.add_argument("system", metavar="SYSTEM_NAME", type=key_name("system name"),
                    help="system name, as in skinet/<system>/... keys")
     c.add_argument("command", metavar="SKILLSET:TRANSITION", help="e.g. spot:go_to_waypoint.start")
@@ -74,6 +75,7 @@ def cmd_watch(args: argparse.Namespace) -> int:
 
 
 EXIT = {"allow": 0, "warn": 3, "deny": 4}
+NOT_FIRABLE = 5  # the command cannot be sent now, whatever its decision
 
 
 def cmd_check(args: argparse.Namespace) -> int:
@@ -81,7 +83,7 @@ def cmd_check(args: argparse.Namespace) -> int:
     import time
 
     from services.common.zenoh_config import (
-        check_connected, client_name, config_from_args, open_session, wait_connected, warn_on_stderr,
+        check_connected, client_name, config_from_args, open_session, said_at_the_end, wait_connected,
     )
     from services.dashboard.observer import monitored_systems
     from services.monitor.check import parse_command, parse_policy
@@ -98,7 +100,7 @@ def cmd_check(args: argparse.Namespace) -> int:
         raise SkinetError(str(exc)) from None
     config = config_from_args(args, command=True)
     key = keys.check(args.system, client_name(config))
-    session = open_session(config, warn_on_stderr("skinet check"))
+    session = open_session(config, said_at_the_end)
     try:
         deadline = time.monotonic() + args.timeout
         wait_connected(session, config, args.timeout)  # an endpoint Zenoh still tries may come up in time
@@ -121,8 +123,10 @@ def cmd_check(args: argparse.Namespace) -> int:
         print(f"{args.command}: error: {reply.error}" + (f" (candidates: {', '.join(reply.candidates)})"
                                                           if reply.candidates else ""))
     else:
-        state = "" if reply.enabled else " (not firable now)"
-        print(f"{args.command}: {reply.decision.upper() if reply.decision else '?'} at step {reply.seq}{state}"
+        decision = reply.decision.upper() if reply.decision else "?"
+        answer = (f"{decision} at step {reply.seq}" if reply.enabled else
+                  f"NOT FIRABLE at step {reply.seq} (not enabled at the live marking; if it were: {decision})")
+        print(f"{args.command}: {answer}"
               + (" (STATE NOT LIVE: about the last marking known)" if reply.state_stale else "")
               + (" (prediction stale: explicit and forced constraints only)" if reply.prediction_stale else ""))
         for r in reply.reasons:
@@ -132,4 +136,6 @@ def cmd_check(args: argparse.Namespace) -> int:
             print(f"  {r.property + ': ' if r.property else ''}{r.constraint} ({r.action}){steps}{via}{why}")
         for p in reply.recovers:
             print(f"  restores {p} (violated now)")
-    return EXIT.get(reply.decision or "", 1) if reply.ok else 1
+    if not reply.ok:
+        return 1
+    return EXIT.get(reply.decision or "", 1) if reply.enabled else NOT_FIRABLE

@@ -50,7 +50,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
     if args.verify:
         return cmd_verify(args)
     from services.common.zenoh_config import (
-        check_connected, client_name, config_from_args, open_session, wait_connected, warn_on_stderr,
+        check_connected, client_name, config_from_args, open_session, said_at_the_end, wait_connected,
     )
     from services.embedded import fix_free_ports, start_dashboard, stop_on_signals
     from services.replay import Replay, recording
@@ -60,7 +60,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
     config = config_from_args(args, command=True)
     listening = fix_free_ports(config) if json.loads(config.get_json("mode")) == "peer" else []
     stop = stop_on_signals()
-    session = open_session(config, warn_on_stderr("skinet replay"))
+    session = open_session(config, said_at_the_end)
     dashboard = replay = None
     try:
         if not wait_connected(session, config, CONNECT_WAIT):  # publishing to an endpoint never reached is no replay

@@ -6,6 +6,7 @@ matplotlib is imported only when a picture is drawn (Agg canvas, no display).
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -15,8 +16,10 @@ from skinet.errors import SkinetError, SourceError
 from skinet.files import read_text
 from skinet.system import System
 from skinet.wire.log import Entry, read_log
-from skinet.wire.mcap_log import MAGIC, is_mcap, read_mcap
+from skinet.wire.mcap_log import MAGIC, ROSBAG, is_mcap, read_mcap
 from skinet.wire.messages import LiveState
+
+SQLITE = b"SQLite format 3\x00"  # a rosbag2 in its sqlite3 storage
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -48,9 +51,15 @@ def save_timeline(entries: Sequence[Entry], title: str, output: str | Path, syst
 
 
 def load_log(path: str) -> list[Entry]:
-    """A monitor log in either format (MCAP is recognised by its magic bytes)."""
+    """A monitor log in either format (MCAP is recognised by its magic bytes); a rosbag2 (its folder, or
+    its SQLite file) is refused in one line that points to ``skinet conform``."""
+    if os.path.isfile(os.path.join(path, "metadata.yaml")):
+        raise SourceError.at(path, None, ROSBAG)
     try:
         with open(path, "rb") as f:
+            if f.read(len(SQLITE)) == SQLITE:
+                raise SourceError.at(path, None, ROSBAG)
+            f.seek(0)
             if is_mcap(f.read(len(MAGIC))):
                 f.seek(0)
                 return read_mcap(f, path, lambda text: print(text, file=sys.stderr))

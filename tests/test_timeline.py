@@ -188,6 +188,10 @@ def test_records_to_log_publishes_what_the_monitor_would() -> None:
     assert [e.type for e in entries[1:5]] == ["LiveState", "Verdicts", "UnsafeReport", "StateSpaceReport"]
     states = [e.message for e in entries if isinstance(e.message, LiveState)]
     assert [s.seq for s in states] == list(range(len(states)))
+    # The views vouch for a replayed scenario's marking: every skillset live from the start (issue 32, item 8).
+    assert {(k, x.state, x.since) for s in states for k, x in s.sync.items()} == {
+        ("spot", "live", 0.0), ("manipulator", "live", 0.0)}
+    assert all(len(s.sync) == 2 for s in states)
     events = [e.message for e in entries if isinstance(e.message, CanonicalEvent)]
     assert len(events) == len(states) - 1
     for ss in ("spot", "manipulator"):

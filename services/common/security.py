@@ -47,7 +47,7 @@ from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
 from skinet.errors import SkinetError
 
-USERS = ("bridge", "monitor", "predictor", "robot", "observer", "hub", "pilot", "operator")
+USERS = ("bridge", "monitor", "predictor", "robot", "observer", "hub", "pilot", "operator", "goalbox")
 DAY = datetime.timedelta(days=1)
 
 

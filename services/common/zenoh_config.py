@@ -240,6 +240,11 @@ def session_mode(args: argparse.Namespace, connect: list[str], command: bool = F
     return str(args.mode)
 
 
+def said_at_the_end(message: str) -> None:
+    """A ``warn`` for :func:`open_session` in a command that waits a bounded time for its endpoints and then
+    fails with :func:`check_connected`: the error says it then, in one line, not twice."""
+
+
 def warn_on_stderr(prog: str) -> Callable[[str], None]:
     """A ``warn`` for :func:`open_session` that prints ``PROG: warning: ...`` at once (commands)."""
     return lambda message: print(f"{prog}: warning: {message}", file=sys.stderr, flush=True)

@@ -10,6 +10,7 @@ in use, no router, refused login, bad system file) are raised as one-line
 from __future__ import annotations
 
 import argparse
+import json
 import logging
 import os
 import sys
@@ -51,8 +52,37 @@ def add_dashboard_args(p: argparse.ArgumentParser) -> None:
                    default=os.environ.get("SKINET_DASHBOARD_FOXGLOVE") or None, metavar="PORT",
                    help="also serve the system to Foxglove (WebSocket, on --host) on this port (default: "
                         "$SKINET_DASHBOARD_FOXGLOVE, else none; see skinet foxglove)")
+    g = p.add_argument_group("the goal box's own login (a secured deployment, whose observer may not send goals)")
+    g.add_argument("--goal-user", default=os.environ.get("SKINET_DASHBOARD_GOAL_USER") or None, metavar="USER",
+                   help="send the goal box's goals as USER, an operator-role router user, from a Zenoh session of "
+                        "its own (default: $SKINET_DASHBOARD_GOAL_USER; none: the page's own login)")
+    g.add_argument("--goal-secrets", default=os.environ.get("SKINET_DASHBOARD_GOAL_SECRETS") or None, metavar="DIR",
+                   help="folder of USER's secrets: USER.password, and for a tls/ endpoint tls/ca.pem, tls/USER.pem, "
+                        "tls/USER.key (default: $SKINET_DASHBOARD_GOAL_SECRETS, else $SKINET_SECRETS, else "
+                        "~/.config/skinet/secrets)")
     add_log_arg(p)
     add_zenoh_args(p)
+
+
+def goal_config(args: argparse.Namespace, config: zenoh.Config) -> zenoh.Config | None:
+    """The Zenoh configuration of the goal box's own login (``--goal-user``), at the router the page's
+    session connects to; ``None`` without one.  :class:`SkinetError` (one line) for what cannot log in."""
+    user = getattr(args, "goal_user", None)
+    if not user:
+        return None
+    from services.common.zenoh_config import login, session_config
+    from services.secrets.handout import client_config, client_files
+
+    connect = json.loads(config.get_json("connect/endpoints") or "[]")
+    if not connect:
+        raise SkinetError(f"--goal-user {user} logs in to a router: give its endpoint with --connect/-e")
+    folder = Path(args.goal_secrets or os.environ.get("SKINET_SECRETS")
+                  or Path.home() / ".config" / "skinet" / "secrets")
+    tls = [e for e in connect if e.startswith("tls/")]
+    if tls:  # the router binds certificates to users: the goal login brings its own
+        return zenoh.Config.from_json5(json.dumps(client_config(client_files(folder, user), tls[0])))
+    password = login(argparse.Namespace(user=user, password=None, password_file=str(folder / f"{user}.password")))
+    return session_config("client", connect, user=user, password=password["password"])
 
 
 def resolve_system(spec: str) -> tuple[str, System | None]:
@@ -72,16 +102,28 @@ def serve(args: argparse.Namespace, stop: threading.Event) -> int:
     (one line: a bad system file or name, no router, a refused login, a port in use)."""
     setup_logging(args)
     log = logging.getLogger("skinet.dashboard")
-    config, session, observer = observe(args)
-    name = observer.name
+    name, system = resolve_system(args.system)
+    config = config_from_args(args)
+    goals = goal_config(args, config)  # before any session: a missing secret is one line
+    session = open_session(config)
+    try:
+        goal_session = open_session(goals) if goals is not None else None
+    except SkinetError:
+        session.close()
+        raise
+    observer = Observer(session, name, system, client=client_name(config),
+                        goal_login=None if goal_session is None else (goal_session, client_name(goals)))
     dashboard = Dashboard(observer, args.host, args.port)
     try:
         dashboard.start()
     except SkinetError:
         observer.close()
         session.close()
+        if goal_session is not None:
+            goal_session.close()
         raise
-    print(f"skinet dashboard: system {name} on {dashboard.url}", file=sys.stderr, flush=True)
+    print(f"skinet dashboard: system {name} on {dashboard.url}"
+          + (f"; its goal box sends as user {args.goal_user}" if goals is not None else ""), file=sys.stderr, flush=True)
     foxglove = None
     try:
         if args.foxglove is not None:
@@ -96,6 +138,8 @@ def serve(args: argparse.Namespace, stop: threading.Event) -> int:
         dashboard.close()
         observer.close()
         session.close()
+        if goal_session is not None:
+            goal_session.close()
     return 0
 
 
@@ -113,12 +157,16 @@ def follow(observer: Observer, config: zenoh.Config, wait: float, stop: threadin
     unreached is a one-line error instead)."""
     if not observer.wait_monitor(wait) and not stop.is_set():
         check_connected(observer.session, config)
-        log.warning("%s", no_monitor_message(observer.session, observer.name))
+        log.warning("%s", no_monitor_message(observer.session, observer.name, config))
     stop.wait()
 
 
-def no_monitor_message(session, name: str) -> str:
-    """One line for a system the observer cannot find, naming the systems it can."""
+def no_monitor_message(session, name: str, config: zenoh.Config | None = None) -> str:
+    """One line for a system the observer cannot find, naming the systems it can; with no ``connect``
+    endpoint in ``config`` (multicast scouting is off by default), how to reach ``skinet run``'s."""
     others = monitored_systems(session)
     seen = f"systems with a monitor: {', '.join(others)}" if others else "no monitor is reachable at all"
+    if not others and config is not None and not json.loads(config.get_json("connect/endpoints")):
+        seen += ("; no --connect/-e given: `skinet run` and `skinet demo --live` listen on a free port and print "
+                 "the -e ENDPOINT to pass")
     return f"no monitor of system '{name}' is alive ({seen}); waiting for one"

@@ -275,9 +275,12 @@ class Board:
 
 
 def lanes(system: System) -> dict[str, Any]:
-    """Per skillset, its resources with their states and its skills: the timeline's lanes."""
+    """Per skillset, its resources with their states, its skills and their inputs: the timeline's lanes and
+    the page's examples of goals and commands."""
     return {c.name: {"resources": {r.name: list(r.states) for r in c.skillset.resources},
-                     "skills": [k.name for k in c.skillset.skills]} for c in system.components}
+                     "skills": [k.name for k in c.skillset.skills],
+                     "inputs": {k.name: [v.name for v in k.inputs] for k in c.skillset.skills if k.inputs}}
+            for c in system.components}
 
 
 def _json(message: BaseModel | None) -> dict[str, Any] | None:

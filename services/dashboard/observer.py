@@ -54,10 +54,12 @@ class Observer:
     """Follows ``system`` on ``session`` (which may be shared, e.g. ``skinet run``)."""
 
     def __init__(self, session: zenoh.Session, system: str, model: System | None = None, history: int = 5000,
-                 client: str = keys.LOCAL_CLIENT):
+                 client: str = keys.LOCAL_CLIENT, goal_login: tuple[zenoh.Session, str] | None = None):
         """``client``: the client chunk of its check queries, the session's router login
-        (:func:`~services.common.zenoh_config.client_name`)."""
+        (:func:`~services.common.zenoh_config.client_name`); ``goal_login``: the session and login the
+        goals are sent from, when not this session's (an operator's, beside an observer's)."""
         self.session = session
+        self._goal_login = goal_login
         self.name = keys.check_chunk(system, "system name")
         self.client = keys.check_chunk(client, "client name")
         self.board = Board(self.name, history, model)
@@ -130,8 +132,9 @@ class Observer:
         return self._bundled[1]
 
     def goal(self, request: PilotGoalRequest, timeout: float) -> PilotGoalReply:
-        """Ask the pilot under this session's login; raises :class:`~services.common.goals.NoPilot`."""
-        return ask_pilot(self.session, request, self.client, timeout)
+        """Ask the pilot under the goal login, else this session's; raises :class:`~services.common.goals.NoPilot`."""
+        session, client = self._goal_login or (self.session, self.client)
+        return ask_pilot(session, request, client, timeout)
 
     def close(self) -> None:
         self._closed.set()

@@ -27,7 +27,8 @@ def build_parser() -> ArgumentParser:
         description="Make what is missing in the vault (a password per user, a CA, a certificate for the router "
                     "and each user; with --fleet-hub the fleet CA and the hub's link certificate), then copy into "
                     "each folder of --out, named router or for a user, only that service's files (never the CA "
-                    "key). Compose runs it before every start; existing files are kept.")
+                    "key); an --out that does not exist yet is made with a folder for the router and each user. Compose runs it "
+                    "before every start; existing files are kept.")
     parser.add_argument("--vault", default=os.environ.get("SKINET_SECRETS", "/var/lib/skinet/secrets"),
                         help="the folder of every secret (default: $SKINET_SECRETS or /var/lib/skinet/secrets)")
     parser.add_argument("--out", default="/var/lib/skinet/out",
@@ -44,9 +45,12 @@ def build_parser() -> ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     vault, out = Path(args.vault), Path(args.out)
-    if not out.is_dir():
+    if out.exists() and not out.is_dir():
         raise SkinetError(f"--out {out} is not a folder")
     vault.mkdir(mode=0o700, parents=True, exist_ok=True)
+    if not out.exists():  # outside compose, which mounts one folder per service: one for each of them
+        for name in (ROUTER, *USERS):
+            (out / name).mkdir(mode=0o700, parents=True)
     ensure_users(vault)
     ensure_tls(vault / "tls", [ROUTER, *USERS], [h.strip() for h in args.hostnames.split(",") if h.strip()])
     if args.fleet_hub:

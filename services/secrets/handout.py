@@ -151,6 +151,9 @@ def client_files(folder: Path, user: str, now: datetime.datetime | None = None) 
     if not folder.is_dir():
         raise SkinetError(f"secrets folder {folder} does not exist")
     tls = folder / "tls"
+    if (folder / "users.txt").is_file() and not tls.is_dir():  # a router's folder, from a router with no tls/
+        raise SkinetError(f"{folder} has no tls/ folder: a router makes its certificates there when it listens on a "
+                          "tls/ endpoint (skinet router --secrets DIR --listen tls/0.0.0.0:7447)")
     password = _read(folder / f"{user}.password", user).decode(errors="replace").strip()
     if not password or "\n" in password:
         raise SkinetError(f"{folder / f'{user}.password'} must hold the password on one line")

@@ -26,6 +26,8 @@ MAGIC = b"\x89MCAP0\r\n"
 PROFILE = ""  # not a ROS profile: JSON messages with JSON schemas
 LIBRARY = "skinet-live"
 CHUNK_SIZE = 64 * 1024  # a recorder killed without warning loses at most this much
+ROSBAG = ("this is a ROS 2 bag (rosbag2: CDR messages), not a monitor log: `skinet conform SYSTEM BAG` checks a "
+          "bag against a model")
 
 
 def is_mcap(head: bytes) -> bool:
@@ -81,6 +83,8 @@ def read_mcap(stream: IO[bytes], source: str = "<log>", warn: Callable[[str], No
     errors: list[Diagnostic] = []
     try:
         for mschema, channel, message in NonSeekingReader(stream).iter_messages(log_time_order=False):
+            if channel.message_encoding == "cdr":  # one line for the whole bag, not one per message
+                raise SourceError([Diagnostic(source, None, "error", ROSBAG)])
             if channel.topic.startswith("/skinet/"):  # an incident bundle's Foxglove channels (a view of the rest)
                 continue
             problem = _entry(mschema, channel, message, entries)

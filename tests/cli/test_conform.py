@@ -115,7 +115,25 @@ def test_a_clean_run_conforms(clean, storage: str, capsys: pytest.CaptureFixture
     assert out[0].endswith(": 21 messages, 12 events, 0 model divergences")
     # the run ends before docking (the pilot docks in `skinet demo nav2`): the dock server's status is not in it;
     # the result of the aborted goal is not in a bag: its mode came from the binding's default, said so
-    assert out[1:] == ["  not recorded: /dock_robot/_action/status", "  result not recorded: 1"]
+    assert out[1:] == ["  not recorded: /dock_robot/_action/status", "  result not recorded: 1 (goals that ended with no result in the bag "
+                       "(a rosbag records topics, and action results are services): their mode is the binding's "
+                       "default)"]
+
+
+@pytest.mark.parametrize("storage", ["sqlite3", "mcap"])
+@pytest.mark.parametrize("command", ["replay", "timeline"])
+def test_a_bag_given_for_a_monitor_log_is_one_line_pointing_to_conform(
+        clean, storage: str, command: str, capsys: pytest.CaptureFixture[str]) -> None:
+    """The folder, or its storage file: said to be a rosbag once, not one line per message (issue 32, item 8)."""
+    bag = clean[storage]
+    files = [p for p in bag.iterdir() if p.suffix in (".db3", ".mcap")]
+    assert len(files) == 1
+    for path in (bag, files[0]):
+        assert main([command, str(path), *(["-o", str(bag / "t.png")] if command == "timeline" else [])]) == 1
+        captured = capsys.readouterr()
+        assert (captured.out, captured.err) == ("", f"{path}: error: this is a ROS 2 bag (rosbag2: CDR messages), "
+                                                    "not a monitor log: `skinet conform SYSTEM BAG` checks a bag "
+                                                    "against a model\n")
 
 
 def test_a_drifting_run_reports_each_divergence_with_its_time(drifting, capsys: pytest.CaptureFixture[str]) -> None:

@@ -448,6 +448,11 @@ def _cases() -> list[Case]:
               "argument --incident-window: '0' is not a number of seconds from 0 (excluded) to 3600")
         add(program, "--incidents", (*base, "--no-multicast-scouting", "--incidents", "{tmp}/list.json"), 1,
             prefix + "--incidents {tmp}/list.json: cannot make the folder: File exists")
+    add("skinet", "--goal-user", ("dashboard", "spot_arm", "--port", "0", "--goal-user", "goalbox"), 1,
+        "skinet: error: --goal-user goalbox logs in to a router: give its endpoint with --connect/-e")
+    add("skinet", "--goal-secrets", ("dashboard", "spot_arm", "--port", "0", "--goal-user", "goalbox", "-e",
+                                     "tcp/127.0.0.1:7447", "--goal-secrets", "{tmp}/none"), 1,
+        "skinet: error: cannot read password file {tmp}/none/goalbox.password: No such file or directory")
 
     # skinet timeline
     add("skinet", "log", ("timeline", "{tmp}/missing.jsonl", "-o", "{tmp}/t.png"), 1,

@@ -141,7 +141,7 @@ def test_watch_logs_in_from_the_environment(deployment: str) -> None:
     assert lines[0].startswith("SkiNet Live  system spot_arm  step 6  last event manipulator:arm_ready.success.ready")
     assert "  manipulator  mutex=Free arm_status=RD; running: -" in lines
     assert "unsafe transitions (1), prediction STALE (explicit and forced constraints only)" in lines  # no predictor here
-    assert "services  monitor: 1, bridge_ros2: 1, predictor: 0, pilot: 0" in lines
+    assert "services  monitor: 1, bridge_ros2: 1, predictor: 0, pilot: off" in lines
     assert lines[-2:] == ["violations (0)", "divergences and manager restarts (0)"]
     out = skinet("watch", "nope", "--wait", "1", *zenoh_flags(deployment))
     assert (out.returncode, out.stderr.strip()) == (1, "skinet: error: no monitor of system 'nope' is alive "
@@ -212,7 +212,7 @@ def test_watch_on_a_terminal_redraws_the_view(deployment: str) -> None:
     text = out.decode()
     assert text.startswith("\x1b[H\x1b[JSkiNet Live  system spot_arm  step 6  last event "
                            "manipulator:arm_ready.success.ready#2"), text[:200]
-    assert "services  monitor: 1, bridge_ros2: 1, predictor: 0, pilot: 0" in text
+    assert "services  monitor: 1, bridge_ros2: 1, predictor: 0, pilot: off" in text
 
 
 RESTARTED = "manager restarted (the manager (or its gateway) came back); same state as before"

@@ -32,7 +32,7 @@ from skinet.wire.convert import bundle, statuses
 from skinet.wire.messages import CanonicalEvent, CheckReply, PredictReply, PredictRequest, SkillsetStatus
 from tests.bridge_side import BridgeSide
 
-USERS = ("bridge", "monitor", "predictor", "robot", "observer", "hub", "pilot", "operator")
+USERS = ("bridge", "monitor", "predictor", "robot", "observer", "hub", "pilot", "operator", "goalbox")
 FLOODER = "flooder"  # a second user allowed to ask predictions, as an operator adds one
 MISSION = [  # the paper's mission, as a cycle: every step a new marking
     ("spot", "init_power.start"), ("spot", "init_power.success.powered_on"), ("spot", "stand_up.start"),

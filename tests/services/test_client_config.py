@@ -15,6 +15,8 @@ import shutil
 import subprocess
 import sys
 import time
+import urllib.error
+import urllib.request
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -49,7 +51,7 @@ def deployment(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Path,
     """The router and a monitor on compose's layout; yields the folder of the hand-outs and the endpoint."""
     root = tmp_path_factory.mktemp("deployment")
     out = root / "out"
-    for name in ("router", "monitor", "observer", "bridge"):
+    for name in ("router", "monitor", "observer", "bridge", "pilot", "goalbox"):
         (out / name).mkdir(parents=True)
     job = subprocess.run([sys.executable, "-m", "services.secrets", "--vault", str(root / "vault"), "--out", str(out)],
                          cwd=REPO, capture_output=True, text=True, timeout=60)
@@ -186,6 +188,17 @@ def test_bad_arguments_are_refused_in_one_line(vault: Path, tmp_path: Path, args
     assert list(tmp_path.glob("*.json*")) == []
 
 
+def test_a_routers_folder_without_certificates_says_how_to_get_them(tmp_path: Path) -> None:
+    """``skinet router --secrets DIR`` on tcp/ only writes no certificates: said in one line (issue 32, item 8)."""
+    ensure_users(tmp_path / "router")
+    r = skinet("client-config", "--secrets", str(tmp_path / "router"), "-o", str(tmp_path / "observer.json5"))
+    assert (r.returncode, r.stdout, r.stderr.splitlines()) == (1, "", [
+        f"skinet: error: {tmp_path / 'router'} has no tls/ folder: a router makes its certificates there when it "
+        "listens on a tls/ endpoint (skinet router --secrets DIR --listen tls/0.0.0.0:7447)"])
+    help_text = skinet("client-config", "--help").stdout
+    assert "the\nfolder of `skinet router --secrets DIR --listen tls/...` serves as it is" in help_text
+
+
 def test_the_default_output_is_the_users_file_here_and_never_names_the_ca_key(vault: Path, tmp_path: Path) -> None:
     r = skinet("client-config", "--secrets", str(vault), "--user", "bridge", cwd=tmp_path)
     assert r.returncode == 0, r
@@ -205,3 +218,60 @@ def test_an_operators_configuration_says_how_to_send_goals(vault: Path, tmp_path
     body = json.loads((tmp_path / "operator.json5").read_text().split("\n", 4)[4])
     assert body["transport"]["auth"]["usrpwd"] == {"user": "operator",
                                                    "password": (vault / "operator.password").read_text().strip()}
+
+
+def _post_goal(url: str) -> tuple[int, dict]:
+    request = urllib.request.Request(url + "api/goal", data=json.dumps(
+        {"op": "goal", "goals": "reach spot:Standing", "mode": "guide"}).encode(), method="POST",
+        headers={"Content-Type": "application/json"})
+    try:
+        with urllib.request.urlopen(request, timeout=60) as r:
+            return r.status, json.loads(r.read())
+    except urllib.error.HTTPError as exc:
+        return exc.code, json.loads(exc.read())
+
+
+def test_the_dashboards_goal_box_sends_goals_under_its_own_login(deployment: tuple[Path, str],
+                                                                tmp_path: Path) -> None:
+    """Behind the shipped access control the page logs in as observer, which may not send goals; its goal box
+    may log in as goalbox, of the operator role, with its own secret (issue 32, item 7)."""
+    out, endpoint = deployment
+    pilot_config = client_config(out / "pilot", "pilot", endpoint, tmp_path / "pilot.json5")
+    observer = client_config(out / "observer", "observer", endpoint, tmp_path / "observer.json5")
+    procs: list[tuple[subprocess.Popen, Path]] = []
+    try:
+        log = tmp_path / "pilot.log"
+        with log.open("wb") as f:
+            procs.append((subprocess.Popen([sys.executable, "-m", "services.pilot", "skillsets/spot_arm.toml",
+                                            "--mode", "client", "--zenoh-config", str(pilot_config)],
+                                           cwd=REPO, stdout=f, stderr=subprocess.STDOUT), log))
+        urls = []
+        for name, extra in (("plain", []), ("goalbox", ["--goal-user", "goalbox", "--goal-secrets",
+                                                        str(out / "goalbox")])):
+            port = free_port()
+            log = tmp_path / f"dashboard-{name}.log"
+            with log.open("wb") as f:
+                procs.append((subprocess.Popen([sys.executable, "-m", "services.dashboard", "skillsets/spot_arm.toml",
+                                                "--port", str(port), "--mode", "client", "--zenoh-config",
+                                                str(observer), *extra], cwd=REPO, stdout=f, stderr=subprocess.STDOUT),
+                              log))
+            urls.append(f"http://127.0.0.1:{port}/")
+            deadline = time.monotonic() + 30
+            while "skinet dashboard: system spot_arm on" not in log.read_text():
+                assert time.monotonic() < deadline, log.read_text()
+                time.sleep(0.2)
+            assert log.read_text().splitlines()[0] == (f"skinet dashboard: system spot_arm on {urls[-1]}" + (
+                "; its goal box sends as user goalbox" if extra else ""))
+        # The pilot answers the goal box's login once it follows the monitor (its liveliness comes first).
+        deadline = time.monotonic() + 60
+        while (answer := _post_goal(urls[1]))[0] == 504:
+            assert time.monotonic() < deadline, answer
+            time.sleep(0.5)
+        status, body = answer
+        assert (status, body["ok"]) == (200, True), body
+        status, body = _post_goal(urls[0])  # the page's own login, observer: the router drops its goal query
+        assert (status, body["ok"]) == (504, False)
+        assert body["error"].endswith("(or the router refused user 'observer': only operator-role users may send "
+                                      "goals)"), body
+    finally:
+        stop_and_show(procs)

@@ -1,6 +1,7 @@
 """Loud connections (issue 27, item 2): an explicit ``--connect`` endpoint that cannot be reached,
 or that refuses the login, is reported at once in every mode, peer included, naming the endpoint
-and the reason; the commands that need it exit 1 after their timeout; ``skinet run`` prints
+and the reason (once: as the error of a command that waits a bounded time for it); the commands that need it
+exit 1 after their timeout; ``skinet run`` prints
 where it listens and the exact commands that reach it; ``--user`` with ``--connect`` logs in to
 a router as a client.
 
@@ -19,7 +20,7 @@ from pathlib import Path
 import pytest
 
 from services.common.zenoh_config import config_from_args
-from skinet_cli.main import build_parser
+from skinet_cli.main import build_parser, main
 from tests.processes import Watched
 from tests.services.conftest import REPO, client_args, free_port, wait_queryable
 
@@ -35,8 +36,6 @@ def _dead() -> str:
 
 
 @pytest.mark.parametrize("command", [
-    ("watch", "spot_arm", "--wait", "8"),
-    ("check", "spot_arm", "spot:teleop.start", "--timeout", "8"),
     ("record", "spot_arm", "-o", "{tmp}/rec.jsonl", "--duration", "8"),
     ("dashboard", "spot_arm", "--port", "0", "--wait", "8"),
 ])
@@ -56,14 +55,35 @@ def test_an_unreachable_endpoint_is_reported_at_once_then_fails(command: tuple[s
     assert "0 messages written" not in proc.text
 
 
-def test_a_peer_connects_when_the_endpoint_comes_up_later() -> None:
+@pytest.mark.parametrize("command", [
+    ("watch", "spot_arm", "--wait", "1"),
+    ("check", "spot_arm", "spot:teleop.start", "--timeout", "1"),
+    ("replay", "{tmp}/run.jsonl", "--linger", "0"),
+    ("demo", "--live", "--linger", "0"),
+])
+def test_an_unreachable_endpoint_of_a_command_that_waits_is_one_line(command: tuple[str, ...],
+                                                                     tmp_path: Path) -> None:
+    """Commands that wait a bounded time for their endpoints say it once, as their error (a warning first
+    repeated it); in peer mode (given --connect alone they are clients, which fail at once in one line too)."""
+    if command[0] == "replay":
+        scenario = str(REPO / "skillsets" / "missions" / "unassisted.toml")
+        assert main(["demo", "--core", "--log", str(tmp_path / "logs"), scenario]) == 0
+        command = ("replay", str(next((tmp_path / "logs").iterdir())), "--linger", "0")
     endpoint = _dead()
-    watch = skinet("watch", "spot_arm", "--once", "--wait", "30", "-e", endpoint, "-m", "peer")
-    watch.wait_for(lambda text: "keeps trying" in text, "warning")
+    proc = skinet(*(a.replace("{tmp}", str(tmp_path)) for a in command), "--connect", endpoint, "-m", "peer")
+    assert proc.wait(60) == 1
+    assert proc.lines == [f"skinet: error: cannot connect to {endpoint}: nothing answers there"]
+
+
+def test_a_peer_connects_when_the_endpoint_comes_up_later(tmp_path: Path) -> None:
+    endpoint = _dead()
+    record = skinet("record", "spot_arm", "-o", str(tmp_path / "r.jsonl"), "--count", "1", "--duration", "60",
+                    "-e", endpoint, "-m", "peer")
+    record.wait_for(lambda text: "keeps trying" in text, "warning")
     run = skinet("run", SYSTEM, "--listen", endpoint, "--duration", "60")
     try:
-        assert watch.wait(60) == 0, watch.text
-        assert "SkiNet Live  system spot_arm  step 0" in watch.text
+        assert record.wait(60) == 0, record.text
+        assert len((tmp_path / "r.jsonl").read_text().splitlines()) >= 1
     finally:
         run.stop()
 
@@ -78,8 +98,7 @@ def test_a_refused_login_is_reported_in_peer_mode_too(tmp_path: Path) -> None:
         assert peer.wait(60) == 1
         reason = (f"cannot connect to {endpoint}: the router refused the login: authentication failed for user "
                   "'observer' (check SKINET_ZENOH_USER and SKINET_ZENOH_PASSWORD, or --user and --password)")
-        assert peer.lines == [f"skinet watch: warning: {reason}; Zenoh keeps trying in the background",
-                              f"skinet: error: {reason}"]
+        assert peer.lines == [f"skinet: error: {reason}"]
         # --user with --connect is a client of the router: it fails at once, with the same reason.
         client = skinet("watch", "spot_arm", "--wait", "3", "-e", endpoint, "--user", "observer", "--password", "x")
         assert client.wait(60) == 1
@@ -155,6 +174,11 @@ def test_run_prints_where_it_listens_and_lines_that_work() -> None:
         assert check.returncode == 3 and check.stdout.startswith(
             "spot:init_power.start: WARN at step 0 (STATE NOT LIVE: about the last marking known)"), check
         assert "\n  state_unknown (warn) — the live state is not known" in check.stdout, check
+        # A transition that cannot fire now is no allow: its own answer and exit status.
+        idle = subprocess.run([sys.executable, "-m", "skinet_cli.main", "check", "spot_arm", "spot:go_to_waypoint.start",
+                               "-e", endpoint], cwd=REPO, capture_output=True, text=True, timeout=60)
+        assert idle.returncode == 5 and idle.stdout.startswith(
+            "spot:go_to_waypoint.start: NOT FIRABLE at step 0 (not enabled at the live marking; if it were: "), idle
     finally:
         assert run.stop() == 0
 
@@ -198,3 +222,12 @@ def test_run_as_a_client_of_a_router(capsys: pytest.CaptureFixture[str]) -> None
     assert main(["run", SYSTEM, "--mode", "client"]) == 1
     assert capsys.readouterr().err == "skinet: error: --mode client needs the router's endpoint: --connect ENDPOINT\n"
 
+
+
+def test_watch_with_no_endpoint_says_where_to_find_one() -> None:
+    """``skinet run`` listens on a free port: a watch without ``-e`` reaches nothing, and says how to reach it."""
+    watch = skinet("watch", "spot_arm", "--once", "--wait", "0.5")
+    assert watch.wait(60) == 1
+    assert watch.lines == ["skinet: error: no monitor of system 'spot_arm' is alive (no monitor is reachable at all; "
+                           "no --connect/-e given: `skinet run` and `skinet demo --live` listen on a free port and "
+                           "print the -e ENDPOINT to pass)"]

@@ -188,6 +188,13 @@ def test_assisted_run_shows_the_two_warnings_before_the_commands(browser, dashbo
                 browser, "#check-result")[0]["text"]
             if index == WARNINGS[0][0]:
                 screenshot(browser, tmp_path, "dashboard-assisted-warning.png")
+                # Spot is powered on: init_power cannot fire, and the answer says so rather than allow it.
+                browser.execute_script("document.getElementById('check-result').replaceChildren();"
+                                       "document.getElementById('check-command').value = 'spot:init_power.start';"
+                                       "document.querySelector('#check-form button').click();")
+                idle = until(browser, lambda d: css(d, "#check-result [data-enabled=false]"), "the check's answer")
+                assert idle[0]["text"].startswith("spot:init_power.start: NOT FIRABLE (not enabled at the live "
+                                                  "marking; if it were: "), idle
 
     records = play("assisted", router, after)
     assert seen == [(i, s, t, p, "explicit") for i, s, t, p in WARNINGS]

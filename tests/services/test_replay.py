@@ -11,6 +11,7 @@ web dashboard in headless Chromium.
 
 from __future__ import annotations
 
+import json
 import re
 import signal
 import subprocess
@@ -178,7 +179,7 @@ def test_replay_publishes_the_recorded_run_as_its_monitor_did(recording: dict[st
         assert watch.stdout.startswith(f"SkiNet Live  system {NAME}  step {LAST_STEP}  last event "
                                        f"{last_state.event}\n")
         assert "  stowed_drive: holds\n" in watch.stdout
-        assert "services  monitor: 1, bridge_ros2: 0, predictor: 0, pilot: 0\n  REPLAY of a recorded run (skinet replay), not the " \
+        assert "services  monitor: 1, bridge_ros2: 0, predictor: 0, pilot: off\n  REPLAY of a recorded run (skinet replay), not the " \
             "live robot\n" in watch.stdout
         check = subprocess.run([sys.executable, "-m", "skinet_cli.main", "check", NAME, "arm:unfold.start",
                                 *client_args(router)], cwd=REPO, capture_output=True, text=True, timeout=60)
@@ -206,6 +207,44 @@ def test_replay_publishes_the_recorded_run_as_its_monitor_did(recording: dict[st
                            cwd=REPO, capture_output=True, text=True, timeout=120)
     assert drawn.returncode == 0, drawn.stderr
     assert picture.stat().st_size > 10_000
+
+
+def test_a_demo_log_replays_as_a_live_state_with_whole_property_names(browser, tmp_path: Path) -> None:
+    """A ``skinet demo --log`` log (issue 32, item 8): no "not vouched for" banner, every skillset live beside the
+    monitor, and property names on one line in a narrow window."""
+    scenario = REPO / "skillsets" / "missions" / "unassisted.toml"
+    made = subprocess.run([sys.executable, "-m", "skinet_cli.main", "demo", "--core", "--log", str(tmp_path / "logs"),
+                           str(scenario)], cwd=REPO, capture_output=True, text=True, timeout=300)
+    assert made.returncode == 0, made.stderr
+    log = tmp_path / "violated.jsonl"  # the run up to its first violation: a recovery column beside the names
+    log.write_text("".join(line + "\n" for line in (tmp_path / "logs" / "unassisted.jsonl").read_text().splitlines()
+                           if json.loads(line)["t"] <= 52.0))
+    out = tmp_path / "replay.out"
+    proc = skinet("replay", str(log), "--speed", "0", "--dashboard", "0", log=out)
+    try:
+        wait_until(lambda: "dashboard on http" in out.read_text(), "the dashboard's address")
+        url = out.read_text().split("dashboard on ")[1].split()[0]
+        wait_http(url + "api/snapshot")
+        browser.set_window_size(360, 900)
+        browser.get(url)
+        until(browser, lambda d: css(d, "#properties tr[data-property=action_guard][data-holds=false]"),
+              "the violated property")
+        assert "hidden" in css(browser, "#stale")[0]
+        assert {c["data-skillset"]: c["data-sync"] for c in css(browser, "#skillsets .card")} == {
+            "spot": "live", "manipulator": "live"}
+        pilot = css(browser, "#services [data-service=pilot]")[0]  # none in a demo's run: off, not a failure
+        assert (pilot["class"], pilot["text"]) == ("service off", "pilot: off")
+        placeholders = {e["id"]: e["placeholder"] for e in css(browser, "#goal-text, #goal-inputs, #check-command")}
+        assert placeholders == {"goal-text": "reach spot:PowerOn\nrun spot:init_power",
+                                "goal-inputs": "go_to_waypoint.target = ...",
+                                "check-command": "skillset:transition, e.g. spot:init_power.start"}
+        lines = browser.execute_script(
+            "const r = document.createRange(); const td = document.querySelector("
+            "'#properties tr[data-property=action_guard] td'); r.selectNodeContents(td);"
+            "return new Set([...r.getClientRects()].map((x) => Math.round(x.top))).size")
+        assert lines == 1
+    finally:
+        stop(proc, out)
 
 
 def test_replay_with_dashboard_shows_the_run_live(recording: dict[str, Path], browser, tmp_path: Path) -> None:
@@ -237,6 +276,11 @@ def test_replay_with_dashboard_shows_the_run_live(recording: dict[str, Path], br
         assert "hidden" not in notice and notice["text"] == ("Replay of a recorded run (skinet replay), not the live "
                                                             "robot: times are the recording's.")
         assert css(browser, "#timeline .violation-label")
+        # The examples name this system's skillsets, not the paper robot's (issue 32, item 7).
+        placeholders = {e["id"]: e["placeholder"] for e in css(browser, "#goal-text, #goal-inputs, #check-command")}
+        assert placeholders == {"goal-text": "reach base:Moving\nrun base:undock",
+                                "goal-inputs": "no skill of this system takes inputs",
+                                "check-command": "skillset:transition, e.g. base:undock.start"}
         browser.execute_script("document.getElementById('check-command').value = 'arm:unfold.start';"
                                "document.querySelector('#check-form button').click();")
         error = until(browser, lambda d: css(d, "#check-result .error"), "the check's answer")
@@ -293,8 +337,8 @@ def test_readme_lines_a_peer_replay_and_a_watch_connected_to_it(recording: dict[
 
 
 def test_an_unreachable_endpoint_stops_the_replay(recording: dict[str, Path]) -> None:
-    """Publishing towards an explicit ``--connect`` endpoint nobody answers at is no replay: said at once,
-    then exit 1 (issue 27, item 2, as for watch and record)."""
+    """Publishing towards an explicit ``--connect`` endpoint nobody answers at is no replay: one error line
+    after the wait, exit 1 (issue 27, item 2, as for watch and record)."""
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     r = subprocess.run([sys.executable, "-m", "skinet_cli.main", "replay", str(recording["jsonl"]), "--connect",
                         endpoint, "--no-multicast-scouting"], cwd=REPO, capture_output=True, text=True, timeout=60)

@@ -116,7 +116,23 @@ def test_each_service_is_handed_its_own_files_only(tmp_path: Path) -> None:
                        capture_output=True, text=True, timeout=60)
     assert (r.returncode, r.stderr) == (1, f"python -m services.secrets: error: {out / 'nobody'}: a service's folder "
                                            "is named router or for its user (bridge, monitor, predictor, robot, "
-                                           "observer, hub, pilot, operator)\n")
+                                           "observer, hub, pilot, operator, goalbox)\n")
+
+
+def test_a_new_out_folder_gets_a_folder_for_each_service(tmp_path: Path) -> None:
+    """Outside compose (which mounts one folder per service), ``--out`` need not exist yet (issue 32, item 8)."""
+    vault, out = tmp_path / "vault", tmp_path / "new" / "out"
+    r = subprocess.run([sys.executable, "-m", "services.secrets", "--vault", str(vault), "--out", str(out)], cwd=REPO,
+                       capture_output=True, text=True, timeout=60)
+    assert (r.returncode, r.stderr) == (0, ""), r
+    assert sorted(p.name for p in out.iterdir()) == sorted(["router", *USERS])
+    assert len(r.stdout.splitlines()) == 1 + len(USERS)
+    assert (out / "operator" / "tls" / "operator.pem").is_file() and not list(out.rglob("ca.key"))
+    (tmp_path / "file").write_text("")
+    r = subprocess.run([sys.executable, "-m", "services.secrets", "--vault", str(vault), "--out",
+                        str(tmp_path / "file")], cwd=REPO, capture_output=True, text=True, timeout=60)
+    assert (r.returncode, r.stderr) == (1, f"python -m services.secrets: error: --out {tmp_path / 'file'} is not a "
+                                           "folder\n")
 
 
 class Router:

@@ -113,8 +113,11 @@ function renderHeader() {
   const services = [["monitor", "monitor"], ["bridge_ros2", "bridge"], ["predictor", "predictors"], ["pilot", "pilot"]].map(([s, label]) => {
     const ids = view.alive[s] || [];
     const up = s === "predictor" ? ids.length : (s === "monitor" && replay ? "replay" : "up");
-    return el("span", { class: "service " + (ids.length ? "up" : "down"), "data-service": s, "data-alive": ids.length,
-      title: ids.join(", ") || "none alive" }, `${label}: ${ids.length ? up : "none"}`);
+    // A pilot never heard of was not started (skinet demo --live has none by design): off, not a failure.
+    const off = s === "pilot" && !ids.length && !view.pilot;
+    return el("span", { class: "service " + (ids.length ? "up" : off ? "off" : "down"), "data-service": s,
+      "data-alive": ids.length, title: ids.join(", ") || (off ? "no pilot started: skinet run starts one" : "none alive") },
+      `${label}: ${ids.length ? up : off ? "off" : "none"}`);
   });
   fill("services", ...services);
   const s = view.state;
@@ -515,8 +518,10 @@ async function check(event) {
     const reasons = r.reasons.map((x) => el("li", {}, `${x.property ? x.property + ": " : ""}${x.constraint} (${x.action})`,
       x.steps ? `, within ${x.steps} steps` : "", x.witness.length ? ` via ${x.witness.join(" \u2192 ")}` : "",
       x.reason ? ` \u2014 ${x.reason}` : ""));
-    out.replaceChildren(el("p", { class: `decision decision-${r.decision}`, "data-decision": r.decision },
-      `${r.skillset}:${r.transition}: ${r.decision.toUpperCase()}`, r.enabled ? "" : " (not firable now)"),
+    // As skinet check answers: a command that cannot fire now is no allow, whatever its decision.
+    out.replaceChildren(el("p", { class: `decision decision-${r.decision}`, "data-decision": r.decision,
+      "data-enabled": r.enabled }, `${r.skillset}:${r.transition}: ` + (r.enabled ? r.decision.toUpperCase()
+        : `NOT FIRABLE (not enabled at the live marking; if it were: ${r.decision.toUpperCase()})`)),
       el("ul", {}, ...reasons));
   } catch (e) {
     out.textContent = `check failed: ${e}`;
@@ -529,6 +534,22 @@ function updateNames() {
   for (const e of (view.unsafe ? view.unsafe.unsafe : [])) names.push(`${e.skillset}:${e.transition}`);
   for (const [ss, l] of Object.entries(lanes)) for (const k of l.skills) names.push(`${ss}:${k}.start`);
   list.replaceChildren(...[...new Set(names)].map((n) => el("option", { value: n })));
+  examples(lanes);
+}
+
+// The goal box's and the check's placeholders name the loaded system's skillsets, never another robot's.
+function examples(lanes) {
+  const [ss, l] = Object.entries(lanes).find(([, x]) => x.skills.length) || Object.entries(lanes)[0] || [];
+  if (!ss) return;
+  const skill = l.skills[0], [, states] = Object.entries(l.resources)[0] || [];
+  const goals = [states && states.length ? `reach ${ss}:${states[states.length - 1]}` : null,
+    skill ? `run ${ss}:${skill}` : null].filter(Boolean);
+  document.getElementById("goal-text").placeholder = goals.join("\n");
+  document.getElementById("check-command").placeholder =
+    `skillset:transition${skill ? `, e.g. ${ss}:${skill}.start` : ""}`;
+  const inputs = Object.values(lanes).flatMap((x) => Object.entries(x.inputs || {}))[0];
+  document.getElementById("goal-inputs").placeholder =
+    inputs ? `${inputs[0]}.${inputs[1][0]} = ...` : "no skill of this system takes inputs";
 }
 
 // -- the pilot: goal box, status, plan (SPEC §8) ---------------------------------------
