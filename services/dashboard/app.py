@@ -31,22 +31,23 @@ from skinet.system import System
 from skinet.wire import keys
 
 
-def add_view_args(p: argparse.ArgumentParser, env: str, port: int, system_help: str) -> None:
-    """A served view's SYSTEM, ``--host`` and ``--port`` (defaults from ``$<env>_HOST`` and ``$<env>_PORT``) and
-    ``--wait``: the dashboard's and the Foxglove view's."""
+def add_view_args(p: argparse.ArgumentParser, env: tuple[str, str], port: int, system_help: str) -> None:
+    """A served view's SYSTEM, ``--host`` and ``--port`` (defaults from the variables ``env`` names: host, port)
+    and ``--wait``: the dashboard's and the Foxglove view's."""
+    host_env, port_env = env
     p.add_argument("system", metavar="SYSTEM", help=system_help)
-    p.add_argument("--host", default=os.environ.get(f"{env}_HOST", "127.0.0.1"),
-                   help=f"address to serve on (default: ${env}_HOST or 127.0.0.1; 0.0.0.0 exposes it)")
-    p.add_argument("--port", "-p", type=count(0, 65535, env=f"{env}_PORT"),
-                   default=os.environ.get(f"{env}_PORT", str(port)),
-                   help=f"TCP port (default: ${env}_PORT or {port}; 0 picks a free one)")
+    p.add_argument("--host", default=os.environ.get(host_env, "127.0.0.1"),
+                   help=f"address to serve on (default: ${host_env} or 127.0.0.1; 0.0.0.0 exposes it)")
+    p.add_argument("--port", "-p", type=count(0, 65535, env=port_env),
+                   default=os.environ.get(port_env, str(port)),
+                   help=f"TCP port (default: ${port_env} or {port}; 0 picks a free one)")
     p.add_argument("--wait", type=seconds(zero=True), default=5.0,
                    help="seconds before warning that no monitor of the system is alive (default: 5)")
 
 
 def add_dashboard_args(p: argparse.ArgumentParser) -> None:
     """The dashboard's arguments, its log level and the Zenoh flags."""
-    add_view_args(p, "SKINET_DASHBOARD", 8080,
+    add_view_args(p, ("SKINET_DASHBOARD_HOST", "SKINET_DASHBOARD_PORT"), 8080,
                   "system file (.toml, gives the name and the timeline's lanes) or system name")
     p.add_argument("--foxglove", type=count(0, 65535, env="SKINET_DASHBOARD_FOXGLOVE"),
                    default=os.environ.get("SKINET_DASHBOARD_FOXGLOVE") or None, metavar="PORT",

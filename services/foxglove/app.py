@@ -25,7 +25,7 @@ DEFAULT_PORT = 8765  # Foxglove's usual WebSocket port
 
 def add_foxglove_args(p: argparse.ArgumentParser) -> None:
     """The command's arguments, its log level and the Zenoh flags."""
-    add_view_args(p, "SKINET_FOXGLOVE", DEFAULT_PORT, "system file (.toml) or system name")
+    add_view_args(p, ("SKINET_FOXGLOVE_HOST", "SKINET_FOXGLOVE_PORT"), DEFAULT_PORT, "system file (.toml) or system name")
     add_log_arg(p)
     add_zenoh_args(p)
 

@@ -25,7 +25,7 @@ from skinet.net.export.dot import to_dot
 from skinet.net.export.pnml import PNML_NS, PTNET_TYPE, to_pnml
 from skinet.net.export.tina import tina_name, to_tina
 from skinet.net.petrinet import PetriNet, Transition
-from corpus import require_corpus
+from tests.corpus import require_corpus
 
 CORPUS = Path(__file__).resolve().parents[3] / "shared" / "corpus"
 CORPUS_FILES = ["spot.rl", "manipulator.rl", "isae_robot/isae_robot.rl"]

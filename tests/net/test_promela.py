@@ -14,7 +14,7 @@ from skinet.files import load_system
 from skinet.net.export.promela import to_promela
 from skinet.net.union import union
 from skinet.verify.explore import explore
-from corpus import require_corpus
+from tests.corpus import require_corpus
 
 ROOT = Path(__file__).resolve().parents[2]
 CORPUS = ROOT.parent / "shared" / "corpus"

@@ -17,7 +17,7 @@ from skinet.net.semantics import steps
 from skinet.plan.goal import Goal, parse_goal
 from skinet.system import System, build_system
 from skinet.verify.forced import forced
-from corpus import require_corpus
+from tests.corpus import require_corpus
 
 ROOT = Path(__file__).resolve().parents[2]
 CORPUS = ROOT.parent / "shared" / "corpus"

@@ -25,7 +25,7 @@ from skinet.ros.interfaces import (
     status_topic,
 )
 from skinet.ros.typemap import parse_typemap
-from corpus import require_corpus
+from tests.corpus import require_corpus
 
 CORPUS = Path(__file__).resolve().parents[2].parent / "shared" / "corpus"
 ISAE = CORPUS / "isae_robot"

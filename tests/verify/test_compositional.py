@@ -16,7 +16,7 @@ from skinet.system import System, build_system
 from skinet.verify.compositional import CompositionalOracle, one_step
 from skinet.verify.explore import Deadline
 from skinet.verify.predict import forecast
-from corpus import require_corpus
+from tests.corpus import require_corpus
 
 ROOT = Path(__file__).resolve().parents[2]
 CORPUS = ROOT.parent / "shared" / "corpus"

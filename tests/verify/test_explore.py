@@ -18,7 +18,7 @@ from skinet.system import System, build_system
 from skinet.verify.component import CACHE_SIZE, explore_component, forget_component_graphs
 from skinet.verify.ctl import Kripke
 from skinet.verify.explore import StateSpace, explore
-from corpus import require_corpus
+from tests.corpus import require_corpus
 
 CORPUS = Path(__file__).resolve().parents[3] / "shared" / "corpus"
 

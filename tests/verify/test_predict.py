@@ -21,7 +21,7 @@ from skinet.verify.component import forget_component_graphs
 from skinet.verify.ctl import Kripke, check
 from skinet.options import PredictionOptions, PropertyOptions
 from skinet.verify.predict import Forecast, forecast
-from corpus import require_corpus
+from tests.corpus import require_corpus
 
 LITERAL = PredictionOptions(PropertyOptions(af="literal"))
 
