@@ -36,7 +36,8 @@ RUN groupadd --system --gid 10001 skinet \
  && useradd --system --uid 10001 --gid 10001 --home-dir /app --no-create-home skinet \
  && mkdir -p /var/lib/skinet/secrets /var/lib/skinet/out/router /var/lib/skinet/out/bridge \
         /var/lib/skinet/out/monitor /var/lib/skinet/out/predictor /var/lib/skinet/out/robot \
-        /var/lib/skinet/out/observer /var/lib/skinet/out/pilot \
+        /var/lib/skinet/out/observer /var/lib/skinet/out/pilot /var/lib/skinet/out/goalbox \
+        /var/lib/skinet/goalbox \
  && chown -R skinet:skinet /var/lib/skinet && chmod -R 0700 /var/lib/skinet
 COPY --from=deps /opt/skinet /opt/skinet
 COPY docker/entrypoint.sh /usr/local/bin/skinet-entrypoint

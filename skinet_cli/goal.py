@@ -83,6 +83,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     c.add_argument("--drive", action="store_true",
                    help="the pilot sends the commands itself (default: guide, it shows each one and you send it)")
     c.add_argument("--replace", action="store_true", help="replace a goal that runs (else the pilot rejects the new one)")
+    c.add_argument("--recover", action="store_true",
+                   help="from a state outside Safe (a property violated or forced), let the pilot first send one of "
+                        "the commands that lead back into Safe, then plan again (else such a goal is rejected, with "
+                        "those commands named)")
     c.add_argument("--max-retries", type=count(1, 100), default=3, metavar="N",
                    help="failures of one skill after which the goal fails (default: 3)")
     ops = c.add_mutually_exclusive_group()
@@ -166,7 +170,8 @@ def _goal_fields(args: argparse.Namespace, system: Any) -> dict[str, Any]:
     if system is not None:
         read_goals(argparse.Namespace(system=args.system, goals_file=args.goals_file, inputs=args.inputs,
                                       goals=args.goals), system)
-    fields: dict[str, Any] = {"goals": list(args.goals), "replace": args.replace, "max_retries": args.max_retries}
+    fields: dict[str, Any] = {"goals": list(args.goals), "replace": args.replace, "max_retries": args.max_retries,
+                              "recover": args.recover}
     if args.inputs is not None:
         fields["inputs"] = parse_toml(args.inputs, "<--inputs>")
     if args.goals_file:

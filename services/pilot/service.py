@@ -127,6 +127,8 @@ class _Goal:
     unknown: MissedOutcome | None = None  # an outcome that ended unseen and cannot be told: awaits `confirm`
     notes: list[str] = field(default_factory=list)  # what it assumed or was told (PilotStatus.notes)
     note: str = ""  # the last note while it matters: shown as the status's reason when there is no other
+    recover: bool = False  # from outside Safe, send a recovery command first (PilotGoalRequest.recover)
+    planned_at: dict[str, int] | None = None  # the marking g.plan was made at
     accepted_divergence: int = -1  # the step whose divergence `resume` accepted
     end: str = ""  # reached, failed or cancelled
     reason: str = ""
@@ -391,6 +393,22 @@ class Pilot:
             last = f" (last: {mode})" if mode else ""
             self._end(g, "failed", f"{what} {g.retries[name]} times{last}")
 
+    @staticmethod
+    def _recovers(g: _Goal, marking: dict[str, int]) -> bool:
+        """Whether ``g`` recovers first at ``marking``: asked to, and its plan from here is ``none`` with a way
+        back into Safe (SPEC §8: from outside Safe no plan promises safety)."""
+        return g.recover and g.plan is not None and g.plan.answer == "none" and bool(g.plan.recovery) and \
+            g.planned_at == marking
+
+    @staticmethod
+    def _recovery(g: _Goal) -> Command:
+        """The first recovery command, in the planner's fixed order (a start takes the goal's inputs)."""
+        assert g.plan is not None
+        skillset, transition = g.plan.recovery[0]
+        skill, _, kind = transition.partition(".")
+        inputs = g.goals[g.index].given(skillset, skill) if kind == "start" else None
+        return Command(skillset, transition, dict(inputs or {}))
+
     def _notes(self, g: _Goal, note: str) -> None:
         g.note = note
         g.notes = (g.notes + [note])[-MAX_NOTES:]
@@ -575,6 +593,8 @@ class Pilot:
                 except SkinetError as exc:
                     return self._reject(f"the live state cannot be planned from: {exc}")
                 for n, p in enumerate(plans, 1):
+                    if n == 1 and request.recover and p.answer == "none" and p.recovery:
+                        continue  # it recovers first, then plans again
                     if p.answer not in ("strong", "cyclic"):
                         which = f"goal {n} ({p.goal.text})" if len(goals) > 1 else f"goal '{p.goal.text}'"
                         return self._reject(f"{which} has no plan from the live state: {p.answer}: {p.reason}")
@@ -583,7 +603,8 @@ class Pilot:
             self._goals += 1
             since = self._state.seq if self._state is not None else -1
             self._goal = _Goal(self._goals, client, request.mode, goals, request.max_retries, since,
-                               plan=plans[0] if plans else None, plans=plans)
+                               plan=plans[0] if plans else None, plans=plans, recover=request.recover,
+                               planned_at=marking_of(self.system, self._state.skillsets) if plans else None)
             self._asked = None
             log.info("goal %d of %s (%s): %s", self._goals, client, request.mode,
                      _cut("; ".join(x.text for x in goals), MAX_LOGGED))
@@ -655,17 +676,25 @@ class Pilot:
         if marking is None:
             return self._show("paused", f"the live state of step {st.seq} names what {self.name} does not have")
         while True:
-            if g.plan is None or g.plan.action(marking) is None:
+            if g.plan is None or (g.plan.action(marking) is None and not self._recovers(g, marking)):
                 self._show("planning")
                 try:
                     g.plan = self.planner.plan(g.goals[g.index], marking, self.budget)
+                    g.planned_at = dict(marking)
                 except SkinetError as exc:  # a marking the robot cannot be in (SPEC §3): nothing to plan from
                     g.plan = None
                     return self._show("paused", f"the live state of step {st.seq} cannot be planned from: {exc}")
-                if g.plan.answer not in ("strong", "cyclic"):
-                    self._end(g, "failed", f"no plan for '{g.goals[g.index].text}' from step {st.seq}: "
-                                           f"{g.plan.answer}: {g.plan.reason}")
-                    return self._show(g.end, g.reason)
+            if self._recovers(g, marking):
+                action = self._recovery(g)
+                note = (f"recovering first with {action.skillset}:{action.transition} (back into Safe whatever its "
+                        f"outcome), then planning again: {g.plan.reason.partition('; recover first')[0]}")
+                if g.note != note:
+                    self._notes(g, note)
+                break
+            if g.plan.answer not in ("strong", "cyclic"):
+                self._end(g, "failed", f"no plan for '{g.goals[g.index].text}' from step {st.seq}: "
+                                       f"{g.plan.answer}: {g.plan.reason}")
+                return self._show(g.end, g.reason)
             action = g.plan.action(marking)
             if not isinstance(action, Reached):
                 break

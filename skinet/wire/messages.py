@@ -380,7 +380,7 @@ class PilotGoalRequest(_Message):
     switch mode, cancel, pause or resume.  ``goals`` (goal texts) and ``mission`` (a goals file's TOML
     text) are read as ``skinet plan`` reads them; errors come back with ``mission_name:line:col``."""
 
-    OMIT_AT_DEFAULT = ("answer",)
+    OMIT_AT_DEFAULT = ("answer", "recover")
     system: str
     op: Literal["goal", "mode", "cancel", "pause", "resume", "confirm"] = Field(
         "goal", description="goal: set goals (or mission); mode: switch to `mode`; cancel, pause, resume the goal; "
@@ -398,6 +398,9 @@ class PilotGoalRequest(_Message):
     answer: Literal["success", "failure", "rerun"] | None = Field(
         None, description="confirm: how the skill whose outcome is unknown ended (success, failure), or rerun: it "
                           "did not do its work, start it again (no retry counted)")
+    recover: bool = Field(False, description="from a marking outside Safe (a property violated or forced), first "
+                                             "send one of the admissible commands that lead back into Safe (the "
+                                             "plan's recovery), then plan again; otherwise such a goal is rejected")
 
 
 class PilotGoalReply(_Message):

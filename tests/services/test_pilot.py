@@ -514,3 +514,37 @@ def test_a_mission_past_the_limit_is_refused_at_the_first_goal_too_many() -> Non
         parse_goals('[[goals]]\nreach = "spot:Standing"\n' * 4, system, "m.toml", typemap, max_goals=3)
     assert str(refused.value) == "m.toml:7:1: error: 4 goals: a mission has at most 3"
     assert len(parse_goals('[[goals]]\nreach = "spot:Standing"\n' * 3, system, "m.toml", typemap, 3)) == 3
+
+
+def test_from_a_violation_the_goal_is_refused_naming_the_way_back_unless_it_asks_to_recover(robot: Robot) -> None:
+    """Issue 30: from a violated marking the answer names every violated property and the commands that lead
+    back into Safe; with `recover`, the pilot sends the first of them, then plans again from Safe."""
+    impl = Implementations(robot.sim, robot.system, hold=[("spot", "teleop"), ("manipulator", "arm_joystick")])
+    gui = Gui(robot.observer, robot)
+    try:
+        for skillset, skill in (("spot", "init_power"), ("spot", "stand_up"), ("manipulator", "arm_ready")):
+            gui.start(skillset, skill)
+            wait_until(lambda: any(e.startswith(f"{skillset}:{skill}.success") for e in impl.ended), 30,
+                       f"{skillset}:{skill} ended")
+        for skillset, skill in (("manipulator", "arm_joystick"), ("spot", "teleop")):  # both held: both Busy
+            gui.start(skillset, skill)
+            wait_until(lambda: skill in robot.monitor.snapshot().state.skillsets[skillset].running, 30,
+                       f"{skillset}:{skill} running")
+        refused = ask_goal(robot.observer, goal("reach spot:Standing", mode="drive"))
+        assert not refused.accepted
+        assert refused.reason.startswith("goal 'reach spot:Standing' has no plan from the live state: none: the robot "
+                                         "is in a marking forced for action_guard")
+        assert refused.reason.endswith("recover first with one of spot:teleop.interrupt, "
+                                       "manipulator:arm_joystick.interrupt (each leads back into Safe whatever its "
+                                       "outcome), then plan again"), refused.reason
+        reply = ask_goal(robot.observer, goal("reach spot:Standing", mode="drive", recover=True))
+        assert (reply.accepted, reply.answer) == (True, "none")
+        done = robot.statuses.state("reached", reply.goal_id)
+        assert robot.actuator.sent == ["spot:teleop.interrupt"]
+        assert done.commands == 1 and done.denied == 0
+        assert done.notes[0].startswith("recovering first with spot:teleop.interrupt (back into Safe whatever its "
+                                        "outcome), then planning again: the robot is in a marking forced for "
+                                        "action_guard"), done.notes
+    finally:
+        gui.close()
+        impl.close()
