@@ -55,8 +55,11 @@ def main(argv: list[str] | None = None) -> int:
     ensure_tls(vault / "tls", [ROUTER, *USERS], [h.strip() for h in args.hostnames.split(",") if h.strip()])
     if args.fleet_hub:
         ensure_fleet(vault)
-    for name, files in hand_out(vault, out).items():
-        print(f"secrets: {name}: {' '.join(files)}", flush=True)
+    # The goal box's operator login is handed out only when the dashboard is told to use it: by default the
+    # dashboard's container holds no operator credentials.
+    withheld = frozenset() if os.environ.get("SKINET_DASHBOARD_GOAL_USER") == "goalbox" else frozenset({"goalbox"})
+    for name, files in hand_out(vault, out, withheld).items():
+        print(f"secrets: {name}: {' '.join(files) or '(nothing: not switched on)'}", flush=True)
     return 0
 
 

@@ -67,9 +67,10 @@ def _remove_strays(folder: Path, keep: list[str]) -> None:
                 os.unlink(name, dir_fd=root_fd)
 
 
-def hand_out(vault: Path, out: Path) -> dict[str, list[str]]:
+def hand_out(vault: Path, out: Path, withheld: frozenset[str] = frozenset()) -> dict[str, list[str]]:
     """Copy each service's files from ``vault`` into ``out/<service>`` for every folder
     already in ``out`` (compose mounts one volume there per service); returns what each got.
+    The folders named in ``withheld`` get nothing and are emptied (a login not switched on).
 
     Nothing is written through a link: a link as a service's folder, as ``tls/`` or
     ``fleet/`` in it, or at a file's name is refused (:class:`SkinetError`, one line)
@@ -78,6 +79,11 @@ def hand_out(vault: Path, out: Path) -> dict[str, list[str]]:
     for folder in sorted(p for p in out.iterdir() if p.is_dir() or p.is_symlink()):
         if folder.name != ROUTER and folder.name not in USERS:
             raise SkinetError(f"{folder}: a service's folder is named {ROUTER} or for its user ({', '.join(USERS)})")
+        if folder.name in withheld:
+            if not folder.is_symlink():
+                _remove_strays(folder, [])
+            handed[folder.name] = []
+            continue
         files = service_files(vault, folder.name)
         missing = [f for f in files if not (vault / f).is_file()]
         if missing:
