@@ -682,6 +682,11 @@ class Monitor:
                 if again is not None:
                     self._predict.want(*again)
                 self._answer_waiting()
+            except zenoh.ZError as exc:
+                if self.session.is_closed():  # closed under a monitor not closed first: nothing left to do
+                    log.warning("the monitor's session is closed (%s): its watchdog stops", exc)
+                    return
+                log.exception("error in the monitor's watchdog")
             except Exception:  # a bug must not stop the watchdog
                 log.exception("error in the monitor's watchdog")
 

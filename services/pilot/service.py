@@ -637,6 +637,11 @@ class Pilot:
                     self._ask_status(skillset)
                 if due is not None:
                     self._act(due)
+            except zenoh.ZError as exc:
+                if self.session.is_closed():  # closed under a pilot not closed first: nothing left to do
+                    log.warning("the pilot's session is closed (%s): it stops", exc)
+                    return
+                log.exception("error in the pilot")
             except Exception:  # a bug must not stop the pilot
                 log.exception("error in the pilot")
             self._wake.wait(TICK)

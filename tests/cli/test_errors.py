@@ -541,6 +541,9 @@ def _cases() -> list[Case]:
     for program, base in ((mon, (SYSTEM,)), (pred, ())):
         usage(program, "--log-level", (*base, "--log-level", "LOUD"),
               "argument --log-level: expected one of DEBUG, INFO, WARNING, ERROR, CRITICAL, got 'LOUD'")
+    usage(br, "--status-poll", (SYSTEM, "--status-poll", "0"),
+          "argument --status-poll: the status-request period must be 0.05 to 3600 s, got '0'")
+    usage(br, "--silent-after", (SYSTEM, "--silent-after", "0"), "argument --silent-after: not a count from 1 to 1000: '0'")
     usage(br, "--domain", (SYSTEM,), "argument --domain: expected an integer from 0 to 232, got 'x' "
           "(from $ROS_DOMAIN_ID)", ROS_DOMAIN_ID="x")
     usage(br, "--namespace", (SYSTEM,), "argument --namespace: namespace 'a b' (from $SKINET_ROS_NAMESPACE) cannot "

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import datetime
 import json
+import os
 import shutil
 import subprocess
 import sys
@@ -54,7 +55,8 @@ def deployment(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Path,
     for name in ("router", "monitor", "observer", "bridge", "pilot", "goalbox"):
         (out / name).mkdir(parents=True)
     job = subprocess.run([sys.executable, "-m", "services.secrets", "--vault", str(root / "vault"), "--out", str(out)],
-                         cwd=REPO, capture_output=True, text=True, timeout=60)
+                         cwd=REPO, capture_output=True, text=True, timeout=60,
+                         env={**os.environ, "SKINET_DASHBOARD_GOAL_USER": "goalbox"})  # the goal box's login too
     assert job.returncode == 0, job
     shipped = zenoh.Config.from_file(str(REPO / "docker" / "zenoh" / "router.json5"))
     shipped.insert_json5("transport/auth/usrpwd/dictionary_file", json.dumps(str(out / "router" / "users.txt")))

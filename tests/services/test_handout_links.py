@@ -170,3 +170,26 @@ def test_a_fifo_as_a_password_or_key_file_is_refused_not_waited_on(vault: Path, 
     with pytest.raises(SkinetError) as info:
         client_files(out / "observer", "observer")
     assert str(info.value) == f"cannot read {key}: not a regular file"
+
+
+def test_the_goal_box_login_is_handed_out_only_when_switched_on(tmp_path: Path) -> None:
+    """By default the dashboard's container holds no operator credentials: the job leaves goalbox's folder empty
+    (and empties it), unless SKINET_DASHBOARD_GOAL_USER=goalbox."""
+    import os
+    import subprocess
+    import sys
+
+    out = tmp_path / "out"
+    for name in ("observer", "goalbox"):
+        (out / name).mkdir(parents=True)
+    (out / "goalbox" / "stale.password").write_text("old")
+    job = [sys.executable, "-m", "services.secrets", "--vault", str(tmp_path / "vault"), "--out", str(out)]
+    env = {k: v for k, v in os.environ.items() if k != "SKINET_DASHBOARD_GOAL_USER"}
+    off = subprocess.run(job, capture_output=True, text=True, timeout=60, env=env)
+    assert off.returncode == 0, off.stderr
+    assert "secrets: goalbox: (nothing: not switched on)" in off.stdout.splitlines()
+    assert list((out / "goalbox").rglob("*")) == [] and (out / "observer" / "observer.password").is_file()
+    on = subprocess.run(job, capture_output=True, text=True, timeout=60,
+                        env={**env, "SKINET_DASHBOARD_GOAL_USER": "goalbox"})
+    assert on.returncode == 0, on.stderr
+    assert (out / "goalbox" / "goalbox.password").is_file() and (out / "goalbox" / "tls" / "goalbox.key").is_file()

@@ -135,7 +135,9 @@ def test_guide_mode_names_a_command_other_than_the_one_suggested(robot: Robot) -
 def test_an_outcome_lost_on_the_way_is_found_by_the_status_request(
         client_factory: Callable[[], zenoh.Session], spot_arm: tuple) -> None:
     """teleop ends on the robot but its response and status never leave the manager (a link down): the
-    status request after the outcome timeout brings the status, and the pilot asks about the outcome."""
+    status request after the outcome timeout, or the bridge's own poll, whichever comes first, brings the status
+    (test_no_outcome_within_the_outcome_timeout_asks_the_manager_for_its_status shows the first alone), and the
+    pilot asks about the outcome."""
     robot = Robot(client_factory, *spot_arm, outcome_timeout=1.0)
     impl = Implementations(robot.sim, robot.system, hold=[("spot", "teleop")])
     try:
@@ -148,7 +150,7 @@ def test_an_outcome_lost_on_the_way_is_found_by_the_status_request(
         # the gap in the pilot's words, or the monitor's when it lists the missed outcome itself
         assert paused.unknown is not None and (paused.unknown.skill, paused.unknown.candidates) == (
             "teleop", ["teleop.success.done", "teleop.failure.link_lost"]), paused.unknown
-        assert robot.actuator.asked and robot.actuator.sent.count("spot:teleop.start") == 1
+        assert robot.actuator.sent.count("spot:teleop.start") == 1
         assert ask_goal(robot.observer, PilotGoalRequest(system="spot_arm", op="confirm", answer="rerun")).accepted
         again = robot.statuses.first(lambda s: s.commands == 4, what="teleop started again")
         assert again.notes[-1].endswith(": rerun confirmed by operator1")
