@@ -668,6 +668,9 @@ class Monitor:
         while not self._closed:
             self._wake.wait(TICK)
             self._wake.clear()
+            if self.session.is_closed():  # closed under a monitor not closed first: nothing left to watch
+                log.warning("the monitor's session is closed: its watchdog stops")
+                return
             try:
                 with self._lock:
                     if self._closed:

@@ -408,7 +408,7 @@ def test_stamps_past_2038_are_clamped_with_one_warning(spot_arm, caplog) -> None
         status = m.status()
         back = to_plain(decode(store, status.typename, encode(store, status.typename, status.msg)))
         assert back["stamp"] == {"sec": 2**31 - 1, "nanosec": 999_999_999}
-    assert [r.getMessage() for r in caplog.records] == [
+    assert [r.getMessage() for r in caplog.records if r.name.startswith("skinet.simulator")] == [
         "spot: stamp 2147483653 s is past the int32 seconds of ROS Time (2038-01-19 03:14:07 UTC): clamped to it "
         "(and every later one like it)"]
     assert m.clamped == 2
