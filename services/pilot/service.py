@@ -33,7 +33,8 @@ mode a command other than the one suggested is named; a ``run`` goal counts only
 with its inputs (the actuator hears the requests).  New goals are counted before they are
 parsed, and parsed and planned on a thread of their own, so cancels are answered meanwhile.
 
-A skillset that is not ``live``, a model divergence (until the next step, or ``resume``),
+A skillset that is not ``live``, a model divergence seen while the goal runs (until ``resume``: later
+steps do not clear it, the operator must accept the state the monitor adopted),
 a prediction still pending ``PENDING_GRACE`` after its step (when a command is due) or an
 operator's ``pause`` pause it.  A
 skill that fails ``max_retries`` times in one goal ends it ``failed``.  The status
@@ -130,8 +131,15 @@ class _Goal:
     recover: bool = False  # from outside Safe, send a recovery command first (PilotGoalRequest.recover)
     planned_at: dict[str, int] | None = None  # the marking g.plan was made at
     accepted_divergence: int = -1  # the step whose divergence `resume` accepted
+    diverged_at: int = -1  # the last step with a divergence seen while following the goal
+    diverged: str = ""  # its reason: the goal holds on it until `resume` accepts it
     end: str = ""  # reached, failed or cancelled
     reason: str = ""
+
+
+def divergence_reason(st: LiveState) -> str:
+    return (f"model divergence at step {st.seq} ({st.event}): {st.divergence}; resume to go on from the state the "
+            "monitor adopted")
 
 
 @dataclass
@@ -268,6 +276,8 @@ class Pilot:
         if g is None or g.end or state.seq <= g.since:
             return
         gap = last is not None and state.seq > last.seq + 1  # publications the pilot did not get
+        if state.divergence:
+            g.diverged_at, g.diverged = state.seq, divergence_reason(state)
         self._follow(g, state, skillset, transition, mine, gap)
 
     def _follow(self, g: _Goal, state: LiveState, skillset: str, transition: str, mine: PilotCommand | None,
@@ -535,8 +545,9 @@ class Pilot:
                 g.paused_by = client
             else:  # resume: also accepts the divergence shown now
                 g.paused_by = g.held = ""
+                g.accepted_divergence = max(g.accepted_divergence, g.diverged_at)
                 if self._state is not None and self._state.divergence:
-                    g.accepted_divergence = self._state.seq
+                    g.accepted_divergence = max(g.accepted_divergence, self._state.seq)
             self._asked = None
             self._decide()
             return PilotGoalReply(system=self.name, accepted=True, goal_id=g.id)
@@ -765,9 +776,10 @@ class Pilot:
                  for name, s in st.sync.items() if s.state != "live"]
         if stale:
             return "; ".join(stale)
-        if st.divergence and st.seq != g.accepted_divergence:
-            return (f"model divergence at step {st.seq} ({st.event}): {st.divergence}; resume to go on from the "
-                    "state the monitor adopted")
+        if g.diverged_at > g.accepted_divergence:
+            return g.diverged
+        if st.divergence and st.seq > g.accepted_divergence:
+            return divergence_reason(st)
         return ""
 
     def _act(self, due: _Due) -> None:

@@ -183,8 +183,10 @@ def test_a_pending_prediction_pauses_the_pilot_until_it_comes(robot: Robot, clie
 
 def test_a_model_divergence_pauses_the_pilot_until_resumed(robot: Robot) -> None:
     """The robot stands up with no skill (a model divergence): the pilot stops until the operator resumes,
-    then goes on from the state the monitor adopted."""
+    whatever steps the model explains come after it (here the operator makes it sit down), then goes on from
+    the marking the monitor holds then."""
     impl = Implementations(robot.sim, robot.system, hold=[("spot", "init_power")])
+    gui = Gui(robot.observer, robot)
     try:
         reply = ask_goal(robot.observer, goal("run spot:go_to_waypoint", inputs=WALK, mode="drive"))
         robot.statuses.first(lambda s: s.reason == "the outcome of spot:init_power")
@@ -195,12 +197,16 @@ def test_a_model_divergence_pauses_the_pilot_until_resumed(robot: Robot) -> None
         paused = robot.statuses.first(lambda s: s.state == "paused" and "divergence" in s.reason, what="diverged")
         assert paused.reason.startswith(f"model divergence at step {paused.state_seq} (spot:"), paused.reason
         assert paused.reason.endswith("; resume to go on from the state the monitor adopted")
+        gui.start("spot", "sit_down")  # two steps the model explains: the start and its success
+        later = robot.statuses.first(lambda s: s.state_seq >= paused.state_seq + 2, what="sat down")
+        assert (later.state, later.reason) == ("paused", paused.reason)  # later steps do not clear it
         time.sleep(0.3)
         assert robot.actuator.sent == ["spot:init_power.start"]
         assert ask_goal(robot.observer, PilotGoalRequest(system="spot_arm", op="resume")).accepted
         robot.statuses.state("reached", reply.goal_id)
-        assert robot.actuator.sent == ["spot:init_power.start", "spot:go_to_waypoint.start"]  # standing already
+        assert robot.actuator.sent == ["spot:init_power.start", "spot:stand_up.start", "spot:go_to_waypoint.start"]
     finally:
+        gui.close()
         impl.close()
 
 
