@@ -42,7 +42,7 @@ GiB = 1 << 30
 
 def one(kind: str) -> dict:
     """Run in a fresh process: one measurement, as JSON."""
-    from skinet.options import PredictionOptions, PropertyOptions
+    from skinet.system.prediction import PredictionOptions, PropertyOptions
     from skinet.verify.algorithm1 import analyse
     from skinet.verify.explore import explore, peak_resident_bytes
     from skinet.verify.predict import forecast

@@ -80,7 +80,7 @@ def one(mode: str, cycles: int) -> dict:
     from services.bridge_ros2 import Feed, start_bridge
     from services.bridge_ros2 import service
     from services.simulator.manager import Manager
-    from skinet.files import load_system, load_typemap
+    from skinet.system.load import load_system, load_typemap
     from skinet.ros.keys import KeyStyle
     from skinet.ros.typestore import encode as cdr
     from skinet.wire import keys
@@ -165,7 +165,7 @@ def _action_side(cycles: int, results: bool) -> tuple[Any, Any, list[bytes], Any
     from skinet.lang.parser import parse_skillset
     from skinet.ros.binding import STATUS_TYPE, parse_binding
     from skinet.ros.typestore import default_instance, encode
-    from skinet.system import build_system
+    from skinet.system.model import build_system
     from services.simulator.protocols import ABORTED, ActionLogic, SUCCEEDED
 
     ss = parse_skillset(BENCH_MODEL, "bench.rl")
@@ -193,7 +193,7 @@ def _manager_side(cycles: int) -> tuple[Any, Any, list[tuple[Any, bytes, bool]]]
     """spot's manager playing teleop ``cycles`` times: (topic, CDR, whether an event follows it)."""
     from services.bridge_ros2 import Feed
     from services.simulator.manager import Manager
-    from skinet.files import load_system, load_typemap
+    from skinet.system.load import load_system, load_typemap
     from skinet.ros.typestore import encode as cdr
 
     path = ROOT / "skillsets" / "spot_arm.toml"

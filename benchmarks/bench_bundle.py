@@ -23,10 +23,11 @@ from pathlib import Path
 
 from common import ROOT, table
 
-from services.chain import run_chain  # noqa: E402
+from chains.chain import run_chain  # noqa: E402
 from services.common.zenoh_config import session_config  # noqa: E402
-from skinet.files import load_system, load_typemap, read_text  # noqa: E402
-from skinet.mission import parse_scenario  # noqa: E402
+from skinet.system.load import load_system, load_typemap
+from skinet.files.read import read_text
+from skinet.mission.scenario import parse_scenario  # noqa: E402
 
 import zenoh  # noqa: E402
 

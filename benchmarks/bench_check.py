@@ -35,13 +35,13 @@ from services.common.zenoh_config import session_config  # noqa: E402
 from services.monitor import start_monitor  # noqa: E402
 from services.monitor.check import request_from  # noqa: E402
 from services.predictor.service import start_predictor  # noqa: E402
-from skinet.files import load_system  # noqa: E402
-from skinet.live import LiveSystem  # noqa: E402
+from skinet.system.load import load_system
+from skinet.system.live import LiveSystem  # noqa: E402
 from skinet.verify.algorithm1 import analyse  # noqa: E402
 from skinet.verify.predict import forecast  # noqa: E402
 from skinet.wire import keys  # noqa: E402
 from skinet.wire.codec import decode, encode  # noqa: E402
-from skinet.system import System  # noqa: E402
+from skinet.system.model import System  # noqa: E402
 from skinet.wire.messages import CheckReply, CheckRequest  # noqa: E402
 from tests.bridge_side import BridgeSide  # noqa: E402
 

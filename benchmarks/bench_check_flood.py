@@ -41,7 +41,7 @@ from bench_latency import Arrivals, events, ping_pong  # noqa: E402
 from services.common.zenoh_config import session_config  # noqa: E402
 from services.monitor import service, start_monitor  # noqa: E402
 from services.monitor.check import MAX_REQUEST  # noqa: E402
-from skinet.files import load_system  # noqa: E402
+from skinet.system.load import load_system
 from skinet.wire import keys  # noqa: E402
 from skinet.wire.messages import CheckReply, CheckRequest  # noqa: E402
 from tests.bridge_side import BridgeSide  # noqa: E402

@@ -393,7 +393,7 @@ def pair_verdicts(system: Any, marking: Mapping[str, int], decide: Any) -> list[
 
 
 def run_ours(case: str, af: str, walks: int) -> dict:
-    from skinet.options import PredictionOptions, PropertyOptions
+    from skinet.system.prediction import PredictionOptions, PropertyOptions
     from skinet.verify.algorithm1 import analyse
     from skinet.verify.predict import forecast
 

@@ -45,7 +45,7 @@ from bench_latency import events  # noqa: E402
 from services.monitor import start_monitor  # noqa: E402
 from tests.bridge_side import BridgeSide  # noqa: E402
 from services.predictor import start_predictor  # noqa: E402
-from skinet.files import load_system  # noqa: E402
+from skinet.system.load import load_system
 from skinet.wire import keys  # noqa: E402
 from skinet.wire.codec import decode, encode  # noqa: E402
 from skinet.wire.convert import bundle, statuses  # noqa: E402

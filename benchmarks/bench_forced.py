@@ -28,8 +28,8 @@ from collections.abc import Callable
 from common import CORPUS, _copies, median_time, paper_system, pin_one_core, table, verdict
 
 from skinet.net.semantics import steps
-from skinet.options import PredictionOptions, PropertyOptions
-from skinet.system import Marking, System, build_system
+from skinet.system.prediction import PredictionOptions, PropertyOptions
+from skinet.system.model import Marking, System, build_system
 from skinet.verify.algorithm1 import analyse
 from skinet.verify.component import forget_component_graphs
 from skinet.verify.forced import oracle

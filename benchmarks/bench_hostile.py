@@ -65,7 +65,7 @@ from services.common.zenoh_config import session_config  # noqa: E402
 from services.monitor.check import parse_command  # noqa: E402
 from services.monitor import start_monitor  # noqa: E402
 from services.predictor import start_predictor  # noqa: E402
-from skinet.files import load_system  # noqa: E402
+from skinet.system.load import load_system
 from skinet.wire import keys  # noqa: E402
 from skinet.wire.codec import DecodeError, decode, encode  # noqa: E402
 from skinet.wire.convert import bundle, statuses, system_from_bundle  # noqa: E402

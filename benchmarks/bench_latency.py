@@ -49,9 +49,9 @@ import zenoh  # noqa: E402
 from services.common.zenoh_config import session_config  # noqa: E402
 from services.monitor import start_monitor  # noqa: E402
 from tests.bridge_side import BridgeSide  # noqa: E402
-from skinet.files import load_system  # noqa: E402
-from skinet.live import LiveSystem  # noqa: E402
-from skinet.system import marking_to_json  # noqa: E402
+from skinet.system.load import load_system
+from skinet.system.live import LiveSystem  # noqa: E402
+from skinet.system.model import marking_to_json  # noqa: E402
 from skinet.wire import keys  # noqa: E402
 from skinet.wire.codec import encode  # noqa: E402
 from skinet.wire.messages import CanonicalEvent, SkillsetStatus  # noqa: E402
@@ -223,7 +223,7 @@ def with_views(n: int, rounds: int = 3) -> list[list[object]]:
 
     from services.dashboard.observer import Observer
     from services.foxglove.server import FoxgloveView
-    from services.incidents import Incidents
+    from services.monitor.incidents import Incidents
     from skinet.wire.convert import bundle
 
     system = load_system(SYSTEM_FILE)[0]

@@ -21,7 +21,7 @@ import tracemalloc
 
 from common import copies_system, pin_one_core, table, verdict
 
-from skinet.options import PredictionOptions, PropertyOptions
+from skinet.system.prediction import PredictionOptions, PropertyOptions
 from skinet.verify.explore import explore
 from skinet.verify.predict import forecast
 

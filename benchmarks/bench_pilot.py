@@ -45,12 +45,13 @@ from services.common.zenoh_config import session_config  # noqa: E402
 from services.monitor import start_monitor  # noqa: E402
 from services.pilot import start_pilot  # noqa: E402
 from services.predictor.service import start_predictor  # noqa: E402
-from skinet.files import load_goals, load_system, load_typemap, read_text  # noqa: E402
-from skinet.flight import fly  # noqa: E402
-from skinet.live import LiveSystem  # noqa: E402
-from skinet.pilot_run import Outcomes  # noqa: E402
+from skinet.system.load import load_goals, load_system, load_typemap
+from skinet.files.read import read_text
+from skinet.pilot.flight import fly  # noqa: E402
+from skinet.system.live import LiveSystem  # noqa: E402
+from skinet.pilot.run import Outcomes  # noqa: E402
 from skinet.plan import Planner  # noqa: E402
-from skinet.system import System  # noqa: E402
+from skinet.system.model import System  # noqa: E402
 from skinet.wire import keys  # noqa: E402
 from skinet.wire.codec import decode, encode  # noqa: E402
 from skinet.wire.messages import (  # noqa: E402

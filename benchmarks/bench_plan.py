@@ -69,7 +69,7 @@ TARGET = {"target": {"x": 12.0, "y": 3.5, "z": 0.0}}
 
 def case(name: str) -> tuple[Any, dict[str, int], Any]:
     """(system, start marking, goal) of a case."""
-    from skinet.files import load_state, load_system
+    from skinet.system.load import load_state, load_system
     from skinet.plan import parse_goal
 
     if name == "paper":

@@ -43,8 +43,8 @@ import zenoh  # noqa: E402
 
 from services.common.zenoh_config import session_config  # noqa: E402
 from services.monitor.prediction import PredictionClient  # noqa: E402
-from skinet.files import load_system  # noqa: E402
-from skinet.system import Marking, System  # noqa: E402
+from skinet.system.load import load_system
+from skinet.system.model import Marking, System  # noqa: E402
 from skinet.wire import keys  # noqa: E402
 from skinet.wire.codec import encode  # noqa: E402
 from skinet.wire.convert import bundle, marking_of  # noqa: E402

@@ -27,7 +27,7 @@ from skinet.lang.model import Skillset  # noqa: E402
 from skinet.lang.parser import parse_skillset  # noqa: E402
 from skinet.net.semantics import stabilize, steps  # noqa: E402
 from skinet.props.evaluate import holds  # noqa: E402
-from skinet.system import System, build_system  # noqa: E402
+from skinet.system.model import System, build_system  # noqa: E402
 from skinet.verify.component import forget_component_graphs  # noqa: E402
 
 CORPUS = ROOT.parent / "shared" / "corpus"

@@ -46,7 +46,7 @@ import json, os, sys, time
 from pathlib import Path
 import zenoh
 from services.common.security import tls_connect_config
-from skinet_cli.environment import EnvironmentVariableError, check_environment
+from services.common.environment import EnvironmentVariableError, check_environment
 
 try:
     check_environment()  # a misspelt SKINET_ variable or a bad value: one line, before anything waits

@@ -37,11 +37,11 @@ import zenoh  # noqa: E402
 
 from services.common.zenoh_config import add_zenoh_args, client_name, config_from_args, open_session  # noqa: E402
 from skinet.errors import SkinetError  # noqa: E402
-from skinet.files import load_system, load_typemap  # noqa: E402
+from skinet.system.load import load_system, load_typemap
 from skinet.ros.interfaces import skill_topic  # noqa: E402
 from skinet.ros.keys import KeyStyle, manager_topics  # noqa: E402
 from skinet.ros.typestore import build_typestore, default_instance, encode  # noqa: E402
-from skinet.system import System  # noqa: E402
+from skinet.system.model import System  # noqa: E402
 from skinet.wire import keys  # noqa: E402
 from skinet.wire.codec import DecodeError, decode  # noqa: E402
 from skinet.wire.codec import encode as encode_message  # noqa: E402

@@ -14,7 +14,7 @@ import json
 import os
 from pathlib import Path
 
-from skinet_cli.options import key_name
+from services.common.options import key_name
 
 DEFAULT_ENDPOINT = "tls/127.0.0.1:7447"
 OPERATOR = "operator"  # the compose vault's user of the operator role: it may send the pilot goals
@@ -64,7 +64,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def cmd_client_config(args: argparse.Namespace) -> int:
     from services.common.security import write_file
-    from services.common.zenoh_config import check_endpoint
+    from services.common.endpoints import check_endpoint
     from services.secrets.handout import client_config, client_files
     from skinet.errors import SkinetError
 

@@ -18,12 +18,12 @@ from collections.abc import Mapping
 from pathlib import Path
 
 from skinet.errors import SkinetError, SourceError
-from skinet.files import load_bindings, load_typemap
-from skinet.live import LiveSystem
+from skinet.system.load import load_bindings, load_typemap
+from skinet.system.live import LiveSystem
 from skinet.ros.binding import Binding
-from skinet.system import System
+from skinet.system.model import System
 from skinet.wire.messages import CanonicalEvent
-from skinet_cli.options import load_live_system, print_warnings
+from services.common.options import load_live_system, print_warnings
 
 DIVERGENCE_EXIT = 3
 

@@ -12,13 +12,14 @@ from typing import TYPE_CHECKING, Any
 from skinet.errors import SkinetError, SourceError
 from skinet_cli.demo_pilot import PilotEntry, Row, load_pilot_entry, play_pilot, table, tally
 from skinet_cli.live_demo import add_live_args, live_options_misused, live_session, play_live
-from skinet_cli.options import add_no_properties_arg, load_live_system, require_properties
-from skinet.explain import plural, warning_line
-from skinet.files import load_bindings, load_goals, load_typemap, read_text
-from skinet.mission import Scenario, StepRecord, check_scenario, flagged_before, parse_scenario, replay
-from skinet.mission_log import records_to_log
-from skinet.pilot_run import is_pilot_run
-from skinet.system import System
+from services.common.options import add_no_properties_arg, load_live_system, require_properties
+from skinet.verify.explain import plural, warning_line
+from skinet.system.load import load_bindings, load_goals, load_typemap
+from skinet.files.read import read_text
+from skinet.mission.scenario import Scenario, StepRecord, check_scenario, flagged_before, parse_scenario, replay
+from skinet.mission.log import records_to_log
+from skinet.pilot.run import is_pilot_run
+from skinet.system.model import System
 from skinet.wire.log import log_line
 
 if TYPE_CHECKING:
@@ -118,7 +119,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
         return _live_pilot(args, runs[0]) if isinstance(runs[0], PilotEntry) else _live(args, *runs[0])
     if args.core:
         return _play(args, runs, None)
-    from services.chain import shared_session  # Zenoh only when the chain runs
+    from chains.chain import shared_session  # Zenoh only when the chain runs
 
     with shared_session(predict=not args.no_predict) as session:  # one predictor for every run
         return _play(args, runs, session)
@@ -146,7 +147,7 @@ def _play(args: argparse.Namespace, runs: list[tuple[Path, Scenario, System] | P
             records = replay(system, scenario, predict=not args.no_predict)
             how = "core replay"
         elif any(c.binding for c in system.components):
-            from services.chain import run_bound_chain  # Zenoh only when the chain runs
+            from chains.chain import run_bound_chain  # Zenoh only when the chain runs
 
             bindings, _ = load_bindings(system)
             records = run_bound_chain(system, bindings, scenario, predict=not args.no_predict,
@@ -154,7 +155,7 @@ def _play(args: argparse.Namespace, runs: list[tuple[Path, Scenario, System] | P
             how = ("simulated action servers, lifecycle node and topics -> CDR -> bridge (bindings) -> monitor -> "
                    "predictor, embedded Zenoh session")
         else:
-            from services.chain import run_chain  # Zenoh only when the chain runs
+            from chains.chain import run_chain  # Zenoh only when the chain runs
 
             records = run_chain(system, load_typemap(path.parent / scenario.system), scenario,
                                 predict=not args.no_predict, **chain)
@@ -227,7 +228,7 @@ def _pilot_after_run(path: Path, scenario: Scenario, piloted: list[Any], duratio
     ``piloted``); ``None`` without such goals."""
     if not scenario.pilot:
         return None
-    from services.bound_pilot import drive_goals  # Zenoh only when the chain runs
+    from chains.bound_pilot import drive_goals  # Zenoh only when the chain runs
 
     goals = path.parent / scenario.pilot
     return lambda chain: piloted.append(drive_goals(chain, read_text(goals), str(goals), duration=duration))
@@ -291,7 +292,7 @@ def _summary(records: list[StepRecord]) -> str:
 
 
 def _pilot_lines(goals: Path, end: Any) -> str:
-    """What the pilot did after the run (:class:`services.bound_pilot.PilotEnd`)."""
+    """What the pilot did after the run (:class:`chains.bound_pilot.PilotEnd`)."""
     status = end.status
     lines = [f"   then the pilot, in drive mode through the bindings: {', '.join(status.goals)} ({goals}): "
              f"{end.reply.answer}, {plural(end.reply.moves or 0, 'move')} when outcomes are favourable"]

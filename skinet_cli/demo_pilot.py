@@ -1,10 +1,10 @@
 """``skinet demo``'s pilot run and the table of every run side by side (issue 24, the demo).
 
-A pilot run file (:mod:`skinet.pilot_run`, ``skillsets/missions/pilot.toml``) hands a goals
+A pilot run file (:mod:`skinet.pilot.run`, ``skillsets/missions/pilot.toml``) hands a goals
 file to the pilot, which drives the simulated managers through the whole chain
-(:func:`services.pilot_chain.run_pilot_chain`), or, with ``--core``, the pilot's drive mode
-on the core (:func:`skinet.flight.fly`).  Either way the moves become a scenario that the
-core replays (:func:`skinet.mission.replay`), so that its notable steps, ``--log`` and
+(:func:`chains.pilot_chain.run_pilot_chain`), or, with ``--core``, the pilot's drive mode
+on the core (:func:`skinet.pilot.flight.fly`).  Either way the moves become a scenario that the
+core replays (:func:`skinet.mission.scenario.replay`), so that its notable steps, ``--log`` and
 ``--timeline`` read as the other runs'.  The table at the end counts, per run: the commands
 sent (skill starts and interrupts), the moves (every transition: commands, outcomes,
 events), the retries (failed skill runs the pilot got past; none in an operator's run
@@ -21,12 +21,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from skinet.files import load_goals, load_typemap, read_text
-from skinet.mission import Scenario, Step, StepRecord, replay
-from skinet.pilot_run import Outcomes, PilotRun, check_pilot_run, parse_pilot_run
+from skinet.system.load import load_goals, load_typemap
+from skinet.files.read import read_text
+from skinet.mission.scenario import Scenario, Step, StepRecord, replay
+from skinet.pilot.run import Outcomes, PilotRun, check_pilot_run, parse_pilot_run
 from skinet.plan import Goal
-from skinet.system import System
-from skinet_cli.options import load_live_system, require_properties
+from skinet.system.model import System
+from services.common.options import load_live_system, require_properties
 
 if TYPE_CHECKING:
     import zenoh
@@ -89,15 +90,15 @@ def play_pilot(args: argparse.Namespace, entry: PilotEntry, line: Callable[[Step
           f"system {system.name}")
     print(f"   failures injected: {failures}")
     if args.core:
-        from skinet.flight import fly
+        from skinet.pilot.flight import fly
 
         flight = fly(system, entry.goals, Outcomes.of(run, system))
         scenario = Scenario(run.name, run.system, tuple(Step(float(n), s, t) for n, (s, t) in enumerate(flight.moves)))
         end, reason, denied, monitor_violations, sent = flight.end, flight.reason, None, None, None
         print("   chain: core only (the pilot's drive mode on the live nets; no simulator, Zenoh, check)")
     else:
-        from services.chain import ChainError
-        from services.pilot_chain import run_pilot_chain  # Zenoh only when the chain runs
+        from chains.chain import ChainError
+        from chains.pilot_chain import run_pilot_chain  # Zenoh only when the chain runs
 
         speed = 1.0 if getattr(args, "speed", None) is None else args.speed
         duration = (LIVE_SKILL_SECONDS / speed if speed > 0 else SKILL_SECONDS) if live else SKILL_SECONDS
@@ -138,7 +139,7 @@ def play_pilot(args: argparse.Namespace, entry: PilotEntry, line: Callable[[Step
 
 def _printer() -> Callable[[PilotStatus], None]:
     """Prints a line per change of the pilot's status, as ``skinet goal`` does (the statuses of a live run)."""
-    from skinet_cli.goal import StatusLines
+    from chains.pilot_lines import StatusLines
 
     lines = StatusLines(say_mode=False)
     lock = threading.Lock()

@@ -24,7 +24,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def cmd_foxglove(args: argparse.Namespace) -> int:
-    from services.embedded import stop_on_signals
+    from services.common.cli import stop_on_signals
     from services.foxglove.app import serve
 
     return serve(args, stop_on_signals())

@@ -21,11 +21,12 @@ import time
 from typing import TYPE_CHECKING, Any
 
 from services.common.zenoh_config import add_zenoh_args
-from skinet_cli.options import count, seconds
+from services.common.options import count, seconds
+from chains.pilot_lines import StatusLines, status_line
 from skinet_cli.plan import add_goal_args
 
 if TYPE_CHECKING:
-    from skinet.wire.messages import PilotCommand, PilotGoalReply, PilotStatus
+    from skinet.wire.messages import PilotGoalReply, PilotStatus
 
 HELP = "give a running pilot a goal (guide or drive) and follow it until it ends (SPEC §8)"
 DESCRIPTION = """\
@@ -110,7 +111,7 @@ def cmd_goal(args: argparse.Namespace) -> int:
     from services.common.zenoh_config import (
         check_connected, client_name, config_from_args, open_session, wait_connected, warn_on_stderr,
     )
-    from services.dashboard.app import resolve_system
+    from services.dashboard.observer import resolve_system
     from skinet.errors import SkinetError
     from skinet.wire.messages import PilotGoalReply, PilotGoalRequest
 
@@ -160,8 +161,8 @@ def cmd_goal(args: argparse.Namespace) -> int:
 def _goal_fields(args: argparse.Namespace, system: Any) -> dict[str, Any]:
     """The request's goals, mission and inputs; checked first against ``system`` (when the file is at hand)."""
     from skinet.errors import SkinetError
-    from skinet.files import read_text
-    from skinet.tomltext import parse_toml
+    from skinet.files.read import read_text
+    from skinet.files.toml import parse_toml
     from skinet_cli.plan import read_goals
 
     if not args.goals and not args.goals_file:
@@ -225,61 +226,6 @@ def _print_reply(reply: PilotGoalReply, mode: str) -> None:
         print("steps:")
         print("\n".join(step_lines(reply.steps, "  ")))
     sys.stdout.flush()
-
-
-def command_text(command: PilotCommand) -> str:
-    from skinet_cli.plan import toml_value
-
-    given = f" with {toml_value(command.inputs)}" if command.inputs else ""
-    return f"{command.skillset}:{command.transition}{given}"
-
-
-def status_line(s: PilotStatus, mode: bool = False) -> str:
-    """One line of the pilot's status: ``STATE[: REASON] — goal i/n, next ..., moves left, retries, commands``;
-    ``mode``: say the mode too (it has just changed)."""
-    from skinet_cli.plan import moves_text
-
-    parts = [f"now in {s.mode} mode"] if mode else []
-    if len(s.goals) > 1 and s.index < len(s.goals):
-        parts.append(f"goal {s.index + 1}/{len(s.goals)} {s.goals[s.index]}")
-    if s.next is not None:
-        parts.append(f"next {command_text(s.next)}")
-    if s.moves_left is not None and s.state not in ("reached", "failed", "cancelled"):
-        parts.append(f"{moves_text(s.moves_left)} left")
-    if s.retries:
-        parts.append("retries " + ", ".join(f"{k} {n}" for k, n in sorted(s.retries.items())))
-    if s.mode == "drive" or s.commands:
-        parts.append(f"{s.commands} command{'' if s.commands == 1 else 's'} sent")
-    if s.denied:
-        parts.append(f"{s.denied} denied by the check")
-    head = s.state + (f": {s.reason}" if s.reason else "")
-    return head + (" \u2014 " + ", ".join(parts) if parts else "")
-
-
-def status_change(s: PilotStatus, shown: tuple | None) -> tuple:
-    """What a line shows: a status equal in all of it to the one ``shown`` is no new line (moves left not
-    known, None, is no change from those shown)."""
-    moves = shown[6] if s.moves_left is None and shown is not None and shown[1] == s.state else s.moves_left
-    return (s.goal_id, s.state, s.reason, s.mode, s.index, s.next and s.next.model_dump_json(), moves,
-            tuple(sorted(s.retries.items())), s.commands, s.denied)
-
-
-class StatusLines:
-    """One line per change of the pilot's status, as ``skinet goal`` prints them (:func:`status_change`);
-    ``say_mode``: a line also says the mode when it has just changed."""
-
-    def __init__(self, say_mode: bool = True):
-        self.say_mode = say_mode
-        self.shown: tuple | None = None  # what the last line showed
-
-    def line(self, status: PilotStatus) -> str | None:
-        """The line ``status`` adds, or None when it shows nothing new."""
-        change = status_change(status, self.shown)
-        if change == self.shown:
-            return None
-        switched = self.say_mode and self.shown is not None and self.shown[3] != status.mode
-        self.shown = change
-        return status_line(status, switched)
 
 
 class _Follower:

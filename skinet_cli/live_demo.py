@@ -23,10 +23,10 @@ from pathlib import Path
 from typing import Any
 
 from services.common.zenoh_config import add_zenoh_args
-from skinet.files import load_bindings, load_typemap
-from skinet.mission import Scenario, StepRecord
-from skinet.system import System
-from skinet_cli.options import count, number, seconds
+from skinet.system.load import load_bindings, load_typemap
+from skinet.mission.scenario import Scenario, StepRecord
+from skinet.system.model import System
+from services.common.options import count, number, seconds
 
 CONNECT_WAIT = 2.0  # seconds for an explicit --connect endpoint to answer before the demo gives up
 # Options that only --live takes, whose default is None (the login's and --mode's come from the environment).
@@ -69,7 +69,8 @@ def live_session(args: argparse.Namespace, system: System, header: str) -> Itera
     from services.common.zenoh_config import (
         check_connected, client_name, config_from_args, open_session, said_at_the_end, wait_connected,
     )
-    from services.embedded import connect_lines, fix_free_ports, start_dashboard, stop_on_signals
+    from chains.embedded import connect_lines, fix_free_ports, start_dashboard
+    from services.common.cli import stop_on_signals
 
     config = config_from_args(args)
     mode = json.loads(config.get_json("mode"))
@@ -106,9 +107,9 @@ def play_live(args: argparse.Namespace, path: Path, scenario: Scenario, system: 
               on_record: Callable[[StepRecord], None], after: Callable[[list[StepRecord]], None],
               then: Callable[[Any], None] | None = None) -> list[StepRecord]:
     """Play ``scenario`` on a :func:`live_session`: ``on_record`` after each step, ``then`` after the last step (a
-    bound system's chain: the pilot's goals, :func:`services.chain.run_bound_chain`), ``after`` once the run is
+    bound system's chain: the pilot's goals, :func:`chains.chain.run_bound_chain`), ``after`` once the run is
     over (then the chain keeps running until Ctrl-C or ``--linger``)."""
-    from services.chain import run_bound_chain, run_chain
+    from chains.chain import run_bound_chain, run_chain
 
     with live_session(args, system, header) as (session, linger):
         def over(records: list[StepRecord]) -> None:

@@ -18,21 +18,21 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 from skinet import __version__
 from skinet.errors import SkinetError, SourceError
-from skinet.explain import plural
-from skinet.files import load_model
+from skinet.verify.explain import plural
+from skinet.system.load import load_model
 from skinet.net.build import build_net
 from skinet.net.export import FORMATS
 from skinet.props.parser import parse_formula
-from skinet.system import System, marking_problems, marking_to_json
+from skinet.system.model import System, marking_problems, marking_to_json
 from skinet.verify.algorithm1 import analyse
 from skinet.verify.ctl import Kripke, check
 from skinet.verify.explore import Deadline, explore
 from skinet.verify.predict import Forecast, forecast
-from skinet_cli.environment import check_environment
-from skinet_cli.options import ArgumentParser, count, load_live_system, print_warnings, state_marking
-from skinet_cli.options import seconds as duration, time_budget
-from skinet_cli.memory import add_memory_arg, memory_limit
-from skinet_cli.render import analysis_text, seconds, table
+from services.common.environment import check_environment
+from services.common.options import ArgumentParser, count, load_live_system, print_warnings, state_marking
+from services.common.options import seconds as duration, time_budget
+from services.common.memory import add_memory_arg, memory_limit
+from chains.render import analysis_text, seconds, table
 
 DESCRIPTION = """\
 SkiNet Live: predictive runtime verification of skill-based robots.

@@ -8,7 +8,7 @@ import argparse
 
 from services.common.zenoh_config import add_zenoh_args
 from skinet.wire.messages import MAX_CHECK_WAIT
-from skinet_cli.options import key_name, seconds, seconds_within
+from services.common.options import key_name, seconds, seconds_within
 
 
 def add_parsers(sub: argparse._SubParsersAction) -> None:
@@ -63,13 +63,13 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
 
 def cmd_dashboard(args: argparse.Namespace) -> int:
     from services.dashboard.app import serve
-    from services.embedded import stop_on_signals
+    from services.common.cli import stop_on_signals
 
     return serve(args, stop_on_signals())
 
 
 def cmd_watch(args: argparse.Namespace) -> int:
-    from services.watch import watch
+    from chains.watch import watch
 
     return watch(args)
 

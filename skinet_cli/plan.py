@@ -4,24 +4,25 @@ from __future__ import annotations
 
 import argparse
 import json
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
+from chains.pilot_lines import moves_text, toml_value
 from skinet.errors import Pos, SkinetError, SourceError
-from skinet.files import load_goals, load_typemap
+from skinet.system.load import load_goals, load_typemap
 from skinet.plan.goal import Goal, parse_goal
 from skinet.plan.inputs import Inputs, parse_inputs
 from skinet.plan.planner import ENGINES, Planner
 from skinet.plan.policy import Branch, Command, Plan, Reached, Step, Wait
-from skinet.system import System, marking_problems, marking_to_json
-from skinet.tomltext import parse_toml
+from skinet.system.model import System, marking_problems, marking_to_json
+from skinet.files.toml import parse_toml
 
 if TYPE_CHECKING:  # pydantic only for the types: `skinet plan` does not import it
     from skinet.wire.messages import PlanBranch, PlanStep
-from skinet_cli.memory import add_memory_arg, memory_limit
-from skinet_cli.options import load_live_system, print_warnings, state_marking
-from skinet_cli.options import seconds as duration, time_budget
-from skinet_cli.render import seconds
+from services.common.memory import add_memory_arg, memory_limit
+from services.common.options import load_live_system, print_warnings, state_marking
+from services.common.options import seconds as duration, time_budget
+from chains.render import seconds
 
 HELP = "plan the commands that reach a goal without violating any property (SPEC §8)"
 DESCRIPTION = """\
@@ -93,7 +94,7 @@ def read_goals(args: argparse.Namespace, system: System) -> list[Goal]:
     if not goals:
         raise SkinetError("no goals: give GOAL arguments (e.g. \"reach spot:Standing\") or --goals FILE")
     if any(c.binding for c in system.components):  # a bound skill's inputs: what its goal message can hold
-        from skinet.files import load_bindings
+        from skinet.system.load import load_bindings
         from skinet.ros.binding import bound_inputs_problem
 
         bindings, _ = load_bindings(system)
@@ -160,10 +161,6 @@ def plan_lines(plan: Plan) -> list[str]:
     return out
 
 
-def moves_text(n: int) -> str:
-    return f"{n} move{'' if n == 1 else 's'}"
-
-
 def step_lines(steps: Sequence[Step | PlanStep], indent: str) -> list[str]:
     """Numbered steps with their branches, indented (a plan's, or the pilot's :class:`PlanStep` copies)."""
     out = []
@@ -191,17 +188,6 @@ def _branch_lines(b: Branch | PlanBranch, indent: str) -> list[str]:
     if b.step is not None:
         lines.append(f"{indent}  then continue at step {b.step}")
     return lines
-
-
-def toml_value(value: Any) -> str:
-    """A value as TOML writes it inline (for inputs)."""
-    if isinstance(value, Mapping):
-        return "{" + ", ".join(f"{k} = {toml_value(v)}" for k, v in value.items()) + "}"
-    if isinstance(value, list):
-        return "[" + ", ".join(toml_value(v) for v in value) + "]"
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    return json.dumps(value) if isinstance(value, str) else str(value)
 
 
 def plan_json(system: System, plan: Plan) -> dict[str, Any]:

@@ -29,8 +29,8 @@ from services.common.zenoh_config import (
 )
 from services.bridge_ros2.record import STORAGES, BagRecorder, recorded_topics
 from services.common.cli import add_ros_key_args, key_style
-from skinet.files import load_bindings, load_typemap
-from skinet_cli.options import count, key_name, load_live_system, print_warnings, seconds
+from skinet.system.load import load_bindings, load_typemap
+from services.common.options import count, key_name, load_live_system, print_warnings, seconds
 from skinet.errors import SkinetError, SourceError
 from skinet.wire import keys
 from skinet.wire.codec import DecodeError, decode

@@ -1,6 +1,6 @@
 """``skinet replay LOG``: publish a recorded run again, for the operator views (SPEC §7).
 
-Arguments and the command's output; the publishing is :mod:`services.replay`.
+Arguments and the command's output; the publishing is :mod:`chains.replay`.
 Zenoh and the web server are imported when the command runs.
 """
 
@@ -12,7 +12,7 @@ import sys
 import time
 
 from services.common.zenoh_config import add_zenoh_args
-from skinet_cli.options import count, number, seconds
+from services.common.options import count, number, seconds
 
 CONNECT_WAIT = 2.0  # seconds for an explicit --connect endpoint to answer before the replay gives up
 
@@ -52,8 +52,9 @@ def cmd_replay(args: argparse.Namespace) -> int:
     from services.common.zenoh_config import (
         check_connected, client_name, config_from_args, open_session, said_at_the_end, wait_connected,
     )
-    from services.embedded import fix_free_ports, start_dashboard, stop_on_signals
-    from services.replay import Replay, recording
+    from chains.embedded import fix_free_ports, start_dashboard
+    from services.common.cli import stop_on_signals
+    from chains.replay import Replay, recording
     from skinet_cli.timeline import load_log
 
     rec = recording(load_log(args.log), args.log)
@@ -100,7 +101,7 @@ DIFFERENT = 3  # exit status of a bundle whose re-run differs
 
 def cmd_verify(args: argparse.Namespace) -> int:
     """``skinet replay BUNDLE --verify``: see the ``--verify`` help; one-line errors for bad files."""
-    from services.bundle_verify import verify
+    from chains.bundle_verify import verify
     from skinet.errors import SkinetError
     from skinet.wire.bundle import read_bundle
 

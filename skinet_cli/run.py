@@ -10,8 +10,8 @@ from services.common.ratelimit import add_rate_args
 from services.common.zenoh_config import add_login_args
 from services.monitor.check import add_policy_arg
 from services.monitor.sync import add_lost_after_arg
-from skinet_cli.memory import add_memory_arg
-from skinet_cli.options import add_no_properties_arg, add_outcome_timeout_arg, budget, count, seconds
+from services.common.memory import add_memory_arg
+from services.common.options import add_no_properties_arg, add_outcome_timeout_arg, budget, count, seconds
 
 
 def _zenoh_args(c: argparse.ArgumentParser, listen_help: str) -> None:
@@ -38,7 +38,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
                    help="also serve the system to Foxglove (WebSocket) on this port (0: a free one; see skinet "
                         "foxglove)")
     c.add_argument("--foxglove-host", default="127.0.0.1", help="address of --foxglove (default: 127.0.0.1)")
-    from services.incidents import add_incidents_args
+    from services.monitor.incidents import add_incidents_args
 
     add_incidents_args(c)
     c.add_argument("--no-pilot", action="store_true",
@@ -87,13 +87,13 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from services.embedded import run
+    from chains.embedded import run
 
     return run(args)
 
 
 def cmd_router(args: argparse.Namespace) -> int:
-    from services.embedded import router
+    from chains.embedded import router
 
     return router(args)
 

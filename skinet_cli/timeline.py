@@ -11,10 +11,10 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from skinet_cli.options import count, load_live_system, print_warnings
+from services.common.options import count, load_live_system, print_warnings
 from skinet.errors import SkinetError, SourceError
-from skinet.files import read_text
-from skinet.system import System
+from skinet.files.read import read_text
+from skinet.system.model import System
 from skinet.wire.log import Entry, read_log
 from skinet.wire.mcap_log import MAGIC, ROSBAG, is_mcap, read_mcap
 from skinet.wire.messages import LiveState

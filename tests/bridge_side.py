@@ -16,9 +16,9 @@ import zenoh
 
 from services.common.events import event_publisher
 from services.common.heartbeat import HeartbeatPublisher
-from skinet.files import load_system
-from skinet.live import LiveSystem
-from skinet.system import System
+from skinet.system.load import load_system
+from skinet.system.live import LiveSystem
+from skinet.system.model import System
 from skinet.wire import keys
 from skinet.wire.codec import decode, encode
 from skinet.wire.convert import statuses

@@ -18,7 +18,7 @@ import pytest
 
 from skinet.lang.model import Skillset
 from skinet.lang.parser import parse_skillset
-from skinet.system import System, build_system
+from skinet.system.model import System, build_system
 
 from corpus import CORPUS, CORPUS_ABSENT, REPO
 

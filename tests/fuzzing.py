@@ -42,13 +42,13 @@ if str(REPO) not in sys.path:  # run as a script
 
 from skinet_cli.main import main as skinet_main  # noqa: E402
 from skinet.errors import SkinetError  # noqa: E402
-from skinet.files import load_state, load_system  # noqa: E402
+from skinet.system.load import load_state, load_system
 from skinet.lang.larkerrors import MAX_FORMULA_CHARS, MAX_SOURCE_CHARS  # noqa: E402
 from skinet.lang.parser import parse_model  # noqa: E402
 from skinet.net.build import build_net  # noqa: E402
 from skinet.net.export import FORMATS  # noqa: E402
 from skinet.props.parser import parse_formula, parse_properties  # noqa: E402
-from skinet.system import System, marking_problems  # noqa: E402
+from skinet.system.model import System, marking_problems  # noqa: E402
 from skinet.verify.algorithm1 import analyse  # noqa: E402
 from skinet.verify.ctl import Kripke, check  # noqa: E402
 from skinet.verify.explore import explore  # noqa: E402

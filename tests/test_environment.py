@@ -1,6 +1,6 @@
 """The SKINET_* environment variables (issue 27, item 1): a name nothing reads, or a bad value,
 is refused with one line before any command or service starts; the table of variables
-(skinet_cli/environment.py) names every one the repository mentions."""
+(services/common/environment.py) names every one the repository mentions."""
 
 from __future__ import annotations
 
@@ -24,7 +24,7 @@ def _clean_env(**extra: str) -> dict[str, str]:
 
 
 def test_every_variable_the_repository_names_is_in_the_table() -> None:
-    from skinet_cli.environment import VARIABLES
+    from services.common.environment import VARIABLES
 
     files = subprocess.run(["git", "ls-files"], cwd=ROOT, capture_output=True, text=True, check=True).stdout.split()
     named: set[str] = set()
@@ -74,7 +74,7 @@ def test_unknown_names_and_bad_values_are_refused(name: str, value: str, message
 
 
 def test_known_names_pass() -> None:
-    from skinet_cli.environment import check_environment
+    from services.common.environment import check_environment
 
     check_environment({"SKINET_ZENOH_SCOUTING": "0", "SKINET_ZENOH_CONNECT_TIMEOUT": "-1", "SKINET_PREDICTORS": "4",
                        "SKINET_ROUTER_PORT": "127.0.0.1:7447", "SKINET_HUB_PORT": "7448",

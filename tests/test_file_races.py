@@ -17,7 +17,8 @@ from pathlib import Path
 import pytest
 
 from skinet.errors import SourceError
-from skinet.files import FileRefused, load_model, read_bytes
+from skinet.files.read import FileRefused, read_bytes
+from skinet.system.load import load_model
 
 LOADS = 1500
 HANG = 60.0  # seconds for all the loads; a load blocked on a FIFO never ends
@@ -148,7 +149,7 @@ def test_read_bytes_refuses_what_it_opened(tmp_path: Path) -> None:
 
 def test_a_definition_file_linked_out_of_its_folder_is_refused(tmp_path: Path) -> None:
     """A binding's message definitions stay in its definitions folder, like includes."""
-    from skinet.files import _read_definitions
+    from skinet.system.load import _read_definitions
 
     folder = tmp_path / "interfaces"
     (folder / "pkg" / "msg").mkdir(parents=True)

@@ -12,8 +12,8 @@ import pytest
 
 from skinet_cli.main import main
 from skinet.errors import SourceError
-from skinet.files import load_goals, load_model, load_state, load_system, load_typemap
-from skinet.system import marking_problems
+from skinet.system.load import load_goals, load_model, load_state, load_system, load_typemap
+from skinet.system.model import marking_problems
 
 ROOT = Path(__file__).resolve().parents[1]
 SYSTEM = ROOT / "skillsets" / "spot_arm.toml"
@@ -331,7 +331,7 @@ def test_include_cycle(tmp_path: Path) -> None:
 
 
 def test_scenario_toml_errors() -> None:
-    from skinet.mission import parse_scenario
+    from skinet.mission.scenario import parse_scenario
 
     assert error(parse_scenario, "[scenario]\nname = ", "s.toml") == "s.toml:2:7: error: invalid TOML: Invalid value"
     assert error(parse_scenario, "a = " + "[" * 3000, "s.toml") == "s.toml: error: invalid TOML: nested too deeply"

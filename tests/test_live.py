@@ -4,9 +4,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from skinet.files import load_system
-from skinet.live import LiveSystem, Outcome
-from skinet.system import marking_to_json
+from skinet.system.load import load_system
+from skinet.system.live import LiveSystem, Outcome
+from skinet.system.model import marking_to_json
 
 SYSTEM = Path(__file__).resolve().parents[1] / "skillsets" / "spot_arm.toml"
 

@@ -7,8 +7,8 @@ from pathlib import Path
 import pytest
 
 from skinet.errors import SourceError
-from skinet.files import load_system
-from skinet.mission import parse_scenario, replay, step_numbers
+from skinet.system.load import load_system
+from skinet.mission.scenario import parse_scenario, replay, step_numbers
 
 MISSIONS = Path(__file__).resolve().parents[1] / "skillsets" / "missions"
 

@@ -14,9 +14,10 @@ from pathlib import Path
 
 import pytest
 
-from skinet.files import load_system, read_text
-from skinet.live import LiveSystem
-from skinet.mission import parse_scenario, replay
+from skinet.system.load import load_system
+from skinet.files.read import read_text
+from skinet.system.live import LiveSystem
+from skinet.mission.scenario import parse_scenario, replay
 from skinet.verify.algorithm1 import analyse
 from skinet.verify.predict import forecast
 
@@ -157,7 +158,7 @@ def test_the_issue_arm_forced_for_safety_guard_while_walking() -> None:
     action_guard only; its forced constraint for safety_guard is the paper's 15:42 violation.
     """
     from skinet.lang.parser import parse_skillset
-    from skinet.system import build_system
+    from skinet.system.model import build_system
 
     arm_text = (SKILLSETS / "manipulator.rl").read_text()
     start = arm_text.index("    skill arm_ready {")

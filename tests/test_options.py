@@ -7,10 +7,10 @@ from pathlib import Path
 import pytest
 
 from skinet.errors import SourceError
-from skinet.files import load_system
-from skinet.options import PredictionOptions, PropertyOptions
+from skinet.system.load import load_system
+from skinet.system.prediction import PredictionOptions, PropertyOptions
 from skinet.verify.algorithm1 import analyse
-from skinet.files import load_state
+from skinet.system.load import load_state
 
 SKILLSETS = Path(__file__).resolve().parents[1] / "skillsets"
 HEAD = f'''[system]

@@ -1,4 +1,4 @@
-"""Pilot run files and the outcomes their failures inject (skinet/pilot_run.py; issue 24, the demo)."""
+"""Pilot run files and the outcomes their failures inject (skinet/pilot/run.py; issue 24, the demo)."""
 
 from __future__ import annotations
 
@@ -7,8 +7,9 @@ from pathlib import Path
 import pytest
 
 from skinet.errors import SourceError
-from skinet.files import load_goals, load_system, load_typemap, read_text
-from skinet.pilot_run import Failure, Outcomes, check_pilot_run, is_pilot_run, parse_pilot_run
+from skinet.system.load import load_goals, load_system, load_typemap
+from skinet.files.read import read_text
+from skinet.pilot.run import Failure, Outcomes, check_pilot_run, is_pilot_run, parse_pilot_run
 
 MISSIONS = Path(__file__).resolve().parents[1] / "skillsets" / "missions"
 HEAD = '[pilot]\nname = "p"\nsystem = "../spot_arm.toml"\ngoals = "../goals/paper_mission.toml"\n'

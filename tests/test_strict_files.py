@@ -11,7 +11,7 @@ import pytest
 
 import services.monitor.__main__ as monitor_main
 from skinet.errors import Pos, SourceError
-from skinet.mission import parse_scenario
+from skinet.mission.scenario import parse_scenario
 from skinet_cli.main import main
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -138,7 +138,7 @@ def test_no_properties_on_purpose(folder: Path, capsys: pytest.CaptureFixture[st
 # -- locating keys -----------------------------------------------------------------------------
 
 def test_locate_follows_tables_and_skips_strings() -> None:
-    from skinet.tomltext import locate
+    from skinet.files.toml import locate
 
     text = ('# c\n[system]\nname = "x"\nnote = """\n[fake]\nkey = 1\n"""\n[[skillsets]]\nmodel = "a"\n'
             "[[skillsets]]\n  'manager' = 'b'\n[prediction.properties.p]\naf = 'fair'\n")

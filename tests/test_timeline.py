@@ -16,12 +16,13 @@ import zenoh
 from services.common.zenoh_config import session_config
 from skinet_cli.main import main
 from skinet.errors import SourceError
-from skinet.files import load_system, read_text
-from skinet.mission import parse_scenario, replay
+from skinet.system.load import load_system
+from skinet.files.read import read_text
+from skinet.mission.scenario import parse_scenario, replay
 from skinet_cli.timeline import load_log
-from skinet.mission_log import records_to_log
+from skinet.mission.log import records_to_log
 from skinet.plot.timeline import draw, flagged, lanes_of, violations
-from skinet.system import System
+from skinet.system.model import System
 from skinet.wire import keys
 from skinet.wire.codec import encode
 from skinet.wire.convert import bundle

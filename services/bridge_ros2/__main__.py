@@ -27,9 +27,9 @@ from services.common.cli import (
 )
 from services.common.events import event_publisher
 from services.common.zenoh_config import add_zenoh_args, config_from_args, open_session
-from skinet_cli.options import ArgumentParser, load_live_system, seconds
+from services.common.options import ArgumentParser, load_live_system, seconds
 from skinet.errors import SkinetError, SourceError
-from skinet.files import load_bindings, load_typemap
+from skinet.system.load import load_bindings, load_typemap
 from skinet.wire import keys
 from skinet.wire.codec import encode
 

@@ -42,7 +42,7 @@ from skinet.ros.actions import get_result_reply, get_state_reply
 from skinet.ros.binding import STATUS_TYPE, TRANSITION_EVENT_TYPE, Binding
 from skinet.ros.derive import Derived
 from skinet.ros.typestore import decode, to_plain
-from skinet.system import System
+from skinet.system.model import System
 from skinet.wire.messages import CanonicalEvent, SkillsetStatus
 
 log = logging.getLogger("skinet.bridge_ros2")

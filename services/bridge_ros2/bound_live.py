@@ -59,7 +59,7 @@ from skinet.ros import bound
 from skinet.ros.actions import get_result_request, get_state_request
 from skinet.ros.binding import GET_STATE_TYPE, STATUS_TYPE, Binding
 from skinet.ros.keys import KeyStyle, history_selector, parse_liveliness_token, rmw_attachment
-from skinet.system import System
+from skinet.system.model import System
 from skinet.wire import keys
 from skinet.wire.codec import encode as wire_encode
 from skinet.wire.messages import HeartbeatSkillset

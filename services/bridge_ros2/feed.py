@@ -25,7 +25,7 @@ from skinet.ros import derive
 from skinet.ros.interfaces import status_field
 from skinet.ros.keys import ManagerTopic, manager_topics, parse_rmw_attachment, topic_fqn
 from skinet.ros.typestore import Typestore, build_typestore, decode, to_plain
-from skinet.system import Component, System
+from skinet.system.model import Component, System
 from skinet.wire.messages import CanonicalEvent, MissedOutcome, SkillsetStatus
 
 log = logging.getLogger("skinet.bridge_ros2")

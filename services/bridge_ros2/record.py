@@ -40,7 +40,7 @@ from services.bridge_ros2.feed import Feed
 from services.common.zenoh_config import undeclare
 from skinet.ros.binding import Binding
 from skinet.ros.keys import KeyStyle, topic_fqn
-from skinet.system import System
+from skinet.system.model import System
 
 STORAGES = {"mcap": StoragePlugin.MCAP, "sqlite3": StoragePlugin.SQLITE3}
 

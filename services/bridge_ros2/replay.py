@@ -21,7 +21,7 @@ from rosbags.highlevel import AnyReader
 
 from services.bridge_ros2.feed import Feed
 from skinet.errors import SourceError
-from skinet.system import System
+from skinet.system.model import System
 from skinet.wire.log import read_log
 from skinet.wire.mcap_log import LIBRARY, MAGIC, is_mcap
 from skinet.wire.messages import CanonicalEvent

@@ -74,7 +74,7 @@ from skinet.ros.keys import (
     parse_liveliness_token, rmw_attachment, rmw_zenoh_key, topic_fqn,
 )
 from skinet.ros.typestore import default_instance, encode
-from skinet.system import System
+from skinet.system.model import System
 from skinet.wire import keys
 from skinet.wire.codec import encode as wire_encode
 from skinet.wire.messages import CanonicalEvent, HeartbeatSkillset

@@ -7,12 +7,14 @@ import functools
 import logging
 import os
 import re
+import signal
 import socket
 import sys
+import threading
 from collections.abc import Callable, Sequence
 
-from skinet_cli.environment import check_environment
-from skinet_cli.options import count, key_name, key_prefix
+from services.common.environment import check_environment
+from services.common.options import count, key_name, key_prefix
 from skinet.errors import SkinetError, SourceError
 from skinet.ros.keys import KeyStyle
 
@@ -86,3 +88,13 @@ def one_line_errors(prog: str) -> Callable[[Callable[[Sequence[str] | None], int
         return guarded
 
     return wrap
+
+
+def stop_on_signals() -> threading.Event:
+    """An event set by SIGINT or SIGTERM (handlers installed only from the main thread)."""
+    stop = threading.Event()
+    handler: Callable[..., None] = lambda *_: stop.set()
+    if threading.current_thread() is threading.main_thread():
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, handler)
+    return stop

@@ -38,7 +38,7 @@ import time
 from collections import OrderedDict
 from collections.abc import Callable
 
-from skinet_cli.options import number
+from services.common.options import number
 
 MAX_CLIENTS = 1024
 PREDICT_RATE_LIMIT = 20.0  # default prediction requests/s per client (a monitor asks one marking at a time)

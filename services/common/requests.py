@@ -21,7 +21,7 @@ from services.common.zenoh_config import undeclare
 from skinet.ros.keys import KeyStyle, ManagerTopic, manager_topics
 from skinet.ros.requests import Writer
 from skinet.ros.typestore import Typestore
-from skinet.system import Component
+from skinet.system.model import Component
 
 REQUEST_KINDS = ("skill_request", "skill_interrupt", "event_request", "status_request")
 

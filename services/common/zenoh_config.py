@@ -24,44 +24,23 @@ from collections.abc import Callable
 
 import zenoh
 
+from services.common.endpoints import ZenohSetupError, check_endpoint
 from services.common.session import connect_problem, login_refused, unconnected
 from skinet.errors import Pos, SkinetError, SourceError, shown
-from skinet.files import FileRefused, read_bytes, read_text
+from skinet.files.read import FileRefused, read_bytes, read_text
 from skinet.wire import keys
-from skinet_cli.environment import flag
+from services.common.environment import flag
 
 _log = logging.getLogger("skinet.zenoh")
 LOOPBACK = "tcp/127.0.0.1:0"  # a peer's default endpoint: this host only, any free port
 ROUTER_LOOPBACK = "tcp/127.0.0.1:7447"  # a router's
 
 MODES = ("peer", "client", "router")
-# Protocols whose address is HOST:PORT (the others, e.g. unixsock-stream, take a path).
-_IP_PROTOCOLS = {"tcp", "udp", "tls", "quic", "ws"}
-_ENDPOINT = re.compile(r"^(?P<proto>[a-z][a-z0-9+\-]*)/(?P<address>[^?#]+)(?:\?[^#]*)?(?:#.*)?$")
-_HOST_PORT = re.compile(r"^(?P<host>\[[0-9A-Fa-f:.]+\]|[^:\[\]]+):(?P<port>[^:]*)$")
 MAX_PASSWORD_FILE = 4096  # bytes: a password file is one line
 _RUST_PLACE = re.compile(r"\s+at \S+\.rs:\d+\.?")  # " at /root/.cargo/.../x.rs:62." in ZError texts
 _JSON_MESSAGE = re.compile(r'msg: "(?P<msg>(?:[^"\\]|\\.)*)", location: Some\(Location \{ line: (?P<line>\d+), '
                            r"column: (?P<col>\d+)")
 _JSON5_SYNTAX = re.compile(r"-->\s*(?P<line>\d+):(?P<col>\d+).*?=\s*(?P<msg>[^\n]+)", re.S)
-
-
-class ZenohSetupError(SkinetError):
-    """A Zenoh option, configuration file or session that cannot be used (one line)."""
-
-
-def check_endpoint(endpoint: str, option: str) -> str:
-    """``PROTOCOL/ADDRESS`` with a port in 0-65535 for IP protocols; raises :class:`ZenohSetupError`."""
-    m = _ENDPOINT.match(endpoint)
-    if m is None:
-        raise ZenohSetupError(f"{option} '{endpoint}': an endpoint is PROTOCOL/ADDRESS, e.g. tcp/127.0.0.1:7447")
-    if m["proto"] in _IP_PROTOCOLS:
-        hp = _HOST_PORT.match(m["address"])
-        if hp is None:
-            raise ZenohSetupError(f"{option} '{endpoint}': the address must be HOST:PORT, e.g. tcp/127.0.0.1:7447")
-        if not hp["port"].isdigit() or int(hp["port"]) > 65535:
-            raise ZenohSetupError(f"{option} '{endpoint}': port '{hp['port']}' is not a number from 0 to 65535")
-    return endpoint
 
 
 def _clean(text: str) -> str:

@@ -8,7 +8,7 @@ from collections.abc import Sequence
 
 from services.common.cli import one_line_errors
 from services.dashboard.app import add_dashboard_args, serve
-from services.embedded import stop_on_signals
+from services.common.cli import stop_on_signals
 
 
 def build_parser() -> argparse.ArgumentParser:

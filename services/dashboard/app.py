@@ -20,29 +20,11 @@ from pathlib import Path
 import zenoh
 
 from services.common.cli import add_log_arg, setup_logging
-from services.common.zenoh_config import (
-    add_zenoh_args, check_connected, client_name, config_from_args, open_session,
-)
-from services.dashboard.observer import Observer, monitored_systems
+from services.common.options import count
+from services.common.zenoh_config import add_zenoh_args, client_name, config_from_args, open_session
+from services.dashboard.observer import Observer, add_view_args, follow, resolve_system
 from services.dashboard.server import Dashboard
-from skinet_cli.options import count, load_live_system, seconds
 from skinet.errors import SkinetError
-from skinet.system import System
-from skinet.wire import keys
-
-
-def add_view_args(p: argparse.ArgumentParser, env: tuple[str, str], port: int, system_help: str) -> None:
-    """A served view's SYSTEM, ``--host`` and ``--port`` (defaults from the variables ``env`` names: host, port)
-    and ``--wait``: the dashboard's and the Foxglove view's."""
-    host_env, port_env = env
-    p.add_argument("system", metavar="SYSTEM", help=system_help)
-    p.add_argument("--host", default=os.environ.get(host_env, "127.0.0.1"),
-                   help=f"address to serve on (default: ${host_env} or 127.0.0.1; 0.0.0.0 exposes it)")
-    p.add_argument("--port", "-p", type=count(0, 65535, env=port_env),
-                   default=os.environ.get(port_env, str(port)),
-                   help=f"TCP port (default: ${port_env} or {port}; 0 picks a free one)")
-    p.add_argument("--wait", type=seconds(zero=True), default=5.0,
-                   help="seconds before warning that no monitor of the system is alive (default: 5)")
 
 
 def add_dashboard_args(p: argparse.ArgumentParser) -> None:
@@ -84,18 +66,6 @@ def goal_config(args: argparse.Namespace, config: zenoh.Config) -> zenoh.Config 
         return zenoh.Config.from_json5(json.dumps(client_config(client_files(folder, user), tls[0])))
     password = login(argparse.Namespace(user=user, password=None, password_file=str(folder / f"{user}.password")))
     return session_config("client", connect, user=user, password=password["password"])
-
-
-def resolve_system(spec: str) -> tuple[str, System | None]:
-    """(name, system) from a system file, or (name, None) from a bare name (:class:`SkinetError`
-    when it cannot be a Zenoh key chunk)."""
-    if spec.endswith(".toml") or Path(spec).is_file():
-        system, _ = load_live_system(spec)
-        return system.name, system
-    try:
-        return keys.check_chunk(spec, "system name"), None
-    except ValueError as exc:
-        raise SkinetError(str(exc)) from None
 
 
 def serve(args: argparse.Namespace, stop: threading.Event) -> int:
@@ -144,30 +114,3 @@ def serve(args: argparse.Namespace, stop: threading.Event) -> int:
     return 0
 
 
-def observe(args: argparse.Namespace) -> tuple[zenoh.Config, zenoh.Session, Observer]:
-    """A served view's Zenoh configuration, session and observer of the system ``args.system`` names."""
-    name, system = resolve_system(args.system)
-    config = config_from_args(args)
-    session = open_session(config)
-    return config, session, Observer(session, name, system, client=client_name(config))
-
-
-def follow(observer: Observer, config: zenoh.Config, wait: float, stop: threading.Event,
-           log: logging.Logger) -> None:
-    """Until ``stop``: warn once when no monitor shows up within ``wait`` seconds (an explicit endpoint still
-    unreached is a one-line error instead)."""
-    if not observer.wait_monitor(wait) and not stop.is_set():
-        check_connected(observer.session, config)
-        log.warning("%s", no_monitor_message(observer.session, observer.name, config))
-    stop.wait()
-
-
-def no_monitor_message(session, name: str, config: zenoh.Config | None = None) -> str:
-    """One line for a system the observer cannot find, naming the systems it can; with no ``connect``
-    endpoint in ``config`` (multicast scouting is off by default), how to reach ``skinet run``'s."""
-    others = monitored_systems(session)
-    seen = f"systems with a monitor: {', '.join(others)}" if others else "no monitor is reachable at all"
-    if not others and config is not None and not json.loads(config.get_json("connect/endpoints")):
-        seen += ("; no --connect/-e given: `skinet run` and `skinet demo --live` listen on a free port and print "
-                 "the -e ENDPOINT to pass")
-    return f"no monitor of system '{name}' is alive ({seen}); waiting for one"

@@ -31,7 +31,7 @@ from pydantic import BaseModel
 
 from services.monitor.violations import onset_property
 from skinet.errors import SkinetError
-from skinet.system import System
+from skinet.system.model import System
 from skinet.wire.convert import system_from_bundle
 from skinet.wire.messages import (
     CanonicalEvent, Divergences, LiveState, ModelBundle, PilotStatus, StateSpaceReport, UnsafeReport, Verdicts,

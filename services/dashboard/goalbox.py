@@ -20,8 +20,8 @@ from skinet.errors import Pos, SkinetError, SourceError
 from skinet.plan.goal import parse_goal
 from skinet.plan.goalfile import nested
 from skinet.plan.inputs import parse_inputs
-from skinet.system import System
-from skinet.tomltext import parse_toml
+from skinet.system.model import System
+from skinet.files.toml import parse_toml
 from skinet.wire.messages import PilotGoalRequest
 
 INPUTS_SOURCE = "<inputs>"

@@ -7,7 +7,7 @@ import sys
 from collections.abc import Sequence
 
 from services.common.cli import one_line_errors
-from services.embedded import stop_on_signals
+from services.common.cli import stop_on_signals
 from services.foxglove.app import add_foxglove_args, serve
 
 

@@ -16,8 +16,7 @@ import threading
 
 from services.common.cli import add_log_arg, setup_logging
 from services.common.zenoh_config import add_zenoh_args
-from services.dashboard.app import add_view_args, follow, observe
-from services.dashboard.observer import Observer
+from services.dashboard.observer import Observer, add_view_args, follow, observe
 from skinet.errors import SkinetError
 
 DEFAULT_PORT = 8765  # Foxglove's usual WebSocket port

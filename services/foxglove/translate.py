@@ -17,7 +17,7 @@ import time
 from collections.abc import Callable, Iterable
 from typing import Any
 
-from skinet.explain import warning_line
+from skinet.verify.explain import warning_line
 from skinet.wire import foxglove as fx
 from skinet.wire.messages import UnsafeEntry
 

@@ -11,11 +11,11 @@ from collections.abc import Sequence
 from services.common.cli import add_log_arg, one_line_errors, setup_logging
 from services.common.zenoh_config import add_zenoh_args, client_name, config_from_args, open_session
 from services.common.ratelimit import add_rate_args
-from services.incidents import add_incidents_args, start_incidents
+from services.monitor.incidents import add_incidents_args, start_incidents
 from services.monitor.check import add_policy_arg
 from services.monitor.service import start_monitor
 from services.monitor.sync import add_lost_after_arg
-from skinet_cli.options import (
+from services.common.options import (
     ArgumentParser, add_no_properties_arg, budget, key_name, load_live_system, require_properties, seconds,
 )
 

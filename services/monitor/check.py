@@ -36,7 +36,7 @@ from dataclasses import dataclass, field
 from functools import cached_property, lru_cache
 
 from skinet.net.semantics import steps
-from skinet.system import System
+from skinet.system.model import System
 from skinet.verify.algorithm1 import CONSTRAINTS, Analysis
 from skinet.wire.codec import DecodeError, decode
 from skinet.wire.messages import CheckReason, CheckReply, CheckRequest

@@ -1,7 +1,7 @@
 """The monitor's fast path without I/O (SPEC §1 monitor, §5, §7).
 
 :class:`Engine` checks each event's sequence number, advances the live marking
-with :class:`~skinet.live.LiveSystem`, runs Algorithm 1 and returns the
+with :class:`~skinet.system.live.LiveSystem`, runs Algorithm 1 and returns the
 encoded :class:`LiveState`, :class:`Verdicts` and :class:`UnsafeReport`.
 
 The work per event is compiled once per marking, in the spirit of rosbags'
@@ -33,8 +33,8 @@ from typing import Any
 import msgpack
 
 from services.monitor.divergences import event_name
-from skinet.live import LiveSystem
-from skinet.system import Marking, System, marking_from_json
+from skinet.system.live import LiveSystem
+from skinet.system.model import Marking, System, marking_from_json
 from skinet.verify.algorithm1 import Analysis, analyse
 from skinet.wire.convert import RiskTable, analysis_bodies, statuses
 from skinet.net.outcomes import infer_outcomes

@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 import zenoh
 
 from services.monitor.pool import Pool
-from skinet.system import Marking, System
+from skinet.system.model import Marking, System
 from skinet.wire import keys
 from skinet.wire.codec import DecodeError, decode, encode
 from skinet.wire.convert import statuses

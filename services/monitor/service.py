@@ -63,7 +63,7 @@ from services.monitor.engine import Counters, Engine, MarkingKey, Step
 from services.monitor.prediction import PredictionClient, PredictorStats
 from services.monitor.sync import BOUND, SYNCING, SyncTracker
 from skinet.errors import SourceError
-from skinet.system import Marking, System
+from skinet.system.model import Marking, System
 from skinet.wire import keys
 from skinet.wire.codec import DecodeError, decode, encode
 from skinet.wire.convert import RiskTable, bundle, missed_line
@@ -377,8 +377,8 @@ class Monitor:
         def on_reply(reply: zenoh.Reply) -> None:
             if reply.err is not None:
                 text = reply.err.payload.to_bytes()[:MAX_REASON].decode("utf-8", "replace")
-                if reply.replier_id is None:  # Zenoh's own error (Timeout): said with what was asked
-                    failed[0] = text
+                if reply.replier_id is None or text == "Timeout":  # Zenoh's own error: said with what was asked
+                    failed[0] = text  # (a timed-out query's error has come with a replier id under load)
                 else:  # the bridge knows its last status is outdated: still syncing
                     refused[0] = text
             replied[0] = self._on_resync(reply) or replied[0]

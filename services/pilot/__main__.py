@@ -10,11 +10,11 @@ from services.common.cli import (
     add_instance_arg, add_log_arg, add_ros_key_args, key_style, one_line_errors, setup_logging,
 )
 from services.common.zenoh_config import add_zenoh_args, client_name, config_from_args, open_session
-from services.embedded import stop_on_signals
+from services.common.cli import stop_on_signals
 from services.pilot.service import start_pilot
-from skinet.files import load_typemap
+from skinet.system.load import load_typemap
 from skinet.wire import keys
-from skinet_cli.options import (
+from services.common.options import (
     ArgumentParser, add_no_properties_arg, add_outcome_timeout_arg, budget, load_live_system, require_properties, seconds,
 )
 

@@ -30,6 +30,7 @@ from typing import Any, Literal, Protocol
 
 import zenoh
 
+from services.pilot.errors import ActError, Refused
 from services.common.requests import Requests
 from services.common.zenoh_config import undeclare
 from skinet.errors import SkinetError
@@ -39,7 +40,7 @@ from skinet.ros.requests import (
     plain_inputs, request_inputs, skill_ids, skill_interrupt, skill_request, start_refusal, status_request,
 )
 from skinet.ros.typestore import Typestore, build_typestore
-from skinet.system import Component, System
+from skinet.system.model import Component, System
 from skinet.wire.messages import PilotCommand
 
 log = logging.getLogger("skinet.pilot")
@@ -47,18 +48,6 @@ STATUS_WAIT = 1.0  # seconds an interrupt waits for a manager's status when it h
 REACT_WAIT = 1.0  # seconds a start waits for the manager's answer (its status, or a refusal) before it returns
 READY = 0  # SkillXStatus.state
 MAX_REQUESTS = 64  # start requests remembered per skill (their inputs, by execution id)
-
-
-class ActError(Exception):
-    """The command could not be sent; ``reason`` says why, in the operator's words."""
-
-    def __init__(self, reason: str):
-        super().__init__(reason)
-        self.reason = reason
-
-
-class Refused(ActError):
-    """The robot answered the command with a refusal (a start the manager refused): nothing changed there."""
 
 
 class Actuator(Protocol):
@@ -295,7 +284,7 @@ def default_actuator(session: zenoh.Session, system: System, typemap: Mapping[st
     actuators: dict[str, Actuator] = {"manager": ManagerActuator(session, system, typemap, style, instance)}
     if any(c.binding for c in system.components):
         from services.pilot.bound_act import BoundActuator  # only systems with bindings need it
-        from skinet.files import load_bindings
+        from skinet.system.load import load_bindings
 
         if bindings is None:
             bindings, _ = load_bindings(system)

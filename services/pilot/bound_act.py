@@ -9,9 +9,9 @@ on the keys of :class:`~skinet.ros.keys.KeyStyle` (``zenoh-bridge-ros2dds`` or
   new goal id (UUID 4) and the goal's fields from the command's inputs, as the
   binding maps them (:meth:`~skinet.ros.binding.SkillBinding.goal_fields`: its fixed
   ``goal`` fields, each input at its field).  A goal the server rejects
-  (``accepted`` false) raises :class:`~services.pilot.act.Refused` (nothing changed:
+  (``accepted`` false) raises :class:`~services.pilot.errors.Refused` (nothing changed:
   the pilot asks again, up to its ``max_retries``); no reply within ``timeout``, or a
-  reply that does not decode, :class:`~services.pilot.act.ActError`.
+  reply that does not decode, :class:`~services.pilot.errors.ActError`.
 - ``SKILL.interrupt``: a ``cancel_goal`` request for one goal id: the goal this
   actuator sent and the server accepted, unless the action's status shows it ended; otherwise (the operator
   started the skill) the goal the bridge follows, read from the status cache
@@ -50,7 +50,7 @@ import zenoh
 from services.common.ros_client import ServiceClient
 from services.common.ros_liveliness import declare_node
 from services.common.zenoh_config import undeclare
-from services.pilot.act import ActError, Refused
+from services.pilot.errors import ActError, Refused
 from skinet.lang.dnf import dnf
 from skinet.lang.model import Skillset
 from skinet.ros.actions import (

@@ -17,7 +17,7 @@ stale); a deny is a defect, logged with its reason and counted in ``denied``, ne
 sent.  After a command the pilot waits for its effect (an event of that skillset
 after the step it was planned from); never two commands in flight; no reaction within
 ``response_timeout`` ends the goal ``failed: no response from <manager>``; a command the
-robot refuses (:class:`~services.pilot.act.Refused`) is asked again, and ends the goal after
+robot refuses (:class:`~services.pilot.errors.Refused`) is asked again, and ends the goal after
 ``max_retries`` refusals.
 
 Every skill seen running during a goal (and every start it sent) is followed to its end
@@ -61,13 +61,14 @@ from typing import Any
 import zenoh
 
 from services.common.zenoh_config import undeclare
-from services.pilot.act import ActError, Actuator, Refused, default_actuator, inputs_problem, responder
+from services.pilot.errors import ActError, Refused
+from services.pilot.act import Actuator, default_actuator, inputs_problem, responder
 from skinet.errors import SkinetError, SourceError
 from skinet.net.outcomes import Inference, infer_outcomes, modes
 from skinet.plan import Command, Goal, Plan, Planner, Reached, parse_goal, parse_goals
 from skinet.plan.goalfile import count_goals
 from skinet.ros.keys import KeyStyle
-from skinet.system import System
+from skinet.system.model import System
 from skinet.wire import keys
 from skinet.wire.codec import DecodeError, decode, encode
 from skinet.wire.limits import MAX_BUDGET

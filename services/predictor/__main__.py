@@ -11,8 +11,8 @@ from services.common.cli import add_instance_arg, add_log_arg, one_line_errors, 
 from services.common.zenoh_config import add_zenoh_args, config_from_args, open_session
 from services.common.ratelimit import add_rate_args
 from services.predictor.service import start_predictor
-from skinet_cli.memory import memory_size
-from skinet_cli.options import ArgumentParser, budget, count, number, seconds
+from services.common.memory import memory_size
+from services.common.options import ArgumentParser, budget, count, number, seconds
 from skinet.verify.explore import DEFAULT_MEMORY_LIMIT
 from skinet.wire.limits import MAX_PREDICT_REQUEST
 

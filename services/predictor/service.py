@@ -6,7 +6,7 @@ not know the digest fetches the :class:`~skinet.wire.messages.ModelBundle` from
 ``skinet/<system>/model/<digest>``, checks that the bundle hashes to the digest
 before anything is built (a sha256 of its text) and keeps the bundle in a small LRU
 cache.  Building the nets, exploring from the marking and computing the replies'
-risks happen in worker processes (:mod:`services.sandbox`) under the request's
+risks happen in worker processes (:mod:`services.predictor.sandbox`) under the request's
 budget and an address-space limit, so a hostile model costs an instance at most its
 limits.  Every failure is answered with ``ok=False`` and a one-line ``error``
 (SPEC §7: bad input never crashes a service).
@@ -48,7 +48,7 @@ import zenoh
 
 from services.common.ratelimit import OK, PREDICT_RATE_LIMIT as RATE_LIMIT, RateLimiter
 from services.common.zenoh_config import undeclare
-from services.sandbox import Worker, WorkerError
+from services.predictor.sandbox import Worker, WorkerError
 from skinet.verify.explore import DEFAULT_MEMORY_LIMIT
 from skinet.wire import keys
 from skinet.wire.codec import DecodeError, decode, encode

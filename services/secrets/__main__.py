@@ -16,7 +16,7 @@ from services.common.cli import one_line_errors
 from services.common.security import USERS, ensure_fleet, ensure_tls, ensure_users
 from services.secrets.handout import ROUTER, hand_out
 from skinet.errors import SkinetError
-from skinet_cli.options import ArgumentParser
+from services.common.options import ArgumentParser
 
 PROG = "python -m services.secrets"
 

@@ -32,7 +32,7 @@ from cryptography.x509.oid import NameOID
 
 from services.common.security import FLEET, USERS, write_file
 from skinet.errors import SkinetError
-from skinet.files import FileRefused, read_bytes
+from skinet.files.read import FileRefused, read_bytes
 
 ROUTER = "router"
 MAX_SECRET_FILE = 1 << 20  # bytes: a password, a certificate chain or a key is a few KiB

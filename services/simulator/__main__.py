@@ -14,9 +14,10 @@ from services.common.cli import add_log_arg, one_line_errors, setup_logging
 from services.common.zenoh_config import add_zenoh_args, config_from_args, open_session
 from services.simulator.driver import StepRun
 from services.simulator.service import Simulator
-from skinet_cli.options import ArgumentParser, count, key_prefix, load_live_system, number, seconds
-from skinet.files import load_bindings, load_typemap, read_text
-from skinet.mission import check_scenario, parse_scenario
+from services.common.options import ArgumentParser, count, key_prefix, load_live_system, number, seconds
+from skinet.system.load import load_bindings, load_typemap
+from skinet.files.read import read_text
+from skinet.mission.scenario import check_scenario, parse_scenario
 from skinet.ros.keys import KeyStyle
 
 

@@ -50,7 +50,7 @@ from services.common.ros_client import ServiceClient
 from services.common.ros_liveliness import declare_node
 from services.common.zenoh_config import undeclare
 from services.simulator.driver import StepRun
-from skinet.mission import Scenario, step_numbers
+from skinet.mission.scenario import Scenario, step_numbers
 from services.simulator.protocols import ABORTED, SUCCEEDED, ActionLogic, LifecycleLogic
 from skinet.ros.actions import cancel_goal_request, message, send_goal_reply, send_goal_request
 from skinet.ros.binding import (
@@ -59,7 +59,7 @@ from skinet.ros.binding import (
 from skinet.ros.bound import goal_text
 from skinet.ros.keys import KeyStyle, rmw_attachment
 from skinet.ros.typestore import encode
-from skinet.system import System
+from skinet.system.model import System
 
 log = logging.getLogger("skinet.simulator")
 

@@ -44,7 +44,7 @@ from rosbags.interfaces import Nodetype
 from services.simulator.service import INPUTS, OUTPUTS, Simulator, _Node
 from skinet.ros.keys import KeyStyle, dds_type_name, topic_fqn, type_hash
 from skinet.ros.typestore import Typestore
-from skinet.system import System
+from skinet.system.model import System
 
 log = logging.getLogger("skinet.simulator")
 

@@ -48,7 +48,7 @@ from skinet.ros.binding import (
 from skinet.ros.definitions import rihs01
 from skinet.ros.keys import dds_type_name
 from skinet.ros.typestore import Typestore, encode
-from skinet.system import System
+from skinet.system.model import System
 
 log = logging.getLogger("skinet.simulator")
 

@@ -1,6 +1,6 @@
 """Playing a mission scenario on the simulated managers (MISSION.md, SPEC §7).
 
-Each ``transition`` step of a scenario (:mod:`skinet.mission`) becomes, at time
+Each ``transition`` step of a scenario (:mod:`skinet.mission.scenario`) becomes, at time
 ``t / speed``, what would cause it on the real robot:
 
 - ``k.start``: a ``Skill<K>Request`` on ``skill/<k>/request``, as an operator GUI sends it;
@@ -27,11 +27,11 @@ import zenoh
 
 from services.common.requests import Requests
 from skinet.lang.model import Skillset
-from skinet.mission import Scenario, Step, step_numbers
+from skinet.mission.scenario import Scenario, Step, step_numbers
 from skinet.ros.keys import KeyStyle, ManagerTopic
 from skinet.ros.requests import event_request, skill_interrupt, skill_request
 from skinet.ros.typestore import Typestore
-from skinet.system import Component
+from skinet.system.model import Component
 
 log = logging.getLogger("skinet.simulator")
 
@@ -75,7 +75,7 @@ class Planned:
 class StepRun:
     """One step as played: ``ok`` is false when the robot did not do it (e.g. skill not running)."""
 
-    index: int  # the step number of :func:`skinet.mission.step_numbers`, as in :class:`skinet.mission.StepRecord`
+    index: int  # the step number of :func:`skinet.mission.scenario.step_numbers`, as in :class:`skinet.mission.scenario.StepRecord`
     step: Step
     action: Action
     ok: bool

@@ -29,10 +29,10 @@ from services.common.ros_liveliness import declare_node
 from services.common.zenoh_config import undeclare
 from services.simulator.driver import StepRun, drive
 from services.simulator.manager import INTERRUPTING, READY, RUNNING, Manager, Message
-from skinet.mission import Scenario
+from skinet.mission.scenario import Scenario
 from skinet.ros.keys import KeyStyle, ManagerTopic, manager_topics, rmw_attachment, topic_fqn
 from skinet.ros.typestore import Typestore, build_typestore, decode, encode
-from skinet.system import Component, System
+from skinet.system.model import Component, System
 
 log = logging.getLogger("skinet.simulator")
 

@@ -4,7 +4,7 @@ A scenario plays each outcome as a step of its own (:mod:`services.simulator.dri
 A pilot run has no such steps: the pilot starts skills and waits for their outcomes,
 as on the robot.  :class:`World` plays the implementations: whenever a request starts
 a skill on the simulated managers, it ends that execution ``duration`` seconds later in
-the mode :class:`skinet.pilot_run.Outcomes` gives (the favourable success mode, or the
+the mode :class:`skinet.pilot.run.Outcomes` gives (the favourable success mode, or the
 failure a pilot run declares for that run of that skill).  An execution that stopped
 otherwise meanwhile (interrupted, an invariant failure) is left alone.  One worker thread
 ends them in the order they are due; cost O(log n) per start.
@@ -19,7 +19,7 @@ import time
 from dataclasses import dataclass
 
 from services.simulator.service import Simulator
-from skinet.pilot_run import Outcomes
+from skinet.pilot.run import Outcomes
 
 log = logging.getLogger("skinet.simulator")
 

@@ -176,7 +176,7 @@ class Model:
     """Everything one ``.rl`` file declares, plus the warnings validation gave.
 
     ``includes`` are the ``include "file"`` lines, with their positions; the core
-    does no I/O, :func:`skinet.files.load_model` resolves them.
+    does no I/O, :func:`skinet.system.load.load_model` resolves them.
     """
 
     source: str

@@ -71,7 +71,7 @@ def parse_model(text: str, source: str = "<string>") -> Model:
 
     Raises :class:`SourceError` carrying every error, sorted by position; on success
     the returned model's ``warnings`` hold the validation warnings.  ``include``
-    lines are recorded, not followed (see :func:`skinet.files.load_model`).
+    lines are recorded, not followed (see :func:`skinet.system.load.load_model`).
     """
     return link([parse_unit(text, source)])
 

@@ -18,7 +18,7 @@ goal-independent structures are built once per start marking and kept)::
 
     goal = parse_goal(system, "run spot:go_to_waypoint",
                       inputs={"go_to_waypoint": {"target": {"x": 12.0, "y": 3.5, "z": 0.0}}})
-    # or: goals = parse_goals(text, system, "mission.toml")   (files: skinet.files.load_goals)
+    # or: goals = parse_goals(text, system, "mission.toml")   (files: skinet.system.load.load_goals)
     planner = Planner(system, engine="auto", memory_limit=1 << 30)
     plan = planner.plan(goal, marking, budget=1.0)
     plan.answer            # "strong" | "cyclic" | "none" | "unknown"
@@ -41,7 +41,7 @@ are :class:`skinet.errors.SourceError`; a marking the robot cannot be in
 raises :class:`skinet.errors.SkinetError`.
 
 Examples:
-    >>> from skinet.files import load_system
+    >>> from skinet.system.load import load_system
     >>> system, _ = load_system("skillsets/spot_arm.toml")
     >>> plan = Planner(system).plan(parse_goal(system, "reach spot:Standing"))
     >>> plan.answer, plan.moves, plan.action(system.initial_marking())

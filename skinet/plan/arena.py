@@ -32,7 +32,7 @@ import numpy as np
 from skinet.net.semantics import steps
 from skinet.plan.goal import Goal
 from skinet.props.formula import PlaceAtom
-from skinet.system import Component, System
+from skinet.system.model import Component, System
 from skinet.verify.component import ComponentGraph, explore_component
 from skinet.verify.forced import OUTCOMES, forced_boxes
 

@@ -29,7 +29,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from skinet import explain
+from skinet.verify import explain
 from skinet.plan.arena import DONE, WAIT, Arena, Local
 from skinet.plan.goal import Goal
 from skinet.plan.inputs import missing

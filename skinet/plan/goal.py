@@ -12,7 +12,7 @@ in the goal text, shifted by ``at`` when the text sits inside a file.
 Cost: linear in the text.
 
 Examples:
-    >>> from skinet.files import load_system
+    >>> from skinet.system.load import load_system
     >>> system, _ = load_system("skillsets/spot_arm.toml")
     >>> parse_goal(system, "run manipulator:arm_ready.success.ready").target("manipulator", "arm_ready.success.ready")
     True
@@ -44,7 +44,7 @@ from skinet.plan.inputs import Inputs, missing, parse_inputs
 from skinet.props.evaluate import holds
 from skinet.props.formula import is_temporal
 from skinet.props.parser import parse_formula
-from skinet.system import System
+from skinet.system.model import System
 
 
 @dataclass(frozen=True, eq=False)

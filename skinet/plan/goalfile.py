@@ -11,7 +11,7 @@
 Each ``[[goals]]`` table has ``reach = "FORMULA"`` or ``run = "SKILLSET:SKILL[.success.MODE]"``
 and, for the skills that need them, ``inputs`` (:mod:`skinet.plan.inputs`).
 Errors carry the file, line and column: TOML syntax, unknown tables and keys
-(with the close names, as in system files: :mod:`skinet.tomltext`), a goal's own
+(with the close names, as in system files: :mod:`skinet.files.toml`), a goal's own
 errors at their place inside its string, an input's at its key inside the
 inline tables.  Pure; cost linear in the text.
 """
@@ -24,8 +24,8 @@ from collections.abc import Mapping, Sequence
 from skinet.errors import Pos, SourceError
 from skinet.plan.goal import Goal, parse_goal
 from skinet.plan.inputs import parse_inputs
-from skinet.system import System
-from skinet.tomltext import Locations, check_keys, check_tables, locate, parse_toml
+from skinet.system.model import System
+from skinet.files.toml import Locations, check_keys, check_tables, locate, parse_toml
 
 GOAL_KEYS = ("reach", "run", "inputs")
 
@@ -78,7 +78,7 @@ def parse_goals(text: str, system: System, source: str = "<goals>",
 
 def nested(lines: list[str], start: Pos | None, keys: Sequence[str]) -> Pos | None:
     """Where the path ``keys`` is written from ``start`` on (keys of inline tables and dotted keys,
-    which :func:`skinet.tomltext.locate` finds by their first name only): each key searched after
+    which :func:`skinet.files.toml.locate` finds by their first name only): each key searched after
     the previous one; ``start`` itself when a key cannot be found."""
     if start is None or not keys:
         return start

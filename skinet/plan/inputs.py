@@ -17,7 +17,7 @@ value (the model alone does not say what it is).  Cost: linear in the size of
 the values, plus rosbags' type store the first time a message is checked.
 
 Examples:
-    >>> from skinet.files import load_system
+    >>> from skinet.system.load import load_system
     >>> system, _ = load_system("skillsets/spot_arm.toml")
     >>> parse_inputs(system, {"go_to_waypoint": {"target": {"x": 1.0}}}, "<inputs>")
     {('spot', 'go_to_waypoint'): {'target': {'x': 1.0}}}
@@ -36,7 +36,7 @@ from typing import Any
 from skinet.closenames import unknown
 from skinet.errors import Pos, SourceError
 from skinet.lang.model import Skill, Variable
-from skinet.system import System
+from skinet.system.model import System
 
 Inputs = dict[tuple[str, str], dict[str, Any]]
 """(skillset, skill) -> {input name: value}."""

@@ -32,7 +32,7 @@ from skinet.plan.diagnose import _forced_words, diagnose
 from skinet.plan.goal import Goal
 from skinet.plan.policy import Command, Plan, Stats
 from skinet.plan.solve import cyclic, strong
-from skinet.system import System, marking_problems
+from skinet.system.model import System, marking_problems
 from skinet.verify.explore import DEFAULT_MEMORY_LIMIT, Deadline, resident_bytes
 
 ENGINES = ("auto", "explicit", "symbolic")

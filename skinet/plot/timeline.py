@@ -22,7 +22,7 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
 from skinet.errors import SkinetError
-from skinet.system import System
+from skinet.system.model import System
 from skinet.wire.convert import system_from_bundle
 from skinet.wire.log import Entry
 from skinet.wire.messages import CanonicalEvent, LiveState, ModelBundle, UnsafeReport, Verdicts

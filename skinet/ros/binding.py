@@ -52,7 +52,7 @@ controllable (:attr:`Binding.commanded`, :func:`commanded_events`; SPEC §5, §6
 says).  An event bound to a topic condition is the robot's own, so it cannot change
 a commanded resource.
 
-Pure (the definitions come in as texts, read by :mod:`skinet.files`); cost linear
+Pure (the definitions come in as texts, read by :mod:`skinet.system.load`); cost linear
 in the file.
 """
 
@@ -72,7 +72,7 @@ from skinet.lang.model import Skill, Skillset
 from skinet.plan.inputs import message_problem
 from skinet.ros.condition import Condition, parse_condition
 from skinet.ros.definitions import action_types, build_store
-from skinet.tomltext import locate_path, parse_toml
+from skinet.files.toml import locate_path, parse_toml
 
 # lifecycle_msgs/msg/State ids of the primary states (transition states 10-15 settle into one of them).
 LIFECYCLE_STATES: dict[str, int] = {"unconfigured": 1, "inactive": 2, "active": 3, "finalized": 4}
@@ -547,7 +547,7 @@ def changing(skillset: Skillset, resource: str) -> frozenset[str]:
 
 def commanded_events(text: str, source: str, skillset: Skillset) -> frozenset[str]:
     """The events of ``skillset`` that a binding text makes controllable (its ``commanded`` resources), for the
-    system's nets (:func:`skinet.files.load_system`), without the binding's message types: only the
+    system's nets (:func:`skinet.system.load.load_system`), without the binding's message types: only the
     ``commanded`` keys are checked here (errors at their position); :func:`parse_binding` checks the rest."""
     data = parse_toml(text, source)
     p = _Parser(text, source, skillset, None)  # type: ignore[arg-type]

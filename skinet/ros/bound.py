@@ -55,7 +55,7 @@ from skinet.net.build import idle_place, resource_place, running_place
 from skinet.net.semantics import enabled, stabilize, stable_successors
 from skinet.ros.binding import Binding, ResourceBinding, SkillBinding
 from skinet.ros.derive import Derived
-from skinet.system import Component
+from skinet.system.model import Component
 from skinet.wire.messages import SkillsetStatus
 
 # action_msgs/msg/GoalStatus

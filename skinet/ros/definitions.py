@@ -8,7 +8,7 @@ action.  :func:`build_store` starts from its Humble store and registers:
   their documented fields (:data:`STANDARD`): ``action_msgs/srv/CancelGoal``,
   ``lifecycle_msgs/srv/GetState``, ``lifecycle_msgs/srv/ChangeState``;
 - every definition a binding brings (``.msg``, ``.srv``, ``.action`` texts by type
-  name, read from its ``definitions`` folder by :mod:`skinet.files`), with the
+  name, read from its ``definitions`` folder by :mod:`skinet.system.load`), with the
   default values of its fields (:mod:`skinet.ros.defaults`).
 
 A service ``pkg/srv/Name`` (request ``---`` response) becomes ``Name_Request`` and

@@ -21,7 +21,7 @@ Several changes in one status become several transitions, in an order the net
 accepts (checked by firing them with their invariant cascades from the previous
 status); only the last carries the status.  When the changes cannot be named, one
 event with ``transition=None`` and the status is produced and the monitor's
-:class:`~skinet.live.LiveSystem` looks for a transition explaining it.
+:class:`~skinet.system.live.LiveSystem` looks for a transition explaining it.
 
 Pure: no I/O; messages come in as the plain dicts of
 :func:`skinet.ros.typestore.to_plain`.

@@ -18,7 +18,7 @@ attachments of one writer.  Pure: the type store comes from
 :func:`skinet.ros.typestore.build_typestore`.  Cost: one CDR encoding or decoding.
 
 Examples:
-    >>> from skinet.files import load_system, load_typemap
+    >>> from skinet.system.load import load_system, load_typemap
     >>> from skinet.ros.typestore import build_typestore
     >>> system, _ = load_system("skillsets/spot_arm.toml")
     >>> spot = system.component("spot").skillset

@@ -21,13 +21,13 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Literal, Protocol, get_args
 
-from skinet import explain
+from skinet.verify import explain
 from skinet.net.petrinet import Transition
 from skinet.net.semantics import steps
-from skinet.options import PredictionOptions, PropertyOptions
+from skinet.system.prediction import PredictionOptions, PropertyOptions
 from skinet.props.evaluate import holds
 from skinet.props.formula import Property
-from skinet.system import Marking, System
+from skinet.system.model import Marking, System
 from skinet.verify.forced import oracle as forced_oracle
 
 Constraint = Literal["explicit", "implicit", "forced", "unknown"]
@@ -60,7 +60,7 @@ class UnsafeTransition:
     constraint: Constraint
     steps: int | None = None  # 0 for explicit; steps to the violation for implicit and forced
     witness: tuple[str, ...] = ()  # "skillset:transition" per step
-    reason: str = field(default="", compare=False)  # the operator's sentence (skinet.explain)
+    reason: str = field(default="", compare=False)  # the operator's sentence (skinet.verify.explain)
 
 
 @dataclass(frozen=True)

@@ -42,7 +42,7 @@ from skinet.net.build import idle_place
 from skinet.net.semantics import steps
 from skinet.props.evaluate import evaluate
 from skinet.props.formula import PlaceAtom, Property
-from skinet.system import System
+from skinet.system.model import System
 from skinet.verify.algorithm1 import PredictionVerdict
 from skinet.verify.component import ComponentGraph, explore_component
 from skinet.verify.explore import Deadline

@@ -35,7 +35,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from skinet.net.semantics import steps
-from skinet.system import System
+from skinet.system.model import System
 from skinet.verify.component import ComponentGraph, Expired, explore_component, stub_component
 
 CHUNK = 1 << 15  # markings handled at once: bounds the temporaries of every pass

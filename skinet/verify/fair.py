@@ -34,7 +34,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from skinet.net.build import idle_place
-from skinet.system import System
+from skinet.system.model import System
 from skinet.props.formula import PlaceAtom
 from skinet.verify.component import ComponentGraph
 from skinet.verify.ctl import UNREACHED, Kripke, Result, place_values

@@ -22,7 +22,7 @@ component marking, then at most ``prod_i v_i`` evaluations of ``phi``, where
 valuations component ``i`` reaches.  No product exploration, ever.
 
 Examples:
-    >>> from skinet.files import load_system
+    >>> from skinet.system.load import load_system
     >>> system, _ = load_system("skillsets/mobile_manip.toml")
     >>> m = system.initial_marking()
     >>> forced(system, m, system.property("stowed_drive")) is None
@@ -43,7 +43,7 @@ from skinet.net.semantics import stable_successors
 from skinet.props.evaluate import evaluate
 from skinet.props.formula import PlaceAtom, Property
 from skinet.lang.expr import atoms
-from skinet.system import System
+from skinet.system.model import System
 from skinet.verify.component import ComponentGraph
 
 OUTCOMES = frozenset({"success", "failure"})

@@ -26,8 +26,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from skinet.lang.expr import Not
-from skinet.options import PredictionOptions
-from skinet.system import System
+from skinet.system.prediction import PredictionOptions
+from skinet.system.model import System
 from skinet.verify.algorithm1 import PredictionVerdict
 from skinet.verify.ctl import UNREACHED, Kripke, Result, af, check
 from skinet.verify import symbolic

@@ -50,7 +50,7 @@ import numpy as np
 from skinet.lang.expr import Expr
 from skinet.props.evaluate import evaluate
 from skinet.props.formula import PlaceAtom
-from skinet.system import System
+from skinet.system.model import System
 from skinet.verify.component import ComponentGraph
 from skinet.verify.explore import CHUNK, Deadline, StateSpace
 from skinet.verify.fair import idle_atoms

@@ -16,10 +16,10 @@ from typing import Any
 
 from skinet.errors import SkinetError, SourceError
 from skinet.net.semantics import steps
-from skinet.options import PredictionOptions, PropertyOptions
+from skinet.system.prediction import PredictionOptions, PropertyOptions
 from skinet.plan.policy import Step
 from skinet.props.evaluate import holds
-from skinet.system import Marking, System, build_system, marking_from_json, marking_to_json
+from skinet.system.model import Marking, System, build_system, marking_from_json, marking_to_json
 from skinet.lang.parser import parse_model, parse_skillset
 from skinet.verify.algorithm1 import Analysis, PredictionVerdict
 from skinet.verify.predict import Forecast

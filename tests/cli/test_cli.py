@@ -330,10 +330,13 @@ def test_lazy_command_runs_its_module(capsys: pytest.CaptureFixture[str]) -> Non
 
 
 def test_unsafe_imports_no_service_module() -> None:
-    """Start-up (issue 10 (d)): no Zenoh, pydantic, web server, plotting or services for `skinet unsafe`."""
+    """Start-up (issue 10 (d)): no Zenoh, pydantic, web server, plotting, chain or service for `skinet unsafe`
+    (only the options the services share and the chains' text helpers)."""
     code = ("import sys; from skinet_cli.main import main; code = main(['unsafe', sys.argv[1]]); "
             "print(sorted({m.split('.')[0] for m in sys.modules} & {'zenoh', 'pydantic', 'aiohttp', 'matplotlib', "
-            "'services', 'scipy'})); raise SystemExit(code)")
+            "'scipy'} | {m for m in sys.modules if m.startswith(('services.', 'chains.')) and m not in "
+            "('services.common', 'services.common.options', 'services.common.environment', "
+            "'services.common.memory', 'chains.render', 'chains.pilot_lines')})); raise SystemExit(code)")
     done = subprocess.run([sys.executable, "-c", code, SYSTEM], cwd=ROOT, capture_output=True, text=True, timeout=60)
     assert done.returncode == 0, done.stderr
     assert done.stdout.splitlines()[-1] == "[]"

@@ -23,8 +23,9 @@ from bound_bags import BagRecorder
 from services.common.zenoh_config import session_config
 from services.simulator.bound import BoundSimulator
 from skinet.errors import SourceError
-from skinet.files import load_bindings, load_system, read_text
-from skinet.mission import parse_scenario
+from skinet.system.load import load_bindings, load_system
+from skinet.files.read import read_text
+from skinet.mission.scenario import parse_scenario
 from skinet.ros.bound import goal_text
 from skinet_cli.main import main
 

@@ -28,7 +28,7 @@ from pathlib import Path
 
 import pytest
 
-from skinet.mission import parse_scenario
+from skinet.mission.scenario import parse_scenario
 from skinet_cli.main import EPILOG
 from tests.processes import Watched
 from tests.services.conftest import free_port

@@ -24,10 +24,10 @@ from event_watch import Events
 from gateway import free_domain
 from services.bridge_ros2.bound_live import start_bound_bridge
 from services.common.zenoh_config import session_config
-from services.pilot.act import ActError
+from services.pilot.errors import ActError
 from services.pilot.bound_act import BoundActuator
 from services.simulator.dds_bound import DdsBoundRobot
-from skinet.files import load_bindings, load_system
+from skinet.system.load import load_bindings, load_system
 from skinet.ros.actions import cancel_goal_reply, cancel_goal_request, send_goal_reply, send_goal_request
 from skinet.ros.bound import goal_text
 from skinet.ros.keys import KeyStyle

@@ -23,11 +23,12 @@ import zenoh
 from event_watch import Events
 from gateway import free_domain, free_port
 from services.bridge_ros2 import start_bridge
-from services.chain import run_chain
+from chains.chain import run_chain
 from services.common.zenoh_config import session_config
 from services.simulator.dds import DdsSimulator
-from skinet.files import load_system, load_typemap, read_text
-from skinet.mission import StepRecord, parse_scenario, replay
+from skinet.system.load import load_system, load_typemap
+from skinet.files.read import read_text
+from skinet.mission.scenario import StepRecord, parse_scenario, replay
 from skinet.ros.interfaces import status_request_topic
 from skinet.ros.keys import KeyStyle, manager_topics
 from skinet.ros.typestore import build_typestore, decode as decode_cdr, encode as cdr

@@ -19,11 +19,12 @@ import zenoh
 
 from gateway import free_domain
 from services.common.zenoh_config import session_config
-from services.pilot_chain import run_pilot_chain
+from chains.pilot_chain import run_pilot_chain
 from services.simulator.dds import DdsSimulator
-from skinet.files import load_goals, load_system, load_typemap, read_text
-from skinet.flight import fly
-from skinet.pilot_run import Outcomes, parse_pilot_run
+from skinet.system.load import load_goals, load_system, load_typemap
+from skinet.files.read import read_text
+from skinet.pilot.flight import fly
+from skinet.pilot.run import Outcomes, parse_pilot_run
 
 pytestmark = pytest.mark.slow
 

@@ -20,9 +20,10 @@ from pathlib import Path
 import zenoh
 
 from services.common.security import USERS, ensure_tls, ensure_users, tls_connect_config, tls_listen_config
-from skinet.files import load_system, read_text
+from skinet.system.load import load_system
+from skinet.files.read import read_text
 from tests.processes import stop_and_show
-from skinet.mission import Scenario, parse_scenario, replay
+from skinet.mission.scenario import Scenario, parse_scenario, replay
 from skinet.wire import keys
 from skinet.wire.codec import DecodeError, decode, encode
 from skinet.wire.convert import bundle
@@ -217,7 +218,7 @@ def answering_predictor(session: zenoh.Session, system_file: Path = REPO / "skil
 class Violation:
     """A property that became false at one scenario step."""
 
-    step: int  # 1-based index in the scenario (skinet.mission.replay numbering)
+    step: int  # 1-based index in the scenario (skinet.mission.scenario.replay numbering)
     skillset: str
     transition: str
     property: str

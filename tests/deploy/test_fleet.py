@@ -33,7 +33,7 @@ from skinet.wire.codec import decode
 from skinet.wire.messages import UnsafeReport, Verdicts
 from test_containers import SECRETS_IN_IMAGE, Stack, image  # noqa: F401  (the image fixture; skips without Docker)
 from test_fleet_links import fleet_skillsets
-from skinet.files import load_system
+from skinet.system.load import load_system
 from tests.bridge_side import BridgeSide
 
 pytestmark = pytest.mark.slow

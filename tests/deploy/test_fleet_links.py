@@ -27,7 +27,7 @@ from deploy_support import (
     REPO, USERS_FILE, ZENOH_DIR, Services, Tokens, acl_router_config, free_port, login, passwords, wait_until,
 )
 from skinet.wire import keys
-from skinet.files import load_system
+from skinet.system.load import load_system
 from skinet.wire.codec import decode
 from skinet.wire.messages import UnsafeReport
 from tests.services.test_monitor import Events

@@ -18,7 +18,7 @@ import zenoh
 
 from deploy_support import REPO, SYSTEM, Tokens, acl_router_config, free_port, login, passwords, wait_until
 from services.pilot import start_pilot
-from skinet.files import load_system, load_typemap
+from skinet.system.load import load_system, load_typemap
 
 SYSTEM_FILE = REPO / "skillsets" / "spot_arm.toml"
 REFUSED = ("no pilot answers on skinet/spot_arm/pilot/goal/observer: is `skinet run` or the pilot service running? "

@@ -20,13 +20,13 @@ import zenoh
 
 from deploy_support import REPO, SYSTEM, Tokens, acl_router_config, free_port, login, passwords, wait_until
 from services.monitor import start_monitor
-from skinet.files import load_system
+from skinet.system.load import load_system
 from skinet.wire import keys
 from skinet.wire.codec import decode, encode
 from skinet.wire.messages import CheckReply, CheckRequest, Divergences
 from tests.services.test_monitor import Events
 
-SG_AT_RD = "violates it at once: spot go_to_waypoint runs while manipulator arm_status at RD"  # skinet.explain
+SG_AT_RD = "violates it at once: spot go_to_waypoint runs while manipulator arm_status at RD"  # skinet.verify.explain
 TO_ARM_AT_RD = [("spot", "init_power.start"), ("spot", "init_power.success.powered_on"), ("spot", "stand_up.start"),
                 ("spot", "stand_up.success.standing"), ("manipulator", "arm_ready.start"),
                 ("manipulator", "arm_ready.success.ready")]

@@ -22,12 +22,13 @@ import zenoh
 
 from deploy_support import REPO, SYSTEM, Services, Tokens, acl_router_config, free_port, login, wait_until
 from services.pilot import start_pilot
-from services.pilot.act import ActError, ManagerActuator
+from services.pilot.errors import ActError
+from services.pilot.act import ManagerActuator
 from services.pilot.bound_act import BoundActuator
 from services.simulator.bound import BoundSimulator
 from services.simulator.driver import Operator
 from services.simulator.service import Simulator
-from skinet.files import load_bindings, load_system, load_typemap
+from skinet.system.load import load_bindings, load_system, load_typemap
 from skinet.ros.interfaces import status_request_topic
 from skinet.ros.requests import event_request, skill_interrupt, skill_request
 from skinet.ros.keys import KeyStyle, manager_topics

@@ -24,7 +24,7 @@ import zenoh
 
 from deploy_support import REPO, SYSTEM, Tokens, free_port, wait_until
 from services.simulator.service import Simulator
-from skinet.files import load_system, load_typemap
+from skinet.system.load import load_system, load_typemap
 from skinet.wire import keys
 from skinet.wire.codec import decode, encode
 from skinet.wire.messages import PilotGoalReply, PilotGoalRequest, PilotStatus

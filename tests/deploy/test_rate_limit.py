@@ -23,9 +23,9 @@ from deploy_support import (
 )
 from services.monitor import start_monitor
 from services.monitor.check import parse_command
-from skinet.files import load_system
-from skinet.live import LiveSystem
-from skinet.system import System, marking_to_json
+from skinet.system.load import load_system
+from skinet.system.live import LiveSystem
+from skinet.system.model import System, marking_to_json
 from skinet.wire import keys
 from skinet.wire.codec import decode, encode
 from skinet.wire.convert import bundle, statuses

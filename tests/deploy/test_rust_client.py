@@ -24,7 +24,7 @@ from deploy_support import REPO, SYSTEM, acl_router_config, free_port, login, pa
 from native_build import native_binary
 from services.monitor import Monitor, start_monitor
 from services.predictor import start_predictor
-from skinet.files import load_system
+from skinet.system.load import load_system
 from skinet.wire.messages import CheckRequest
 from tests.bridge_side import BridgeSide
 

@@ -6,7 +6,7 @@ from skinet.lang.parser import parse_skillset
 from skinet.net.build import build_net, idle_place, resource_place, running_place
 from skinet.net.outcomes import MAX_SKILLS, infer_outcomes, modes
 from skinet.net.semantics import stable_successors
-from skinet.system import System, marking_from_json
+from skinet.system.model import System, marking_from_json
 
 
 def _marking(system: System, skillset: str, resources: dict[str, str], running: list[str]) -> int:

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from skinet_cli.main import main
-from skinet.files import load_system
+from skinet.system.load import load_system
 from skinet.net.export.promela import to_promela
 from skinet.net.union import union
 from skinet.verify.explore import explore

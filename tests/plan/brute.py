@@ -19,7 +19,7 @@ from skinet.net.semantics import steps
 from skinet.plan.goal import Goal
 from skinet.plan.policy import Command, Plan, Reached, Wait
 from skinet.props.evaluate import holds
-from skinet.system import System
+from skinet.system.model import System
 
 Combined = tuple[int, ...]
 DONE = "done"

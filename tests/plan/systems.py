@@ -10,12 +10,12 @@ from pathlib import Path
 import pytest
 
 from skinet.errors import SourceError
-from skinet.files import load_system
+from skinet.system.load import load_system
 from skinet.lang.model import Effect, Skillset
 from skinet.lang.parser import parse_skillset
 from skinet.net.semantics import steps
 from skinet.plan.goal import Goal, parse_goal
-from skinet.system import System, build_system
+from skinet.system.model import System, build_system
 from skinet.verify.forced import forced
 from tests.corpus import require_corpus
 

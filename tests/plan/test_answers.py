@@ -16,7 +16,7 @@ from skinet.lang.parser import parse_skillset
 from skinet.net.semantics import steps
 from skinet.plan import Command, Plan, Planner, Reached, Wait, parse_goal
 from skinet.plan import planner as planner_module
-from skinet.system import System, build_system, marking_from_json, marking_to_json
+from skinet.system.model import System, build_system, marking_from_json, marking_to_json
 from skinet.verify.algorithm1 import analyse
 from skinet.verify.component import explore_component
 from skinet.verify.explore import Deadline, resident_bytes

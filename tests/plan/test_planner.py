@@ -17,10 +17,10 @@ from dataclasses import replace
 
 import pytest
 
-from skinet.options import PredictionOptions, PropertyOptions
+from skinet.system.prediction import PredictionOptions, PropertyOptions
 from skinet.plan.planner import Planner
 from skinet.plan.policy import Plan
-from skinet.system import System
+from skinet.system.model import System
 from skinet.verify.symbolic import available
 from tests.plan.brute import Brute
 from tests.plan.systems import corpus, cranes, mobile, mutants, paper, random_goal, random_marking

@@ -11,7 +11,7 @@ from skinet.lang.parser import parse_skillset
 from skinet.props.evaluate import holds
 from skinet.props.formula import PlaceAtom, Temporal, Until
 from skinet.props.parser import parse_formula, parse_properties
-from skinet.system import System, build_system, marking_from_json, marking_to_json
+from skinet.system.model import System, build_system, marking_from_json, marking_to_json
 
 ARM = """
 skillset arm {

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from skinet.errors import Pos, SourceError
-from skinet.files import load_bindings, load_system
+from skinet.system.load import load_bindings, load_system
 from skinet.ros.binding import LIFECYCLE_STATES, parse_binding
 from skinet.ros.condition import parse_condition
 from skinet.ros.actions import message

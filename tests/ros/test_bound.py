@@ -3,7 +3,7 @@
 The nav2 example (examples/nav2): every GoalStatus code, every lifecycle transition,
 goal-id races, results naming modes, start-up readings, and the drift cases the
 issue lists, each with the message that showed it.  Derived events are fed to
-:class:`~skinet.live.LiveSystem`, as the monitor would: clean runs give no
+:class:`~skinet.system.live.LiveSystem`, as the monitor would: clean runs give no
 divergence there, drifts give one.
 """
 
@@ -13,8 +13,8 @@ from pathlib import Path
 
 import pytest
 
-from skinet.files import load_bindings, load_system
-from skinet.live import LiveSystem
+from skinet.system.load import load_bindings, load_system
+from skinet.system.live import LiveSystem
 from skinet.ros.actions import SentGoal
 from skinet.ros.bound import BoundDeriver, BoundOutput, Goal, goal_text, goals_from_plain
 

@@ -15,9 +15,9 @@ from pathlib import Path
 
 import pytest
 
-from skinet.files import load_bindings, load_system
+from skinet.system.load import load_bindings, load_system
 from skinet.plan import Planner, parse_goal
-from skinet.system import System, marking_from_json
+from skinet.system.model import System, marking_from_json
 from skinet.verify.algorithm1 import analyse
 
 REPO = Path(__file__).resolve().parents[2]

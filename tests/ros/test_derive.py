@@ -1,7 +1,7 @@
 """Status diffs to model-level transitions (skinet.ros.derive; SPEC §1 bridge_ros2, corpus README).
 
 Every test checks the derived events against the live nets too: feeding them to
-:class:`~skinet.live.LiveSystem` must reproduce the manager's status without a
+:class:`~skinet.system.live.LiveSystem` must reproduce the manager's status without a
 divergence, unless the test is about a change the model cannot name.
 """
 
@@ -10,13 +10,13 @@ from __future__ import annotations
 import pytest
 
 from skinet.lang.parser import parse_skillset
-from skinet.live import LiveSystem
+from skinet.system.live import LiveSystem
 from skinet.ros.derive import (
     Derived, Deriver, EventRequest, EventResponse, SkillResponse, SkillView, Status, event_response_from_plain,
     skill_response_from_plain, status_from_plain, termination,
 )
 from skinet.ros.interfaces import EVENT_RESULTS, RESULTS
-from skinet.system import System, build_system
+from skinet.system.model import System, build_system
 
 R, E = RESULTS, EVENT_RESULTS
 

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 import skinet.ros.requests
-from skinet.files import load_system, load_typemap
+from skinet.system.load import load_system, load_typemap
 from skinet.ros.requests import Writer, event_request, skill_ids, skill_interrupt, skill_request, status_request
 from skinet.ros.typestore import build_typestore, decode, encode, to_plain
 from services.simulator.manager import Manager

@@ -188,7 +188,7 @@ def spawn(tmp_path: Path) -> Iterator[Callable[..., subprocess.Popen]]:
 @pytest.fixture(scope="session")
 def spot_arm() -> tuple:
     """``skillsets/spot_arm.toml`` as the services load it: (system, type map)."""
-    from skinet.files import load_system, load_typemap
+    from skinet.system.load import load_system, load_typemap
 
     path = REPO / "skillsets" / "spot_arm.toml"
     return load_system(path)[0], load_typemap(path)

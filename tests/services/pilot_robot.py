@@ -29,7 +29,7 @@ from services.predictor.service import start_predictor
 from services.simulator import Simulator
 from skinet.ros.keys import KeyStyle
 from skinet.ros.requests import skill_interrupt, skill_request
-from skinet.system import System
+from skinet.system.model import System
 from skinet.wire import keys
 from skinet.wire.codec import decode, encode
 from skinet.wire.messages import PilotCommand, PilotGoalReply, PilotGoalRequest, PilotStatus

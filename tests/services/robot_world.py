@@ -24,9 +24,9 @@ from pathlib import Path
 from services.common.zenoh_config import open_session, session_config
 from services.simulator import Simulator
 from services.simulator.world import World
-from skinet.files import load_system, load_typemap
-from skinet.mission import parse_scenario
-from skinet.pilot_run import Outcomes
+from skinet.system.load import load_system, load_typemap
+from skinet.mission.scenario import parse_scenario
+from skinet.pilot.run import Outcomes
 from skinet.ros.keys import KeyStyle
 
 

@@ -22,10 +22,10 @@ import zenoh
 
 from event_watch import Events
 from services.bridge_ros2.bound_live import start_bound_bridge
-from services.pilot.act import ActError, Refused
+from services.pilot.errors import ActError, Refused
 from services.pilot.bound_act import BoundActuator
 from services.simulator.bound import BoundSimulator
-from skinet.files import load_bindings, load_system
+from skinet.system.load import load_bindings, load_system
 from skinet.ros.keys import KeyStyle, parse_liveliness_token
 from skinet.wire.messages import PilotCommand
 from tests.services.conftest import wait_queryable

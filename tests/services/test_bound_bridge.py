@@ -20,11 +20,12 @@ import zenoh
 
 from event_watch import Events
 from services.bridge_ros2.bound_live import start_bound_bridge
-from services.chain import run_bound_chain
+from chains.chain import run_bound_chain
 from services.common.zenoh_config import session_config
 from services.simulator.bound import BoundSimulator
-from skinet.files import load_bindings, load_system, read_text
-from skinet.mission import StepRecord, parse_scenario, replay
+from skinet.system.load import load_bindings, load_system
+from skinet.files.read import read_text
+from skinet.mission.scenario import StepRecord, parse_scenario, replay
 from skinet.ros.keys import KeyStyle
 from skinet.wire import keys
 from skinet.wire.codec import decode, encode
@@ -306,7 +307,7 @@ def test_messages_of_a_manager_and_a_bound_skillset_keep_their_arrival_order(cli
     from services.bridge_ros2.feed import Feed
     from services.bridge_ros2.order import Order
     from services.simulator.manager import Manager
-    from skinet.files import load_typemap
+    from skinet.system.load import load_typemap
     from skinet.ros.actions import message
     from skinet.ros.typestore import encode as cdr
     from tests.services.test_bridge import CYCLES
@@ -373,7 +374,7 @@ def test_a_bound_skillset_waiting_for_a_result_holds_the_later_events_of_a_manag
     from services.bridge_ros2.order import Order
     from services.simulator.manager import Manager
     from services.simulator.protocols import ABORTED, ACCEPTED, SUCCEEDED, ActionLogic, Goal
-    from skinet.files import load_typemap
+    from skinet.system.load import load_typemap
     from skinet.ros.bound import ResultRequest
     from skinet.ros.typestore import encode as cdr
 

@@ -31,7 +31,7 @@ from services.pilot.act import default_actuator
 from services.predictor.service import start_predictor
 from services.simulator.bound import BoundSimulator
 from services.simulator.protocols import ActionLogic
-from skinet.files import load_bindings, load_system
+from skinet.system.load import load_bindings, load_system
 from skinet.ros.keys import KeyStyle
 from skinet_cli.main import main
 from tests.services.conftest import wait_queryable

@@ -27,8 +27,8 @@ from services.bridge_ros2.service import Bridge
 from services.common.zenoh_config import session_config
 from services.simulator import Simulator
 from services.simulator.manager import Manager
-from skinet.live import LiveSystem
-from skinet.mission import parse_scenario
+from skinet.system.live import LiveSystem
+from skinet.mission.scenario import parse_scenario
 from skinet.ros.keys import (
     EMPTY_TYPE, KeyStyle, bridge_key, dds_type_name, manager_topics, node_entity, parse_liveliness_token,
     parse_rmw_attachment, rmw_attachment, rmw_zenoh_key, topic_entity, topic_fqn,

@@ -25,9 +25,10 @@ def skinet(*args: str) -> subprocess.CompletedProcess:
 
 def play_any(scenario_path: Path, router: str) -> list:
     """A mission through the whole chain (a bound system's through its bindings) on a client of ``router``."""
-    from services.chain import run_bound_chain, run_chain
-    from skinet.files import load_bindings, load_system, load_typemap, read_text
-    from skinet.mission import parse_scenario
+    from chains.chain import run_bound_chain, run_chain
+    from skinet.system.load import load_bindings, load_system, load_typemap
+    from skinet.files.read import read_text
+    from skinet.mission.scenario import parse_scenario
 
     scenario = parse_scenario(read_text(scenario_path), str(scenario_path))
     system_file = scenario_path.parent / scenario.system
@@ -197,7 +198,7 @@ def test_a_bundle_with_an_injected_fault_verifies_and_shows_the_divergence(route
     from mcap.reader import make_reader
 
     from services.monitor import start_monitor
-    from skinet.files import load_system
+    from skinet.system.load import load_system
     from tests.services.test_divergences import TEN
     from tests.services.test_monitor import SYSTEM_FILE, Events, wait_until
 
@@ -232,8 +233,8 @@ def test_a_bundle_with_an_injected_fault_verifies_and_shows_the_divergence(route
 def test_incidents_are_written_around_the_violations_and_verify(router, client_factory, tmp_path) -> None:
     from mcap.reader import make_reader
 
-    from services.incidents import Incidents
-    from skinet.files import load_system
+    from services.monitor.incidents import Incidents
+    from skinet.system.load import load_system
     from skinet.wire.convert import bundle
     from tests.services.test_dashboard import SYSTEM_FILE
 

@@ -11,9 +11,10 @@ from pathlib import Path
 
 import pytest
 
-from services.chain import run_chain
-from skinet.files import load_system, load_typemap, read_text
-from skinet.mission import StepRecord, parse_scenario, replay
+from chains.chain import run_chain
+from skinet.system.load import load_system, load_typemap
+from skinet.files.read import read_text
+from skinet.mission.scenario import StepRecord, parse_scenario, replay
 
 MISSIONS = Path(__file__).resolve().parents[2] / "skillsets" / "missions"
 
@@ -56,16 +57,16 @@ def test_assisted_run_through_the_chain() -> None:
 def test_step_numbers_are_the_monitors(monkeypatch: pytest.MonkeyPatch) -> None:
     """A record's step number is the monitor's step (LiveState.seq) after it, as `skinet run` shows it:
     the bridge's start-up statuses are no steps, and a considered command is no step."""
-    import services.chain
+    import chains.chain
 
     seen: list[tuple[int, int, bool]] = []
-    record = services.chain._record
+    record = chains.chain._record
 
     def spy(run, view, *rest):
         seen.append((run.index, view.state.seq, run.step.consider is not None))
         return record(run, view, *rest)
 
-    monkeypatch.setattr(services.chain, "_record", spy)
+    monkeypatch.setattr(chains.chain, "_record", spy)
     scenario = parse_scenario(read_text(MISSIONS / "assisted.toml"), "assisted")
     system, _ = load_system(MISSIONS / scenario.system)
     run_chain(system, load_typemap(MISSIONS / scenario.system), scenario, predict=False)

@@ -226,7 +226,7 @@ def test_example_client_asks_before_every_start(router, session, spot_arm) -> No
 def test_forced_constraint_is_denied_under_the_strict_policy(monitor_factory, session, policy, decision) -> None:
     """The mobile manipulator (skillsets/mobile_manip.toml): driving off while the arm unfolds is
     forced for stowed_drive (SPEC §6.3), known at once without any predictor."""
-    from skinet.files import load_system
+    from skinet.system.load import load_system
     from tests.services.conftest import REPO
 
     mobile = load_system(REPO / "skillsets" / "mobile_manip.toml")[0]

@@ -21,7 +21,7 @@ import zenoh
 from services.common.ratelimit import CHECK_RATE_LIMIT
 from services.monitor.check import parse_command
 from services.monitor.service import MAX_WAITING, Monitor
-from skinet.system import System
+from skinet.system.model import System
 from skinet.wire import keys
 from skinet.wire.codec import decode, encode
 from skinet.wire.messages import CheckReply

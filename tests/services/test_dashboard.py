@@ -24,11 +24,12 @@ from pathlib import Path
 
 import pytest
 
-from services.chain import run_chain
+from chains.chain import run_chain
 from services.dashboard.board import Board
 from services.monitor import start_monitor
-from skinet.files import load_system, load_typemap, read_text
-from skinet.mission import StepRecord, parse_scenario
+from skinet.system.load import load_system, load_typemap
+from skinet.files.read import read_text
+from skinet.mission.scenario import StepRecord, parse_scenario
 from skinet.wire.messages import LiveState, PilotStatus, PropertyVerdict, UnsafeReport, Verdicts
 from tests.services.conftest import REPO, client_args, free_port, open_client, open_router
 from tests.services.test_divergences import TEN

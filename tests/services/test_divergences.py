@@ -19,12 +19,12 @@ from services.bridge_ros2 import start_bridge
 from services.monitor import start_monitor
 from services.monitor.divergences import DivergenceLog
 from services.simulator import Simulator
-from skinet.mission import parse_scenario
+from skinet.mission.scenario import parse_scenario
 from skinet.ros.keys import KeyStyle
 from skinet.wire import keys
 from skinet.wire.codec import decode, encode
 from skinet.wire.messages import CanonicalEvent, Divergence, Divergences, LiveState
-from skinet.files import load_system
+from skinet.system.load import load_system
 from tests.services.test_bridge import CHAIN
 from tests.services.test_monitor import SYSTEM_FILE, Events, wait_until
 

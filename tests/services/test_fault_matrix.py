@@ -35,7 +35,7 @@ from pathlib import Path
 
 import pytest
 
-from services.pilot_chain import _Watch, ask_goal
+from chains.pilot_chain import _Watch, ask_goal
 from skinet.wire import keys
 from skinet.wire.messages import PilotGoalRequest, PilotStatus
 from tests.processes import Watched

@@ -14,7 +14,7 @@ from collections.abc import Callable, Iterator
 
 import pytest
 
-from skinet.mission import StepRecord
+from skinet.mission.scenario import StepRecord
 from skinet.wire import foxglove as fx
 from tests.services.conftest import REPO, client_args, free_port
 from tests.services.foxglove_client import FoxgloveClient

@@ -20,7 +20,7 @@ import zenoh
 
 from services.common.goals import NoPilot, ask_pilot, no_pilot_message, pilot_status
 from services.dashboard.goalbox import GoalFormError, Placed, goal_request, place
-from skinet.files import load_system
+from skinet.system.load import load_system
 from skinet.wire.messages import PilotGoalRequest
 from tests.services.conftest import REPO, client_args, free_port, open_client, start_skinet
 from tests.services.pilot_robot import Implementations, Robot

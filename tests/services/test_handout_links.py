@@ -151,7 +151,7 @@ def test_the_router_copies_its_read_only_hand_out_into_its_own_folder(vault: Pat
 
 
 def test_a_fifo_as_a_password_or_key_file_is_refused_not_waited_on(vault: Path, tmp_path: Path) -> None:
-    """The same reader as the model files (skinet.files.read_bytes): nothing blocks on a FIFO."""
+    """The same reader as the model files (skinet.files.read.read_bytes): nothing blocks on a FIFO."""
     import argparse
 
     from services.common.zenoh_config import login

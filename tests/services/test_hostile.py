@@ -20,7 +20,7 @@ import zenoh
 
 from services.monitor import start_monitor
 from services.predictor import start_predictor
-from skinet.files import load_system
+from skinet.system.load import load_system
 from skinet.wire import keys
 from skinet.wire.codec import decode
 from skinet.wire.messages import LiveState, PredictReply

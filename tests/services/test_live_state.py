@@ -20,13 +20,13 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from services.chain import run_chain
+from chains.chain import run_chain
 from services.monitor import Monitor, start_monitor
 from services.predictor.service import start_predictor
 from services.simulator import Simulator
-from skinet.files import load_system, load_typemap
-from skinet.mission import Scenario, Step, StepRecord
-from skinet.system import System
+from skinet.system.load import load_system, load_typemap
+from skinet.mission.scenario import Scenario, Step, StepRecord
+from skinet.system.model import System
 from skinet.wire import keys
 from skinet.wire.codec import decode, encode
 from skinet.wire.convert import statuses
@@ -225,7 +225,7 @@ def test_stamps_from_simulated_time_give_the_wall_clock_verdicts(client_factory,
 def test_terminal_views_show_a_stale_state_first_in_colour() -> None:
     """``skinet watch`` and ``skinet run``: one banner line per skillset not live, red when lost, yellow
     when syncing (on a terminal), and a mark on the skillset's line."""
-    from services.embedded import RED, YELLOW, PLAIN, Observed, render, summary
+    from chains.embedded import RED, YELLOW, PLAIN, Observed, render, summary
     from skinet.wire.messages import PropertyVerdict, SkillsetSync, UnsafeReport, Verdicts
 
     system = load_system(SYSTEM_FILE)[0]

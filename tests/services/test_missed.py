@@ -15,7 +15,7 @@ from event_watch import Events
 from services.bridge_ros2 import start_bridge
 from services.monitor.engine import Engine
 from services.simulator import Simulator
-from skinet.mission import parse_scenario
+from skinet.mission.scenario import parse_scenario
 from skinet.wire import keys
 from skinet.wire.codec import decode
 from skinet.wire.messages import CanonicalEvent, Heartbeat, LiveState, MissedOutcome, SkillsetStatus

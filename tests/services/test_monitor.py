@@ -25,9 +25,9 @@ import zenoh
 
 from services.monitor import Monitor, start_monitor
 from services.predictor.service import start_predictor
-from skinet.files import load_system
-from skinet.live import LiveSystem
-from skinet.system import System
+from skinet.system.load import load_system
+from skinet.system.live import LiveSystem
+from skinet.system.model import System
 from skinet.verify.algorithm1 import analyse
 from skinet.verify.predict import forecast
 from skinet.wire import keys

@@ -23,9 +23,9 @@ from services.common.events import event_subscriber
 from services.common.zenoh_config import undeclare
 from services.monitor import start_monitor
 from services.simulator import Simulator
-from skinet.mission import parse_scenario
+from skinet.mission.scenario import parse_scenario
 from skinet.ros.keys import KeyStyle
-from skinet.files import load_system
+from skinet.system.load import load_system
 from skinet.wire import keys
 from skinet.wire.codec import decode
 from skinet.wire.messages import CanonicalEvent, LiveState
@@ -215,7 +215,7 @@ def test_router_restart_between_a_bound_robot_and_the_bridge_is_read_again(outag
     and an event closing the gap."""
     from services.bridge_ros2.bound_live import start_bound_bridge
     from services.simulator.bound import BoundSimulator
-    from skinet.files import load_bindings
+    from skinet.system.load import load_bindings
     from tests.services.test_bound_bridge import FIRST, NAV2, _pending, _resync
 
     system = load_system(NAV2 / "nav2.toml")[0]

@@ -484,7 +484,7 @@ def test_a_planning_budget_past_one_day_is_refused(budget: float) -> None:
     from pathlib import Path
 
     from services.pilot.service import Pilot
-    from skinet.files import load_system
+    from skinet.system.load import load_system
 
     system, _ = load_system(Path(__file__).resolve().parents[2] / "skillsets" / "spot_arm.toml")
     with pytest.raises(ValueError) as info:
@@ -512,7 +512,7 @@ def test_a_huge_mission_is_refused_by_its_goal_count_and_a_cancel_right_after_is
 
 def test_a_mission_past_the_limit_is_refused_at_the_first_goal_too_many() -> None:
     from skinet.errors import SourceError
-    from skinet.files import load_system
+    from skinet.system.load import load_system
     from skinet.plan import parse_goals
 
     system, typemap = load_system("skillsets/spot_arm.toml")

@@ -6,7 +6,7 @@ from __future__ import annotations
 import pytest
 
 from services.pilot import ActError, Routed, route
-from skinet.files import load_system
+from skinet.system.load import load_system
 from skinet.wire.messages import PilotCommand
 from tests.services.conftest import REPO
 

@@ -4,7 +4,7 @@ Simulated managers whose skills end by themselves (two failures injected: the ar
 once on its way to ready, one not_arrived) -> CDR -> bridge -> monitor -> predictor -> pilot
 -> the monitor's strict check -> the pilot's requests, on one embedded Zenoh session, and
 over rmw_zenoh keys behind a router.  The chain's moves must be the core flight's, move for
-move (:func:`skinet.flight.fly`); the pilot reaches every goal with no violation and no
+move (:func:`skinet.pilot.flight.fly`); the pilot reaches every goal with no violation and no
 command denied; ``skinet demo`` prints the run beside the paper's two as a table.
 """
 
@@ -14,11 +14,12 @@ from pathlib import Path
 
 import pytest
 
-from services.pilot_chain import PilotRecord, run_pilot_chain
+from chains.pilot_chain import PilotRecord, run_pilot_chain
 from services.simulator import Simulator
-from skinet.files import load_goals, load_system, load_typemap, read_text
-from skinet.flight import fly
-from skinet.pilot_run import Outcomes, parse_pilot_run
+from skinet.system.load import load_goals, load_system, load_typemap
+from skinet.files.read import read_text
+from skinet.pilot.flight import fly
+from skinet.pilot.run import Outcomes, parse_pilot_run
 from skinet.ros.keys import KeyStyle, parse_rmw_attachment
 from skinet_cli.main import main
 
@@ -135,13 +136,13 @@ def test_a_pilot_run_that_fails_is_an_unexpected_end(tmp_path: Path, capsys: pyt
 def test_a_pilot_run_that_does_not_end_is_said_not_crashed(monkeypatch: pytest.MonkeyPatch,
                                                             capsys: pytest.CaptureFixture[str]) -> None:
     """The chain not letting the mission end (a pilot paused for good) is an unexpected end, with the reason."""
-    import services.pilot_chain
-    from services.chain import ChainError
+    import chains.pilot_chain
+    from chains.chain import ChainError
 
     def stuck(*_args: object, **_options: object) -> None:
         raise ChainError("the pilot's mission did not end within 120 s: it is paused (spot is lost) at goal 3 of 29")
 
-    monkeypatch.setattr(services.pilot_chain, "run_pilot_chain", stuck)
+    monkeypatch.setattr(chains.pilot_chain, "run_pilot_chain", stuck)
     assert main(["demo", "--no-predict", str(PILOT)]) == 3
     out, err = capsys.readouterr()
     assert "   pilot: the run did not end: the pilot's mission did not end within 120 s: it is paused (spot is lost) " \

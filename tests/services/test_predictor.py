@@ -22,8 +22,8 @@ import zenoh
 from services.common.zenoh_config import session_config
 from services.monitor import start_monitor
 from services.predictor import start_predictor
-from skinet.files import load_system
-from skinet.system import System
+from skinet.system.load import load_system
+from skinet.system.model import System
 from skinet.verify.predict import forecast
 from skinet.wire import keys
 from skinet.wire.codec import decode, encode

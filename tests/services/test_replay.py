@@ -23,11 +23,12 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from services.chain import run_chain
+from chains.chain import run_chain
 from services.monitor import start_monitor
-from services.replay import RESULTS
-from skinet.files import load_system, load_typemap, read_text
-from skinet.mission import parse_scenario
+from chains.replay import RESULTS
+from skinet.system.load import load_system, load_typemap
+from skinet.files.read import read_text
+from skinet.mission.scenario import parse_scenario
 from skinet.wire import keys
 from skinet.wire.codec import decode
 from skinet.wire.log import Entry

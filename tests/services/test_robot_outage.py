@@ -157,7 +157,7 @@ def test_an_outcome_lost_with_the_managers_link_is_a_missed_outcome(spot_arm, sk
     """The managers' router is down while ``skill`` ends: its response is lost for good.  The monitor is lost
     with why, then converges; its step lists the missed outcome with the model's inference."""
     from services.simulator import Simulator
-    from skinet.mission import Scenario, Step
+    from skinet.mission.scenario import Scenario, Step
     from tests.services.test_outage import Outage
 
     system, typemap = spot_arm

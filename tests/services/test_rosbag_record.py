@@ -17,8 +17,9 @@ from rosbags.highlevel import AnyReader
 from services.bridge_ros2.record import BagRecorder, recorded_topics
 from services.simulator.bound import BoundSimulator
 from services.simulator.service import Simulator
-from skinet.files import load_bindings, load_system, load_typemap, read_text
-from skinet.mission import parse_scenario
+from skinet.system.load import load_bindings, load_system, load_typemap
+from skinet.files.read import read_text
+from skinet.mission.scenario import parse_scenario
 from skinet.ros.keys import KeyStyle
 from skinet_cli.main import main
 

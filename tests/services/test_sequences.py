@@ -16,8 +16,8 @@ from services.bridge_ros2 import start_bridge
 from services.monitor import start_monitor
 from services.monitor.engine import Engine
 from services.simulator import Simulator
-from skinet.files import load_system
-from skinet.mission import parse_scenario
+from skinet.system.load import load_system
+from skinet.mission.scenario import parse_scenario
 from skinet.wire import keys
 from skinet.wire.codec import decode, encode
 from skinet.wire.messages import CanonicalEvent, LiveState, SkillsetStatus

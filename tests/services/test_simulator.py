@@ -17,7 +17,7 @@ import zenoh
 from services.simulator import Manager, Simulator, StepRun
 from services.simulator.driver import plan
 from skinet.lang.parser import parse_skillset
-from skinet.mission import Scenario, Step, parse_scenario
+from skinet.mission.scenario import Scenario, Step, parse_scenario
 from skinet.ros.interfaces import EVENT_RESULTS, RESULTS, SKILL_STATES
 from skinet.ros.keys import KeyStyle, manager_topics
 from skinet.ros.typestore import build_typestore, decode, msg_typename, to_plain
@@ -343,7 +343,7 @@ def test_the_world_ends_each_started_skill_as_the_outcomes_say(client_factory, s
     implementations do, in the favourable mode or the failure declared for that run of that skill."""
     from services.simulator.driver import Operator
     from services.simulator.world import End, World
-    from skinet.pilot_run import Failure, Outcomes
+    from skinet.pilot.run import Failure, Outcomes
     from skinet.ros.requests import skill_interrupt, skill_request
 
     system, typemap = spot_arm

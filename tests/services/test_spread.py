@@ -19,7 +19,7 @@ import zenoh
 
 from services.monitor.pool import Pool
 from services.monitor.service import SystemNameTaken, start_monitor
-from skinet.files import load_system
+from skinet.system.load import load_system
 from skinet.wire import keys
 from skinet.wire.codec import decode, encode
 from skinet.wire.convert import statuses

@@ -17,7 +17,7 @@ import zenoh
 
 from services.monitor import start_monitor
 from services.predictor.service import start_predictor
-from skinet.files import load_system
+from skinet.system.load import load_system
 from skinet.wire import keys
 from tests.services.conftest import REPO, LivelinessWatch, client_args, open_client
 from tests.services.test_monitor import Events, wait_until

@@ -11,7 +11,7 @@ import pytest
 from skinet.lang.parser import parse_skillset
 from skinet.net.semantics import enabled, stable_successors, steps
 from skinet.props.evaluate import holds
-from skinet.system import System, build_system, marking_from_json, marking_to_json
+from skinet.system.model import System, build_system, marking_from_json, marking_to_json
 from skinet.verify.algorithm1 import Analysis, PredictionVerdict, Recovery, UnsafeTransition, analyse
 from skinet.verify.predict import forecast
 

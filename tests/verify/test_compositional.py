@@ -11,8 +11,8 @@ import pytest
 
 from skinet.lang.parser import parse_skillset
 from skinet.net.semantics import steps
-from skinet.options import PredictionOptions, PropertyOptions
-from skinet.system import System, build_system
+from skinet.system.prediction import PredictionOptions, PropertyOptions
+from skinet.system.model import System, build_system
 from skinet.verify.compositional import CompositionalOracle, one_step
 from skinet.verify.explore import Deadline
 from skinet.verify.predict import forecast

@@ -24,7 +24,7 @@ from skinet.lang.parser import parse_skillset
 from skinet.net.petrinet import PetriNet
 from skinet.props.formula import PlaceAtom, Temporal, Until, is_temporal
 from skinet.props.parser import parse_formula
-from skinet.system import build_system
+from skinet.system.model import build_system
 from skinet.verify.component import ComponentGraph
 from skinet.verify.ctl import Kripke, Result, check
 from skinet.verify.explore import Deadline, StateSpace, explore, explore_graphs

@@ -14,7 +14,7 @@ import pytest
 from skinet.lang.model import Skillset
 from skinet.lang.parser import parse_skillset
 from skinet.net.semantics import stabilize, steps
-from skinet.system import System, build_system
+from skinet.system.model import System, build_system
 from skinet.verify.component import CACHE_SIZE, explore_component, forget_component_graphs
 from skinet.verify.ctl import Kripke
 from skinet.verify.explore import StateSpace, explore

@@ -22,10 +22,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from skinet.files import load_system
+from skinet.system.load import load_system
 from skinet.net.build import idle_place
-from skinet.options import PredictionOptions, PropertyOptions
-from skinet.system import System
+from skinet.system.prediction import PredictionOptions, PropertyOptions
+from skinet.system.model import System
 from skinet.verify.ctl import UNREACHED, Kripke, Result
 from skinet.verify.component import ComponentGraph
 from skinet.verify.explore import StateSpace, explore_graphs

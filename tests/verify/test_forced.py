@@ -18,12 +18,12 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from skinet.files import load_system
+from skinet.system.load import load_system
 from skinet.lang.parser import parse_skillset
 from skinet.net.semantics import steps
 from skinet.props.evaluate import holds
 from skinet.props.formula import Property
-from skinet.system import System, build_system
+from skinet.system.model import System, build_system
 from skinet.verify.explore import explore
 from skinet.verify.forced import forced, forced_mask, uncontrollable_kinds
 from skinet.verify.predict import forecast

@@ -21,7 +21,7 @@ import pytest
 from skinet.lang.expr import Not
 from skinet.props.formula import Temporal
 from skinet.props.parser import parse_formula
-from skinet.system import System
+from skinet.system.model import System
 from skinet.verify.algorithm1 import analyse
 from skinet.verify.ctl import Kripke, Result, check
 from skinet.verify.component import forget_component_graphs
@@ -176,7 +176,7 @@ MEMORY_SCRIPT = """
 import json, sys
 sys.path.insert(0, {root!r})
 from tests.verify.test_limits import copies
-from skinet.options import PredictionOptions, PropertyOptions
+from skinet.system.prediction import PredictionOptions, PropertyOptions
 from skinet.verify.explore import peak_resident_bytes, resident_bytes
 from skinet.verify.predict import forecast
 start = resident_bytes()

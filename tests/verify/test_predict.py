@@ -16,10 +16,10 @@ from skinet.net.semantics import stabilize, steps
 from skinet.props.evaluate import holds
 from skinet.props.formula import Temporal
 from skinet.props.parser import parse_formula
-from skinet.system import System, build_system
+from skinet.system.model import System, build_system
 from skinet.verify.component import forget_component_graphs
 from skinet.verify.ctl import Kripke, check
-from skinet.options import PredictionOptions, PropertyOptions
+from skinet.system.prediction import PredictionOptions, PropertyOptions
 from skinet.verify.predict import Forecast, forecast
 from tests.corpus import require_corpus
 

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from skinet.files import load_system
+from skinet.system.load import load_system
 from skinet.verify import scc
 from skinet.lang.expr import Not
 from skinet.verify.ctl import check
@@ -164,5 +164,5 @@ def _imports_scipy(system_expr: str) -> bool:
 
 @pytest.mark.corpus
 def test_scipy_only_for_large_graphs() -> None:
-    assert not _imports_scipy("from skinet.files import load_system; system = load_system('skillsets/spot_arm.toml')[0]")
+    assert not _imports_scipy("from skinet.system.load import load_system; system = load_system('skillsets/spot_arm.toml')[0]")
     assert _imports_scipy("from tests.verify.test_limits import pair_and_arm; system = pair_and_arm()")

@@ -10,9 +10,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from skinet.files import load_system
-from skinet.options import PredictionOptions, PropertyOptions
-from skinet.system import System
+from skinet.system.load import load_system
+from skinet.system.prediction import PredictionOptions, PropertyOptions
+from skinet.system.model import System
 from skinet.verify import symbolic
 from skinet.verify.explore import Deadline, StateSpace, explore_graphs
 from skinet.verify.predict import forecast

@@ -1,6 +1,6 @@
 """A supervised system: several skillsets, their nets, and safety properties.
 
-Pure: built from texts already read (see :mod:`skinet.files` for loading).
+Pure: built from texts already read (see :mod:`skinet.system.load` for loading).
 A *combined marking* maps each skillset name to its net marking (bit mask).
 """
 
@@ -15,7 +15,7 @@ from skinet.lang.model import Resource, Skillset
 from skinet.net.build import build_net, idle_place, resource_place, running_place
 from skinet.net.petrinet import PetriNet
 from skinet.net.semantics import invariants_enabled
-from skinet.options import PredictionOptions
+from skinet.system.prediction import PredictionOptions
 from skinet.props.formula import Property
 from skinet.props.parser import parse_properties
 from skinet.verify.component import explore_component

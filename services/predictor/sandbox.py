@@ -4,7 +4,7 @@ A model bundle comes from whoever answered ``skinet/<system>/model/<digest>``: i
 digest proves it is consistent, not who wrote it, and a 2 KB skillset whose guards
 expand exponentially (SPEC §3, DNF) can take gigabytes and minutes to build and
 explore.  So the predictor never builds or explores in its own process: a
-:class:`Worker` runs ``python -m services.sandbox`` with an address-space
+:class:`Worker` runs ``python -m services.predictor.sandbox`` with an address-space
 limit (``RLIMIT_AS``) and a lower CPU priority, sends it one job at a time over a
 pipe and kills it when the job's deadline (the request's budget plus a grace)
 passes.  Net construction, exploration and the reply's risks all happen in the
@@ -63,7 +63,7 @@ class Worker:
 
     def _spawn(self) -> None:
         self._proc = subprocess.Popen(
-            [sys.executable, "-m", "services.sandbox", "--instance", self.instance_id,
+            [sys.executable, "-m", "services.predictor.sandbox", "--instance", self.instance_id,
              "--memory-mb", str(self.memory_mb), "--cache", str(self.cache_size), "--nice", str(self.nice)],
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, close_fds=True)
         self._ready = False
@@ -181,7 +181,7 @@ def _serve(instance: str, cache_size: int, nice: int) -> None:
     import scipy.sparse.csgraph  # noqa: F401
 
     from skinet.errors import SkinetError
-    from skinet.system import System
+    from skinet.system.model import System
     from skinet.verify.predict import forecast
     from skinet.wire.codec import DecodeError, decode, encode
     from skinet.wire.convert import bundle as bundle_of
@@ -249,7 +249,7 @@ def _die_with_parent() -> None:
 def main(argv: list[str] | None = None) -> int:
     import resource
 
-    parser = argparse.ArgumentParser(prog="python -m services.sandbox",
+    parser = argparse.ArgumentParser(prog="python -m services.predictor.sandbox",
                                      description="A predictor's worker process (started by the predictor; "
                                                  "reads jobs on stdin, answers on stdout).")
     parser.add_argument("--instance", required=True, help="predictor instance id, copied into replies")

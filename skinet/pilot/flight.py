@@ -3,7 +3,7 @@
 What the pilot service does on the live robot, as one loop over the live nets: plan the
 current goal from the marking (reusing the plan while ``plan.action`` answers there),
 send its command, or, when it waits, let the running skill end in the mode
-:class:`skinet.pilot_run.Outcomes` gave it when it started (as the simulated
+:class:`skinet.pilot.run.Outcomes` gave it when it started (as the simulated
 implementations of :mod:`services.simulator.world` do); a ``run`` goal is reached by its
 success outcome, a ``reach`` goal when the plan says so; ``max_retries`` failures of
 one skill in one goal end the mission ``failed``.  ``skinet demo --core`` flies the
@@ -18,10 +18,10 @@ from collections import deque
 from dataclasses import dataclass, field
 from typing import Literal
 
-from skinet.live import LiveSystem
-from skinet.pilot_run import Outcomes
+from skinet.system.live import LiveSystem
+from skinet.pilot.run import Outcomes
 from skinet.plan import Command, Goal, Plan, Planner, Reached
-from skinet.system import System
+from skinet.system.model import System
 
 
 @dataclass

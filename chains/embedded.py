@@ -17,26 +17,31 @@ import dataclasses
 import json
 import os
 import re
-import signal
 import socket
 import sys
 import threading
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
-from services.common.cli import key_style
+from services.common.cli import key_style, stop_on_signals
+from services.common.endpoints import ZenohSetupError
 from services.common.zenoh_config import (
-    ZenohSetupError, client_name, login, open_session, session_config, session_mode, warn_on_stderr,
+    client_name,
+    login,
+    open_session,
+    session_config,
+    session_mode,
+    warn_on_stderr,
 )
 from services.monitor import Monitor, MonitorView, start_monitor
-from skinet_cli.memory import memory_limit
-from skinet_cli.options import load_live_system, require_properties
-from skinet.explain import warning_line
-from skinet_cli.render import seconds, table
-from skinet.files import load_typemap
-from skinet.system import System
+from services.common.memory import memory_limit
+from services.common.options import load_live_system, require_properties
+from skinet.verify.explain import warning_line
+from chains.render import seconds, table
+from skinet.system.load import load_typemap
+from skinet.system.model import System
 from skinet.wire import keys
 from skinet.wire.convert import missed_line
 from skinet.wire.messages import LiveState, StateSpaceReport, UnsafeReport, Verdicts
@@ -208,7 +213,7 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
         monitor = start_monitor(session, system, budget=args.budget, check_policy=args.check_policy,
                                 client=client_name(config), check_rate_limit=args.check_rate_limit,
                                 lost_after=args.lost_after)
-        from services.incidents import start_incidents
+        from services.monitor.incidents import start_incidents
 
         incidents = start_incidents(session, system, args)
         if not args.no_pilot:
@@ -489,11 +494,3 @@ def router(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
         session.close()
     return 0
 
-
-def stop_on_signals() -> threading.Event:
-    stop = threading.Event()
-    handler: Callable[..., None] = lambda *_: stop.set()
-    if threading.current_thread() is threading.main_thread():
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            signal.signal(sig, handler)
-    return stop

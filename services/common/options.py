@@ -19,9 +19,10 @@ from pathlib import Path
 from typing import NoReturn
 
 from skinet.errors import Diagnostic, Pos, SourceError
-from skinet.files import load_state, load_system, parse_state, read_text
-from skinet.system import Marking, System
-from skinet.tomltext import locate, parse_toml
+from skinet.system.load import load_state, load_system, parse_state
+from skinet.files.read import read_text
+from skinet.system.model import Marking, System
+from skinet.files.toml import locate, parse_toml
 from skinet.wire.keys import check_chunk
 from skinet.wire.limits import MAX_BUDGET, MIN_BUDGET
 
@@ -133,7 +134,7 @@ _NAME_LINE = re.compile(r'^\s*name\s*=\s*(["\'])')
 
 
 def load_live_system(path: str | Path) -> tuple[System, list[Diagnostic]]:
-    """:func:`skinet.files.load_system`, refusing a system name that cannot be a Zenoh key chunk.
+    """:func:`skinet.system.load.load_system`, refusing a system name that cannot be a Zenoh key chunk.
 
     Every command takes the name as the ``<system>`` of ``skinet/<system>/...``
     keys, so ``skinet unsafe`` refuses what ``skinet run`` could not publish.
@@ -186,7 +187,7 @@ def _name_pos(path: str | Path) -> Pos | None:
 def state_marking(state: str, system: System, what_if: bool = False) -> tuple[Marking, str]:
     """The marking ``--state`` gives, a JSON file or the JSON itself, and its source name for errors.
 
-    A marking the robot cannot be in is refused unless ``what_if`` (:func:`skinet.files.parse_state`).
+    A marking the robot cannot be in is refused unless ``what_if`` (:func:`skinet.system.load.parse_state`).
     """
     if state.lstrip().startswith("{"):  # the JSON itself
         return parse_state(state, "<state>", system, what_if), "<state>"

@@ -18,7 +18,6 @@ steps plus one exploration per distinct fresh marking.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from dataclasses import dataclass
 
 from services.monitor.engine import Engine

@@ -1,4 +1,6 @@
-"""Reading model files from disk: the only module of the core that does I/O.
+"""Loading a system and what it names from disk (models, properties, bindings, types, goals, states).
+
+Files are read through :mod:`skinet.files.read` (opened once, checked on the descriptor).
 
 A *system file* (TOML) names the skillsets, the properties file and, for each
 skillset, the ROS 2 node of its manager; paths are relative to the file::
@@ -23,122 +25,28 @@ reads it.
 
 from __future__ import annotations
 
-import errno
 import json
 import os
 import re
-import stat
 from collections.abc import Mapping
 from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from skinet.errors import Diagnostic, Pos, SkinetError, SourceError, shown
+from skinet.files.read import FileRefused, read_bytes, read_source, utf8_text
+from skinet.errors import Diagnostic, Pos, SourceError, shown
 from skinet.lang.larkerrors import MAX_SOURCE_CHARS
 from skinet.lang.model import Model, Skillset
 from skinet.lang.parser import link, parse_unit
-from skinet.options import parse_prediction
+from skinet.system.prediction import parse_prediction
 from skinet.ros.binding import Binding, commanded_events, definitions_folder, lifecycle_events, parse_binding
 from skinet.ros.definitions import KINDS
 from skinet.ros.typemap import TypeMap, parse_typemap
-from skinet.tomltext import check_keys, check_tables, locate, parse_toml
-from skinet.system import Marking, System, build_system, marking_from_json, marking_problems
+from skinet.files.toml import check_keys, check_tables, locate, parse_toml
+from skinet.system.model import Marking, System, build_system, marking_from_json, marking_problems
 
 if TYPE_CHECKING:
     from skinet.plan.goal import Goal
-
-
-class FileRefused(SkinetError):
-    """A file :func:`read_bytes` would not read; ``reason`` is one line without the path."""
-
-    def __init__(self, reason: str):
-        super().__init__(reason)
-        self.reason = reason
-
-
-_OPEN_FLAGS = (os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_NOCTTY | getattr(os, "O_CLOEXEC", 0))
-
-
-def read_bytes(path: str | Path, limit: int | None = None, root: Path | None = None) -> tuple[bytes, os.stat_result]:
-    """A regular file's bytes and status, opened once and checked on the open descriptor.
-
-    The path is resolved (links followed) and the resolved name opened with
-    ``O_NOFOLLOW`` (a link swapped in since is refused, not followed) and
-    ``O_NONBLOCK`` (a FIFO cannot block the opening); ``fstat`` of that
-    descriptor must show a regular file within ``limit`` bytes, and, with
-    ``root`` (a resolved folder), the descriptor's own path
-    (``/proc/self/fd/N``) must lie inside it, so a folder of the path swapped
-    for a link between resolving and opening is caught too.  Everything is then
-    read from that descriptor (docs/deployment.md, "Files read and secrets written
-    through no link").
-    :class:`FileRefused` otherwise, never an ``OSError``.  Cost: one
-    ``realpath``, one ``open``, one ``fstat``, the read.
-    """
-    try:
-        resolved = os.path.realpath(path)
-        if root is not None and not Path(resolved).is_relative_to(root):
-            raise FileRefused(f"it lies outside {root}")
-        fd = os.open(resolved, _OPEN_FLAGS)
-    except (OSError, ValueError) as exc:  # ValueError: a NUL in the path
-        raise FileRefused(f"cannot read file: {_reason(exc)}") from None
-    try:
-        if root is not None and not _opened_inside(fd, resolved, root):
-            raise FileRefused(f"it lies outside {root}")
-        st = os.fstat(fd)
-        if stat.S_ISDIR(st.st_mode):
-            raise FileRefused(f"cannot read file: {os.strerror(errno.EISDIR)}")
-        if not stat.S_ISREG(st.st_mode):
-            raise FileRefused("not a regular file")
-        if limit is not None and st.st_size > limit:
-            raise FileRefused(f"file too large: {st.st_size} bytes (the limit is {limit})")
-        chunks, total = [], 0
-        while chunk := os.read(fd, 1 << 20 if limit is None else min(1 << 20, limit + 1 - total)):
-            chunks.append(chunk)
-            total += len(chunk)
-            if limit is not None and total > limit:  # a file growing while read is bounded too
-                raise FileRefused(f"file too large: {total} bytes (the limit is {limit})")
-        return b"".join(chunks), st
-    except OSError as exc:
-        raise FileRefused(f"cannot read file: {_reason(exc)}") from None
-    finally:
-        os.close(fd)
-
-
-def _opened_inside(fd: int, resolved: str, root: Path) -> bool:
-    """Whether the open ``fd`` is a file inside ``root``: by its ``/proc/self/fd`` name,
-    else (no ``/proc``) by device and inode against ``resolved``, re-resolved."""
-    try:
-        return Path(os.readlink(f"/proc/self/fd/{fd}")).is_relative_to(root)
-    except OSError:
-        st, again = os.fstat(fd), os.path.realpath(resolved)
-        try:
-            named = os.stat(again, follow_symlinks=False)
-        except OSError:
-            return False
-        return Path(again).is_relative_to(root) and (st.st_dev, st.st_ino) == (named.st_dev, named.st_ino)
-
-
-def _reason(exc: BaseException) -> str:
-    return exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
-
-
-def read_text(path: str | Path, limit: int | None = None, root: Path | None = None) -> str:
-    """UTF-8 text of a file read by :func:`read_bytes`, or a :class:`SourceError`
-    naming the file and the reason.
-
-    A file larger than ``limit`` bytes is refused before it is read, so a huge
-    file costs no memory.
-    """
-    try:
-        data, _ = read_bytes(path, limit, root)
-    except FileRefused as exc:
-        raise SourceError.at(str(path), None, exc.reason) from None
-    return _utf8(data, str(path))
-
-
-def read_source(path: str | Path, root: Path | None = None) -> str:
-    """A model, properties, system or state file: at most MAX_SOURCE_CHARS bytes."""
-    return read_text(path, MAX_SOURCE_CHARS, root)
 
 
 # The folder that included files must lie in, when not the model's own (issue 25).
@@ -163,7 +71,7 @@ def _load_linked(path: Path, include_root: str | Path | None = None) -> tuple[Mo
     :data:`skinet.errors.MAX_SHOWN` characters of a name.
     """
     data, st = _read_source_bytes(path, None)
-    text = _utf8(data, str(path))
+    text = utf8_text(data, str(path))
     units = [parse_unit(text, str(path))]
     texts = {str(path): text}
     seen = {(st.st_dev, st.st_ino)}
@@ -185,7 +93,7 @@ def _load_linked(path: Path, include_root: str | Path | None = None) -> tuple[Mo
                 continue
             seen.add((st.st_dev, st.st_ino))
             try:
-                included = _utf8(data, str(target))
+                included = utf8_text(data, str(target))
             except SourceError as exc:
                 raise SourceError.at(str(including), pos,
                                      f"cannot include '{shown(name)}': {exc.diagnostics[0].message}") from None
@@ -203,13 +111,6 @@ def _read_source_bytes(path: Path, root: Path | None) -> tuple[bytes, os.stat_re
         return read_bytes(path, MAX_SOURCE_CHARS)
     except FileRefused as exc:
         raise SourceError.at(str(path), None, exc.reason) from None
-
-
-def _utf8(data: bytes, source: str) -> str:
-    try:
-        return data.decode("utf-8")
-    except UnicodeDecodeError as exc:  # its text quotes the byte: no content in an error
-        raise SourceError.at(source, None, f"cannot read file: not UTF-8 text (byte {exc.start})") from None
 
 
 SYSTEM_TABLES = ("[system]", "[[skillsets]]", "[prediction]")
@@ -418,9 +319,9 @@ def load_state(path: str | Path, system: System, what_if: bool = False) -> Marki
 
 
 def parse_state(text: str, source: str, system: System, what_if: bool = False) -> Marking:
-    """A combined marking from JSON text (see :func:`skinet.system.marking_from_json`).
+    """A combined marking from JSON text (see :func:`skinet.system.model.marking_from_json`).
 
-    A marking the live system cannot be in (see :func:`skinet.system.marking_problems`)
+    A marking the live system cannot be in (see :func:`skinet.system.model.marking_problems`)
     is refused unless ``what_if``.
     """
     try:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from skinet.files import load_memory_limit, parse_size
+from skinet.system.load import load_memory_limit, parse_size
 from skinet.verify.explore import DEFAULT_MEMORY_LIMIT
 
 

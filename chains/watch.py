@@ -2,7 +2,7 @@
 
 A read-only observer (:class:`~services.dashboard.observer.Observer`) follows the
 monitor's messages through Zenoh; the view is the one ``skinet run`` draws
-(:func:`services.embedded.render`), plus the services alive, the violations
+(:func:`chains.embedded.render`), plus the services alive, the violations
 seen and the model divergences and manager restarts of the run (the monitor's list so
 far, for a watch that joins late too), and the pilot's status (SPEC §8: its goal, state, next command):
 redrawn in place on a terminal, one line per step otherwise (:class:`StepLines`), one per divergence or
@@ -28,12 +28,13 @@ from services.common.zenoh_config import (
 )
 from services.dashboard.board import Board
 from services.dashboard.observer import Observer
-from services.dashboard.app import no_monitor_message
-from services.embedded import CLEAR, Observed, divergence_line, divergence_lines, render, stop_on_signals, summary
-from services.replay import INSTANCE_PREFIX as REPLAY
+from services.dashboard.observer import no_monitor_message
+from chains.embedded import CLEAR, Observed, divergence_line, divergence_lines, render, summary
+from services.common.cli import stop_on_signals
+from chains.replay import INSTANCE_PREFIX as REPLAY
 from skinet.errors import SkinetError
 from skinet.wire.messages import PilotStatus
-from skinet_cli.goal import StatusLines, status_line
+from chains.pilot_lines import StatusLines, status_line
 
 
 def view_lines(board: Board, colour: bool = False) -> list[str]:

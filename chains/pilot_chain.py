@@ -12,8 +12,8 @@ What it gives back is measured on the robot's side of the chain, not taken from 
 pilot's word: the commands the managers handled, the transitions the bridge reported (in
 the monitor's order), the properties the monitor's own verdicts showed violated; and the
 pilot's statuses beside them (its ``commands`` and ``denied``).  The transitions also make
-a :class:`~skinet.mission.Scenario` (one step per transition), which
-:func:`skinet.mission.replay` turns into the records ``skinet demo`` prints and logs.
+a :class:`~skinet.mission.scenario.Scenario` (one step per transition), which
+:func:`skinet.mission.scenario.replay` turns into the records ``skinet demo`` prints and logs.
 """
 
 from __future__ import annotations
@@ -26,17 +26,17 @@ from dataclasses import dataclass, field
 import zenoh
 
 from services.bridge_ros2 import start_bridge
-from services.chain import ChainError, embedded_services, handled_all, run_instance, statuses_lost, wait_until
+from chains.chain import ChainError, embedded_services, handled_all, run_instance, statuses_lost, wait_until
 from services.common.goals import ask_pilot
 from services.pilot import start_pilot
 from services.pilot.act import ManagerActuator
 from services.simulator import Simulator
 from services.simulator.world import End, World
-from skinet.mission import Scenario, Step
-from skinet.pilot_run import Outcomes, PilotRun
+from skinet.mission.scenario import Scenario, Step
+from skinet.pilot.run import Outcomes, PilotRun
 from skinet.errors import SkinetError
 from skinet.ros.keys import KeyStyle
-from skinet.system import System
+from skinet.system.model import System
 from skinet.wire import keys
 from skinet.wire.codec import decode
 from skinet.wire.messages import CanonicalEvent, PilotGoalReply, PilotGoalRequest, PilotStatus, Verdicts
@@ -95,7 +95,7 @@ def run_pilot_chain(
     which it then closes itself; ``shared_predictor``: a predictor already serves ``session`` (else one is
     started: the pilot sends a command only from a step whose prediction came, so there is always one);
     ``on_status``: called with each of the pilot's statuses as it comes (on Zenoh's thread: must not block).
-    Raises :class:`~services.chain.ChainError` when the pilot refuses the mission or the chain does not
+    Raises :class:`~chains.chain.ChainError` when the pilot refuses the mission or the chain does not
     settle.
     """
     with embedded_services(session, system, not shared_predictor) as (session, monitor, services):
@@ -192,7 +192,7 @@ class _Watch:
 
     def caught_up(self, verdicts_seq: int, next_seq: Mapping[str, int]) -> bool:
         """Whether the verdicts up to ``verdicts_seq`` and every event before ``next_seq`` (skillset -> the seq
-        of its next event, as in :func:`~services.chain.handled_all`) came here: the monitor's subscription
+        of its next event, as in :func:`~chains.chain.handled_all`) came here: the monitor's subscription
         may see the last events before this one does."""
         with self._cond:
             return self._verdicts >= verdicts_seq and all(self._seqs.get(n, -1) >= q - 1 for n, q in next_seq.items())

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 from skinet.errors import SourceError
 from skinet.net.semantics import enabled, stable_successors
-from skinet.system import Marking, System, marking_from_json
+from skinet.system.model import Marking, System, marking_from_json
 
 
 @dataclass(frozen=True)
@@ -38,7 +38,7 @@ class LiveSystem:
         """Advance ``skillset`` by ``transition`` (logical name) and/or to ``observed``.
 
         ``observed`` is ``{"resources": {...}, "running": [...]}`` for that
-        skillset, as in :func:`skinet.system.marking_from_json`.
+        skillset, as in :func:`skinet.system.model.marking_from_json`.
         """
         try:
             comp = self.system.component(skillset)

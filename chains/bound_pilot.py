@@ -1,7 +1,7 @@
 """The pilot drives a bound robot after a chain run (SPEC §8, *The pilot*; §9, *Acting*; issue 26 item 5).
 
 ``skinet demo nav2`` plays its scenario through the chain, then hands a goals file to
-the pilot (:func:`drive_goals`, the ``then`` of :func:`services.chain.run_bound_chain`):
+the pilot (:func:`drive_goals`, the ``then`` of :func:`chains.chain.run_bound_chain`):
 a pilot on the chain's session, with the default actuator (the bound skills' goals and
 cancel requests on the simulated action servers), follows the monitor from where the
 run left the robot and drives the mission in drive mode, asking the monitor's strict
@@ -21,11 +21,11 @@ from dataclasses import dataclass, field
 
 import zenoh
 
-from services.chain import BoundChain, ChainError, wait_until
+from chains.chain import BoundChain, ChainError, wait_until
 from services.common.zenoh_config import undeclare
 from services.pilot import start_pilot
 from services.pilot.act import Actuator, default_actuator
-from services.pilot_chain import ask_goal
+from chains.pilot_chain import ask_goal
 from skinet.wire import keys
 from skinet.wire.codec import decode
 from skinet.wire.messages import CanonicalEvent, PilotCommand, PilotGoalReply, PilotGoalRequest, PilotStatus, Verdicts
@@ -90,7 +90,7 @@ def drive_goals(chain: BoundChain, mission: str, mission_name: str, *, duration:
                 timeout: float = 60.0, settle: float = 10.0) -> PilotEnd:
     """Drive ``mission`` (a goals file's text, named ``mission_name`` in errors) with a pilot on ``chain``.
 
-    Raises :class:`~services.chain.ChainError` when the pilot refuses the mission, does not end it
+    Raises :class:`~chains.chain.ChainError` when the pilot refuses the mission, does not end it
     within ``timeout`` seconds, or the chain does not settle within ``settle``.
     """
     session, system, robot = chain.session, chain.system, chain.robot

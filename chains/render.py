@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 
-from skinet.explain import warning_line
-from skinet.system import System, marking_to_json
+from skinet.verify.explain import warning_line
+from skinet.system.model import System, marking_to_json
 from skinet.verify.algorithm1 import Analysis, UnsafeTransition
 
 

@@ -94,7 +94,7 @@ def _published_port(text: str) -> str:
 
 
 def _endpoint(text: str) -> str:
-    from services.common.zenoh_config import ZenohSetupError, check_endpoint  # Zenoh only when it is set
+    from services.common.endpoints import ZenohSetupError, check_endpoint
 
     try:
         return check_endpoint(text, "")
@@ -145,7 +145,7 @@ VARIABLES: dict[str, Variable] = {
     "SKINET_DASHBOARD_GOAL_USER": Variable("--goal-user of the dashboard, compose.yaml: its goal box's login"),
     "SKINET_DASHBOARD_GOAL_SECRETS": Variable("--goal-secrets of the dashboard: the goal login's secrets"),
     "SKINET_TRACEBACK": Variable("skinet: print the traceback of an internal error"),
-    "SKINET_INCLUDE_ROOT": Variable("skinet.files: the folder included model files must stay in (default: the "
+    "SKINET_INCLUDE_ROOT": Variable("skinet.system.load: the folder included model files must stay in (default: the "
                                     "including model's own)", _folder),
     # compose.yaml, docker/*.sh
     "SKINET_IMAGE": Variable("compose.yaml, docker/build.sh: the image"),

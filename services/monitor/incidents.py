@@ -31,7 +31,7 @@ import zenoh
 from services.common.zenoh_config import undeclare
 from services.foxglove.bundle import BundleSink
 from skinet.errors import SkinetError
-from skinet.system import System
+from skinet.system.model import System
 from skinet.wire import keys
 from skinet.wire.convert import bundle
 from skinet.wire.codec import DecodeError, decode

@@ -3,14 +3,14 @@
 Simulated skillset managers -> ROS 2 encoding (CDR on bridge keys) -> bridge
 -> monitor -> predictor, all on one Zenoh peer session in this process.  A
 scenario is driven through the simulator and, after each step, the monitor's
-published view is read back into the same :class:`~skinet.mission.StepRecord`
+published view is read back into the same :class:`~skinet.mission.scenario.StepRecord`
 the core replay gives, so both can be printed and compared alike.
 
 A step the model does not allow (``pick.success.picked`` while pick is idle) is a
 model divergence there, as in the core replay (SPEC §7).  The simulated managers
 refuse such a step as real ones would, so the monitor sees nothing happen; the
 chain then judges the step itself on the marking the monitor published, with the
-core's :class:`~skinet.live.LiveSystem`, and records the same divergence as the
+core's :class:`~skinet.system.live.LiveSystem`, and records the same divergence as the
 core replay.  A step the model allows but the managers did not carry out is a
 divergence too (the robot and its model disagree).
 """
@@ -32,11 +32,11 @@ from services.monitor.service import MonitorView, start_monitor
 from services.predictor.service import start_predictor
 from services.simulator import Simulator
 from services.simulator.driver import StepRun
-from skinet.live import LiveSystem
-from skinet.mission import Scenario, StepRecord, flags_on
+from skinet.system.live import LiveSystem
+from skinet.mission.scenario import Scenario, StepRecord, flags_on
 from skinet.ros.binding import Binding
 from skinet.ros.keys import KeyStyle
-from skinet.system import System
+from skinet.system.model import System
 from skinet.verify.algorithm1 import UnsafeTransition
 from skinet.wire.convert import marking_of
 from skinet.wire.messages import UnsafeEntry
@@ -130,7 +130,7 @@ def run_bound_chain(
     the bridge has fed every message the robot published on a bound topic (and fetched
     the results it needed), and the monitor has applied every event.  ``then`` is called
     after the last step, before ``after``, with the running chain (a pilot drives the
-    robot from where the run left it: :mod:`services.bound_pilot`).
+    robot from where the run left it: :mod:`chains.bound_pilot`).
     """
     from services.bridge_ros2.bound_live import start_bound_bridge
     from services.simulator.bound import BoundSimulator

@@ -23,10 +23,10 @@ from dataclasses import dataclass, field
 from typing import Any, TypeVar
 
 from skinet.errors import SourceError
-from skinet.live import LiveSystem
+from skinet.system.live import LiveSystem
 from skinet.props.evaluate import holds
-from skinet.system import System
-from skinet.tomltext import check_keys, check_tables, locate, parse_toml
+from skinet.system.model import System
+from skinet.files.toml import check_keys, check_tables, locate, parse_toml
 from skinet.verify.algorithm1 import Analysis, UnsafeTransition, analyse
 from skinet.verify.predict import forecast
 

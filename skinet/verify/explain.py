@@ -17,7 +17,7 @@ from collections.abc import Collection, Mapping, Sequence
 from skinet.lang.expr import And, Const, Expr, Implies, Not, Or, atoms
 from skinet.net.build import idle_place, resource_place, running_place
 from skinet.props.formula import PlaceAtom, Property
-from skinet.system import System, is_running, resource_state
+from skinet.system.model import System, is_running, resource_state
 
 MAX_CLAUSES = 256
 Literal_ = tuple[PlaceAtom, bool]

@@ -34,8 +34,8 @@ from typing import Literal
 
 from skinet.errors import SourceError
 from skinet.lang.model import Skill
-from skinet.system import System
-from skinet.tomltext import check_keys, check_tables, locate, parse_toml
+from skinet.system.model import System
+from skinet.files.toml import check_keys, check_tables, locate, parse_toml
 
 HEAD_KEYS = ("name", "system", "goals", "mode", "seed", "failure_rate")
 FAILURE_KEYS = ("skill", "run", "mode")

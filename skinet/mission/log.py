@@ -1,7 +1,7 @@
 """A replayed mission as the monitor log it would have produced (MISSION.md, SPEC §1).
 
-:func:`records_to_log` turns the :class:`~skinet.mission.StepRecord` list of
-:func:`~skinet.mission.replay` into the messages seen on ``skinet/<system>/**``
+:func:`records_to_log` turns the :class:`~skinet.mission.scenario.StepRecord` list of
+:func:`~skinet.mission.scenario.replay` into the messages seen on ``skinet/<system>/**``
 during the run: the model bundle, then per step the bridge's
 :class:`CanonicalEvent` and the monitor's :class:`LiveState`,
 :class:`Verdicts`, :class:`UnsafeReport` (and :class:`StateSpaceReport` when
@@ -14,9 +14,9 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from skinet.live import LiveSystem
-from skinet.mission import Scenario, StepRecord
-from skinet.system import Marking, System
+from skinet.system.live import LiveSystem
+from skinet.mission.scenario import Scenario, StepRecord
+from skinet.system.model import Marking, System
 from skinet.verify.algorithm1 import analyse
 from skinet.verify.predict import forecast
 from skinet.wire import keys

@@ -1,0 +1,1 @@
+"""The supervised system: its model, loading it from disk, its prediction options, following it live."""
