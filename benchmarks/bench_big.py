@@ -11,7 +11,7 @@
     initial marking with the default 1 s budget, fresh process: every
     successor decided or honestly unknown; wall seconds and peak resident
     size (target 1.2 GiB).  Baseline: the same without the compositional
-    verdicts (SPEC §6.4), i.e. the truncated exploration alone.
+    verdicts (docs/semantics.md §6.4), i.e. the truncated exploration alone.
 (c) Stable markings per second on 2 + 2 without seeds (246 016 markings):
     ``explore()`` against Spin's ``pan`` (exhaustive, compiled -O2 outside
     the timing; compile time shown).

@@ -1,5 +1,5 @@
-"""The bridge under two managers publishing in turn at full speed (SPEC §1, §7), and on action
-statuses of a bound skillset beside manager statuses (SPEC §9).
+"""The bridge under two managers publishing in turn at full speed (docs/semantics.md §1, §7), and on action
+statuses of a bound skillset beside manager statuses (docs/semantics.md §9).
 
 Spot and arm managers of ``skillsets/spot_arm.toml`` (the simulator's
 :class:`~services.simulator.manager.Manager`) each play ``--cycles`` skill

@@ -1,4 +1,4 @@
-"""Command check latency: ``skinet/<system>/check`` request -> reply (SPEC §7).
+"""Command check latency: ``skinet/<system>/check`` request -> reply (docs/semantics.md §7).
 
 The monitor sits at the paper's warning marking (arm at RD, a fresh prediction
 from an in-process predictor), so every answer carries a reason.  Rows:

@@ -1,4 +1,4 @@
-"""Hostile command checks against the monitor's event path (issue 25 item 6; SPEC §7).
+"""Hostile command checks against the monitor's event path (issue 25 item 6; docs/semantics.md §7).
 
 One peer session holds the monitor and a bridge stand-in (``tests/bridge_side.py``);
 events of the paper's mission go to the monitor one at a time, every 5 ms, and the

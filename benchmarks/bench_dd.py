@@ -13,12 +13,12 @@ frame conditions are never built.  On top of that, with ``dd.autoref`` (pure
 Python), ``dd.cudd`` (CUDD, from the PyPI wheel) and ``oxidd`` (its BDD
 manager):
 
-(1) the reachable set from the sources SPEC §6 names (the live marking, and
+(1) the reachable set from the sources docs/semantics.md §6 names (the live marking, and
     with event seeds the markings one event leads to), by chained
     partitioned images, and its number of markings;
 (2) mu1 per property: literal ``AF not phi = reach and not EG phi``, ``EG phi``
     the greatest fixpoint of ``phi and reach and EX Z`` (a global deadlock
-    loops on itself, SPEC §6.2); fair AF with fair-EG by Emerson-Lei, one
+    loops on itself, docs/semantics.md §6.2); fair AF with fair-EG by Emerson-Lei, one
     fairness constraint per skill (its idle place), counted;
 (3) 4 + 4 with seeds: the verdict of ``AF not phi`` at every one-step
     successor (steps of the full nets, as Algorithm 1 asks) of the initial
@@ -30,7 +30,7 @@ manager):
 
 Ours, in the same run, with the same AF: ``forecast`` (complete exploration +
 mu1, 1 GiB memory limit) for (1)-(2); ``forecast(budget=1.0)`` (truncated
-exploration plus the compositional verdicts, SPEC §6.4) and Algorithm 1 per
+exploration plus the compositional verdicts, docs/semantics.md §6.4) and Algorithm 1 per
 live marking for (3).  Each case runs
 in a fresh process with a deadline (``--deadline``, default 120 s); one that
 does not finish prints "no (deadline)".  Times are wall seconds inside the
@@ -244,7 +244,7 @@ class Encoding:
         return f
 
     def sources(self) -> Any:
-        """SPEC §6's sources: every combination of roots, plus one component moved to a seed."""
+        """docs/semantics.md §6's sources: every combination of roots, plus one component moved to a seed."""
         roots = [self.states(i, g.roots) for i, g in enumerate(self.graphs)]
         f = self.bdd.true()
         for r in roots:
@@ -308,7 +308,7 @@ class Encoding:
             y = ny
 
     def fair_eg(self, f: Any, fairness: Sequence[Any]) -> tuple[Any, int]:
-        """Emerson-Lei: greatest fixpoint of ``f and AND_k EX E[f U (Z and F_k)]`` (SPEC §6.2)."""
+        """Emerson-Lei: greatest fixpoint of ``f and AND_k EX E[f U (Z and F_k)]`` (docs/semantics.md §6.2)."""
         z = f
         rounds = 0
         while True:
@@ -321,13 +321,13 @@ class Encoding:
             z = nz
 
     def idle(self, system: Any) -> list[Any]:
-        """One fairness constraint per skill: its idle place is marked (SPEC §6.2)."""
+        """One fairness constraint per skill: its idle place is marked (docs/semantics.md §6.2)."""
         from skinet.verify.fair import idle_atoms
 
         return [self.formula(a) for a in idle_atoms(self.graphs, system)]
 
     def formula(self, expr: Any) -> Any:
-        """A state formula (SPEC §4) as a BDD over the local state codes."""
+        """A state formula (docs/semantics.md §4) as a BDD over the local state codes."""
         from skinet.props.evaluate import evaluate
 
         by_name = {g.name: i for i, g in enumerate(self.graphs)}

@@ -1,4 +1,4 @@
-"""Prediction requests flooding a predictor: fresh predictions before and during (issue 14; SPEC §7).
+"""Prediction requests flooding a predictor: fresh predictions before and during (issue 14; docs/semantics.md §7).
 
 A router with the shipped access control (``docker/zenoh/router.json5``), a
 monitor and a predictor logged in as their users, and the paper's mission sent as

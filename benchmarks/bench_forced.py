@@ -11,7 +11,7 @@ Times are CPU time of the measuring thread (medians), so that other work on
 the machine does not inflate them.
 
 (2) The paper's system: complete exploration + mu1 with fair AF beside literal
-AF, measured in the same run.  Target: <= 2 ms (SPEC §6.2 keeps (a) of
+AF, measured in the same run.  Target: <= 2 ms (docs/semantics.md §6.2 keeps (a) of
 bench_paper.py).
 
     python benchmarks/bench_forced.py [--markings N] [--repeats N]

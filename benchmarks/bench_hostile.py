@@ -1,4 +1,4 @@
-"""Hostile requests against an embedded ``skinet run`` (issues 14 and 25; SPEC §6, §7).
+"""Hostile requests against an embedded ``skinet run`` (issues 14 and 25; docs/semantics.md §6, §7).
 
 Monitor and predictor share one peer session, as in ``skinet run``.  An attacker on
 the same session serves the consistent 1.9 KB bundle of

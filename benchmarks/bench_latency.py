@@ -1,4 +1,4 @@
-"""(d) Monitor latency and throughput: event -> published UnsafeReport (SPEC §1 fast path).
+"""(d) Monitor latency and throughput: event -> published UnsafeReport (docs/semantics.md §1 fast path).
 
 In-process: one peer session carries the events, the monitor and the
 measuring subscriber.  Across processes: this process publishes events to a

@@ -1,4 +1,4 @@
-"""Pilot latency: from a marking change (a LiveState arriving) to the command sent (SPEC §8, issue 24).
+"""Pilot latency: from a marking change (a LiveState arriving) to the command sent (docs/semantics.md §8, issue 24).
 
 The pilot drives the paper's mission (``skillsets/goals/paper_mission.toml``) lap after lap
 on the paper's system.  A stand-in robot (the pilot's actuator here) answers each command at

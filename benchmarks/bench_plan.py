@@ -21,7 +21,7 @@ classical by letting the planner choose every outcome (all-outcomes
 determinization): one action per (component, local state, move, result), each
 with the component's local state as precondition and, as a further
 precondition, that its result is not forced for any property (forced markings
-excluded, SPEC §6.3; "the result is safe" is written as "each other component
+excluded, docs/semantics.md §6.3; "the result is safe" is written as "each other component
 in a state compatible with it", a positive disjunction: negative literals over
 a one-hot group make Fast Downward's translator enumerate every combination of
 the other values, and it did not finish 1 + 1 in 300 s).  Time:

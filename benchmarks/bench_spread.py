@@ -1,4 +1,4 @@
-"""(e) Predictor load spreading: share of the queries per instance and latency (SPEC §7).
+"""(e) Predictor load spreading: share of the queries per instance and latency (docs/semantics.md §7).
 
 A loopback router, N ``python -m services.predictor`` processes (default options:
 2 worker threads, 8 pending) and, in this process, ``--clients`` monitors' prediction

@@ -1,6 +1,6 @@
 """Shared helpers of the benchmarks: systems, the pure-Python baseline, tables.
 
-The baseline is the straightforward search SPEC §6 compares against: a
+The baseline is the straightforward search docs/semantics.md §6 compares against: a
 breadth-first search over combined markings (tuples of per-skillset bit
 masks), firing each component's eventless net with
 :func:`skinet.net.semantics.steps` at every marking; no numpy, no product

@@ -1,4 +1,4 @@
-"""The pilot drives a bound robot after a chain run (SPEC §8, *The pilot*; §9, *Acting*; issue 26 item 5).
+"""The pilot drives a bound robot after a chain run (docs/semantics.md §8, *The pilot*; §9, *Acting*; issue 26 item 5).
 
 ``skinet demo nav2`` plays its scenario through the chain, then hands a goals file to
 the pilot (:func:`drive_goals`, the ``then`` of :func:`chains.chain.run_bound_chain`):

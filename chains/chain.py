@@ -1,4 +1,4 @@
-"""The whole chain on the embedded default (MISSION.md acceptance, issue 5).
+"""The whole chain on the embedded default (docs/mission.md acceptance, issue 5).
 
 Simulated skillset managers -> ROS 2 encoding (CDR on bridge keys) -> bridge
 -> monitor -> predictor, all on one Zenoh peer session in this process.  A
@@ -7,7 +7,7 @@ published view is read back into the same :class:`~skinet.mission.scenario.StepR
 the core replay gives, so both can be printed and compared alike.
 
 A step the model does not allow (``pick.success.picked`` while pick is idle) is a
-model divergence there, as in the core replay (SPEC §7).  The simulated managers
+model divergence there, as in the core replay (docs/semantics.md §7).  The simulated managers
 refuse such a step as real ones would, so the monitor sees nothing happen; the
 chain then judges the step itself on the marking the monitor published, with the
 core's :class:`~skinet.system.live.LiveSystem`, and records the same divergence as the
@@ -91,7 +91,7 @@ def run_chain(
             services.append(simulator)
         bridge = start_bridge(session, system, typemap, style=style, instance_id=run_instance())
         services.append(bridge)
-        wait_until(monitor.synced, settle, "initial statuses")  # SPEC §7: every skillset live
+        wait_until(monitor.synced, settle, "initial statuses")  # docs/semantics.md §7: every skillset live
         lost = statuses_lost(simulator, bridge) if external else {name: 0 for name in simulator.nodes}
 
         def caught_up(run: StepRun) -> None:
@@ -123,7 +123,7 @@ def run_bound_chain(
     then: Callable[[BoundChain], None] | None = None,
     shared_predictor: bool = False,
 ) -> list[StepRecord]:
-    """:func:`run_chain` for a system whose skillsets are all bound to plain ROS 2 interfaces (SPEC §9).
+    """:func:`run_chain` for a system whose skillsets are all bound to plain ROS 2 interfaces (docs/semantics.md §9).
 
     The simulated robot's action servers, lifecycle nodes and topics (CDR on Zenoh keys)
     -> the bound bridge -> monitor -> predictor.  After each step the chain waits until
@@ -142,7 +142,7 @@ def run_bound_chain(
                                     instance_id=run_instance())
         services.append(bridge)
         robot.publish_topics(scenario.topics)
-        wait_until(monitor.synced, settle, "initial statuses")  # SPEC §7: every skillset live
+        wait_until(monitor.synced, settle, "initial statuses")  # docs/semantics.md §7: every skillset live
         watched = set(bridge.feed.routes)
 
         def caught_up() -> bool:

@@ -1,8 +1,8 @@
-"""Embedded default (SPEC §7): monitor and predictor on one peer session, with a live view.
+"""Embedded default (docs/semantics.md §7): monitor and predictor on one peer session, with a live view.
 
 ``skinet run SYSTEM.toml`` opens one Zenoh ``peer`` session (no router; ZENOH.md:
 share one session in a process; loopback only and no multicast scouting unless
-asked), starts the monitor, a predictor and the pilot (SPEC §8; ``--no-pilot``) on it, prints the endpoint it
+asked), starts the monitor, a predictor and the pilot (docs/semantics.md §8; ``--no-pilot``) on it, prints the endpoint it
 listens on (a free port is chosen before opening, so that it can be printed)
 with the exact commands that reach it, and shows the operator view: redrawn in
 place on a terminal, one line per change otherwise.  ``--listen`` lets a bridge
@@ -58,7 +58,7 @@ RED, YELLOW, PLAIN = "\x1b[1;37;41m", "\x1b[1;30;43m", "\x1b[0m"  # ANSI: white 
 
 
 def stale_lines(state: LiveState, colour: bool = False) -> list[str]:
-    """The banner of a state the monitor cannot vouch for (SPEC §7): one line per skillset that is not
+    """The banner of a state the monitor cannot vouch for (docs/semantics.md §7): one line per skillset that is not
     live, with since when and why; none when every skillset is live.  ``colour``: ANSI red for lost,
     yellow for syncing (terminals)."""
     if not state.sync:

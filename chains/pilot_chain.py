@@ -1,4 +1,4 @@
-"""A pilot run through the whole chain (issue 24, the demo's third run; SPEC §8, *The pilot*).
+"""A pilot run through the whole chain (issue 24, the demo's third run; docs/semantics.md §8, *The pilot*).
 
 Simulated skillset managers whose skills end by themselves (:mod:`services.simulator.world`,
 with the failures a pilot run declares) -> ROS 2 encoding (CDR) -> bridge -> monitor ->
@@ -113,7 +113,7 @@ def run_pilot_chain(
         actuator = ManagerActuator(session, system, typemap, style=style, instance=f"pilot-{instance}")
         pilot = start_pilot(session, system, instance=instance, actuator=actuator, typemap=typemap)
         services.append(pilot)
-        wait_until(monitor.synced, settle, "initial statuses")  # SPEC §7: every skillset live
+        wait_until(monitor.synced, settle, "initial statuses")  # docs/semantics.md §7: every skillset live
         lost = statuses_lost(simulator, bridge) if external else {name: 0 for name in simulator.nodes}
         wait_until(lambda: pilot.status.state == "idle", settle, "the pilot to follow the monitor")
         request = PilotGoalRequest(system=system.name, mission=mission, mission_name=mission_name, mode=run.mode)

@@ -1,4 +1,4 @@
-"""``skinet replay LOG``: a recorded run published again as its monitor published it (SPEC §7).
+"""``skinet replay LOG``: a recorded run published again as its monitor published it (docs/semantics.md §7).
 
 A monitor log (``skinet record``, ``skinet demo --log``: :mod:`skinet.wire.log`,
 :mod:`skinet.wire.mcap_log`) holds what the monitor published on

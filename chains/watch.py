@@ -1,13 +1,13 @@
-"""``skinet watch SYSTEM_NAME``: the terminal operator view of any running deployment (SPEC §7).
+"""``skinet watch SYSTEM_NAME``: the terminal operator view of any running deployment (docs/semantics.md §7).
 
 A read-only observer (:class:`~services.dashboard.observer.Observer`) follows the
 monitor's messages through Zenoh; the view is the one ``skinet run`` draws
 (:func:`chains.embedded.render`), plus the services alive, the violations
 seen and the model divergences and manager restarts of the run (the monitor's list so
-far, for a watch that joins late too), and the pilot's status (SPEC §8: its goal, state, next command):
+far, for a watch that joins late too), and the pilot's status (docs/semantics.md §8: its goal, state, next command):
 redrawn in place on a terminal, one line per step otherwise (:class:`StepLines`), one per divergence or
 restart and one per change of the pilot's status (as ``skinet goal`` prints them); a
-state the monitor cannot vouch for (a skillset syncing or lost, SPEC §7) is a banner on top,
+state the monitor cannot vouch for (a skillset syncing or lost, docs/semantics.md §7) is a banner on top,
 red or yellow on a terminal, and ``STATE STALE`` in a pipe's line (a skillset lost is a line at
 once, one still syncing after a second too).  With no
 monitor of the system alive within ``--wait`` seconds it says so, naming the
@@ -91,7 +91,7 @@ class StepLines:
     """One line per monitor step for a pipe: a step's line is written once, when its prediction is
     fresh and every skillset live (or no predictor is alive to make it so), when the next step
     comes, or at the end; the monitor publishes a step several times (its prediction pending, then
-    fresh; its sync states changed).  A step whose skillsets are not all live (SPEC §7) is a line of
+    fresh; its sync states changed).  A step whose skillsets are not all live (docs/semantics.md §7) is a line of
     its own per set of sync states: at once when one is lost, after ``settle`` seconds otherwise
     (the seconds' syncing at start is no line), and the step's line is due again once they are
     all live.  A step here is (epoch, seq, the skillsets not live with their states)."""

@@ -1,4 +1,4 @@
-"""Ask SkiNet Live before every skill start: a guarded skill-manager client (SPEC §7).
+"""Ask SkiNet Live before every skill start: a guarded skill-manager client (docs/semantics.md §7).
 
 A skill-manager client (what an operator GUI does) starts a skill by publishing
 a ``Skill<K>Request`` on the manager's ``skill/<k>/request`` topic; over Zenoh
@@ -13,7 +13,7 @@ such a client: before each start it asks the monitor's command check
 
 It asks the monitor to wait up to ``--wait`` seconds (default 2) for a synced state
 and a fresh prediction: without them the answer is at least ``warn``
-(``state_unknown``, ``prediction_pending``; SPEC §7).
+(``state_unknown``, ``prediction_pending``; docs/semantics.md §7).
 
     python examples/check_client.py skillsets/spot_arm.toml spot:init_power.start spot:teleop.start \\
         --connect tcp/127.0.0.1:7447 --user observer --password observer-demo-password

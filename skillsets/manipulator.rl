@@ -1,5 +1,5 @@
 // Kinova Jaco arm mounted on Spot, as in the seed paper's mission
-// (design/MISSION.md).  mutex is Busy while a movement skill runs;
+// (docs/mission.md).  mutex is Busy while a movement skill runs;
 // arm_status is HP (home position), RD (ready position), Moving, or Away
 // (somewhere else after a joystick session or an interrupted movement).
 // An emergency stop leaves the arm Away; the in_motion invariant then stops

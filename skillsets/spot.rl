@@ -1,4 +1,4 @@
-// Spot quadruped as driven in the seed paper's mission (design/MISSION.md).
+// Spot quadruped as driven in the seed paper's mission (docs/mission.md).
 // control_mode is Busy while a movement skill runs; power_switchoff models a
 // depleted battery or an emergency stop.
 

@@ -1,4 +1,4 @@
-"""``skinet conform SYSTEM BAG...``: replay recorded bags against the model, offline (SPEC §9 *Conformance*).
+"""``skinet conform SYSTEM BAG...``: replay recorded bags against the model, offline (docs/semantics.md §9 *Conformance*).
 
 Each bag (rosbag2, sqlite3 or mcap) is replayed from the model's initial marking
 through the bridge's own derivation (managers' statuses, and the bindings of bound

@@ -1,4 +1,4 @@
-"""``skinet goal``: give a running pilot a goal and follow it to its end (SPEC §8, issue 24 item 4).
+"""``skinet goal``: give a running pilot a goal and follow it to its end (docs/semantics.md §8, issue 24 item 4).
 
 Sends a :class:`~skinet.wire.messages.PilotGoalRequest` on
 ``skinet/<system>/pilot/goal/<login>``, prints the reply (the plan's answer and
@@ -28,7 +28,7 @@ from skinet_cli.plan import add_goal_args
 if TYPE_CHECKING:
     from skinet.wire.messages import PilotGoalReply, PilotStatus
 
-HELP = "give a running pilot a goal (guide or drive) and follow it until it ends (SPEC §8)"
+HELP = "give a running pilot a goal (guide or drive) and follow it until it ends (docs/semantics.md §8)"
 DESCRIPTION = """\
 Send goals to the pilot of a running system (skinet run, or the pilot service)
 and follow them. The pilot plans from the live marking as skinet plan does and

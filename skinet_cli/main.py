@@ -94,14 +94,14 @@ LAZY_COMMANDS: tuple[tuple[str, str, dict[str, str]], ...] = (
     ("skinet_cli.conform", "add_parser",
      {"conform": "replay rosbag2 files against the model and report every divergence"}),
     ("skinet_cli.run", "add_commands", {
-        "run": "monitor, predictor and pilot in one process with a live operator view (SPEC §7, §8)",
+        "run": "monitor, predictor and pilot in one process with a live operator view (docs/semantics.md §7, §8)",
         "router": "run a Zenoh router (the Python wheel in router mode) until interrupted",
         "fleet": "link robots' routers to a hub over mutual TLS: exchange the trust files",
     }),
     ("skinet_cli.plan", "add_parser",
-     {"plan": "plan the commands that reach a goal without violating any property (SPEC §8)"}),
+     {"plan": "plan the commands that reach a goal without violating any property (docs/semantics.md §8)"}),
     ("skinet_cli.goal", "add_parser",
-     {"goal": "give a running pilot a goal (guide or drive) and follow it until it ends (SPEC §8)"}),
+     {"goal": "give a running pilot a goal (guide or drive) and follow it until it ends (docs/semantics.md §8)"}),
     ("skinet_cli.operator", "add_parsers", {
         "dashboard": "live web dashboard of a running system (served on 127.0.0.1:8080)",
         "watch": "terminal live view of a running system (any deployment)",
@@ -165,21 +165,21 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     c.add_argument("--json", action="store_true", help="machine-readable summary")
     c.set_defaults(func=cmd_parse)
 
-    c = sub.add_parser("net", help="print the Petri net of a skillset or of a system's union (SPEC §3)")
+    c = sub.add_parser("net", help="print the Petri net of a skillset or of a system's union (docs/semantics.md §3)")
     c.add_argument("file", help="skillset model (.rl), or system file (.toml) for the union of its skillsets")
     c.add_argument("--eventless", action="store_true", help="the eventless net SkN^e (no event transitions)")
     c.add_argument("--format", choices=sorted(FORMATS), default="json", help="output format (default: json)")
     c.add_argument("-o", "--output", help="write to this file instead of standard output")
     c.set_defaults(func=cmd_net)
 
-    c = sub.add_parser("unsafe", help="Algorithm 1: unsafe transitions at a marking (SPEC §5)")
+    c = sub.add_parser("unsafe", help="Algorithm 1: unsafe transitions at a marking (docs/semantics.md §5)")
     _system_args(c)
     c.add_argument("--no-predict", action="store_true", help="explicit constraints only (mu1 empty)")
     c.add_argument("--literal", action="store_true",
                    help="also print the literal algorithm's list (it flags transitions for properties already violated)")
     c.set_defaults(func=cmd_unsafe)
 
-    c = sub.add_parser("explore", help="explore the eventless state space and compute mu1 (SPEC §6)")
+    c = sub.add_parser("explore", help="explore the eventless state space and compute mu1 (docs/semantics.md §6)")
     _system_args(c)
     c.add_argument("--progress", action="store_true",
                    help=f"print the layer and markings so far on standard error every {PROGRESS_EVERY:g} s (on a "

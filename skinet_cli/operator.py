@@ -1,5 +1,5 @@
 """``skinet dashboard``, ``skinet watch`` and ``skinet check``: operator views of any running
-deployment, as read-only Zenoh observers (SPEC §7).  Arguments only; Zenoh and the web
+deployment, as read-only Zenoh observers (docs/semantics.md §7).  Arguments only; Zenoh and the web
 server are imported when a command runs."""
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                        description="Serve a live web page of a running system: skillsets, properties, unsafe "
                                    "commands with kind, steps and witness, predictions, state space, violations "
                                    "and a timeline, observed on Zenoh; and a goal box that gives goals to the "
-                                   "system's pilot (guide or drive, pause, resume, cancel; SPEC §8) under this "
+                                   "system's pilot (guide or drive, pause, resume, cancel; docs/semantics.md §8) under this "
                                    "process's login (--user: only operator-role users may send goals).")
     add_dashboard_args(c)
     c.set_defaults(func=cmd_dashboard)

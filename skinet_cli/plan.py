@@ -1,4 +1,4 @@
-"""``skinet plan``: commands that reach a goal and never violate a property (SPEC §8)."""
+"""``skinet plan``: commands that reach a goal and never violate a property (docs/semantics.md §8)."""
 
 from __future__ import annotations
 
@@ -24,7 +24,7 @@ from services.common.options import load_live_system, print_warnings, state_mark
 from services.common.options import seconds as duration, time_budget
 from chains.render import seconds
 
-HELP = "plan the commands that reach a goal without violating any property (SPEC §8)"
+HELP = "plan the commands that reach a goal without violating any property (docs/semantics.md §8)"
 DESCRIPTION = """\
 Plans the commands that reach each goal from the start marking while no
 property can be violated, whatever the skills' outcomes: only commands after

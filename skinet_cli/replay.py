@@ -1,4 +1,4 @@
-"""``skinet replay LOG``: publish a recorded run again, for the operator views (SPEC §7).
+"""``skinet replay LOG``: publish a recorded run again, for the operator views (docs/semantics.md §7).
 
 Arguments and the command's output; the publishing is :mod:`chains.replay`.
 Zenoh and the web server are imported when the command runs.

@@ -1,4 +1,4 @@
-"""``skinet run`` and ``skinet router``: arguments only; Zenoh is imported when they run (SPEC §7)."""
+"""``skinet run`` and ``skinet router``: arguments only; Zenoh is imported when they run (docs/semantics.md §7)."""
 
 from __future__ import annotations
 
@@ -25,7 +25,7 @@ def _zenoh_args(c: argparse.ArgumentParser, listen_help: str) -> None:
 
 
 def add_commands(sub: argparse._SubParsersAction) -> None:
-    c = sub.add_parser("run", help="monitor, predictor and pilot in one process with a live operator view (SPEC §7, §8)")
+    c = sub.add_parser("run", help="monitor, predictor and pilot in one process with a live operator view (docs/semantics.md §7, §8)")
     c.add_argument("system", help="system file (.toml), e.g. skillsets/spot_arm.toml")
     c.add_argument("--once", action="store_true", help="print one view (after the first prediction) and exit")
     c.add_argument("--duration", type=seconds(), help="stop after this many seconds")
@@ -42,7 +42,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
 
     add_incidents_args(c)
     c.add_argument("--no-pilot", action="store_true",
-                   help="do not start the pilot (SPEC §8: goals on skinet/<system>/pilot/goal/<client>, guided or "
+                   help="do not start the pilot (docs/semantics.md §8: goals on skinet/<system>/pilot/goal/<client>, guided or "
                         "driven with the strict check; see docs/pilot.md)")
     add_outcome_timeout_arg(c)
     add_no_properties_arg(c)

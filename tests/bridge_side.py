@@ -3,7 +3,7 @@ their own (schemas/README.md): canonical events, the liveliness token, heartbeat
 
 The real bridge derives events from manager messages (``services/bridge_ros2``); this stand-in
 publishes the events a test names and follows them on the model to answer resyncs, so that a
-monitor syncs from it as from the bridge (SPEC §7).
+monitor syncs from it as from the bridge (docs/semantics.md §7).
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ class BridgeSide:
     0.5 s (:class:`HeartbeatPublisher`) and resync answers, the status after the last event sent
     (followed on the model; before any event, the initial status, numbered 0: the first event sent
     is #1).  When a monitor of the system is alive, it returns once that monitor is synced, so that
-    the first events are live, not history (SPEC §7)."""
+    the first events are live, not history (docs/semantics.md §7)."""
 
     def __init__(self, session: zenoh.Session, system: str = "spot_arm", source: str = "test", *,
                  model: System | None = None, epoch: int = 0, advanced: bool = False, cache: int = 4096,

@@ -1,5 +1,5 @@
 """Loading system, model and state files: bad files give one clear error, and
-states the robot cannot be in are refused unless asked for (SPEC §3)."""
+states the robot cannot be in are refused unless asked for (docs/semantics.md §3)."""
 
 from __future__ import annotations
 
@@ -67,12 +67,12 @@ def test_one_model_file_with_two_skillsets_errors(tmp_path: Path) -> None:
 
 
 def test_a_skillset_bound_to_plain_ros2_names_its_binding_file(tmp_path: Path) -> None:
-    """``binding`` (SPEC §9) is a path relative to the system file, instead of ``manager``."""
+    """``binding`` (docs/semantics.md §9) is a path relative to the system file, instead of ``manager``."""
     write(tmp_path, "two.rl", TWO)
     path = write(tmp_path, "b.toml", '[system]\nname = "b"\n[[skillsets]]\nmodel = "two.rl"\nname = "alpha"\n'
                  'binding = "alpha.binding.toml"\n[[skillsets]]\nmodel = "two.rl"\nname = "beta"\nmanager = "/m"\n')
     assert error(load_system, path) == f"{tmp_path / 'alpha.binding.toml'}: error: cannot read file: No such file or " \
-                                       "directory"  # it says which events are commanded (SPEC §9)
+                                       "directory"  # it says which events are commanded (docs/semantics.md §9)
     write(tmp_path, "alpha.binding.toml", "")
     system, _ = load_system(path)
     assert [(c.name, c.manager, c.binding) for c in system.components] == [
@@ -110,7 +110,7 @@ def test_two_skillset_file_travels_to_the_predictor(tmp_path: Path) -> None:
 
 
 def test_commanded_events_travel_to_the_predictor() -> None:
-    """A binding's commanded events (SPEC §9) are in the model bundle, so the predictor's rebuilt system has the
+    """A binding's commanded events (docs/semantics.md §9) are in the model bundle, so the predictor's rebuilt system has the
     same controllable transitions; a system without any keeps its digest's form (no field, nothing hashed)."""
     from skinet.wire.codec import decode, encode
     from skinet.wire.convert import bundle, system_from_bundle

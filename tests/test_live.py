@@ -1,4 +1,4 @@
-"""Following the live marking, and model divergence (SPEC §7)."""
+"""Following the live marking, and model divergence (docs/semantics.md §7)."""
 
 from __future__ import annotations
 

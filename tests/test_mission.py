@@ -1,4 +1,4 @@
-"""The paper's two runs replayed on the core (MISSION.md acceptance, core part)."""
+"""The paper's two runs replayed on the core (docs/mission.md acceptance, core part)."""
 
 from __future__ import annotations
 

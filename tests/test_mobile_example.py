@@ -2,7 +2,7 @@
 
 ``skillsets/mobile_manip.toml`` is a wheeled base carrying an arm whose skills
 change the arm's pose only when they end.  Driving off while ``unfold`` runs
-violates nothing yet, but unfold's outcome alone will (SPEC §6.3): SkiNet flags
+violates nothing yet, but unfold's outcome alone will (docs/semantics.md §6.3): SkiNet flags
 it *forced*, one command before any explicit constraint appears.  Every step of
 both runs is checked: the operator view's unsafe transitions with their kinds,
 steps and witnesses.

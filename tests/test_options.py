@@ -1,4 +1,4 @@
-"""The ``[prediction]`` table of a system file (SPEC §5, §6.2, §6.3): options and their errors."""
+"""The ``[prediction]`` table of a system file (docs/semantics.md §5, §6.2, §6.3): options and their errors."""
 
 from __future__ import annotations
 

@@ -218,7 +218,7 @@ def test_records_to_log_lists_the_divergences_as_the_monitor_does() -> None:
 
 
 def test_assisted_run_shows_the_paper_warnings() -> None:
-    """MISSION.md: go_to_waypoint.start flagged before trap 2's transfer, arm_ready.start at trap 3."""
+    """docs/mission.md: go_to_waypoint.start flagged before trap 2's transfer, arm_ready.start at trap 3."""
     spans = flagged(_run("assisted")[1], 200.0)
 
     def during(lane: str, t: float) -> bool:

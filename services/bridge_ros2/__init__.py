@@ -1,9 +1,9 @@
-"""bridge_ros2: skillset manager topics (CDR on Zenoh, or a rosbag2 file) to canonical events (SPEC §1).
+"""bridge_ros2: skillset manager topics (CDR on Zenoh, or a rosbag2 file) to canonical events (docs/semantics.md §1).
 
 ``start_bridge(session, system, typemap)`` runs it live; ``replay_bag(path, system,
 typemap, emit)`` replays a recording; the derivation itself is
 :mod:`skinet.ros.derive`.  Skillsets bound to plain ROS 2 action servers, lifecycle
-nodes and topics (SPEC §9) have their own live bridge
+nodes and topics (docs/semantics.md §9) have their own live bridge
 (:func:`services.bridge_ros2.bound_live.start_bound_bridge`) and replay
 (:func:`services.bridge_ros2.bound.replay_bags`); their derivation is
 :mod:`skinet.ros.bound`.

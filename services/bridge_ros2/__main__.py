@@ -1,5 +1,5 @@
-"""``python -m services.bridge_ros2 SYSTEM.toml``: canonical events from skillset managers (SPEC §1, §7)
-and from skillsets bound to plain ROS 2 action servers, lifecycle nodes and topics (SPEC §9).
+"""``python -m services.bridge_ros2 SYSTEM.toml``: canonical events from skillset managers (docs/semantics.md §1, §7)
+and from skillsets bound to plain ROS 2 action servers, lifecycle nodes and topics (docs/semantics.md §9).
 
 Live (default): subscribes to the managers' topics and the bound interfaces on Zenoh.  ``--replay BAG``:
 reads a rosbag2 file (sqlite3 or mcap) instead, as fast as possible or with

@@ -1,4 +1,4 @@
-"""From plain ROS 2 interfaces (CDR) to canonical events through bindings, shared by live and replay (SPEC §9).
+"""From plain ROS 2 interfaces (CDR) to canonical events through bindings, shared by live and replay (docs/semantics.md §9).
 
 :class:`BoundFeed` decodes each message of a bound topic with the binding's type
 store, hands it to the skillset's :class:`~skinet.ros.bound.BoundDeriver` and numbers
@@ -12,7 +12,7 @@ messages came (:class:`~services.bridge_ros2.order.Order`, shared with the manag
 feed of the same bridge): while a skillset waits for a goal's result, the events of
 every other skillset that come later wait behind it (at most the result's timeout).
 
-What the bridge can vouch for (SPEC §7, §9): until every bound interface of a
+What the bridge can vouch for (docs/semantics.md §7, §9): until every bound interface of a
 skillset has been read once, and again after the link to the robot was cut or an
 action server or lifecycle node left (:meth:`BoundFeed.unread`: the robot's topics
 are volatile, what happened meanwhile is lost), the skillset's status is *pending*
@@ -64,7 +64,7 @@ class BoundCounters:
     messages: int = 0  # bound topic messages fed
     malformed: int = 0  # payloads that did not decode
     events: int = 0  # canonical events produced
-    drifts: int = 0  # model divergences found (SPEC §9)
+    drifts: int = 0  # model divergences found (docs/semantics.md §9)
     resyncs: int = 0  # gaps after which every interface of a skillset was read again (link cut, server gone)
     bad: Counter[str] = field(default_factory=Counter)  # other bad input, per kind
 
@@ -223,7 +223,7 @@ class BoundFeed:
 
     def pending(self, skillset: str) -> str:
         """Why ``skillset``'s status is not current ('' when it is): start-up readings still missing, or
-        interfaces to read again (SPEC §7: nobody may vouch for it meanwhile)."""
+        interfaces to read again (docs/semantics.md §7: nobody may vouch for it meanwhile)."""
         ss = self.skillsets[skillset]
         if not ss.deriver.synced:
             return f"waiting for {', '.join(ss.deriver.missing())}"

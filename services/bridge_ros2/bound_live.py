@@ -1,6 +1,6 @@
 """bridge_ros2 for bound skillsets on Zenoh: action servers, lifecycle nodes and topics in, canonical events out.
 
-SPEC §9.  For every binding of the system, on the keys of :class:`~skinet.ros.keys.KeyStyle`
+docs/semantics.md §9.  For every binding of the system, on the keys of :class:`~skinet.ros.keys.KeyStyle`
 (``zenoh-bridge-ros2dds``: the ROS name without its leading slash, below the bridge's
 namespace; ``rmw_zenoh``: ``<domain>/<name>/<DDS type>/<type hash>``):
 
@@ -12,7 +12,7 @@ namespace; ``rmw_zenoh``: ``<domain>/<name>/<DDS type>/<type hash>``):
   service, asked at start-up (and again every ``retry`` seconds until it answers);
 - each bound topic.
 
-Start-up (SPEC §9): a skillset is *syncing* until each of its interfaces has been
+Start-up (docs/semantics.md §9): a skillset is *syncing* until each of its interfaces has been
 read; nothing is published for it before.  An action whose server is present
 (``zenoh-bridge-ros2dds``: the route's ``AS`` liveliness token; ``rmw_zenoh``: the
 ``send_goal`` service token) and has published no status is read as "no goal" once
@@ -21,7 +21,7 @@ When a terminal goal's mode depends on its result, the bridge asks
 ``<action>/_action/get_result`` and holds that skillset's later observations until
 the reply (at most ``hold`` seconds: then the binding's default mode, said so).
 
-Honest status (SPEC §7): while a skillset's status is pending (start-up readings
+Honest status (docs/semantics.md §7): while a skillset's status is pending (start-up readings
 missing; after the link to the routers was cut, every interface; after an action
 server or a lifecycle node left, as its token shows (``SS`` route token of its
 ``get_state`` service, or the ``rmw_zenoh`` service token), its own), the heartbeat
@@ -112,7 +112,7 @@ class BoundBridge:
         self._resync = [session.declare_queryable(keys.resync(system.name, name), self._on_resync)
                         for name in bindings]
         self._pending_seen: dict[str, str] = {}  # what the last heartbeat said was pending (see _notice)
-        # SPEC §7: the monitor loses what a silent bridge publishes.
+        # docs/semantics.md §7: the monitor loses what a silent bridge publishes.
         self._heartbeat = self.worker.beacon(session, system.name, self.feed.source, self.instance_id, self._beat,
                                              self._pending)
         self.worker.add_follow_up(self._ask_results)
@@ -147,7 +147,7 @@ class BoundBridge:
         """Wait until every queued message has been handled (tests, the embedded demo)."""
         return self.worker.wait_idle(timeout)
 
-    # -- what it can vouch for (SPEC §7) -----------------------------------------------------
+    # -- what it can vouch for (docs/semantics.md §7) -----------------------------------------------------
 
     def _beat(self) -> dict[str, HeartbeatSkillset]:
         """Per skillset, the seq of its last event (the heartbeat)."""
@@ -288,7 +288,7 @@ class BoundBridge:
             with self.worker.lock:
                 why = self.feed.pending(skillset)
                 ev = None if why else self.feed.last_status(skillset)
-            if why:  # never vouch for a status it knows is not current (SPEC §7)
+            if why:  # never vouch for a status it knows is not current (docs/semantics.md §7)
                 query.reply_err(refusal(self.feed.source, skillset, why))
             elif ev is not None:
                 query.reply(keys.resync(self.system.name, skillset), wire_encode(ev))

@@ -1,11 +1,11 @@
-"""From manager messages (CDR) to canonical events, shared by live and replay (SPEC §1).
+"""From manager messages (CDR) to canonical events, shared by live and replay (docs/semantics.md §1).
 
 :class:`Feed` decodes each message with the skillset's type store, hands it to the
 skillset's :class:`~skinet.ros.derive.Deriver` and numbers the resulting
 :class:`~skinet.wire.messages.CanonicalEvent` per skillset (0, 1, 2, ...) within
 an epoch, the feed's start time in milliseconds, so that a monitor recognises a
 restarted bridge (issue 14).  A payload that does not decode is logged and dropped
-(SPEC §7).  A status that overtook one of its responses waits for it (bounded), and
+(docs/semantics.md §7).  A status that overtook one of its responses waits for it (bounded), and
 the events of other skillsets that arrive meanwhile wait behind it: the bridge emits
 events in the order their messages arrived, across skillsets too (and across the
 bound skillsets of the same bridge process, which share its
@@ -191,7 +191,7 @@ class Feed:
         return self.order.drain()
 
     def restarted(self, skillset: str, why: str) -> None:
-        """``skillset``'s manager restarted: its next status is a new initial status (SPEC §7).
+        """``skillset``'s manager restarted: its next status is a new initial status (docs/semantics.md §7).
 
         A status still held from before is derived in its place (the next :meth:`feed`
         or :meth:`expire` returns its events).  The monitor then follows the new status,
@@ -209,7 +209,7 @@ class Feed:
 
     def resync(self, skillset: str, why: str) -> None:
         """Messages of ``skillset``'s manager may have been lost (the link was cut): its next
-        status closes the gap, and its event says so (SPEC §7: never lost without a trace).
+        status closes the gap, and its event says so (docs/semantics.md §7: never lost without a trace).
 
         Unlike :meth:`restarted`, the manager kept its state and execution ids: the next
         status is derived from the last one as usual.  Counted once per gap.
@@ -345,7 +345,7 @@ class Feed:
 
     def outdated(self, skillset: str) -> str:
         """Why ``skillset``'s last status is known not to be its manager's current one ('' when it is not
-        known to be): a restart or a cut link whose next status has not come yet (SPEC §7: nobody may
+        known to be): a restart or a cut link whose next status has not come yet (docs/semantics.md §7: nobody may
         vouch for it meanwhile)."""
         m = self.managers[skillset]
         if m.restart:

@@ -1,4 +1,4 @@
-"""Whether the bridge's session still reaches a router: what the robot publishes meanwhile is lost (SPEC §7).
+"""Whether the bridge's session still reaches a router: what the robot publishes meanwhile is lost (docs/semantics.md §7).
 
 The robot's topics are volatile (a manager's statuses, a lifecycle node's
 transition events, a bound topic's samples): a bridge whose session has lost every

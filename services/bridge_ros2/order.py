@@ -1,4 +1,4 @@
-"""Canonical events in the order their messages arrived, across skillsets and kinds of bridge (SPEC §1, §7).
+"""Canonical events in the order their messages arrived, across skillsets and kinds of bridge (docs/semantics.md §1, §7).
 
 The monitor follows the interleaving the robot went through only if the bridge
 emits events in the order their messages came.  A derivation may have to wait

@@ -1,4 +1,4 @@
-"""Replay of a recorded rosbag2 file through the bridge's derivation (SPEC §1).
+"""Replay of a recorded rosbag2 file through the bridge's derivation (docs/semantics.md §1).
 
 Reads sqlite3 and mcap bags with ``rosbags.highlevel.AnyReader``, keeps the
 manager topics the system knows (by ROS topic name, e.g.

@@ -1,4 +1,4 @@
-"""bridge_ros2 on Zenoh: manager topics in, canonical events out (SPEC §1).
+"""bridge_ros2 on Zenoh: manager topics in, canonical events out (docs/semantics.md §1).
 
 Subscribes to each manager's ``status``, ``event_request``, ``event_response`` and
 ``skill/<k>/response`` on the keys of :mod:`skinet.ros.keys` (as
@@ -23,7 +23,7 @@ whose type hash also gives the key on Humble; ``zenoh-bridge-ros2dds``: the toke
 the gateway's route).  A token that comes back, a status from a new publisher GID or
 with its sequence number going back (``rmw_zenoh`` attachments), or skill ids reset
 to '' mean the manager restarted: the bridge asks again and the next status is a new
-initial status whose ``info`` says how it differs from the last one (SPEC §7).  With
+initial status whose ``info`` says how it differs from the last one (docs/semantics.md §7).  With
 ``rmw_zenoh`` the bridge declares its own node, subscription and publisher tokens.
 A monitor that missed events, or that starts, asks ``keys.resync(system, skillset)``:
 the bridge answers with the skillset's last status (numbered as its last event) and
@@ -38,7 +38,7 @@ event says so, and every manager is asked again when the link is back
 :class:`~skinet.wire.messages.Heartbeat` (:mod:`services.common.heartbeat`): its
 token, and per skillset its last event's number and whether the manager is present
 (its token seen, gone, or never announced), so that a monitor can tell a silent
-bridge from a quiet robot (SPEC §7).
+bridge from a quiet robot (docs/semantics.md §7).
 
 One subscriber per manager covers all its topics (``.../<skillset>_skillset/**``):
 separate subscribers per key would run their callbacks on different threads and
@@ -251,7 +251,7 @@ class Bridge:
             with self._fed:
                 why = self._outdated(skillset)
                 ev = None if why else self.feed.last_status(skillset)
-            if why:  # never vouch for a status known to be outdated (SPEC §7)
+            if why:  # never vouch for a status known to be outdated (docs/semantics.md §7)
                 query.reply_err(refusal(self.feed.source, skillset, why))
             elif ev is not None:
                 query.reply(keys.resync(self.system.name, skillset), wire_encode(ev))

@@ -1,4 +1,4 @@
-"""The bridge's one derivation thread: jobs in arrival order, events published in order (SPEC §1, §7).
+"""The bridge's one derivation thread: jobs in arrival order, events published in order (docs/semantics.md §1, §7).
 
 Zenoh callbacks only queue a job (a message to derive, a reply, a resync mark);
 the worker runs the jobs one after the other under :attr:`Worker.lock`, takes the
@@ -112,7 +112,7 @@ class Worker:
             try:
                 with self.lock:
                     events = (job() or []) + self.order.drain()
-            except Exception:  # a bug must not stop the bridge (SPEC §7)
+            except Exception:  # a bug must not stop the bridge (docs/semantics.md §7)
                 log.exception("failed to derive a message")
             for ev in events:
                 try:

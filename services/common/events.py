@@ -1,4 +1,4 @@
-"""Canonical events that survive a router restart or a short partition (issue 14; SPEC §7).
+"""Canonical events that survive a router restart or a short partition (issue 14; docs/semantics.md §7).
 
 Zenoh's own means, from ``zenoh.ext`` (eclipse-zenoh 1.10): the bridge publishes
 with an :class:`~zenoh.ext.AdvancedPublisher` that keeps its last ``cache`` events

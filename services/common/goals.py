@@ -1,4 +1,4 @@
-"""The client side of the pilot (SPEC §8): ask its goal queryable, read its status.
+"""The client side of the pilot (docs/semantics.md §8): ask its goal queryable, read its status.
 
 Shared by ``skinet goal`` and the dashboard's goal box.  A goal request goes to
 ``skinet/<system>/pilot/goal/<client>`` where ``client`` is the session's router

@@ -1,4 +1,4 @@
-"""A publisher of canonical events says it is alive: :class:`Heartbeat` every 0.5 s (SPEC §7, honest live state).
+"""A publisher of canonical events says it is alive: :class:`Heartbeat` every 0.5 s (docs/semantics.md §7, honest live state).
 
 zenoh.ext's advanced publisher sends heartbeats of its own, but they are internal
 to its subscriber (miss detection) and say nothing to the application.  This one

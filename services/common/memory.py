@@ -1,4 +1,4 @@
-"""The ``--memory-limit`` option shared by ``skinet explore/unsafe/ctl/run`` (SPEC §6.1)."""
+"""The ``--memory-limit`` option shared by ``skinet explore/unsafe/ctl/run`` (docs/semantics.md §6.1)."""
 
 from __future__ import annotations
 

@@ -73,7 +73,7 @@ def seconds_within(low: float, high: float, env: str | None = None) -> Callable[
 
 
 def budget(env: str | None = None) -> Callable[[str], float]:
-    """A prediction budget in seconds: at least the predictor's minimum (SPEC §6.1), at most one day."""
+    """A prediction budget in seconds: at least the predictor's minimum (docs/semantics.md §6.1), at most one day."""
     return _number(float, f"a number of seconds from {MIN_BUDGET:g} (the predictor's minimum budget) to "
                           f"{MAX_BUDGET:g} (one day)", MIN_BUDGET, False, MAX_BUDGET, env)
 

@@ -1,4 +1,4 @@
-"""Per-client request budgets a client cannot dodge by renaming itself (issues 14 and 31; SPEC §7).
+"""Per-client request budgets a client cannot dodge by renaming itself (issues 14 and 31; docs/semantics.md §7).
 
 The predictor and the monitor's command check name the querier by the client chunk
 of the key it queried (:func:`skinet.wire.keys.client_of`); behind the shipped

@@ -1,4 +1,4 @@
-"""Requests to skillset managers over Zenoh, as an operator GUI sends them (SPEC §8, corpus README).
+"""Requests to skillset managers over Zenoh, as an operator GUI sends them (docs/semantics.md §8, corpus README).
 
 :class:`Requests` declares one publisher per request topic of every manager of a
 system (skill requests and interrupts, event and status requests; keys of

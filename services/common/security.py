@@ -1,4 +1,4 @@
-"""Secrets and certificates for a deployment, made at first start (issue 14; SPEC §7).
+"""Secrets and certificates for a deployment, made at first start (issue 14; docs/semantics.md §7).
 
 Nothing that works is committed: :func:`ensure_users` writes a random password per
 user (``users.txt`` for the router's ``dictionary_file``, ``<user>.password`` for

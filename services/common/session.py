@@ -1,4 +1,4 @@
-"""Why a Zenoh session could not connect: nothing answers, or a refused login (SPEC §7).
+"""Why a Zenoh session could not connect: nothing answers, or a refused login (docs/semantics.md §7).
 
 Zenoh reports every failed client connection as ``Unable to connect to any of
 [...]``, whether nothing listens there or the router refused the login.  When

@@ -1,4 +1,4 @@
-"""``python -m services.dashboard SYSTEM``: the live web dashboard as a process (SPEC §7)."""
+"""``python -m services.dashboard SYSTEM``: the live web dashboard as a process (docs/semantics.md §7)."""
 
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog="python -m services.dashboard",
         description="SkiNet Live dashboard: a web page showing a running system live (skillsets, properties, "
                     "unsafe commands with their kind, steps and witness, predictions, violations, timeline), "
-                    "fed by a Zenoh observer; its goal box gives goals to the system's pilot (SPEC §8) under "
+                    "fed by a Zenoh observer; its goal box gives goals to the system's pilot (docs/semantics.md §8) under "
                     "this process's login (only operator-role users may).")
     add_dashboard_args(parser)
     return parser

@@ -1,4 +1,4 @@
-"""What an operator view knows of one running system, from the monitor's messages (SPEC §7).
+"""What an operator view knows of one running system, from the monitor's messages (docs/semantics.md §7).
 
 :class:`Board` is fed the messages an observer receives on ``skinet/<system>/**``
 (no I/O here) and keeps: the last :class:`LiveState`, :class:`Verdicts`,
@@ -10,11 +10,11 @@ violated at the first step this view saw, past step 0: its onset is not known he
 model divergences and manager restarts of every monitor run it saw
 (:class:`Divergences`, kept by monitor instance and entry number, the last
 :data:`KEPT_DIVERGENCES`; issue 27 item 4); and the pilot's last status
-(:class:`PilotStatus`, SPEC §8: its goal, state, plan and next command).
+(:class:`PilotStatus`, docs/semantics.md §8: its goal, state, plan and next command).
 
 A monitor restart shows as a step counter going back: a new *epoch* starts, the
 timeline keeps the previous points.  The same step published again with a later
-stamp (its skillsets' sync states changed, SPEC §7) replaces the shown state.  Messages older than what is
+stamp (its skillsets' sync states changed, docs/semantics.md §7) replaces the shown state.  Messages older than what is
 shown (a late reply to the start-up query) are ignored; a reply with an earlier step but a later stamp than the
 shown one comes from a restarted monitor whose publications the view missed, and starts a new epoch too.  Every
 :meth:`Board.feed` returns the updates to send to views, as JSON-able dicts ``{"kind": ..., ...}``; applying
@@ -64,7 +64,7 @@ class Board:
         self._last_seq = -1
         self._holds: dict[str, bool] = {}
         self._pending: list[tuple[Verdicts | UnsafeReport, bool]] = []
-        self.pilot: PilotStatus | None = None  # the pilot's last status (SPEC §8)
+        self.pilot: PilotStatus | None = None  # the pilot's last status (docs/semantics.md §8)
         self.divergences: OrderedDict[tuple[str, int], dict[str, Any]] = OrderedDict()  # (monitor, n) -> entry
         self._noted: OrderedDict[str, int] = OrderedDict()  # monitor run -> entries it noted (listed or older)
         self._forgotten = 0  # entries noted by runs no longer in _noted
@@ -125,7 +125,7 @@ class Board:
             return []  # the same step again (the start-up query)
         if self.state is not None and (msg.seq, msg.event) == (self.state.seq, self.state.event) and \
                 msg.stamp > self.state.stamp:
-            self.state = msg  # the step published again: its sync state changed (SPEC §7)
+            self.state = msg  # the step published again: its sync state changed (docs/semantics.md §7)
             return [{"kind": "state", "message": _json(msg)}]
         if msg.seq <= self._last_seq:
             if initial and self.state is not None and msg.stamp <= self.state.stamp:

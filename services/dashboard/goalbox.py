@@ -1,4 +1,4 @@
-"""The dashboard's goal box (SPEC §8, issue 24 item 4): a form into a pilot request, errors placed.
+"""The dashboard's goal box (docs/semantics.md §8, issue 24 item 4): a form into a pilot request, errors placed.
 
 The page sends what the operator typed: one goal per line, skill inputs as
 TOML, the mode, whether to replace the goal that runs.  :func:`goal_request`

@@ -1,6 +1,6 @@
-"""A read-only Zenoh observer of one system, feeding a :class:`Board` (SPEC §7).
+"""A read-only Zenoh observer of one system, feeding a :class:`Board` (docs/semantics.md §7).
 
-Subscribes to the monitor's five result keys, the pilot's status (SPEC §8) and to
+Subscribes to the monitor's five result keys, the pilot's status (docs/semantics.md §8) and to
 the liveliness tokens of the system's services and of the predictors; when a
 monitor or a pilot appears (at start, or after a restart) it fetches the model
 bundle and the last publications (the monitor and the pilot answer ``get`` on

@@ -1,4 +1,4 @@
-"""The dashboard's web server: one page, its assets, and a Server-Sent Events stream (SPEC §7).
+"""The dashboard's web server: one page, its assets, and a Server-Sent Events stream (docs/semantics.md §7).
 
 aiohttp serves ``static/`` (the page, its script and style sheet, all written
 here: no CDN, works offline) and:
@@ -8,7 +8,7 @@ here: no CDN, works offline) and:
   ``EventSource`` reconnects by itself (``retry: 1000``) and gets a fresh snapshot.
 - ``GET /api/snapshot``: the snapshot as JSON.
 - ``GET /api/check?command=skillset:transition``: the monitor's command check, as JSON.
-- ``POST /api/goal``: the goal box (SPEC §8): a JSON form (``op``, ``goals``, ``inputs``,
+- ``POST /api/goal``: the goal box (docs/semantics.md §8): a JSON form (``op``, ``goals``, ``inputs``,
   ``mode``, ``replace``; :mod:`~services.dashboard.goalbox`) sent to the pilot under the
   dashboard's login; answers ``{"ok": true, "reply": PilotGoalReply}``, or ``{"ok": false,
   "error", "field", "line", "column"}`` for a goal that cannot be sent or was rejected (its

@@ -1,4 +1,4 @@
-"""The monitor service (SPEC §1): live marking, Algorithm 1, reports on Zenoh."""
+"""The monitor service (docs/semantics.md §1): live marking, Algorithm 1, reports on Zenoh."""
 
 from services.monitor.engine import Counters
 from services.monitor.prediction import PredictorStats

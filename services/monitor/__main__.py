@@ -1,4 +1,4 @@
-"""``python -m services.monitor SYSTEM.toml [zenoh flags]``: the monitor as a process (SPEC §1, §7)."""
+"""``python -m services.monitor SYSTEM.toml [zenoh flags]``: the monitor as a process (docs/semantics.md §1, §7)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The command check: allow, warn or deny one ``skillset:transition`` now (SPEC §7, §5).
+"""The command check: allow, warn or deny one ``skillset:transition`` now (docs/semantics.md §7, §5).
 
 A GUI or a skill-manager client asks ``skinet/<system>/check/<client>`` before it sends a
 command.  The answer comes from the monitor's live Algorithm 1 result (the
@@ -14,7 +14,7 @@ operator decides); ``strict`` denies explicit and forced constraints (the
 violation is certain now, or no command can prevent it) and warns on the rest.
 A kind the policy does not name (a newer monitor's) is warned about.
 
-The answer never vouches for what the monitor does not know (SPEC §7): when a
+The answer never vouches for what the monitor does not know (docs/semantics.md §7): when a
 skillset is not ``live`` the reasons include ``state_unknown``, and while the
 prediction of the live marking is pending ``prediction_pending``; a policy may
 warn or deny on them, never allow.  ``strict`` denies ``state_unknown`` (a

@@ -1,4 +1,4 @@
-"""The monitor's list of model divergences, manager restarts and violation onsets (SPEC §7), without I/O.
+"""The monitor's list of model divergences, manager restarts and violation onsets (docs/semantics.md §7), without I/O.
 
 The step that meets a divergence says so in its :class:`~skinet.wire.messages.LiveState`,
 and the next step no longer does; operator views need the whole run's list, and a view

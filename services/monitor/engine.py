@@ -1,4 +1,4 @@
-"""The monitor's fast path without I/O (SPEC §1 monitor, §5, §7).
+"""The monitor's fast path without I/O (docs/semantics.md §1 monitor, §5, §7).
 
 :class:`Engine` checks each event's sequence number, advances the live marking
 with :class:`~skinet.system.live.LiveSystem`, runs Algorithm 1 and returns the
@@ -9,7 +9,7 @@ generated deserialisers: the result of ``LiveSystem.apply`` is cached per
 (skillset marking, transition, observed status), and the msgpack bytes of the
 three messages per (combined marking, prediction) with holes for the fields of
 a step (seq, stamp, event, divergence, missed outcomes, and the sync states of
-SPEC §7, left out while they hold their default).  Both caches are bounded and exact (the core
+docs/semantics.md §7, left out while they hold their default).  Both caches are bounded and exact (the core
 functions are pure); a step packs a few small values and joins bytes.
 
 An event naming skills found ended without their response (``missed``) gets the
@@ -60,7 +60,7 @@ class Counters:
     resyncs: int = 0  # status resyncs applied
     unrecovered: int = 0  # events an outage took that the bridge's cache could not give back (also in lost)
     history: int = 0  # events a resync answer covered (the bridge's cache replayed them to a late monitor)
-    divergences: int = 0  # events the model could not explain (SPEC §7)
+    divergences: int = 0  # events the model could not explain (docs/semantics.md §7)
     errors: int = 0  # unexpected exceptions while handling a payload (bugs)
 
 
@@ -131,7 +131,7 @@ class Prediction:
 
 
 def _divergence(reason: str | None, ev: CanonicalEvent) -> str | None:
-    """What a step reports as a model divergence (SPEC §7, §9), with the message that showed it: the bridge's
+    """What a step reports as a model divergence (docs/semantics.md §7, §9), with the message that showed it: the bridge's
     own finding (a binding's drift names its message), else the live nets' reason with the event's info."""
     if ev.divergence:
         return f"{ev.divergence} ({reason})" if reason else ev.divergence
@@ -249,7 +249,7 @@ class Engine:
 
     def adopt(self, ev: CanonicalEvent) -> Step | None:
         """Take a resync answer's status as ``ev.skillset``'s marking without judging how the robot got
-        there (the monitor did not know: SPEC §7 syncing), and count later events of its stream up to
+        there (the monitor did not know: docs/semantics.md §7 syncing), and count later events of its stream up to
         ``ev.seq`` as history (:meth:`check_seq`).  A step when the marking changed or events of the
         stream that this monitor did not check are covered (its event says which), else None.
         Raises :class:`~skinet.errors.SourceError` for a status the model cannot read."""
@@ -322,7 +322,7 @@ class Engine:
         return out
 
     def prediction(self, key: MarkingKey | None = None) -> Prediction | None:
-        """The prediction for the live marking (``key`` when known), if any (SPEC §5)."""
+        """The prediction for the live marking (``key`` when known), if any (docs/semantics.md §5)."""
         return self.predictions.get(self.key if key is None else key)
 
     def add_prediction(self, key: MarkingKey, table: RiskTable) -> bool:
@@ -335,7 +335,7 @@ class Engine:
         return key == self.key
 
     def set_sync(self, sync: Mapping[str, SkillsetSync], stale: tuple[str, float] | None) -> None:
-        """The sync fields of the next messages: LiveState.sync, UnsafeReport.state_stale and why (SPEC §7)."""
+        """The sync fields of the next messages: LiveState.sync, UnsafeReport.state_stale and why (docs/semantics.md §7)."""
         self.sync = {"sync": {n: s.model_dump(mode="json") for n, s in sync.items()},
                      "state_stale": OMIT if stale is None else True,
                      "state_reason": OMIT if stale is None else stale[0],

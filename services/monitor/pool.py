@@ -1,4 +1,4 @@
-"""Which predictor instance gets the next query: least outstanding, then least recent (SPEC §7).
+"""Which predictor instance gets the next query: least outstanding, then least recent (docs/semantics.md §7).
 
 The monitor learns the instances from their liveliness tokens and counts its own
 queries in flight on each.  :meth:`Pool.pick` prefers instances not suspected of

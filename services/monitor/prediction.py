@@ -1,4 +1,4 @@
-"""The monitor's side of prediction: one query in flight, latest marking next (SPEC §1, §6, §7).
+"""The monitor's side of prediction: one query in flight, latest marking next (docs/semantics.md §1, §6, §7).
 
 The event path only calls :meth:`PredictionClient.want`, which records the
 marking and wakes a worker thread; the worker sends the ``get`` with a callback
@@ -9,7 +9,7 @@ a predictor's liveliness token appears (:meth:`instance`), so a monitor without
 predictor does not flood the network; while instances are known, the same marking
 is asked again after that delay (a cold instance may have missed the timeout).
 
-Load spreading and failover (SPEC §7): the predictors' liveliness tokens name
+Load spreading and failover (docs/semantics.md §7): the predictors' liveliness tokens name
 the instances (:class:`~services.monitor.pool.Pool`); each query goes to one
 instance's own key, the one with the fewest outstanding queries.  There the
 instance replies an empty "working" payload at once and every 0.1 s until its
@@ -68,7 +68,7 @@ def query_timeout(budget: float) -> float:
     """Default predict-query timeout for a request ``budget`` (seconds).
 
     The predictor bounds its whole answer by the budget plus a small constant
-    (SPEC §6.1: deadline checked per chunk), and the first query of a system
+    (docs/semantics.md §6.1: deadline checked per chunk), and the first query of a system
     also waits for the model bundle (the predictor's default fetch timeout,
     2 s): a quarter of the budget and a second on top cover scheduling on a
     loaded machine, so an answer within budget is never reported as a timeout.

@@ -1,4 +1,4 @@
-"""The monitor service: the fast path of SPEC §1 as a Zenoh shell around :class:`Engine`.
+"""The monitor service: the fast path of docs/semantics.md §1 as a Zenoh shell around :class:`Engine`.
 
 Subscribes to ``keys.events(system, "*")``, recovering what an outage took from
 the bridge's cache (:mod:`services.common.events`); per event it publishes
@@ -19,9 +19,9 @@ memory limit, ``StateSpaceReport.timeout_reached``) is asked again while its mar
 then the check says "could not decide", never allow.  A gap, a jump, a restarted bridge or events
 that could not be recovered make it ask the bridge for the skillset's last status
 (``keys.resync``) and apply it (see :meth:`Engine.check_seq`).  Bad payloads are counted and logged,
-never raised (SPEC §7).
+never raised (docs/semantics.md §7).
 
-Honest live state (SPEC §7, :mod:`services.monitor.sync`): at start every
+Honest live state (docs/semantics.md §7, :mod:`services.monitor.sync`): at start every
 skillset is ``syncing`` and the monitor asks the bridge for its last status; its
 events wait until the answer is applied.  The bridge's heartbeats
 (``keys.heartbeat``), its liveliness token and its events keep a skillset
@@ -235,7 +235,7 @@ class Monitor:
             return self._divergences_published
 
     def synced(self) -> bool:
-        """Whether every skillset is ``live`` (SPEC §7)."""
+        """Whether every skillset is ``live`` (docs/semantics.md §7)."""
         with self._lock:
             return self._sync.all_live()
 
@@ -300,7 +300,7 @@ class Monitor:
                 if self._closed:
                     return
                 self._engine.counters.received += 1
-                # A skillset that is not live keeps its events until its resync answers (SPEC §7: what
+                # A skillset that is not live keeps its events until its resync answers (docs/semantics.md §7: what
                 # its answer covers is history, whatever the events' stamps say).
                 resync = self._sync.hold(ev) or self._handle(ev)
                 self._note(ev, None, self._engine.seq)  # a restart is news even when its event is held or history
@@ -427,7 +427,7 @@ class Monitor:
         return False
 
     def _adopt(self, ev: CanonicalEvent) -> bool:
-        """A skillset that was not live is synced from ``ev`` (lock held; SPEC §7): its status becomes the
+        """A skillset that was not live is synced from ``ev`` (lock held; docs/semantics.md §7): its status becomes the
         marking, then its buffered events follow (those the answer covers are history); whether to resync."""
         engine = self._engine
         prev = engine.last_seq.get((ev.skillset, ev.source))
@@ -551,7 +551,7 @@ class Monitor:
             query.reply(keys.model(self.system.name, self.digest), self._model_payload)
 
     def check(self, request: CheckRequest) -> CheckReply:
-        """The command check at the live marking (SPEC §7; :mod:`services.monitor.check`).
+        """The command check at the live marking (docs/semantics.md §7; :mod:`services.monitor.check`).
 
         Names and the request's policy are checked before the lock is taken (suggestions cost
         difflib's time, never the events')."""
@@ -798,7 +798,7 @@ def _tokens(session: zenoh.Session, key_expr: str, timeout: float = 2.0) -> list
 
 
 def start_monitor(session: zenoh.Session, system: System, **options: object) -> Monitor:
-    """Start a monitor of ``system`` on ``session`` (which may be shared, SPEC §7).
+    """Start a monitor of ``system`` on ``session`` (which may be shared, docs/semantics.md §7).
 
     Options: ``instance_id``, ``budget`` (predictor exploration seconds, default 1),
     ``query_timeout`` (default 1.25 x budget + 3 s, see :func:`prediction.query_timeout`),
@@ -812,6 +812,6 @@ def start_monitor(session: zenoh.Session, system: System, **options: object) -> 
     never deny), ``client`` (the client chunk of its predict queries: its router login,
     default ``local``), ``check_rate_limit`` (check requests per second per client and new client names per
     second, five times as many from all clients together; 0: no limit; default 20), ``lost_after`` (seconds of silence from a skillset's source after
-    which it is lost, default 2; SPEC §7).
+    which it is lost, default 2; docs/semantics.md §7).
     """
     return Monitor(session, system, **options)  # type: ignore[arg-type]

@@ -1,4 +1,4 @@
-"""Honest live state: which skillsets the monitor can vouch for (SPEC §7), without I/O.
+"""Honest live state: which skillsets the monitor can vouch for (docs/semantics.md §7), without I/O.
 
 Each skillset is
 

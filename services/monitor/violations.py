@@ -1,4 +1,4 @@
-"""Violation onsets: the steps at which a property became violated (SPEC §7), without I/O.
+"""Violation onsets: the steps at which a property became violated (docs/semantics.md §7), without I/O.
 
 A step's :class:`~skinet.wire.messages.Verdicts` says which properties are violated now;
 the next step no longer does when the violation ended, so a view that joins later never

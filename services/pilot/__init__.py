@@ -1,4 +1,4 @@
-"""The pilot service (SPEC §8, *The pilot*): goals in, safe skill requests out; see :mod:`services.pilot.service`."""
+"""The pilot service (docs/semantics.md §8, *The pilot*): goals in, safe skill requests out; see :mod:`services.pilot.service`."""
 
 from services.pilot.errors import ActError
 from services.pilot.act import Actuator, ManagerActuator, Routed, default_actuator, route

@@ -1,4 +1,4 @@
-"""``python -m services.pilot SYSTEM.toml [zenoh flags]``: the pilot as a process (SPEC §8, issue 24)."""
+"""``python -m services.pilot SYSTEM.toml [zenoh flags]``: the pilot as a process (docs/semantics.md §8, issue 24)."""
 
 from __future__ import annotations
 

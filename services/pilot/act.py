@@ -1,4 +1,4 @@
-"""How the pilot acts on the robot (SPEC §8, *The pilot*; §9, *Acting*).
+"""How the pilot acts on the robot (docs/semantics.md §8, *The pilot*; §9, *Acting*).
 
 An :class:`Actuator` sends one :class:`~skinet.wire.messages.PilotCommand`
 (``SKILL.start`` with its inputs, ``SKILL.interrupt``, or an event a binding commands)
@@ -8,7 +8,7 @@ protocol carries a skill is decided in one place, :func:`route`, and
 :class:`Routed` (the pilot's :func:`default_actuator`) sends each command
 through the actuator of its route: the :class:`ManagerActuator` speaks a
 generated skillset manager's request protocol, as an operator GUI does
-(:mod:`skinet.ros.requests`); skills bound to ROS 2 actions (SPEC §9) and the events
+(:mod:`skinet.ros.requests`); skills bound to ROS 2 actions (docs/semantics.md §9) and the events
 a binding commands go to the :class:`~services.pilot.bound_act.BoundActuator` (a goal,
 a cancel request, a lifecycle transition, a topic message).
 
@@ -62,14 +62,14 @@ class Actuator(Protocol):
 
 def inputs_problem(actuator: object, skillset: str, skill: str, inputs: Mapping[str, Any]) -> str | None:
     """Why ``actuator`` could not send a start of ``skillset:skill`` with ``inputs``, when it can tell before
-    sending (its optional ``problem`` method: a bound skill's goal message, SPEC §9), else None."""
+    sending (its optional ``problem`` method: a bound skill's goal message, docs/semantics.md §9), else None."""
     check = getattr(actuator, "problem", None)
     return check(skillset, skill, inputs) if check is not None else None
 
 
 def route(system: System, skillset: str, skill: str) -> Literal["manager", "binding"]:
     """The protocol that carries ``skillset:skill``'s commands: ``binding`` when its skillset is bound to
-    plain ROS 2 interfaces (SPEC §9: the binding's action), else ``manager`` (the manager's requests)."""
+    plain ROS 2 interfaces (docs/semantics.md §9: the binding's action), else ``manager`` (the manager's requests)."""
     return "binding" if system.component(skillset).binding else "manager"
 
 
@@ -139,7 +139,7 @@ class ManagerActuator:
                     self._lock.notify_all()
                 return
             refusal = start_refusal(store, skillset, topic.skill or "", sample.payload.to_bytes())
-        except Exception as exc:  # a malformed message must not stop the pilot (SPEC §7)
+        except Exception as exc:  # a malformed message must not stop the pilot (docs/semantics.md §7)
             log.warning("%s of %s not understood: %s", topic.topic, component.manager, exc)
             return
         if refusal is None:
@@ -264,7 +264,7 @@ class Routed:
             raise ActError(f"unknown skillset '{command.skillset}' of {self.system.name}") from None
         actuator = self.actuators.get(way)
         if actuator is None:
-            raise ActError(f"{command.skillset}:{skill} is bound to a ROS 2 interface (SPEC §9), and this pilot "
+            raise ActError(f"{command.skillset}:{skill} is bound to a ROS 2 interface (docs/semantics.md §9), and this pilot "
                            "cannot act through bindings")
         return actuator.send(command)
 

@@ -1,4 +1,4 @@
-"""The pilot's commands for skills bound to ROS 2 actions (SPEC §9, *Acting*): goals and cancel requests.
+"""The pilot's commands for skills bound to ROS 2 actions (docs/semantics.md §9, *Acting*): goals and cancel requests.
 
 For a skill whose skillset has a binding instead of a skillset manager
 (:mod:`skinet.ros.binding`), :class:`BoundActuator` does what an action client does,

@@ -1,4 +1,4 @@
-"""The pilot: goals in, safe skill requests out, on the live robot (SPEC §8, *The pilot*; issue 24).
+"""The pilot: goals in, safe skill requests out, on the live robot (docs/semantics.md §8, *The pilot*; issue 24).
 
 Follows the monitor: its :class:`LiveState` on ``keys.state`` (asked with a ``get`` at
 start and whenever a monitor appears; an answer that comes after the subscriber gave a
@@ -407,7 +407,7 @@ class Pilot:
     @staticmethod
     def _recovers(g: _Goal, marking: dict[str, int]) -> bool:
         """Whether ``g`` recovers first at ``marking``: asked to, and its plan from here is ``none`` with a way
-        back into Safe (SPEC §8: from outside Safe no plan promises safety)."""
+        back into Safe (docs/semantics.md §8: from outside Safe no plan promises safety)."""
         return g.recover and g.plan is not None and g.plan.answer == "none" and bool(g.plan.recovery) and \
             g.planned_at == marking
 
@@ -698,7 +698,7 @@ class Pilot:
                 try:
                     g.plan = self.planner.plan(g.goals[g.index], marking, self.budget)
                     g.planned_at = dict(marking)
-                except SkinetError as exc:  # a marking the robot cannot be in (SPEC §3): nothing to plan from
+                except SkinetError as exc:  # a marking the robot cannot be in (docs/semantics.md §3): nothing to plan from
                     g.plan = None
                     return self._show("paused", f"the live state of step {st.seq} cannot be planned from: {exc}")
             if self._recovers(g, marking):
@@ -876,7 +876,7 @@ class Pilot:
             return
         g.index += 1
         # The next goal's plan from when the mission was set: it serves wherever it covers the marking (a
-        # plan's policy holds in its whole winning region, SPEC §8), so a goal change costs no planning.
+        # plan's policy holds in its whole winning region, docs/semantics.md §8), so a goal change costs no planning.
         g.plan = g.plans[g.index] if g.index < len(g.plans) else None
         g.retries.clear()  # max_retries counts per goal of a mission
 
@@ -953,7 +953,7 @@ def start_pilot(session: zenoh.Session, system: System, instance: str | None = N
                 actuator: Actuator | None = None, response_timeout: float = 5.0, budget: float = 1.0,
                 client: str | None = None, typemap: Mapping[str, str] | None = None,
                 style: KeyStyle = KeyStyle(), outcome_timeout: float = OUTCOME_TIMEOUT) -> Pilot:
-    """Start a pilot of ``system`` on ``session`` (which may be shared, SPEC §7).
+    """Start a pilot of ``system`` on ``session`` (which may be shared, docs/semantics.md §7).
 
     ``instance``: its id in the liveliness token and the status (default: random);
     ``actuator``: how it acts (default: :func:`~services.pilot.act.default_actuator` on the keys of

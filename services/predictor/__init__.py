@@ -1,4 +1,4 @@
-"""The predictor service: state-space exploration and mu1 over Zenoh (SPEC §1, §6).
+"""The predictor service: state-space exploration and mu1 over Zenoh (docs/semantics.md §1, §6).
 
 Its names are loaded on first use, so that ``python -m services.predictor.sandbox`` (a worker
 process) does not import the service first."""

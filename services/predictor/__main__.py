@@ -1,4 +1,4 @@
-"""``python -m services.predictor``: one predictor instance in its own session (SPEC §7)."""
+"""``python -m services.predictor``: one predictor instance in its own session (docs/semantics.md §7)."""
 
 from __future__ import annotations
 

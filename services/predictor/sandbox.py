@@ -1,8 +1,8 @@
-"""Forecasts of untrusted models in a child process with hard limits (SPEC §6, §7).
+"""Forecasts of untrusted models in a child process with hard limits (docs/semantics.md §6, §7).
 
 A model bundle comes from whoever answered ``skinet/<system>/model/<digest>``: its
 digest proves it is consistent, not who wrote it, and a 2 KB skillset whose guards
-expand exponentially (SPEC §3, DNF) can take gigabytes and minutes to build and
+expand exponentially (docs/semantics.md §3, DNF) can take gigabytes and minutes to build and
 explore.  So the predictor never builds or explores in its own process: a
 :class:`Worker` runs ``python -m services.predictor.sandbox`` with an address-space
 limit (``RLIMIT_AS``) and a lower CPU priority, sends it one job at a time over a

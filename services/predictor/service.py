@@ -1,4 +1,4 @@
-"""The predictor: a stateless Zenoh queryable answering prediction requests (SPEC §1, §6).
+"""The predictor: a stateless Zenoh queryable answering prediction requests (docs/semantics.md §1, §6).
 
 A :class:`~skinet.wire.messages.PredictRequest` arrives on
 ``skinet/<system>/predict/<client>`` with the live marking and the digest of the monitor's model.  An instance that does
@@ -9,7 +9,7 @@ cache.  Building the nets, exploring from the marking and computing the replies'
 risks happen in worker processes (:mod:`services.predictor.sandbox`) under the request's
 budget and an address-space limit, so a hostile model costs an instance at most its
 limits.  Every failure is answered with ``ok=False`` and a one-line ``error``
-(SPEC §7: bad input never crashes a service).
+(docs/semantics.md §7: bad input never crashes a service).
 
 Threading: Zenoh runs query callbacks on its own threads, and a ``get`` issued from
 inside one (the model fetch) may deadlock.  The callback therefore only decodes the
@@ -27,7 +27,7 @@ client neither queues behind nor ahead of the others.  ``max_pending`` still bou
 instance, and one client may hold at most half of it (``busy: client ... has its
 share``), so requests that are slow to answer cannot fill it either.
 
-Load spreading (SPEC §7): besides the shared key every instance answers on its own
+Load spreading (docs/semantics.md §7): besides the shared key every instance answers on its own
 key ``skinet/<system>/predict/<client>/<id>``, found through its liveliness token.  There it
 first replies an empty payload when it admits a request, then another every
 :data:`HEARTBEAT` seconds until the answer: a client that hears nothing for a few
@@ -257,7 +257,7 @@ class Predictor:
             pass  # the caller gave up (timeout, cancelled)
 
     def answer(self, request: PredictRequest) -> PredictReply:
-        """Compute the reply to one request (SPEC §6) in a worker process; failures become ``ok=False``."""
+        """Compute the reply to one request (docs/semantics.md §6) in a worker process; failures become ``ok=False``."""
         try:
             model = self._bundle(request.system, request.digest)
             worker = self._idle.get()
@@ -409,7 +409,7 @@ def start_predictor(
         cache_size: systems kept (least recently used dropped first).
         fetch_timeout: seconds to wait for a model bundle.
         max_budget: cap on a request's exploration budget, seconds.
-        memory_limit: peak memory the core may use, bytes, shared by the workers (SPEC §6.1);
+        memory_limit: peak memory the core may use, bytes, shared by the workers (docs/semantics.md §6.1);
             beyond it answers are truncated.
         memory_mb: address-space limit of each worker process, MB (killed beyond it).
         grace: seconds past a request's budget before its worker is killed.

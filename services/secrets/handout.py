@@ -1,4 +1,4 @@
-"""Each service's own credentials out of the vault, and a user's files checked (issue 25 item 7; SPEC §7).
+"""Each service's own credentials out of the vault, and a user's files checked (issue 25 item 7; docs/semantics.md §7).
 
 The *vault* is the folder :mod:`services.common.security` fills: every password,
 the CA with its key, one certificate per name and, on a fleet's hub, ``fleet/``.

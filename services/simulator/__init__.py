@@ -1,4 +1,4 @@
-"""Simulated skillset managers driven by mission scenarios (SPEC §7, MISSION.md).
+"""Simulated skillset managers driven by mission scenarios (docs/semantics.md §7, docs/mission.md).
 
 ``Simulator(session, system, typemap)`` serves every manager of a system on Zenoh;
 ``Simulator.drive(scenario, speed, on_step)`` plays a scenario on it.

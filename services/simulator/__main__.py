@@ -1,5 +1,5 @@
-"""``python -m services.simulator SCENARIO.toml``: play a scenario on simulated managers (SPEC §7), or on the
-simulated action servers, lifecycle nodes and topics of a system bound to plain ROS 2 interfaces (SPEC §9)."""
+"""``python -m services.simulator SCENARIO.toml``: play a scenario on simulated managers (docs/semantics.md §7), or on the
+simulated action servers, lifecycle nodes and topics of a system bound to plain ROS 2 interfaces (docs/semantics.md §9)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Simulated ROS 2 action servers, lifecycle nodes and topics of bound skillsets, on Zenoh (SPEC §9).
+"""Simulated ROS 2 action servers, lifecycle nodes and topics of bound skillsets, on Zenoh (docs/semantics.md §9).
 
 The simulator's action-server mode: for a skillset with a binding instead of a
 skillset manager, :class:`BoundSimulator` plays the robot's own interfaces, speaking

@@ -1,4 +1,4 @@
-"""A bound robot's action servers, lifecycle nodes and topics on real DDS, as ``rmw_cyclonedds`` runs them (SPEC §9).
+"""A bound robot's action servers, lifecycle nodes and topics on real DDS, as ``rmw_cyclonedds`` runs them (docs/semantics.md §9).
 
 :class:`DdsBoundRobot` serves the protocols of :mod:`services.simulator.protocols` on a
 CycloneDDS participant (PyPI ``cyclonedds``), laid out as ROS 2 nodes lay them out,
@@ -150,7 +150,7 @@ class DdsBoundRobot:
 
                 try:
                     handle(raw[:4] + raw[4 + HEADER:], reply)
-                except Exception:  # a simulated server never stops (SPEC §7)
+                except Exception:  # a simulated server never stops (docs/semantics.md §7)
                     log.exception("%s: request not handled", service)
 
         reader = DataReader(self.participant, self._topic(f"rq{service}Request", request), qos=qos,

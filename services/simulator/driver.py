@@ -1,4 +1,4 @@
-"""Playing a mission scenario on the simulated managers (MISSION.md, SPEC §7).
+"""Playing a mission scenario on the simulated managers (docs/mission.md, docs/semantics.md §7).
 
 Each ``transition`` step of a scenario (:mod:`skinet.mission.scenario`) becomes, at time
 ``t / speed``, what would cause it on the real robot:

@@ -19,9 +19,9 @@ origin repository):
   mode, ``effect`` (effects applied) and ``postcondition``.
 
 Every handled input publishes the status, after the responses.  Effect sets are
-applied whole or not at all (SPEC §3).  The simulated *world* makes a mode's or an
+applied whole or not at all (docs/semantics.md §3).  The simulated *world* makes a mode's or an
 interrupt's postcondition true when the skill ends (as the net's transition does,
-SPEC §3 *Postconditions*), so ``postcondition`` is true unless unsatisfiable.
+docs/semantics.md §3 *Postconditions*), so ``postcondition`` is true unless unsatisfiable.
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The ROS 2 action and lifecycle protocols as a simulated robot serves them, whatever carries them (SPEC §9).
+"""The ROS 2 action and lifecycle protocols as a simulated robot serves them, whatever carries them (docs/semantics.md §9).
 
 :class:`ActionLogic` is one action server's goals, as ``rclcpp_action`` keeps them:
 CDR requests in (``send_goal``, ``cancel_goal``, ``get_result``), CDR replies and
@@ -84,7 +84,7 @@ class ActionLogic:
         """(reply, outputs) for a ``SendGoal`` request; ``None`` when it does not decode."""
         try:
             request = decode(self.store, f"{self.action}_SendGoal_Request", payload)
-        except Exception as exc:  # never crash on a bad request (SPEC §7)
+        except Exception as exc:  # never crash on a bad request (docs/semantics.md §7)
             log.warning("%s: bad send_goal request ignored: %s", self.action, exc)
             return None
         goal = Goal(bytes(request.goal_id.uuid), time.time())

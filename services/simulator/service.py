@@ -1,4 +1,4 @@
-"""Simulated skillset managers on Zenoh, as a ROS 2 gateway would carry them (SPEC §7).
+"""Simulated skillset managers on Zenoh, as a ROS 2 gateway would carry them (docs/semantics.md §7).
 
 Each skillset of the system gets a :class:`~services.simulator.manager.Manager`
 behind the manager's topics on the keys of :mod:`skinet.ros.keys`
@@ -132,7 +132,7 @@ class Simulator:
         """Handle one CDR input of ``node`` (from any transport) and count it."""
         try:
             self._handle(node, topic, decode(node.store, topic.typename, payload))
-        except Exception as exc:  # bad CDR (rosbags raises several types); never crash (SPEC §7)
+        except Exception as exc:  # bad CDR (rosbags raises several types); never crash (docs/semantics.md §7)
             log.warning("%s: %s ignored: %s", node.component.name, topic.topic, exc)
         finally:
             self._count(node, topic.topic)

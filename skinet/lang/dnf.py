@@ -1,4 +1,4 @@
-"""Disjunctive normal form of skillset guards (SPEC §3, *Guards*).
+"""Disjunctive normal form of skillset guards (docs/semantics.md §3, *Guards*).
 
 A clause is a mapping ``resource -> state``: the conjunction of ``R == s`` atoms.
 ``R != s`` expands to the other states of ``R``, ``a => b`` is ``not a or b``,

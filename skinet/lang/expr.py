@@ -1,4 +1,4 @@
-"""Boolean expressions shared by skillset guards and safety properties (SPEC §2, §4).
+"""Boolean expressions shared by skillset guards and safety properties (docs/semantics.md §2, §4).
 
 Atoms are left abstract: a skillset guard uses :class:`StateAtom` (``R == s``),
 the property language uses its own atoms.  Precedence in both languages is

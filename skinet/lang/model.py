@@ -1,4 +1,4 @@
-"""Typed objects for a parsed skillset model (SPEC §2).
+"""Typed objects for a parsed skillset model (docs/semantics.md §2).
 
 Built by :mod:`skinet.lang.parser`; every element keeps its source position so
 later stages can report ``FILE:LINE:COL`` errors.  Objects are immutable.
@@ -49,7 +49,7 @@ class Resource:
     transition_target_pos: tuple[Pos | None, ...] = ()
 
     def allows(self, source: str, target: str) -> bool:
-        """Legality of a move (SPEC §3): identity, ``transition all``, or declared."""
+        """Legality of a move (docs/semantics.md §3): identity, ``transition all``, or declared."""
         if source == target:
             return True
         if self.transitions is None:

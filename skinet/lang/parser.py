@@ -1,9 +1,9 @@
-"""Parser of the skillset language (SPEC §2).
+"""Parser of the skillset language (docs/semantics.md §2).
 
 ``parse_model`` turns the text of a ``.rl`` file into a :class:`~skinet.lang.model.Model`,
 validates it (:mod:`skinet.lang.validate`) and raises :class:`~skinet.errors.SourceError`
 with ``FILE:LINE:COL: error: ...`` diagnostics on any syntax or validation error.
-The grammar (``skillset.lark``) accepts every dialect listed in SPEC §2.
+The grammar (``skillset.lark``) accepts every dialect listed in docs/semantics.md §2.
 """
 
 from __future__ import annotations
@@ -42,7 +42,7 @@ __all__ = ["parse_model", "parse_skillset", "parse_unit", "link"]
 
 _GRAMMAR_PATH = Path(__file__).with_name("skillset.lark")
 
-# Seconds per unit of a progress period (SPEC §2: `1 sec`, `100 ms`, bare `1.0`).
+# Seconds per unit of a progress period (docs/semantics.md §2: `1 sec`, `100 ms`, bare `1.0`).
 _UNIT_DIVISOR = {"sec": 1.0, "s": 1.0, "ms": 1000.0}
 
 # Tree nodes that nest an expression one level deeper (see check_nesting).
@@ -67,7 +67,7 @@ def _parser(start: str = "start") -> Lark:
 
 
 def parse_model(text: str, source: str = "<string>") -> Model:
-    """Parse and validate a whole ``.rl`` file (SPEC §2).
+    """Parse and validate a whole ``.rl`` file (docs/semantics.md §2).
 
     Raises :class:`SourceError` carrying every error, sorted by position; on success
     the returned model's ``warnings`` hold the validation warnings.  ``include``
@@ -132,7 +132,7 @@ def link(units: Sequence[Unit]) -> Model:
 
 
 def parse_skillset(text: str, source: str = "<string>") -> Skillset:
-    """Parse a text declaring exactly one skillset (SPEC §2) and return it."""
+    """Parse a text declaring exactly one skillset (docs/semantics.md §2) and return it."""
     model = parse_model(text, source)
     if len(model.skillsets) != 1:
         extra = model.skillsets[1]

@@ -1,13 +1,13 @@
-"""Static checks of a parsed skillset model (SPEC §2, "Validation").
+"""Static checks of a parsed skillset model (docs/semantics.md §2, "Validation").
 
 Errors: unknown resource or state in an expression or effect, duplicate names,
 undeclared initial state, transitions from or to undeclared states, an
-expression whose disjunctive normal form (one transition per clause, SPEC §3)
+expression whose disjunctive normal form (one transition per clause, docs/semantics.md §3)
 exceeds :data:`MAX_CLAUSES`, an element whose transition variants exceed
 :data:`MAX_VARIANTS`.
 Warnings: duplicate transition pairs or type declarations, undeclared types of
 data, parameters, inputs, outputs and progress fields (real files have them, see
-``corpus/EXPECTED.md``), an unsatisfiable postcondition (SPEC §3).  Each
+``corpus/EXPECTED.md``), an unsatisfiable postcondition (docs/semantics.md §3).  Each
 diagnostic points at the offending name.  Cost: linear in the model, plus the
 DNF of each expression (bounded by MAX_CLAUSES).
 """
@@ -28,7 +28,7 @@ __all__ = ["validate", "sort_diagnostics", "MAX_CLAUSES", "MAX_VARIANTS"]
 MAX_CLAUSES = 1024
 # Most transition variants one event, start, invariant, interrupt or mode may give
 # (one per guard clause, postcondition clause and combination of the source states
-# of the resources it moves, SPEC §3); the corpus needs at most a few dozen.
+# of the resources it moves, docs/semantics.md §3); the corpus needs at most a few dozen.
 MAX_VARIANTS = 4096
 
 
@@ -44,7 +44,7 @@ def sort_diagnostics(diagnostics: Iterable[Diagnostic]) -> list[Diagnostic]:
 
 
 def validate(model: Model) -> list[Diagnostic]:
-    """Every error and warning about ``model`` (SPEC §2), sorted by position."""
+    """Every error and warning about ``model`` (docs/semantics.md §2), sorted by position."""
     checker = _Checker(model.source)
     checker.check_model(model)
     return sort_diagnostics(checker.diagnostics)
@@ -252,7 +252,7 @@ class _Checker:
             return None
 
     def check_postcondition(self, expr: Expr | None, owner: str, pos: Pos | None) -> list[dict[str, str]] | None:
-        """Errors of a postcondition, and a warning when nothing can satisfy it (SPEC §3).
+        """Errors of a postcondition, and a warning when nothing can satisfy it (docs/semantics.md §3).
 
         Returns its clauses (``None`` when there is no postcondition or it is invalid).
         """
@@ -277,7 +277,7 @@ class _Checker:
         effects: Iterable[Effect],
         post: list[dict[str, str]] | None,
     ) -> None:
-        """An error when ``owner`` would give more than MAX_VARIANTS transitions (SPEC §3).
+        """An error when ``owner`` would give more than MAX_VARIANTS transitions (docs/semantics.md §3).
 
         Each guard clause and postcondition clause gives one variant per
         combination of source states of the resources moved and not fixed by

@@ -1,4 +1,4 @@
-"""A replayed mission as the monitor log it would have produced (MISSION.md, SPEC §1).
+"""A replayed mission as the monitor log it would have produced (docs/mission.md, docs/semantics.md §1).
 
 :func:`records_to_log` turns the :class:`~skinet.mission.scenario.StepRecord` list of
 :func:`~skinet.mission.scenario.replay` into the messages seen on ``skinet/<system>/**``

@@ -1,17 +1,17 @@
-"""Mission scenarios and their replay on the core (MISSION.md, SPEC §5).
+"""Mission scenarios and their replay on the core (docs/mission.md, docs/semantics.md §5).
 
 A scenario is a TOML file of timed steps; each step is a model transition of
 one skillset (``transition = "teleop.start"``: an operator command, an event
 or a skill outcome) or an operator *considering* a command without issuing it
 (``consider = "arm_ready.start"``), which shows whether SkiNet warns about it.
 A transition step the model does not allow at that moment is a model divergence
-(SPEC §7); a scenario that plays one on purpose (a conformance test, a faulty
+(docs/semantics.md §7); a scenario that plays one on purpose (a conformance test, a faulty
 robot) says so with ``expect_divergence = true`` on the step.
-For a skillset bound to plain ROS 2 interfaces (SPEC §9), ``message = {...}``
+For a skillset bound to plain ROS 2 interfaces (docs/semantics.md §9), ``message = {...}``
 gives the fields of the message that causes the step (a goal's inputs or result,
 a topic sample), and ``[scenario] topics`` the first sample of each bound topic.
 ``[scenario] pilot = "dock.toml"`` names a goals file (:mod:`skinet.plan.goalfile`)
-that the pilot drives after the steps (SPEC §8), when the run goes through the
+that the pilot drives after the steps (docs/semantics.md §8), when the run goes through the
 whole chain (``skinet demo``).
 The simulator of issue 5 plays the same files through the whole chain.
 """
@@ -42,7 +42,7 @@ class Step:
     consider: str | None = None
     note: str = ""
     expect_divergence: bool = False  # the model is expected not to explain this step
-    message: Mapping[str, Any] | None = field(default=None, compare=False)  # on a bound interface (SPEC §9): the
+    message: Mapping[str, Any] | None = field(default=None, compare=False)  # on a bound interface (docs/semantics.md §9): the
     # fields of the message that causes the step
 
 
@@ -52,7 +52,7 @@ class Scenario:
     system: str  # path of the system file, relative to the scenario file
     steps: tuple[Step, ...]
     text: str = field(default="", compare=False, repr=False)  # the file's text, to locate errors in it
-    # bound skillsets (SPEC §9): the first sample the simulated robot publishes on each bound topic
+    # bound skillsets (docs/semantics.md §9): the first sample the simulated robot publishes on each bound topic
     topics: Mapping[str, Mapping[str, Any]] = field(default_factory=dict, compare=False)
     pilot: str = ""  # a goals file (relative to the scenario file) the pilot drives after the steps; '' for none
 

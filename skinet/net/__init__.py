@@ -1,4 +1,4 @@
-"""Petri nets of skillsets (SPEC §3): construction, firing, exports."""
+"""Petri nets of skillsets (docs/semantics.md §3): construction, firing, exports."""
 
 from skinet.net.build import build_net, idle_place, resource_place, running_place
 from skinet.net.petrinet import PetriNet, Transition

@@ -1,7 +1,7 @@
-"""From a skillset model to its Petri net (SPEC §3).
+"""From a skillset model to its Petri net (docs/semantics.md §3).
 
 Places: one per resource state (``R.s``), and per skill ``k`` an idle place
-``e_k`` and a running place ``i_k``.  Transitions follow the table of SPEC §3:
+``e_k`` and a running place ``i_k``.  Transitions follow the table of docs/semantics.md §3:
 events, starts, invariant failures, interrupts and success/failure modes, one
 variant per guard clause and per combination of effect source states.
 """
@@ -51,7 +51,7 @@ def build_net(skillset: Skillset, eventless: bool = False, commanded: frozenset[
     Invariant transitions get priority over every other transition (one
     priority pair).  Variants of one logical transition are numbered in
     generation order: ``name``, ``name#2``, ...  The events named in
-    ``commanded`` are controllable (a binding's commanded resources, SPEC §9);
+    ``commanded`` are controllable (a binding's commanded resources, docs/semantics.md §9);
     those named in ``without`` are left out.
     """
     states = {r.name: r.states for r in skillset.resources}

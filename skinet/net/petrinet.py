@@ -1,4 +1,4 @@
-"""Place/transition nets with unit arcs and a static priority relation (SPEC §3).
+"""Place/transition nets with unit arcs and a static priority relation (docs/semantics.md §3).
 
 A net is compiled once into bit masks: a marking of a 1-safe net is a Python
 ``int`` whose bit ``i`` is set when place ``i`` holds a token, so enabledness
@@ -31,7 +31,7 @@ class Transition:
     skillset: str
     skill: str | None = None  # the skill, for start/invariant/interrupt/modes
     element: str | None = None  # event, invariant or mode name
-    commanded: bool = False  # an event someone commands (a binding's commanded resource, SPEC §9)
+    commanded: bool = False  # an event someone commands (a binding's commanded resource, docs/semantics.md §9)
     pre_mask: int = field(default=0, compare=False, init=False)
     post_mask: int = field(default=0, compare=False, init=False)
 
@@ -41,7 +41,7 @@ class Transition:
 
     @property
     def controllable(self) -> bool:
-        """Skill starts and interrupts are operator commands (SPEC §5), and so are commanded events (SPEC §9)."""
+        """Skill starts and interrupts are operator commands (docs/semantics.md §5), and so are commanded events (docs/semantics.md §9)."""
         return self.kind in CONTROLLABLE_KINDS or self.commanded
 
     @property

@@ -1,4 +1,4 @@
-"""Firing rule, priorities and invariant cascades (SPEC §3, *Priority*).
+"""Firing rule, priorities and invariant cascades (docs/semantics.md §3, *Priority*).
 
 Markings are bit masks (see :mod:`skinet.net.petrinet`).  A marking where an
 invariant transition is enabled is *transient*; :func:`stable_successors`

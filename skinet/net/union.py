@@ -1,4 +1,4 @@
-"""Disjoint union of skillset nets (SPEC §3, *Eventless net*).
+"""Disjoint union of skillset nets (docs/semantics.md §3, *Eventless net*).
 
 Names are prefixed with ``skillset:`` so places and transitions of different
 components never collide; each component keeps its own priority pair.

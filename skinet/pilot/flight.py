@@ -1,4 +1,4 @@
-"""The pilot's drive mode on the core: a mission flown without Zenoh (SPEC §8, *The pilot*).
+"""The pilot's drive mode on the core: a mission flown without Zenoh (docs/semantics.md §8, *The pilot*).
 
 What the pilot service does on the live robot, as one loop over the live nets: plan the
 current goal from the marking (reusing the plan while ``plan.action`` answers there),

@@ -1,7 +1,7 @@
 """Pilot runs: a mission handed to the pilot, and the skill outcomes a simulated robot gives it.
 
 A *pilot run* file (issue 24, the demo's third run) names a system, a goals file
-(:mod:`skinet.plan.goalfile`) and the mode the pilot follows it in (SPEC §8,
+(:mod:`skinet.plan.goalfile`) and the mode the pilot follows it in (docs/semantics.md §8,
 *The pilot*), and declares the failures the simulated skills inject on the way::
 
     [pilot]

@@ -1,4 +1,4 @@
-"""Goals and safe plans (SPEC §8): from a marking, the commands that reach a goal and never
+"""Goals and safe plans (docs/semantics.md §8): from a marking, the commands that reach a goal and never
 let any property be violated, whatever the skills' outcomes.
 
 Modules, in the order a question flows through them:
@@ -32,7 +32,7 @@ goal-independent structures are built once per start marking and kept)::
 
 ``plan.action(m)`` answers for any marking ``m`` of the plan's winning region,
 so the pilot reuses one plan while the live marking stays inside (an outcome
-that came before a command took effect leaves it in Safe, SPEC §8, *Races*;
+that came before a command took effect leaves it in Safe, docs/semantics.md §8, *Races*;
 if it is still covered, the plan goes on); ``None`` means the marking left
 the region (an event, the operator's own command, a model divergence): plan
 again from there.  ``Reached()`` means a ``reach`` goal holds; a ``run`` goal is

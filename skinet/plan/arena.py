@@ -1,13 +1,13 @@
-"""The arena of the planning game (SPEC §8, *The game*), shared by both solvers.
+"""The arena of the planning game (docs/semantics.md §8, *The game*), shared by both solvers.
 
 The game is played on the stable-marking graph of the eventless union, which
-is the asynchronous product of the components' graphs (SPEC §6.4).  So the
+is the asynchronous product of the components' graphs (docs/semantics.md §6.4).  So the
 arena is kept per component, as a :class:`LocalGame`: the component's stable
 markings reachable from its live marking (:mod:`skinet.verify.component`;
 invariant cascades and priorities are inside its steps) and, at each one,
 its *commands* (``k.start``, ``k.interrupt``, and the events a binding commands,
 docs/planning.md) and *outcomes* (``k.success.m``, ``k.failure.m``, and the other
-events when they count as uncontrollable, SPEC §6.3),
+events when they count as uncontrollable, docs/semantics.md §6.3),
 each with every stable marking it may lead to.  Variants of one logical
 transition are one move: the controller sends ``k.start``, not a variant, so
 ``Post(m, k.start)`` is the union of its variants' results.
@@ -15,7 +15,7 @@ transition are one move: the controller sends ``k.start``, not a variant, so
 A product marking is a tuple of local state indices, one per component;
 ``Post(m, c)`` of a command of component ``i`` changes index ``i`` only, and
 waiting may bring any enabled outcome of any component.  ``Safe`` (the
-markings forced for no property, SPEC §6.3) is kept as boxes over the local
+markings forced for no property, docs/semantics.md §6.3) is kept as boxes over the local
 states (:func:`skinet.verify.forced.forced_boxes`), which each solver turns
 into its own set.  Cost: one breadth-first search per component (memoised per
 net and marking), then the forced boxes; nothing here grows with the product.
@@ -75,8 +75,8 @@ def local_game(component: Component, marking: int, events: bool = False) -> Loca
     """The local game of ``component`` from its ``marking`` (memoised on the net).
 
     With ``events``, the graph is the full net's and events are outcomes; otherwise it is
-    the eventless net's (SPEC §8: the eventless union).  Either way the commanded events
-    (SPEC §9) are in it as commands: they happen only when someone commands them, and the
+    the eventless net's (docs/semantics.md §8: the eventless union).  Either way the commanded events
+    (docs/semantics.md §9) are in it as commands: they happen only when someone commands them, and the
     pilot does so through the binding (docs/planning.md).
     """
     net = component.net if events else component.commanding
@@ -140,7 +140,7 @@ class Arena:
 
     @property
     def box(self) -> int:
-        """Markings of the product (all reachable from the root: SPEC §6.4)."""
+        """Markings of the product (all reachable from the root: docs/semantics.md §6.4)."""
         n = 1
         for s in self.shape:
             n *= s
@@ -180,7 +180,7 @@ class Arena:
     def enabled(self, goal: Goal, relaxed: bool = False) -> list[np.ndarray]:
         """Per component, per command name (``command_names``): whether the goal lets the plan send it.
 
-        A start needs the skill's inputs (SPEC §8, *Skill inputs*); ``relaxed`` lifts that.
+        A start needs the skill's inputs (docs/semantics.md §8, *Skill inputs*); ``relaxed`` lifts that.
         """
         out = []
         for g, c in zip(self.games, self.system.components):

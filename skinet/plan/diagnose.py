@@ -1,4 +1,4 @@
-"""Why there is no plan (SPEC §8: the reasons of a ``none`` answer).
+"""Why there is no plan (docs/semantics.md §8: the reasons of a ``none`` answer).
 
 Asked only after a complete search found the start marking outside ``W_c``.
 The reasons, first that applies:
@@ -9,7 +9,7 @@ The reasons, first that applies:
    (violated at once, or by skill outcomes alone), named with an example;
 3. a skill the plan needs has inputs the goal does not give: with every start
    allowed, a plan exists, and its policy starts that skill;
-4. every way to the goal crosses a forced marking (SPEC §6.3): no safe way
+4. every way to the goal crosses a forced marking (docs/semantics.md §6.3): no safe way
    exists (the weak fixpoint ``E`` misses the start); the shortest way over all
    moves is shown up to its first move into a marking forced for a property;
 5. outcomes can lead away from the goal for good (the start is in ``E`` but not

@@ -1,4 +1,4 @@
-"""The planning game on the explored graph, as boolean arrays (SPEC §8; the explicit solver).
+"""The planning game on the explored graph, as boolean arrays (docs/semantics.md §8; the explicit solver).
 
 The product is explored breadth-first from the live marking within the
 budget and the memory limit (:func:`skinet.verify.explore.explore_graphs`).
@@ -82,7 +82,7 @@ class ExplicitSpace:
         self.safe = self.stored.copy()
         for f in forced.values():
             self.safe &= ~f
-        # A command is admissible when every result is safe (SPEC §8, *Safe region*).
+        # A command is admissible when every result is safe (docs/semantics.md §8, *Safe region*).
         unsafe_edge = ~self.safe[self.commands.dst]
         self.admissible = np.bincount(self.commands.row[unsafe_edge], minlength=self.commands.src.size) == 0
 

@@ -1,7 +1,7 @@
-"""The goal language (SPEC §8, *Goals*): ``reach FORMULA`` and ``run SKILLSET:SKILL[.success.MODE]``.
+"""The goal language (docs/semantics.md §8, *Goals*): ``reach FORMULA`` and ``run SKILLSET:SKILL[.success.MODE]``.
 
 ``reach FORMULA`` asks for a marking of Safe where FORMULA holds; FORMULA is a
-state formula of the property language (SPEC §4: atoms, ``not``, ``and``,
+state formula of the property language (docs/semantics.md §4: atoms, ``not``, ``and``,
 ``or``, ``=>``; no temporal operator).  ``run SKILLSET:SKILL`` asks that the
 skill be started and end in a success mode (any, or the one named with
 ``.success.MODE``): the goal is reached by that outcome itself; should the

@@ -1,4 +1,4 @@
-"""Goal files: a mission as an ordered list of goals, in TOML (SPEC §8, *Goals*)::
+"""Goal files: a mission as an ordered list of goals, in TOML (docs/semantics.md §8, *Goals*)::
 
     # Ready the arm, then walk to a waypoint.
     [[goals]]

@@ -1,4 +1,4 @@
-"""Skill inputs of a goal (SPEC §8, *Skill inputs*): which skill gets which values, checked.
+"""Skill inputs of a goal (docs/semantics.md §8, *Skill inputs*): which skill gets which values, checked.
 
 A start needs values for the skill's ``input`` fields; a goal gives them per
 skill, and a plan starts a skill only when the goal gives all of its inputs.

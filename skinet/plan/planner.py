@@ -1,4 +1,4 @@
-"""The planner: a goal, or a mission goal after goal, from a marking (SPEC §8).
+"""The planner: a goal, or a mission goal after goal, from a marking (docs/semantics.md §8).
 
 :class:`Planner` builds what does not depend on the goal once per start
 marking and keeps it (the arena, the explored graph or its BDDs), so that the
@@ -183,7 +183,7 @@ class Planner:
     def admissible(self, marking: Mapping[str, int]) -> list[tuple[str, str]]:
         """The commands at ``marking`` after which every result is in Safe, ``(skillset, transition)``
         in the fixed order: those the ``strict`` check allows wherever no property is violated
-        (SPEC §8; where one is, the check judges only the others, SPEC §5: tests/plan/test_answers.py)."""
+        (docs/semantics.md §8; where one is, the check judges only the others, docs/semantics.md §5: tests/plan/test_answers.py)."""
         arena = self.arena(marking)
         local = arena.root
         out = []

@@ -1,4 +1,4 @@
-"""A plan: its answer, its policy by descent in the layers, and its steps (SPEC §8, *Plans*).
+"""A plan: its answer, its policy by descent in the layers, and its steps (docs/semantics.md §8, *Plans*).
 
 At a marking of rank ``k > 0`` the policy takes the first action, in the fixed
 order of :meth:`skinet.plan.arena.Arena.actions` (starts by component and net

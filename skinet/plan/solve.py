@@ -1,4 +1,4 @@
-"""Strong, strong cyclic and weak plans as fixpoints over a game (SPEC §8, *Plans*).
+"""Strong, strong cyclic and weak plans as fixpoints over a game (docs/semantics.md §8, *Plans*).
 
 With ``T`` the target, ``A(m)`` the admissible commands at ``m`` (those whose
 every result lies in Safe, and whose skill inputs the goal gives) plus

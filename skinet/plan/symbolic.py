@@ -1,4 +1,4 @@
-"""The planning game over the whole product, as BDDs (SPEC §8; the symbolic solver).
+"""The planning game over the whole product, as BDDs (docs/semantics.md §8; the symbolic solver).
 
 Encoded as :mod:`skinet.verify.symbolic` encodes the stable graph: each
 component's local state index in binary variables ``x_i``, primed copies
@@ -9,7 +9,7 @@ position of its name in the component's ``command_names``).  Per component:
 * ``O_i^o(x_i, y_i)``: outcome ``o`` at ``x_i`` may lead to ``y_i`` (one per name,
   so that a ``run`` goal can set its target outcomes apart).
 
-The union is an asynchronous product (SPEC §6.4): a move changes one
+The union is an asynchronous product (docs/semantics.md §6.4): a move changes one
 component, so every pre-image is taken per component and no frame condition
 is built.  With ``X'_i`` the set ``X`` with ``x_i`` renamed to ``y_i``::
 
@@ -97,7 +97,7 @@ class SymbolicSpace:
         for f in self.forced.values():
             forced_any |= f
         self.safe = self.universe & ~forced_any
-        # Adm_i: command a_i at x is admissible, every result safe (SPEC §8, *Safe region*).
+        # Adm_i: command a_i at x is admissible, every result safe (docs/semantics.md §8, *Safe region*).
         self.admissible = [en & ~self._and_exists(c, ~self.prime(self.safe, i), self.y_sets[i])
                            for i, (c, en) in enumerate(zip(self.commands, self.enabled))]
 

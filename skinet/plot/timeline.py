@@ -30,7 +30,7 @@ from skinet.wire.messages import CanonicalEvent, LiveState, ModelBundle, UnsafeR
 SKILLSET_COLOURS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#9467bd", "#8c564b", "#e377c2", "#17becf", "#bcbd22")
 STATE_FILLS = ("#eef3fa", "#fdf0e1", "#eaf6ea", "#f6ecf7", "#f5efe9", "#eef7f8")
 HOLDS, VIOLATED, FLAGGED = "#dff0d8", "#d62728", "#e8a0a0"
-# How a lane is hatched while one of its commands is flagged, per constraint kind (SPEC §5), least severe first.
+# How a lane is hatched while one of its commands is flagged, per constraint kind (docs/semantics.md §5), least severe first.
 FLAG_STYLES = {
     "unknown": ("#aaaaaa", "...."),
     "forced": ("#ff7f0e", "\\\\\\\\"),
@@ -313,7 +313,7 @@ def _legend(lanes: Lanes, colour: dict[str, str]) -> list:
 
 
 def _kind(transition: str | None) -> str:
-    """Marker kind of a logical transition name (SPEC §3 naming)."""
+    """Marker kind of a logical transition name (docs/semantics.md §3 naming)."""
     if transition is None:
         return "status"
     parts = transition.split(".")

@@ -1,4 +1,4 @@
-"""Evaluation of state formulas on combined markings (SPEC §4, ``safe(phi, m)``)."""
+"""Evaluation of state formulas on combined markings (docs/semantics.md §4, ``safe(phi, m)``)."""
 
 from __future__ import annotations
 

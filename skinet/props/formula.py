@@ -1,4 +1,4 @@
-"""Property and CTL formula objects (SPEC §4, §6).
+"""Property and CTL formula objects (docs/semantics.md §4, §6).
 
 Boolean structure reuses :mod:`skinet.lang.expr`; atoms are resolved to one
 place of one skillset net.

@@ -1,4 +1,4 @@
-"""Parser for safety properties and CTL formulas (SPEC §4, §6).
+"""Parser for safety properties and CTL formulas (docs/semantics.md §4, §6).
 
 Atoms ``skillset:NAME``, ``skillset:resource.state``, ``skillset:i_skill`` and
 ``skillset:e_skill`` are resolved against the system's skillsets; an unknown or
@@ -158,5 +158,5 @@ def parse_properties(text: str, skillsets: Mapping[str, Skillset], source: str =
 
 
 def parse_formula(text: str, skillsets: Mapping[str, Skillset], source: str = "<formula>"):
-    """Parse one CTL formula (SPEC §6): boolean operators, EX AX EF AF EG AG, E[U], A[U]."""
+    """Parse one CTL formula (docs/semantics.md §6): boolean operators, EX AX EF AF EG AG, E[U], A[U]."""
     return _parse(text.strip(), "expr", skillsets, source)

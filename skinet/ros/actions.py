@@ -1,9 +1,9 @@
-"""Requests and replies of the ROS 2 action and lifecycle protocols, in CDR (SPEC §9).
+"""Requests and replies of the ROS 2 action and lifecycle protocols, in CDR (docs/semantics.md §9).
 
 What a client puts on the wire to act through a binding, and reads back:
 
 - :func:`send_goal_request`: ``<action>/_action/send_goal`` with a goal id and the goal's
-  fields (the plan's inputs, SPEC §8: ``SKILL.start``); :func:`send_goal_reply` reads
+  fields (the plan's inputs, docs/semantics.md §8: ``SKILL.start``); :func:`send_goal_reply` reads
   the answer (accepted, stamp);
 - :func:`cancel_goal_request`: ``<action>/_action/cancel_goal`` for one goal id
   (``SKILL.interrupt``); :func:`cancel_goal_reply` reads the return code and the goals
@@ -156,7 +156,7 @@ def change_state_reply(store: Typestore, payload: bytes) -> bool:
 
 def followed_goal(goals: Sequence[Goal]) -> Goal | None:
     """The active goal (ACCEPTED, EXECUTING, CANCELING) with the earliest stamp: the one the bridge takes
-    for the skill's run (a later concurrent goal is a drift, SPEC §9); ``None`` when none is active.
+    for the skill's run (a later concurrent goal is a drift, docs/semantics.md §9); ``None`` when none is active.
 
     Examples:
         >>> followed_goal([Goal(b"a" * 16, 2.0, 2), Goal(b"b" * 16, 1.0, 4), Goal(b"c" * 16, 3.0, 1)]).id[:1]

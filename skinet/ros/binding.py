@@ -1,4 +1,4 @@
-"""Binding files: a skillset's skills, resources and events on plain ROS 2 interfaces (SPEC §9).
+"""Binding files: a skillset's skills, resources and events on plain ROS 2 interfaces (docs/semantics.md §9).
 
 A binding (TOML, named by ``binding = "..."`` in a system file's ``[[skillsets]]``
 entry) lets the bridge play the part of a skillset manager::
@@ -37,7 +37,7 @@ the binding's definitions) and every condition (:mod:`skinet.ros.condition`), an
 reports each error at the file, line and column of the key or value.  A skill
 without a binding is a warning: the bridge never sees it run.
 
-Acting (SPEC §9, *Acting*): the pilot's ``k.start`` sends a goal of ``k``'s action
+Acting (docs/semantics.md §9, *Acting*): the pilot's ``k.start`` sends a goal of ``k``'s action
 (:meth:`SkillBinding.goal_fields`): the fixed fields of ``goal``, then each input
 of the skill at its goal field (``inputs``: input -> field path, dotted for a
 nested field such as ``pose.pose.position.x``; an input named like a top-level
@@ -46,8 +46,8 @@ every path must name one, and ``goal`` must type-check against the goal message.
 
 A bound resource's change is an event of the skillset (the model's event that
 explains it), uncontrollable unless the binding says the resource is
-``commanded`` (SPEC §9): then every event of the model that changes it is
-controllable (:attr:`Binding.commanded`, :func:`commanded_events`; SPEC §5, §6.3,
+``commanded`` (docs/semantics.md §9): then every event of the model that changes it is
+controllable (:attr:`Binding.commanded`, :func:`commanded_events`; docs/semantics.md §5, §6.3,
 §8: it never counts as an uncontrollable step, whatever ``events_uncontrollable``
 says).  An event bound to a topic condition is the robot's own, so it cannot change
 a commanded resource.

@@ -1,4 +1,4 @@
-"""Model-level transitions from plain ROS 2 interfaces through a binding (SPEC §9).
+"""Model-level transitions from plain ROS 2 interfaces through a binding (docs/semantics.md §9).
 
 The bridge plays the skillset manager of a bound skillset: :class:`BoundDeriver`
 holds the skillset's net marking, as a manager holds its state, and turns each
@@ -23,7 +23,7 @@ and leading to the observed state); a start by ``k.start`` when it is enabled.
 start, a second concurrent goal, a resource state no event of the model reaches
 from here, a topic value that matches no state, an event whose guard is false) is
 reported with the message that showed it and what the model expected; the
-observed marking is then adopted, as the monitor does (SPEC §7).  An event that
+observed marking is then adopted, as the monitor does (docs/semantics.md §7).  An event that
 carries a drift says so (:attr:`~skinet.ros.derive.Derived.divergence`); a drift
 that changes nothing in the marking (a second goal, a value matching no state, an
 event whose guard is false) comes without an event (the bridge publishes it as a
@@ -96,7 +96,7 @@ def goals_from_plain(msg: Mapping[str, Any]) -> list[Goal]:
 
 @dataclass(frozen=True)
 class Drift:
-    """A model divergence found by a binding (SPEC §9): what showed it, what was seen, what the model expected."""
+    """A model divergence found by a binding (docs/semantics.md §9): what showed it, what was seen, what the model expected."""
 
     stamp: float
     skillset: str

@@ -1,4 +1,4 @@
-"""Conditions on the fields of a ROS 2 message, as a binding writes them (SPEC §9).
+"""Conditions on the fields of a ROS 2 message, as a binding writes them (docs/semantics.md §9).
 
 ``percentage < 0.2``, ``error_code == FAILED_TO_CHARGE``,
 ``power_supply_status != POWER_SUPPLY_STATUS_CHARGING and present``: comparisons

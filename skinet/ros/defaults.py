@@ -1,4 +1,4 @@
-"""Default values of message fields, which ``rosbags`` reads and drops (SPEC §9).
+"""Default values of message fields, which ``rosbags`` reads and drops (docs/semantics.md §9).
 
 A ``.msg`` field may carry a default (``float32 max_undocking_time 30.0``); ``rosidl``
 gives it to every new message, and a goal the pilot sends through a binding must

@@ -1,4 +1,4 @@
-"""ROS 2 message, service and action types from their definitions (SPEC §9).
+"""ROS 2 message, service and action types from their definitions (docs/semantics.md §9).
 
 ``rosbags`` ships the standard *messages* of each distribution (``action_msgs``,
 ``lifecycle_msgs``, ``sensor_msgs``, ``geometry_msgs``, ...) but no service and no

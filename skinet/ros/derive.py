@@ -1,4 +1,4 @@
-"""Model-level transitions from what a skillset manager publishes (SPEC §1 bridge_ros2).
+"""Model-level transitions from what a skillset manager publishes (docs/semantics.md §1 bridge_ros2).
 
 The manager (corpus README) publishes its ``SkillsetStatus`` after every change,
 answers terminations, interrupts, invariant failures and rejected starts on
@@ -9,7 +9,7 @@ received since the previous status to name the transitions:
 - skill READY -> RUNNING (or a new id): ``k.start``;
 - RUNNING/INTERRUPTING -> READY with its response: ``k.success.m``,
   ``k.failure.m``, ``k.interrupt``; an ``INVARIANT_FAILURE`` response is the
-  invariant cascade of another transition (the net fires it by priority, SPEC §3);
+  invariant cascade of another transition (the net fires it by priority, docs/semantics.md §3);
 - a ``SUCCESS`` event response: the event named by the matching ``EventRequest``;
   internal events (response id equal to the status ``info``) and requests not seen
   are named from the model when exactly one event explains the change;
@@ -107,7 +107,7 @@ class Derived:
     status: SkillsetStatus | None
     stamp: float
     info: str = ""
-    divergence: str = ""  # a model divergence found while deriving it, with the message that showed it (SPEC §9)
+    divergence: str = ""  # a model divergence found while deriving it, with the message that showed it (docs/semantics.md §9)
     missed: tuple[str, ...] = ()  # skills this status shows ended without their response (missed outcomes)
 
 

@@ -1,4 +1,4 @@
-"""What an operator GUI puts on a skillset manager's request topics, in CDR (corpus README; SPEC §8).
+"""What an operator GUI puts on a skillset manager's request topics, in CDR (corpus README; docs/semantics.md §8).
 
 A generated manager takes, on topics relative to its node (:func:`skinet.ros.keys.manager_topics`):
 

@@ -1,4 +1,4 @@
-"""Following the live robot on its nets (SPEC §1 monitor, §7 model divergence).
+"""Following the live robot on its nets (docs/semantics.md §1 monitor, §7 model divergence).
 
 Canonical events name a model-level transition of one skillset and may carry
 the status observed after it.  The live marking advances by that transition

@@ -13,7 +13,7 @@ skillset, the ROS 2 node of its manager; paths are relative to the file::
     model = "spot.rl"
     manager = "/spot/spot_skillset_manager"
 
-A skillset without a manager may name a *binding* instead (SPEC §9), a TOML file
+A skillset without a manager may name a *binding* instead (docs/semantics.md §9), a TOML file
 mapping its skills, resources and events to plain ROS 2 action servers,
 lifecycle nodes and topics: ``binding = "nav2.binding.toml"`` (read by
 :func:`load_bindings`).
@@ -162,7 +162,7 @@ def load_system(path: str | Path) -> tuple[System, list[Diagnostic]]:
         for ss in _entry_skillsets(entry, n, model, where):
             skillsets.append((ss, str(entry.get("manager", "")), binding))
             sources[Path(ss.source).name] = texts[ss.source]
-            if binding:  # its commanded resources make events controllable (SPEC §9); load_bindings checks the rest
+            if binding:  # its commanded resources make events controllable (docs/semantics.md §9); load_bindings checks the rest
                 binding_text = read_source(Path(binding))
                 commanded[ss.name] = commanded_events(binding_text, binding, ss)
                 commandable[ss.name] = lifecycle_events(binding_text, binding, ss)
@@ -224,7 +224,7 @@ def _entry_skillsets(entry: dict[str, object], n: int, model: Model, where: str)
 
 
 def load_goals(path: str | Path, system: System, types: Mapping[str, str] | None = None) -> list[Goal]:
-    """A goals file (a mission, SPEC §8): see :mod:`skinet.plan.goalfile`; ``types``: the system's type map."""
+    """A goals file (a mission, docs/semantics.md §8): see :mod:`skinet.plan.goalfile`; ``types``: the system's type map."""
     from skinet.plan.goalfile import parse_goals
 
     return parse_goals(read_source(path), system, str(path), types)
@@ -244,7 +244,7 @@ def load_typemap(path: str | Path) -> TypeMap:
 
 
 def load_bindings(system: System) -> tuple[dict[str, Binding], list[Diagnostic]]:
-    """The binding of every skillset of ``system`` that names one (SPEC §9), and their warnings.
+    """The binding of every skillset of ``system`` that names one (docs/semantics.md §9), and their warnings.
 
     A binding's ``definitions`` folder (relative to the binding file) holds
     ``<package>/<msg|srv|action>/<Name>.<msg|srv|action>`` files; each is read and
@@ -294,7 +294,7 @@ def parse_size(text: str | int) -> int:
 
 
 def load_memory_limit(path: str | Path) -> int | None:
-    """``[system] memory_limit`` of a system file (bytes; ``None`` when absent), SPEC §6.1."""
+    """``[system] memory_limit`` of a system file (bytes; ``None`` when absent), docs/semantics.md §6.1."""
     path = Path(path)
     text = read_source(path)
     data = parse_toml(text, str(path))

@@ -31,8 +31,8 @@ class Component:
     net: PetriNet
     eventless: PetriNet
     manager: str = ""  # ROS 2 node of the skillset manager, e.g. /spot/spot_skillset_manager
-    binding: str = ""  # binding file (SPEC §9), when plain ROS 2 interfaces stand for a manager
-    commanded: frozenset[str] = frozenset()  # events its binding says are commanded (controllable, SPEC §9)
+    binding: str = ""  # binding file (docs/semantics.md §9), when plain ROS 2 interfaces stand for a manager
+    commanded: frozenset[str] = frozenset()  # events its binding says are commanded (controllable, docs/semantics.md §9)
     commandable: frozenset[str] = frozenset()  # events that change a lifecycle node's resource (could be commanded)
 
     @property
@@ -41,7 +41,7 @@ class Component:
 
     @cached_property
     def uncommanded(self) -> PetriNet:
-        """The full net without its commanded events: what may happen with no command (SPEC §8, §9)."""
+        """The full net without its commanded events: what may happen with no command (docs/semantics.md §8, §9)."""
         return build_net(self.skillset, without=self.commanded) if self.commanded else self.net
 
     @cached_property
@@ -94,7 +94,7 @@ def build_system(
 ) -> System:
     """Assemble a system from parsed skillsets (each with its manager node, and its binding file
     if it has one) and properties text; ``commanded``: per skillset, the events its binding says
-    are commanded (controllable, SPEC §9); ``commandable``: per skillset, the events that change a resource bound
+    are commanded (controllable, docs/semantics.md §9); ``commandable``: per skillset, the events that change a resource bound
     to a lifecycle node (a plan's ``none`` names those it would need commanded, docs/planning.md)."""
     seen: set[str] = set()
     components = []
@@ -113,7 +113,7 @@ def build_system(
 def marking_problems(system: System, marking: Mapping[str, int]) -> list[str]:
     """Why ``marking`` cannot be a state of the live system; empty when it can.
 
-    Two reasons (SPEC §3): a component marking is *transient* (an invariant is
+    Two reasons (docs/semantics.md §3): a component marking is *transient* (an invariant is
     violated, and the manager never publishes such a state), or no sequence of
     transitions, events included, reaches it from the initial marking.
     Components share no place, so a combined marking is reachable exactly when

@@ -1,4 +1,4 @@
-"""Prediction options of a system: which AF, forced constraints, events (SPEC §5, §6.2, §6.3).
+"""Prediction options of a system: which AF, forced constraints, events (docs/semantics.md §5, §6.2, §6.3).
 
 Set in the system file's ``[prediction]`` table, for every property, and in
 ``[prediction.properties.NAME]`` for one property; the command line can
@@ -6,7 +6,7 @@ override them for all properties::
 
     [prediction]
     af = "fair"                      # or "literal" (the paper's AF, no fairness)
-    forced = true                    # warn about forced constraints (SPEC §6.3)
+    forced = true                    # warn about forced constraints (docs/semantics.md §6.3)
     events_uncontrollable = false    # count events as uncontrollable steps too
 
     [prediction.properties.action_guard]

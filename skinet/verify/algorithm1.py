@@ -1,4 +1,4 @@
-"""Algorithm 1 with implicit and forced constraints (SPEC §5; seed paper, Algorithm 1).
+"""Algorithm 1 with implicit and forced constraints (docs/semantics.md §5; seed paper, Algorithm 1).
 
 For each skillset, each transition firable at the live marking is fired (with
 its invariant cascade); a property it violates at once is an *explicit*
@@ -81,7 +81,7 @@ class Analysis:
     recovery: dict[str, list[Recovery]] = field(default_factory=dict)  # per violated property
 
     def operator_unsafe(self) -> list[UnsafeTransition]:
-        """Unsafe transitions for properties that hold now (the operator view, SPEC §5)."""
+        """Unsafe transitions for properties that hold now (the operator view, docs/semantics.md §5)."""
         return [u for u in self.unsafe if u.property not in self.violated]
 
 

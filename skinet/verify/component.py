@@ -1,7 +1,7 @@
-"""Stable-marking graph of one skillset's eventless net (SPEC §3, §6).
+"""Stable-marking graph of one skillset's eventless net (docs/semantics.md §3, §6).
 
 The eventless union net is the asynchronous product of its components
-(SPEC §6), so prediction explores each component alone, here, and combines
+(docs/semantics.md §6), so prediction explores each component alone, here, and combines
 them in :mod:`skinet.verify.explore`.  States are stable markings; an edge
 ``a -> b`` means one step (a non-invariant transition and its invariant
 cascade) leads from ``a`` to ``b``.  Complexity: O(S x T) firings for S

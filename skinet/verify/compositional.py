@@ -1,4 +1,4 @@
-"""Literal and fair AF at single markings of systems too large to explore (SPEC §6.2, §6.4).
+"""Literal and fair AF at single markings of systems too large to explore (docs/semantics.md §6.2, §6.4).
 
 ``AF not phi`` fails at ``m`` exactly when some path from ``m`` stays in
 ``phi`` forever (``EG phi``; fair: a path on which every skill is idle

@@ -1,4 +1,4 @@
-"""CTL model checking on an explored state space, three-valued (SPEC §6).
+"""CTL model checking on an explored state space, three-valued (docs/semantics.md §6).
 
 Every formula evaluates to a pair of boolean arrays over the index space,
 ``(lower, upper)``: ``lower`` is where it provably holds, ``upper`` where it
@@ -11,7 +11,7 @@ themselves, so ``AF f`` holds at a deadlock only if ``f`` does.
 Fixpoints use the linear-time counting algorithms of Clarke, Emerson and
 Sistla (1986) on predecessors generated from the product structure; ``AF`` and
 ``AU`` also return each marking's rank, the bound on steps to ``f``.  ``AF g``
-(mu1, SPEC §6.2) is computed as ``not EG not g`` where that side is cheaper: on
+(mu1, docs/semantics.md §6.2) is computed as ``not EG not g`` where that side is cheaper: on
 the box, "has a successor in Z" is one vectorised pass over slices of the box
 per component edge, with no index arithmetic at all.  Cost:
 linear in the stored markings and edges; memory: a few bytes per index (one

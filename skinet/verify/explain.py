@@ -1,4 +1,4 @@
-"""Operator wording of constraints: why a command is unsafe, in a sentence (SPEC §5).
+"""Operator wording of constraints: why a command is unsafe, in a sentence (docs/semantics.md §5).
 
 ``go_to_waypoint.start: forced for safety_guard — arm_ready may succeed
 (1 step) and leave manipulator arm_status at RD while spot go_to_waypoint

@@ -1,9 +1,9 @@
-"""Breadth-first exploration of the eventless union net (SPEC §6.1, §6.4).
+"""Breadth-first exploration of the eventless union net (docs/semantics.md §6.1, §6.4).
 
 The union's stable-marking graph is the asynchronous product of its
 components' graphs (:mod:`skinet.verify.component`).  A global marking is a
 mixed-radix *code* over the product box ``n_1 x ... x n_k`` (``n_i`` stable
-markings of component ``i``).  Breadth-first depth needs no search (SPEC
+markings of component ``i``).  Breadth-first depth needs no search (docs/semantics.md
 §6.4): from the live marking it is the sum of the components' depths, and an
 event seed moves one component only, so with seeds
 
@@ -17,7 +17,7 @@ limit and the time budget is chosen *before* anything is allocated; the stored
 markings (depth <= expanded depth + 1) are then enumerated in code order with
 pruning, chunk by chunk, checking the deadline per chunk.
 
-Storage follows what is stored (SPEC §6.1): the *index space* of every array
+Storage follows what is stored (docs/semantics.md §6.1): the *index space* of every array
 over markings is either the box itself (``codes is None``: index = code, a
 byte per box element per boolean array; chosen when the stored markings fill
 most of the box) or the positions in the sorted array ``codes`` of stored

@@ -1,4 +1,4 @@
-"""Fair AF: inevitability over the paths on which every running skill ends (SPEC §6.2).
+"""Fair AF: inevitability over the paths on which every running skill ends (docs/semantics.md §6.2).
 
 Literal ``AF g`` also counts the paths on which one skill runs forever while
 another component cycles; in a product of components it almost never holds
@@ -42,7 +42,7 @@ from skinet.verify.scc import strong_components
 
 
 def idle_atoms(graphs: Sequence[ComponentGraph], system: System) -> list[PlaceAtom]:
-    """The fairness constraints (SPEC §6.2): one per skill of the components, its idle place marked."""
+    """The fairness constraints (docs/semantics.md §6.2): one per skill of the components, its idle place marked."""
     return [PlaceAtom(g.name, idle_place(k.name)) for g in graphs for k in system.component(g.name).skillset.skills]
 
 

@@ -1,4 +1,4 @@
-"""Forced violations: uncontrollable reachability, computed compositionally (SPEC §6.3).
+"""Forced violations: uncontrollable reachability, computed compositionally (docs/semantics.md §6.3).
 
 A step is *uncontrollable* when its transition is a skill outcome
 (``k.success.m``, ``k.failure.m``; invariant failures happen inside cascades)
@@ -51,7 +51,7 @@ CACHE_SIZE = 4096  # component markings remembered per net
 
 
 def uncontrollable_kinds(events: bool) -> frozenset[str]:
-    """Transition kinds that make an uncontrollable step (SPEC §6.3)."""
+    """Transition kinds that make an uncontrollable step (docs/semantics.md §6.3)."""
     return OUTCOMES | {"event"} if events else OUTCOMES
 
 
@@ -224,7 +224,7 @@ def oracle(system: System, events: bool = False) -> ForcedOracle:
 
 
 def forced(system: System, marking: Mapping[str, int], prop: Property, events: bool = False) -> ForcedVerdict | None:
-    """forced(``prop``) at ``marking`` with its steps and witness, or None (SPEC §6.3)."""
+    """forced(``prop``) at ``marking`` with its steps and witness, or None (docs/semantics.md §6.3)."""
     return oracle(system, events).verdict(prop, marking)
 
 

@@ -1,4 +1,4 @@
-"""mu1 = Sat(AF not phi) per property, with steps and witnesses (SPEC §6.2).
+"""mu1 = Sat(AF not phi) per property, with steps and witnesses (docs/semantics.md §6.2).
 
 A marking in mu1 inevitably violates phi.  Each property is predicted with
 *fair* AF (:mod:`skinet.verify.fair`: only paths on which running skills end
@@ -53,7 +53,7 @@ class PropertyRisk:
     af: str  # "fair" or "literal"
     fair: Result | None = None  # fair AF not phi, rank = fewest steps
     literal: Result | None = None  # literal AF not phi, rank = bound on steps
-    forced: np.ndarray | None = None  # forced(phi) (SPEC §6.3)
+    forced: np.ndarray | None = None  # forced(phi) (docs/semantics.md §6.3)
 
     @property
     def mu1(self) -> Result:
@@ -107,7 +107,7 @@ class Forecast:
     space: StateSpace
     kripke: Kripke
     risks: dict[str, PropertyRisk]
-    # Verdicts for markings the exploration left undecided (SPEC §6.4), when given.
+    # Verdicts for markings the exploration left undecided (docs/semantics.md §6.4), when given.
     fallback: Callable[[str, Mapping[str, int]], PredictionVerdict] | None = None
     symbolic_fair: SymbolicFair | None = None  # fair AF was computed with decision diagrams
 
@@ -185,9 +185,9 @@ def forecast(
     ``options`` (default: the system's) choose fair or literal AF per property;
     ``full`` also computes the other AF and the forced set, for reports.
     ``budget`` (seconds) bounds the whole answer, fixpoints included;
-    ``memory_limit`` (bytes, whole process) bounds what is stored (SPEC §6.1).
+    ``memory_limit`` (bytes, whole process) bounds what is stored (docs/semantics.md §6.1).
     With ``compositional``, markings the exploration leaves undecided are
-    decided by :mod:`skinet.verify.compositional` where it can (SPEC §6.4).
+    decided by :mod:`skinet.verify.compositional` where it can (docs/semantics.md §6.4).
     """
     options = options or system.prediction
     marking = dict(marking or system.initial_marking())

@@ -1,6 +1,6 @@
 """Strongly connected components, without importing scipy for small graphs.
 
-Fair AF (SPEC §6.2) and the compositional abilities (SPEC §6.4) decompose
+Fair AF (docs/semantics.md §6.2) and the compositional abilities (docs/semantics.md §6.4) decompose
 graphs into SCCs.  scipy's ``connected_components`` is fast, but importing
 ``scipy.sparse.csgraph`` costs 0.15-0.3 s, half the start-up of a one-shot
 ``skinet unsafe`` on the paper system (63 markings).  Graphs of at most

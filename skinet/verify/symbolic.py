@@ -1,4 +1,4 @@
-"""Fair AF over the whole product with binary decision diagrams (SPEC §6.2, §6.4).
+"""Fair AF over the whole product with binary decision diagrams (docs/semantics.md §6.2, §6.4).
 
 The explicit fair AF (:mod:`skinet.verify.fair`) decomposes the explored
 graph into strongly connected components and so holds its edge list, about
@@ -10,7 +10,7 @@ stable-marking graph is encoded instead, as a BDD (CUDD, through ``dd.cudd``):
   variables ``x``, primed copies ``y`` for successors, the bits of ``x`` and
   ``y`` interleaved and the components in the system's order;
 * one relation ``T_i(x_i, y_i)`` per component, its steps and self-loops.
-  The union is the asynchronous product of the components (SPEC §6.4), so a
+  The union is the asynchronous product of the components (docs/semantics.md §6.4), so a
   step of the product is one component's step, others standing still: the
   image is partitioned per component and no frame condition is ever built;
 * a global deadlock (every component stuck) loops on itself, as in
@@ -153,7 +153,7 @@ class SymbolicProduct:
         return f
 
     def formula(self, expr: Expr) -> Function:
-        """A state formula (SPEC §4) as the set of product markings where it holds."""
+        """A state formula (docs/semantics.md §4) as the set of product markings where it holds."""
         def atom(a: PlaceAtom) -> Function:
             i = next(j for j, g in enumerate(self.graphs) if g.name == a.skillset)
             bit = self.graphs[i].net.place_index(a.place)
@@ -162,7 +162,7 @@ class SymbolicProduct:
         return evaluate(expr, atom, lambda v: self.bdd.true if v else self.bdd.false)
 
     def skill_fairness(self, system: System) -> list[Function]:
-        """One fairness constraint per skill: its idle place is marked (SPEC §6.2)."""
+        """One fairness constraint per skill: its idle place is marked (docs/semantics.md §6.2)."""
         return [self.formula(a) for a in idle_atoms(self.graphs, system)]
 
     # ------------------------------------------------------------ fixpoints

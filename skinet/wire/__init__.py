@@ -1,1 +1,1 @@
-"""The language-neutral contract between services: keys, messages, codec (SPEC §1)."""
+"""The language-neutral contract between services: keys, messages, codec (docs/semantics.md §1)."""

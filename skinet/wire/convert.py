@@ -1,4 +1,4 @@
-"""Conversions between core objects and wire messages (SPEC §1, §5, §6).
+"""Conversions between core objects and wire messages (docs/semantics.md §1, §5, §6).
 
 The predictor answers with the *risks* of the markings one step away from the
 live marking (what Algorithm 1 needs); :class:`RiskTable` turns them back into
@@ -159,7 +159,7 @@ class RiskTable:
 def analysis_bodies(
     system: System, analysis: Analysis
 ) -> tuple[list[PropertyVerdict], list[UnsafeEntry], list[RecoveryEntry]]:
-    """Algorithm 1's result as message parts: verdicts, operator-view entries, recovery (SPEC §5)."""
+    """Algorithm 1's result as message parts: verdicts, operator-view entries, recovery (docs/semantics.md §5)."""
     props = [PropertyVerdict(name=p.name, holds=p.name not in analysis.violated) for p in system.properties]
     unsafe = [
         UnsafeEntry(skillset=u.skillset, transition=u.transition, kind=u.kind, controllable=u.controllable,
@@ -186,7 +186,7 @@ def missed_line(m: MissedOutcome) -> str:
 
 
 def plan_steps(steps: Iterable[Step]) -> list[PlanStep]:
-    """A plan's steps and branches (:attr:`skinet.plan.Plan.steps`) as wire messages (SPEC §8)."""
+    """A plan's steps and branches (:attr:`skinet.plan.Plan.steps`) as wire messages (docs/semantics.md §8)."""
     return [PlanStep(number=s.number, skillset=s.skillset, action=s.action, expect=s.expect,
                      inputs=dict(s.inputs) if s.inputs else None,
                      branches=[PlanBranch(skillset=b.skillset, transition=b.transition, then=b.then, step=b.step,

@@ -1,4 +1,4 @@
-"""Zenoh key-expression layout, all under ``skinet/<system>/`` (SPEC §1).
+"""Zenoh key-expression layout, all under ``skinet/<system>/`` (docs/semantics.md §1).
 
 ========================================  ==================  ==========================
 key                                       publisher           payload

@@ -1,4 +1,4 @@
-"""Messages exchanged over Zenoh (SPEC §1), as pydantic models.
+"""Messages exchanged over Zenoh (docs/semantics.md §1), as pydantic models.
 
 Every message carries ``v``, the schema version; a receiver rejects other
 versions.  JSON Schemas in ``schemas/`` are generated from these models
@@ -71,7 +71,7 @@ class CanonicalEvent(_Message):
     info: str = Field("", description="free text from the manager (response name, ids)")
     restart: bool = Field(False, description="the skillset's manager restarted: this status starts afresh, "
                                              "and info says why and how its state differs")
-    divergence: str = Field("", description="a model divergence the bridge found (a binding's drift, SPEC §9), "
+    divergence: str = Field("", description="a model divergence the bridge found (a binding's drift, docs/semantics.md §9), "
                                             "with the message that showed it; the monitor reports it even when "
                                             "the status matches its marking")
     missed: list[MissedOutcome] = Field(
@@ -88,7 +88,7 @@ class PropertyVerdict(BaseModel):
 
 
 class SkillsetSync(BaseModel):
-    """How far the monitor vouches for one skillset's marking (SPEC §7, honest live state)."""
+    """How far the monitor vouches for one skillset's marking (docs/semantics.md §7, honest live state)."""
 
     model_config = ConfigDict(extra="forbid", frozen=True)
     state: Literal["live", "syncing", "lost"] = Field(
@@ -125,7 +125,7 @@ class Verdicts(_Message):
 
 
 class UnsafeEntry(BaseModel):
-    """One unsafe transition of Algorithm 1 (SPEC §5), the worst kind over its variants."""
+    """One unsafe transition of Algorithm 1 (docs/semantics.md §5), the worst kind over its variants."""
 
     model_config = ConfigDict(extra="forbid", frozen=True)
     skillset: str
@@ -192,7 +192,7 @@ class ModelBundle(_Message):
     properties_name: str = "properties"
     commanded: dict[str, list[str]] = Field(
         default_factory=dict, description="per skillset, the events its binding says are commanded (controllable, "
-                                          "SPEC §9), sorted; skillsets without any are left out")
+                                          "docs/semantics.md §9), sorted; skillsets without any are left out")
 
 
 class PredictRequest(_Message):
@@ -205,7 +205,7 @@ class PredictRequest(_Message):
     budget: float = Field(1.0, ge=MIN_BUDGET, le=MAX_BUDGET, allow_inf_nan=False,
                           description="exploration time budget, seconds (a number from 0.05 to 86400)")
     af: dict[str, Literal["fair", "literal"]] = Field(
-        default_factory=dict, description="AF per property (SPEC §6.2); properties not listed use fair AF")
+        default_factory=dict, description="AF per property (docs/semantics.md §6.2); properties not listed use fair AF")
 
 
 class Risk(BaseModel):
@@ -215,7 +215,7 @@ class Risk(BaseModel):
     skillsets: dict[str, SkillsetStatus]
     property: str
     status: Literal["dangerous", "undecided"]
-    af: Literal["fair", "literal"] = Field("fair", description="the AF that decided it (SPEC §6.2)")
+    af: Literal["fair", "literal"] = Field("fair", description="the AF that decided it (docs/semantics.md §6.2)")
     steps: int | None = None
     witness: list[str] = Field(default_factory=list)
 
@@ -245,7 +245,7 @@ class CheckRequest(_Message):
 
 
 class CheckReason(BaseModel):
-    """One property the transition puts at risk (an operator-view unsafe entry, SPEC §5)."""
+    """One property the transition puts at risk (an operator-view unsafe entry, docs/semantics.md §5)."""
 
     model_config = ConfigDict(extra="forbid", frozen=True)
     property: str
@@ -258,7 +258,7 @@ class CheckReason(BaseModel):
 
 
 class CheckReply(_Message):
-    """The monitor's answer from its live Algorithm 1 state (SPEC §7)."""
+    """The monitor's answer from its live Algorithm 1 state (docs/semantics.md §7)."""
 
     system: str
     skillset: str
@@ -291,7 +291,7 @@ class HeartbeatSkillset(BaseModel):
 
 
 class Heartbeat(_Message):
-    """A publisher of canonical events is alive (SPEC §7): every ``period`` seconds on
+    """A publisher of canonical events is alive (docs/semantics.md §7): every ``period`` seconds on
     ``skinet/<system>/heartbeat/<source>``."""
 
     system: str
@@ -303,13 +303,13 @@ class Heartbeat(_Message):
     pending: dict[str, str] = Field(
         default_factory=dict, description="skillsets whose last status the publisher knows to be outdated, with "
                                           "why (a restarted manager not heard yet, a link cut, an interface not "
-                                          "read yet or gone): a monitor must not vouch for it (SPEC §7)")
+                                          "read yet or gone): a monitor must not vouch for it (docs/semantics.md §7)")
 
     OMIT_AT_DEFAULT = ("pending",)
 
 
 class Divergence(BaseModel):
-    """One model divergence, manager restart or violation onset the monitor met (SPEC §7), as operator views
+    """One model divergence, manager restart or violation onset the monitor met (docs/semantics.md §7), as operator views
     list it."""
 
     model_config = ConfigDict(extra="forbid", frozen=True)
@@ -329,7 +329,7 @@ class Divergence(BaseModel):
 class Divergences(_Message):
     """The model divergences, manager restarts and violation onsets of the monitor's run so far, the last
     ``MAX_DIVERGENCES``
-    (SPEC §7): published on ``skinet/<system>/divergences`` when the list changes, and answered on ``get``."""
+    (docs/semantics.md §7): published on ``skinet/<system>/divergences`` when the list changes, and answered on ``get``."""
 
     system: str
     monitor: str = Field(description="the monitor's instance id: a new one starts a new list")
@@ -364,7 +364,7 @@ PlanBranch.model_rebuild()
 
 
 class PilotCommand(BaseModel):
-    """A command of the pilot (SPEC §8): ``skillset:transition`` with a start's input values."""
+    """A command of the pilot (docs/semantics.md §8): ``skillset:transition`` with a start's input values."""
 
     skillset: str
     transition: str = Field(description="'SKILL.start' or 'SKILL.interrupt'")
@@ -376,7 +376,7 @@ PILOT_STATES = ("idle", "waiting for monitor", "planning", "guiding", "driving",
 
 
 class PilotGoalRequest(_Message):
-    """Asked on ``skinet/<system>/pilot/goal/<client>`` (SPEC §8, the pilot): set a goal or a mission,
+    """Asked on ``skinet/<system>/pilot/goal/<client>`` (docs/semantics.md §8, the pilot): set a goal or a mission,
     switch mode, cancel, pause or resume.  ``goals`` (goal texts) and ``mission`` (a goals file's TOML
     text) are read as ``skinet plan`` reads them; errors come back with ``mission_name:line:col``."""
 
@@ -417,7 +417,7 @@ class PilotGoalReply(_Message):
 
 
 class PilotStatus(_Message):
-    """The pilot's status (SPEC §8): published on ``skinet/<system>/pilot/status`` at every change, and
+    """The pilot's status (docs/semantics.md §8): published on ``skinet/<system>/pilot/status`` at every change, and
     answered on ``get`` there."""
 
     OMIT_AT_DEFAULT = ("unknown", "notes")

@@ -1,4 +1,4 @@
-"""JSON Schemas of the wire messages, generated from the pydantic models (SPEC §1).
+"""JSON Schemas of the wire messages, generated from the pydantic models (docs/semantics.md §1).
 
 ``python -m skinet.wire.schemas [DIR]`` rewrites ``schemas/*.schema.json`` (default
 ``DIR``: the ``schemas/`` folder of the repository); ``tests/wire/test_schemas.py``

@@ -1,4 +1,4 @@
-"""``skinet conform SYSTEM BAG...``: recorded bags replayed against the model (SPEC §9 *Conformance*).
+"""``skinet conform SYSTEM BAG...``: recorded bags replayed against the model (docs/semantics.md §9 *Conformance*).
 
 Bags are recorded from the simulated Nav2 robot (real CDR, written by rosbags'
 Writer in sqlite3 and in mcap): a clean run gives no divergence and exit 0; a run

@@ -107,13 +107,13 @@ def test_every_help_example_works_as_written(tmp_path: Path) -> None:
                 code = proc.stop()
                 assert code == 0, f"{name} exited {code} on SIGTERM:\n{proc.text}"
                 if name == "skinet watch":  # in a pipe: one line per step, up to the mission's last
-                    # (and one per set of sync states while the monitor waits for the bridge: SPEC §7)
+                    # (and one per set of sync states while the monitor waits for the bridge: docs/semantics.md §7)
                     lines = re.findall(r"^\[(\d+)\] .*$", proc.text, re.M)
                     steps = [int(m) for m in re.findall(r"^\[(\d+)\] ", proc.text, re.M)]
                     live = [int(m) for m in re.findall(r"^\[(\d+)\] (?!.*STATE STALE).*$", proc.text, re.M)]
                     assert lines and steps == sorted(steps) and live == sorted(set(live)), proc.text
                     # The simulator's managers appear with its first steps: when those come before the monitor
-                    # has synced, its resync answer covers them and makes one step of them (SPEC §7).
+                    # has synced, its resync answer covers them and makes one step of them (docs/semantics.md §7).
                     covered = re.findall(r"^\[(\d+)\] \w+:resync#(\d+) ", proc.text, re.M)
                     assert steps[-1] == MISSION_STEPS or (covered and steps[-1] < MISSION_STEPS), proc.text
                     last = [s.transition for s in parse_scenario(MISSION.read_text(), str(MISSION)).steps

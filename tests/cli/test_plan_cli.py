@@ -125,7 +125,7 @@ def test_the_examples_of_plan_help_work(capsys: pytest.CaptureFixture[str], monk
 
 
 def test_the_papers_mission_as_goals_is_planned_whole(capsys: pytest.CaptureFixture[str]) -> None:
-    """skillsets/goals/paper_mission.toml: MISSION.md's protocol (stand up, four traps), every goal planned,
+    """skillsets/goals/paper_mission.toml: docs/mission.md's protocol (stand up, four traps), every goal planned,
     each from where the previous one ends, with the commands of the protocol when outcomes are favourable."""
     data = json.loads(run(capsys, SYSTEM, "--goals", str(ROOT / "skillsets" / "goals" / "paper_mission.toml"),
                           "--json"))

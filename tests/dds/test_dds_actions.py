@@ -1,4 +1,4 @@
-"""Bound skillsets over real DDS and the real zenoh-plugin-ros2dds (slow: cargo build; SPEC §9).
+"""Bound skillsets over real DDS and the real zenoh-plugin-ros2dds (slow: cargo build; docs/semantics.md §9).
 
 A CycloneDDS participant plays the Nav2 example's robot as rmw_cyclonedds lays it out
 (:class:`services.simulator.dds_bound.DdsBoundRobot`: action servers as rq/rr service
@@ -7,7 +7,7 @@ lifecycle node with get_state, change_state and transition_event, the battery to
 ``ros_discovery_info``).  The plugin routes them: action server routes (AS tokens,
 send_goal/cancel_goal/get_result queryables, the status cached for late joiners),
 service routes, topics.  The test's operator sends goals and cancels through the
-plugin, as a remote client would, and so does the pilot's action client (SPEC §9,
+plugin, as a remote client would, and so does the pilot's action client (docs/semantics.md §9,
 *Acting*); the bridge derives the model's transitions.
 """
 
@@ -170,7 +170,7 @@ def test_the_bridge_reads_a_busy_robot_at_start_up(gateway_factory, nav2) -> Non
 
 
 def test_the_pilot_s_goals_and_cancel_requests_cross_the_plugin(gateway_factory, nav2) -> None:
-    """SPEC §9, Acting: the pilot's BoundActuator, a Zenoh client behind the real plugin, sends the undocking and
+    """docs/semantics.md §9, Acting: the pilot's BoundActuator, a Zenoh client behind the real plugin, sends the undocking and
     the docking goals (the binding's goal fields, the input at dock_id) to the DDS action servers, then cancels
     the docking goal it sent; the bridge derives start, success, start, interrupt."""
     system, bindings = nav2

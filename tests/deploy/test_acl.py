@@ -1,4 +1,4 @@
-"""Access control and authentication of ``docker/zenoh/router.json5`` (SPEC §7).
+"""Access control and authentication of ``docker/zenoh/router.json5`` (docs/semantics.md §7).
 
 The router is the Python wheel in router mode with the shipped configuration (only
 the users file path, the listening port and its certificate changed), on a ``tls/``

@@ -1,4 +1,4 @@
-"""The compose stack (SPEC §7): router, bridge, monitor, two predictors, simulator.
+"""The compose stack (docs/semantics.md §7): router, bridge, monitor, two predictors, simulator.
 
 The image is built with ``docker/build.sh --local-base`` (a Debian base made with
 debootstrap, so no registry is needed; Docker's cache makes later runs quick).  The
@@ -424,7 +424,7 @@ def test_router_restart_clients_reconnect(stack: tuple[Stack, str], observer: ze
     the in-process verdicts.
 
     No robot runs across the restart: the bridge cannot tell what its managers did while its
-    link was cut, so the monitor vouches for no skillset (syncing, SPEC §7) until the mission's
+    link was cut, so the monitor vouches for no skillset (syncing, docs/semantics.md §7) until the mission's
     managers answer the bridge; it then publishes its last step again with the new sync state,
     which is no step of the mission (:class:`MissionObserver`'s ``after``)."""
     s = stack[0]
@@ -468,7 +468,7 @@ def test_router_restart_loses_no_event(stack: tuple[Stack, str], observer: zenoh
 
     The restart also cut the stack's bridge from spot's manager: until the manager's
     next status closes that gap the bridge refuses the resync, and the monitor does
-    not vouch for spot (SPEC §7): the host's events wait.  So a robot at rest serves
+    not vouch for spot (docs/semantics.md §7): the host's events wait.  So a robot at rest serves
     the managers (a simulator that plays nothing), frozen (``docker pause``) across
     the restart so that the refusal is seen, then thawed to answer.
     """

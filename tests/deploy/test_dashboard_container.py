@@ -1,6 +1,6 @@
 """The ``dashboard`` service of ``compose.yaml`` (onboard profile): published on the host's
 loopback only, logged in as the read-only ``observer``, showing the containerised monitor
-and asking its command check (SPEC §7).  The image is test_containers' (``$SKINET_TEST_IMAGE``,
+and asking its command check (docs/semantics.md §7).  The image is test_containers' (``$SKINET_TEST_IMAGE``,
 default ``skinet-live:local``, built by ``docker/build.sh --local-base``)."""
 
 from __future__ import annotations
@@ -53,7 +53,7 @@ def test_dashboard_container_shows_the_monitor_and_checks(onboard: tuple[Stack, 
     snap = get(port, "/api/snapshot")
     assert snap["system"] == "spot_arm" and snap["state"]["seq"] == 0
     assert [v["name"] for v in snap["verdicts"]["properties"]] == ["action_guard", "safety_guard"]
-    # Neither bridge nor predictor in this stack: the monitor vouches for nothing (SPEC §7), and says so.
+    # Neither bridge nor predictor in this stack: the monitor vouches for nothing (docs/semantics.md §7), and says so.
     assert {n: s["state"] for n, s in snap["state"]["sync"].items()} == {"spot": "syncing", "manipulator": "syncing"}
     reply = get(port, "/api/check?command=spot:init_power.start")
     assert (reply["ok"], reply["decision"], reply["enabled"], reply["state_stale"]) == (True, "warn", True, True)

@@ -1,4 +1,4 @@
-"""Several robots sharing one off-board predictor pool, in containers (SPEC §7).
+"""Several robots sharing one off-board predictor pool, in containers (docs/semantics.md §7).
 
 Two robots, each a compose project of the ``onboard`` profile (router, bridge,
 monitor) on its own Docker networks, with a system file of its own name; one
@@ -63,7 +63,7 @@ class Robot:
     def connect(self, folder: Path) -> None:
         self.session = self.login(folder, "observer")
         self.bridge = self.login(folder, "bridge")
-        system = self.skills / f"{self.name}.toml"  # the bridge's side, the monitor syncs from (SPEC §7)
+        system = self.skills / f"{self.name}.toml"  # the bridge's side, the monitor syncs from (docs/semantics.md §7)
         self.events = BridgeSide(self.bridge, self.name, model=load_system(system)[0] if system.exists() else None,
                                  wait=False)
         self.tokens = Tokens(self.session)

@@ -1,5 +1,5 @@
 """Several robots and one off-board router with a shared predictor pool, through the
-shipped access control (SPEC §7), without containers: routers are Python sessions.
+shipped access control (docs/semantics.md §7), without containers: routers are Python sessions.
 
 Each robot's router runs ``docker/zenoh/router.json5``; the off-board router runs
 ``docker/zenoh/hub.json5`` and connects to both robots as the user ``hub``;

@@ -1,4 +1,4 @@
-"""The pilot's faces through the shipped ACL router (SPEC §8, issue 24 item 4): ``skinet goal`` and the
+"""The pilot's faces through the shipped ACL router (docs/semantics.md §8, issue 24 item 4): ``skinet goal`` and the
 dashboard's goal box reach the pilot as the ``operator`` login, and say plainly that nobody answered when
 they run as ``observer`` (the router drops the other logins' goal requests without a word).
 

@@ -1,4 +1,4 @@
-"""Operator views through the shipped ACL router (SPEC §7): ``skinet watch``, ``skinet check``
+"""Operator views through the shipped ACL router (docs/semantics.md §7): ``skinet watch``, ``skinet check``
 and the dashboard log in as the read-only ``observer`` (flags or ``SKINET_ZENOH_*``), the
 monitor serves its check and last results under its own role, and a refused login says so.
 

@@ -1,4 +1,4 @@
-"""The pilot's and the operators' rights in ``docker/zenoh/router.json5`` (issue 24 item 2; SPEC §7, §8).
+"""The pilot's and the operators' rights in ``docker/zenoh/router.json5`` (issue 24 item 2; docs/semantics.md §7, §8).
 
 The router is the Python wheel with the shipped configuration on a ``tls/`` endpoint
 (mutual TLS, each user with its own password and certificate, as in ``test_acl.py``);
@@ -228,7 +228,7 @@ def nav2_router() -> Iterator[str]:
 
 @pytest.mark.parametrize("style", [KeyStyle(), KeyStyle(rmw_zenoh=True)], ids=["zenoh-bridge-ros2dds", "rmw_zenoh"])
 def test_the_pilot_login_sends_and_cancels_bound_action_goals(nav2_router: str, style: KeyStyle) -> None:
-    """Skills bound to actions (SPEC §9): the pilot's actuator sends a goal to the robot's action server
+    """Skills bound to actions (docs/semantics.md §9): the pilot's actuator sends a goal to the robot's action server
     and cancels it (after reading the action's last status); the same actuator logged in as the
     operator or the observer gets no answer, so nothing starts or stops."""
     system, _ = load_system(NAV2_FILE)

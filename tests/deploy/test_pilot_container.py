@@ -1,7 +1,7 @@
 """The ``pilot`` service of ``compose.yaml`` (onboard profile; issue 24 items 1 and 2): its own
 container on the robot's network with the ``pilot`` login alone, beside the monitor, the bridge
 and a predictor; a goal from the ``operator`` login through the router is accepted and driven on
-the robot, an observer's is refused (SPEC §7, §8).
+the robot, an observer's is refused (docs/semantics.md §7, §8).
 
 The robot is the simulator's managers on the host, logged in to the stack's router as ``robot``
 with that user's files, as the robot's ROS 2 gateway logs in from outside the compose network

@@ -1,4 +1,4 @@
-"""Per-client rate limits through the shipped router's access control (issue 14; SPEC §7).
+"""Per-client rate limits through the shipped router's access control (issue 14; docs/semantics.md §7).
 
 The client chunk of the predict and check keys names the querier
 (``skinet/<system>/predict/<client>``, ``skinet/<system>/check/<client>``), and

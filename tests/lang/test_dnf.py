@@ -1,4 +1,4 @@
-"""Disjunctive normal form of skillset guards and its effect on nets (SPEC §3, *Guards*)."""
+"""Disjunctive normal form of skillset guards and its effect on nets (docs/semantics.md §3, *Guards*)."""
 
 from __future__ import annotations
 

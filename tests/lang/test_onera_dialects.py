@@ -1,4 +1,4 @@
-"""Every construct of ONERA's public grammars parses (SPEC §2).
+"""Every construct of ONERA's public grammars parses (docs/semantics.md §2).
 
 The reference grammars are DavidD12/robot_language (2022, ``grammar.lalrpop``) and
 DavidD12/rl_model-rs (2023-2024, every version).  The two files below are written
@@ -163,7 +163,7 @@ def test_parameter_of_unknown_type_is_a_warning() -> None:
     assert [str(w) for w in model.warnings] == ["f.rl:4:16: warning: unknown type 'Nope' of parameter 'p'"]
 
 
-# ---- SPEC §3: an unsatisfiable postcondition warns, and the skill still stops -----------
+# ---- docs/semantics.md §3: an unsatisfiable postcondition warns, and the skill still stops -----------
 
 
 def test_unsatisfiable_postconditions_warn() -> None:

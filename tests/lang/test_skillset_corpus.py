@@ -1,4 +1,4 @@
-"""The real skillset files of the corpus parse and validate (SPEC §2)."""
+"""The real skillset files of the corpus parse and validate (docs/semantics.md §2)."""
 
 from __future__ import annotations
 

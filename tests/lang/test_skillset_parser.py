@@ -1,4 +1,4 @@
-"""Every dialect form of the skillset language parses (SPEC §2)."""
+"""Every dialect form of the skillset language parses (docs/semantics.md §2)."""
 
 from __future__ import annotations
 

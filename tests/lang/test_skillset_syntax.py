@@ -1,4 +1,4 @@
-"""Syntax errors are one readable diagnostic, never a lark traceback (SPEC §2)."""
+"""Syntax errors are one readable diagnostic, never a lark traceback (docs/semantics.md §2)."""
 
 from __future__ import annotations
 

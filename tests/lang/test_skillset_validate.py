@@ -1,4 +1,4 @@
-"""Validation errors and warnings of skillset models (SPEC §2), exact messages."""
+"""Validation errors and warnings of skillset models (docs/semantics.md §2), exact messages."""
 
 from __future__ import annotations
 

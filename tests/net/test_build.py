@@ -1,6 +1,6 @@
-"""From a skillset to its Petri net, checked by hand on small models (SPEC §3).
+"""From a skillset to its Petri net, checked by hand on small models (docs/semantics.md §3).
 
-Every expected net below was worked out from the table of SPEC §3 before being
+Every expected net below was worked out from the table of docs/semantics.md §3 before being
 compared with ``build_net``: places, transition ids and logical names, the exact
 pre/post place sets of every variant, the priority pair and the initial marking.
 """
@@ -37,7 +37,7 @@ def priority_ids(net: PetriNet) -> list[tuple[set[str], set[str]]]:
 
 
 # ---------------------------------------------------------------------------
-# A model exercising every row of the SPEC §3 table
+# A model exercising every row of the docs/semantics.md §3 table
 
 BASIC = """
 skillset m {
@@ -335,7 +335,7 @@ def test_identical_variants_from_different_clauses_are_kept_once() -> None:
 
 
 # ---------------------------------------------------------------------------
-# Legality of moves (SPEC §3, *Effects*, last column of the table)
+# Legality of moves (docs/semantics.md §3, *Effects*, last column of the table)
 
 LEGAL = """
 skillset g {

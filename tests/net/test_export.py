@@ -1,4 +1,4 @@
-"""Exports of a net: Tina, PNML, Graphviz, JSON (SPEC §3, *Interop*)."""
+"""Exports of a net: Tina, PNML, Graphviz, JSON (docs/semantics.md §3, *Interop*)."""
 
 from __future__ import annotations
 
@@ -65,7 +65,7 @@ skillset mini {
 }
 """
 
-# Derived by hand from the SPEC §3 table: the failure's postcondition fixes
+# Derived by hand from the docs/semantics.md §3 table: the failure's postcondition fixes
 # `power`, so it has one variant per source state of `power`.
 MINI_TINA = """\
 net mini

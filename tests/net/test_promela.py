@@ -1,4 +1,4 @@
-"""``skinet net --format promela``: Spin finds exactly our stable markings (SPEC §3, §6.1)."""
+"""``skinet net --format promela``: Spin finds exactly our stable markings (docs/semantics.md §3, §6.1)."""
 
 from __future__ import annotations
 

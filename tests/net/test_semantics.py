@@ -1,4 +1,4 @@
-"""Firing, priorities and invariant cascades (SPEC §3, *Priority*)."""
+"""Firing, priorities and invariant cascades (docs/semantics.md §3, *Priority*)."""
 
 from __future__ import annotations
 

@@ -1,9 +1,9 @@
-"""An independent plain-sets version of SPEC §8, for the planner's tests.
+"""An independent plain-sets version of docs/semantics.md §8, for the planner's tests.
 
 Combined markings are tuples of net markings (bit masks), found by a plain
 breadth-first search that fires each component's net with
 :func:`skinet.net.semantics.steps` (the firing rule is the ground truth, shared
-with the product); everything else is written here again from the SPEC's
+with the product); everything else is written here again from the semantics' (docs/semantics.md)
 formulas with Python sets and dicts: the game's moves, the forced markings by
 their least fixpoint ``X = not phi | EX_unc X`` on the combined graph (not
 the planner's compositional boxes), ``W``, ``W_c`` and ``E`` with their ranks,
@@ -26,7 +26,7 @@ DONE = "done"
 
 
 class Brute:
-    """The game of SPEC §8 on ``system`` from ``marking``, by plain sets."""
+    """The game of docs/semantics.md §8 on ``system`` from ``marking``, by plain sets."""
 
     def __init__(self, system: System, marking: Mapping[str, int], events: bool = False):
         self.system = system

@@ -1,4 +1,4 @@
-"""Answers, reasons and the pilot's API of the planner (SPEC §8): exact plans on the paper's
+"""Answers, reasons and the pilot's API of the planner (docs/semantics.md §8): exact plans on the paper's
 system, each reason of ``none``, ``unknown`` never ``none`` when the search is cut, the strict
 check's commands, determinism, races and replanning."""
 
@@ -269,7 +269,7 @@ def strict_allows(system: System, marking: dict[str, int], predict: bool) -> set
 @pytest.mark.parametrize("predict", [False, True], ids=["explicit-forced", "with-prediction"])
 def test_admissible_commands_are_those_the_strict_check_allows(predict: bool) -> None:
     """Over all 70 markings of the paper's system (events included).  Where a property is already
-    violated the check judges only the others (SPEC §5's operator view) and so allows the arm's
+    violated the check judges only the others (docs/semantics.md §5's operator view) and so allows the arm's
     interrupts while go_to_waypoint runs with the arm out; the planner never starts from there."""
     system = paper()
     planner = Planner(system)
@@ -388,7 +388,7 @@ def test_engines_need_cudd_or_say_so() -> None:
 
 def test_every_violated_marking_of_the_paper_names_each_violation_and_a_way_back() -> None:
     """Issue 30: from a violated marking the answer named only the first property, and no way out.  Now it
-    names every violated property and the admissible commands (every result in Safe, SPEC §8) that recover;
+    names every violated property and the admissible commands (every result in Safe, docs/semantics.md §8) that recover;
     each really leads into Safe (checked on the plain-sets game of tests/plan/brute.py)."""
     from skinet.props.evaluate import holds
 

@@ -1,4 +1,4 @@
-"""The planner against an independent plain-sets version of SPEC §8 (tests/plan/brute.py).
+"""The planner against an independent plain-sets version of docs/semantics.md §8 (tests/plan/brute.py).
 
 For hundreds of random goals from random reachable markings of the paper's
 system, the mobile manipulator, the corpus pair, two cranes whose commands may have several results
@@ -82,7 +82,7 @@ SYSTEMS: dict[str, tuple[Callable[[], System], int, int]] = {  # goals per start
     "mobile": (mobile, 40, 6),
     "corpus": (corpus, 15, 4),
     "cranes": (cranes, 40, 5),  # commands with several results (invariant cascades in either order)
-    "paper, events uncontrollable": (lambda: with_events(paper()), 30, 4),  # events are outcomes too (SPEC §6.3)
+    "paper, events uncontrollable": (lambda: with_events(paper()), 30, 4),  # events are outcomes too (docs/semantics.md §6.3)
     "mobile, events uncontrollable": (lambda: with_events(mobile()), 30, 4),
 }
 

@@ -1,4 +1,4 @@
-"""Deep or huge property and CTL texts give one clear error, never a crash (SPEC §4, §6)."""
+"""Deep or huge property and CTL texts give one clear error, never a crash (docs/semantics.md §4, §6)."""
 
 from __future__ import annotations
 

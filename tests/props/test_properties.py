@@ -1,4 +1,4 @@
-"""Safety properties: parsing, name resolution, errors, evaluation (SPEC §4), and
+"""Safety properties: parsing, name resolution, errors, evaluation (docs/semantics.md §4), and
 the JSON form of combined markings used to state them."""
 
 from __future__ import annotations

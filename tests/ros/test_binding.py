@@ -1,4 +1,4 @@
-"""Binding files, message conditions and type definitions (SPEC §9; skinet.ros.binding, condition, definitions).
+"""Binding files, message conditions and type definitions (docs/semantics.md §9; skinet.ros.binding, condition, definitions).
 
 Every bad binding gives one error at the file, line and column of the key or value
 at fault, with close names where a name is unknown.
@@ -78,7 +78,7 @@ def test_bad_definitions(name: str, text: str, message: str) -> None:
 
 
 def test_fields_take_their_definitions_defaults_and_a_quaternion_is_no_rotation() -> None:
-    """rosbags drops a .msg field's default; rosidl, and so a goal the pilot sends, keeps it (SPEC §9).  The
+    """rosbags drops a .msg field's default; rosidl, and so a goal the pilot sends, keeps it (docs/semantics.md §9).  The
     defaults leave REP 2011 hashes unchanged (rmw_zenoh keys), as ROS hashes definitions without them."""
     action = "pkg/action/Go"
     text = ("float32 max_time 30.0  # s\nbool use_id True\nstring name 'a # b'\nint32[] ids [1, 2]\nuint8[2] pair [3, 4]\n"
@@ -318,7 +318,7 @@ DOCK_GOAL = "opennav_docking_msgs/action/DockRobot_Goal"
      "b.toml:13:8: error: [skills.dock_robot] goal must be a table"),
 ])
 def test_bad_goal_mappings_give_one_line_at_the_fault(tmp_path: Path, text: str, message: str) -> None:
-    """What a pilot's start sends (SPEC §9, Acting): every input reaches a goal field, fixed fields type-check."""
+    """What a pilot's start sends (docs/semantics.md §9, Acting): every input reaches a goal field, fixed fields type-check."""
     assert check(tmp_path, text, DOCK_FILES) == message
 
 

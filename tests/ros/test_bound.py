@@ -1,4 +1,4 @@
-"""Canonical events from action statuses, lifecycle transitions and topics (SPEC §9; skinet.ros.bound).
+"""Canonical events from action statuses, lifecycle transitions and topics (docs/semantics.md §9; skinet.ros.bound).
 
 The nav2 example (examples/nav2): every GoalStatus code, every lifecycle transition,
 goal-id races, results naming modes, start-up readings, and the drift cases the

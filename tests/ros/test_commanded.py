@@ -1,6 +1,6 @@
-"""Commanded resources (SPEC §9): a bound resource's change is an event of the skillset, uncontrollable unless
+"""Commanded resources (docs/semantics.md §9): a bound resource's change is an event of the skillset, uncontrollable unless
 the binding says the resource is ``commanded``.  Then the events that change it are commands in Algorithm 1
-(SPEC §5: ``controllable``, as the check reports them), and never uncontrollable steps, for forced constraints
+(docs/semantics.md §5: ``controllable``, as the check reports them), and never uncontrollable steps, for forced constraints
 (§6.3) or plans (§8), even with ``events_uncontrollable``.
 
 The Nav2 base (examples/nav2): ``bt_navigator``'s lifecycle is commanded by its lifecycle manager.  A property

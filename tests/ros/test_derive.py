@@ -1,4 +1,4 @@
-"""Status diffs to model-level transitions (skinet.ros.derive; SPEC §1 bridge_ros2, corpus README).
+"""Status diffs to model-level transitions (skinet.ros.derive; docs/semantics.md §1 bridge_ros2, corpus README).
 
 Every test checks the derived events against the live nets too: feeding them to
 :class:`~skinet.system.live.LiveSystem` must reproduce the manager's status without a

@@ -1,7 +1,7 @@
 """A hostile model bundle (issue 14): a 1.9 KB skillset whose nets are costly to build.
 
 Ten resources of three states and ten skills whose precondition is ``a!=z and
-b!=z and ...``: each ``!=`` expands to two states (SPEC §3, DNF), so each
+b!=z and ...``: each ``!=`` expands to two states (docs/semantics.md §3, DNF), so each
 precondition has 2^10 = 1024 clauses, the most the parser accepts, and the net
 about 10 000 transitions, seconds to build before any exploration; with more
 skills (``skills=80``) it takes gigabytes.  Consistent (its digest is right), so a

@@ -1,4 +1,4 @@
-"""The paper's robot for pilot tests, through a real router (SPEC §8; issue 24).
+"""The paper's robot for pilot tests, through a real router (docs/semantics.md §8; issue 24).
 
 :class:`Robot` runs the simulated managers (real CDR on bridge keys), the bridge,
 the monitor and a predictor, each on its own client session of the test's router,

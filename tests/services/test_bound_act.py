@@ -1,4 +1,4 @@
-"""The pilot acting through bindings (SPEC §9, *Acting*; services/pilot/bound_act.py).
+"""The pilot acting through bindings (docs/semantics.md §9, *Acting*; services/pilot/bound_act.py).
 
 Through a real router, each party on its own client session: the Nav2 example's
 simulated robot (action servers speaking the real action protocol in CDR), the

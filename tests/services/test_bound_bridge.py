@@ -1,4 +1,4 @@
-"""The bridge on bound skillsets, live on Zenoh (SPEC §9; services/bridge_ros2/bound_live.py, simulator/bound.py).
+"""The bridge on bound skillsets, live on Zenoh (docs/semantics.md §9; services/bridge_ros2/bound_live.py, simulator/bound.py).
 
 The Nav2 example's simulated robot speaks the real action and lifecycle protocols
 (CDR requests and replies on send_goal / cancel_goal / get_result / get_state
@@ -434,7 +434,7 @@ def _pending(session: zenoh.Session, system: str, timeout: float = 3.0) -> dict[
 
 
 def test_a_bound_skillset_is_pending_until_every_interface_is_read_again(nav2, session) -> None:
-    """SPEC §7 for bindings: before its first readings, and after an action server or a lifecycle node left,
+    """docs/semantics.md §7 for bindings: before its first readings, and after an action server or a lifecycle node left,
     the bridge refuses to vouch for the skillset's status (heartbeat ``pending``, resync queries refused) until
     the interface is read again; that reading shows what the restart did (the goal forgotten, the node
     unconfigured: divergences), and an event closes the gap."""
@@ -495,7 +495,7 @@ def test_a_bound_skillset_is_pending_until_every_interface_is_read_again(nav2, s
 
 
 def test_the_monitor_reports_each_drift_with_the_message_that_showed_it(nav2, session) -> None:
-    """SPEC §9: a drift is a model divergence, with the message that showed it.  The monitor's LiveState (the
+    """docs/semantics.md §9: a drift is a model divergence, with the message that showed it.  The monitor's LiveState (the
     dashboard's and ``skinet watch``'s list of divergences) used to say only that the transition was not
     enabled, and a drift that moved nothing (a second goal, a value matching no state) never reached it."""
     from services.monitor import start_monitor

@@ -1,4 +1,4 @@
-"""The pilot drives a robot without skillset managers through its bindings (SPEC §8, §9 *Acting*; issue 26 item 4).
+"""The pilot drives a robot without skillset managers through its bindings (docs/semantics.md §8, §9 *Acting*; issue 26 item 4).
 
 The Nav2 example through a real router, each party on its own client session: the
 simulated robot (action servers, bt_navigator's lifecycle and the battery topic in CDR),

@@ -251,7 +251,7 @@ def test_simulator_to_bridge_exact_events(client_factory, spot_arm):
 
 
 def test_one_shared_peer_session(spot_arm):
-    """Embedded: simulator, bridge and their listeners on a single session (SPEC §1, §7)."""
+    """Embedded: simulator, bridge and their listeners on a single session (docs/semantics.md §1, §7)."""
     session = zenoh.open(session_config("peer", multicast_scouting=False))
     try:
         events, _ = run_chain(lambda: session, spot_arm)

@@ -1,4 +1,4 @@
-"""MISSION.md acceptance: both paper runs through the whole chain.
+"""docs/mission.md acceptance: both paper runs through the whole chain.
 
 Simulated managers (real CDR on bridge keys) -> bridge_ros2 -> monitor ->
 predictor, on one embedded Zenoh session; the records must equal the core

@@ -1,4 +1,4 @@
-"""The command check ``skinet/<system>/check`` (SPEC §7): policy, verdicts at the paper's
+"""The command check ``skinet/<system>/check`` (docs/semantics.md §7): policy, verdicts at the paper's
 warnings, unknown names, bad payloads, through a real router."""
 
 from __future__ import annotations
@@ -225,7 +225,7 @@ def test_example_client_asks_before_every_start(router, session, spot_arm) -> No
 @pytest.mark.parametrize("policy,decision", [(None, "warn"), ("strict", "deny")])
 def test_forced_constraint_is_denied_under_the_strict_policy(monitor_factory, session, policy, decision) -> None:
     """The mobile manipulator (skillsets/mobile_manip.toml): driving off while the arm unfolds is
-    forced for stowed_drive (SPEC §6.3), known at once without any predictor."""
+    forced for stowed_drive (docs/semantics.md §6.3), known at once without any predictor."""
     from skinet.system.load import load_system
     from tests.services.conftest import REPO
 

@@ -170,7 +170,7 @@ def test_run_prints_where_it_listens_and_lines_that_work() -> None:
         assert watch.returncode == 0 and watch.stdout.startswith("SkiNet Live  system spot_arm  step 0"), watch
         check = subprocess.run([sys.executable, "-m", "skinet_cli.main", *shlex.split(lines[2])[1:]],
                                cwd=REPO, capture_output=True, text=True, timeout=60)
-        # No bridge has connected: the monitor vouches for nothing yet (SPEC §7), never a plain allow.
+        # No bridge has connected: the monitor vouches for nothing yet (docs/semantics.md §7), never a plain allow.
         assert check.returncode == 3 and check.stdout.startswith(
             "spot:init_power.start: WARN at step 0 (STATE NOT LIVE: about the last marking known)"), check
         assert "\n  state_unknown (warn) — the live state is not known" in check.stdout, check

@@ -1,4 +1,4 @@
-"""The live web dashboard in a real browser (SPEC §7; MISSION.md acceptance on the page).
+"""The live web dashboard in a real browser (docs/semantics.md §7; docs/mission.md acceptance on the page).
 
 Headless Chromium from Debian's packages (``chromium``, ``chromium-driver``;
 ``scripts/install-test-deps.sh`` installs them) driven by selenium.  The
@@ -37,7 +37,7 @@ from tests.services.test_monitor import Events
 
 SYSTEM_FILE = REPO / "skillsets" / "spot_arm.toml"
 MISSIONS = REPO / "skillsets" / "missions"
-# MISSION.md in `skinet demo` numbering: (property, step, the step's command).
+# docs/mission.md in `skinet demo` numbering: (property, step, the step's command).
 VIOLATIONS = [("action_guard", 26, "spot:teleop.start"), ("safety_guard", 33, "spot:go_to_waypoint.start"),
               ("action_guard", 38, "manipulator:arm_ready.start")]
 WARNINGS = [(29, "spot", "go_to_waypoint.start", "safety_guard"), (36, "manipulator", "arm_ready.start", "action_guard")]
@@ -253,7 +253,7 @@ def test_page_follows_monitor_and_router_restarts_and_its_own_server_restart(bro
         until(browser, lambda d: css(d, "#services [data-service=monitor][data-alive='0']"), "the link lost", 30)
         router = open_router(endpoint)
         until(browser, lambda d: css(d, "#services [data-service=monitor][data-alive='1']"), "the link back", 30)
-        events.synced()  # the monitor resynced after the outage (SPEC §7): the next event is live
+        events.synced()  # the monitor resynced after the outage (docs/semantics.md §7): the next event is live
         events.send("spot", "init_power.success.powered_on")
         until(browser, lambda d: "init_power.success.powered_on" in css(d, "#step")[0]["text"], "the next event", 20)
 
@@ -271,7 +271,7 @@ def test_page_follows_monitor_and_router_restarts_and_its_own_server_restart(bro
 
 
 def test_a_lost_bridge_is_shown_plainly_until_it_is_back(browser, dashboard, router, tmp_path) -> None:
-    """SPEC §7: with the bridge gone, the page says in red which skillsets are lost, since when and
+    """docs/semantics.md §7: with the bridge gone, the page says in red which skillsets are lost, since when and
     why; while they resync, in yellow; once live again, nothing."""
     session = open_client(router)
     system, _ = load_system(SYSTEM_FILE)
@@ -352,7 +352,7 @@ def test_board_joins_steps_in_any_order_and_counts_violations_once() -> None:
     assert board.feed(verdicts(1, False), 0, initial=True) == []
     board.feed(state(2, "a:y#1"), 0)
     board.feed(verdicts(2, False), 0)  # still violated: no new onset
-    # The same step published again (its sync state changed, SPEC §7): shown in place, no restart.
+    # The same step published again (its sync state changed, docs/semantics.md §7): shown in place, no restart.
     assert [u["kind"] for u in board.feed(state(2, "a:y#1", stamp=150.0), 0)] == ["state"]
     assert board.state.stamp == 150.0 and board.epoch == 0
     restart = board.feed(state(0, stamp=200.0), 0)  # a restarted monitor
@@ -429,7 +429,7 @@ def test_skinet_run_serves_the_dashboard_beside_its_monitor(tmp_path) -> None:
             time.sleep(0.1)
         assert snap["state"]["seq"] == 0 and snap["state_space"]["markings"] > 0  # the embedded predictor answered
         assert len(snap["alive"]["monitor"]) == 1 and len(snap["alive"]["predictor"]) == 1
-        # No bridge connected: the monitor cannot vouch for the marking, so the check warns (SPEC §7).
+        # No bridge connected: the monitor cannot vouch for the marking, so the check warns (docs/semantics.md §7).
         assert {n: s["state"] for n, s in snap["state"]["sync"].items()} == {"spot": "syncing", "manipulator": "syncing"}
         with urllib.request.urlopen(f"http://127.0.0.1:{port}/api/check?command=spot:init_power.start",
                                     timeout=2) as r:
@@ -448,7 +448,7 @@ def test_skinet_run_serves_the_dashboard_beside_its_monitor(tmp_path) -> None:
 def test_no_violation_reads_none_not_a_numbered_none(browser, dashboard) -> None:
     """The empty violations list showed "1. none" (a numbered list item); it reads "none"."""
     browser.get(dashboard())
-    # With no pilot ever seen, its panel is one line (SPEC §8's goal box has nobody to send goals to).
+    # With no pilot ever seen, its panel is one line (docs/semantics.md §8's goal box has nobody to send goals to).
     until(browser, lambda d: css(d, "#status[data-connected=true]"), "the live status")
     assert browser.execute_script("return document.getElementById('pilot-panel').innerText").strip() == (
         "Pilot (no pilot alive: skinet run starts one, or python -m services.pilot)")
@@ -654,7 +654,7 @@ def test_the_screenshot_target_photographs_the_live_dashboard(browser, tmp_path)
     assert (0xFB, 0xD3, 0xD0) in colours  # the badge of an explicit constraint: the warning on arm_ready.start
 
 
-# -- the goal box: goals to the real pilot, its status and plan (SPEC §8, issue 24 item 4) --------------------
+# -- the goal box: goals to the real pilot, its status and plan (docs/semantics.md §8, issue 24 item 4) --------------------
 
 PLAN_STAND_READY = ["1. spot:init_power.start", "2. wait for spot:init_power.success.powered_on",
                     "3. spot:stand_up.start", "4. wait for spot:stand_up.success.standing",

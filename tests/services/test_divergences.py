@@ -1,4 +1,4 @@
-"""Model divergences and manager restarts stay visible (issue 27 item 4; SPEC §7).
+"""Model divergences and manager restarts stay visible (issue 27 item 4; docs/semantics.md §7).
 
 The monitor keeps the list of its run (the last 256, with the count of older ones),
 publishes it on ``skinet/<system>/divergences`` when it changes and answers ``get``

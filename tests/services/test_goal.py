@@ -1,4 +1,4 @@
-"""``skinet goal`` through a real router with the real pilot (SPEC §8, issue 24 item 4).
+"""``skinet goal`` through a real router with the real pilot (docs/semantics.md §8, issue 24 item 4).
 
 The pilot drives the paper's system on simulated managers (:mod:`tests.services.pilot_robot`);
 ``skinet goal`` runs as its own process, a client of the router, and is judged on its exit
@@ -93,7 +93,7 @@ def test_a_goal_driven_to_its_end_prints_the_plan_then_each_change_and_exits_0(r
     assert lines[:9] == ["goal 1 accepted (drive mode: the pilot sends each command)",
                          "cyclic: 4 moves when outcomes are favourable", *STAND_UP], done.stdout
     # A step's prediction on its way is said (and becomes a pause past a grace) or not, as the predictor is quick
-    # or not (SPEC §7).
+    # or not (docs/semantics.md §7).
     changes = [c for c in status_lines(done.stdout) if not PENDING.match(c)]
     assert changes == [
         "driving \u2014 next spot:init_power.start, 4 moves left, 0 commands sent",
@@ -355,7 +355,7 @@ def test_every_help_example_works_as_written(robot, skills, router) -> None:
 
 
 def test_skinet_watch_in_a_pipe_prints_a_line_per_change_of_the_pilots_status(robot, skills, router) -> None:
-    """``skinet watch`` shows the pilot (SPEC §8): a pipe gets one line per change, the lines ``skinet goal``
+    """``skinet watch`` shows the pilot (docs/semantics.md §8): a pipe gets one line per change, the lines ``skinet goal``
     prints, with the goal's number, mode and sender."""
     skills(delay=0.3)
     proc = subprocess.Popen([sys.executable, "-m", "skinet_cli.main", "watch", "spot_arm", "--duration", "60",

@@ -1,4 +1,4 @@
-"""A hostile model costs a predictor at most its limits (issue 14; SPEC §6, §7).
+"""A hostile model costs a predictor at most its limits (issue 14; docs/semantics.md §6, §7).
 
 The attack: any peer answers ``skinet/h/model/<digest>`` with a consistent 1.9 KB
 bundle whose nets take seconds to build, or gigabytes with more skills

@@ -1,4 +1,4 @@
-"""Honest live state (SPEC §7; issue 25 items 1-4): the monitor never vouches for a marking it
+"""Honest live state (docs/semantics.md §7; issue 25 items 1-4): the monitor never vouches for a marking it
 does not know.
 
 Real parts: simulated managers (the only stand-in, for the robot), the bridge as a process of

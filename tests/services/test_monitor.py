@@ -1,4 +1,4 @@
-"""The monitor service over real Zenoh sessions on loopback (SPEC §1, §5, §7).
+"""The monitor service over real Zenoh sessions on loopback (docs/semantics.md §1, §5, §7).
 
 A Python router-mode session (``router`` fixture) links client sessions; the
 predictor, the monitor process, ``skinet run`` and ``skinet router`` run as
@@ -154,7 +154,7 @@ def monitor_factory(router: str, session: zenoh.Session) -> Iterator[Callable[..
 
 # -- (a) the paper's warnings and one violation ------------------------------------------
 
-# Events of both paper runs (design/MISSION.md) and the exact operator view after each.
+# Events of both paper runs (docs/mission.md) and the exact operator view after each.
 WARN_GTW = [("spot", "go_to_waypoint.start", SG, "explicit", True)]  # before trap 2's transfer
 WARN_ARM = [("manipulator", "arm_ready.start", AG, "explicit", True)]  # trap 3: teleop still runs
 ARM_BUSY = sorted([("spot", "sit_down.start", AG, "explicit", True), ("spot", "go_to_waypoint.start", AG, "explicit", True),
@@ -289,7 +289,7 @@ def test_prediction_in_process(router, monitor_factory, session, system):
 
 
 def test_big_system_answered_within_the_budget_never_a_timeout(router, monitor_factory, session, tmp_path):
-    """4 + 4 skillsets (SPEC §6.1): the predictor answers within its budget; the derived query timeout holds."""
+    """4 + 4 skillsets (docs/semantics.md §6.1): the predictor answers within its budget; the derived query timeout holds."""
     fleet = load_system(_heavy_system(tmp_path))[0]
     psession = open_client(router)
     predictor = start_predictor(psession, "big")
@@ -365,7 +365,7 @@ def test_silent_predictor_times_out_without_blocking(monitor_factory, session, s
 
 
 def _heavy_system(folder: Path, pairs: int = 4) -> Path:
-    """Four Spots and four arms (three: fewer); the predictor uses the whole budget on it (SPEC §6.1)."""
+    """Four Spots and four arms (three: fewer); the predictor uses the whole budget on it (docs/semantics.md §6.1)."""
     spot = (REPO / "skillsets" / "spot.rl").read_text()
     arm = (REPO / "skillsets" / "manipulator.rl").read_text()
     lines = ['[system]\nname = "fleet"\nproperties = "fleet.props"\n']

@@ -1,4 +1,4 @@
-"""Nothing lost across a router restart (issue 14; SPEC §7).
+"""Nothing lost across a router restart (issue 14; docs/semantics.md §7).
 
 Canonical events go through the bridge's publisher (:func:`event_publisher`: a
 cache and heartbeats) to the monitor's subscriber (:func:`event_subscriber`:
@@ -108,7 +108,7 @@ def test_router_restart_loses_nothing(outage: Outage) -> None:
     counters, states = run(outage, cache=4096, seconds=3.0)
     assert (counters.received, counters.applied, counters.lost, counters.unrecovered, counters.out_of_order,
             counters.duplicates, counters.history) == (200, 200, 0, 0, 0, 0, 0)
-    # The outage showed: the skillset was lost, then syncing, then live again (SPEC §7).
+    # The outage showed: the skillset was lost, then syncing, then live again (docs/semantics.md §7).
     seen = [s.sync["spot"].state for s in states]
     changes = [a for a, b in zip(seen, [None, *seen]) if a != b]
     assert changes == ["syncing", "live", "lost", "syncing", "live"], changes

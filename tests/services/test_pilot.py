@@ -1,4 +1,4 @@
-"""The pilot (SPEC §8, *The pilot*; issue 24) on the paper's robot through a real router: simulated
+"""The pilot (docs/semantics.md §8, *The pilot*; issue 24) on the paper's robot through a real router: simulated
 managers speaking the real protocol, the bridge, the monitor, a predictor and the pilot on their own
 sessions; the skills' outcomes come from :class:`~tests.services.pilot_robot.Implementations`."""
 
@@ -351,7 +351,7 @@ RACE_GOALS = ["reach manipulator:RD and spot:Standing", "reach manipulator:HP an
 
 @pytest.mark.parametrize("seed", [1, 2])
 def test_outcomes_at_random_moments_around_commands_never_lead_to_a_violation(robot: Robot, seed: int) -> None:
-    """SPEC §8, *Races*: both components' skills end at random moments (0 to 30 ms after they start,
+    """docs/semantics.md §8, *Races*: both components' skills end at random moments (0 to 30 ms after they start,
     a quarter of them in a failure mode), so outcomes arrive before, during and after the pilot's
     commands to the other component; 12 goals per seed, every one reached, no command denied, no
     property ever violated."""

@@ -33,7 +33,7 @@ def test_skills_of_managers_and_of_bindings_take_their_own_route() -> None:
     assert route(nav2, "nav2", "navigate") == "binding"
     managers = Kept()
     routed = Routed(nav2, {"manager": managers})
-    with pytest.raises(ActError, match=r"^nav2:navigate is bound to a ROS 2 interface \(SPEC §9\), and this pilot "
+    with pytest.raises(ActError, match=r"^nav2:navigate is bound to a ROS 2 interface \(docs/semantics.md §9\), and this pilot "
                                        r"cannot act through bindings$"):
         routed.send(PilotCommand(skillset="nav2", transition="navigate.start"))
     with pytest.raises(ActError, match=r"^unknown skillset 'spot' of nav2$"):

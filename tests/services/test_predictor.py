@@ -1,4 +1,4 @@
-"""The predictor service over real Zenoh on loopback (SPEC §1, §6, §7).
+"""The predictor service over real Zenoh on loopback (docs/semantics.md §1, §6, §7).
 
 Predictor processes are clients of a Python router; the test plays the monitor: it
 serves the model bundle on ``skinet/<system>/model/<digest>`` and queries

@@ -117,7 +117,7 @@ def recording(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     assert published(entries["jsonl"]) == published(entries["mcap"]), outputs
     for found in entries.values():
         seqs = [e.message.seq for e in found if isinstance(e.message, LiveState)]
-        # Every step, in order; a step is published again when its skillsets' sync states change (SPEC §7).
+        # Every step, in order; a step is published again when its skillsets' sync states change (docs/semantics.md §7).
         assert seqs == sorted(seqs) and sorted(set(seqs)) == list(range(LAST_STEP + 1)), seqs
         assert sum(isinstance(e.message, ModelBundle) for e in found) == 1
     return logs
@@ -192,7 +192,7 @@ def test_replay_publishes_the_recorded_run_as_its_monitor_did(recording: dict[st
         out = stop(replay, tmp_path / "replay.out") if replay is not None else ""
         stop(recorder, tmp_path / "record.out")
     events = sum(e.type == "CanonicalEvent" for e in original)
-    beats = sum(e.type == "Heartbeat" for e in original)  # the bridge's (SPEC §7): never replayed either
+    beats = sum(e.type == "Heartbeat" for e in original)  # the bridge's (docs/semantics.md §7): never replayed either
     lines = out.splitlines()
     assert beats > 0 and lines[0] == (f"skinet replay: {log}: system {NAME}, {len(expected)} monitor messages over "
                                       f"{recorded[-1]:.1f} s recorded, at speed 4; not published: {events} "

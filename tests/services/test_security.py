@@ -1,4 +1,4 @@
-"""Secure defaults and TLS (issue 14; SPEC §7).
+"""Secure defaults and TLS (issue 14; docs/semantics.md §7).
 
 ``skinet router`` makes random passwords at first start and refuses sessions without
 them; services and ``skinet run`` listen on loopback with multicast scouting off

@@ -1,4 +1,4 @@
-"""Sequence numbers that cannot be poisoned (issue 14; SPEC §7 duplicated or out-of-order messages).
+"""Sequence numbers that cannot be poisoned (issue 14; docs/semantics.md §7 duplicated or out-of-order messages).
 
 One forged event with the bridge's ``source`` and ``seq`` 2^64-1 used to make the
 monitor drop the stream for good, as did a bridge restarted under the same source.
@@ -134,7 +134,7 @@ def test_forged_event_and_restarted_bridge_on_zenoh(client_factory, spot_arm, tm
                    "the monitor following the restarted bridge")
         # The bridge's resync answer took the stream back from the forged seq.  The restarted bridge
         # is a new run: its token went away (both skillsets lost), and both were resynced from the
-        # new run before they counted as live again (SPEC §7).
+        # new run before they counted as live again (docs/semantics.md §7).
         wait_until(monitor.synced, 5, "both skillsets live again")
         assert {n for st in states for n, x in st.sync.items() if x.state == "lost"} == {"spot", "manipulator"}
         assert (monitor.counters.jumps, monitor.counters.lost, monitor.counters.out_of_order) == (1, 0, 0)

@@ -1,4 +1,4 @@
-"""Load spreading and failover across predictor instances (SPEC §7), real processes on a real router.
+"""Load spreading and failover across predictor instances (docs/semantics.md §7), real processes on a real router.
 
 Predictors run as ``python -m services.predictor`` processes, clients of a Python
 router; the monitor runs in-process on its own client session.  A predictor frozen

@@ -1,4 +1,4 @@
-"""The monitor's sync states without I/O (SPEC §7, :mod:`services.monitor.sync`): a clock is
+"""The monitor's sync states without I/O (docs/semantics.md §7, :mod:`services.monitor.sync`): a clock is
 stepped by hand, heartbeats, tokens, events and resync answers are fed in order."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Algorithm 1 with implicit constraints (SPEC §5) on the paper's system and on
+"""Algorithm 1 with implicit constraints (docs/semantics.md §5) on the paper's system and on
 small synthetic systems."""
 
 from __future__ import annotations
@@ -52,7 +52,7 @@ POWERED_STANDING = (
 
 
 # ---------------------------------------------------------------------------
-# The paper's two warnings (MISSION.md, assisted run)
+# The paper's two warnings (docs/mission.md, assisted run)
 
 
 def test_warning_go_to_waypoint_with_arm_out_of_home(paper_system: System) -> None:
@@ -394,7 +394,7 @@ def test_synthetic_verdicts(kitchen: System) -> None:
     assert f.verdict("no_fire", state("Hot")) == PredictionVerdict("dangerous", 1, ("stove:blast.start",))
     assert f.verdict("no_fire", state("On", "blast")) == PredictionVerdict("dangerous", 0, ())
     # never explored from here (heat cannot run with the flame On): undecided by the
-    # exploration, decided compositionally (SPEC §6.4)
+    # exploration, decided compositionally (docs/semantics.md §6.4)
     alone = forecast(kitchen, m, compositional=False)
     assert alone.verdict("no_fire", state("On", "heat")) == PredictionVerdict("undecided")
     assert f.verdict("no_fire", state("On", "heat")).status == "dangerous"

@@ -1,4 +1,4 @@
-"""Compositional verdicts equal the global fixpoints wherever both answer (SPEC §6.2, §6.4)."""
+"""Compositional verdicts equal the global fixpoints wherever both answer (docs/semantics.md §6.2, §6.4)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Three-valued CTL against a direct set-based definition (SPEC §6).
+"""Three-valued CTL against a direct set-based definition (docs/semantics.md §6).
 
 Random Kripke structures are products of random component graphs, built
 directly (:class:`ComponentGraph` with random successor lists and self-loops);

@@ -1,4 +1,4 @@
-"""Product exploration against EXPECTED.md, hand-computed nets and a naive BFS (SPEC §3, §6)."""
+"""Product exploration against EXPECTED.md, hand-computed nets and a naive BFS (docs/semantics.md §3, §6)."""
 
 from __future__ import annotations
 

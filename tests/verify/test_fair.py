@@ -1,4 +1,4 @@
-"""Fair EG and fair AF against a direct definition (SPEC §6.2).
+"""Fair EG and fair AF against a direct definition (docs/semantics.md §6.2).
 
 The reference never decomposes into SCCs: on the graph restricted to ``f``
 (a deadlock is a sink with a self-loop) it takes the boolean transitive

@@ -1,4 +1,4 @@
-"""Forced violations against a brute-force definition on the explicit product (SPEC §6.3).
+"""Forced violations against a brute-force definition on the explicit product (docs/semantics.md §6.3).
 
 The reference is the definition itself: breadth-first search over the product
 of the components' *full* nets, one component step at a time, using only the

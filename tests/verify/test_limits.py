@@ -1,4 +1,4 @@
-"""The budget and the memory limit bound the whole answer; nothing is refused (SPEC §6.1).
+"""The budget and the memory limit bound the whole answer; nothing is refused (docs/semantics.md §6.1).
 
 Soundness at every limit: whatever stopped the work (depth, memory, the
 deadline inside the exploration or inside any fixpoint), what the truncated

@@ -1,4 +1,4 @@
-"""mu1 = Sat(AF not phi), step bounds, witnesses and truncated forecasts (SPEC §5, §6)."""
+"""mu1 = Sat(AF not phi), step bounds, witnesses and truncated forecasts (docs/semantics.md §5, §6)."""
 
 from __future__ import annotations
 

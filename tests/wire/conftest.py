@@ -1,4 +1,4 @@
-"""One realistic instance of every wire message (SPEC §1), built from the paper's system."""
+"""One realistic instance of every wire message (docs/semantics.md §1), built from the paper's system."""
 
 from __future__ import annotations
 

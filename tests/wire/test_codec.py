@@ -1,4 +1,4 @@
-"""msgpack codec: round trips and one-line errors (SPEC §1, §7: bad input never crashes)."""
+"""msgpack codec: round trips and one-line errors (docs/semantics.md §1, §7: bad input never crashes)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The committed JSON Schemas in ``schemas/`` match the pydantic models (SPEC §1)."""
+"""The committed JSON Schemas in ``schemas/`` match the pydantic models (docs/semantics.md §1)."""
 
 from __future__ import annotations
 

@@ -64,7 +64,7 @@ struct Risk {
     skillsets: BTreeMap<String, SkillsetStatus>,
     property: String,
     status: String,
-    /// "fair" or "literal": the AF that decided it (SPEC §6.2).
+    /// "fair" or "literal": the AF that decided it (docs/semantics.md §6.2).
     #[serde(default)]
     af: String,
     steps: Option<u64>,

@@ -122,7 +122,7 @@ function renderHeader() {
   fill("services", ...services);
   const s = view.state;
   fill("step", s ? `step ${s.seq} \u00b7 ${s.event || "start"} \u00b7 ${clock(s.stamp)}` : "no monitor message yet");
-  // SPEC §7: a marking the monitor cannot vouch for is said plainly, with since when and why.
+  // docs/semantics.md §7: a marking the monitor cannot vouch for is said plainly, with since when and why.
   const stale = document.getElementById("stale");
   const sync = s && s.sync ? Object.entries(s.sync) : [];
   const notLive = sync.filter(([, x]) => x.state !== "live");
@@ -552,7 +552,7 @@ function examples(lanes) {
     inputs ? `${inputs[0]}.${inputs[1][0]} = ...` : "no skill of this system takes inputs";
 }
 
-// -- the pilot: goal box, status, plan (SPEC §8) ---------------------------------------
+// -- the pilot: goal box, status, plan (docs/semantics.md §8) ---------------------------------------
 
 const ACTIVE = ["planning", "guiding", "driving", "waiting for outcome", "paused", "waiting for monitor"];
 const plan = { goal: 0, steps: [], answer: null, moves: null, at: -1 };  // the plan shown and its next step (flat index)

@@ -1,4 +1,4 @@
-"""Exports of a Petri net: JSON, Tina ``.net``, PNML, Graphviz and Promela (SPEC §3, *Interop*).
+"""Exports of a Petri net: JSON, Tina ``.net``, PNML, Graphviz and Promela (docs/semantics.md §3, *Interop*).
 
 Every exporter is a pure function from a :class:`~skinet.net.petrinet.PetriNet`
 to text; :data:`FORMATS` maps a format name to it (for the command line).

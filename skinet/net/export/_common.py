@@ -1,4 +1,4 @@
-"""Checks shared by the exporters (SPEC §3, *Interop*)."""
+"""Checks shared by the exporters (docs/semantics.md §3, *Interop*)."""
 
 from __future__ import annotations
 

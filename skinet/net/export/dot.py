@@ -1,7 +1,7 @@
-"""Export to Graphviz DOT, for pictures of a net (SPEC §3, *Interop*).
+"""Export to Graphviz DOT, for pictures of a net (docs/semantics.md §3, *Interop*).
 
 Places are circles labelled with their name and, when initially marked, a
-``●``; transitions are boxes labelled with their logical name (SPEC §3 shows
+``●``; transitions are boxes labelled with their logical name (docs/semantics.md §3 shows
 variants such as ``k.start#2`` as ``k.start``; the unique id is the tooltip).
 Invariant transitions, which have priority over the rest, are filled in
 :data:`INVARIANT_COLOR`; controllable ones (skill start and interrupt, the
@@ -61,7 +61,7 @@ def _skill_places(net: PetriNet, members: list[int]) -> set[int]:
 
     The idle place is consumed (not tested) by every start variant and produced
     by every other transition of the skill; the running place the other way
-    round (SPEC §3 table).
+    round (docs/semantics.md §3 table).
     """
     starts = [net.transitions[j] for j in members if net.transitions[j].kind == "start"]
     stops = [net.transitions[j] for j in members if net.transitions[j].kind != "start"]

@@ -1,4 +1,4 @@
-"""A JSON form of a net, and back (SPEC §3, *Interop*).
+"""A JSON form of a net, and back (docs/semantics.md §3, *Interop*).
 
 :func:`to_json` gives a plain ``dict`` (ready for :func:`json.dumps`) that names
 places and transitions instead of indexing them::
@@ -20,7 +20,7 @@ places and transitions instead of indexing them::
 
 A place in both ``pre`` and ``post`` is a test.  ``controllable`` is derived
 from ``kind`` (an event is controllable when its binding says it is commanded,
-SPEC §9); on input it only marks an event as commanded.  :func:`from_json` rebuilds an equal
+docs/semantics.md §9); on input it only marks an event as commanded.  :func:`from_json` rebuilds an equal
 :class:`~skinet.net.petrinet.PetriNet` with compiled bit masks.
 """
 

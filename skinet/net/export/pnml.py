@@ -1,4 +1,4 @@
-"""Export to PNML, the ISO/IEC 15909-2 P/T net format (SPEC §3, *Interop*).
+"""Export to PNML, the ISO/IEC 15909-2 P/T net format (docs/semantics.md §3, *Interop*).
 
 The document is a P/T net (``type`` = :data:`PTNET_TYPE`) on one page.  XML ids
 must be NCNames, which our names are not (``k.start#2``), so elements get the

@@ -1,4 +1,4 @@
-"""Export to Tina's textual ``.net`` format (SPEC §3, *Interop*).
+"""Export to Tina's textual ``.net`` format (docs/semantics.md §3, *Interop*).
 
 Format reference: the ``.net`` grammar shipped with Tina (``doc/formats/net.txt``,
 mirrored in lip6/ITSTools ``coloane/extensions/importExportTINA/doc/formats/net.txt``)::
@@ -20,7 +20,7 @@ Choices made here:
   carries ``(1)``;
 * a test (a place in both ``pre`` and ``post``) is written as the place on both
   sides of ``->``, i.e. a self-loop, not as Tina's ``?1`` test arc;
-* each transition is labelled with its logical name (SPEC §3: variants such as
+* each transition is labelled with its logical name (docs/semantics.md §3: variants such as
   ``k.start#2`` are shown with their logical name ``k.start``);
 * each priority pair ``(high, low)`` becomes one line ``pr H1 H2 ... > L1 L2 ...``.
 """
