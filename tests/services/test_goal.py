@@ -222,7 +222,7 @@ def test_the_pilot_stopping_ends_the_follow_with_exit_1(robot, router) -> None:
     try:
         robot.wait_pilot("guiding", 20)
         robot.pilot.close()
-        out, _ = proc.communicate(timeout=20)
+        out, _ = proc.communicate(timeout=60)
     finally:
         proc.kill()
     assert proc.returncode == 1 and out.endswith("\nthe pilot stopped before goal 1 ended\n"), out
