@@ -15,7 +15,7 @@ def add_memory_arg(c: argparse.ArgumentParser) -> None:
 
 
 def memory_size(text: str) -> int:
-    """argparse type of ``--memory-limit``."""
+    """argparse type of a size in bytes (``--memory-limit``, ``--incidents-max-bytes``): ``512MiB``, ``2GB``, ..."""
     try:
         return parse_size(text)
     except ValueError as exc:

@@ -16,20 +16,22 @@ here: no CDN, works offline) and:
 
 The server runs its asyncio loop in a thread of its own, so it can sit beside
 the embedded monitor of ``skinet run``; updates cross from Zenoh's threads with
-``call_soon_threadsafe``.  A client too slow to keep up is dropped (it reconnects
-and starts from a snapshot).
+``call_soon_threadsafe``, and only while a page is open: with none, the observer's
+call costs one test.  Each batch of updates is encoded once (JSON, in Rust:
+``pydantic_core.to_json``) for every page.  A client too slow to keep up is
+dropped (it reconnects and starts from a snapshot).
 """
 
 from __future__ import annotations
 
 import asyncio
 import errno
-import json
 import threading
 from pathlib import Path
 from typing import Any
 
 from aiohttp import web
+from pydantic_core import to_json
 
 from services.common.goals import GOAL_TIMEOUT, NoPilot
 from services.dashboard.board import Update
@@ -48,7 +50,7 @@ class PortError(SkinetError):
 
 
 def _frame(update: Update) -> bytes:
-    return b"data: " + json.dumps(update, separators=(",", ":")).encode() + b"\n\n"
+    return b"data: " + to_json(update) + b"\n\n"
 
 
 class Dashboard:
@@ -58,7 +60,7 @@ class Dashboard:
         self.observer, self.host, self.port = observer, host, port
         self._loop: asyncio.AbstractEventLoop | None = None
         self._runner: web.AppRunner | None = None
-        self._clients: set[asyncio.Queue[list[Update] | None]] = set()
+        self._clients: set[asyncio.Queue[bytes | None]] = set()  # each open page's frames to send
         self._thread: threading.Thread | None = None
 
     @property
@@ -133,16 +135,20 @@ class Dashboard:
 
     def _post_threadsafe(self, updates: list[Update]) -> None:
         loop = self._loop
-        if loop is not None and not loop.is_closed():
+        # No page open: nothing to do (a page registers before it takes its snapshot, see _events).
+        if self._clients and loop is not None and not loop.is_closed():
             loop.call_soon_threadsafe(self._post, updates)
 
     def _post(self, updates: list[Update]) -> None:
+        if not self._clients:
+            return
+        data = b"".join(_frame(u) for u in updates)
         for queue in list(self._clients):
             if queue.qsize() >= QUEUE_LIMIT:
                 self._clients.discard(queue)
                 queue.put_nowait(None)  # too slow: drop it, it reconnects to a snapshot
             else:
-                queue.put_nowait(updates)
+                queue.put_nowait(data)
 
     # -- handlers -----------------------------------------------------------------------
 
@@ -193,20 +199,22 @@ class Dashboard:
         response = web.StreamResponse(headers={
             "Content-Type": "text/event-stream", "Cache-Control": "no-cache", "X-Accel-Buffering": "no"})
         await response.prepare(request)
-        queue: asyncio.Queue[list[Update] | None] = asyncio.Queue()
-        snapshot = self.observer.snapshot()  # before registering: later updates re-apply harmlessly
+        queue: asyncio.Queue[bytes | None] = asyncio.Queue()
+        # Registered before the snapshot: an update the observer posts once it is registered comes after the snapshot
+        # (or is in it: applying it again is harmless); one posted before is in the snapshot.
         self._clients.add(queue)
         try:
+            snapshot = self.observer.snapshot()
             await response.write(b"retry: 1000\n\n" + _frame(snapshot))
             while True:
                 try:
-                    updates = await asyncio.wait_for(queue.get(), KEEPALIVE)
+                    data = await asyncio.wait_for(queue.get(), KEEPALIVE)
                 except asyncio.TimeoutError:
                     await response.write(b": keepalive\n\n")
                     continue
-                if updates is None:
+                if data is None:
                     break
-                await response.write(b"".join(_frame(u) for u in updates))
+                await response.write(data)
         except (ConnectionResetError, asyncio.CancelledError):
             pass
         finally:

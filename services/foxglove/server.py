@@ -8,10 +8,16 @@ queryable and publishes nothing) and serves its updates, translated by
 (``foxglove.websocket.v1``), bound to 127.0.0.1 unless told otherwise.  Foxglove
 keeps no message for a late subscriber: when a client subscribes to a channel of
 the live picture (state, verdicts, unsafe, state space, pilot, series) its last
-message is sent again.  Messages are logged from a thread of this view, never
-from Zenoh's: a slow client costs the observer nothing.  Cost: O(1) per update
-beyond the translation; the queue between the observer and the server is bounded
-(:data:`QUEUE`): past it the oldest updates are dropped and counted.
+message is sent again.
+
+Cost.  The observer calls :meth:`FoxgloveView._on_updates` in Zenoh's thread with
+its lock held: there the view only appends to a bounded queue (:data:`QUEUE`; past it
+the oldest updates are dropped and counted), and while no client subscribes to any
+channel it does nothing at all: the first subscription starts the translator again
+from the observer's snapshot, taken under the observer's lock so that no update is
+lost or counted twice.  Translating, encoding (JSON, in Rust:
+``pydantic_core.to_json``) and sending happen in a thread of this view, and a
+message of a channel no client subscribes to is translated but never encoded.
 """
 
 from __future__ import annotations
@@ -23,8 +29,9 @@ from typing import Any
 
 import foxglove
 from foxglove.websocket import ChannelView, Client
+from pydantic_core import to_json
 
-from services.dashboard.board import Update
+from services.dashboard.board import Board, Update
 from services.dashboard.observer import Observer
 from services.foxglove.translate import Out, Translator
 from skinet.errors import SkinetError
@@ -36,13 +43,17 @@ log = logging.getLogger("skinet.foxglove")
 
 
 class _Listener:
-    """The server's callbacks: a subscription asks for the channel's last message again."""
+    """The server's callbacks: a subscription asks for the channel's last message again; the first one wakes the
+    view up, the end of the last one puts it to sleep."""
 
     def __init__(self, view: FoxgloveView):
         self.view = view
 
     def on_subscribe(self, client: Client, channel: ChannelView) -> None:
-        self.view._resend(channel.topic)
+        self.view._subscribed(channel.topic)
+
+    def on_unsubscribe(self, client: Client, channel: ChannelView) -> None:
+        self.view._unsubscribed()
 
 
 class FoxgloveView:
@@ -53,23 +64,33 @@ class FoxgloveView:
         self.translator = Translator(observer.name)
         self.dropped = 0
         self.sent = 0
+        self.caught_up = 0  # times the view woke up from the observer's snapshot
+        self.translated = 0  # observer updates translated
         self._context = foxglove.Context()
         self._channels = {spec.topic: foxglove.Channel(spec.topic, schema=spec.schema, context=self._context)
                           for spec in fx.channels()}
         self._last: dict[str, tuple[dict[str, Any], int]] = {}
-        self._queue: collections.deque[list[Update] | str] = collections.deque()
+        self._queue: collections.deque[list[Update] | str | tuple[str, Update]] = collections.deque()
         self._cond = threading.Condition()
         self._closed = False
+        self._subscriptions = 0  # (client, channel) pairs subscribed now
+        self._idle = True  # no client subscribes to any channel: updates are dropped at once
+        observer.listen(self._on_updates)  # before the server: a first subscription finds it listening
         try:
             self.server = foxglove.start_server(name=f"SkiNet Live {observer.name}", host=host, port=port,
                                                 context=self._context, server_listener=_Listener(self))
         except Exception as exc:  # the SDK raises its own error types (port in use, bad address)
+            observer.unlisten(self._on_updates)
             raise SkinetError(f"cannot serve Foxglove on {host}:{port}: {exc}") from None
         self.host = host
         self.port = self.server.port
         self._thread = threading.Thread(target=self._run, name="skinet-foxglove", daemon=True)
         self._thread.start()
-        self._put(observer.listen(self._on_updates))
+
+    @property
+    def idle(self) -> bool:
+        """Whether no client subscribes to any channel (updates are dropped)."""
+        return self._idle
 
     @property
     def url(self) -> str:
@@ -86,19 +107,36 @@ class FoxgloveView:
     # -- from the observer (its lock held: never block) -----------------------------------
 
     def _on_updates(self, updates: list[Update]) -> None:
-        self._put(updates)
+        if not self._idle:
+            self._put(updates)
 
-    def _put(self, item: list[Update] | Update | str) -> None:
+    def _put(self, item: list[Update] | str | tuple[str, Update]) -> None:
         with self._cond:
             if len(self._queue) >= QUEUE:
                 self._queue.popleft()
                 self.dropped += 1
-            self._queue.append(item)  # type: ignore[arg-type]
+            self._queue.append(item)
             self._cond.notify_all()
 
-    def _resend(self, topic: str) -> None:
+    # -- from the server's callbacks ----------------------------------------------------------
+
+    # Both under the observer's lock: an update comes either before the snapshot (in it) or after it (queued).
+
+    def _subscribed(self, topic: str) -> None:
+        def wake(board: Board) -> None:
+            self._subscriptions += 1
+            if self._idle:
+                self._idle = False
+                self._put(("snapshot", board.snapshot()))
+        self.observer.read(wake)
         if topic in LATCHED:
             self._put(topic)
+
+    def _unsubscribed(self) -> None:
+        def sleep(_board: Board) -> None:
+            self._subscriptions = max(0, self._subscriptions - 1)  # a client gone: one call per subscription
+            self._idle = self._subscriptions == 0
+        self.observer.read(sleep)
 
     # -- the server thread ------------------------------------------------------------------
 
@@ -113,20 +151,31 @@ class FoxgloveView:
             if isinstance(item, str):
                 last = self._last.get(item)
                 if last is not None:
-                    self._channels[item].log(last[0], log_time=last[1])
-                continue
-            if isinstance(item, dict):  # the snapshot the view starts from
-                outs = self.translator.snapshot(item)
+                    self._log(item, *last)
+            elif isinstance(item, tuple):
+                self._catch_up(item[1])
             else:
-                outs = self.translator.feed(item)
-            self._send(outs)
+                self.translated += len(item)
+                self._send(self.translator.feed(item))
+
+    def _catch_up(self, snapshot: Update) -> None:
+        """Start again from the observer's ``snapshot``: the translator's counts and the channels' last messages
+        (sent on subscription); violations, divergences and log lines of before are not sent again."""
+        self.caught_up += 1
+        self.translator = Translator(self.observer.name)
+        self._last = {topic: (message, t) for topic, message, t in self.translator.snapshot(snapshot)
+                      if topic in LATCHED}
 
     def _send(self, outs: list[Out]) -> None:
         for topic, message, t in outs:
             if topic in LATCHED:
                 self._last[topic] = (message, t)
-            try:
-                self._channels[topic].log(message, log_time=t)
-                self.sent += 1
-            except Exception:  # never let one message stop the view
-                log.exception("cannot send a message on %s", topic)
+            if self._channels[topic].has_sinks():  # else nobody subscribes: not even encoded
+                self._log(topic, message, t)
+
+    def _log(self, topic: str, message: dict[str, Any], t: int) -> None:
+        try:
+            self._channels[topic].log(to_json(message), log_time=t)
+            self.sent += 1
+        except Exception:  # never let one message stop the view
+            log.exception("cannot send a message on %s", topic)

@@ -46,14 +46,14 @@ class Translator:
         return out
 
     def snapshot(self, snap: dict[str, Any]) -> list[Out]:
-        """The messages a snapshot (a view starting mid-run) gives: the last of each kind."""
-        updates: list[dict[str, Any]] = []
+        """The messages a snapshot (a view starting mid-run) gives: the last of each kind, after the violations
+        and divergences so far (the series counts them)."""
+        updates: list[dict[str, Any]] = [{"kind": "violation", "violation": v} for v in snap.get("violations", [])]
+        if snap.get("divergences"):
+            updates.append({"kind": "divergences", "added": snap["divergences"]})
         for kind in ("state", "verdicts", "unsafe", "state_space", "pilot"):
             if snap.get(kind) is not None:
                 updates.append({"kind": kind, "message": snap[kind], "t": snap.get("state_space_t")})
-        updates += [{"kind": "violation", "violation": v} for v in snap.get("violations", [])]
-        if snap.get("divergences"):
-            updates.append({"kind": "divergences", "added": snap["divergences"]})
         return self.feed(updates)
 
     def _log(self, t: float, level: int, text: str) -> Out:
@@ -102,6 +102,8 @@ class Translator:
         if kind == "divergences":
             out = []
             for d in u["added"]:
+                if d["kind"] == "violation":
+                    continue  # an onset the monitor lists for late views: the board made it a violation update
                 self.divergences += 1
                 what = "manager restart" if d["kind"] == "restart" else "model divergence"
                 why = "; ".join(w for w in (d.get("reason", ""), d.get("info", "")) if w)

@@ -14,13 +14,19 @@ none in the publishing thread (samples go through a Zenoh ring channel to a
 thread of this writer), then one bounded deque append per sample; only verdicts,
 divergence lists and pilot statuses are decoded at once (the rest when a bundle is written).  Memory:
 at most :data:`MAX_ENTRIES` payloads (each under the codec's size limit;
-about 1 KB for the paper's system), whatever the window.
+about 1 KB for the paper's system), whatever the window.  Disk: a bundle is
+written under a hidden ``.partial`` name and renamed when complete (a failed
+one is removed), then the folder is capped: the oldest bundles of the system
+go first until at most ``max_files`` of them and ``max_bytes`` remain (the
+newest always stays); the cap costs one listing of the folder per bundle.
 """
 
 from __future__ import annotations
 
 import argparse
 import logging
+import os
+import re
 import threading
 import time
 from collections import deque
@@ -28,6 +34,8 @@ from pathlib import Path
 
 import zenoh
 
+from services.common.memory import memory_size
+from services.common.options import count
 from services.common.zenoh_config import undeclare
 from services.foxglove.bundle import BundleSink
 from skinet.errors import SkinetError
@@ -44,18 +52,27 @@ RECORDED = {"events": CanonicalEvent, "state": LiveState, "verdicts": Verdicts, 
 CHANNEL = 4096  # samples waiting for the ring's thread
 POLL = 0.005  # seconds between looks at an empty channel
 MAX_ENTRIES = 100_000  # payloads kept in the ring, whatever the window
+MAX_FILES = 100  # default --incidents-max-files
+MAX_BYTES = 1 << 30  # default --incidents-max-bytes (1 GiB)
+PARTIAL = ".partial"  # suffix of a bundle being written (hidden: its name starts with a dot)
 log = logging.getLogger("skinet.incidents")
 
 
 class Incidents:
     """Writes incident bundles of ``model``'s system into ``folder``."""
 
-    def __init__(self, session: zenoh.Session, model: ModelBundle, folder: Path, window: float = 30.0):
+    def __init__(self, session: zenoh.Session, model: ModelBundle, folder: Path, window: float = 30.0,
+                 max_files: int = MAX_FILES, max_bytes: int = MAX_BYTES):
         self.model, self.folder, self.window = model, Path(folder), window
+        self.max_files, self.max_bytes = max_files, max_bytes
         self.folder.mkdir(parents=True, exist_ok=True)
         self.system = model.system
         self.written: list[Path] = []
+        self.removed: list[Path] = []  # bundles the cap removed, oldest first
         self.failed = 0
+        self._name = re.compile(re.escape(self.system) + r"-\d{8}-\d{6}-\d{3}\.mcap")
+        self._leftovers()
+        self._cap()
         self._ring: deque[tuple[str, bytes, float]] = deque(maxlen=MAX_ENTRIES)
         self._lock = threading.Lock()
         self._holds: dict[str, bool] = {}
@@ -125,9 +142,11 @@ class Incidents:
                 noted = d.older + len(d.entries)
                 before = self._noted.get(d.monitor, 0)
                 self._noted[d.monitor] = max(before, noted)
-                if noted > before:
-                    kinds = sorted({e.kind for e in d.entries if e.n >= before}) or ["divergence"]
-                    return f"{' and '.join('manager restart' if k == 'restart' else 'model divergence' for k in kinds)}"
+                # Violation onsets are listed too (for views that join later): the verdicts report them.
+                kinds = sorted({e.kind for e in d.entries if e.n >= before and e.kind != "violation"})
+                if noted > before and (kinds or not d.entries):
+                    return " and ".join("manager restart" if k == "restart" else "model divergence"
+                                        for k in kinds or ["divergence"])
                 return None
             if kind == "pilot":
                 p = decode(payload, PilotStatus)
@@ -160,37 +179,90 @@ class Incidents:
             self._pending = None
         stamp = time.strftime("%Y%m%d-%H%M%S", time.localtime(t0))
         path = self.folder / f"{self.system}-{stamp}-{int(t0 * 1000) % 1000:03d}.mcap"
-        sink = BundleSink(path.open("wb"), self.system, trigger="; ".join(what))
-        sink.write(keys.model(self.system, self.model.digest), self.model, t0)
+        partial = path.with_name(f".{path.name}{PARTIAL}")
         kept = 0
         try:
-            for key, payload, t in entries:
-                kind = RECORDED.get(key.split("/")[2] if key.count("/") >= 2 else "")
-                if kind is None or (kind is PilotStatus and not key.endswith("/status")):
-                    continue
-                try:
-                    sink.write(key, decode(payload, kind), t)
-                    kept += 1
-                except DecodeError:
-                    continue
-            sink.close()
+            with partial.open("wb") as out:
+                sink = BundleSink(out, self.system, trigger="; ".join(what))
+                sink.write(keys.model(self.system, self.model.digest), self.model, t0)
+                for key, payload, t in entries:
+                    kind = RECORDED.get(key.split("/")[2] if key.count("/") >= 2 else "")
+                    if kind is None or (kind is PilotStatus and not key.endswith("/status")):
+                        continue
+                    try:
+                        sink.write(key, decode(payload, kind), t)
+                        kept += 1
+                    except DecodeError:
+                        continue
+                sink.close()
+            os.replace(partial, path)
         except Exception as exc:  # a full disk, a folder removed: counted and logged, the monitor goes on
             self.failed += 1
+            try:
+                partial.unlink(missing_ok=True)  # never a partial bundle left
+            except OSError:
+                pass
             log.error("cannot write the incident bundle %s: %s", path, exc)
             return
-        self.written.append(path)
-        log.warning("incident (%s): bundle %s written, %d messages from %.0f s before to %.0f s after",
+        log.warning("incident (%s): bundle %s written, %d messages from %g s before to %g s after",
                     "; ".join(what), path, kept, self.window, self.window)
+        self._cap()
+        self.written.append(path)
+
+    # -- the folder's cap ------------------------------------------------------------------
+
+    def _leftovers(self) -> None:
+        """Remove the partial bundles of this system a killed writer left."""
+        try:
+            for p in self.folder.iterdir():
+                if p.name.startswith(".") and p.name.endswith(PARTIAL) and \
+                        self._name.fullmatch(p.name[1:-len(PARTIAL)]):
+                    p.unlink(missing_ok=True)
+        except OSError as exc:
+            log.error("cannot remove partial incident bundles in %s: %s", self.folder, exc)
+
+    def _cap(self) -> None:
+        """Remove this system's oldest bundles until at most ``max_files`` and ``max_bytes`` remain; the newest
+        stays, even alone over ``max_bytes``.  Other files in the folder are never touched."""
+        try:
+            found = []
+            for p in self.folder.iterdir():
+                if self._name.fullmatch(p.name):
+                    st = p.stat()
+                    found.append((st.st_mtime_ns, p.name, st.st_size, p))
+        except OSError as exc:
+            log.error("cannot list the incident bundles in %s: %s", self.folder, exc)
+            return
+        found.sort()
+        count, total = len(found), sum(size for _, _, size, _ in found)
+        for _, _, size, p in found[:-1]:
+            if count <= self.max_files and total <= self.max_bytes:
+                break
+            try:
+                p.unlink(missing_ok=True)
+            except OSError as exc:
+                log.error("cannot remove the incident bundle %s: %s", p, exc)
+                continue
+            count, total = count - 1, total - size
+            self.removed.append(p)
+            log.info("incident bundle %s removed: the folder keeps at most %d bundles and %d bytes of %s",
+                     p, self.max_files, self.max_bytes, self.system)
 
 
 def add_incidents_args(p: argparse.ArgumentParser) -> None:
-    """``--incidents DIR`` and ``--incident-window S``."""
+    """``--incidents DIR``, ``--incident-window S`` and the folder's cap, ``--incidents-max-files N`` and
+    ``--incidents-max-bytes SIZE``."""
     p.add_argument("--incidents", metavar="DIR",
                    help="write an incident bundle (MCAP; skinet replay FILE --verify re-runs it) into DIR around each "
                         "violation, model divergence, manager restart or pilot failure: the --incident-window "
                         "seconds before and after it")
     p.add_argument("--incident-window", type=_window, default=30.0, metavar="S",
                    help="seconds kept before an incident and recorded after it (default: 30)")
+    p.add_argument("--incidents-max-files", type=count(1), default=MAX_FILES, metavar="N",
+                   help=f"keep at most N bundles of the system in DIR: the oldest are removed first, the newest "
+                        f"always stays (default: {MAX_FILES})")
+    p.add_argument("--incidents-max-bytes", type=memory_size, default=MAX_BYTES, metavar="SIZE",
+                   help="and at most SIZE bytes of them, e.g. 500MiB (default: 1GiB)")
 
 
 def _window(text: str) -> float:
@@ -209,6 +281,7 @@ def start_incidents(session: zenoh.Session, system: System, args: argparse.Names
     if getattr(args, "incidents", None) is None:
         return None
     try:
-        return Incidents(session, bundle(system), Path(args.incidents), args.incident_window)
+        return Incidents(session, bundle(system), Path(args.incidents), args.incident_window,
+                         args.incidents_max_files, args.incidents_max_bytes)
     except OSError as exc:
         raise SkinetError(f"--incidents {args.incidents}: cannot make the folder: {exc.strerror}") from None

@@ -448,6 +448,10 @@ def _cases() -> list[Case]:
               "argument --incident-window: '0' is not a number of seconds from 0 (excluded) to 3600")
         add(program, "--incidents", (*base, "--no-multicast-scouting", "--incidents", "{tmp}/list.json"), 1,
             prefix + "--incidents {tmp}/list.json: cannot make the folder: File exists")
+        usage(program, "--incidents-max-files", (*base, "--incidents-max-files", "0"),
+              "argument --incidents-max-files: expected an integer >= 1, got '0'")
+        usage(program, "--incidents-max-bytes", (*base, "--incidents-max-bytes", "-1GiB"),
+              "argument --incidents-max-bytes: not a size: '-1GiB' (a size is positive, e.g. 1GiB, 512MiB, 2GB)")
     add("skinet", "--goal-user", ("dashboard", "spot_arm", "--port", "0", "--goal-user", "goalbox"), 1,
         "skinet: error: --goal-user goalbox logs in to a router: give its endpoint with --connect/-e")
     add("skinet", "--goal-secrets", ("dashboard", "spot_arm", "--port", "0", "--goal-user", "goalbox", "-e",

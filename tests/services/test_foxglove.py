@@ -75,6 +75,57 @@ def test_the_unassisted_run_in_foxglove_shows_each_violation_at_its_step(foxglov
     assert client.on(fx.STATE_SPACE) and client.on(fx.STATE)[-1]["seq"] == records[-1].index
 
 
+def test_the_view_does_nothing_without_a_subscriber_and_wakes_up_where_the_run_is(router, client_factory) -> None:
+    """In process: no client, nothing translated; a client joining at step 27 gets the last state and the series
+    counting the violation it missed (not the violation again); gone at step 33, the view sleeps; another client at
+    step 37 starts from there and sees the violation of step 38 once."""
+    from services.dashboard.observer import Observer
+    from services.foxglove.server import FoxgloveView
+    from skinet.system.load import load_system
+    from tests.services.test_monitor import wait_until
+
+    observer = Observer(client_factory(), "spot_arm", load_system(SYSTEM_FILE)[0])
+    view = FoxgloveView(observer, "127.0.0.1", 0)
+    clients: list[FoxgloveClient] = []
+    translated: list[int] = []
+
+    def join(step: int) -> FoxgloveClient:
+        wait_until(lambda: observer.read(lambda b: b.unsafe is not None and b.unsafe.seq == step), 20,
+                   f"the observer at step {step}")
+        clients.append(FoxgloveClient(view.url))
+        clients[-1].wait(lambda c: c.on(fx.STATE) and c.on(fx.SERIES), "the last state and series")
+        return clients[-1]
+
+    def after(record: StepRecord) -> None:
+        if record.index == 27:
+            assert (view.idle, view.translated, view.sent, view.caught_up) == (True, 0, 0, 0)
+            client = join(27)
+            assert (client.on(fx.STATE)[-1]["seq"], client.on(fx.SERIES)[-1]["violations"]) == (27, 1)
+            assert view.caught_up == 1 and not view.idle and client.on(fx.VIOLATIONS) == []
+        elif record.index == 33:
+            clients[0].wait(lambda c: len(c.on(fx.VIOLATIONS)) == 1, "the violation of step 33")
+            clients[0].close()
+            wait_until(lambda: view.idle, 10, "the view asleep")
+            translated.append(view.translated)
+        elif record.index == 37:
+            assert view.translated == translated[0]  # steps 34 to 37: nothing done
+            client = join(37)
+            assert (client.on(fx.STATE)[-1]["seq"], client.on(fx.SERIES)[-1]["violations"]) == (37, 2)
+            assert view.caught_up == 2
+
+    try:
+        play("unassisted", router, after)
+        clients[1].wait(lambda c: c.on(fx.VIOLATIONS), "the violation of step 38")
+        assert [(v["property"], v["seq"]) for c in clients for v in c.on(fx.VIOLATIONS)] == [
+            (p, i) for p, i, _ in VIOLATIONS[1:]]
+        assert [c.invalid for c in clients] == [[], []]
+    finally:
+        for c in clients:
+            c.close()
+        view.close()
+        observer.close()
+
+
 def test_a_port_in_use_is_a_one_line_error(router) -> None:
     import socket
 
