@@ -1,6 +1,6 @@
 """Build hook: a wheel ships the demo's files, copied at build time from the checkout's ``skillsets/``
 and ``examples/nav2/`` into ``skinet_cli/demo_files/``, so that an installed ``skinet demo`` runs from
-any folder (README, "Commands"; :func:`skinet_cli.demo.demo_roots` finds them).  An editable
+any folder (docs/commands.md, "Every command"; :func:`skinet_cli.demo.demo_roots` finds them).  An editable
 install copies nothing: it reads the checkout's folders.  Cost: one copy of about 250 kB per build."""
 
 from __future__ import annotations

@@ -38,6 +38,7 @@ from services.common.zenoh_config import (
 from services.monitor import Monitor, MonitorView, start_monitor
 from services.common.memory import memory_limit
 from services.common.options import load_live_system, require_properties
+from skinet.files import program
 from skinet.verify.explain import warning_line
 from chains.render import seconds, table
 from skinet.system.load import load_typemap
@@ -291,20 +292,21 @@ def connect_lines(args: argparse.Namespace, system: System, mode: str, listening
 
     first = system.components[0]
     command = f"{first.name}:{first.skillset.skills[0].name}.start" if first.skillset.skills else "SKILLSET:TRANSITION"
-    lines = [head, f"  skinet watch {system.name} {flags('observer')}",
-             f"  skinet dashboard {system.name} {flags('observer')}",
-             f"  skinet check {system.name} {command} {flags('observer')}"]
+    skinet = program.skinet()
+    lines = [head, f"  {skinet} watch {system.name} {flags('observer')}",
+             f"  {skinet} dashboard {system.name} {flags('observer')}",
+             f"  {skinet} check {system.name} {command} {flags('observer')}"]
     if bridge:
         ros = (" --rmw-zenoh" + (f" --domain {args.domain}" if args.domain else "") + (
             " --ros-distro humble" if args.ros_distro == "humble" else "") if args.rmw_zenoh else "") + (
             f" --namespace {args.namespace}" if args.namespace else "")  # the robot's keys, as the pilot's
-        lines.append(f"  python -m services.bridge_ros2 {args.system}{ros} {flags('bridge')}   (the robot's side)")
+        lines.append(f"  {program.python()} -m services.bridge_ros2 {args.system}{ros} {flags('bridge')}   (the robot's side)")
     if pilot:
         lines.append(f"  pilot: goals on {keys.pilot_goal(system.name, '<client>')} (<client>: your login, "
                      f"'{keys.LOCAL_CLIENT}' without one), status on {keys.pilot_status(system.name)}")
         runnable = [f"run {c.name}:{k.name}" for c in system.components for k in c.skillset.skills
                     if k.successes and not k.inputs]
-        lines.append(f"  skinet goal {system.name} \"{runnable[0] if runnable else 'reach FORMULA'}\" "
+        lines.append(f"  {skinet} goal {system.name} \"{runnable[0] if runnable else 'reach FORMULA'}\" "
                      f"{flags('operator')}   (guided; --drive: the pilot sends the commands)")
     return lines
 

@@ -15,6 +15,7 @@ import os
 from pathlib import Path
 
 from services.common.options import key_name
+from skinet.files import program
 
 DEFAULT_ENDPOINT = "tls/127.0.0.1:7447"
 OPERATOR = "operator"  # the compose vault's user of the operator role: it may send the pilot goals
@@ -82,13 +83,13 @@ def cmd_client_config(args: argparse.Namespace) -> int:
         text = (f"// Zenoh client configuration of user '{args.user}' for the router at {args.connect},\n"
                 f"// written by `skinet client-config` from {folder.resolve()}.\n"
                 "// It holds the password: keep it private.  Use it with --zenoh-config, e.g.\n"
-                f"//   skinet watch SYSTEM_NAME --zenoh-config {output}\n" + text)
+                f"//   {program.skinet()} watch SYSTEM_NAME --zenoh-config {output}\n" + text)
     try:
         write_file(output, text.encode())
     except OSError as exc:
         raise SkinetError(f"cannot write {output}: {exc.strerror}") from None
     print(f"wrote {output}: user {args.user} at {args.connect} (password, CA, certificate and key of {folder})")
-    print(f"  skinet watch SYSTEM_NAME --zenoh-config {output}")
+    print(f"  {program.skinet()} watch SYSTEM_NAME --zenoh-config {output}")
     if args.user == OPERATOR:
-        print(f"  skinet goal SYSTEM_NAME GOAL... --drive --zenoh-config {output}")
+        print(f"  {program.skinet()} goal SYSTEM_NAME GOAL... --drive --zenoh-config {output}")
     return 0

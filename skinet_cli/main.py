@@ -18,6 +18,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 from skinet import __version__
 from skinet.errors import SkinetError, SourceError
+from skinet.files import program
 from skinet.verify.explain import plural
 from skinet.system.load import load_model
 from skinet.net.build import build_net
@@ -268,8 +269,8 @@ def _emit(data: object) -> None:
 def cmd_parse(args: argparse.Namespace) -> int:
     if args.file.endswith(".toml"):
         raise SourceError.at(args.file, None, "this is a system or scenario file (.toml); skinet parse checks a "
-                                              f"skillset model (.rl): for a system try skinet net {args.file} or "
-                                              f"skinet unsafe {args.file}")
+                                              f"skillset model (.rl): for a system try {program.skinet()} net {args.file} or "
+                                              f"{program.skinet()} unsafe {args.file}")
     model = load_model(args.file)
     print_warnings(model.warnings)
     summary = [

@@ -29,6 +29,7 @@ from services.common.zenoh_config import (
 )
 from services.bridge_ros2.record import STORAGES, BagRecorder, recorded_topics
 from services.common.cli import add_ros_key_args, key_style
+from skinet.files import program
 from skinet.system.load import load_bindings, load_typemap
 from services.common.options import count, key_name, load_live_system, print_warnings, seconds
 from skinet.errors import SkinetError, SourceError
@@ -282,8 +283,8 @@ def cmd_rosbag(args: argparse.Namespace) -> int:
     if recorder.messages == 0:  # an empty bag is never a success
         raise SkinetError(f"nothing recorded in {args.output}: no message on the {len(topics)} topics (is the robot "
                           "or its gateway connected to this Zenoh network? check -e/--connect and --namespace)")
-    print(f"skinet rosbag: {recorder.messages} messages written to {args.output}; replay it with skinet conform "
-          f"{args.system} {args.output}", file=sys.stderr)
+    print(f"skinet rosbag: {recorder.messages} messages written to {args.output}; replay it with "
+          f"{program.skinet()} conform {args.system} {args.output}", file=sys.stderr)
     return 0
 
 

@@ -13,6 +13,7 @@ import time
 
 from services.common.zenoh_config import add_zenoh_args
 from services.common.options import count, number, seconds
+from skinet.files import program
 
 CONNECT_WAIT = 2.0  # seconds for an explicit --connect endpoint to answer before the replay gives up
 
@@ -72,7 +73,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
         replay = Replay(session, rec, args.log)
         endpoint = next((e for e in listening if e.startswith("tcp/")), None)
         if endpoint is not None:
-            print(f"skinet replay: listening on {', '.join(listening)}; follow it with: skinet watch {rec.system} "
+            print(f"skinet replay: listening on {', '.join(listening)}; follow it with: {program.skinet()} watch {rec.system} "
                   f"-e {endpoint}", file=sys.stderr, flush=True)
         left_out = "".join(f", {n} {kind}" for kind, n in rec.left_out.items())
         print(f"skinet replay: {args.log}: system {rec.system}, {len(rec.messages)} monitor messages over "

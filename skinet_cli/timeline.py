@@ -16,7 +16,7 @@ from skinet.errors import SkinetError, SourceError
 from skinet.files.read import read_text
 from skinet.system.model import System
 from skinet.wire.log import Entry, read_log
-from skinet.wire.mcap_log import MAGIC, ROSBAG, is_mcap, read_mcap
+from skinet.wire.mcap_log import MAGIC, is_mcap, read_mcap, rosbag_refused
 from skinet.wire.messages import LiveState
 
 SQLITE = b"SQLite format 3\x00"  # a rosbag2 in its sqlite3 storage
@@ -54,11 +54,11 @@ def load_log(path: str) -> list[Entry]:
     """A monitor log in either format (MCAP is recognised by its magic bytes); a rosbag2 (its folder, or
     its SQLite file) is refused in one line that points to ``skinet conform``."""
     if os.path.isfile(os.path.join(path, "metadata.yaml")):
-        raise SourceError.at(path, None, ROSBAG)
+        raise SourceError.at(path, None, rosbag_refused())
     try:
         with open(path, "rb") as f:
             if f.read(len(SQLITE)) == SQLITE:
-                raise SourceError.at(path, None, ROSBAG)
+                raise SourceError.at(path, None, rosbag_refused())
             f.seek(0)
             if is_mcap(f.read(len(MAGIC))):
                 f.seek(0)

@@ -4,7 +4,7 @@
 workspace into ``~/.cache/skinet-live/cargo-target``, shared by every clone) and
 returns the binary's path, or skips the test with the reason when cargo or cmake
 is missing.  cargo rebuilds only what changed: after the first build (about 12
-minutes on 2 idle cores, see README) a call costs about a second.
+minutes on 2 idle cores, see docs/development.md) a call costs about a second.
 """
 
 from __future__ import annotations

@@ -29,6 +29,7 @@ from services.common.events import event_publisher
 from services.common.zenoh_config import add_zenoh_args, config_from_args, open_session
 from services.common.options import ArgumentParser, load_live_system, seconds
 from skinet.errors import SkinetError, SourceError
+from skinet.files import program
 from skinet.system.load import load_bindings, load_typemap
 from skinet.wire import keys
 from skinet.wire.codec import encode
@@ -75,7 +76,7 @@ def main(argv: list[str] | None = None) -> int:
     kind = monitor_log(args.replay) if args.replay else None
     if kind is not None:
         raise SourceError.at(args.replay, None, f"a SkiNet monitor log ({kind}, skinet record), not a rosbag2 "
-                                                f"file of the managers: replay it with 'skinet replay {args.replay}'")
+                                                f"file of the managers: replay it with '{program.skinet()} replay {args.replay}'")
     source = args.source or default_source(args.instance)
     session = open_session(config_from_args(args))
     try:

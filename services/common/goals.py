@@ -15,6 +15,7 @@ import time
 import zenoh
 
 from skinet.errors import SkinetError
+from skinet.files import program
 from skinet.wire import keys
 from skinet.wire.codec import DecodeError, decode, encode
 from skinet.wire.messages import PilotGoalReply, PilotGoalRequest, PilotStatus
@@ -31,7 +32,7 @@ def no_pilot_message(system: str, client: str) -> str:
     key = keys.pilot_goal(system, client)
     who = "" if client == keys.LOCAL_CLIENT else (
         f" (or the router refused user '{client}': only operator-role users may send goals)")
-    return f"no pilot answers on {key}: is `skinet run` or the pilot service running?{who}"
+    return f"no pilot answers on {key}: is `{program.skinet()} run` or the pilot service running?{who}"
 
 
 def ask_pilot(session: zenoh.Session, request: PilotGoalRequest, client: str,
@@ -49,7 +50,7 @@ def ask_pilot(session: zenoh.Session, request: PilotGoalRequest, client: str,
             raise SkinetError(f"undecodable answer on {key}: {exc}") from None
     if time.monotonic() - start >= timeout:  # somebody holds the query: a pilot still planning, or frozen
         raise NoPilot(f"no answer on {key} within {timeout:g} s: a pilot still planning may yet take the goal "
-                      f"(skinet goal {request.system} --cancel cancels it)")
+                      f"({program.skinet()} goal {request.system} --cancel cancels it)")
     raise NoPilot(no_pilot_message(request.system, client))
 
 

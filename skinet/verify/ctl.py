@@ -551,7 +551,7 @@ def check(kripke: Kripke, formula: Expr) -> Result:
     whose operands return after it, is undecided at once (no fixpoint and no
     pass over the markings is started), and a state formula is evaluated only
     up to :data:`GRACE_ATOMS` atoms: the work past the budget is bounded by a
-    constant, not by the formula (README, ``skinet ctl``).  Cost: one fixpoint
+    constant, not by the formula (docs/commands.md, ``skinet ctl``).  Cost: one fixpoint
     per temporal operator, each linear in the stored markings and edges.
     """
     st = kripke.stored

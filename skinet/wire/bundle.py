@@ -30,6 +30,7 @@ from typing import IO, Any
 from pydantic import BaseModel, ValidationError
 
 from skinet.errors import SkinetError
+from skinet.files import program
 from skinet.wire.log import Entry
 from skinet.wire.mcap_log import MAGIC, McapLogWriter, _entry
 from skinet.wire.messages import ModelBundle
@@ -126,7 +127,7 @@ def read_bundle(stream: IO[bytes], source: str) -> Bundle:
     digests = metadata.get(ATTACHMENTS)
     if digests is None or MODEL not in attachments:
         raise SkinetError(f"{source}: not a SkiNet bundle (no model attachment and digests; a monitor log? "
-                          "skinet replay plays those without --verify)")
+                          f"{program.skinet()} replay plays those without --verify)")
     for name in sorted(set(digests) | set(attachments)):
         found = sha256(attachments[name]) if name in attachments else "missing"
         if found != digests.get(name, "not recorded"):

@@ -18,6 +18,7 @@ from typing import IO, Any
 from pydantic import BaseModel, ValidationError
 
 from skinet.errors import Diagnostic, SourceError
+from skinet.files import program
 from skinet.wire.log import MAX_ERRORS, Entry
 from skinet.wire.messages import MESSAGES
 from skinet.wire.schemas import schema
@@ -26,8 +27,12 @@ MAGIC = b"\x89MCAP0\r\n"
 PROFILE = ""  # not a ROS profile: JSON messages with JSON schemas
 LIBRARY = "skinet-live"
 CHUNK_SIZE = 64 * 1024  # a recorder killed without warning loses at most this much
-ROSBAG = ("this is a ROS 2 bag (rosbag2: CDR messages), not a monitor log: `skinet conform SYSTEM BAG` checks a "
-          "bag against a model")
+
+
+def rosbag_refused() -> str:
+    """The one line that refuses a rosbag2 where a monitor log is read, and names the command that reads it."""
+    return (f"this is a ROS 2 bag (rosbag2: CDR messages), not a monitor log: `{program.skinet()} conform SYSTEM BAG` "
+            "checks a bag against a model")
 
 
 def is_mcap(head: bytes) -> bool:
@@ -84,7 +89,7 @@ def read_mcap(stream: IO[bytes], source: str = "<log>", warn: Callable[[str], No
     try:
         for mschema, channel, message in NonSeekingReader(stream).iter_messages(log_time_order=False):
             if channel.message_encoding == "cdr":  # one line for the whole bag, not one per message
-                raise SourceError([Diagnostic(source, None, "error", ROSBAG)])
+                raise SourceError([Diagnostic(source, None, "error", rosbag_refused())])
             if channel.topic.startswith("/skinet/"):  # an incident bundle's Foxglove channels (a view of the rest)
                 continue
             problem = _entry(mschema, channel, message, entries)

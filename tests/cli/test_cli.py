@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import re
 import subprocess
 import sys
@@ -416,3 +417,31 @@ def test_explore_progress_shows_progress_or_says_why_not(capsys: pytest.CaptureF
     assert code == 0 and err.splitlines() and all(re.fullmatch(r"  layer \d+: \d+ markings?, [\d.]+ m?s", line)
                                                   for line in err.splitlines())
     assert err.splitlines()[-1].startswith("  layer 9: 63 markings, ")
+
+
+def test_hints_name_the_skinet_that_was_called(tmp_path: Path) -> None:
+    """A ``skinet`` that PATH does not find (a clone's ``.venv/bin/skinet``) prints hints that call it by the
+    path it was started with; one that PATH finds prints plain ``skinet`` (skinet/files/program.py)."""
+    script = Path(sys.executable).parent / "skinet"
+    typed = os.path.relpath(script, tmp_path)
+    hint = "for a system try {0} net {1} or {0} unsafe {1}\n"
+    for path, name in ((os.defpath, typed), (f"{script.parent}{os.pathsep}{os.defpath}", "skinet")):
+        done = subprocess.run([typed, "parse", SYSTEM], cwd=tmp_path, capture_output=True, text=True, timeout=60,
+                              env={**os.environ, "PATH": path})
+        assert done.returncode == 1 and done.stderr.endswith(hint.format(name, SYSTEM)), done.stderr
+
+
+def test_python_hint_is_the_interpreter_beside_the_script(monkeypatch: pytest.MonkeyPatch) -> None:
+    from skinet.files import program
+
+    script = Path(sys.executable).parent / "skinet"
+    monkeypatch.setenv("PATH", os.defpath)
+    for argv0, expected in ((str(script), (str(script), str(script.with_name("python")))),
+                            ("/no/such/place/skinet", ("/no/such/place/skinet", sys.executable)),
+                            (str(ROOT / "skinet_cli" / "main.py"), ("skinet", "python"))):
+        monkeypatch.setattr(sys, "argv", [argv0])
+        program.skinet.cache_clear()
+        try:
+            assert (program.skinet(), program.python()) == expected
+        finally:
+            program.skinet.cache_clear()

@@ -318,7 +318,7 @@ def test_bridge_points_at_skinet_replay_for_a_monitor_log(recording: dict[str, P
 
 
 def test_readme_lines_a_peer_replay_and_a_watch_connected_to_it(recording: dict[str, Path], tmp_path: Path) -> None:
-    """README's ``skinet replay run.mcap --speed 4 --listen ENDPOINT`` then ``skinet watch --connect ENDPOINT``
+    """docs/operator.md's ``skinet replay run.mcap --speed 4 --listen ENDPOINT`` then ``skinet watch --connect ENDPOINT``
     (no router); ``--linger`` ends the replay by itself."""
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     out = tmp_path / "replay.out"

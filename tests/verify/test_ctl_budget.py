@@ -1,4 +1,4 @@
-"""The budget bounds every CTL formula, whatever its nesting (issue 31, item 1; README "skinet ctl").
+"""The budget bounds every CTL formula, whatever its nesting (issue 31, item 1; docs/commands.md "skinet ctl").
 
 Once the deadline has passed, each remaining operator costs O(1): no fixpoint
 starts and no pass over the markings is made, so the time past the budget does
