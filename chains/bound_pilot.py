@@ -5,8 +5,9 @@ the pilot (:func:`drive_goals`, the ``then`` of :func:`chains.chain.run_bound_ch
 a pilot on the chain's session, with the default actuator (the bound skills' goals and
 cancel requests on the simulated action servers), follows the monitor from where the
 run left the robot and drives the mission in drive mode, asking the monitor's strict
-check before every command.  The simulated robot's implementation ends every goal it
-accepts in its success mode, ``duration`` seconds later.
+check before every command.  The simulated robot's implementations
+(:class:`services.simulator.world.World`) end every goal it accepts in its first success
+mode, ``duration`` seconds later.
 
 What it gives back (:class:`PilotEnd`) is read on the robot's side of the chain, not
 taken from the pilot's word alone: what the actuator sent (the action client's own
@@ -26,6 +27,7 @@ from services.common.zenoh_config import undeclare
 from services.pilot import start_pilot
 from services.pilot.act import Actuator, default_actuator
 from chains.pilot_chain import ask_goal
+from services.simulator.world import World
 from skinet.wire import keys
 from skinet.wire.codec import decode
 from skinet.wire.messages import CanonicalEvent, PilotCommand, PilotGoalReply, PilotGoalRequest, PilotStatus, Verdicts
@@ -93,12 +95,8 @@ def drive_goals(chain: BoundChain, mission: str, mission_name: str, *, duration:
     Raises :class:`~chains.chain.ChainError` when the pilot refuses the mission, does not end it
     within ``timeout`` seconds, or the chain does not settle within ``settle``.
     """
-    session, system, robot = chain.session, chain.system, chain.robot
-
-    def implementation(skillset: str, skill: str, goal: str) -> None:
-        threading.Timer(duration, robot.terminate, (skillset, skill, "success", "", goal)).start()
-
-    robot.on_start.append(implementation)
+    session, system = chain.session, chain.system
+    world = World(chain.robot, duration=duration)  # each goal the robot accepts succeeds, ``duration`` s later
     seen = _Seen(session, system.name)
     actuator = _Logged(default_actuator(session, system, bindings=chain.bindings, style=chain.style))
     pilot = start_pilot(session, system, actuator=actuator)  # a random instance: one of its own per run
@@ -124,7 +122,7 @@ def drive_goals(chain: BoundChain, mission: str, mission_name: str, *, duration:
     finally:
         pilot.close()
         seen.close()
-        robot.on_start.remove(implementation)
+        world.close()
 
 
 __all__ = ["PilotEnd", "drive_goals"]

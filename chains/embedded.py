@@ -37,7 +37,7 @@ from services.common.zenoh_config import (
 )
 from services.monitor import Monitor, MonitorView, start_monitor
 from services.common.memory import memory_limit
-from services.common.options import load_live_system, require_properties
+from services.common.options import load_live_system, require_properties, self_ending_options
 from skinet.files import program
 from skinet.verify.explain import warning_line
 from chains.render import seconds, table
@@ -184,6 +184,8 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
 
     system, _ = load_live_system(args.system)
     require_properties(system, args.system, args.no_properties)
+    simulate = getattr(args, "simulate", False)
+    duration, failure_rate, seed = self_ending_options(args, "--simulate", simulate)
     mode = session_mode(args, args.connect or [])
     if mode == "client" and args.listen:
         raise ZenohSetupError("--listen: a client listens on nothing (--mode client, or --user with --connect); "
@@ -201,6 +203,7 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
     foxglove = None
     incidents = None
     pilot = None
+    robot = None
     try:
         if args.dashboard is not None:  # first: a port in use stops the run before anything starts
             dashboard = start_dashboard(session, system.name, args.dashboard_host, args.dashboard,
@@ -223,8 +226,15 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
             pilot = start_pilot(session, system, instance=f"embedded-{os.getpid()}", client=client_name(config),
                                 typemap=load_typemap(args.system), style=key_style(args),
                                 outcome_timeout=args.outcome_timeout)
-        print("\n".join(connect_lines(args, system, mode, listening, pilot=pilot is not None)), file=sys.stderr,
-              flush=True)
+        if simulate:
+            from chains.simulated import start_simulated_robot
+
+            robot = start_simulated_robot(session, system, load_typemap(args.system), instance=f"embedded-{os.getpid()}",
+                                          style=key_style(args), duration=duration, failure_rate=failure_rate,
+                                          seed=seed)
+        print("\n".join(connect_lines(args, system, mode, listening, pilot=pilot is not None,
+                                     simulated=(duration, failure_rate, seed) if simulate else None)),
+              file=sys.stderr, flush=True)
         if args.once:
             deadline = time.monotonic() + args.budget + 2.0  # the first prediction, if any comes
             view = monitor.snapshot()
@@ -247,6 +257,8 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
             pilot.close()
         if monitor is not None:
             monitor.close()
+        if robot is not None:  # after the monitor, which would report the robot's bridge gone
+            robot.close()
         session.close()
         if predictor is not None:
             predictor.close()
@@ -274,9 +286,11 @@ def fix_free_ports(config: zenoh.Config) -> list[str]:
 
 
 def connect_lines(args: argparse.Namespace, system: System, mode: str, listening: list[str],
-                  prog: str = "skinet run", bridge: bool = True, pilot: bool = False) -> list[str]:
+                  prog: str = "skinet run", bridge: bool = True, pilot: bool = False,
+                  simulated: tuple[float, float, int] | None = None) -> list[str]:
     """What ``skinet run`` (or ``prog``) prints at start: where it listens, and the exact commands that reach it
-    (``bridge``: the bridge's too, for the system file ``args.system``; ``pilot``: the pilot's goal key)."""
+    (``bridge``: the bridge's too, for the system file ``args.system``, unless ``simulated`` (skill duration,
+    failure rate, seed) says that the run simulates the robot itself; ``pilot``: the pilot's goal key)."""
     if mode == "peer":
         endpoint = next((e for e in listening if e.startswith("tcp/")), listening[0] if listening else "")
         endpoint = re.sub(r"^tcp/0\.0\.0\.0:", "tcp/127.0.0.1:", re.sub(r"^tcp/\[::\]:", "tcp/[::1]:", endpoint))
@@ -296,7 +310,11 @@ def connect_lines(args: argparse.Namespace, system: System, mode: str, listening
     lines = [head, f"  {skinet} watch {system.name} {flags('observer')}",
              f"  {skinet} dashboard {system.name} {flags('observer')}",
              f"  {skinet} check {system.name} {command} {flags('observer')}"]
-    if bridge:
+    if simulated is not None:
+        duration, rate, seed = simulated
+        lines.append(f"  the robot: simulated here, with its bridge; each skill ends by itself {duration:g} s after it "
+                     f"starts (failure rate {rate:g}, seed {seed})")
+    elif bridge:
         ros = (" --rmw-zenoh" + (f" --domain {args.domain}" if args.domain else "") + (
             " --ros-distro humble" if args.ros_distro == "humble" else "") if args.rmw_zenoh else "") + (
             f" --namespace {args.namespace}" if args.namespace else "")  # the robot's keys, as the pilot's
@@ -306,8 +324,9 @@ def connect_lines(args: argparse.Namespace, system: System, mode: str, listening
                      f"'{keys.LOCAL_CLIENT}' without one), status on {keys.pilot_status(system.name)}")
         runnable = [f"run {c.name}:{k.name}" for c in system.components for k in c.skillset.skills
                     if k.successes and not k.inputs]
-        lines.append(f"  {skinet} goal {system.name} \"{runnable[0] if runnable else 'reach FORMULA'}\" "
-                     f"{flags('operator')}   (guided; --drive: the pilot sends the commands)")
+        goal = f"  {skinet} goal {system.name} \"{runnable[0] if runnable else 'reach FORMULA'}\""
+        lines.append(f"{goal} --drive {flags('operator')}   (the pilot drives the simulated robot)" if simulated
+                     else f"{goal} {flags('operator')}   (guided; --drive: the pilot sends the commands)")
     return lines
 
 

@@ -11,7 +11,9 @@ from services.common.zenoh_config import add_login_args
 from services.monitor.check import add_policy_arg
 from services.monitor.sync import add_lost_after_arg
 from services.common.memory import add_memory_arg
-from services.common.options import add_no_properties_arg, add_outcome_timeout_arg, budget, count, seconds
+from services.common.options import (
+    add_no_properties_arg, add_outcome_timeout_arg, add_self_ending_args, budget, count, seconds,
+)
 
 
 def _zenoh_args(c: argparse.ArgumentParser, listen_help: str) -> None:
@@ -44,6 +46,11 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     c.add_argument("--no-pilot", action="store_true",
                    help="do not start the pilot (docs/semantics.md §8: goals on skinet/<system>/pilot/goal/<client>, guided or "
                         "driven with the strict check; see docs/pilot.md)")
+    c.add_argument("--simulate", action="store_true",
+                   help="also run a simulated robot of the system on this session, with its bridge: skillset "
+                        "managers (or the bound action servers, lifecycle nodes and topics) whose skills end by "
+                        "themselves, for skinet goal --drive to drive (docs/pilot.md, Try the pilot in one command)")
+    add_self_ending_args(c, "--simulate")
     add_outcome_timeout_arg(c)
     add_no_properties_arg(c)
     add_policy_arg(c)

@@ -62,6 +62,10 @@ def test_every_variable_the_repository_names_is_in_the_table() -> None:
      "0.05 (the predictor's minimum budget) to 86400 (one day), got '1e308'"),
     ("SKINET_INCLUDE_ROOT", "/no/such/folder", "environment variable SKINET_INCLUDE_ROOT: expected an existing "
      "folder, got '/no/such/folder'"),
+    ("SKINET_FAILURE_RATE", "1.5", "environment variable SKINET_FAILURE_RATE: expected a probability from 0 to 1, "
+     "got '1.5'"),
+    ("SKINET_SKILL_DURATION", "-1", "environment variable SKINET_SKILL_DURATION: expected a number of seconds >= 0, "
+     "got '-1'"),
 ])
 def test_unknown_names_and_bad_values_are_refused(name: str, value: str, message: str,
                                                   capsys: pytest.CaptureFixture[str],
@@ -88,6 +92,20 @@ def test_scouting_variable_means_what_it_says(value: str, on: bool, monkeypatch:
     monkeypatch.setenv("SKINET_ZENOH_SCOUTING", value)
     args = build_parser("watch").parse_args(["watch", "spot_arm"])
     assert args.multicast_scouting is on
+
+
+def test_the_simulated_robots_variables_are_the_defaults_of_its_options(monkeypatch: pytest.MonkeyPatch) -> None:
+    """SKINET_SKILL_DURATION and SKINET_FAILURE_RATE give --skill-duration and --failure-rate when they are not
+    given (skinet run --simulate, python -m services.simulator --self-ending)."""
+    from services.common.options import self_ending_options
+
+    run = ["run", "skillsets/spot_arm.toml", "--simulate"]
+    assert self_ending_options(build_parser("run").parse_args(run), "--simulate", True) == (1.0, 0.0, 0)
+    monkeypatch.setenv("SKINET_SKILL_DURATION", "2.5")
+    monkeypatch.setenv("SKINET_FAILURE_RATE", "0.25")
+    assert self_ending_options(build_parser("run").parse_args(run), "--simulate", True) == (2.5, 0.25, 0)
+    args = build_parser("run").parse_args([*run, "--failure-rate", "0", "--seed", "7"])
+    assert self_ending_options(args, "--simulate", True) == (2.5, 0.0, 7)
 
 
 def test_entry_points_refuse_a_misspelt_variable() -> None:

@@ -75,6 +75,16 @@ def _budget(text: str) -> float:
     return value
 
 
+def _probability(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not 0 <= value <= 1:
+        raise ValueError("expected a probability from 0 to 1")
+    return value
+
+
 def _folder(text: str) -> str:
     if not os.path.isdir(text):
         raise ValueError("expected an existing folder")
@@ -82,7 +92,13 @@ def _folder(text: str) -> str:
 
 
 def _seconds(text: str) -> float:
-    return 0.0 if text.strip() in ("0", "0.0") else _positive_seconds(text)
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not 0 <= value < float("inf"):
+        raise ValueError("expected a number of seconds >= 0")
+    return value
 
 
 def _published_port(text: str) -> str:
@@ -136,6 +152,10 @@ VARIABLES: dict[str, Variable] = {
     "SKINET_RATE_LIMIT": Variable("--rate-limit of the predictor and skinet run"),
     "SKINET_ROS_NAMESPACE": Variable("--namespace of the bridge, the pilot and skinet run, compose.yaml"),
     "SKINET_SPEED": Variable("--speed of the simulator, compose.yaml"),
+    "SKINET_SKILL_DURATION": Variable("--skill-duration of the simulator --self-ending and skinet run --simulate",
+                                      _seconds),
+    "SKINET_FAILURE_RATE": Variable("--failure-rate of the simulator --self-ending and skinet run --simulate",
+                                    _probability),
     "SKINET_DASHBOARD_HOST": Variable("--host of the dashboard"),
     "SKINET_DASHBOARD_PORT": Variable("--port of the dashboard, compose.yaml (the host port)"),
     "SKINET_DASHBOARD_FOXGLOVE": Variable("--foxglove of the dashboard: also serve Foxglove on this port"),

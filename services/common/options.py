@@ -18,7 +18,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import NoReturn
 
-from skinet.errors import Diagnostic, Pos, SourceError
+from skinet.errors import Diagnostic, Pos, SkinetError, SourceError
 from skinet.system.load import load_state, load_system, parse_state
 from skinet.files.read import read_text
 from skinet.system.model import Marking, System
@@ -102,6 +102,50 @@ def count(low: int = 1, high: int | None = None, env: str | None = None) -> Call
     """An integer in ``[low, high]``."""
     what = f"an integer >= {low}" if high is None else f"an integer from {low} to {high}"
     return _number(int, what, low, False, high, env)  # type: ignore[return-value]
+
+
+def probability(env: str | None = None) -> Callable[[str], float]:
+    """A probability: a number from 0 to 1."""
+    return _number(float, "a probability from 0 to 1", 0.0, False, 1.0, env)
+
+
+# The options of a simulated robot whose skills end by themselves: (name, environment variable, default).
+SELF_ENDING = (("skill_duration", "SKINET_SKILL_DURATION", 1.0), ("failure_rate", "SKINET_FAILURE_RATE", 0.0),
+               ("seed", None, 0))
+
+
+def add_self_ending_args(parser: argparse.ArgumentParser, flag: str) -> None:
+    """The options of a simulated robot whose skills end by themselves (``flag``: the option that asks for it;
+    docs/pilot.md, *Try the pilot in one command*); :func:`self_ending_options` reads them."""
+    g = parser.add_argument_group(f"the simulated robot's skills (with {flag})")
+    g.add_argument("--skill-duration", type=seconds(zero=True), metavar="S",
+                   help="seconds each skill runs before it ends by itself (default: $SKINET_SKILL_DURATION, else 1)")
+    g.add_argument("--failure-rate", type=probability(), metavar="P",
+                   help="probability that a run of a skill ends in one of its failure modes (drawn with --seed) "
+                        "instead of its first success mode (default: $SKINET_FAILURE_RATE, else 0)")
+    g.add_argument("--seed", type=count(0), metavar="N",
+                   help="seed of the failure draws: the same seed gives the same outcomes in the same order of "
+                        "starts (default: 0)")
+
+
+def self_ending_options(args: argparse.Namespace, flag: str, on: bool) -> tuple[float, float, int]:
+    """(skill duration, failure rate, seed) of :func:`add_self_ending_args`: the option, else its environment
+    variable (checked by :mod:`services.common.environment` before any command starts), else the default.
+    Raises :class:`SelfEndingMisused` when one of them is given while ``on`` is false (``flag`` not given)."""
+    given = [name for name, _, _ in SELF_ENDING if getattr(args, name, None) is not None]
+    if given and not on:
+        raise SelfEndingMisused(f"--{given[0].replace('_', '-')} needs {flag}")
+    values = []
+    for name, env, default in SELF_ENDING:
+        value = getattr(args, name, None)
+        if value is None:
+            value = type(default)(float(os.environ[env])) if env and os.environ.get(env) else default
+        values.append(value)
+    return values[0], values[1], values[2]  # type: ignore[return-value]
+
+
+class SelfEndingMisused(SkinetError):
+    """An option of the simulated robot's skills without the option that asks for that robot."""
 
 
 def key_name(what: str) -> Callable[[str], str]:

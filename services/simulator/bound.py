@@ -55,6 +55,7 @@ from services.simulator.protocols import ABORTED, SUCCEEDED, ActionLogic, Lifecy
 from skinet.ros.actions import cancel_goal_request, message, send_goal_reply, send_goal_request
 from skinet.ros.binding import (
     CANCEL_TYPE, CHANGE_STATE_TYPE, GET_STATE_TYPE, STATUS_TYPE, TRANSITION_EVENT_TYPE, Binding, ResourceBinding, SkillBinding,
+    result_fields,
 )
 from skinet.ros.bound import goal_text
 from skinet.ros.keys import KeyStyle, rmw_attachment
@@ -206,7 +207,7 @@ class BoundSimulator:
         self.status_first = status_first
         self.client = ServiceClient(session, style)  # the operator's client (send_goal, cancel_goal)
         # Called with (skillset, skill, goal id as ROS prints it) when an action server accepts a goal, under its
-        # lock (a simulated implementation, services.simulator.world, ends it later): keep them short.
+        # lock (the simulated implementations, services.simulator.world.World, end it later): keep them short.
         self.on_start: list[Callable[[str, str, str], None]] = []
         self.publishers: dict[str, _Publisher] = {}  # ROS topic name -> publisher
         self.actions: dict[tuple[str, str], _ActionServer] = {}  # (skillset, skill) -> server
@@ -297,13 +298,16 @@ class BoundSimulator:
     def terminate(self, skillset: str, skill: str, kind: str, mode: str = "", id_: str | None = None,
                   result: Mapping[str, Any] | None = None) -> bool:
         """End the goal ``id_`` (as ROS prints it; default: the active one) of ``skill`` in mode ``mode`` of
-        ``kind`` (``success``: SUCCEEDED, ``failure``: ABORTED); False when that goal is not active.  A mode
-        other than the binding's default for ``kind`` needs the ``result`` fields that name it (ValueError)."""
+        ``kind`` (``success``: SUCCEEDED, ``failure``: ABORTED); False when that goal is not active.  Without
+        ``result``, the result's fields are those that name ``mode`` through the binding's ``<kind>_when``
+        conditions (:func:`~skinet.ros.binding.result_fields`); ValueError when none is found: give them."""
         server = self.actions[(skillset, skill)]
-        outcome = server.skill.success if kind == "success" else server.skill.failure
-        if result is None and mode and mode != outcome.default:
-            raise ValueError(f"{skillset}:{skill}: the {kind} mode {mode} comes from the goal's result "
-                             f"(not the binding's default, {outcome.default}): give the result's fields")
+        if result is None:
+            result = result_fields(server.skill, kind, mode, self.bindings[skillset].store)
+            if result is None:
+                outcome = server.skill.success if kind == "success" else server.skill.failure
+                raise ValueError(f"{skillset}:{skill}: no result found that names the {kind} mode {mode} (not "
+                                 f"the binding's default, {outcome.default}): give the result's fields")
         goal = uuid.UUID(id_).bytes if id_ is not None else None
         return server.finish(SUCCEEDED if kind == "success" else ABORTED, result or {}, goal)
 

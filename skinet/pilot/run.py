@@ -144,7 +144,7 @@ class Outcomes:
         self._skills: Mapping[tuple[str, str], Skill] = {
             (c.name, k.name): k for c in system.components for k in c.skillset.skills}
         self._failures = {(f.skillset, f.skill, f.run): f.mode for f in failures}
-        self._rate = failure_rate
+        self.failure_rate = failure_rate
         self._random = random.Random(seed)
         self.runs: dict[tuple[str, str], int] = {}  # (skillset, skill) -> starts so far
         self.failed: list[tuple[str, str, int, str]] = []  # (skillset, skill, run, mode) in the order decided
@@ -159,7 +159,7 @@ class Outcomes:
         n = self.runs[(skillset, skill)] = self.runs.get((skillset, skill), 0) + 1
         mode = self._failures.get((skillset, skill, n))
         failures = _modes(k, "failure")
-        if mode is None and failures and self._rate > 0 and self._random.random() < self._rate:
+        if mode is None and failures and self.failure_rate > 0 and self._random.random() < self.failure_rate:
             mode = failures[self._random.randrange(len(failures))]
         if mode is not None:
             self.failed.append((skillset, skill, n, mode))

@@ -70,7 +70,7 @@ from skinet.closenames import close_names, unknown
 from skinet.errors import Diagnostic, Pos, SourceError
 from skinet.lang.model import Skill, Skillset
 from skinet.plan.inputs import message_problem
-from skinet.ros.condition import Condition, parse_condition
+from skinet.ros.condition import Condition, example_message, parse_condition
 from skinet.ros.definitions import action_types, build_store
 from skinet.files.toml import locate_path, parse_toml
 
@@ -579,9 +579,51 @@ def definition_folder_of(head: Mapping[str, Any]) -> str:
     return folder if isinstance(folder, str) else ""
 
 
+# -- a simulated robot's side of a binding (services/simulator) ----------------------------------------------
+
+
+def result_fields(skill: SkillBinding, kind: str, mode: str, store: Typestore) -> dict[str, Any] | None:
+    """The fields of a result that names ``mode`` of ``kind`` (``success``: a SUCCEEDED goal, ``failure``:
+    ABORTED; ``''``: the binding's default mode): the first ``<kind>_when`` condition of ``mode`` true and
+    every earlier one false, or (the default) none of them true.  None when no such result is found
+    (:func:`~skinet.ros.condition.example_message`) or ``mode`` is not one the binding names."""
+    outcome = skill.success if kind == "success" else skill.failure
+    mode = mode or outcome.default or ""
+    earlier = [(c, False) for _, c in outcome.when]
+    for i, (named, condition) in enumerate(outcome.when):
+        if named == mode:
+            return example_message([*earlier[:i], (condition, True)], store)
+    return example_message(earlier, store) if mode == outcome.default else None
+
+
+def first_samples(binding: Binding, skillset: Skillset) -> dict[str, dict[str, Any]]:
+    """A first message of each topic ``binding`` reads (ROS name -> fields) that shows every resource bound
+    to it in its initial state and fires none of its events: what a simulated robot publishes before anything
+    happens.  Raises ``ValueError`` naming a topic for which no such message is found."""
+    out: dict[str, dict[str, Any]] = {}
+    for topic in dict.fromkeys([r.topic for r in binding.resources if r.topic] + [e.topic for e in binding.events]):
+        shown: list[tuple[Condition, bool]] = []
+        others: list[tuple[Condition, bool]] = []  # the other states false, when the conditions allow it
+        for r in binding.resources:
+            if r.topic == topic:
+                initial = skillset.resource(r.resource).initial
+                shown += [(c, True) for state, c in r.states if state == initial]
+                others += [(c, False) for state, c in r.states if state != initial]
+        quiet = [(e.when, False) for e in binding.events if e.topic == topic]
+        found = example_message([*shown, *others, *quiet], binding.store) if binding.store is not None else None
+        if found is None and binding.store is not None:
+            found = example_message([*shown, *quiet], binding.store)
+        if found is None:
+            what = ", ".join(f"{r.resource} {skillset.resource(r.resource).initial}" for r in binding.resources
+                             if r.topic == topic)
+            raise ValueError(f"{binding.source}: no {topic} message found that shows {what or 'no event'}"
+                             f"{' and fires no event' if quiet and what else ''}")
+        out[topic] = found
+    return out
+
+
 __all__ = [
     "Binding", "CANCEL_TYPE", "EventBinding", "GET_STATE_TYPE", "LIFECYCLE_STATES", "Outcome", "ResourceBinding",
     "STATUS_TYPE", "CHANGE_STATE_TYPE", "SkillBinding", "TRANSITION_EVENT_TYPE", "changing", "commanded_events", "definitions_folder",
-    "lifecycle_events",
-    "parse_binding",
+    "first_samples", "lifecycle_events", "parse_binding", "result_fields",
 ]

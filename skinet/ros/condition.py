@@ -18,7 +18,9 @@ lookup per path element and one comparison per atom.
 :func:`unique_message` goes the other way, for a commanded topic resource (the pilot
 publishes the state it commands, docs/robot.md): the fields a condition pins to one
 value each (``mode == 3``, ``data``, ``not data``, joined by ``and``), or None when
-it leaves a choice (``or``, ``!=``, ``<``...).
+it leaves a choice (``or``, ``!=``, ``<``...).  :func:`example_message` finds a message on which
+several conditions are each true or false as wanted (a simulated robot's first sample of a bound
+topic: the model's initial states, no event firing).
 
 Examples:
     >>> from skinet.ros.definitions import build_store
@@ -29,10 +31,12 @@ Examples:
 
 from __future__ import annotations
 
+import copy
 import operator
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import cache
+from itertools import islice, product
 from pathlib import Path
 from typing import Any
 
@@ -46,6 +50,7 @@ from skinet.closenames import unknown
 from skinet.errors import Pos, SourceError
 from skinet.lang.larkcache import cached_lark
 from skinet.lang.larkerrors import check_nesting, check_size, syntax_error
+from skinet.ros.typestore import default_instance, to_plain
 
 MAX_CONDITION_CHARS = 4096
 NUMBERS = frozenset({"int8", "uint8", "int16", "uint16", "int32", "uint32", "int64", "uint64", "float32",
@@ -282,6 +287,111 @@ def unique_message(condition: Condition, store: Typestore) -> dict[str, Any] | N
             inner = inner.setdefault(name, {})
         inner[path[-1]] = value
     return out
+
+
+UNSIGNED = frozenset({"uint8", "uint16", "uint32", "uint64", "byte", "char", "octet"})
+EXAMPLE_TRIES = 4096  # messages example_message tries at most
+
+
+def example_message(wanted: Sequence[tuple[Condition, bool]], store: Typestore) -> dict[str, Any] | None:
+    """Fields (nested dicts for paths) of a message on which every condition of ``wanted`` (all on one
+    message type) has the truth wanted with it; None when none is found.
+
+    The values tried for a field are its default, then each value a condition compares it with and a
+    step either side of it (1 for integers, half the value for reals), every boolean for a boolean
+    field; the combinations are tried in that order, at most :data:`EXAMPLE_TRIES` of them.  Complete
+    for comparisons of fields with literals and constants; a condition relating two fields may find
+    none.  Cost: the number of combinations tried times the size of the conditions.
+
+    Examples:
+        >>> from skinet.ros.definitions import build_store
+        >>> store = build_store()
+        >>> ok = parse_condition("percentage >= 0.2", "sensor_msgs/msg/BatteryState", store)
+        >>> charging = parse_condition("power_supply_status == POWER_SUPPLY_STATUS_CHARGING",
+        ...                            "sensor_msgs/msg/BatteryState", store)
+        >>> example_message([(ok, True), (charging, True)], store)
+        {'percentage': 0.2, 'power_supply_status': 1}
+        >>> example_message([(ok, True), (ok, False)], store) is None
+        True
+    """
+    if not wanted:
+        return {}
+    typename = wanted[0][0].typename
+    values: dict[tuple[str, ...], list[Any]] = {}
+    for condition, _ in wanted:
+        tree = _lark().parse(condition.text)
+        for node in (tree.iter_subtrees_topdown() if isinstance(tree, Tree) else ()):
+            if node.data == "path" and _is_path(node, typename, store):
+                _candidates(values, node, None, typename, store)
+            elif node.data == "compare":
+                left, _, right = node.children
+                for path, other in ((left, right), (right, left)):
+                    if _is_path(path, typename, store):
+                        _candidates(values, path, other, typename, store)
+    default = to_plain(default_instance(store, typename))
+    for path, tried in values.items():  # the field's own default first
+        first = default
+        for name in path:
+            first = first[normalize_fieldname(name)]
+        values[path] = [first, *(x for x in tried if x != first)]
+    paths = list(values)
+    for combination in islice(product(*(values[p] for p in paths)), EXAMPLE_TRIES):
+        fields: dict[str, Any] = {}
+        plain = copy.deepcopy(default)
+        for path, value in zip(paths, combination):
+            inner, seen = fields, plain
+            for name in path[:-1]:
+                inner, seen = inner.setdefault(name, {}), seen[normalize_fieldname(name)]
+            inner[path[-1]] = seen[normalize_fieldname(path[-1])] = value
+        if all(condition.holds(plain) == truth for condition, truth in wanted):
+            return fields
+    return None
+
+
+def _candidates(values: dict[tuple[str, ...], list[Any]], path: Tree, other: Any, typename: str,
+                store: Typestore) -> None:
+    """Add the values :func:`example_message` tries for the field at ``path`` compared with ``other``."""
+    names = tuple(str(t) for t in path.children)
+    found = _field(store, typename, names)
+    if found is None:
+        return
+    owner, base = found
+    seen = values.setdefault(names, [])
+    if base == "bool":
+        more: list[Any] = [False, True]
+    elif other is None:
+        return
+    else:
+        literal = _value(other, owner, store) or _value(other, typename, store)
+        if literal is None:
+            return
+        v = literal[0]
+        if base == "string":
+            more = [v, f"{v}_"]
+        elif base in NUMBERS and isinstance(v, (int, float)) and not isinstance(v, bool):
+            real = base.startswith("float")
+            step = (abs(v) / 2 or 0.5) if real else 1
+            more = [v, v + step, v - step]
+            more = [float(x) if real else int(x) for x in more if not (base in UNSIGNED and x < 0)]
+        else:
+            return
+    seen += [x for x in more if x not in seen]
+
+
+def _field(store: Typestore, typename: str, names: tuple[str, ...]) -> tuple[str, str] | None:
+    """(the type holding the field, its base type) of a path of single values; None otherwise."""
+    current = typename
+    for i, name in enumerate(names):
+        desc = dict(store.fielddefs[current][1]).get(name)
+        if desc is None:
+            return None
+        if desc[0] == Nodetype.NAME and i < len(names) - 1:
+            current = desc[1]
+            continue
+        if i < len(names) - 1 or desc[0] != Nodetype.BASE:
+            return None
+        return current, desc[1][0]
+    return None
 
 
 def _pin(node: Tree, typename: str, store: Typestore) -> tuple[tuple[str, ...], Any] | None:

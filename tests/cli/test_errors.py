@@ -389,6 +389,27 @@ def _cases() -> list[Case]:
           "argument --domain: expected an integer from 0 to 232, got '233'")
     usage("skinet", "--lost-after", ("run", SYSTEM, "--lost-after", "0.5"),
           "argument --lost-after: expected a number of seconds >= 1 (two heartbeat periods), got '0.5'")
+    # the simulated robot of skinet run --simulate and python -m services.simulator SYSTEM --self-ending
+    for program, base, flag in (("skinet", ("run", SYSTEM, "--simulate"), "--simulate"),
+                                ("python -m services.simulator", (SYSTEM, "--self-ending"), "--self-ending")):
+        usage(program, "--skill-duration", (*base, "--skill-duration", "-1"),
+              "argument --skill-duration: expected a number of seconds >= 0, got '-1'")
+        usage(program, "--skill-duration", (*base, "--skill-duration", "soon"),
+              "argument --skill-duration: expected a number of seconds >= 0, got 'soon'")
+        for bad in ("1.5", "-0.1", "nan"):
+            usage(program, "--failure-rate", (*base, "--failure-rate", bad),
+                  f"argument --failure-rate: expected a probability from 0 to 1, got '{bad}'")
+        usage(program, "--seed", (*base, "--seed", "-1"), "argument --seed: expected an integer >= 0, got '-1'")
+        usage(program, "--seed", (*base, "--seed", "x"), "argument --seed: expected an integer >= 0, got 'x'")
+    add("skinet", "--failure-rate", ("run", SYSTEM, "--failure-rate", "0.5"), 1,
+        "skinet: error: --failure-rate needs --simulate")
+    add("skinet", "--simulate", ("run", "{tmp}/missing.toml", "--simulate"), 1, missing)
+    usage("python -m services.simulator", "--seed", (SCENARIO, "--seed", "3"), "--seed needs --self-ending")
+    usage("python -m services.simulator", "--self-ending", (SCENARIO, "--self-ending"),
+          f"--self-ending takes a system file; {SCENARIO} is a scenario (its steps end the skills)")
+    add("python -m services.simulator", "--self-ending", (SYSTEM,), 1,
+        f"{SYSTEM}:4:1: error: a system file, not a scenario: add --self-ending to simulate its robot with skills "
+        "that end by themselves")
     usage("skinet", "--format", ("record", "spot_arm", "-o", "{tmp}/rec.csv", "--format", "csv"),
           "argument --format: invalid choice: 'csv' (choose from 'jsonl', 'mcap')")
 

@@ -12,8 +12,8 @@ import pytest
 
 from skinet.errors import Pos, SourceError
 from skinet.system.load import load_bindings, load_system
-from skinet.ros.binding import LIFECYCLE_STATES, parse_binding
-from skinet.ros.condition import parse_condition
+from skinet.ros.binding import LIFECYCLE_STATES, first_samples, parse_binding, result_fields
+from skinet.ros.condition import example_message, parse_condition
 from skinet.ros.actions import message
 from skinet.ros.definitions import action_types, build_store, rihs01
 from skinet.ros.typestore import to_plain
@@ -271,6 +271,76 @@ def _system_file(tmp_path: Path) -> Path:
     path = tmp_path / "s.toml"
     path.write_text('[system]\nname = "s"\n[[skillsets]]\nmodel = "nav2.rl"\nbinding = "b.toml"\n')
     return path
+
+
+def test_the_first_samples_show_the_initial_states_and_fire_no_event(nav2) -> None:  # type: ignore[no-untyped-def]
+    """A simulated robot's first /battery_state: battery Ok (percentage >= 0.2) and Charging at once; its first
+    /emergency_stop does not fire the event (data false)."""
+    system, binding, _ = nav2
+    skillset = system.component("nav2").skillset
+    samples = first_samples(binding, skillset)
+    assert samples == {"/battery_state": {"percentage": 0.2, "power_supply_status": 1},
+                       "/emergency_stop": {"data": False}}
+    battery = {r.resource: dict(r.states) for r in binding.resources if r.topic == "/battery_state"}
+    plain = to_plain(message(binding.store, BATTERY, samples["/battery_state"]))
+    assert [state for r in ("battery", "charging") for state, c in battery[r].items() if c.holds(plain)] == [
+        "Ok", "Charging"]
+
+
+def test_a_users_own_binding_gets_first_samples_too(tmp_path: Path) -> None:
+    """Another robot's battery: Ok when the voltage is high enough and the battery present; its own stop button
+    (an event on a nested field) not pressed."""
+    (tmp_path / "nav2.rl").write_text(NAV2_MODEL)
+    (tmp_path / "b.toml").write_text(
+        '[resources.battery]\ntopic = "/power"\ntype = "sensor_msgs/msg/BatteryState"\n'
+        'states = { Ok = "voltage >= 11.5 and present", Low = "voltage < 11.5 or not present" }\n'
+        '[events.emergency_stop]\ntopic = "/stop"\ntype = "std_msgs/msg/Header"\nwhen = "frame_id == \'stop\'"\n')
+    system, _ = load_system(_system_file(tmp_path))
+    binding = parse_binding((tmp_path / "b.toml").read_text(), "b.toml", system.component("nav2").skillset)
+    assert first_samples(binding, system.component("nav2").skillset) == {
+        "/power": {"voltage": 11.5, "present": True}, "/stop": {"frame_id": ""}}
+
+
+def test_a_topic_whose_initial_state_no_message_shows_is_named(tmp_path: Path) -> None:
+    (tmp_path / "nav2.rl").write_text(NAV2_MODEL)
+    (tmp_path / "b.toml").write_text('[resources.battery]\ntopic = "/battery_state"\ntype = "sensor_msgs/msg/BatteryState"'
+                                     '\nstates = { Ok = "percentage > 1 and percentage < 0", Low = "percentage < 0.2" }\n')
+    system, _ = load_system(_system_file(tmp_path))
+    binding = parse_binding((tmp_path / "b.toml").read_text(), "b.toml", system.component("nav2").skillset)
+    with pytest.raises(ValueError) as info:
+        first_samples(binding, system.component("nav2").skillset)
+    assert str(info.value) == "b.toml: no /battery_state message found that shows battery Ok"
+
+
+def test_a_result_names_the_mode_it_is_asked_for(nav2) -> None:  # type: ignore[no-untyped-def]
+    """What a simulated action server answers for a goal that ends in a mode: fields the binding's conditions read
+    as that mode (the default: none of them true), read back by the binding as the same mode."""
+    _, binding, _ = nav2
+    dock = binding.skill("dock_robot")
+    assert result_fields(dock, "failure", "not_charging", binding.store) == {"error_code": 906}
+    assert result_fields(dock, "failure", "failed", binding.store) == {"error_code": 0}
+    assert result_fields(dock, "failure", "", binding.store) == {"error_code": 0}  # '': the default mode
+    assert result_fields(dock, "success", "docked", binding.store) == {}
+    assert result_fields(dock, "failure", "docked", binding.store) is None  # not a failure mode
+    for mode in ("not_charging", "failed"):
+        plain = to_plain(message(binding.store, f"{dock.type}_Result", result_fields(dock, "failure", mode,
+                                                                                    binding.store)))
+        assert dock.failure.mode(plain) == mode
+
+
+def test_an_example_message_steps_around_the_values_compared() -> None:
+    store = build_store()
+    below = parse_condition("percentage < 0.2", BATTERY, store)
+    status = parse_condition("power_supply_status != POWER_SUPPLY_STATUS_UNKNOWN", BATTERY, store)
+    header = parse_condition("header.frame_id == 'map'", BATTERY, store)
+    assert example_message([(below, True), (status, True)], store) == {"percentage": 0.0, "power_supply_status": 1}
+    assert example_message([(below, False)], store) == {"percentage": 0.2}
+    assert example_message([(header, True)], store) == {"header": {"frame_id": "map"}}
+    assert example_message([(header, False)], store) == {"header": {"frame_id": ""}}
+    # An unsigned field is never tried below 0: no status "below UNKNOWN" exists.
+    lowest = parse_condition("power_supply_status < POWER_SUPPLY_STATUS_UNKNOWN", BATTERY, store)
+    assert example_message([(lowest, True)], store) is None
+    assert example_message([], store) == {}
 
 
 def test_docstring_examples() -> None:

@@ -2,19 +2,16 @@
 
 :class:`Robot` runs the simulated managers (real CDR on bridge keys), the bridge,
 the monitor and a predictor, each on its own client session of the test's router,
-and a pilot on another; :class:`Implementations` is the robot's side of the skills:
-it ends each execution it sees running in the mode a script gives (the first
-success mode by default), after a delay, through the simulator's implementation
-hook (the managers then speak the real protocol).  :class:`Recording` wraps the
+and a pilot on another; the robot's side of the skills is
+:class:`services.simulator.world.World` (each execution ends in the mode a script or
+the outcomes give, after a delay; the managers then speak the real protocol).  :class:`Recording` wraps the
 pilot's real actuator (:func:`~services.pilot.act.default_actuator`) and keeps what it sent, in order.
 """
 
 from __future__ import annotations
 
-import random
-import threading
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable
 from typing import Any
 
 import pytest
@@ -108,57 +105,6 @@ def ask_goal(session: zenoh.Session, request: PilotGoalRequest | bytes | None, c
 
 def goal(*goals: str, **fields: Any) -> PilotGoalRequest:
     return PilotGoalRequest(system=fields.pop("system", "spot_arm"), goals=list(goals), **fields)
-
-
-class Implementations:
-    """The robot's skill implementations: each execution seen running ends after ``delay`` seconds (a
-    random one in ``[0, delay]`` with ``rng``) in the next mode of ``script[(skillset, skill)]``, else (with ``rng``,
-    with probability ``fail``) in a random failure mode, else in its first success mode; ``hold`` lists skills
-    left running until :meth:`release`."""
-
-    def __init__(self, simulator: Simulator, system: System, script: dict[tuple[str, str], list[str]] | None = None,
-                 delay: float = 0.05, rng: random.Random | None = None, hold: Iterable[tuple[str, str]] = (),
-                 fail: float = 0.0):
-        self.sim, self.system, self.fail = simulator, system, fail
-        self.script = {k: list(v) for k, v in (script or {}).items()}
-        self.delay, self.rng = delay, rng
-        self.hold = set(hold)
-        self.ended: list[str] = []  # skillset:skill.kind.mode, in order
-        self._seen: set[tuple[str, str, str]] = set()
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, daemon=True)
-        self._thread.start()
-
-    def release(self, skillset: str, skill: str) -> None:
-        self.hold.discard((skillset, skill))
-
-    def _run(self) -> None:
-        while not self._stop.wait(0.005):
-            for c in self.system.components:
-                for k in c.skillset.skills:
-                    running, id_ = self.sim.skill_status(c.name, k.name)
-                    if not running or (c.name, k.name, id_) in self._seen or (c.name, k.name) in self.hold:
-                        continue
-                    self._seen.add((c.name, k.name, id_))
-                    queue = self.script.get((c.name, k.name))
-                    failures = [m.name for m in k.modes if m.kind == "failure"]
-                    if queue:
-                        mode = queue.pop(0)
-                    elif self.rng is not None and failures and self.rng.random() < self.fail:
-                        mode = self.rng.choice(failures)
-                    else:
-                        mode = next(m for m in k.modes if m.kind == "success").name
-                    kind = next(m.kind for m in k.modes if m.name == mode)
-                    wait = self.rng.uniform(0, self.delay) if self.rng else self.delay
-                    threading.Timer(wait, self._end, (c.name, k.name, kind, mode)).start()
-
-    def _end(self, skillset: str, skill: str, kind: str, mode: str) -> None:
-        if self.sim.terminate(skillset, skill, kind, mode):
-            self.ended.append(f"{skillset}:{skill}.{kind}.{mode}")
-
-    def close(self) -> None:
-        self._stop.set()
-        self._thread.join(2.0)
 
 
 class Robot:

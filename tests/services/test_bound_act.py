@@ -200,11 +200,13 @@ def test_the_simulated_robot_ends_the_goals_it_accepted(rig: Rig, nav2, client_f
     act.send(PilotCommand(skillset="nav2", transition="dock_robot.start", inputs={"dock": "d1"}))
     [(goal, _)] = rig.received("dock_robot")
     assert started == [("nav2", "undock_robot", rig.received("undock_robot")[0][0]), ("nav2", "dock_robot", goal)]
-    with pytest.raises(ValueError, match="the failure mode not_charging comes from the goal's result"):
-        rig.robot.terminate("nav2", "dock_robot", "failure", "not_charging", goal)
+    with pytest.raises(ValueError, match="^nav2:dock_robot: no result found that names the failure mode stuck "
+                                         r"\(not the binding's default, failed\): give the result's fields$"):
+        rig.robot.terminate("nav2", "dock_robot", "failure", "stuck", goal)
     assert not rig.robot.terminate("nav2", "dock_robot", "success", "docked", rig.received("undock_robot")[0][0])
-    assert rig.robot.terminate("nav2", "dock_robot", "success", "docked", goal)
-    rig.wait_for("dock_robot.success.docked")
+    # A mode the binding names by a condition on the result: the result that makes it true (error_code 906).
+    assert rig.robot.terminate("nav2", "dock_robot", "failure", "not_charging", goal)
+    rig.wait_for("dock_robot.failure.not_charging")
     assert rig.events.items[-1].status.resources["dock"] == "Docked"
 
 

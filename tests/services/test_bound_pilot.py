@@ -15,7 +15,6 @@ from __future__ import annotations
 import re
 import subprocess
 import time
-import threading
 import uuid
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -31,10 +30,12 @@ from services.pilot.act import default_actuator
 from services.predictor.service import start_predictor
 from services.simulator.bound import BoundSimulator
 from services.simulator.protocols import ActionLogic
+from services.simulator.world import World
 from skinet.system.load import load_bindings, load_system
 from skinet.ros.keys import KeyStyle
 from skinet_cli.main import main
 from tests.services.conftest import wait_queryable
+from tests.services.test_monitor import wait_until
 from tests.services.pilot_robot import Recording, Statuses, ask_goal, goal
 
 NAV2 = Path(__file__).resolve().parents[2] / "examples" / "nav2"
@@ -50,10 +51,8 @@ class Nav2:
         self.system, _ = load_system(NAV2 / "nav2.toml")
         self.bindings, _ = load_bindings(self.system)
         self.robot = BoundSimulator(sessions(), self.system, self.bindings, style=style)
-        self.ended: list[str] = []
-        if end_goals:  # the robot's implementation: each accepted goal succeeds a moment later
-            self.robot.on_start.append(lambda ss, skill, goal: threading.Timer(0.05, self._end, (ss, skill, goal))
-                                       .start())
+        # the robot's implementation: each accepted goal succeeds a moment later
+        self.world = World(self.robot, duration=0.05) if end_goals else None
         self.bridge = start_bound_bridge(sessions(), self.system, self.bindings, style=style, settle=0.1, retry=0.1)
         self.predictor = start_predictor(sessions(), "bound-pilot-test")
         self.monitor = start_monitor(sessions(), self.system)
@@ -68,11 +67,6 @@ class Nav2:
         self.events = Events(self.observer, "nav2")
         self.robot.publish_topics(FIRST)
 
-    def _end(self, skillset: str, skill: str, goal: str) -> None:
-        self.ended.append(f"{skill} {goal}")  # before: the pilot may see its effect before terminate returns
-        if not self.robot.terminate(skillset, skill, "success", "", goal):
-            self.ended[-1] += " (no longer active)"
-
     def received(self) -> list[tuple[str, str, dict]]:
         """Every goal the robot's action servers received, in order: (skill, goal id, fields)."""
         got = [(server.logic.received, skill) for (_, skill), server in self.robot.actions.items()]
@@ -81,6 +75,8 @@ class Nav2:
     def close(self) -> None:
         if self.pilot is not None:
             self.pilot.close()
+        if self.world is not None:
+            self.world.close()
         self.monitor.close()
         self.bridge.close()
         self.predictor.close()
@@ -121,7 +117,10 @@ def test_drive_docks_through_the_action_servers(nav2: Nav2) -> None:
         "navigate_to_staging_pose": True,
         "dock_pose": {"header": {"stamp": {"sec": 0, "nanosec": 0}, "frame_id": ""},
                       "pose": {"position": zero, "orientation": {**zero, "w": 1.0}}}})
-    assert nav2.ended == [f"undock_robot {undock_id}", f"dock_robot {dock_id}"]
+    assert nav2.world is not None
+    wait_until(lambda: len(nav2.world.ends) == 2, 10, "both ends")  # the pilot may see them before terminate returns
+    assert [(e.skill, e.id, e.kind, e.ok) for e in nav2.world.ends] == [("undock_robot", undock_id, "success", True),
+                                                                      ("dock_robot", dock_id, "success", True)]
     transitions = [e.transition for e in nav2.events.wait(lambda items: len(items) >= 5, timeout=20)]
     assert transitions == [None, "undock_robot.start", "undock_robot.success.undocked", "dock_robot.start",
                            "dock_robot.success.docked"]

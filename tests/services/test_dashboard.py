@@ -694,10 +694,11 @@ def test_the_goal_box_drives_a_goal_with_the_next_step_highlighted(browser, dash
                                                                    tmp_path) -> None:
     from selenium.webdriver.common.by import By
 
-    from tests.services.pilot_robot import Implementations, Robot
+    from services.simulator.world import World
+    from tests.services.pilot_robot import Robot
 
     robot = Robot(client_factory, *spot_arm)
-    impl = Implementations(robot.sim, robot.system, delay=1.0)  # each outcome a second after its start: seen
+    impl = World(robot.sim, duration=1.0)  # each outcome a second after its start: seen
     try:
         browser.get(dashboard())
         until(browser, lambda d: css(d, "#services [data-service=pilot][data-alive='1']"), "the pilot alive")
@@ -741,7 +742,7 @@ def test_the_goal_box_drives_a_goal_with_the_next_step_highlighted(browser, dash
         assert facts["commands"] == "3 commands sent" and facts["mode"] == "drive mode" and "denied" not in facts
 
         # Guide mode with skill inputs, pause, resume, then switched to drive and cancelled while its skill runs.
-        impl.hold.add(("manipulator", "arm_RD_to_HP"))
+        impl.holding.add(("manipulator", "arm_RD_to_HP"))
         click(browser, "input[name=goal-mode][value=guide]")
         browser.find_element(By.ID, "goal-inputs").send_keys("go_to_waypoint.target = {x = 12.0, y = 3.5, z = 0.0}")
         type_goal(browser, "run spot:go_to_waypoint")
@@ -779,11 +780,12 @@ def test_the_goal_box_drives_a_goal_with_the_next_step_highlighted(browser, dash
 def test_the_goal_box_asks_how_a_skill_that_ended_unseen_ended(browser, dashboard, client_factory, spot_arm) -> None:
     """teleop ends while the monitor restarts: the box shows the skill and the gap with three answers, and
     'It succeeded' lets the pilot reach the goal without starting teleop again."""
-    from tests.services.pilot_robot import Implementations, Robot
+    from services.simulator.world import World
+    from tests.services.pilot_robot import Robot
     from tests.services.test_pilot_gaps import restart_monitor_while
 
     robot = Robot(client_factory, *spot_arm)
-    impl = Implementations(robot.sim, robot.system, hold=[("spot", "teleop")])
+    impl = World(robot.sim, holding=[("spot", "teleop")])
     try:
         browser.get(dashboard())
         until(browser, lambda d: pilot_state(d) == "idle", "the idle pilot")

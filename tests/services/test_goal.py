@@ -20,10 +20,11 @@ import zenoh
 
 from services.common.goals import NoPilot, ask_pilot, no_pilot_message, pilot_status
 from services.dashboard.goalbox import GoalFormError, Placed, goal_request, place
+from services.simulator.world import World
 from skinet.system.load import load_system
 from skinet.wire.messages import PilotGoalRequest
 from tests.services.conftest import REPO, client_args, free_port, open_client, start_skinet
-from tests.services.pilot_robot import Implementations, Robot
+from tests.services.pilot_robot import Robot
 
 SYSTEM_FILE = REPO / "skillsets" / "spot_arm.toml"
 
@@ -72,12 +73,12 @@ def robot(client_factory: Callable[[], zenoh.Session], spot_arm: tuple) -> Itera
 
 
 @pytest.fixture
-def skills(robot: Robot) -> Iterator[Callable[..., Implementations]]:
-    """Starts the robot's skill implementations (:class:`Implementations` options)."""
-    started: list[Implementations] = []
+def skills(robot: Robot) -> Iterator[Callable[..., World]]:
+    """Starts the robot's skill implementations (:class:`World` options)."""
+    started: list[World] = []
 
-    def start(**options: object) -> Implementations:
-        started.append(Implementations(robot.sim, robot.system, **options))  # type: ignore[arg-type]
+    def start(**options: object) -> World:
+        started.append(World(robot.sim, **options))  # type: ignore[arg-type]
         return started[-1]
 
     yield start
@@ -86,7 +87,7 @@ def skills(robot: Robot) -> Iterator[Callable[..., Implementations]]:
 
 
 def test_a_goal_driven_to_its_end_prints_the_plan_then_each_change_and_exits_0(robot, skills, router) -> None:
-    impl = skills(delay=0.3)
+    impl = skills(duration=0.3)
     done = goal(router, str(SYSTEM_FILE), "reach spot:Standing", "--drive")
     assert done.returncode == 0, done.stdout + done.stderr
     lines = done.stdout.splitlines()
@@ -319,7 +320,7 @@ def help_sections() -> list[list[list[str]]]:
 
 
 def test_every_help_example_works_as_written(robot, skills, router) -> None:
-    skills(delay=0.1)
+    skills(duration=0.1)
     driven, guided, confirm = help_sections()
     assert [len(driven), len(guided), len(confirm)] == [3, 4, 1]
 
@@ -357,7 +358,7 @@ def test_every_help_example_works_as_written(robot, skills, router) -> None:
 def test_skinet_watch_in_a_pipe_prints_a_line_per_change_of_the_pilots_status(robot, skills, router) -> None:
     """``skinet watch`` shows the pilot (docs/semantics.md §8): a pipe gets one line per change, the lines ``skinet goal``
     prints, with the goal's number, mode and sender."""
-    skills(delay=0.3)
+    skills(duration=0.3)
     proc = subprocess.Popen([sys.executable, "-m", "skinet_cli.main", "watch", "spot_arm", "--duration", "60",
                              *client_args(router)], cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True)

@@ -1,6 +1,6 @@
 """The pilot (docs/semantics.md §8, *The pilot*; issue 24) on the paper's robot through a real router: simulated
 managers speaking the real protocol, the bridge, the monitor, a predictor and the pilot on their own
-sessions; the skills' outcomes come from :class:`~tests.services.pilot_robot.Implementations`."""
+sessions; the skills' outcomes come from :class:`~services.simulator.world.World`."""
 
 from __future__ import annotations
 
@@ -18,13 +18,15 @@ from services.common.zenoh_config import undeclare
 from services.monitor import Monitor
 from services.pilot import ActError
 from services.predictor.service import start_predictor
+from services.simulator.world import World
+from skinet.pilot.run import Outcomes
 from skinet.ros.keys import KeyStyle
 from skinet.wire import keys
 from skinet.wire.codec import encode
 from skinet.wire.messages import PilotCommand, PilotGoalRequest, Verdicts
 from tests.event_watch import Messages
 from tests.services.test_monitor import wait_until
-from tests.services.pilot_robot import WALK, Gui, Implementations, Robot, ask_goal, goal
+from tests.services.pilot_robot import WALK, Gui, Robot, ask_goal, goal
 
 
 # `skinet plan skillsets/spot_arm.toml "reach manipulator:RD" "run spot:go_to_waypoint"`, outcomes favourable.
@@ -42,7 +44,7 @@ def robot(client_factory: Callable[[], zenoh.Session], spot_arm: tuple) -> Itera
 
 def test_drive_reaches_a_mission_with_exactly_the_planned_commands(robot: Robot) -> None:
     system = robot.system
-    impl = Implementations(robot.sim, system)
+    impl = World(robot.sim)
     try:
         reply = ask_goal(robot.observer, goal("reach manipulator:RD", "run spot:go_to_waypoint", inputs=WALK,
                                               mode="drive"))
@@ -57,7 +59,7 @@ def test_drive_reaches_a_mission_with_exactly_the_planned_commands(robot: Robot)
 
 
 def test_guide_sends_nothing_and_publishes_the_exact_next_command(robot: Robot) -> None:
-    impl = Implementations(robot.sim, robot.system)
+    impl = World(robot.sim)
     gui = Gui(robot.observer, robot)
     try:
         reply = ask_goal(robot.observer, goal("run spot:go_to_waypoint", inputs=WALK))
@@ -86,7 +88,7 @@ def test_the_operators_interrupt_of_the_pilots_skill_is_reported_counted_and_not
         robot: Robot) -> None:
     """Spot is standing up (held) when the operator interrupts it: the pilot says so, counts it against
     the retries and waits for `resume`; then it plans again from there and stands it up again."""
-    impl = Implementations(robot.sim, robot.system, hold=[("spot", "stand_up")])
+    impl = World(robot.sim, holding=[("spot", "stand_up")])
     gui = Gui(robot.observer, robot)
     try:
         reply = ask_goal(robot.observer, goal("run spot:go_to_waypoint", inputs=WALK, mode="drive"))
@@ -110,7 +112,7 @@ def test_the_operators_interrupt_of_the_pilots_skill_is_reported_counted_and_not
 
 
 def test_a_failed_skill_is_retried(robot: Robot) -> None:
-    impl = Implementations(robot.sim, robot.system, {("spot", "stand_up"): ["fell"]})
+    impl = World(robot.sim, script={("spot", "stand_up"): ["fell"]})
     try:
         reply = ask_goal(robot.observer, goal("run spot:go_to_waypoint", inputs=WALK, mode="drive"))
         done = robot.statuses.state("reached", reply.goal_id)
@@ -122,7 +124,7 @@ def test_a_failed_skill_is_retried(robot: Robot) -> None:
 
 
 def test_max_retries_failures_of_one_skill_end_the_goal_with_skill_and_mode(robot: Robot) -> None:
-    impl = Implementations(robot.sim, robot.system, {("spot", "stand_up"): ["fell", "fell"]})
+    impl = World(robot.sim, script={("spot", "stand_up"): ["fell", "fell"]})
     try:
         reply = ask_goal(robot.observer, goal("run spot:go_to_waypoint", inputs=WALK, mode="drive", max_retries=2))
         done = robot.statuses.state("failed", reply.goal_id)
@@ -143,7 +145,7 @@ def quick(client_factory: Callable[[], zenoh.Session], spot_arm: tuple) -> Itera
 
 def test_a_skillset_not_live_pauses_the_pilot_until_it_is_live_again(quick: Robot, client_factory) -> None:
     robot = quick
-    impl = Implementations(robot.sim, robot.system, hold=[("spot", "init_power")])
+    impl = World(robot.sim, holding=[("spot", "init_power")])
     try:
         reply = ask_goal(robot.observer, goal("run spot:go_to_waypoint", inputs=WALK, mode="drive"))
         robot.statuses.first(lambda s: s.reason == "the outcome of spot:init_power")
@@ -163,7 +165,7 @@ def test_a_skillset_not_live_pauses_the_pilot_until_it_is_live_again(quick: Robo
 
 
 def test_a_pending_prediction_pauses_the_pilot_until_it_comes(robot: Robot, client_factory) -> None:
-    impl = Implementations(robot.sim, robot.system, hold=[("spot", "init_power")])
+    impl = World(robot.sim, holding=[("spot", "init_power")])
     try:
         reply = ask_goal(robot.observer, goal("run spot:go_to_waypoint", inputs=WALK, mode="drive"))
         robot.statuses.first(lambda s: s.reason == "the outcome of spot:init_power")
@@ -185,7 +187,7 @@ def test_a_model_divergence_pauses_the_pilot_until_resumed(robot: Robot) -> None
     """The robot stands up with no skill (a model divergence): the pilot stops until the operator resumes,
     whatever steps the model explains come after it (here the operator makes it sit down), then goes on from
     the marking the monitor holds then."""
-    impl = Implementations(robot.sim, robot.system, hold=[("spot", "init_power")])
+    impl = World(robot.sim, holding=[("spot", "init_power")])
     gui = Gui(robot.observer, robot)
     try:
         reply = ask_goal(robot.observer, goal("run spot:go_to_waypoint", inputs=WALK, mode="drive"))
@@ -266,7 +268,7 @@ def test_bad_requests_get_a_clear_reason_and_never_a_command(robot: Robot) -> No
 
 def test_no_monitor_means_waiting_then_the_goal_goes_on(client_factory, spot_arm) -> None:
     robot = Robot(client_factory, *spot_arm, monitor=False)
-    impl = Implementations(robot.sim, robot.system)
+    impl = World(robot.sim)
     try:
         robot.wait_pilot("waiting for monitor")
         assert robot.pilot.status.reason == ("no monitor of spot_arm is running (no token on "
@@ -313,7 +315,7 @@ def test_an_answer_to_the_pilots_get_older_than_a_publication_is_dropped(client_
     monkeypatch.setattr(Monitor, "_on_latest", answer_late)
     monkeypatch.setattr(Bridge, "_on_resync", after_the_pilots_get)
     robot = Robot(client_factory, *spot_arm, monitor=False)
-    impl = Implementations(robot.sim, robot.system)
+    impl = World(robot.sim)
     try:
         robot.wait_pilot("waiting for monitor")
         robot.start_monitor()
@@ -356,7 +358,7 @@ def test_outcomes_at_random_moments_around_commands_never_lead_to_a_violation(ro
     commands to the other component; 12 goals per seed, every one reached, no command denied, no
     property ever violated."""
     verdicts = Messages(robot.observer, keys.verdicts("spot_arm"), Verdicts)
-    impl = Implementations(robot.sim, robot.system, delay=0.03, rng=random.Random(seed), fail=0.25)
+    impl = World(robot.sim, Outcomes(robot.system, failure_rate=0.25, seed=seed), 0.03, rng=random.Random(seed))
     try:
         commands = 0
         for n in range(12):
@@ -374,7 +376,7 @@ def test_outcomes_at_random_moments_around_commands_never_lead_to_a_violation(ro
 
 
 def test_switching_to_drive_and_pausing_by_the_operator(robot: Robot) -> None:
-    impl = Implementations(robot.sim, robot.system)
+    impl = World(robot.sim)
     try:
         reply = ask_goal(robot.observer, goal("reach spot:Standing"))
         robot.statuses.first(lambda s: s.state == "guiding" and s.next is not None)
@@ -423,7 +425,7 @@ def test_a_command_the_check_denies_is_a_defect_never_sent(client_factory, spot_
     system, typemap = spot_arm
     weaker = dataclasses.replace(system, properties=tuple(p for p in system.properties if p.name != "safety_guard"))
     robot = Robot(client_factory, system, typemap, pilot_system=weaker)
-    impl = Implementations(robot.sim, robot.system)
+    impl = World(robot.sim)
     gui = Gui(robot.observer, robot)
     try:
         gui.start("manipulator", "arm_ready")
@@ -446,7 +448,7 @@ def test_a_command_the_check_denies_is_a_defect_never_sent(client_factory, spot_
 def test_drive_through_rmw_zenoh_keys(client_factory, spot_arm) -> None:
     """The pilot's requests on rmw_zenoh keys, with their attachments, reach the managers."""
     robot = Robot(client_factory, *spot_arm, style=KeyStyle(rmw_zenoh=True, domain=31))
-    impl = Implementations(robot.sim, robot.system)
+    impl = World(robot.sim)
     try:
         reply = ask_goal(robot.observer, goal("reach spot:Standing", mode="drive"))
         robot.statuses.state("reached", reply.goal_id)
@@ -525,7 +527,7 @@ def test_a_mission_past_the_limit_is_refused_at_the_first_goal_too_many() -> Non
 def test_from_a_violation_the_goal_is_refused_naming_the_way_back_unless_it_asks_to_recover(robot: Robot) -> None:
     """Issue 30: from a violated marking the answer names every violated property and the commands that lead
     back into Safe; with `recover`, the pilot sends the first of them, then plans again from Safe."""
-    impl = Implementations(robot.sim, robot.system, hold=[("spot", "teleop"), ("manipulator", "arm_joystick")])
+    impl = World(robot.sim, holding=[("spot", "teleop"), ("manipulator", "arm_joystick")])
     gui = Gui(robot.observer, robot)
     try:
         for skillset, skill in (("spot", "init_power"), ("spot", "stand_up"), ("manipulator", "arm_ready")):

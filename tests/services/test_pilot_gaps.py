@@ -12,10 +12,11 @@ from collections.abc import Callable, Iterator
 import pytest
 import zenoh
 
+from services.simulator.world import World
 from skinet.ros.interfaces import status_request_topic
 from skinet.wire.messages import MissedOutcome, PilotGoalRequest
 from tests.services.conftest import REPO, client_args
-from tests.services.pilot_robot import WALK, Gui, Implementations, Robot, ask_goal, goal
+from tests.services.pilot_robot import WALK, Gui, Robot, ask_goal, goal
 from tests.services.test_monitor import wait_until
 
 
@@ -26,7 +27,7 @@ def robot(client_factory: Callable[[], zenoh.Session], spot_arm: tuple) -> Itera
     r.close()
 
 
-def restart_monitor_while(robot: Robot, impl: Implementations, skill: str) -> None:
+def restart_monitor_while(robot: Robot, impl: World, skill: str) -> None:
     """Stop the monitor, let ``skill`` (held) end on the robot meanwhile, start a fresh monitor."""
     robot.monitor.close()
     robot.monitor = None
@@ -43,7 +44,7 @@ def test_a_skill_that_ended_during_a_monitor_restart_is_not_started_again_but_as
                                                                                           router: str) -> None:
     """teleop's success and failure leave the same resources: the pilot cannot tell, pauses, and goes on
     after the operator's answer (before: teleop was started twice, 'reached — 2 commands sent')."""
-    impl = Implementations(robot.sim, robot.system, hold=[("spot", "teleop")])
+    impl = World(robot.sim, holding=[("spot", "teleop")])
     try:
         reply = ask_goal(robot.observer, goal("run spot:teleop", mode="drive"))
         robot.statuses.first(lambda s: s.reason == "the outcome of spot:teleop", what="teleop running")
@@ -77,7 +78,7 @@ def test_a_skill_that_ended_during_a_monitor_restart_is_not_started_again_but_as
 def test_an_outcome_the_resources_tell_is_inferred_and_the_pilot_goes_on(robot: Robot, mode: str) -> None:
     """stand_up's modes leave different postures: the pilot goes on from the inferred one, says so, and
     counts an inferred failure against the retries (it then stands up again, saying why)."""
-    impl = Implementations(robot.sim, robot.system, {("spot", "stand_up"): [mode]}, hold=[("spot", "stand_up")])
+    impl = World(robot.sim, script={("spot", "stand_up"): [mode]}, holding=[("spot", "stand_up")])
     try:
         reply = ask_goal(robot.observer, goal("run spot:go_to_waypoint", inputs=WALK, mode="drive"))
         robot.statuses.first(lambda s: s.reason == "the outcome of spot:stand_up", what="stand_up running")
@@ -100,7 +101,7 @@ def test_an_outcome_the_resources_tell_is_inferred_and_the_pilot_goes_on(robot: 
 def test_no_outcome_within_the_outcome_timeout_asks_the_manager_for_its_status(
         client_factory: Callable[[], zenoh.Session], spot_arm: tuple) -> None:
     robot = Robot(client_factory, *spot_arm, outcome_timeout=0.5)
-    impl = Implementations(robot.sim, robot.system, hold=[("spot", "teleop")])
+    impl = World(robot.sim, holding=[("spot", "teleop")])
     topic = status_request_topic(robot.system.component("spot").skillset)
     try:
         ask_goal(robot.observer, goal("run spot:teleop", mode="drive"))
@@ -139,7 +140,7 @@ def test_an_outcome_lost_on_the_way_is_found_by_the_status_request(
     (test_no_outcome_within_the_outcome_timeout_asks_the_manager_for_its_status shows the first alone), and the
     pilot asks about the outcome."""
     robot = Robot(client_factory, *spot_arm, outcome_timeout=1.0)
-    impl = Implementations(robot.sim, robot.system, hold=[("spot", "teleop")])
+    impl = World(robot.sim, holding=[("spot", "teleop")])
     try:
         ask_goal(robot.observer, goal("run spot:teleop", mode="drive"))
         robot.statuses.first(lambda s: s.reason == "the outcome of spot:teleop", what="teleop running")
@@ -163,7 +164,7 @@ def test_an_outcome_lost_on_the_way_is_found_by_the_status_request(
 def test_a_run_goal_is_reached_only_by_a_start_with_its_inputs(robot: Robot) -> None:
     """The operator walks spot elsewhere: the pilot names the start, does not count it, and suggests the
     goal's walk again."""
-    impl = Implementations(robot.sim, robot.system)
+    impl = World(robot.sim)
     gui = Gui(robot.observer, robot)
     elsewhere = {"target": {"x": 1.0, "y": 2.0, "z": 0.0}}
     try:

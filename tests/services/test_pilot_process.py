@@ -1,6 +1,7 @@
 """The pilot as a process (issue 24): ``python -m services.pilot`` (a one-line error on a bad system file, a
 liveliness token and a status on ``get`` with no monitor running, a clean stop on SIGTERM), and the pilot
-that ``skinet run`` embeds, driving the robot that connects to it."""
+that ``skinet run`` embeds, driving the robot that connects to it, or the simulated robot of ``skinet run
+--simulate`` with ``skinet goal --drive`` from another process."""
 
 from __future__ import annotations
 
@@ -8,14 +9,17 @@ import signal
 import subprocess
 import sys
 from pathlib import Path
+from subprocess import CompletedProcess
 
 from services.bridge_ros2 import start_bridge
 from services.simulator import Simulator
+from services.simulator.world import World
 from skinet.wire import keys
 from skinet.wire.codec import decode
 from skinet.wire.messages import PilotStatus
+from tests.processes import Watched
 from tests.services.conftest import REPO, free_port, open_client, start_skinet
-from tests.services.pilot_robot import Implementations, Statuses, ask_goal, goal
+from tests.services.pilot_robot import Statuses, ask_goal, goal
 
 
 def test_a_bad_system_file_is_one_line(tmp_path: Path) -> None:
@@ -56,7 +60,7 @@ def test_skinet_run_drives_a_goal_with_its_embedded_pilot(spot_arm) -> None:
         session = open_client(endpoint)
         sim = Simulator(session, system, typemap)
         bridge = start_bridge(session, system, typemap)
-        impl = Implementations(sim, system)
+        impl = World(sim)
         statuses = Statuses(session)
         try:
             reply = ask_goal(session, goal("reach spot:Standing", mode="drive"), client=keys.LOCAL_CLIENT)
@@ -73,3 +77,50 @@ def test_skinet_run_drives_a_goal_with_its_embedded_pilot(spot_arm) -> None:
             session.close()
         proc.send_signal(signal.SIGINT)
         proc.wait(timeout=20)
+
+
+WAYPOINT = "go_to_waypoint.target = {x = 12.0, y = 3.5, z = 0.0}"
+
+
+def simulate_and_drive(run_args: list[str], system: str, goal_args: list[str]) -> tuple[list[str], CompletedProcess]:
+    """``skinet run ... --simulate`` as a process, then, once it printed how to reach it, ``skinet goal ...
+    --drive -e ENDPOINT`` as another (the endpoint read from the goal line it printed): the run's first lines and
+    the goal's process."""
+    run = Watched([sys.executable, "-m", "skinet_cli.main", "run", *run_args, "--simulate"], REPO)
+    try:
+        run.wait_for(lambda text: f"  skinet goal {system} " in text, "the goal line", timeout=120)
+        line = next(x for x in run.lines if x.startswith(f"  skinet goal {system} "))
+        endpoint = line.split(" -e ")[1].split()[0]
+        done = subprocess.run([sys.executable, "-m", "skinet_cli.main", "goal", system, *goal_args, "--drive",
+                               "-e", endpoint], cwd=REPO, capture_output=True, text=True, timeout=120)
+    finally:
+        stopped = run.stop()
+    assert stopped == 0, run.text  # SIGTERM ends it cleanly
+    return run.lines, done
+
+
+def test_skinet_run_simulate_is_a_robot_that_skinet_goal_drives_to_the_goal() -> None:
+    """Try the pilot in one command (docs/pilot.md): the paper's robot simulated by ``skinet run --simulate``
+    (its managers and bridge on the run's session, each skill ending by itself a second after it starts), and
+    ``skinet goal`` in another process driving it to a waypoint: power on, stand up, walk."""
+    lines, done = simulate_and_drive(["skillsets/spot_arm.toml"], "spot_arm",
+                                     ["run spot:go_to_waypoint", "--inputs", WAYPOINT])
+    assert ("  the robot: simulated here, with its bridge; each skill ends by itself 1 s after it starts (failure "
+            "rate 0, seed 0)") in lines, lines
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert done.stdout.splitlines()[-1] == "reached \u2014 3 commands sent", done.stdout
+    assert [x.split(". ", 1)[1] for x in done.stdout.splitlines() if x.startswith("  ") and ". spot:" in x] == [
+        "spot:init_power.start", "spot:stand_up.start",
+        "spot:go_to_waypoint.start with {target = {x = 12.0, y = 3.5, z = 0.0}}"]
+
+
+def test_skinet_run_simulate_docks_the_nav2_robot_through_its_binding() -> None:
+    """The Nav2 example has no skillset manager: ``--simulate`` serves its bound action servers, lifecycle node
+    and topics (a first /battery_state that shows battery Ok and Charging), the bound bridge reads them, and
+    the pilot undocks then docks the robot with the goal's dock id, through the action servers."""
+    lines, done = simulate_and_drive(["examples/nav2/nav2.toml", "--skill-duration", "0.2"], "nav2",
+                                     ["run nav2:dock_robot", "--inputs", 'dock_robot.dock = "home_dock"'])
+    assert ("  the robot: simulated here, with its bridge; each skill ends by itself 0.2 s after it starts (failure "
+            "rate 0, seed 0)") in lines, lines
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert done.stdout.splitlines()[-1] == "reached \u2014 2 commands sent", done.stdout

@@ -412,3 +412,175 @@ def test_stamps_past_2038_are_clamped_with_one_warning(spot_arm, caplog) -> None
         "spot: stamp 2147483653 s is past the int32 seconds of ROS Time (2038-01-19 03:14:07 UTC): clamped to it "
         "(and every later one like it)"]
     assert m.clamped == 2
+
+
+class Bench:
+    """A robot without Zenoh for :class:`~services.simulator.world.World`: starts are told to its hooks as a
+    manager tells them, ``terminate`` ends the execution running (False for another one)."""
+
+    def __init__(self, system: Any):
+        self.system = system
+        self.on_start: list[Any] = []
+        self.running: dict[tuple[str, str], str] = {}
+        self.lock = threading.Lock()
+        self.starts = 0
+
+    def start(self, skillset: str, skill: str) -> str:
+        with self.lock:
+            self.starts += 1
+            id_ = self.running[(skillset, skill)] = f"r{self.starts}"
+            for hook in self.on_start:
+                hook(skillset, skill, id_)
+            return id_
+
+    def terminate(self, skillset: str, skill: str, kind: str, mode: str = "", id_: str | None = None) -> bool:
+        with self.lock:
+            if self.running.get((skillset, skill)) != id_:
+                return False
+            del self.running[(skillset, skill)]
+            return True
+
+
+def settle(world: Any) -> None:
+    """Until the world has ended every execution it is not holding."""
+    deadline = time.monotonic() + 10
+    while not world.idle():
+        assert time.monotonic() < deadline, world.ends
+        time.sleep(0.005)
+
+
+def run_through(world: Any, bench: Bench, skill: tuple[str, str], times: int) -> None:
+    """Start ``skill`` ``times`` times, each after the world ended the one before."""
+    for _ in range(times):
+        bench.start(*skill)
+        settle(world)
+
+
+def test_the_failure_rate_draws_failures_from_its_seed(spot_arm) -> None:
+    """--failure-rate P --seed N: each run fails with probability P, in a failure mode drawn from a generator
+    seeded with N, so the same seed gives the same outcomes in the same order of starts."""
+    from services.simulator.world import World
+    from skinet.pilot.run import Outcomes
+
+    system, _ = spot_arm
+    seen = []
+    for seed in (3, 3, 4):
+        bench = Bench(system)
+        world = World(bench, Outcomes(system, failure_rate=0.5, seed=seed), 0.0)
+        try:
+            run_through(world, bench, ("spot", "init_power"), 12)
+        finally:
+            world.close()
+        seen.append([e.mode for e in world.ends])
+        assert all(e.ok for e in world.ends) and world.ended == [f"spot:init_power.{e.kind}.{e.mode}"
+                                                                 for e in world.ends]
+    assert seen[0] == ["no_battery", "no_battery", "powered_on", "no_battery", "powered_on", "no_battery",
+                       "no_battery", "powered_on", "powered_on", "no_battery", "no_battery", "powered_on"]
+    assert seen[1] == seen[0] and seen[2] != seen[0]
+    for rate, mode in ((0.0, "powered_on"), (1.0, "no_battery")):
+        bench = Bench(system)
+        world = World(bench, Outcomes(system, failure_rate=rate, seed=3), 0.0)
+        try:
+            run_through(world, bench, ("spot", "init_power"), 5)
+        finally:
+            world.close()
+        assert world.ended == [f"spot:init_power.{'success' if rate == 0 else 'failure'}.{mode}"] * 5
+
+
+def test_a_script_comes_before_the_outcomes_and_held_skills_wait_for_release(spot_arm) -> None:
+    """The tests' controls: a script of modes per skill (every start still counts as a run of the outcomes: the
+    second run's declared failure), a skill held until released, random durations in [0, duration] from the rng."""
+    import random
+
+    from services.simulator.world import End, World
+    from skinet.pilot.run import Failure, Outcomes
+
+    system, _ = spot_arm
+
+    class Recorded(random.Random):
+        spans: list[tuple[float, float]] = []
+
+        def uniform(self, a: float, b: float) -> float:
+            self.spans.append((a, b))
+            return super().uniform(a, b)
+
+    bench = Bench(system)
+    rng = Recorded(1)
+    world = World(bench, Outcomes(system, [Failure("spot", "stand_up", 2, "fell")]), 0.01,
+                  script={("spot", "stand_up"): ["fell"]}, holding=[("spot", "teleop")], rng=rng)
+    try:
+        run_through(world, bench, ("spot", "stand_up"), 3)
+        assert world.ended == ["spot:stand_up.failure.fell", "spot:stand_up.failure.fell",
+                               "spot:stand_up.success.standing"]
+        teleop = bench.start("spot", "teleop")
+        run_through(world, bench, ("manipulator", "arm_ready"), 1)  # the others go on meanwhile
+        assert world.ended[-1] == "manipulator:arm_ready.success.ready"
+        assert bench.running == {("spot", "teleop"): teleop}  # held
+        world.release("spot", "teleop")
+        settle(world)
+        assert world.ends[-1] == End("spot", "teleop", teleop, "success", "done", True)
+        assert rng.spans == [(0, 0.01)] * 5
+    finally:
+        world.close()
+
+
+def test_the_command_line_simulator_serves_a_robot_whose_skills_end_by_themselves(router, client_factory,
+                                                                                   spot_arm) -> None:
+    """``python -m services.simulator SYSTEM.toml --self-ending`` as a process of its own: an operator's request
+    starts spot:init_power, which fails by itself (--failure-rate 1) 0.1 s later; a line for each; SIGTERM
+    stops it with status 0."""
+    import sys
+
+    from services.common.requests import Requests
+    from skinet.ros.requests import skill_request, status_request
+    from tests.processes import Watched
+    from tests.services.conftest import REPO, client_args
+
+    system, typemap = spot_arm
+    sim = Watched([sys.executable, "-m", "services.simulator", "skillsets/spot_arm.toml", "--self-ending",
+                   "--skill-duration", "0.1", "--failure-rate", "1", "--seed", "5", "--log-level", "WARNING",
+                   *client_args(router)], REPO)
+    session = client_factory()
+    log = StatusLog(session, system, typemap)
+    spot = system.component("spot")
+    store = build_typestore(spot.skillset, typemap)
+    requests = Requests(session, [(spot, store)])
+    try:
+        sim.wait_for(lambda text: "Ctrl-C stops" in text, "serving")
+        assert sim.lines == ["python -m services.simulator: the skillset managers of spot_arm; each skill ends by "
+                             "itself 0.1 s after it starts (failure rate 1, seed 5); Ctrl-C stops"]
+        deadline = time.monotonic() + 30
+        while not log.items:  # until the manager answers: its subscriptions reached the router
+            assert time.monotonic() < deadline, "no status from the simulated manager"
+            requests.put("spot", *status_request(store, spot.skillset))
+            time.sleep(0.2)
+        requests.put("spot", *skill_request(store, spot.skillset, "init_power", "op-1"))
+        sim.wait_for(lambda text: "end " in text, "the skill's end")
+        assert sim.lines[1:] == ["start spot:init_power op-1", "end   spot:init_power.failure.no_battery op-1"]
+        responses = [m for ss, topic, m, _ in log.items if topic.endswith("/response")]
+        assert [(m["id"], m["result"], m["name"]) for m in responses] == [("op-1", R["FAILURE"], "no_battery")]
+        assert sim.stop() == 0
+    finally:
+        requests.close()
+        sim.stop()
+
+
+def test_the_simulator_says_what_runs_a_file_it_does_not_play(capsys) -> None:
+    """A pilot run file names the commands that play it; a system file needs --self-ending; a scenario refuses
+    it."""
+    import services.simulator.__main__ as simulator_main
+
+    assert simulator_main.main(["skillsets/missions/pilot.toml"]) == 1
+    assert capsys.readouterr().err == (
+        "skillsets/missions/pilot.toml:5:1: error: a pilot run, not a scenario or a system file: `skinet demo "
+        "skillsets/missions/pilot.toml` plays it; to drive a simulated robot yourself, `skinet run "
+        "skillsets/spot_arm.toml --simulate` and `skinet goal` (docs/pilot.md)\n")
+    assert simulator_main.main(["skillsets/spot_arm.toml"]) == 1
+    assert capsys.readouterr().err == ("skillsets/spot_arm.toml:4:1: error: a system file, not a scenario: add "
+                                       "--self-ending to simulate its robot with skills that end by themselves\n")
+    with pytest.raises(SystemExit) as exit_:
+        simulator_main.main(["skillsets/missions/unassisted.toml", "--self-ending"])
+    assert exit_.value.code == 2
+    assert capsys.readouterr().err == (
+        "python -m services.simulator: error: --self-ending takes a system file; skillsets/missions/unassisted.toml "
+        "is a scenario (its steps end the skills) (see python -m services.simulator --help)\n")
