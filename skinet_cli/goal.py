@@ -6,9 +6,13 @@ first steps as ``skinet plan`` prints them, or the reason of a rejection), then
 one line per change of ``skinet/<system>/pilot/status`` until the goal ends.
 Goals are checked here first when the system file is at hand, so a typo is
 ``FILE:LINE:COL`` before any connection; the pilot checks them again (it has the
-live model).  Ctrl-C, from the request on, cancels the goal the pilot accepted.
-Exit status: 0 reached, 1 failed or cancelled (or an error: no pilot, no
-router), 2 rejected.  Cost: one query, then O(1) per status received.
+live model).  Ctrl-C, from the request on, cancels the goal the pilot accepted;
+a cancel leaves the skill the pilot started running, ``--cancel --interrupt``
+has the pilot interrupt it too (docs/pilot.md, *Cancelling*).  Exit status: 0
+reached, 1 failed or cancelled (or an error: no pilot, no router, a bad system
+file), 2 rejected (here, a malformed goal; or by the pilot), as ``--help`` says.
+Options and goals may come in any order (``SYSTEM -e ENDPOINT GOAL``).
+Cost: one query, then O(1) per status received.
 """
 
 from __future__ import annotations
@@ -39,7 +43,9 @@ steps) is printed, then one line per change of the pilot's status (state, next
 command, moves left, retries, commands sent) until the goal ends. Ctrl-C
 cancels the goal. Exit status: 0 reached, 1 failed or cancelled (or no pilot,
 no router), 2 rejected (a malformed goal, a goal with no plan, another goal
-running without --replace, a login that may not send goals)."""
+running without --replace, a login that may not send goals). With --cancel,
+--pause, --resume, --set-mode or --confirm: 0 done, 2 rejected (no goal runs);
+--cancel --interrupt: 1 when a skill could not be interrupted."""
 EPILOG = """\
 goals (as in skinet plan):
   reach FORMULA                      a marking where FORMULA holds (the property language)
@@ -64,6 +70,11 @@ a skill the pilot started that ended while nobody could see it (a monitor restar
 whose outcome the resources cannot tell pauses it with 'outcome unknown'; answer how it ended:
   skinet goal spot_arm --confirm success -e tcp/127.0.0.1:7447
 
+a cancel (--cancel, Ctrl-C) leaves the skill the pilot started running: a walk goes on to its waypoint.
+With --interrupt the pilot also sends that skill's interrupt once the check allows it (never the
+interrupt of a skill someone else started), and says what came of it:
+  skinet goal spot_arm --cancel --interrupt -e tcp/127.0.0.1:7447
+
 Through a router with logins, log in as an operator-role user (--user operator --password-file
 ~/.config/skinet/secrets/operator.password, or --zenoh-config from skinet client-config --user
 operator): the router lets no other user send goals, and says nothing to them (no pilot answers)."""
@@ -77,7 +88,7 @@ GONE_GRACE = 5.0  # seconds the pilot's token may stay away, this session linked
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     c = sub.add_parser("goal", help=HELP, description=DESCRIPTION, epilog=EPILOG,
-                       formatter_class=argparse.RawDescriptionHelpFormatter)
+                       formatter_class=argparse.RawDescriptionHelpFormatter, intermixed=True)  # goals after options too
     c.add_argument("system", metavar="SYSTEM",
                    help="system file (.toml: the goals are checked here first) or system name")
     add_goal_args(c)  # as skinet plan's; a --goals file is sent as its text, so errors come back as FILE:LINE:COL
@@ -91,7 +102,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     c.add_argument("--max-retries", type=count(1, 100), default=3, metavar="N",
                    help="failures of one skill after which the goal fails (default: 3)")
     ops = c.add_mutually_exclusive_group()
-    ops.add_argument("--cancel", dest="op", action="store_const", const="cancel", help="cancel the goal that runs")
+    ops.add_argument("--cancel", dest="op", action="store_const", const="cancel",
+                     help="cancel the goal that runs; a skill it runs goes on (a walk ends where it ends) unless "
+                          "--interrupt")
     ops.add_argument("--pause", dest="op", action="store_const", const="pause",
                      help="pause the goal that runs (no command is sent until --resume)")
     ops.add_argument("--resume", dest="op", action="store_const", const="resume", help="resume a paused goal")
@@ -100,8 +113,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     ops.add_argument("--confirm", choices=("success", "failure", "rerun"), metavar="ANSWER",
                      help="answer the pilot paused with 'outcome unknown' (a skill ended unseen): success or "
                           "failure (how it ended), or rerun (it did not do its work: start it again)")
+    c.add_argument("--interrupt", action="store_true",
+                   help="with --cancel: the pilot also interrupts the skills it started for the goal that still run "
+                        "(never one someone else started), each once the check allows it, as any command it sends; "
+                        "one line per change until each is interrupted or ended (exit 0), or not (exit 1)")
     c.add_argument("--timeout", type=seconds(), default=10.0,
-                   help="seconds to wait for the pilot's reply (it plans first; default: 10)")
+                   help="seconds to wait for the pilot's reply (it plans first), and with --cancel --interrupt for "
+                        "what came of the interrupts (default: 10)")
     add_zenoh_args(c)
     c.set_defaults(func=cmd_goal, op=None)
 
@@ -109,22 +127,31 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def cmd_goal(args: argparse.Namespace) -> int:
     from services.common.goals import NoPilot, ask_pilot
     from services.common.zenoh_config import (
-        check_connected, client_name, config_from_args, open_session, wait_connected, warn_on_stderr,
+        check_connected, client_name, config_from_args, open_session, said_at_the_end, wait_connected,
     )
     from services.dashboard.observer import resolve_system
     from skinet.errors import SkinetError
+    from skinet.files.read import read_text
     from skinet.wire.messages import PilotGoalReply, PilotGoalRequest
 
-    name, system = resolve_system(args.system)
+    name, system = resolve_system(args.system)  # a bad system file: an error (exit 1), not a rejected goal
     op = "mode" if args.set_mode else "confirm" if args.confirm else args.op
+    if args.interrupt and op != "cancel":
+        return _rejected_here(SkinetError("--interrupt goes with --cancel: it interrupts what the cancelled goal "
+                                          "started"))
     request = PilotGoalRequest(system=name, op=op or "goal", mode=args.set_mode or ("drive" if args.drive else "guide"),
-                               answer=args.confirm)
+                               answer=args.confirm, interrupt=args.interrupt)
     if op is None:
-        request = request.model_copy(update=_goal_fields(args, system))
+        mission = read_text(args.goals_file) if args.goals_file else None  # unreadable: an error (exit 1)
+        try:
+            request = request.model_copy(update=_goal_fields(args, system, mission))
+        except SkinetError as exc:  # a malformed goal, refused here as the pilot refuses it (the help: exit 2)
+            return _rejected_here(exc)
     elif args.goals or args.goals_file or args.inputs:
-        raise SkinetError(f"--{'set-mode' if op == 'mode' else op} takes no goals: it acts on the goal that runs")
+        return _rejected_here(SkinetError(f"--{'set-mode' if op == 'mode' else op} takes no goals: it acts on the "
+                                          "goal that runs"))
     config = config_from_args(args, command=True)
-    session = open_session(config, warn_on_stderr("skinet goal"))
+    session = open_session(config, said_at_the_end)  # an endpoint still unreached is the error, when no pilot answers
 
     def ask(request: PilotGoalRequest, timeout: float = args.timeout) -> PilotGoalReply:
         """The pilot's reply; with none, an endpoint still unreached is the reason given, else no pilot."""
@@ -136,6 +163,12 @@ def cmd_goal(args: argparse.Namespace) -> int:
 
     try:
         wait_connected(session, config, min(args.timeout, 2.0))
+        if args.interrupt:
+            follower = _Follower(session, name)  # before the request: no change is missed
+            try:
+                return _operate(session, request, ask, follower, args.timeout)
+            finally:
+                follower.close()
         if op is not None:
             return _operate(session, request, ask)
         follower = _Follower(session, name)  # before the request: no change is missed
@@ -158,10 +191,19 @@ def cmd_goal(args: argparse.Namespace) -> int:
         session.close()
 
 
-def _goal_fields(args: argparse.Namespace, system: Any) -> dict[str, Any]:
-    """The request's goals, mission and inputs; checked first against ``system`` (when the file is at hand)."""
+def _rejected_here(exc: Exception) -> int:
+    """A request refused before it is sent (a malformed goal, goals beside an operation): its one line, and
+    the status of a rejected goal."""
+    from skinet.errors import SourceError
+
+    print(str(exc) if isinstance(exc, SourceError) else f"skinet: error: {exc}", file=sys.stderr)
+    return EXIT_REJECTED
+
+
+def _goal_fields(args: argparse.Namespace, system: Any, mission: str | None) -> dict[str, Any]:
+    """The request's goals, mission (the ``--goals`` file's text) and inputs; checked first against ``system``
+    (when the file is at hand)."""
     from skinet.errors import SkinetError
-    from skinet.files.read import read_text
     from skinet.files.toml import parse_toml
     from skinet_cli.plan import read_goals
 
@@ -175,13 +217,14 @@ def _goal_fields(args: argparse.Namespace, system: Any) -> dict[str, Any]:
                               "recover": args.recover}
     if args.inputs is not None:
         fields["inputs"] = parse_toml(args.inputs, "<--inputs>")
-    if args.goals_file:
-        fields["mission"], fields["mission_name"] = read_text(args.goals_file), args.goals_file
+    if mission is not None:
+        fields["mission"], fields["mission_name"] = mission, args.goals_file
     return fields
 
 
-def _operate(session: Any, request: Any, ask: Any) -> int:
-    """Cancel, pause, resume or switch mode: print the pilot's reply (``ask(request)``) and its status."""
+def _operate(session: Any, request: Any, ask: Any, follower: _Follower | None = None, timeout: float = 0.0) -> int:
+    """Cancel, pause, resume or switch mode: print the pilot's reply (``ask(request)``) and its status; a cancel
+    with interrupt: the changes of its status, through ``follower``, until the interrupts ended (``timeout``)."""
     from services.common.goals import pilot_status
 
     reply = ask(request)
@@ -190,7 +233,9 @@ def _operate(session: Any, request: Any, ask: Any) -> int:
     if not reply.accepted:
         print(f"{what} rejected by the pilot: {reply.reason}", file=sys.stderr)
         return EXIT_REJECTED
-    print(f"{what}: done (goal {reply.goal_id})" if reply.goal_id else f"{what}: done")
+    print(f"{what}: done (goal {reply.goal_id})" if reply.goal_id else f"{what}: done", flush=True)
+    if follower is not None:
+        return follower.interrupts(reply.goal_id, timeout)
     status = pilot_status(session, request.system)
     if status is not None:
         print(status_line(status))
@@ -332,6 +377,39 @@ class _Follower:
                 print(line, flush=True)
             if status.state in ("reached", "failed", "cancelled"):
                 return EXIT_REACHED if status.state == "reached" else EXIT_ENDED
+
+    def interrupts(self, goal_id: int, timeout: float) -> int:
+        """After goal ``goal_id`` was cancelled with interrupt: one line per change of its status until every
+        skill to interrupt has its outcome (``PilotStatus.interrupts``); 0 when each was interrupted or had
+        ended (or none ran), 1 when one was not, or is still open after ``timeout`` seconds."""
+        from services.common.goals import pilot_status
+        from skinet.wire.messages import OPEN_INTERRUPTS
+
+        now = pilot_status(self.session, self.system)
+        if now is not None:
+            self.queue.put(now)
+        lines = StatusLines()
+        last: PilotStatus | None = None
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            try:
+                status = self.queue.get(timeout=min(POLL, max(0.0, deadline - time.monotonic())))
+            except queue.Empty:
+                continue
+            if isinstance(status, tuple) or status.goal_id != goal_id or status.state != "cancelled" or \
+                    (last is not None and status.pilot == last.pilot and status.seq <= last.seq):
+                continue
+            last = status
+            line = lines.line(status)
+            if line is not None:
+                print(line, flush=True)
+            if not any(s in OPEN_INTERRUPTS for s in status.interrupts.values()):
+                return EXIT_REACHED if all(s in ("interrupted", "ended") for s in status.interrupts.values()) \
+                    else EXIT_ENDED
+        still = [n for n, s in (last.interrupts if last is not None else {}).items() if s in OPEN_INTERRUPTS]
+        print(f"the pilot has not interrupted {', '.join(still) or 'the skills it started'} within {timeout:g} s; "
+              "it goes on trying until a new goal is set", file=sys.stderr)
+        return EXIT_ENDED
 
     def _linked(self) -> bool:
         """Whether this session is linked to a router or a peer now."""

@@ -49,7 +49,7 @@ examples:
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     c = sub.add_parser("plan", help=HELP, description=DESCRIPTION, epilog=EPILOG,
-                       formatter_class=argparse.RawDescriptionHelpFormatter)
+                       formatter_class=argparse.RawDescriptionHelpFormatter, intermixed=True)  # goals after options too
     c.add_argument("system", help="system file (.toml), e.g. skillsets/spot_arm.toml")
     add_goal_args(c)
     c.add_argument("--state", metavar="STATE",
@@ -90,7 +90,8 @@ def read_goals(args: argparse.Namespace, system: System) -> list[Goal]:
                               lambda keys: nested(lines, Pos(1, 1), keys) if keys else None, types)
     several = len(args.goals) > 1
     for n, text in enumerate(args.goals, 1):
-        goals.append(parse_goal(system, text, inputs, f"<goal {n}>" if several else "<goal>", types=types))
+        goals.append(parse_goal(system, text, inputs, f"<goal {n}>" if several else "<goal>", types=types,
+                                given_with="flag"))
     if not goals:
         raise SkinetError("no goals: give GOAL arguments (e.g. \"reach spot:Standing\") or --goals FILE")
     if any(c.binding for c in system.components):  # a bound skill's inputs: what its goal message can hold

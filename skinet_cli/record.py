@@ -25,7 +25,7 @@ import zenoh
 from pydantic import BaseModel
 
 from services.common.zenoh_config import (
-    add_zenoh_args, config_from_args, connect_problems, open_session, warn_on_stderr,
+    add_zenoh_args, config_from_args, connect_problems, open_session, shown_endpoint, warn_on_stderr,
 )
 from services.bridge_ros2.record import STORAGES, BagRecorder, recorded_topics
 from services.common.cli import add_ros_key_args, key_style
@@ -191,7 +191,14 @@ class Recorder:
 def cmd_record(args: argparse.Namespace) -> int:
     system = args.system
     config = config_from_args(args, command=True)
-    session = open_session(config, warn_on_stderr("skinet record"))
+    said: list[str] = []  # the warnings about endpoints: the end does not say them again
+    shout = warn_on_stderr("skinet record")
+
+    def warn(message: str) -> None:
+        said.append(message)
+        shout(message)
+
+    session = open_session(config, warn)
     if args.bundle is not None:
         args.output = args.bundle
     mcap = (args.format or ("mcap" if args.output.endswith(".mcap") else "jsonl")) == "mcap"
@@ -240,7 +247,7 @@ def cmd_record(args: argparse.Namespace) -> int:
         try:
             recorder.close()  # a bundle without a model: a one-line error
         finally:
-            why = _nothing_recorded(session, config, system) if recorder.written == 0 else None
+            why = _nothing_recorded(session, config, system, said) if recorder.written == 0 else None
             session.close()
     if why is not None:  # an empty log is never a success
         raise SkinetError(f"nothing recorded in {args.output}: {why}")
@@ -288,13 +295,17 @@ def cmd_rosbag(args: argparse.Namespace) -> int:
     return 0
 
 
-def _nothing_recorded(session: zenoh.Session, config: zenoh.Config, system: str) -> str:
-    """Why no message came: an endpoint not reached, or no monitor of ``system`` (naming those seen)."""
+def _nothing_recorded(session: zenoh.Session, config: zenoh.Config, system: str, said: list[str]) -> str:
+    """Why no message came: an endpoint not reached (named only when one of the warnings ``said`` at the
+    start gave its reason), or no monitor of ``system`` (naming those seen)."""
+    from services.common.session import unconnected
     from services.dashboard.observer import monitored_systems
 
-    problems = connect_problems(session, config)
-    if problems:
-        return "; ".join(problems)
+    missing = [shown_endpoint(e) for e in unconnected(session, config)]
+    if missing and all(any(f"cannot connect to {e}: " in m for m in said) for e in missing):
+        return f"no link to {', '.join(missing)} came up (the warning above says why)"
+    if missing:
+        return "; ".join(connect_problems(session, config))
     others = monitored_systems(session)
     return (f"no monitor of system '{system}' published anything "
             f"({'systems with a monitor: ' + ', '.join(others) if others else 'no monitor is reachable'})")

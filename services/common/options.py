@@ -28,13 +28,28 @@ from skinet.wire.limits import MAX_BUDGET, MIN_BUDGET
 
 
 class ArgumentParser(argparse.ArgumentParser):
-    """``argparse`` with a one-line error instead of the usage text (subparsers inherit it)."""
+    """``argparse`` with a one-line error instead of the usage text (subparsers inherit it).
 
-    def __init__(self, *args: object, **kwargs: object) -> None:
+    ``intermixed=True`` (a subparser's keyword) lets its positionals come anywhere among its options, as
+    :meth:`argparse.ArgumentParser.parse_intermixed_args` reads them: ``skinet goal SYSTEM -e ENDPOINT GOAL``
+    (plain argparse gives the positionals one run: GOAL there was "unrecognized")."""
+
+    def __init__(self, *args: object, intermixed: bool = False, **kwargs: object) -> None:
         super().__init__(*args, **kwargs)  # type: ignore[arg-type]
         # A dash then a digit is a value, not an option: `--memory-limit -5MiB` reaches the option's own check
         # (argparse takes only plain negative numbers as values, and said "expected one argument").
         self._negative_number_matcher = re.compile(r"^-\.?\d")
+        self._intermixed = intermixed
+        self._within = False  # parse_known_intermixed_args calls parse_known_args twice: those are plain
+
+    def parse_known_args(self, args=None, namespace=None):  # type: ignore[no-untyped-def]
+        if not self._intermixed or self._within:
+            return super().parse_known_args(args, namespace)
+        self._within = True
+        try:
+            return self.parse_known_intermixed_args(args, namespace)
+        finally:
+            self._within = False
 
     def error(self, message: str) -> NoReturn:
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")

@@ -93,8 +93,13 @@ def open_session(config: zenoh.Config, warn: Callable[[str], None] | None = None
 def connect_problems(session: zenoh.Session, config: zenoh.Config) -> list[str]:
     """``cannot connect to E: REASON`` for each ``connect`` endpoint ``session`` has no link to
     (peers and routers; empty for a client, which has one, or failed to open)."""
-    return [f"cannot connect to {re.sub(r'[?#].*', '', e)}: {connect_problem(config, e)}"  # without its settings
+    return [f"cannot connect to {shown_endpoint(e)}: {connect_problem(config, e)}"
             for e in unconnected(session, config)]
+
+
+def shown_endpoint(endpoint: str) -> str:
+    """An endpoint as messages name it: without its settings (``?...``, ``#...``)."""
+    return re.sub(r"[?#].*", "", endpoint)
 
 
 def wait_connected(session: zenoh.Session, config: zenoh.Config, timeout: float) -> bool:

@@ -21,7 +21,7 @@ import zenoh
 
 from services.common.cli import add_log_arg, setup_logging
 from services.common.options import count
-from services.common.zenoh_config import add_zenoh_args, client_name, config_from_args, open_session
+from services.common.zenoh_config import add_zenoh_args, client_name, config_from_args, open_session, said_at_the_end
 from services.dashboard.observer import Observer, add_view_args, follow, resolve_system
 from services.dashboard.server import Dashboard
 from skinet.errors import SkinetError
@@ -76,7 +76,7 @@ def serve(args: argparse.Namespace, stop: threading.Event) -> int:
     name, system = resolve_system(args.system)
     config = config_from_args(args)
     goals = goal_config(args, config)  # before any session: a missing secret is one line
-    session = open_session(config)
+    session = open_session(config, said_at_the_end)  # an endpoint still unreached after --wait: follow's error
     try:
         goal_session = open_session(goals) if goals is not None else None
     except SkinetError:

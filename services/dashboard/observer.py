@@ -27,7 +27,9 @@ from pydantic import BaseModel
 
 from services.common.goals import ask_pilot
 from services.common.options import count, load_live_system, seconds
-from services.common.zenoh_config import check_connected, client_name, config_from_args, open_session, undeclare
+from services.common.zenoh_config import (
+    check_connected, client_name, config_from_args, open_session, said_at_the_end, undeclare,
+)
 from services.dashboard.board import Board, Update
 from services.monitor.check import parse_command
 from skinet.errors import SkinetError
@@ -238,7 +240,7 @@ def observe(args: argparse.Namespace) -> tuple[zenoh.Config, zenoh.Session, Obse
     """A served view's Zenoh configuration, session and observer of the system ``args.system`` names."""
     name, system = resolve_system(args.system)
     config = config_from_args(args)
-    session = open_session(config)
+    session = open_session(config, said_at_the_end)  # an endpoint still unreached after --wait: follow's error
     return config, session, Observer(session, name, system, client=client_name(config))
 
 

@@ -30,7 +30,10 @@ rerun): the pilot never starts such a skill again on its own.  A skill it starte
 ``outcome_timeout`` s makes it ask the manager for its status.  The operator's interrupt of
 the pilot's skill counts against the retries and holds the goal until ``resume``; in guide
 mode a command other than the one suggested is named; a ``run`` goal counts only a start
-with its inputs (the actuator hears the requests).  New goals are counted before they are
+with its inputs (the actuator hears the requests).  A cancel sends nothing: the skills the pilot
+started run on, unless it asks to interrupt them (``PilotGoalRequest.interrupt``); each is then
+interrupted as a command is sent (the check, one in flight), never a run someone else started
+(docs/pilot.md, *Cancelling*).  New goals are counted before they are
 parsed, and parsed and planned on a thread of their own, so cancels are answered meanwhile.
 
 A skillset that is not ``live``, a model divergence seen while the goal runs (until ``resume``: later
@@ -75,8 +78,8 @@ from skinet.wire.limits import MAX_BUDGET
 from skinet.wire.convert import marking_of, plan_steps
 from skinet.wire.limits import PILOT_OUTCOME_TIMEOUT
 from skinet.wire.messages import (
-    CheckReply, CheckRequest, LiveState, MissedOutcome, PilotCommand, PilotGoalReply, PilotGoalRequest, PilotStatus,
-    PlanStep, UnsafeReport,
+    OPEN_INTERRUPTS, CheckReply, CheckRequest, LiveState, MissedOutcome, PilotCommand, PilotGoalReply,
+    PilotGoalRequest, PilotStatus, PlanStep, UnsafeReport,
 )
 
 log = logging.getLogger("skinet.pilot")
@@ -136,6 +139,9 @@ class _Goal:
     diverged: str = ""  # its reason: the goal holds on it until `resume` accepts it
     end: str = ""  # reached, failed or cancelled
     reason: str = ""
+    interrupts: dict[str, str] = field(default_factory=dict)  # after a cancel with interrupt: PilotStatus.interrupts
+    interrupt_run: int = 0  # the monitor run (Pilot._runs) of that cancel: a restart loses track of the runs
+    interrupt_due: float = 0.0  # when the interrupt sent must have shown its effect (monotonic)
 
 
 def divergence_reason(st: LiveState) -> str:
@@ -157,6 +163,7 @@ class _Due:
     seq: int
     goal: int
     unsafe: UnsafeReport  # the report that said the prediction of ``seq`` is fresh
+    interrupt: bool = False  # the interrupt of a skill the pilot started, after a cancel that asked for it
 
 
 class Pilot:
@@ -274,9 +281,11 @@ class Pilot:
             self._inflight = None  # its effect (or an event that changed what it would do): plan again
             mine = flight.command
         g = self._goal
+        gap = last is not None and state.seq > last.seq + 1  # publications the pilot did not get
+        if g is not None and g.end and _open(g.interrupts):
+            self._watch_interrupts(g, skillset, transition, gap)
         if g is None or g.end or state.seq <= g.since:
             return
-        gap = last is not None and state.seq > last.seq + 1  # publications the pilot did not get
         if state.divergence:
             g.diverged_at, g.diverged = state.seq, divergence_reason(state)
         self._follow(g, state, skillset, transition, mine, gap)
@@ -541,7 +550,7 @@ class Pilot:
             elif request.op == "mode":
                 g.mode = request.mode
             elif request.op == "cancel":
-                self._end(g, "cancelled", f"cancelled by {client}")
+                self._cancel(g, client, request.interrupt)
             elif request.op == "pause":
                 g.paused_by = client
             else:  # resume: also accepts the divergence shown now
@@ -597,7 +606,8 @@ class Pilot:
             g = self._goal
             if g is not None and not g.end and not request.replace:
                 return self._reject(f"goal {g.id} of {g.client} is being followed ({self._status.state}): "
-                                    "cancel it, or send the new goal with replace")
+                                    "cancel it (--cancel), or send the new goal with --replace (the dashboard: "
+                                    "'replace the goal that runs')")
             plans: list[Plan] = []
             if self._state is not None:
                 try:
@@ -667,6 +677,8 @@ class Pilot:
             if f is not None and time.monotonic() >= f.deadline:  # a goal that ended: its command is forgotten
                 log.warning("no effect of %s:%s seen from %s", f.command.skillset, f.command.transition, f.manager)
                 self._inflight = None
+            if _open(g.interrupts):
+                return self._interrupting(g)
             return self._show(g.end, g.reason)
         waiting = self._no_monitor() if not self._monitors else \
             f"no live state from the monitor of {self.name} yet" if st is None else ""
@@ -799,10 +811,13 @@ class Pilot:
                     problem = f"the check's answer is not understood: {exc}"
             else:
                 problem = f"the check failed: {r.err.payload.to_string() if r.err is not None else '?'}"
+        skill, _, kind = c.transition.partition(".")
+        name = f"{c.skillset}:{skill}"
         with self._lock:
             g, st = self._goal, self._state
-            if g is None or g.id != due.goal or g.end or st is None or st.seq != due.seq or self._inflight or \
-                    not self._monitors or self._paused(g, st):
+            if g is None or g.id != due.goal or st is None or st.seq != due.seq or self._inflight or \
+                    not self._monitors or (g.interrupts.get(name) != "pending" if due.interrupt else
+                                           g.end or self._paused(g, st)):
                 return  # things moved on while the check was asked (a step, a sync state, a pause): decide again
             what = f"{c.skillset}:{c.transition}"
             if reply is None or not reply.ok:
@@ -816,46 +831,159 @@ class Pilot:
                 return
             if reply.decision != "allow":
                 why = "; ".join(f"{r.property} ({r.constraint}): {r.reason}" for r in reply.reasons) or reply.decision
+                if due.interrupt:  # asked for once, by the operator: the answer is theirs to act on
+                    self._interrupt_ends(g, name, "not interrupted", f"not interrupted: the check answered "
+                                         f"{reply.decision} for {what} at step {due.seq}: {why}", again=True)
+                    return
                 if reply.decision == "deny":
                     g.denied += 1
                     log.error("DEFECT: the check denied %s at step %d, which the plan gave: %s", what, due.seq, why)
                 self._refuse(g, due, f"the check answered {reply.decision} for {what} at step {due.seq}: {why}",
                              again=False)
                 return
-            skill, _, kind = c.transition.partition(".")
             manager = responder(self.system, c.skillset, skill)
             self._inflight = _InFlight(c, due.seq, time.monotonic() + self.response_timeout, manager)
             g.commands += 1
-            g.note = ""
-            if kind == "start":
-                g.running[f"{c.skillset}:{skill}"] = _Running(c.skillset, skill, True, dict(c.inputs),
-                                                              monitor=self._runs)
-            self._show("waiting for outcome", f"the effect of {what}", c)
+            if due.interrupt:
+                g.interrupts[name], g.interrupt_due = "sent", time.monotonic() + self.response_timeout
+                self._notes(g, f"interrupt of {name} sent: the check allowed it at step {due.seq}")
+                log.info("goal %d (cancelled): interrupting %s, which the pilot started", g.id, name)
+                self._decide()
+            else:
+                g.note = ""
+                if kind == "start":
+                    g.running[name] = _Running(c.skillset, skill, True, dict(c.inputs), monitor=self._runs)
+                self._show("waiting for outcome", f"the effect of {what}", c)
         try:
             sent = self.actuator.send(c)
             log.info("goal %d: sent %s:%s", due.goal, c.skillset, sent)
-        except Refused as exc:  # nothing changed on the robot: ask again, up to max_retries times
-            log.warning("goal %d: %s", due.goal, exc.reason)
-            with self._lock:
-                self._inflight = None
-                g = self._goal
-                if g is not None and g.id == due.goal and not g.end:
-                    self._forget(g, c)
-                    name = f"{c.skillset}:{c.transition}"
-                    g.refused[name] = g.refused.get(name, 0) + 1
-                    if g.refused[name] >= g.max_retries:
-                        self._end(g, "failed", f"{exc.reason} ({g.refused[name]} times)")
-                    else:
-                        self._refuse(g, due, exc.reason)
-                    self._decide()
         except ActError as exc:
-            with self._lock:
-                self._inflight = None
-                g = self._goal
-                if g is not None and g.id == due.goal and not g.end:
-                    self._forget(g, c)
-                    self._end(g, "failed", f"cannot send {c.skillset}:{c.transition}: {exc.reason}")
-                    self._decide()
+            if due.interrupt:
+                with self._lock:
+                    self._inflight = None
+                    g = self._goal
+                    if g is not None and g.id == due.goal and g.interrupts.get(name) == "sent":
+                        refused = "the robot refused it" if isinstance(exc, Refused) else "it could not be sent"
+                        self._interrupt_ends(g, name, "not interrupted", f"not interrupted: {refused}: {exc.reason}",
+                                             again=True)
+            elif isinstance(exc, Refused):
+                self._refused(due, exc)
+            else:
+                self._failed(due, exc)
+
+    def _refused(self, due: _Due, exc: Refused) -> None:
+        """A command the robot refused: nothing changed on it, so it is asked again, up to max_retries times."""
+        c = due.command
+        log.warning("goal %d: %s", due.goal, exc.reason)
+        with self._lock:
+            self._inflight = None
+            g = self._goal
+            if g is not None and g.id == due.goal and not g.end:
+                self._forget(g, c)
+                name = f"{c.skillset}:{c.transition}"
+                g.refused[name] = g.refused.get(name, 0) + 1
+                if g.refused[name] >= g.max_retries:
+                    self._end(g, "failed", f"{exc.reason} ({g.refused[name]} times)")
+                else:
+                    self._refuse(g, due, exc.reason)
+                self._decide()
+
+    def _failed(self, due: _Due, exc: ActError) -> None:
+        """A command that could not be sent: the goal fails."""
+        c = due.command
+        with self._lock:
+            self._inflight = None
+            g = self._goal
+            if g is not None and g.id == due.goal and not g.end:
+                self._forget(g, c)
+                self._end(g, "failed", f"cannot send {c.skillset}:{c.transition}: {exc.reason}")
+                self._decide()
+
+    # -- a cancel that interrupts (docs/pilot.md, *Cancelling*) -----------------------------
+
+    def _cancel(self, g: _Goal, client: str, interrupt: bool) -> None:
+        """End ``g`` cancelled; with ``interrupt``, each skill the pilot started for it whose end it has not
+        seen is to be interrupted, through the check as any command it sends (lock held)."""
+        reason = f"cancelled by {client}"
+        if interrupt:
+            g.interrupts = {name: "pending" for name, r in g.running.items() if r.ours}
+            g.interrupt_run = self._runs
+            if not g.interrupts:
+                reason += "; no skill the pilot started runs: nothing to interrupt"
+        self._end(g, "cancelled", reason, show=not g.interrupts)  # else the first status says what it interrupts
+
+    def _interrupting(self, g: _Goal) -> _Due | None:
+        """The interrupt of the first skill of ``g.interrupts`` still open, when it runs and the state and
+        prediction of the step it is checked on are there; else the status says what it waits for, or what
+        came of it (lock held)."""
+        name, state = next((n, s) for n, s in g.interrupts.items() if s in OPEN_INTERRUPTS)
+        skillset, _, skill = name.partition(":")
+        command = PilotCommand(skillset=skillset, transition=f"{skill}.interrupt")
+
+        def waiting(why: str = "") -> None:
+            return self._show("cancelled", f"{g.reason}; interrupting {name}, which the pilot started"
+                                           + (f": {why}" if why else ""), next_=command)
+
+        if self._runs != g.interrupt_run:
+            return self._interrupt_ends(g, name, "not interrupted", f"not interrupted: {UNTOLD} (the monitor "
+                                                                    "restarted)", again=True)
+        if state == "sent":
+            if time.monotonic() < g.interrupt_due:
+                return waiting("sent, waiting for its effect")
+            who = responder(self.system, skillset, skill)
+            return self._interrupt_ends(g, name, "not interrupted", f"not interrupted: no response from {who} within "
+                                                                    f"{self.response_timeout:g} s", again=True)
+        st, u, flight = self._state, self._unsafe, self._inflight
+        if flight is not None:  # its own start, say, whose effect comes first
+            return waiting(f"waiting for the effect of {flight.command.skillset}:{flight.command.transition}")
+        if st is None or not self._monitors:
+            return waiting("waiting for the monitor's live state")
+        sync = st.sync.get(skillset)
+        if sync is None or sync.state != "live":
+            return waiting(f"the monitor does not vouch for {skillset}" if sync is None else
+                           f"{skillset} is {sync.state}" + (f": {sync.reason}" if sync.reason else ""))
+        status = st.skillsets.get(skillset)
+        if status is None or skill not in status.running:
+            return self._interrupt_ends(g, name, "ended", "no longer runs: nothing to interrupt", again=True)
+        if u is None or u.seq != st.seq or u.prediction_stale:
+            return waiting(f"waiting for the prediction of step {st.seq}")
+        a = self._asked
+        if a is not None and a[:3] == (g.id, st.seq, u) and time.monotonic() < a[3]:
+            return waiting(self._refusal)
+        waiting()
+        return _Due(command, st.seq, g.id, u, interrupt=True)
+
+    def _watch_interrupts(self, g: _Goal, skillset: str, transition: str, gap: bool) -> None:
+        """One step after a cancel with interrupt: the skills to interrupt that it ended, and those whose run
+        the pilot can no longer tell is the one it started (lock held)."""
+        skill, _, kind = transition.partition(".")
+        for name, state in list(g.interrupts.items()):
+            ss, _, k = name.partition(":")
+            if state not in OPEN_INTERRUPTS or (ss != skillset and not gap):
+                continue
+            if gap:
+                self._interrupt_ends(g, name, "not interrupted", f"not interrupted: {UNTOLD} (steps of the monitor "
+                                                                 "were missed)")
+            elif transition not in self._names[ss]:  # a resync, a status adopted
+                self._interrupt_ends(g, name, "not interrupted", f"not interrupted: {UNTOLD} ({ss}'s state was taken "
+                                                                 "from its manager anew)")
+            elif k == skill and kind == "interrupt":
+                self._interrupt_ends(g, name, "interrupted")
+            elif k == skill and kind == "start":
+                self._interrupt_ends(g, name, "not interrupted", "not interrupted: started again by someone else")
+            elif k == skill:
+                self._interrupt_ends(g, name, "ended", f"ended ({transition.partition('.')[2]}) before its interrupt")
+
+    def _interrupt_ends(self, g: _Goal, name: str, state: str, what: str = "", again: bool = False) -> _Due | None:
+        """What came of the interrupt of ``name`` (``state``, said as ``what``, by default the state): in the
+        status's ``interrupts``, reason and notes (lock held); ``again``: decide at once what comes next (the
+        next interrupt, or the end)."""
+        g.interrupts[name] = state
+        said = f"{name} {what or state}"
+        g.reason = f"{g.reason}; {said}"
+        self._notes(g, said)
+        (log.info if state in ("interrupted", "ended") else log.warning)("goal %d (cancelled): %s", g.id, said)
+        return self._decide() if again else None
 
     def _forget(self, g: _Goal, c: PilotCommand) -> None:
         """A start that was not sent, or that the robot refused: no outcome of it to await (lock held)."""
@@ -880,10 +1008,11 @@ class Pilot:
         g.plan = g.plans[g.index] if g.index < len(g.plans) else None
         g.retries.clear()  # max_retries counts per goal of a mission
 
-    def _end(self, g: _Goal, state: str, reason: str) -> None:
+    def _end(self, g: _Goal, state: str, reason: str, show: bool = True) -> None:
         g.end, g.reason = state, reason
         (log.warning if state == "failed" else log.info)("goal %d %s%s", g.id, state, f": {reason}" if reason else "")
-        self._show(state, reason)
+        if show:
+            self._show(state, reason)
 
     def _no_monitor(self) -> str:
         return f"no monitor of {self.name} is running (no token on {keys.alive(self.name, 'monitor', '*')})"
@@ -895,7 +1024,8 @@ class Pilot:
         if g is not None:
             fields.update(goal_id=g.id, client=g.client, mode=g.mode, goals=[x.text for x in g.goals], index=g.index,
                           retries=dict(g.retries), commands=g.commands, denied=g.denied, unknown=g.unknown,
-                          notes=list(g.notes), reason=reason or (g.note if not g.end else ""))
+                          notes=list(g.notes), reason=reason or (g.note if not g.end else ""),
+                          interrupts=dict(g.interrupts))
             plan = g.plan
             if plan is not None:
                 if self._steps[0] is not plan:
@@ -926,6 +1056,13 @@ class Pilot:
             except SkinetError:
                 self._marked = (st, None)
         return self._marked[1]
+
+
+UNTOLD = "the pilot cannot tell that the run is the one it started"  # why it no longer interrupts a skill
+
+
+def _open(interrupts: Mapping[str, str]) -> bool:
+    return any(state in OPEN_INTERRUPTS for state in interrupts.values())
 
 
 def ended(m: MissedOutcome) -> str:

@@ -21,7 +21,11 @@ Examples:
     >>> parse_goal(system, "run spot:go_to_waypoint")
     Traceback (most recent call last):
     ...
-    skinet.errors.SourceError: <goal>:1:5: error: run spot:go_to_waypoint needs input 'target' (GeoPoint): give it in the goal's inputs, e.g. inputs = { go_to_waypoint = { target = ... } }
+    skinet.errors.SourceError: <goal>:1:5: error: run spot:go_to_waypoint needs input 'target' (GeoPoint): give it in the goal's inputs, e.g. go_to_waypoint.target = ...
+
+A missing input's hint is written as the user gives inputs (``given_with``, :data:`INPUTS_HINTS`):
+a goals file's ``inputs = {...}``, the command line's ``--inputs '...'``, or (the default: the
+pilot's requests, the dashboard's inputs box) the TOML line alone.
 """
 
 from __future__ import annotations
@@ -45,6 +49,14 @@ from skinet.props.evaluate import holds
 from skinet.props.formula import is_temporal
 from skinet.props.parser import parse_formula
 from skinet.system.model import System
+
+
+GivenWith = Literal["file", "flag", "text"]
+INPUTS_HINTS: dict[str, str] = {  # how to give a missing input, by where the goal was written (GivenWith)
+    "file": "give it in the goal's inputs, e.g. inputs = {{ {skill} = {{ {name} = ... }} }}",
+    "flag": "give it with --inputs, e.g. --inputs '{skill}.{name} = ...'",
+    "text": "give it in the goal's inputs, e.g. {skill}.{name} = ...",
+}
 
 
 @dataclass(frozen=True, eq=False)
@@ -97,18 +109,20 @@ def shift(exc: SourceError, at: Pos | None) -> SourceError:
 
 
 def parse_goal(system: System, text: str, inputs: Inputs | Mapping[str, Any] | None = None,
-               source: str = "<goal>", at: Pos | None = None, types: Mapping[str, str] | None = None) -> Goal:
+               source: str = "<goal>", at: Pos | None = None, types: Mapping[str, str] | None = None,
+               given_with: GivenWith = "text") -> Goal:
     """Parse one goal.  ``inputs``: checked inputs (:data:`Inputs`) or a raw table for
     :func:`skinet.plan.inputs.parse_inputs`; ``at``: where ``text`` starts in ``source``;
-    ``types``: the system's type map, to check raw inputs."""
+    ``types``: the system's type map, to check raw inputs; ``given_with``: how the user gives inputs
+    (the hint of a missing one, :data:`INPUTS_HINTS`)."""
     try:
-        return _parse(system, text, inputs, source, types)
+        return _parse(system, text, inputs, source, types, given_with)
     except SourceError as exc:
         raise shift(exc, at) from None
 
 
 def _parse(system: System, text: str, inputs: Inputs | Mapping[str, Any] | None, source: str,
-           types: Mapping[str, str] | None) -> Goal:
+           types: Mapping[str, str] | None, given_with: GivenWith) -> Goal:
     check_size(text, source, MAX_FORMULA_CHARS)
     try:
         tree = _lark().parse(text)
@@ -151,9 +165,8 @@ def _parse(system: System, text: str, inputs: Inputs | Mapping[str, Any] | None,
     lacking = missing(k, checked.get((skillset, skill)))
     if lacking:
         v = lacking[0]
-        raise SourceError.at(source, where,
-                             f"run {skillset}:{skill} needs input '{v.name}' ({v.type}): give it in the goal's inputs,"
-                             f" e.g. inputs = {{ {skill} = {{ {v.name} = ... }} }}")
+        hint = INPUTS_HINTS[given_with].format(skill=skill, name=v.name)
+        raise SourceError.at(source, where, f"run {skillset}:{skill} needs input '{v.name}' ({v.type}): {hint}")
     shown = f"run {skillset}:{skill}" + (f".success.{mode}" if mode is not None else "")
     return Goal("run", shown, None, skillset, skill, mode, checked)
 

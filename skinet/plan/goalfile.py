@@ -72,7 +72,8 @@ def parse_goals(text: str, system: System, source: str = "<goals>",
         if "inputs" in entry:
             start = where.get(table, "inputs") or header
             inputs = parse_inputs(system, entry["inputs"], source, lambda keys: nested(lines, start, keys), types)
-        goals.append(parse_goal(system, f"{kind} {value}", inputs, source, _value_start(lines, at, len(kind) + 1), types))
+        goals.append(parse_goal(system, f"{kind} {value}", inputs, source, _value_start(lines, at, len(kind) + 1), types,
+                                "file"))
     return goals
 
 

@@ -371,6 +371,8 @@ class PilotCommand(BaseModel):
     inputs: dict[str, Any] = Field(default_factory=dict)
 
 
+INTERRUPT_STATES = ("pending", "sent", "interrupted", "ended", "not interrupted")  # PilotStatus.interrupts
+OPEN_INTERRUPTS = ("pending", "sent")  # those whose outcome is yet to come
 PILOT_STATES = ("idle", "waiting for monitor", "planning", "guiding", "driving", "waiting for outcome", "paused",
                 "reached", "failed", "cancelled")
 
@@ -380,7 +382,7 @@ class PilotGoalRequest(_Message):
     switch mode, cancel, pause or resume.  ``goals`` (goal texts) and ``mission`` (a goals file's TOML
     text) are read as ``skinet plan`` reads them; errors come back with ``mission_name:line:col``."""
 
-    OMIT_AT_DEFAULT = ("answer", "recover")
+    OMIT_AT_DEFAULT = ("answer", "recover", "interrupt")
     system: str
     op: Literal["goal", "mode", "cancel", "pause", "resume", "confirm"] = Field(
         "goal", description="goal: set goals (or mission); mode: switch to `mode`; cancel, pause, resume the goal; "
@@ -401,6 +403,9 @@ class PilotGoalRequest(_Message):
     recover: bool = Field(False, description="from a marking outside Safe (a property violated or forced), first "
                                              "send one of the admissible commands that lead back into Safe (the "
                                              "plan's recovery), then plan again; otherwise such a goal is rejected")
+    interrupt: bool = Field(False, description=(
+        "cancel: also interrupt the skills the pilot started for the goal that still run, each after the check "
+        "allows it (PilotStatus.interrupts); without it they run on. Never a skill someone else started"))
 
 
 class PilotGoalReply(_Message):
@@ -420,7 +425,7 @@ class PilotStatus(_Message):
     """The pilot's status (docs/semantics.md §8): published on ``skinet/<system>/pilot/status`` at every change, and
     answered on ``get`` there."""
 
-    OMIT_AT_DEFAULT = ("unknown", "notes")
+    OMIT_AT_DEFAULT = ("unknown", "notes", "interrupts")
     system: str
     pilot: str = Field(description="the pilot's instance id")
     seq: int = Field(ge=0, description="publication counter")
@@ -449,6 +454,12 @@ class PilotStatus(_Message):
     notes: list[str] = Field(default_factory=list, description=(
         "what the pilot assumed or was told during this goal, oldest first (its last ones): outcomes inferred "
         "after a gap, the operator's interrupts and answers, commands other than the one it suggested"))
+    interrupts: dict[str, Literal[INTERRUPT_STATES]] = Field(  # type: ignore[valid-type]
+        default_factory=dict, description=(
+            "after a cancel with interrupt: 'skillset:skill' of each skill the pilot started that still ran -> "
+            "pending (to be checked and sent; `next` is its interrupt), sent, interrupted, ended (before its "
+            "interrupt: nothing left to do) or not interrupted (the check did not allow it, the robot refused it, "
+            "or the pilot can no longer tell that the run is the one it started; the reason says why)"))
 
 
 MESSAGES: dict[str, type[BaseModel]] = {

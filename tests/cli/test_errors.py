@@ -176,7 +176,7 @@ def _cases() -> list[Case]:
                                "not a temporal operator"),
         ("fly spot:Busy", "<goal>:1:1: error: unexpected 'fly', expected one of: 'reach', 'run'"),
         ("run spot:go_to_waypoint", "<goal>:1:5: error: run spot:go_to_waypoint needs input 'target' (GeoPoint): "
-                                    "give it in the goal's inputs, e.g. inputs = { go_to_waypoint = { target = ... } }"),
+                                    "give it with --inputs, e.g. --inputs 'go_to_waypoint.target = ...'"),
     ):
         add("skinet", "goals", ("plan", SYSTEM, goal), 1, error)
     add("skinet", "goals", ("plan", SYSTEM, "reach spot:Busy", "reach manipulator:Bussy"), 1,
@@ -226,27 +226,28 @@ def _cases() -> list[Case]:
           "argument --engine: invalid choice: 'fast' (choose from 'auto', 'explicit', 'symbolic')")
 
     # skinet goal (issue 24 item 4): checked as skinet plan checks them when the system file is given, before
-    # any connection; with a system name the pilot checks them (tests/services/test_goal.py)
+    # any connection; with a system name the pilot checks them (tests/services/test_goal.py).  A malformed goal
+    # is a rejected one: exit 2, as its --help says (issue 32 item 8); a file that cannot be read, 1.
     add("skinet", "system", ("goal", "{tmp}/missing.toml", "reach spot:Busy"), 1, missing)
     add("skinet", "system", ("goal", "{tmp}/badname.toml", "reach spot:Busy"), 1, bad_name)
     add("skinet", "system", ("goal", "a/b", "reach spot:Busy"), 1,
         "skinet: error: system name 'a/b' cannot be used in a Zenoh key (letters, digits, _ - . only)")
-    add("skinet", "goals", ("goal", SYSTEM, "reach spot:Stnding"), 1,
+    add("skinet", "goals", ("goal", SYSTEM, "reach spot:Stnding"), 2,
         "<goal>:1:7: error: unknown name 'spot:Stnding' (candidates: spot:Standing, spot:Sitting, spot:posture.Standing)")
-    add("skinet", "goals", ("goal", SYSTEM, "reach spot:Busy", "reach manipulator:Bussy"), 1,
+    add("skinet", "goals", ("goal", SYSTEM, "reach spot:Busy", "reach manipulator:Bussy"), 2,
         "<goal 2>:1:7: error: unknown name 'manipulator:Bussy' (candidates: manipulator:Busy)")
-    add("skinet", "goals", ("goal", "spot_arm"), 1,
+    add("skinet", "goals", ("goal", "spot_arm"), 2,
         'skinet: error: no goals: give GOAL arguments (e.g. "reach spot:Standing") or --goals FILE (or --cancel, '
         "--pause, --resume, --set-mode, --confirm for the goal that runs)")
-    add("skinet", "goals", ("goal", "spot_arm", "--cancel", "--inputs", "x = 1"), 1,
+    add("skinet", "goals", ("goal", "spot_arm", "--cancel", "--inputs", "x = 1"), 2,
         "skinet: error: --cancel takes no goals: it acts on the goal that runs")
     add("skinet", "--goals", ("goal", SYSTEM, "--goals", "{tmp}/missing.toml"), 1, missing)
-    add("skinet", "--goals", ("goal", SYSTEM, "--goals", "{tmp}/goals_formula.toml"), 1,
+    add("skinet", "--goals", ("goal", SYSTEM, "--goals", "{tmp}/goals_formula.toml"), 2,
         "{tmp}/goals_formula.toml:5:28: error: unknown name 'spot:Bussy' (candidates: spot:Busy)")
-    add("skinet", "--inputs", ("goal", "spot_arm", "reach spot:Busy", "--inputs", "target ="), 1,
+    add("skinet", "--inputs", ("goal", "spot_arm", "reach spot:Busy", "--inputs", "target ="), 2,
         "<--inputs>:1:9: error: invalid TOML: Invalid value")
     add("skinet", "--inputs", ("goal", SYSTEM, "run spot:go_to_waypoint", "--inputs",
-                               "go_to_waypoint.target = {x = \"far\"}"), 1,
+                               "go_to_waypoint.target = {x = \"far\"}"), 2,
         "<--inputs>:1:16: error: input 'target' of spot:go_to_waypoint (GeoPoint): expected float64 at x, got a string")
     usage("skinet", "--max-retries", ("goal", "spot_arm", "reach spot:Busy", "--max-retries", "0"),
           "argument --max-retries: expected an integer from 1 to 100, got '0'")
@@ -256,8 +257,10 @@ def _cases() -> list[Case]:
           "argument --confirm: invalid choice: 'maybe' (choose from 'success', 'failure', 'rerun')")
     add("skinet", "--confirm", ("goal", "spot_arm", "--confirm", "success", "--pause"), 2,
         "skinet goal: error: argument --pause: not allowed with argument --confirm (see skinet goal --help)")
-    add("skinet", "--set-mode", ("goal", "spot_arm", "reach spot:Busy", "--set-mode", "drive"), 1,
+    add("skinet", "--set-mode", ("goal", "spot_arm", "reach spot:Busy", "--set-mode", "drive"), 2,
         "skinet: error: --set-mode takes no goals: it acts on the goal that runs")
+    add("skinet", "--interrupt", ("goal", "spot_arm", "--pause", "--interrupt"), 2,
+        "skinet: error: --interrupt goes with --cancel: it interrupts what the cancelled goal started")
     usage("skinet", "--timeout", ("goal", "spot_arm", "reach spot:Busy", "--timeout", "0"),
           "argument --timeout: " + seconds.format("0"))
 

@@ -124,11 +124,39 @@ def test_a_skill_that_keeps_failing_ends_the_goal_failed_with_exit_1(robot, skil
 
 
 def test_a_malformed_goal_is_placed_before_any_connection_or_by_the_pilot(robot, router, tmp_path) -> None:
-    # With the system file at hand, skinet goal checks it itself: FILE:LINE:COL, exit 1, nothing sent.
+    # With the system file at hand, skinet goal checks it itself: FILE:LINE:COL, nothing sent, and the exit status
+    # of a rejected goal (2, as --help says; it was 1 here and 2 from the pilot).
     done = goal(router, str(SYSTEM_FILE), "reach spot:Standin")
-    assert (done.returncode, done.stdout) == (1, "")
+    assert (done.returncode, done.stdout) == (2, "")
     assert done.stderr == ("<goal>:1:7: error: unknown name 'spot:Standin' (candidates: spot:Standing, "
                            "spot:posture.Standing)\n")
+    for text, error in (("run spot:go_to_waypont", "<goal>:1:10: error: unknown skill 'go_to_waypont' of 'spot' "
+                                                   "(candidates: go_to_waypoint)"),
+                        ("rux spot:go_to_waypoint", "<goal>:1:1: error: unexpected 'rux', expected one of: 'reach', "
+                                                    "'run'")):
+        for system in (str(SYSTEM_FILE), "spot_arm"):
+            done = goal(router, system, text)
+            shown = error if system != "spot_arm" else f"goal rejected by the pilot: {error}"
+            assert (done.returncode, done.stdout, done.stderr) == (2, "", shown + "\n"), (system, text)
+    # The missing input's hint is written as the user gives inputs: --inputs on the command line, inputs = {...}
+    # in a goals file; the pilot, which cannot tell, gives the TOML line that both the --inputs flag and the
+    # dashboard's inputs box take.
+    done = goal(router, str(SYSTEM_FILE), "run spot:go_to_waypoint")
+    assert (done.returncode, done.stderr) == (2, "<goal>:1:5: error: run spot:go_to_waypoint needs input 'target' "
+                                                 "(GeoPoint): give it with --inputs, e.g. --inputs "
+                                                 "'go_to_waypoint.target = ...'\n")
+    done = goal(router, "spot_arm", "run spot:go_to_waypoint")
+    assert (done.returncode, done.stderr) == (2, "goal rejected by the pilot: <goal>:1:5: error: run "
+                                                 "spot:go_to_waypoint needs input 'target' (GeoPoint): give it in the "
+                                                 "goal's inputs, e.g. go_to_waypoint.target = ...\n")
+    walk = tmp_path / "walk.toml"
+    walk.write_text('[[goals]]\nrun = "spot:go_to_waypoint"\n')
+    for system in (str(SYSTEM_FILE), "spot_arm"):
+        done = goal(router, system, "--goals", str(walk))
+        error = (f"{walk}:2:8: error: run spot:go_to_waypoint needs input 'target' (GeoPoint): give it in the goal's "
+                 "inputs, e.g. inputs = { go_to_waypoint = { target = ... } }")
+        shown = error if system != "spot_arm" else f"goal rejected by the pilot: {error}"
+        assert (done.returncode, done.stderr) == (2, shown + "\n"), system
     # With a name only, the pilot says it: rejected, exit 2.
     done = goal(router, "spot_arm", "reach spot:Standin")
     assert done.returncode == 2, done.stdout + done.stderr
@@ -238,7 +266,8 @@ def test_pause_resume_cancel_and_a_second_goal_without_replace(robot, router) ->
         robot.wait_pilot("guiding", 20)
         second = goal(router, "spot_arm", "run spot:init_power")
         assert (second.returncode, second.stderr) == (2, "goal rejected by the pilot: goal 1 of local is being followed "
-                                                         "(guiding): cancel it, or send the new goal with replace\n")
+                                                         "(guiding): cancel it (--cancel), or send the new goal with "
+                                                         "--replace (the dashboard: 'replace the goal that runs')\n")
         paused = goal(router, "spot_arm", "--pause")
         assert paused.returncode == 0 and paused.stdout.startswith("pause: done (goal 1)\npaused"), paused.stdout
         resumed = goal(router, "spot_arm", "--resume")
@@ -321,8 +350,8 @@ def help_sections() -> list[list[list[str]]]:
 
 def test_every_help_example_works_as_written(robot, skills, router) -> None:
     skills(duration=0.1)
-    driven, guided, confirm = help_sections()
-    assert [len(driven), len(guided), len(confirm)] == [3, 4, 1]
+    driven, guided, confirm, cancel = help_sections()
+    assert [len(driven), len(guided), len(confirm), len(cancel)] == [3, 4, 1, 1]  # cancel: the test below
 
     def argv(words: list[str]) -> list[str]:
         return [sys.executable, "-m", "skinet_cli.main", *(router if w == "tcp/127.0.0.1:7447" else w for w in words)]
@@ -353,6 +382,57 @@ def test_every_help_example_works_as_written(robot, skills, router) -> None:
     done = subprocess.run(argv(confirm[0]), cwd=REPO, capture_output=True, text=True, timeout=60)
     assert (done.returncode, done.stderr) == (
         2, "confirm success rejected by the pilot: no goal is being followed: nothing to confirm\n")
+
+
+def test_cancel_interrupt_as_the_help_shows_it_stops_the_walk_the_pilot_started(robot, skills, router) -> None:
+    """docs/pilot.md, *Cancelling*: the walk the pilot started (held) runs on after a cancel, unless --interrupt."""
+    skills(duration=0.1, holding=[("spot", "go_to_waypoint")])
+    follower = start_skinet("goal", "spot_arm", "run spot:go_to_waypoint", "--drive", "--inputs",
+                            "go_to_waypoint.target = {x = 12.0, y = 3.5, z = 0.0}", *client_args(router))
+    try:
+        lines: list[str] = []
+        read_until(follower, lines, "waiting for outcome: the outcome of spot:go_to_waypoint")
+        words = help_sections()[3][0]
+        assert words == ["goal", "spot_arm", "--cancel", "--interrupt", "-e", "tcp/127.0.0.1:7447"]
+        done = subprocess.run([sys.executable, "-m", "skinet_cli.main", *(router if w == "tcp/127.0.0.1:7447" else w
+                                                                          for w in words)],
+                              cwd=REPO, capture_output=True, text=True, timeout=60)
+        out, _ = follower.communicate(timeout=20)
+    finally:
+        follower.kill()
+    assert (done.returncode, done.stderr) == (0, ""), done.stdout + done.stderr
+    shown = [line for line in done.stdout.splitlines() if ": waiting for the prediction of step " not in line]
+    assert shown == [
+        "cancel: done (goal 1)",
+        "cancelled: cancelled by local; interrupting spot:go_to_waypoint, which the pilot started \u2014 next "
+        "spot:go_to_waypoint.interrupt, 3 commands sent",
+        "cancelled: cancelled by local; interrupting spot:go_to_waypoint, which the pilot started: sent, waiting for "
+        "its effect \u2014 next spot:go_to_waypoint.interrupt, 4 commands sent",
+        "cancelled: cancelled by local; spot:go_to_waypoint interrupted \u2014 4 commands sent"], done.stdout
+    assert follower.returncode == 1 and out.splitlines()[-1].startswith(
+        "cancelled: cancelled by local; interrupting spot:go_to_waypoint"), out
+    assert robot.actuator.sent[-2:] == ["spot:go_to_waypoint.start", "spot:go_to_waypoint.interrupt"]
+    assert not robot.sim.skill_status("spot", "go_to_waypoint")[0]
+    # Nothing left to cancel: rejected (2); --interrupt alone is a usage error (2), nothing sent.
+    again = goal(router, "spot_arm", "--cancel", "--interrupt")
+    assert (again.returncode, again.stderr) == (2, "cancel rejected by the pilot: no goal is being followed: nothing "
+                                                   "to cancel\n")
+    alone = goal(router, "spot_arm", "--interrupt")
+    assert (alone.returncode, alone.stderr) == (2, "skinet: error: --interrupt goes with --cancel: it interrupts what "
+                                                   "the cancelled goal started\n")
+
+
+@pytest.mark.parametrize("order", ["system first", "endpoint first"])
+def test_the_endpoint_may_come_before_the_goals(robot, skills, router, order: str) -> None:
+    """``skinet goal SYS -e ENDPOINT GOAL`` (GOAL was "unrecognized") and ``skinet goal -e ENDPOINT SYS GOAL``."""
+    skills(duration=0.1)
+    link = ["-e", router]  # a command line given --connect is a client of the router
+    argv = ["spot_arm", *link, "reach spot:Standing"] if order == "system first" else [*link, "spot_arm",
+                                                                                         "reach spot:Standing"]
+    done = subprocess.run([sys.executable, "-m", "skinet_cli.main", "goal", *argv, "--drive"], cwd=REPO,
+                          capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0 and done.stdout.splitlines()[-1] == "reached \u2014 2 commands sent", \
+        done.stdout + done.stderr
 
 
 def test_skinet_watch_in_a_pipe_prints_a_line_per_change_of_the_pilots_status(robot, skills, router) -> None:

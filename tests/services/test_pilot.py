@@ -23,7 +23,7 @@ from skinet.pilot.run import Outcomes
 from skinet.ros.keys import KeyStyle
 from skinet.wire import keys
 from skinet.wire.codec import encode
-from skinet.wire.messages import PilotCommand, PilotGoalRequest, Verdicts
+from skinet.wire.messages import PilotCommand, PilotGoalReply, PilotGoalRequest, Verdicts
 from tests.event_watch import Messages
 from tests.services.test_monitor import wait_until
 from tests.services.pilot_robot import WALK, Gui, Robot, ask_goal, goal
@@ -40,6 +40,14 @@ def robot(client_factory: Callable[[], zenoh.Session], spot_arm: tuple) -> Itera
     r = Robot(client_factory, *spot_arm)
     yield r
     r.close()
+
+
+def drive_until_running(robot: Robot, skill: str) -> PilotGoalReply:
+    """A driven goal to walk to the waypoint, once the pilot awaits the outcome of ``spot:skill`` (which the
+    test's implementations hold)."""
+    reply = ask_goal(robot.observer, goal("run spot:go_to_waypoint", inputs=WALK, mode="drive"))
+    robot.statuses.first(lambda s: s.reason == f"the outcome of spot:{skill}")
+    return reply
 
 
 def test_drive_reaches_a_mission_with_exactly_the_planned_commands(robot: Robot) -> None:
@@ -91,8 +99,7 @@ def test_the_operators_interrupt_of_the_pilots_skill_is_reported_counted_and_not
     impl = World(robot.sim, holding=[("spot", "stand_up")])
     gui = Gui(robot.observer, robot)
     try:
-        reply = ask_goal(robot.observer, goal("run spot:go_to_waypoint", inputs=WALK, mode="drive"))
-        robot.statuses.first(lambda s: s.reason == "the outcome of spot:stand_up")  # the pilot saw it start
+        reply = drive_until_running(robot, "stand_up")  # the pilot saw it start
         gui.interrupt("spot", "stand_up")
         held = robot.statuses.state("paused", reply.goal_id)
         assert held.reason == "spot:stand_up interrupted by the operator (1 of 3 tries): resume to go on"
@@ -147,8 +154,7 @@ def test_a_skillset_not_live_pauses_the_pilot_until_it_is_live_again(quick: Robo
     robot = quick
     impl = World(robot.sim, holding=[("spot", "init_power")])
     try:
-        reply = ask_goal(robot.observer, goal("run spot:go_to_waypoint", inputs=WALK, mode="drive"))
-        robot.statuses.first(lambda s: s.reason == "the outcome of spot:init_power")
+        reply = drive_until_running(robot, "init_power")
         robot.bridge.close()  # the robot goes silent
         paused = robot.statuses.first(lambda s: s.state == "paused" and " is lost: " in s.reason, what="lost")
         assert paused.reason.startswith(("spot is lost: the liveliness token of 'bridge_ros2/",
@@ -167,8 +173,7 @@ def test_a_skillset_not_live_pauses_the_pilot_until_it_is_live_again(quick: Robo
 def test_a_pending_prediction_pauses_the_pilot_until_it_comes(robot: Robot, client_factory) -> None:
     impl = World(robot.sim, holding=[("spot", "init_power")])
     try:
-        reply = ask_goal(robot.observer, goal("run spot:go_to_waypoint", inputs=WALK, mode="drive"))
-        robot.statuses.first(lambda s: s.reason == "the outcome of spot:init_power")
+        reply = drive_until_running(robot, "init_power")
         robot.predictor.close()
         impl.release("spot", "init_power")
         paused = robot.statuses.first(lambda s: s.state == "paused" and s.commands == 1, what="paused")
@@ -190,8 +195,7 @@ def test_a_model_divergence_pauses_the_pilot_until_resumed(robot: Robot) -> None
     impl = World(robot.sim, holding=[("spot", "init_power")])
     gui = Gui(robot.observer, robot)
     try:
-        reply = ask_goal(robot.observer, goal("run spot:go_to_waypoint", inputs=WALK, mode="drive"))
-        robot.statuses.first(lambda s: s.reason == "the outcome of spot:init_power")
+        reply = drive_until_running(robot, "init_power")
         node = robot.sim.nodes["spot"]
         with node.lock:
             node.manager.resources["posture"] = "Standing"
@@ -251,8 +255,9 @@ def test_bad_requests_get_a_clear_reason_and_never_a_command(robot: Robot) -> No
     first = ask(goal("reach spot:Standing"))
     assert (first.accepted, first.goal_id) == (True, 1)
     busy = ask(goal("reach manipulator:RD"))
-    assert (busy.accepted, busy.reason) == (False, "goal 1 of operator1 is being followed (guiding): cancel it, or "
-                                                   "send the new goal with replace")
+    assert (busy.accepted, busy.reason) == (False, "goal 1 of operator1 is being followed (guiding): cancel it "
+                                                   "(--cancel), or send the new goal with --replace (the dashboard: "
+                                                   "'replace the goal that runs')")
     second = ask(goal("reach manipulator:RD", replace=True))
     assert (second.accepted, second.goal_id) == (True, 2)
     assert robot.statuses.first(lambda s: s.goal_id == 1 and s.state == "cancelled").reason == \
@@ -555,4 +560,100 @@ def test_from_a_violation_the_goal_is_refused_naming_the_way_back_unless_it_asks
                                         "action_guard"), done.notes
     finally:
         gui.close()
+        impl.close()
+
+
+def test_a_cancel_leaves_the_pilots_skill_running_unless_it_asks_to_interrupt_it(robot: Robot) -> None:
+    """docs/pilot.md, *Cancelling*: a plain cancel sends nothing more, and spot:stand_up runs on."""
+    impl = World(robot.sim, holding=[("spot", "stand_up")])
+    try:
+        reply = drive_until_running(robot, "stand_up")  # the pilot saw it start
+        assert ask_goal(robot.observer, PilotGoalRequest(system="spot_arm", op="cancel")).accepted
+        done = robot.statuses.state("cancelled", reply.goal_id)
+        assert (done.reason, done.interrupts, done.next) == ("cancelled by operator1", {}, None)
+        time.sleep(0.5)  # nothing more is sent
+        assert robot.actuator.sent == ["spot:init_power.start", "spot:stand_up.start"]
+        assert robot.sim.skill_status("spot", "stand_up")[0]
+        late = ask_goal(robot.observer, PilotGoalRequest(system="spot_arm", op="cancel", interrupt=True))
+        assert (late.accepted, late.reason) == (False, "no goal is being followed: nothing to cancel")
+    finally:
+        impl.close()
+
+
+def test_a_cancel_with_interrupt_interrupts_the_skill_the_pilot_started_through_the_check(robot: Robot) -> None:
+    """The pilot's stand_up runs (held) when the goal is cancelled with interrupt: the pilot checks its
+    interrupt, sends it, and the status says so at each change."""
+    impl = World(robot.sim, holding=[("spot", "stand_up")])
+    try:
+        reply = drive_until_running(robot, "stand_up")
+        cancel = ask_goal(robot.observer, PilotGoalRequest(system="spot_arm", op="cancel", interrupt=True))
+        assert (cancel.accepted, cancel.goal_id) == (True, reply.goal_id)
+        done = robot.statuses.first(lambda s: s.interrupts.get("spot:stand_up") == "interrupted",
+                                    what="stand_up interrupted")
+        assert (done.state, done.next, done.commands) == ("cancelled", None, 3)
+        assert done.reason == "cancelled by operator1; spot:stand_up interrupted"
+        assert done.notes[-2:] == ["interrupt of spot:stand_up sent: the check allowed it at step "
+                                   f"{done.state_seq - 1}", "spot:stand_up interrupted"]
+        # A step's prediction on its way is said, or not, as the predictor is quick or not (docs/semantics.md §7).
+        shown = [(s.reason, s.next and s.next.transition, s.interrupts) for s in robot.statuses.items
+                 if s.goal_id == reply.goal_id and s.state == "cancelled" and ": waiting for the prediction of step "
+                 not in s.reason]
+        assert shown == [
+            ("cancelled by operator1; interrupting spot:stand_up, which the pilot started", "stand_up.interrupt",
+             {"spot:stand_up": "pending"}),
+            ("cancelled by operator1; interrupting spot:stand_up, which the pilot started: sent, waiting for its "
+             "effect", "stand_up.interrupt", {"spot:stand_up": "sent"}),
+            ("cancelled by operator1; spot:stand_up interrupted", None, {"spot:stand_up": "interrupted"})], shown
+        assert robot.actuator.sent == ["spot:init_power.start", "spot:stand_up.start", "spot:stand_up.interrupt"]
+        assert not robot.sim.skill_status("spot", "stand_up")[0]
+    finally:
+        impl.close()
+
+
+def test_a_cancel_with_interrupt_never_interrupts_a_skill_the_operator_started(robot: Robot) -> None:
+    """Guide mode: the operator started stand_up as the pilot showed; the cancel interrupts nothing."""
+    impl = World(robot.sim, holding=[("spot", "stand_up")])
+    gui = Gui(robot.observer, robot)
+    try:
+        reply = ask_goal(robot.observer, goal("reach spot:Standing"))
+        robot.statuses.first(lambda s: s.next is not None and s.next.transition == "init_power.start")
+        gui.start("spot", "init_power")
+        robot.statuses.first(lambda s: s.next is not None and s.next.transition == "stand_up.start")
+        gui.start("spot", "stand_up")
+        robot.statuses.first(lambda s: s.reason == "the outcome of spot:stand_up")
+        assert ask_goal(robot.observer, PilotGoalRequest(system="spot_arm", op="cancel", interrupt=True)).accepted
+        done = robot.statuses.state("cancelled", reply.goal_id)
+        assert (done.reason, done.interrupts, done.next) == (
+            "cancelled by operator1; no skill the pilot started runs: nothing to interrupt", {}, None)
+        time.sleep(0.5)  # nothing is sent
+        assert robot.actuator.sent == [] and robot.sim.skill_status("spot", "stand_up")[0]
+    finally:
+        gui.close()
+        impl.close()
+
+
+def test_an_interrupt_waits_for_a_live_skillset_and_gives_up_a_run_it_cannot_vouch_for(quick: Robot,
+                                                                                       client_factory) -> None:
+    """The robot goes silent just as the goal is cancelled with interrupt: the interrupt waits (spot is not live),
+    stand_up ends unseen meanwhile, and once the bridge is back the monitor takes spot's state anew: the pilot
+    cannot tell that a skill running then is its own run, so it sends nothing and says so."""
+    robot = quick
+    impl = World(robot.sim, holding=[("spot", "stand_up")])
+    try:
+        reply = drive_until_running(robot, "stand_up")
+        robot.bridge.close()  # the robot goes silent
+        robot.statuses.first(lambda s: s.state == "paused" and "spot is lost: " in s.reason, what="lost")
+        assert ask_goal(robot.observer, PilotGoalRequest(system="spot_arm", op="cancel", interrupt=True)).accepted
+        waiting = robot.statuses.first(lambda s: s.state == "cancelled", what="cancelled")
+        assert waiting.reason.startswith("cancelled by operator1; interrupting spot:stand_up, which the pilot "
+                                         "started: spot is lost: "), waiting.reason
+        assert (waiting.interrupts, waiting.next.transition) == ({"spot:stand_up": "pending"}, "stand_up.interrupt")
+        impl.release("spot", "stand_up")  # it stands up meanwhile: nobody sees it
+        robot.bridge = start_bridge(client_factory(), robot.system, robot.typemap)  # heard again: resync
+        done = robot.statuses.first(lambda s: s.interrupts.get("spot:stand_up") == "not interrupted",
+                                    what="given up")
+        assert done.reason == ("cancelled by operator1; spot:stand_up not interrupted: the pilot cannot tell that the "
+                               "run is the one it started (spot's state was taken from its manager anew)")
+        assert (done.next, robot.actuator.sent) == (None, ["spot:init_power.start", "spot:stand_up.start"])
+    finally:
         impl.close()

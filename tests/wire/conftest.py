@@ -81,7 +81,8 @@ def sample_messages(system: System) -> dict[str, BaseModel]:
                             "PowerOn -> PowerOff")]),
         "PilotGoalRequest": PilotGoalRequest(system=system.name, goals=["run spot:go_to_waypoint"],
                                              inputs={"go_to_waypoint": {"target": {"x": 12.0, "y": 3.5, "z": 0.0}}},
-                                             mode="drive", max_retries=2, answer="rerun", recover=True),
+                                             mode="drive", max_retries=2, answer="rerun", recover=True,
+                                             interrupt=True),
         "PilotGoalReply": PilotGoalReply(system=system.name, accepted=True, goal_id=1, answer="cyclic", moves=4,
                                          steps=[_STEP]),
         "PilotStatus": PilotStatus(system=system.name, pilot="p1", seq=3, stamp=1700000000.6, state="driving",
@@ -92,7 +93,8 @@ def sample_messages(system: System) -> dict[str, BaseModel]:
                                    unknown=MissedOutcome(skillset="spot", skill="teleop",
                                                          gap="while the monitor was restarted",
                                                          candidates=["teleop.success.done", "teleop.failure.link_lost"]),
-                                   notes=["spot:teleop ended while the monitor was restarted: outcome unknown"]),
+                                   notes=["spot:teleop ended while the monitor was restarted: outcome unknown"],
+                                   interrupts={"spot:stand_up": "sent", "manipulator:arm_ready": "not interrupted"}),
     }
 
 
