@@ -19,14 +19,18 @@ import logging
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING
 
 from services.bridge_ros2.order import Order, Slot
 from skinet.ros import derive
 from skinet.ros.interfaces import status_field
 from skinet.ros.keys import ManagerTopic, manager_topics, parse_rmw_attachment, topic_fqn
-from skinet.ros.typestore import Typestore, build_typestore, decode, to_plain
+from skinet.ros.typestore import build_typestore, decode, to_plain
 from skinet.system.model import Component, System
 from skinet.wire.messages import CanonicalEvent, MissedOutcome, SkillsetStatus
+
+if TYPE_CHECKING:
+    from skinet.ros.typestore import Typestore
 
 log = logging.getLogger("skinet.bridge_ros2")
 

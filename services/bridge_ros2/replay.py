@@ -17,8 +17,6 @@ import time
 from collections.abc import Callable, Mapping
 from pathlib import Path
 
-from rosbags.highlevel import AnyReader
-
 from services.bridge_ros2.feed import Feed
 from skinet.errors import SourceError
 from skinet.system.model import System
@@ -45,6 +43,8 @@ def replay_bag(
 
     Raises ``rosbags`` errors (``ReaderError`` and friends) when the bag cannot be read.
     """
+    from rosbags.highlevel import AnyReader
+
     feed = Feed(system, typemap, source, extra_types, hold=hold)
     routes = feed.by_fqn()
     with AnyReader([Path(path)]) as reader:

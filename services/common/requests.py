@@ -14,14 +14,17 @@ import os
 import threading
 import time
 from collections.abc import Iterable
+from typing import TYPE_CHECKING
 
 import zenoh
 
 from services.common.zenoh_config import undeclare
 from skinet.ros.keys import KeyStyle, ManagerTopic, manager_topics
 from skinet.ros.requests import Writer
-from skinet.ros.typestore import Typestore
 from skinet.system.model import Component
+
+if TYPE_CHECKING:
+    from skinet.ros.typestore import Typestore
 
 REQUEST_KINDS = ("skill_request", "skill_interrupt", "event_request", "status_request")
 

@@ -26,7 +26,7 @@ from __future__ import annotations
 import logging
 import threading
 from collections.abc import Mapping
-from typing import Any, Literal, Protocol
+from typing import TYPE_CHECKING, Any, Literal, Protocol
 
 import zenoh
 
@@ -39,9 +39,12 @@ from skinet.ros.keys import KeyStyle, manager_topics
 from skinet.ros.requests import (
     plain_inputs, request_inputs, skill_ids, skill_interrupt, skill_request, start_refusal, status_request,
 )
-from skinet.ros.typestore import Typestore, build_typestore
+from skinet.ros.typestore import build_typestore
 from skinet.system.model import Component, System
 from skinet.wire.messages import PilotCommand
+
+if TYPE_CHECKING:
+    from skinet.ros.typestore import Typestore
 
 log = logging.getLogger("skinet.pilot")
 STATUS_WAIT = 1.0  # seconds an interrupt waits for a manager's status when it has seen none

@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable, Iterable, Mapping
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import zenoh
 from cyclonedds.core import Listener, Policy, Qos
@@ -43,8 +43,10 @@ from rosbags.interfaces import Nodetype
 
 from services.simulator.service import INPUTS, OUTPUTS, Simulator, _Node
 from skinet.ros.keys import KeyStyle, dds_type_name, topic_fqn, type_hash
-from skinet.ros.typestore import Typestore
 from skinet.system.model import System
+
+if TYPE_CHECKING:
+    from skinet.ros.typestore import Typestore
 
 log = logging.getLogger("skinet.simulator")
 

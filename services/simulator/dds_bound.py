@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable, Mapping
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from cyclonedds.core import Listener, Policy, Qos
 from cyclonedds.domain import Domain, DomainParticipant
@@ -47,8 +47,11 @@ from skinet.ros.binding import (
 )
 from skinet.ros.definitions import rihs01
 from skinet.ros.keys import dds_type_name
-from skinet.ros.typestore import Typestore, encode
+from skinet.ros.typestore import encode
 from skinet.system.model import System
+
+if TYPE_CHECKING:
+    from skinet.ros.typestore import Typestore
 
 log = logging.getLogger("skinet.simulator")
 

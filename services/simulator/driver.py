@@ -21,7 +21,7 @@ import math
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Literal, Protocol
+from typing import TYPE_CHECKING, Literal, Protocol
 
 import zenoh
 
@@ -30,8 +30,10 @@ from skinet.lang.model import Skillset
 from skinet.mission.scenario import Scenario, Step, step_numbers
 from skinet.ros.keys import KeyStyle, ManagerTopic
 from skinet.ros.requests import event_request, skill_interrupt, skill_request
-from skinet.ros.typestore import Typestore
 from skinet.system.model import Component
+
+if TYPE_CHECKING:
+    from skinet.ros.typestore import Typestore
 
 log = logging.getLogger("skinet.simulator")
 

@@ -30,9 +30,7 @@ import logging
 import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
-from typing import Any
-
-from rosbags.typesys.base import normalize_fieldname
+from typing import TYPE_CHECKING, Any
 
 from skinet.lang.dnf import dnf
 from skinet.lang.expr import Expr, holds
@@ -41,7 +39,10 @@ from skinet.ros.interfaces import (
     EVENT_RESULTS, RESULTS, SKILL_STATES, event_response_topic, skill_topic, skill_type, status_field, status_topic,
 )
 from skinet.ros.stamp import ros_time
-from skinet.ros.typestore import Typestore, default_instance, msg_typename
+from skinet.ros.typestore import default_instance, msg_typename
+
+if TYPE_CHECKING:
+    from skinet.ros.typestore import Typestore
 
 READY, RUNNING, INTERRUPTING = (SKILL_STATES[s] for s in ("READY", "RUNNING", "INTERRUPTING"))
 
@@ -167,6 +168,8 @@ class Manager:
 
     def _response(self, k: Skill, result: str, name: str = "", effect: bool = False, postcondition: bool = True,
                   preconditions: dict[str, bool] | None = None) -> Message:
+        from rosbags.typesys.base import normalize_fieldname
+
         pre = {p.name: True for p in k.preconditions} | (preconditions or {})
         return self._message(
             skill_topic(self.skillset, k, "response"), skill_type(k, "Response"),

@@ -26,12 +26,15 @@ import time
 from collections import OrderedDict
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from skinet.ros.actions import LIFECYCLE_TRANSITIONS, goal_uuid, message
 from skinet.ros.binding import CANCEL_TYPE, CHANGE_STATE_TYPE, GET_STATE_TYPE, LIFECYCLE_STATES, STATUS_TYPE, TRANSITION_EVENT_TYPE
 from skinet.ros.stamp import ros_time
-from skinet.ros.typestore import Typestore, decode, default_instance, encode, to_plain
+from skinet.ros.typestore import decode, default_instance, encode, to_plain
+
+if TYPE_CHECKING:
+    from skinet.ros.typestore import Typestore
 
 log = logging.getLogger("skinet.simulator")
 

@@ -21,7 +21,7 @@ import threading
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import zenoh
 
@@ -31,8 +31,11 @@ from services.simulator.driver import StepRun, drive
 from services.simulator.manager import INTERRUPTING, READY, RUNNING, Manager, Message
 from skinet.mission.scenario import Scenario
 from skinet.ros.keys import KeyStyle, ManagerTopic, manager_topics, rmw_attachment, topic_fqn
-from skinet.ros.typestore import Typestore, build_typestore, decode, encode
+from skinet.ros.typestore import build_typestore, decode, encode
 from skinet.system.model import Component, System
+
+if TYPE_CHECKING:
+    from skinet.ros.typestore import Typestore
 
 log = logging.getLogger("skinet.simulator")
 

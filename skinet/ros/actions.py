@@ -29,16 +29,17 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from rosbags.typesys.base import normalize_fieldname
-from rosbags.typesys.store import Typestore
 
 from skinet.ros.binding import CANCEL_TYPE, CHANGE_STATE_TYPE, GET_STATE_TYPE
 from skinet.ros.bound import ACTIVE, STATUS_NAMES, TERMINAL, Goal
 from skinet.ros.stamp import ros_time
 from skinet.ros.typestore import decode, default_instance, encode, to_plain
+
+if TYPE_CHECKING:
+    from rosbags.typesys.store import Typestore
 
 CANCEL_CODES = {0: "ERROR_NONE", 1: "ERROR_REJECTED", 2: "ERROR_UNKNOWN_GOAL_ID", 3: "ERROR_GOAL_TERMINATED"}
 
@@ -56,6 +57,8 @@ def message(store: Typestore, typename: str, values: Mapping[str, Any]) -> Any:
 
     Raises ``TypeError`` for a field the type lacks, with the fields it has.
     """
+    from rosbags.typesys.base import normalize_fieldname
+
     _, fielddefs = store.fielddefs[typename]
     fields = dict(fielddefs)
     out: dict[str, Any] = {}

@@ -62,9 +62,7 @@ import copy
 import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
-
-from rosbags.typesys.store import Typestore
+from typing import TYPE_CHECKING, Any
 
 from skinet.closenames import close_names, unknown
 from skinet.errors import Diagnostic, Pos, SourceError
@@ -73,6 +71,9 @@ from skinet.plan.inputs import message_problem
 from skinet.ros.condition import Condition, example_message, parse_condition
 from skinet.ros.definitions import action_types, build_store
 from skinet.files.toml import locate_path, parse_toml
+
+if TYPE_CHECKING:
+    from rosbags.typesys.store import Typestore
 
 # lifecycle_msgs/msg/State ids of the primary states (transition states 10-15 settle into one of them).
 LIFECYCLE_STATES: dict[str, int] = {"unconfigured": 1, "inactive": 2, "active": 3, "finalized": 4}

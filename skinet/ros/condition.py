@@ -38,19 +38,19 @@ from dataclasses import dataclass, field
 from functools import cache
 from itertools import islice, product
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from lark import Lark, Token, Tree
 from lark.exceptions import UnexpectedInput
-from rosbags.interfaces import Nodetype
-from rosbags.typesys.base import normalize_fieldname
-from rosbags.typesys.store import Typestore
 
 from skinet.closenames import unknown
 from skinet.errors import Pos, SourceError
 from skinet.lang.larkcache import cached_lark
 from skinet.lang.larkerrors import check_nesting, check_size, syntax_error
 from skinet.ros.typestore import default_instance, to_plain
+
+if TYPE_CHECKING:
+    from rosbags.typesys.store import Typestore
 
 MAX_CONDITION_CHARS = 4096
 NUMBERS = frozenset({"int8", "uint8", "int16", "uint16", "int32", "uint32", "int64", "uint64", "float32",
@@ -85,6 +85,8 @@ class Condition:
 
     def shown(self, msg: Plain) -> str:
         """The values the condition reads in ``msg``: ``percentage=0.15, present=True``."""
+        from rosbags.typesys.base import normalize_fieldname
+
         out = []
         for path in self.fields:
             try:
@@ -166,6 +168,9 @@ class _Compiler:
         return self.path(node, other, resolved)
 
     def path(self, node: Tree, other: Tree | None, resolved: _Operand | None) -> _Operand:
+        from rosbags.interfaces import Nodetype
+        from rosbags.typesys.base import normalize_fieldname
+
         names = [str(t) for t in node.children]
         owners = [resolved.owner] if resolved is not None and resolved.owner else []
         if len(names) == 1:

@@ -31,21 +31,21 @@ is registered with ``uint8[16] client_gid``: ROS maps a ``.msg`` ``char`` to
 differently from ROS (checked against published hashes in
 ``tests/ros/test_definitions.py``).
 
-Pure; cost linear in the definitions' size.
+Pure; cost linear in the definitions' size, plus the import of ``rosbags`` (0.3-0.5 s) at
+the first store or definition read, not at this module's import (docs/performance.md).
 """
 
 from __future__ import annotations
 
 import re
 from collections.abc import Mapping
-from typing import Any
-
-from rosbags.interfaces import Nodetype
-from rosbags.typesys import Stores, get_typestore, get_types_from_msg
-from rosbags.typesys.store import Typestore
+from typing import TYPE_CHECKING, Any
 
 from skinet.errors import Pos, SourceError
 from skinet.ros.defaults import DefaultError, definition_defaults, register
+
+if TYPE_CHECKING:
+    from rosbags.typesys.store import Typestore
 
 KINDS = ("msg", "srv", "action")
 UUID = "unique_identifier_msgs/msg/UUID"
@@ -87,12 +87,17 @@ def sections(text: str) -> list[str]:
 
 def _message(text: str, name: str) -> Typesdict:
     """One message type named exactly ``name`` (rosbags would move ``pkg/srv/X`` to ``pkg/srv/msg/X``)."""
+    from rosbags.interfaces import Nodetype
+    from rosbags.typesys import get_types_from_msg
+
     (consts, fields), = get_types_from_msg(text, name).values()
     return {name: (consts, fields or [(EMPTY_FIELD, (Nodetype.BASE, ("uint8", 0)))])}
 
 
 def _service(name: str, request: str, response: str) -> Typesdict:
     """``name_Request``, ``name_Response`` and the REP 2011 structure of the service ``name``."""
+    from rosbags.interfaces import Nodetype
+
     types = _message(request, f"{name}_Request") | _message(response, f"{name}_Response")
     types[f"{name}_Event"] = ([], [
         ("info", (Nodetype.NAME, EVENT_INFO)),
@@ -149,6 +154,8 @@ def build_store(definitions: Mapping[str, str] | None = None,
     ``sources`` names the file of each definition for errors.  A definition that
     contradicts a type already known is an error at its file.
     """
+    from rosbags.typesys import Stores, get_typestore
+
     store = get_typestore(Stores.ROS2_HUMBLE)
     types: Typesdict = _message(_EVENT_INFO_TEXT, EVENT_INFO)
     for name, text in STANDARD.items():

@@ -34,8 +34,6 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from itertools import permutations
 
-from rosbags.typesys.base import normalize_fieldname
-
 from skinet.lang.model import Skillset
 from skinet.net.build import idle_place, resource_place, running_place
 from skinet.net.petrinet import PetriNet
@@ -138,6 +136,8 @@ def status_from_plain(skillset: Skillset, msg: Mapping) -> Status:
 
 
 def skill_response_from_plain(skillset: Skillset, skill: str, msg: Mapping) -> SkillResponse:
+    from rosbags.typesys.base import normalize_fieldname
+
     pre = {p.name: bool(msg.get(normalize_fieldname(p.name), True)) for p in skillset.skill(skill).preconditions}
     return SkillResponse(skill, str(msg.get("id", "")), int(msg["result"]), str(msg.get("name", "")),
                          bool(msg.get("effect", False)), bool(msg.get("postcondition", True)), pre)

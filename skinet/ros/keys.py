@@ -19,9 +19,7 @@ from __future__ import annotations
 
 import struct
 from dataclasses import dataclass
-from typing import Literal
-
-from rosbags.typesys.store import Typestore
+from typing import TYPE_CHECKING, Literal
 
 from skinet.lang.model import Skillset
 from skinet.ros.interfaces import (
@@ -34,6 +32,9 @@ from skinet.ros.interfaces import (
     topic_prefix,
 )
 from skinet.ros.typestore import msg_typename
+
+if TYPE_CHECKING:
+    from rosbags.typesys.store import Typestore
 
 EMPTY_TYPE = "std_msgs/msg/Empty"
 ATTACHMENT_SIZE = 33

@@ -36,10 +36,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
-
-from rosbags.serde import SerdeError
-from rosbags.typesys.store import Typestore
+from typing import TYPE_CHECKING, Any
 
 from skinet.lang.model import Skillset
 from skinet.ros.actions import message
@@ -47,6 +44,9 @@ from skinet.ros.derive import SkillView, skill_response_from_plain, status_from_
 from skinet.ros.interfaces import RESULTS, skill_type
 from skinet.ros.keys import EMPTY_TYPE, GID_SIZE, ManagerTopic, TopicKind, manager_topics, rmw_attachment
 from skinet.ros.typestore import decode, default_instance, encode, msg_typename, to_plain
+
+if TYPE_CHECKING:
+    from rosbags.typesys.store import Typestore
 
 
 def topic_of(skillset: Skillset, kind: TopicKind, skill: str | None = None) -> ManagerTopic:
@@ -76,6 +76,8 @@ def skill_request(store: Typestore, skillset: Skillset, skill: str, id_: str,
 def request_inputs(store: Typestore, skillset: Skillset, skill: str, payload: bytes) -> tuple[str, dict[str, Any]]:
     """``(id, inputs)`` of a CDR ``Skill<K>Request`` (every input field, as plain values); ``ValueError`` when
     the payload is not one."""
+    from rosbags.serde import SerdeError
+
     topic = topic_of(skillset, "skill_request", skill)
     try:
         msg = decode(store, topic.typename, payload)
@@ -112,6 +114,8 @@ def status_request(store: Typestore, skillset: Skillset) -> tuple[ManagerTopic, 
 def skill_ids(store: Typestore, skillset: Skillset, payload: bytes) -> dict[str, SkillView]:
     """Each skill's state and current (or last) execution id in a CDR ``SkillsetStatus``; ``ValueError``
     when the payload is not one."""
+    from rosbags.serde import SerdeError
+
     try:
         msg = to_plain(decode(store, msg_typename(skillset, "SkillsetStatus"), payload))
         return dict(status_from_plain(skillset, msg).skills)
@@ -128,6 +132,8 @@ def start_refusal(store: Typestore, skillset: Skillset, skill: str, payload: byt
     """``(id, why)`` when a CDR ``Skill<K>Response`` refuses a start (``ALREADY_RUNNING`` with the running
     execution's id, ``PRECONDITION_FAILURE`` with the preconditions that are false, ``VALIDATE_FAILURE``,
     ``START_FAILURE``); None for any other response; ``ValueError`` when the payload is not one."""
+    from rosbags.serde import SerdeError
+
     k = skillset.skill(skill)
     try:
         msg = to_plain(decode(store, msg_typename(skillset, skill_type(k, "Response")), payload))

@@ -3,24 +3,27 @@
 :func:`build_typestore` starts from the ROS 2 Humble store (``std_msgs``,
 ``geometry_msgs``, ``builtin_interfaces``, ...) and registers every message of the
 skillset's interface package under ``<package>/msg/<Name>``.
+
+``rosbags`` (0.3-0.5 s to import) is imported by the functions that make a store,
+not by this module: a process that never handles a ROS message never pays for it
+(docs/performance.md); the functions given a store find it already imported.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import MISSING, fields, is_dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from rosbags.interfaces import Nodetype
-from rosbags.typesys import Stores, get_typestore, get_types_from_msg
-from rosbags.typesys.base import BASE_NAMES, normalize_fieldname
-from rosbags.typesys.store import Typestore
 
 from skinet.errors import Diagnostic, Pos, SourceError
 from skinet.lang.model import Skillset
 from skinet.ros.defaults import DefaultError, defaults_of, message_defaults, register
 from skinet.ros.interfaces import typed_fields, generate_messages, package_name
+
+if TYPE_CHECKING:
+    from rosbags.typesys.store import Typestore
 
 __all__ = [
     "Typestore",
@@ -56,6 +59,9 @@ def build_typestore(
     types the type map uses that the Humble store lacks.  A mapped ROS type that is
     neither a primitive nor known raises :class:`SourceError` at each use.
     """
+    from rosbags.typesys import Stores, get_typestore, get_types_from_msg
+    from rosbags.typesys.base import BASE_NAMES
+
     store = get_typestore(Stores.ROS2_HUMBLE)
     types: dict[str, Any] = {}
     defaults: dict[str, dict[str, Any]] = {}
@@ -104,6 +110,8 @@ def decode(store: Typestore, typename: str, data: bytes | memoryview) -> Any:
 
 
 def _default(store: Typestore, desc: Any) -> Any:
+    from rosbags.interfaces import Nodetype
+
     kind, arg = desc
     if kind == Nodetype.BASE:
         name = arg[0]
@@ -132,6 +140,8 @@ def default_instance(store: Typestore, typename: str, **values: Any) -> Any:
     numbers are 0, strings empty, bools false, sequences empty, fixed arrays full of
     defaults, nested messages default.  An unknown field name raises ``TypeError``.
     """
+    from rosbags.typesys.base import normalize_fieldname
+
     _, fielddefs = store.fielddefs[typename]
     cls = store.types[typename]
     args = {normalize_fieldname(name): _default(store, desc) for name, desc in fielddefs}
@@ -161,3 +171,12 @@ def to_plain(obj: Any) -> Any:
     if isinstance(obj, np.generic):
         return obj.item()
     return obj
+
+
+def __getattr__(name: str) -> Any:
+    """``Typestore`` (rosbags' store class, in ``__all__``), imported when first asked for."""
+    if name == "Typestore":
+        from rosbags.typesys.store import Typestore
+
+        return Typestore
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

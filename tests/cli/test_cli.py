@@ -331,11 +331,11 @@ def test_lazy_command_runs_its_module(capsys: pytest.CaptureFixture[str]) -> Non
 
 
 def test_unsafe_imports_no_service_module() -> None:
-    """Start-up (issue 10 (d)): no Zenoh, pydantic, web server, plotting, chain or service for `skinet unsafe`
-    (only the options the services share and the chains' text helpers)."""
+    """Start-up (issue 10 (d)): no Zenoh, pydantic, web server, plotting, ROS type library (issue 33), chain or
+    service for `skinet unsafe` (only the options the services share and the chains' text helpers)."""
     code = ("import sys; from skinet_cli.main import main; code = main(['unsafe', sys.argv[1]]); "
             "print(sorted({m.split('.')[0] for m in sys.modules} & {'zenoh', 'pydantic', 'aiohttp', 'matplotlib', "
-            "'scipy'} | {m for m in sys.modules if m.startswith(('services.', 'chains.')) and m not in "
+            "'scipy', 'rosbags'} | {m for m in sys.modules if m.startswith(('services.', 'chains.')) and m not in "
             "('services.common', 'services.common.options', 'services.common.environment', "
             "'services.common.memory', 'chains.render', 'chains.pilot_lines')})); raise SystemExit(code)")
     done = subprocess.run([sys.executable, "-c", code, SYSTEM], cwd=ROOT, capture_output=True, text=True, timeout=60)
