@@ -333,6 +333,8 @@ def example_message(wanted: Sequence[tuple[Condition, bool]], store: Typestore) 
                 for path, other in ((left, right), (right, left)):
                     if _is_path(path, typename, store):
                         _candidates(values, path, other, typename, store)
+    from rosbags.typesys.base import normalize_fieldname
+
     default = to_plain(default_instance(store, typename))
     for path, tried in values.items():  # the field's own default first
         first = default
@@ -385,6 +387,8 @@ def _candidates(values: dict[tuple[str, ...], list[Any]], path: Tree, other: Any
 
 def _field(store: Typestore, typename: str, names: tuple[str, ...]) -> tuple[str, str] | None:
     """(the type holding the field, its base type) of a path of single values; None otherwise."""
+    from rosbags.interfaces import Nodetype
+
     current = typename
     for i, name in enumerate(names):
         desc = dict(store.fielddefs[current][1]).get(name)
