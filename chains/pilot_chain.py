@@ -85,6 +85,7 @@ def run_pilot_chain(
     style: KeyStyle = KeyStyle(),
     shared_predictor: bool = False,
     on_status: Callable[[PilotStatus], None] | None = None,
+    then: Callable[[PilotRecord], None] | None = None,
 ) -> PilotRecord:
     """Send ``mission`` (a goals file's text) to a pilot on the whole chain and follow it to its end.
 
@@ -94,7 +95,8 @@ def run_pilot_chain(
     its own ``simulator`` (managers on DDS behind a gateway, or with ``rmw_zenoh`` keys: ``style``),
     which it then closes itself; ``shared_predictor``: a predictor already serves ``session`` (else one is
     started: the pilot sends a command only from a step whose prediction came, so there is always one);
-    ``on_status``: called with each of the pilot's statuses as it comes (on Zenoh's thread: must not block).
+    ``on_status``: called with each of the pilot's statuses as it comes (on Zenoh's thread: must not block);
+    ``then``: called with the record while every service still runs (a live demo's views keep its pilot).
     Raises :class:`~chains.chain.ChainError` when the pilot refuses the mission or the chain does not
     settle.
     """
@@ -137,7 +139,10 @@ def run_pilot_chain(
         wait_until(lambda: handled_all(monitor, bridge.feed.source, seqs()), settle, "the last events applied")
         wait_until(lambda: watch.caught_up(monitor.snapshot().verdicts.seq, seqs()), settle,
                    "the last verdicts and events")
-        return watch.record(run, reply, pilot.status, simulator.commands_handled(), list(world.ends), seconds)
+        record = watch.record(run, reply, pilot.status, simulator.commands_handled(), list(world.ends), seconds)
+        if then is not None:
+            then(record)
+        return record
 
 
 def ask_goal(session: zenoh.Session, request: PilotGoalRequest, timeout: float) -> PilotGoalReply:

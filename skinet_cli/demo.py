@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from skinet.errors import SkinetError, SourceError
-from skinet_cli.demo_pilot import PilotEntry, Row, load_pilot_entry, play_pilot, table, tally
+from skinet_cli.demo_pilot import PilotEntry, PlayedPilot, Row, load_pilot_entry, play_pilot, table, tally
 from skinet_cli.live_demo import add_live_args, live_options_misused, live_session, play_live
 from services.common.options import add_no_properties_arg, load_live_system, require_properties
 from skinet.verify.explain import plural, warning_line
@@ -213,12 +213,15 @@ def _live_pilot(args: argparse.Namespace, entry: PilotEntry) -> int:
     speed = 1.0 if args.speed is None else args.speed
     header = f"== live at speed {speed:g}: the pilot drives the run below, its status as it changes"
     with live_session(args, entry.system, header) as (session, linger):
-        scenario, records, row, surprises = play_pilot(args, entry, _line, session, live=True)
-        for line in surprises:
-            print(f"skinet demo: {entry.path}: {line}", file=sys.stderr, flush=True)
-        if (args.log or args.timeline) and records:
-            _write_run(args, entry.system, scenario, records)
-        linger()
+        def over(played: PlayedPilot) -> None:  # the chain and its pilot still run: the views keep both
+            scenario, records, _, surprises = played
+            for line in surprises:
+                print(f"skinet demo: {entry.path}: {line}", file=sys.stderr, flush=True)
+            if (args.log or args.timeline) and records:
+                _write_run(args, entry.system, scenario, records)
+            linger()
+
+        surprises = play_pilot(args, entry, _line, session, live=True, then=over)[3]
     return UNEXPECTED if surprises else 0
 
 

@@ -32,8 +32,12 @@ from services.common.options import load_live_system, require_properties
 if TYPE_CHECKING:
     import zenoh
 
+    from chains.pilot_chain import PilotRecord
     from skinet.wire.messages import PilotStatus
 
+# What a pilot run played to: its scenario, records, table row (None when the chain did not let it end),
+# surprises
+PlayedPilot = tuple[Scenario, list[StepRecord], "Row | None", list[str]]
 SKILL_SECONDS = 0.05  # how long each simulated skill runs: the pilot's commands stay under the check's rate limit
 LIVE_SKILL_SECONDS = 2.0  # the same with --live, at speed 1
 
@@ -76,14 +80,15 @@ def load_pilot_entry(path: Path, text: str, no_properties: bool) -> PilotEntry:
 
 def play_pilot(args: argparse.Namespace, entry: PilotEntry, line: Callable[[StepRecord], str],
                session: zenoh.Session | None = None, live: bool = False,
-               ) -> tuple[Scenario, list[StepRecord], Row | None, list[str]]:
+               then: Callable[[PlayedPilot], None] | None = None) -> PlayedPilot:
     """Fly the pilot run (through the chain on ``session``, where a predictor runs unless ``--no-predict``;
     ``--core``: on the core), print it (``line`` formats one record), and return its scenario, records, table
     row (None when the chain did not let it end) and surprises (a mission not reached, a violation, a
     denied command, a run that did not end).  The chain always has a predictor: the pilot commands only
     from a step whose prediction came.  ``live`` (``--live``): ``session`` is the live one, without a
     predictor yet; each skill runs 2 s divided by ``--speed``, and each change of the pilot's status is
-    printed as it comes."""
+    printed as it comes.  ``then`` is called with the result while the chain still runs (its pilot too: a
+    live run's views keep a pilot that answers), before the chain closes."""
     run, system = entry.run, entry.system
     failures = ", ".join(f"run {f.run} of {f.skillset}:{f.skill} ends {f.mode}" for f in run.failures) or "none"
     print(f"== {run.name} run ({entry.path}): {len(entry.goals)} goals ({entry.goals_path}), {run.mode} mode, "
@@ -103,18 +108,40 @@ def play_pilot(args: argparse.Namespace, entry: PilotEntry, line: Callable[[Step
         speed = 1.0 if getattr(args, "speed", None) is None else args.speed
         duration = (LIVE_SKILL_SECONDS / speed if speed > 0 else SKILL_SECONDS) if live else SKILL_SECONDS
         try:
-            record = run_pilot_chain(system, load_typemap(entry.path.parent / run.system), run, entry.mission,
-                                     mission_name=str(entry.goals_path), duration=duration, session=session,
-                                     shared_predictor=session is not None and not args.no_predict and not live,
-                                     timeout=120.0 + 200 * duration, on_status=_printer() if live else None)
+            played: list[PlayedPilot] = []
+
+            def finish(record: PilotRecord) -> None:
+                print("   chain: simulated managers (skills end by themselves) -> CDR -> bridge -> monitor -> "
+                      "predictor -> pilot -> check (strict) -> requests on the managers' topics, embedded Zenoh "
+                      "session")
+                played.append(_tally(args, entry, line, record.scenario(), record.status.state,
+                                     record.status.reason, record.status.denied, len(record.violations),
+                                     record.commands))
+                if then is not None:
+                    then(played[0])
+
+            run_pilot_chain(system, load_typemap(entry.path.parent / run.system), run, entry.mission,
+                            mission_name=str(entry.goals_path), duration=duration, session=session,
+                            shared_predictor=session is not None and not args.no_predict and not live,
+                            timeout=120.0 + 200 * duration, on_status=_printer() if live else None, then=finish)
+            return played[0]
         except ChainError as exc:  # the run did not end: said, and counted as a surprise
             print(f"   pilot: the run did not end: {exc}")
-            return Scenario(run.name, run.system, ()), [], None, [f"the pilot run did not end: {exc}"]
-        scenario = record.scenario()
-        end, reason, denied = record.status.state, record.status.reason, record.status.denied
-        monitor_violations, sent = len(record.violations), record.commands
-        print("   chain: simulated managers (skills end by themselves) -> CDR -> bridge -> monitor -> predictor -> "
-              "pilot -> check (strict) -> requests on the managers' topics, embedded Zenoh session")
+            failed = Scenario(run.name, run.system, ()), [], None, [f"the pilot run did not end: {exc}"]
+            if then is not None:
+                then(failed)
+            return failed
+    played_core = _tally(args, entry, line, scenario, end, reason, denied, monitor_violations, sent)
+    if then is not None:
+        then(played_core)
+    return played_core
+
+
+def _tally(args: argparse.Namespace, entry: PilotEntry, line: Callable[[StepRecord], str], scenario: Scenario,
+           end: str, reason: str, denied: int | None, monitor_violations: int | None, sent: int | None,
+           ) -> PlayedPilot:
+    """The run replayed on the core, printed, with its table row and surprises."""
+    run, system = entry.run, entry.system
     records = replay(system, scenario, predict=not args.no_predict)
     for r in records:
         if args.all_steps or r.violations or r.divergence or ".failure" in (r.step.transition or ""):

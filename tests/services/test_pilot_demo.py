@@ -195,3 +195,32 @@ def test_a_pilot_run_plays_live_with_each_change_of_the_pilots_status() -> None:
         in lines and "   violations: 0" in lines
     assert "  skinet watch spot_arm -e tcp/127.0.0.1:" in done.stderr
     assert done.stderr.endswith("skinet demo: the run is over; the chain keeps running for the views for 0 s\n")
+
+
+def test_a_live_pilot_run_keeps_its_pilot_while_the_chain_lingers() -> None:
+    """Issue 32: the chain "keeps running for the views" after a live pilot run, and its pilot with it: a goal
+    asked then is answered by that pilot (here a pause, with no goal left to pause)."""
+    import re
+    import subprocess
+    import sys
+
+    demo = subprocess.Popen([sys.executable, "-m", "skinet_cli.main", "demo", "--live", str(PILOT), "--speed", "0",
+                             "--linger", "300", "--no-multicast-scouting"], cwd=MISSIONS.parents[1],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    try:
+        endpoint, lines = None, []
+        for line in demo.stderr:
+            lines.append(line)
+            found = re.search(r" -e (tcp/127\.0\.0\.1:\d+)", line)
+            endpoint = endpoint or (found and found.group(1))
+            if line.startswith("skinet demo: the run is over"):
+                break
+        assert endpoint and lines[-1] == ("skinet demo: the run is over; the chain keeps running for the views for "
+                                          "300 s\n"), "".join(lines)
+        asked = subprocess.run([sys.executable, "-m", "skinet_cli.main", "goal", "spot_arm", "--pause", "-e", endpoint],
+                               capture_output=True, text=True, timeout=120)
+        assert (asked.returncode, asked.stderr) == (
+            2, "pause rejected by the pilot: no goal is being followed: nothing to pause\n"), asked.stdout
+    finally:
+        demo.terminate()
+        demo.wait(30)
