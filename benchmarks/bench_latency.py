@@ -215,11 +215,9 @@ def with_views(n: int, rounds: int = 3) -> list[list[object]]:
     """The in-process monitor's event -> UnsafeReport latency without and with incident bundles (``--incidents``:
     the ring on the monitor's session) and the Foxglove view (an observer and its WebSocket server, one client
     subscribed to every channel) on the same session, alternated ``rounds`` times so that a busy machine loads
-    both alike; target: p99 with them within 10 % of p99 without."""
-    import json as json_
+    both alike; target: p99 with them within 10 % of p99 without.  The Foxglove client is a process of its own,
+    as Foxglove is (in the monitor's process its JSON decoding would hold the monitor's interpreter)."""
     import tempfile
-
-    import aiohttp
 
     from services.dashboard.observer import Observer
     from services.foxglove.server import FoxgloveView
@@ -243,19 +241,14 @@ def with_views(n: int, rounds: int = 3) -> list[list[object]]:
                     port = free_port()
                     proc = spawn(["-m", "services.foxglove", str(SYSTEM_FILE), "--port", str(port), "--mode", "peer",
                                   "-e", endpoint, "--no-multicast-scouting", "--wait", "0"])
-                    stop = threading.Event()
-                    client = threading.Thread(target=lambda: asyncio.run(_fox_client(
-                        f"ws://127.0.0.1:{port}", stop, aiohttp, json_, retry=True)), daemon=True)
-                    client.start()
+                    client = spawn([__file__, "--fox-client", f"ws://127.0.0.1:{port}"])  # as Foxglove is: apart
                     wait_token(session, keys.alive("spot_arm", "monitor", "*"))
                     time.sleep(1.0)  # the view's start-up queries answered before measuring
                 elif "Foxglove" in views:
                     observer = Observer(session, "spot_arm", system)
                     view = FoxgloveView(observer, "127.0.0.1", 0)
-                    stop = threading.Event()
-                    client = threading.Thread(target=lambda: asyncio.run(_fox_client(view.url, stop, aiohttp,
-                                                                                     json_)), daemon=True)
-                    client.start()
+                    client = spawn([__file__, "--fox-client", view.url])
+                    time.sleep(1.0)  # the client connected and subscribed before measuring
                 payloads = events(n + 200)
                 publishers = {k: session.declare_publisher(k, **BLOCK) for k in {k for k, _ in payloads}}
                 reports = Arrivals(session, keys.unsafe("spot_arm"))
@@ -264,12 +257,9 @@ def with_views(n: int, rounds: int = 3) -> list[list[object]]:
                 if incidents is not None:
                     incidents.close()
                 if proc is not None:
-                    stop.set()
-                    client.join(5)
-                    terminate([proc])
+                    terminate([client, proc])
                 if view is not None:
-                    stop.set()
-                    client.join(5)
+                    terminate([client])
                     view.close()
                     observer.close()
                 folder.cleanup()
@@ -457,9 +447,16 @@ def main() -> None:
     parser.add_argument("--views-only", action="store_true",
                         help="only the rows without and with --incidents and the Foxglove view")
     parser.add_argument("--echo", help=argparse.SUPPRESS)
+    parser.add_argument("--fox-client", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.echo:
         return echo_process(args.echo)
+    if args.fox_client:  # a Foxglove client process subscribed to every channel, until terminated
+        import json
+
+        import aiohttp
+
+        return asyncio.run(_fox_client(args.fox_client, threading.Event(), aiohttp, json, retry=True))
     rows = [] if args.views_only else in_process(args.events, args.profile)
     rows += with_views(args.events)
     if not args.views_only:
