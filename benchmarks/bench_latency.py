@@ -32,16 +32,14 @@ import cProfile
 import pstats
 import os
 import signal
-import socket
 import statistics
-import subprocess
 import sys
 import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
 
-from common import table, terminate, verdict
+from common import table, verdict
 
 import msgpack  # noqa: E402
 import zenoh  # noqa: E402
@@ -49,6 +47,8 @@ import zenoh  # noqa: E402
 from services.common.zenoh_config import session_config  # noqa: E402
 from services.monitor import start_monitor  # noqa: E402
 from tests.bridge_side import BridgeSide  # noqa: E402
+from tests.loopback import client_args, free_port  # noqa: E402
+from tests.processes import start, start_module, start_skinet, stop_all  # noqa: E402
 from skinet.system.load import load_system
 from skinet.system.live import LiveSystem  # noqa: E402
 from skinet.system.model import marking_to_json  # noqa: E402
@@ -241,8 +241,8 @@ def with_views(n: int, rounds: int = 3) -> list[list[object]]:
                 view = proc = None
                 if "another process" in views:
                     port = free_port()
-                    proc = spawn(["-m", "services.foxglove", str(SYSTEM_FILE), "--port", str(port), "--mode", "peer",
-                                  "-e", endpoint, "--no-multicast-scouting", "--wait", "0"])
+                    proc = start_module("services.foxglove", str(SYSTEM_FILE), "--port", str(port), "--mode", "peer",
+                                        "-e", endpoint, "--no-multicast-scouting", "--wait", "0")
                     stop = threading.Event()
                     client = threading.Thread(target=lambda: asyncio.run(_fox_client(
                         f"ws://127.0.0.1:{port}", stop, aiohttp, json_, retry=True)), daemon=True)
@@ -266,7 +266,7 @@ def with_views(n: int, rounds: int = 3) -> list[list[object]]:
                 if proc is not None:
                     stop.set()
                     client.join(5)
-                    terminate([proc])
+                    stop_all([proc])
                 if view is not None:
                     stop.set()
                     client.join(5)
@@ -319,17 +319,6 @@ async def _fox_client(url: str, stop: threading.Event, aiohttp, json_, retry: bo
 # -- across processes ------------------------------------------------------------------
 
 
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def spawn(args: list[str]) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, *args], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                            text=True, start_new_session=True)
-
-
 def wait_token(session: zenoh.Session, key: str, timeout: float = 10.0) -> None:
     seen = threading.Event()
     sub = session.liveliness().declare_subscriber(key, lambda s: seen.set(), history=True)
@@ -347,13 +336,13 @@ def cpu_seconds(pid: int) -> float:
 
 def across_processes(n: int, burst: int) -> list[list[object]]:
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    client = ["--mode", "client", "--connect", endpoint, "--no-multicast-scouting"]
-    router = spawn(["-m", "skinet_cli.main", "router", "--listen", endpoint, "--no-auth"])  # loopback only
+    client = client_args(endpoint)
+    router = start_skinet("router", "--listen", endpoint, "--no-auth")  # loopback only
     procs = [router]
     rows = []
     try:
         assert router.stdout is not None and "listening" in router.stdout.readline()
-        procs.append(spawn([__file__, "--echo", endpoint]))
+        procs.append(start([sys.executable, __file__, "--echo", endpoint]))
         a = zenoh.open(session_config("client", connect=[endpoint], multicast_scouting=False))
         b = zenoh.open(session_config("client", connect=[endpoint], multicast_scouting=False))
         try:
@@ -374,8 +363,8 @@ def across_processes(n: int, burst: int) -> list[list[object]]:
             side = BridgeSide(a, "spot_arm", source="bench", model=load_system(SYSTEM_FILE)[0])
             for flags in ([], ["--no-express"]):
                 name = "monitor" + (" " + " ".join(flags) if flags else "")
-                monitor = spawn(["-m", "services.monitor", str(SYSTEM_FILE), *client, "--id", "bench",
-                                 "--log-level", "WARNING", *flags])
+                monitor = start_module("services.monitor", str(SYSTEM_FILE), *client, "--id", "bench",
+                                       "--log-level", "WARNING", *flags)
                 procs.append(monitor)
                 wait_token(a, keys.alive("spot_arm", "monitor", "bench"))
                 side.synced()
@@ -404,7 +393,7 @@ def across_processes(n: int, burst: int) -> list[list[object]]:
             a.close()
             b.close()
     finally:
-        terminate(procs)
+        stop_all(procs)
     return rows
 
 

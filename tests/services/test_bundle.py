@@ -23,25 +23,6 @@ def skinet(*args: str) -> subprocess.CompletedProcess:
                           timeout=300)
 
 
-def play_any(scenario_path: Path, router: str) -> list:
-    """A mission through the whole chain (a bound system's through its bindings) on a client of ``router``."""
-    from chains.chain import run_bound_chain, run_chain
-    from skinet.system.load import load_bindings, load_system, load_typemap
-    from skinet.files.read import read_text
-    from skinet.mission.scenario import parse_scenario
-
-    scenario = parse_scenario(read_text(scenario_path), str(scenario_path))
-    system_file = scenario_path.parent / scenario.system
-    system, _ = load_system(system_file)
-    session = open_client(router)
-    try:
-        if any(c.binding for c in system.components):
-            return run_bound_chain(system, load_bindings(system)[0], scenario, session=session)
-        return run_chain(system, load_typemap(system_file), scenario, session=session)
-    finally:
-        session.close()
-
-
 def record(router: str, run: str | Path, path: Path, system: str = "spot_arm") -> list:
     proc = subprocess.Popen([sys.executable, "-m", "skinet_cli.main", "record", system, "--bundle", str(path),
                              *client_args(router)], cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
@@ -50,8 +31,7 @@ def record(router: str, run: str | Path, path: Path, system: str = "spot_arm") -
     watch = LivelinessWatch(session, f"skinet/{system}/alive/recorder/*")
     try:
         watch.wait(lambda alive: bool(alive), timeout=30)
-        records = (play(run, router, lambda r: None) if isinstance(run, str)
-                   else play_any(run, router) if isinstance(run, Path) else run(router))
+        records = play(run, router) if isinstance(run, (str, Path)) else run(router)
     finally:
         watch.close()
         session.close()
@@ -242,7 +222,7 @@ def test_incidents_are_written_around_the_violations_and_verify(router, client_f
     folder = tmp_path / "incidents"
     incidents = Incidents(client_factory(), bundle(system), folder, window=1.0)
     try:
-        play("unassisted", router, lambda r: None)
+        play("unassisted", router)
     finally:
         incidents.close()
     assert incidents.failed == 0 and incidents.written and sorted(folder.iterdir()) == sorted(incidents.written)
