@@ -30,7 +30,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import socket
 import subprocess
 import sys
 import threading
@@ -65,10 +64,9 @@ def _sessions() -> tuple[Any, Any]:
     import zenoh
 
     from services.common.zenoh_config import session_config
+    from tests.loopback import free_endpoint
 
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        endpoint = f"tcp/127.0.0.1:{sock.getsockname()[1]}"
+    endpoint = free_endpoint()
     listener = zenoh.open(session_config("peer", listen=[endpoint], multicast_scouting=False))
     return listener, zenoh.open(session_config("client", connect=[endpoint]))
 

@@ -14,7 +14,6 @@ time) and the verification's time.
 from __future__ import annotations
 
 import argparse
-import signal
 import subprocess
 import sys
 import tempfile
@@ -24,43 +23,33 @@ from pathlib import Path
 from common import ROOT, table
 
 from chains.chain import run_chain  # noqa: E402
-from services.common.zenoh_config import session_config  # noqa: E402
 from skinet.system.load import load_system, load_typemap
 from skinet.files.read import read_text
 from skinet.mission.scenario import parse_scenario  # noqa: E402
-
-import zenoh  # noqa: E402
+from tests.loopback import client_args, free_endpoint, open_client, open_router  # noqa: E402
+from tests.processes import start_skinet, stop_all  # noqa: E402
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--speed", type=float, default=1.0, help="time scale of the run (default: 1, real time)")
     args = parser.parse_args()
-    import socket
-
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
-    endpoint = f"tcp/127.0.0.1:{port}"
-    router = zenoh.open(session_config("router", listen=[endpoint], multicast_scouting=False))
-    zargs = ["-e", endpoint, "--mode", "client", "--no-multicast-scouting"]
+    endpoint = free_endpoint()
+    router = open_router(endpoint)
     path = ROOT / "skillsets" / "missions" / "unassisted.toml"
     scenario = parse_scenario(read_text(path), str(path))
     system, _ = load_system(path.parent / scenario.system)
     with tempfile.TemporaryDirectory() as tmp:
         bundle, log = Path(tmp) / "run.mcap", Path(tmp) / "log.mcap"
-        procs = [subprocess.Popen([sys.executable, "-m", "skinet_cli.main", "record", "spot_arm", *out, *zargs],
-                                  cwd=ROOT, stderr=subprocess.PIPE, text=True)
+        procs = [start_skinet("record", "spot_arm", *out, *client_args(endpoint), log=sys.stdout)
                  for out in (["--bundle", str(bundle)], ["-o", str(log)])]
         time.sleep(2.0)  # the recorders subscribed (a benchmark: a missed first step only shrinks the baseline)
-        session = zenoh.open(session_config("client", connect=[endpoint], multicast_scouting=False))
+        session = open_client(endpoint)
         started = time.monotonic()
         run_chain(system, load_typemap(path.parent / scenario.system), scenario, session=session, speed=args.speed)
         minutes = (time.monotonic() - started) / 60
         session.close()
-        for p in procs:
-            p.send_signal(signal.SIGTERM)
-            p.wait(60)
+        stop_all(procs, timeout=60)
         t0 = time.monotonic()
         verified = subprocess.run([sys.executable, "-m", "skinet_cli.main", "replay", str(bundle), "--verify"],
                                   cwd=ROOT, capture_output=True, text=True)

@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import argparse
 import statistics
-import subprocess
 import sys
 import time
 from collections.abc import Callable
@@ -31,10 +30,8 @@ from common import table, verdict
 
 import zenoh  # noqa: E402
 
-from services.common.zenoh_config import session_config  # noqa: E402
-from services.monitor import start_monitor  # noqa: E402
+from chains.chain import embedded_services  # noqa: E402
 from services.monitor.check import request_from  # noqa: E402
-from services.predictor.service import start_predictor  # noqa: E402
 from skinet.system.load import load_system
 from skinet.system.live import LiveSystem  # noqa: E402
 from skinet.verify.algorithm1 import analyse  # noqa: E402
@@ -44,6 +41,8 @@ from skinet.wire.codec import decode, encode  # noqa: E402
 from skinet.system.model import System  # noqa: E402
 from skinet.wire.messages import CheckReply, CheckRequest  # noqa: E402
 from tests.bridge_side import BridgeSide  # noqa: E402
+from tests.loopback import client_args, loopback_router  # noqa: E402
+from tests.processes import start_module, stop  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 SYSTEM_FILE = ROOT / "skillsets" / "spot_arm.toml"
@@ -97,10 +96,7 @@ def wait(predicate: Callable[[], bool], what: str, timeout: float = 20.0) -> Non
 
 def in_process(n: int) -> list[list[object]]:
     system, _ = load_system(SYSTEM_FILE)
-    session = zenoh.open(session_config("peer", multicast_scouting=False))
-    predictor = start_predictor(session, "bench")
-    monitor = start_monitor(session, system, check_rate_limit=0)  # one client asking as fast as it can
-    try:
+    with embedded_services(None, system, True, check_rate_limit=0) as (session, monitor, _):  # one asker, unlimited
         side = send_events(session, system)
         wait(lambda: monitor.counters.applied == len(TO_WARNING) and not monitor.snapshot().unsafe.prediction_stale,
              "the warning marking with a fresh prediction")
@@ -131,22 +127,6 @@ def in_process(n: int) -> list[list[object]]:
         echo.undeclare()
         side.close()
         return rows
-    finally:
-        monitor.close()
-        predictor.close()
-        session.close()
-
-
-def loopback_router(clients: int) -> tuple[str, zenoh.Session, list[zenoh.Session]]:
-    """A router on a free port of 127.0.0.1 (its endpoint and session) and ``clients`` client sessions of it."""
-    import socket
-
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        endpoint = f"tcp/127.0.0.1:{s.getsockname()[1]}"
-    router = zenoh.open(session_config("router", listen=[endpoint], multicast_scouting=False))
-    return endpoint, router, [zenoh.open(session_config("client", connect=[endpoint], multicast_scouting=False))
-                              for _ in range(clients)]
 
 
 def wait_for_monitor(session: zenoh.Session, system: str) -> None:
@@ -160,9 +140,8 @@ def wait_for_monitor(session: zenoh.Session, system: str) -> None:
 
 def through_router(n: int) -> list[list[object]]:
     endpoint, router, (client, other) = loopback_router(2)
-    monitor = subprocess.Popen([sys.executable, "-m", "services.monitor", str(SYSTEM_FILE), "--mode", "client",
-                                "--connect", endpoint, "--no-multicast-scouting", "--log-level", "ERROR",
-                                "--check-rate-limit", "0"], cwd=ROOT)
+    monitor = start_module("services.monitor", str(SYSTEM_FILE), *client_args(endpoint), "--log-level", "ERROR",
+                           "--check-rate-limit", "0", log=sys.stderr)
     try:
         system = "spot_arm"
         wait_for_monitor(client, system)
@@ -181,8 +160,7 @@ def through_router(n: int) -> list[list[object]]:
         side.close()
         return rows
     finally:
-        monitor.terminate()
-        monitor.wait(10)
+        stop(monitor, timeout=10)
         other.close()
         client.close()
         router.close()

@@ -48,7 +48,6 @@ import argparse
 import dataclasses
 import multiprocessing
 import resource
-import socket
 import statistics
 import threading
 import time
@@ -71,6 +70,7 @@ from skinet.wire.codec import DecodeError, decode, encode  # noqa: E402
 from skinet.wire.convert import bundle, statuses, system_from_bundle  # noqa: E402
 from skinet.wire.messages import CheckReply, PredictReply, PredictRequest  # noqa: E402
 from tests.bridge_side import BridgeSide  # noqa: E402
+from tests.loopback import free_endpoint  # noqa: E402
 from tests.services.hostile import Attacker, hostile_bundle  # noqa: E402
 
 GRACE = 1.0
@@ -245,12 +245,6 @@ class GoodClient:
         self._stop.set()
         self._thread.join()
         return self
-
-
-def free_endpoint() -> str:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return f"tcp/127.0.0.1:{s.getsockname()[1]}"
 
 
 def row(name: str, xs: list[float]) -> list[object]:

@@ -32,16 +32,14 @@ import cProfile
 import pstats
 import os
 import signal
-import socket
 import statistics
-import subprocess
 import sys
 import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
 
-from common import table, terminate, verdict
+from common import table, verdict
 
 import msgpack  # noqa: E402
 import zenoh  # noqa: E402
@@ -49,6 +47,8 @@ import zenoh  # noqa: E402
 from services.common.zenoh_config import session_config  # noqa: E402
 from services.monitor import start_monitor  # noqa: E402
 from tests.bridge_side import BridgeSide  # noqa: E402
+from tests.loopback import client_args, free_port  # noqa: E402
+from tests.processes import start, start_module, start_skinet, stop_all  # noqa: E402
 from skinet.system.load import load_system
 from skinet.system.live import LiveSystem  # noqa: E402
 from skinet.system.model import marking_to_json  # noqa: E402
@@ -239,15 +239,15 @@ def with_views(n: int, rounds: int = 3) -> list[list[object]]:
                 view = proc = None
                 if "another process" in views:
                     port = free_port()
-                    proc = spawn(["-m", "services.foxglove", str(SYSTEM_FILE), "--port", str(port), "--mode", "peer",
-                                  "-e", endpoint, "--no-multicast-scouting", "--wait", "0"])
-                    client = spawn([__file__, "--fox-client", f"ws://127.0.0.1:{port}"])  # as Foxglove is: apart
+                    proc = start_module("services.foxglove", str(SYSTEM_FILE), "--port", str(port), "--mode", "peer",
+                                        "-e", endpoint, "--no-multicast-scouting", "--wait", "0")
+                    client = start([sys.executable, __file__, "--fox-client", f"ws://127.0.0.1:{port}"])  # apart
                     wait_token(session, keys.alive("spot_arm", "monitor", "*"))
                     time.sleep(1.0)  # the view's start-up queries answered before measuring
                 elif "Foxglove" in views:
                     observer = Observer(session, "spot_arm", system)
                     view = FoxgloveView(observer, "127.0.0.1", 0)
-                    client = spawn([__file__, "--fox-client", view.url])
+                    client = start([sys.executable, __file__, "--fox-client", view.url])
                     time.sleep(1.0)  # the client connected and subscribed before measuring
                 payloads = events(n + 200)
                 publishers = {k: session.declare_publisher(k, **BLOCK) for k in {k for k, _ in payloads}}
@@ -257,9 +257,9 @@ def with_views(n: int, rounds: int = 3) -> list[list[object]]:
                 if incidents is not None:
                     incidents.close()
                 if proc is not None:
-                    terminate([client, proc])
+                    stop_all([client, proc])
                 if view is not None:
-                    terminate([client])
+                    stop_all([client])
                     view.close()
                     observer.close()
                 folder.cleanup()
@@ -309,17 +309,6 @@ async def _fox_client(url: str, stop: threading.Event, aiohttp, json_, retry: bo
 # -- across processes ------------------------------------------------------------------
 
 
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def spawn(args: list[str]) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, *args], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                            text=True, start_new_session=True)
-
-
 def wait_token(session: zenoh.Session, key: str, timeout: float = 10.0) -> None:
     seen = threading.Event()
     sub = session.liveliness().declare_subscriber(key, lambda s: seen.set(), history=True)
@@ -337,13 +326,13 @@ def cpu_seconds(pid: int) -> float:
 
 def across_processes(n: int, burst: int) -> list[list[object]]:
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    client = ["--mode", "client", "--connect", endpoint, "--no-multicast-scouting"]
-    router = spawn(["-m", "skinet_cli.main", "router", "--listen", endpoint, "--no-auth"])  # loopback only
+    client = client_args(endpoint)
+    router = start_skinet("router", "--listen", endpoint, "--no-auth")  # loopback only
     procs = [router]
     rows = []
     try:
         assert router.stdout is not None and "listening" in router.stdout.readline()
-        procs.append(spawn([__file__, "--echo", endpoint]))
+        procs.append(start([sys.executable, __file__, "--echo", endpoint]))
         a = zenoh.open(session_config("client", connect=[endpoint], multicast_scouting=False))
         b = zenoh.open(session_config("client", connect=[endpoint], multicast_scouting=False))
         try:
@@ -364,8 +353,8 @@ def across_processes(n: int, burst: int) -> list[list[object]]:
             side = BridgeSide(a, "spot_arm", source="bench", model=load_system(SYSTEM_FILE)[0])
             for flags in ([], ["--no-express"]):
                 name = "monitor" + (" " + " ".join(flags) if flags else "")
-                monitor = spawn(["-m", "services.monitor", str(SYSTEM_FILE), *client, "--id", "bench",
-                                 "--log-level", "WARNING", *flags])
+                monitor = start_module("services.monitor", str(SYSTEM_FILE), *client, "--id", "bench",
+                                       "--log-level", "WARNING", *flags)
                 procs.append(monitor)
                 wait_token(a, keys.alive("spot_arm", "monitor", "bench"))
                 side.synced()
@@ -394,7 +383,7 @@ def across_processes(n: int, burst: int) -> list[list[object]]:
             a.close()
             b.close()
     finally:
-        terminate(procs)
+        stop_all(procs)
     return rows
 
 

@@ -46,17 +46,10 @@ from services.common.zenoh_config import session_config  # noqa: E402
 from skinet.wire import keys  # noqa: E402
 from skinet.wire.codec import decode  # noqa: E402
 from skinet.wire.messages import LiveState  # noqa: E402
+from tests.loopback import free_port  # noqa: E402
 
 SYSTEM = ROOT / "skillsets" / "spot_arm.toml"
 OFF = "3600"  # the longest period the bridge accepts: no poll within a run
-
-
-def free_port() -> int:
-    import socket
-
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 class Router:

@@ -30,21 +30,18 @@ from __future__ import annotations
 
 import argparse
 import queue
-import subprocess
 import sys
 import threading
 import time
 from pathlib import Path
 
-from bench_check import get_once, loopback_router, row, timed, wait, wait_for_monitor
+from bench_check import get_once, row, timed, wait, wait_for_monitor
 from common import table
 
 import zenoh  # noqa: E402
 
-from services.common.zenoh_config import session_config  # noqa: E402
-from services.monitor import start_monitor  # noqa: E402
+from chains.chain import embedded_services  # noqa: E402
 from services.pilot import start_pilot  # noqa: E402
-from services.predictor.service import start_predictor  # noqa: E402
 from skinet.system.load import load_goals, load_system, load_typemap
 from skinet.files.read import read_text
 from skinet.pilot.flight import fly  # noqa: E402
@@ -58,6 +55,8 @@ from skinet.wire.messages import (  # noqa: E402
     CheckRequest, LiveState, PilotCommand, PilotGoalReply, PilotGoalRequest, PilotStatus, UnsafeReport,
 )
 from tests.bridge_side import BridgeSide  # noqa: E402
+from tests.loopback import client_args, loopback_router  # noqa: E402
+from tests.processes import start_module, stop_all  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 SYSTEM_FILE = ROOT / "skillsets" / "spot_arm.toml"
@@ -165,30 +164,25 @@ def check_round_trip(session: zenoh.Session, system: str, n: int) -> list[float]
 
 def in_process(n: int) -> list[list[object]]:
     system, _ = load_system(SYSTEM_FILE)
-    session = zenoh.open(session_config("peer", multicast_scouting=False))
-    predictor = start_predictor(session, "bench")
-    monitor = start_monitor(session, system, check_rate_limit=0)  # the pilot asks at machine speed here
-    side = BridgeSide(session, system.name, source="bench", model=system)
-    try:
-        side.synced()
-        samples, waits = laps(session, system, side, n)
-        return [row("in-process: LiveState -> command sent", samples, None),
-                row("  of which: the step's prediction coming (UnsafeReport)", waits, None),
-                row("baseline: the strict check's round trip, same session",
-                    check_round_trip(session, system.name, 500), None)]
-    finally:
-        side.close()
-        monitor.close()
-        predictor.close()
-        session.close()
+    # the pilot asks at machine speed here: no rate limit
+    with embedded_services(None, system, True, check_rate_limit=0) as (session, _, _):
+        side = BridgeSide(session, system.name, source="bench", model=system)
+        try:
+            side.synced()
+            samples, waits = laps(session, system, side, n)
+            return [row("in-process: LiveState -> command sent", samples, None),
+                    row("  of which: the step's prediction coming (UnsafeReport)", waits, None),
+                    row("baseline: the strict check's round trip, same session",
+                        check_round_trip(session, system.name, 500), None)]
+        finally:
+            side.close()
 
 
 def through_router(n: int) -> list[list[object]]:
     endpoint, router, (client, bridge) = loopback_router(2)
-    zargs = ["--mode", "client", "--connect", endpoint, "--no-multicast-scouting", "--log-level", "ERROR"]
-    procs = [subprocess.Popen([sys.executable, "-m", "services.predictor", *zargs], cwd=ROOT),
-             subprocess.Popen([sys.executable, "-m", "services.monitor", str(SYSTEM_FILE), *zargs,
-                               "--check-rate-limit", "0"], cwd=ROOT)]
+    zargs = [*client_args(endpoint), "--log-level", "ERROR"]
+    procs = [start_module("services.predictor", *zargs, log=sys.stderr),
+             start_module("services.monitor", str(SYSTEM_FILE), *zargs, "--check-rate-limit", "0", log=sys.stderr)]
     try:
         system, _ = load_system(SYSTEM_FILE)
         wait_for_monitor(client, system.name)
@@ -202,9 +196,7 @@ def through_router(n: int) -> list[list[object]]:
         side.close()
         return rows
     finally:
-        for p in procs:
-            p.terminate()
-            p.wait(10)
+        stop_all(procs, timeout=10)
         bridge.close()
         client.close()
         router.close()

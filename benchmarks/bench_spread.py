@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import signal
 import statistics
 import subprocess
 import tempfile
@@ -36,8 +35,8 @@ import threading
 import time
 from pathlib import Path
 
-from bench_latency import free_port, spawn, wait_token
-from common import table, terminate
+from bench_latency import wait_token
+from common import table
 
 import zenoh  # noqa: E402
 
@@ -49,6 +48,8 @@ from skinet.wire import keys  # noqa: E402
 from skinet.wire.codec import encode  # noqa: E402
 from skinet.wire.convert import bundle, marking_of  # noqa: E402
 from skinet.wire.messages import SkillsetStatus  # noqa: E402
+from tests.loopback import client_args, free_endpoint  # noqa: E402
+from tests.processes import start_module, start_skinet, stop_all  # noqa: E402
 from tests.services.test_monitor import _heavy_system  # noqa: E402  (the system files)
 
 
@@ -144,9 +145,9 @@ def main() -> None:
     args = ap.parse_args()
     folder = Path(tempfile.mkdtemp(prefix="bench-spread-"))
     system, marking = fleet_system(folder, args.pairs)
-    endpoint = f"tcp/127.0.0.1:{free_port()}"
-    zargs = ["--mode", "client", "--connect", endpoint, "--no-multicast-scouting"]
-    router = spawn(["-m", "skinet_cli.main", "router", "--listen", endpoint, "--no-auth"])  # loopback only
+    endpoint = free_endpoint()
+    zargs = client_args(endpoint)
+    router = start_skinet("router", "--listen", endpoint, "--no-auth")  # loopback only
     procs: list[subprocess.Popen] = [router]
     rows = []
     try:
@@ -155,20 +156,18 @@ def main() -> None:
                                            lambda q: (q.reply(q.key_expr, encode(bundle(system))), q.drop()))
         for count, spread in ((1, True), (2, False), (2, True)):
             names = [f"i{k}" for k in range(1, count + 1)]
-            pool = [spawn(["-m", "services.predictor", "--instance", name, *zargs]) for name in names]
+            pool = [start_module("services.predictor", "--instance", name, *zargs) for name in names]
             procs += pool
             for name in names:
                 wait_token(watcher, keys.alive(keys.ANY_SYSTEM, "predictor", name), timeout=20)
             load = os.getloadavg()[0]
             rows.append(run(endpoint, system, marking, names, spread, args.clients, args.period, args.seconds)
                         + [f"{load:.1f}"])
-            for p in pool:
-                p.send_signal(signal.SIGTERM)
-                p.wait(10)
+            stop_all(pool, timeout=10)
         served.undeclare()
         watcher.close()
     finally:
-        terminate(procs)
+        stop_all(procs)
     print(f"{args.clients} clients, one new marking each every {1000 * args.period:.0f} ms, {args.seconds:.0f} s "
           f"per row; system {system.name} ({args.pairs} Spot+arm pairs); {os.cpu_count()} CPUs, shared")
     print(table(["pool", "answered", "per s", "share", "failed", "p50 ms", "p99 ms", "load avg"], rows))

@@ -154,17 +154,3 @@ def table(headers: Sequence[str], rows: Sequence[Sequence[object]]) -> str:
 
 def verdict(ok: bool) -> str:
     return "PASS" if ok else "MISS"
-
-
-def terminate(procs: Sequence["subprocess.Popen"], timeout: float = 5.0) -> None:
-    """SIGTERM every process still running (last started first), SIGKILL those that outlive ``timeout``."""
-    import signal
-    import subprocess
-
-    for p in reversed(procs):
-        if p.poll() is None:
-            p.send_signal(signal.SIGTERM)
-        try:
-            p.wait(timeout)
-        except subprocess.TimeoutExpired:
-            p.kill()

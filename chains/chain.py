@@ -21,6 +21,7 @@ import itertools
 import time
 from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
+from pathlib import Path
 from typing import Any, NamedTuple
 
 import zenoh
@@ -33,6 +34,7 @@ from services.predictor.service import start_predictor
 from services.simulator import Simulator
 from services.simulator.driver import StepRun
 from skinet.system.live import LiveSystem
+from skinet.system.load import load_bindings, load_typemap
 from skinet.mission.scenario import Scenario, StepRecord, flags_on
 from skinet.ros.binding import Binding
 from skinet.ros.keys import KeyStyle
@@ -164,6 +166,16 @@ def run_bound_chain(
         return records
 
 
+def run_any_chain(system: System, system_file: Path, scenario: Scenario, *,
+                  then: Callable[[BoundChain], None] | None = None, **options: Any) -> list[StepRecord]:
+    """:func:`run_bound_chain` for a system whose skillsets are bound to plain ROS 2 interfaces (the bindings its
+    file names), else :func:`run_chain` with the type map of ``system_file``: the chain a scenario file plays on.
+    ``options`` are theirs, ``then`` the bound chain's only.  Cost: reading the bindings or the type map once."""
+    if any(c.binding for c in system.components):
+        return run_bound_chain(system, load_bindings(system)[0], scenario, then=then, **options)
+    return run_chain(system, load_typemap(system_file), scenario, **options)
+
+
 class BoundChain(NamedTuple):
     """The running parts of :func:`run_bound_chain`."""
 
@@ -192,17 +204,17 @@ def shared_session(predict: bool = True) -> Iterator[zenoh.Session]:
 
 
 @contextmanager
-def embedded_services(session: zenoh.Session | None, system: System,
-                      predict: bool) -> Iterator[tuple[zenoh.Session, Any, list[Any]]]:
-    """A session (a new peer one unless given), the monitor and a predictor on it, and the list of
-    services to close at the end: the monitor first, then the others in reverse order (the session too, if it
-    is ours)."""
+def embedded_services(session: zenoh.Session | None, system: System, predict: bool,
+                      **monitor_options: Any) -> Iterator[tuple[zenoh.Session, Any, list[Any]]]:
+    """A session (a new peer one unless given), the monitor (``monitor_options``: :func:`start_monitor`'s) and a
+    predictor on it, and the list of services to close at the end: the monitor first, then the others in reverse
+    order (the session too, if it is ours).  Cost: the predictor's worker processes start (about 1.5 s)."""
     own = session is None
     if session is None:
         session = zenoh.open(session_config("peer", multicast_scouting=False))
     services: list[Any] = []
     try:
-        monitor = start_monitor(session, system)
+        monitor = start_monitor(session, system, **monitor_options)
         services.append(monitor)
         if predict:
             services.append(start_predictor(session, "embedded"))

@@ -14,7 +14,7 @@ from skinet_cli.demo_pilot import PilotEntry, PlayedPilot, Row, load_pilot_entry
 from skinet_cli.live_demo import add_live_args, live_options_misused, live_session, play_live
 from services.common.options import add_no_properties_arg, load_live_system, require_properties
 from skinet.verify.explain import plural, warning_line
-from skinet.system.load import load_bindings, load_goals, load_typemap
+from skinet.system.load import load_goals, load_typemap
 from skinet.files.read import read_text
 from skinet.mission.scenario import Scenario, StepRecord, check_scenario, flagged_before, parse_scenario, replay
 from skinet.mission.log import records_to_log
@@ -146,20 +146,14 @@ def _play(args: argparse.Namespace, runs: list[tuple[Path, Scenario, System] | P
         if args.core:
             records = replay(system, scenario, predict=not args.no_predict)
             how = "core replay"
-        elif any(c.binding for c in system.components):
-            from chains.chain import run_bound_chain  # Zenoh only when the chain runs
-
-            bindings, _ = load_bindings(system)
-            records = run_bound_chain(system, bindings, scenario, predict=not args.no_predict,
-                                      then=_pilot_after_run(path, scenario, piloted), **chain)
-            how = ("simulated action servers, lifecycle node and topics -> CDR -> bridge (bindings) -> monitor -> "
-                   "predictor, embedded Zenoh session")
         else:
-            from chains.chain import run_chain  # Zenoh only when the chain runs
+            from chains.chain import run_any_chain  # Zenoh only when the chain runs
 
-            records = run_chain(system, load_typemap(path.parent / scenario.system), scenario,
-                                predict=not args.no_predict, **chain)
-            how = "simulated managers -> CDR -> bridge -> monitor -> predictor, embedded Zenoh session"
+            records = run_any_chain(system, path.parent / scenario.system, scenario, predict=not args.no_predict,
+                                    then=_pilot_after_run(path, scenario, piloted), **chain)
+            how = ("simulated action servers, lifecycle node and topics -> CDR -> bridge (bindings) -> monitor -> "
+                   "predictor, embedded Zenoh session" if any(c.binding for c in system.components) else
+                   "simulated managers -> CDR -> bridge -> monitor -> predictor, embedded Zenoh session")
         steps = sum(r.step.transition is not None for r in records)  # considered commands are no steps
         print(f"== {scenario.name} run ({path}): {steps} steps, system {system.name}")
         print(f"   chain: {how}")

@@ -23,7 +23,6 @@ from pathlib import Path
 from typing import Any
 
 from services.common.zenoh_config import add_zenoh_args
-from skinet.system.load import load_bindings, load_typemap
 from skinet.mission.scenario import Scenario, StepRecord
 from skinet.system.model import System
 from services.common.options import count, number, seconds
@@ -109,7 +108,7 @@ def play_live(args: argparse.Namespace, path: Path, scenario: Scenario, system: 
     """Play ``scenario`` on a :func:`live_session`: ``on_record`` after each step, ``then`` after the last step (a
     bound system's chain: the pilot's goals, :func:`chains.chain.run_bound_chain`), ``after`` once the run is
     over (then the chain keeps running until Ctrl-C or ``--linger``)."""
-    from chains.chain import run_bound_chain, run_chain
+    from chains.chain import run_any_chain
 
     with live_session(args, system, header) as (session, linger):
         def over(records: list[StepRecord]) -> None:
@@ -117,8 +116,5 @@ def play_live(args: argparse.Namespace, path: Path, scenario: Scenario, system: 
             linger()
 
         speed = 1.0 if args.speed is None else args.speed
-        options = dict(session=session, speed=speed, on_record=on_record, after=over)
-        if any(c.binding for c in system.components):
-            return run_bound_chain(system, load_bindings(system)[0], scenario, then=then,  # type: ignore[arg-type]
-                                   **options)
-        return run_chain(system, load_typemap(path.parent / scenario.system), scenario, **options)  # type: ignore[arg-type]
+        return run_any_chain(system, path.parent / scenario.system, scenario, then=then, session=session, speed=speed,
+                             on_record=on_record, after=over)

@@ -1,27 +1,78 @@
-"""Stopping the service processes a test started, and showing what they printed."""
+"""Starting and stopping the processes of a chain (services, ``skinet`` commands, routers), for the tests and the
+benchmarks, and showing what they printed.  Every process starts from the repository root in a session of its
+own (a Ctrl-C in the terminal reaches the test runner only); cost: one fork and exec each."""
 
 from __future__ import annotations
 
 import signal
 import subprocess
+import sys
 import threading
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import TextIO
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def start(argv: Sequence[str], log: Path | TextIO | None = None, env: dict[str, str] | None = None,
+          cwd: Path = REPO) -> subprocess.Popen:
+    """``argv`` as a process: its output (standard error too) appended to the file ``log``, written to the open
+    stream ``log``, or, without one, on a text pipe (``proc.stdout``) the caller reads."""
+    if isinstance(log, Path):
+        with log.open("ab") as out:
+            return subprocess.Popen(list(argv), cwd=cwd, env=env, stdout=out, stderr=subprocess.STDOUT,
+                                    start_new_session=True)
+    if log is not None:
+        return subprocess.Popen(list(argv), cwd=cwd, env=env, stdout=log, stderr=subprocess.STDOUT,
+                                start_new_session=True)
+    return subprocess.Popen(list(argv), cwd=cwd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                            text=True, start_new_session=True)
+
+
+def start_module(module: str, *args: str, log: Path | TextIO | None = None,
+                 env: dict[str, str] | None = None) -> subprocess.Popen:
+    """``python -m MODULE ARGS`` (a service: ``services.monitor``, ...), as :func:`start`."""
+    return start([sys.executable, "-m", module, *args], log, env)
+
+
+def start_skinet(*args: str, log: Path | TextIO | None = None) -> subprocess.Popen:
+    """``skinet ARGS``, as :func:`start`."""
+    return start_module("skinet_cli.main", *args, log=log)
+
+
+def stop(proc: subprocess.Popen, sig: int = signal.SIGTERM, timeout: float = 5.0) -> int:
+    """Send ``sig`` unless it ended, wait ``timeout`` seconds (SIGKILL then); its exit status."""
+    if proc.poll() is None:
+        proc.send_signal(sig)
+    return _ended(proc, timeout)
+
+
+def stop_all(procs: Sequence[subprocess.Popen], timeout: float = 5.0) -> None:
+    """SIGTERM every process still running (the last started first), then wait for each (SIGKILL after
+    ``timeout`` seconds): they stop together, not one after the other."""
+    for proc in reversed(procs):
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGTERM)
+    for proc in reversed(procs):
+        _ended(proc, timeout)
+
+
+def _ended(proc: subprocess.Popen, timeout: float) -> int:
+    """The exit status once ``proc`` ended, SIGKILLed after ``timeout`` seconds."""
+    try:
+        return proc.wait(timeout)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        return proc.wait(timeout)
 
 
 def stop_and_show(procs: Sequence[tuple[subprocess.Popen, Path]], tail: int | None = None) -> None:
-    """SIGTERM every process still running, wait (SIGKILL after 5 s), then print each log
-    (its last ``tail`` characters when given) under the process's module and exit status."""
-    for proc, _ in procs:
-        if proc.poll() is None:
-            proc.send_signal(signal.SIGTERM)
+    """:func:`stop_all`, then print each log (its last ``tail`` characters when given) under the process's
+    module and exit status."""
+    stop_all([proc for proc, _ in procs])
     for proc, log in procs:
-        try:
-            proc.wait(timeout=5)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
         text = log.read_text(errors="replace")
         print(f"--- {' '.join(proc.args[2:4])} (exit {proc.returncode}) ---\n{text if tail is None else text[-tail:]}")
 
@@ -30,11 +81,10 @@ class Watched:
     """A command's process with its output (standard error too), each line with the seconds since
     start at which it came, collected by a thread."""
 
-    def __init__(self, argv: Sequence[str], cwd: Path, env: dict[str, str] | None = None):
+    def __init__(self, argv: Sequence[str], cwd: Path = REPO, env: dict[str, str] | None = None):
         self.argv = list(argv)
         self.started = time.monotonic()
-        self.proc = subprocess.Popen(self.argv, cwd=cwd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                                     text=True, start_new_session=True)
+        self.proc = start(self.argv, env=env, cwd=cwd)
         self.timed: list[tuple[float, str]] = []
         self._reader = threading.Thread(target=self._read, daemon=True)
         self._reader.start()
@@ -74,11 +124,6 @@ class Watched:
         return code
 
     def stop(self) -> int:
-        """SIGTERM (SIGKILL after 30 s); the exit status."""
-        if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGTERM)
-        try:
-            return self.wait(30)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            return self.wait(10)
+        """SIGTERM (SIGKILL after 30 s); the exit status, once its output was read."""
+        stop(self.proc, timeout=30)
+        return self.wait(10)

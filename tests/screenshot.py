@@ -17,12 +17,13 @@ from __future__ import annotations
 import argparse
 import base64
 import shutil
-import socket
 import subprocess
 import sys
 import time
 from pathlib import Path
 from typing import Any
+
+from tests.loopback import free_port
 
 REPO = Path(__file__).resolve().parents[1]
 CHROMIUM_FLAGS = ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage", "--no-first-run",
@@ -71,12 +72,6 @@ def page_png(driver: Any, width: int) -> bytes:
     return base64.b64decode(shot["data"])
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 SHOWN = """
 const v = view.verdicts;
 return {seq: view.state ? view.state.seq : -1, fresh: !!view.unsafe && !view.unsafe.prediction_stale
@@ -87,7 +82,7 @@ return {seq: view.state ? view.state.seq : -1, fresh: !!view.unsafe && !view.uns
 
 def photograph(output: Path, speed: float, step: int, width: int, timeout: float = 120.0) -> str:
     """Run the live demo, photograph its page at ``step`` into ``output``; returns what was photographed."""
-    port = _free_port()
+    port = free_port()
     demo = subprocess.Popen([sys.executable, "-m", "skinet_cli.main", "demo", "--live", "--dashboard", str(port),
                              "--speed", f"{speed:g}", "--linger", "60"], cwd=REPO, stdout=subprocess.DEVNULL,
                             stderr=subprocess.PIPE, text=True)

@@ -7,12 +7,13 @@ from __future__ import annotations
 
 import os
 import re
-import socket
 import subprocess
 import threading
 import time
 import urllib.request
 from pathlib import Path
+
+from tests.loopback import free_port
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -30,12 +31,6 @@ def make(*args: str, timeout: float) -> subprocess.CompletedProcess[str]:
     env = {k: v for k, v in os.environ.items() if not k.startswith(("SKINET_", "MAKEFLAGS", "MFLAGS"))}
     return subprocess.run(["make", "--no-print-directory", *args], cwd=REPO, capture_output=True, text=True,
                           timeout=timeout, env=env)
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def test_the_quickstart_is_two_make_targets_and_live_a_third() -> None:

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import functools
 import json
-import socket
 import struct
 import threading
 import time
@@ -30,6 +29,7 @@ from skinet.wire.log import MAX_ERRORS, Entry, log_line, read_log
 from skinet.wire.messages import (
     CanonicalEvent, LiveState, PropertyVerdict, SkillsetStatus, StateSpaceReport, UnsafeEntry, UnsafeReport, Verdicts,
 )
+from tests.loopback import free_endpoint
 
 REPO = Path(__file__).resolve().parents[1]
 MISSIONS = REPO / "skillsets" / "missions"
@@ -332,12 +332,6 @@ def test_timeline_marks_violations_and_unsafe_counts() -> None:
 # -- skinet record on a real Zenoh session --------------------------------------------------
 
 
-def _free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 def _wait_token(session: zenoh.Session, key_expr: str, timeout: float = 10.0) -> None:
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
@@ -350,7 +344,7 @@ def _wait_token(session: zenoh.Session, key_expr: str, timeout: float = 10.0) ->
 @pytest.mark.parametrize("name", ["rec.jsonl", "rec.mcap"])
 def test_record_writes_what_is_published(tmp_path: Path, paper_system: System,
                                          capsys: pytest.CaptureFixture[str], name: str) -> None:
-    endpoint = f"tcp/127.0.0.1:{_free_port()}"
+    endpoint = free_endpoint()
     out = tmp_path / name
     messages = _messages()
     model = bundle(paper_system)

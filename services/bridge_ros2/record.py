@@ -79,10 +79,12 @@ def recorded_topics(system: System, typemap: Mapping[str, str], bindings: Mappin
 class BagRecorder:
     """Records ``topics`` from ``session`` into a new rosbag2 at ``path`` until :meth:`close`.
 
+    ``heard_only``: a topic gets its connection with its first message, so the bag lacks the topics that
+    said nothing (as a recording of whatever was published; default: every topic has one from the start).
     Raises ``OSError`` (and ``rosbags`` errors) when the bag cannot be created."""
 
     def __init__(self, session: zenoh.Session, path: str | Path, topics: list[RecordedTopic], *,
-                 storage: str = "mcap"):
+                 storage: str = "mcap", heard_only: bool = False):
         self.path = Path(path)
         self.counts: dict[str, int] = {t.name: 0 for t in topics}
         self._lock = threading.Lock()
@@ -91,7 +93,7 @@ class BagRecorder:
         self._queue: queue.SimpleQueue[tuple[str, int, bytes] | None] = queue.SimpleQueue()
         self._opened = threading.Event()
         self._error: BaseException | None = None
-        self._thread = threading.Thread(target=self._write, args=(topics, storage), name="skinet-rosbag",
+        self._thread = threading.Thread(target=self._write, args=(topics, storage, heard_only), name="skinet-rosbag",
                                         daemon=True)
         self._thread.start()
         self._opened.wait()
@@ -106,12 +108,17 @@ class BagRecorder:
             else:
                 self._subscribers.append(session.declare_subscriber(t.key, handler))
 
-    def _write(self, topics: list[RecordedTopic], storage: str) -> None:
+    def _write(self, topics: list[RecordedTopic], storage: str, heard_only: bool) -> None:
         """The writer thread: opens the bag, then writes what the callbacks queue until the end mark."""
+        by_name = {t.name: t for t in topics}
+
+        def connect(name: str) -> Any:
+            return writer.add_connection(name, by_name[name].typename, typestore=by_name[name].store)
+
         try:
             writer = Writer(self.path, version=9, storage_plugin=STORAGES[storage])
             writer.open()
-            connections = {t.name: writer.add_connection(t.name, t.typename, typestore=t.store) for t in topics}
+            connections = {} if heard_only else {t.name: connect(t.name) for t in topics}
         except BaseException as exc:  # reported by the constructor
             self._error = exc
             self._opened.set()
@@ -120,6 +127,8 @@ class BagRecorder:
         try:
             while (item := self._queue.get()) is not None:
                 name, stamp, data = item
+                if name not in connections:
+                    connections[name] = connect(name)
                 writer.write(connections[name], stamp, data)
         finally:
             writer.close()

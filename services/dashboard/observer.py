@@ -20,6 +20,7 @@ import os
 import threading
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 import zenoh
@@ -236,12 +237,62 @@ def resolve_system(spec: str) -> tuple[str, System | None]:
         raise SkinetError(str(exc)) from None
 
 
-def observe(args: argparse.Namespace) -> tuple[zenoh.Config, zenoh.Session, Observer]:
-    """A served view's Zenoh configuration, session and observer of the system ``args.system`` names."""
+def goal_config(args: argparse.Namespace, config: zenoh.Config) -> zenoh.Config | None:
+    """The Zenoh configuration of the goal box's own login (the dashboard's ``--goal-user``), at the router
+    ``config`` connects to; ``None`` without one (a view with no such option).  :class:`SkinetError` (one line)
+    for what cannot log in."""
+    user = getattr(args, "goal_user", None)
+    if not user:
+        return None
+    from services.common.zenoh_config import login, session_config
+    from services.secrets.handout import client_config, client_files
+
+    connect = json.loads(config.get_json("connect/endpoints") or "[]")
+    if not connect:
+        raise SkinetError(f"--goal-user {user} logs in to a router: give its endpoint with --connect/-e")
+    folder = Path(getattr(args, "goal_secrets", None) or os.environ.get("SKINET_SECRETS")
+                  or Path.home() / ".config" / "skinet" / "secrets")
+    tls = [e for e in connect if e.startswith("tls/")]
+    if tls:  # the router binds certificates to users: the goal login brings its own
+        return zenoh.Config.from_json5(json.dumps(client_config(client_files(folder, user), tls[0])))
+    password = login(argparse.Namespace(user=user, password=None, password_file=str(folder / f"{user}.password")))
+    return session_config("client", connect, user=user, password=password["password"])
+
+
+@dataclass
+class View:
+    """What a served view observes through: its Zenoh configuration, session and observer, and the goal box's own
+    session when it has a login of its own (:func:`goal_config`); :meth:`close` closes them all."""
+
+    config: zenoh.Config
+    session: zenoh.Session
+    observer: Observer
+    goal_session: zenoh.Session | None = None
+
+    def close(self) -> None:
+        self.observer.close()
+        self.session.close()
+        if self.goal_session is not None:
+            self.goal_session.close()
+
+
+def observe(args: argparse.Namespace) -> View:
+    """A served view of the system ``args.system`` names: the session of ``args``' Zenoh options and, with a
+    goal login (``args.goal_user``), a second session the observer sends goals from.  Raises a one-line
+    :class:`SkinetError` (a bad system, a missing secret: before any session is opened; no router, a refused
+    login)."""
     name, system = resolve_system(args.system)
     config = config_from_args(args)
+    goals = goal_config(args, config)
     session = open_session(config, said_at_the_end)  # an endpoint still unreached after --wait: follow's error
-    return config, session, Observer(session, name, system, client=client_name(config))
+    try:
+        goal_session = open_session(goals) if goals is not None else None
+    except SkinetError:
+        session.close()
+        raise
+    goal_login = None if goals is None or goal_session is None else (goal_session, client_name(goals))
+    observer = Observer(session, name, system, client=client_name(config), goal_login=goal_login)
+    return View(config, session, observer, goal_session)
 
 
 def follow(observer: Observer, config: zenoh.Config, wait: float, stop: threading.Event,

@@ -40,20 +40,18 @@ def serve(args: argparse.Namespace, stop: threading.Event) -> int:
     """Serve until ``stop``; returns the exit status."""
     setup_logging(args)
     log = logging.getLogger("skinet.foxglove")
-    config, session, observer = observe(args)
-    name = observer.name
+    view = observe(args)
+    observer = view.observer
     try:
-        view = start_foxglove(observer, args.host, args.port)
+        foxglove = start_foxglove(observer, args.host, args.port)
     except SkinetError:
-        observer.close()
-        session.close()
-        raise
-    print(f"skinet foxglove: system {name} on {view.url} (Foxglove: Open connection, Foxglove WebSocket; "
-          "layout docs/foxglove-layout.json)", file=sys.stderr, flush=True)
-    try:
-        follow(observer, config, args.wait, stop, log)
-    finally:
         view.close()
-        observer.close()
-        session.close()
+        raise
+    print(f"skinet foxglove: system {observer.name} on {foxglove.url} (Foxglove: Open connection, Foxglove "
+          "WebSocket; layout docs/foxglove-layout.json)", file=sys.stderr, flush=True)
+    try:
+        follow(observer, view.config, args.wait, stop, log)
+    finally:
+        foxglove.close()
+        view.close()
     return 0

@@ -10,16 +10,18 @@ and a bad binding, give one line and exit 1.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import logging
 import time
+from collections.abc import Callable, Mapping
 from pathlib import Path
 
 import pytest
 import zenoh
-from rosbags.rosbag2 import StoragePlugin
+from rosbags.highlevel import AnyReader
 
-from bound_bags import BagRecorder
+from services.bridge_ros2.record import BagRecorder, recorded_topics
 from services.common.zenoh_config import session_config
 from services.simulator.bound import BoundSimulator
 from skinet.errors import SourceError
@@ -42,20 +44,32 @@ def nav2():
     return system, bindings
 
 
-def record(nav2, run) -> BagRecorder:  # type: ignore[no-untyped-def]
-    """Play ``run(robot)`` on the simulated robot while recording its topics."""
+def record(nav2, run: Callable[[BoundSimulator], None],  # type: ignore[no-untyped-def]
+           bags: Mapping[Path, tuple[str, Mapping[str, str]]]) -> None:
+    """Play ``run(robot)`` on the simulated robot while ``skinet rosbag``'s recorder writes each bag of ``bags``
+    (path -> storage, and the types some topics are recorded under instead of their own: a wrong bag); a bag
+    lacks the topics the run never published on (``not recorded``)."""
     system, bindings = nav2
+    topics = recorded_topics(system, {}, bindings)
     session = zenoh.open(session_config("peer", multicast_scouting=False))
-    recorder = BagRecorder(session, bindings)
+    recorders = [BagRecorder(session, path, [dataclasses.replace(t, typename=types.get(t.name, t.typename))
+                                             for t in topics], storage=storage, heard_only=True)
+                 for path, (storage, types) in bags.items()]
     robot = BoundSimulator(session, system, bindings)
     try:
         run(robot)
         time.sleep(0.2)
     finally:
-        recorder.close()
+        for recorder in recorders:
+            recorder.close()
         robot.close()
         session.close()
-    return recorder
+
+
+def stamps(bag: Path) -> list[float]:
+    """The record times of ``bag``'s messages, in seconds."""
+    with AnyReader([bag]) as reader:
+        return [ns * 1e-9 for _, ns, _ in reader.messages()]
 
 
 @pytest.fixture(scope="module")
@@ -66,14 +80,15 @@ def clean(nav2, tmp_path_factory) -> dict[str, Path]:  # type: ignore[no-untyped
         robot.publish_topics(scenario.topics)
         robot.drive(scenario, speed=0, on_step=lambda _: time.sleep(0.02))
 
-    recorder = record(nav2, run)
     folder = tmp_path_factory.mktemp("clean")
-    return {"sqlite3": recorder.write(folder / "sqlite3", StoragePlugin.SQLITE3),
-            "mcap": recorder.write(folder / "mcap", StoragePlugin.MCAP)}
+    bags = {storage: folder / storage for storage in ("sqlite3", "mcap")}
+    record(nav2, run, {path: (storage, {}) for storage, path in bags.items()})
+    return bags
 
 
 @pytest.fixture(scope="module")
 def drifting(nav2, tmp_path_factory):  # type: ignore[no-untyped-def]
+    """The drifting run's bag, the same run with /battery_state recorded under another type, and the goals."""
     goals: list[bytes] = []
 
     def run(robot: BoundSimulator) -> None:
@@ -103,9 +118,10 @@ def drifting(nav2, tmp_path_factory):  # type: ignore[no-untyped-def]
         step()
         robot.nodes[("nav2", "navigator")].transition(1)  # active -> errorprocessing -> unconfigured
 
-    recorder = record(nav2, run)
     folder = tmp_path_factory.mktemp("drift")
-    return recorder, recorder.write(folder / "mcap", StoragePlugin.MCAP), goals
+    bag, wrong = folder / "mcap", folder / "wrong"
+    record(nav2, run, {bag: ("mcap", {}), wrong: ("sqlite3", {"/battery_state": "std_msgs/msg/Float32"})})
+    return bag, wrong, goals
 
 
 @pytest.mark.parametrize("storage", ["sqlite3", "mcap"])
@@ -138,10 +154,11 @@ def test_a_bag_given_for_a_monitor_log_is_one_line_pointing_to_conform(
 
 
 def test_a_drifting_run_reports_each_divergence_with_its_time(drifting, capsys: pytest.CaptureFixture[str]) -> None:
-    recorder, bag, goals = drifting
+    bag, _, goals = drifting
     assert main(["conform", SYSTEM, str(bag), "--json"]) == 3
     report, = json.loads(capsys.readouterr().out)
-    start = recorder.samples[0][0] * 1e-9
+    recorded = stamps(bag)
+    start = recorded[0]
     assert [d["what"] for d in report["divergences"]] == [
         f"{NAV}: goal {goal_text(goals[0])} ACCEPTED: navigate started, but the model says navigate cannot start: "
         "precondition 'active' (navigator == Active) false (navigator is Unconfigured, motion is Still, dock is "
@@ -152,8 +169,7 @@ def test_a_drifting_run_reports_each_divergence_with_its_time(drifting, capsys: 
         "/bt_navigator/transition_event: errorprocessing -> unconfigured (navigator Active -> Unconfigured): "
         "navigator became Unconfigured, but no event of the model takes navigator from Active to Unconfigured here",
     ]
-    stamps = [ns * 1e-9 for ns, _, _, _ in recorder.samples]
-    assert all(any(abs(d["stamp"] - s) < 1e-6 for s in stamps) for d in report["divergences"])  # record times
+    assert all(any(abs(d["stamp"] - s) < 1e-6 for s in recorded) for d in report["divergences"])  # record times
     assert [round(d["offset"], 6) for d in report["divergences"]] == [round(d["stamp"] - start, 6)
                                                                       for d in report["divergences"]]
     assert report["unrecorded"] == ["/dock_robot/_action/status", "/emergency_stop"]
@@ -164,10 +180,8 @@ def test_a_drifting_run_reports_each_divergence_with_its_time(drifting, capsys: 
         "Z) nav2: " + report["divergences"][0]["what"])
 
 
-def test_a_bag_recording_a_bound_topic_under_another_type(drifting, tmp_path: Path,
-                                                          capsys: pytest.CaptureFixture[str]) -> None:
-    recorder, _, _ = drifting
-    bag = recorder.write(tmp_path / "wrong", StoragePlugin.SQLITE3, types={"/battery_state": "std_msgs/msg/Float32"})
+def test_a_bag_recording_a_bound_topic_under_another_type(drifting, capsys: pytest.CaptureFixture[str]) -> None:
+    _, bag, _ = drifting
     assert main(["conform", SYSTEM, str(bag)]) == 1
     assert capsys.readouterr().err.strip().splitlines() == [
         f"{bag}: error: topic /battery_state is recorded as std_msgs/msg/Float32; the binding of nav2 reads it as "

@@ -11,19 +11,13 @@ from __future__ import annotations
 
 import os
 import random
-import socket
 import subprocess
 import threading
 import time
 from pathlib import Path
 
 from services.simulator.dds import loopback_config
-
-
-def free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+from tests.loopback import free_port
 
 
 def free_domain() -> int:

@@ -7,9 +7,7 @@ Every session here is on 127.0.0.1 with multicast scouting off.
 from __future__ import annotations
 
 import json
-import socket
 import subprocess
-import sys
 import tempfile
 import threading
 import time
@@ -22,7 +20,8 @@ import zenoh
 from services.common.security import USERS, ensure_tls, ensure_users, tls_connect_config, tls_listen_config
 from skinet.system.load import load_system
 from skinet.files.read import read_text
-from tests.processes import stop_and_show
+from tests.loopback import client_args, free_port  # noqa: F401  (free_port: the deployment tests and bench_flood)
+from tests.processes import start_module, stop_and_show
 from skinet.mission.scenario import Scenario, parse_scenario, replay
 from skinet.wire import keys
 from skinet.wire.codec import DecodeError, decode, encode
@@ -40,13 +39,6 @@ USERS_FILE = SECRETS / "users.txt"
 TLS = SECRETS / "tls"  # the tests' CA, with a certificate for the router and each user
 UNASSISTED = REPO / "skillsets" / "missions" / "unassisted.toml"
 SYSTEM = "spot_arm"
-
-
-def free_port() -> int:
-    """A TCP port on 127.0.0.1 that was free a moment ago."""
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def passwords() -> dict[str, str]:
@@ -140,12 +132,9 @@ class Services:
     def start(self, module: str, user: str, router: str, *args: str) -> subprocess.Popen:
         cfg = write_login_file(self.folder / f"{user}-{len(self.procs)}.json5", user)
         log = self.folder / f"{module}-{len(self.procs)}.log"
-        with log.open("wb") as out:
-            p = subprocess.Popen([sys.executable, "-m", module, *args, "--mode", "client", "--connect", router,
-                                  "--no-multicast-scouting", "--zenoh-config", str(cfg)],
-                                 cwd=REPO, stdout=out, stderr=subprocess.STDOUT)
-        self.procs.append((p, log))
-        return p
+        proc = start_module(module, *args, *client_args(router), "--zenoh-config", str(cfg), log=log)
+        self.procs.append((proc, log))
+        return proc
 
     def log(self, proc: subprocess.Popen) -> str:
         return next(log for p, log in self.procs if p is proc).read_text(errors="replace")

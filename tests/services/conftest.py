@@ -8,28 +8,19 @@ sleeping.
 
 from __future__ import annotations
 
-import socket
 import subprocess
-import sys
 import threading
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 import zenoh
 
-from services.common.zenoh_config import session_config
-from tests.processes import stop_and_show
-
-REPO = Path(__file__).resolve().parents[2]
-
-
-def free_port() -> int:
-    """A TCP port on 127.0.0.1 that was free a moment ago."""
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+# The service tests take these from here; each has one definition, for the benchmarks too.
+from tests.loopback import client_args, free_endpoint, free_port, open_client, open_router  # noqa: F401
+from tests.processes import REPO, start_module, start_skinet, stop_and_show  # noqa: F401
 
 
 class LivelinessWatch:
@@ -69,18 +60,6 @@ class LivelinessWatch:
         self._sub.undeclare()
 
 
-def open_router(endpoint: str) -> zenoh.Session:
-    """A Python session in router mode listening on ``endpoint``."""
-    config = session_config("router", listen=[endpoint], multicast_scouting=False)
-    config.insert_json5("scouting/delay", "0")  # nothing to scout: open at once, not after 0.5 s
-    return zenoh.open(config)
-
-
-def open_client(endpoint: str) -> zenoh.Session:
-    """A client session connected to the router at ``endpoint``."""
-    return zenoh.open(session_config("client", connect=[endpoint], multicast_scouting=False))
-
-
 def wait_queryable(session: zenoh.Session, key: str, timeout: float = 10.0) -> None:
     """Until a queryable on ``key`` is reachable from ``session`` (one declared on another session reaches the
     router a moment later)."""
@@ -95,21 +74,10 @@ def wait_queryable(session: zenoh.Session, key: str, timeout: float = 10.0) -> N
         querier.undeclare()
 
 
-def start_skinet(*args: str) -> subprocess.Popen:
-    """``skinet ARGS`` in its own process group, output (stderr too) on its text stdout."""
-    return subprocess.Popen([sys.executable, "-m", "skinet_cli.main", *args], cwd=REPO, stdout=subprocess.PIPE,
-                            stderr=subprocess.STDOUT, text=True, start_new_session=True)
-
-
-def client_args(endpoint: str) -> list[str]:
-    """Command-line flags making a service a client of the router at ``endpoint``."""
-    return ["--mode", "client", "--connect", endpoint, "--no-multicast-scouting"]
-
-
 @pytest.fixture
 def router() -> Iterator[str]:
     """A fresh router (a Python session in router mode); yields ``tcp/127.0.0.1:PORT``."""
-    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    endpoint = free_endpoint()
     session = open_router(endpoint)
     try:
         yield endpoint
@@ -172,11 +140,8 @@ def spawn(tmp_path: Path) -> Iterator[Callable[..., subprocess.Popen]]:
 
     def start(module: str, *args: str) -> subprocess.Popen:
         log = tmp_path / f"{module}-{len(procs)}.log"
-        with log.open("wb") as out:
-            proc = subprocess.Popen([sys.executable, "-m", module, *args], cwd=REPO,
-                                    stdout=out, stderr=subprocess.STDOUT)
-        procs.append((proc, log))
-        return proc
+        procs.append((start_module(module, *args, log=log), log))
+        return procs[-1][0]
 
     yield start
     stop_and_show(procs)
@@ -192,3 +157,26 @@ def spot_arm() -> tuple:
 
     path = REPO / "skillsets" / "spot_arm.toml"
     return load_system(path)[0], load_typemap(path)
+
+
+@pytest.fixture
+def robots(client_factory: Callable[[], zenoh.Session], spot_arm: tuple) -> Iterator[Callable[..., Any]]:
+    """Factory of the paper's robot with a pilot, each service on a client session of :func:`router`
+    (:class:`tests.services.pilot_robot.Robot`; ``robots(**options)`` takes its options), closed after the test."""
+    from tests.services.pilot_robot import Robot
+
+    started: list[Robot] = []
+
+    def start(**options: Any) -> Robot:
+        started.append(Robot(client_factory, *spot_arm, **options))
+        return started[-1]
+
+    yield start
+    for r in reversed(started):
+        r.close()
+
+
+@pytest.fixture
+def robot(robots: Callable[..., Any]) -> Any:
+    """:func:`robots` with the robot's defaults."""
+    return robots()

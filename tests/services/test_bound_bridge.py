@@ -215,19 +215,17 @@ def test_the_bridge_command_replays_a_bag_of_a_bound_robot(nav2, session, tmp_pa
     import subprocess
     import sys
 
-    from rosbags.rosbag2 import StoragePlugin
-
-    from bound_bags import BagRecorder
+    from services.bridge_ros2.record import BagRecorder, recorded_topics
 
     system, bindings, scenario = nav2
-    recorder = BagRecorder(session, bindings)
+    bag = tmp_path / "run"
+    recorder = BagRecorder(session, bag, recorded_topics(system, {}, bindings), heard_only=True)
     robot = BoundSimulator(session, system, bindings)
     robot.publish_topics(scenario.topics)
     robot.drive(scenario, speed=0, on_step=lambda _: time.sleep(0.02))
     time.sleep(0.2)
     recorder.close()
     robot.close()
-    bag = recorder.write(tmp_path / "run", StoragePlugin.MCAP)
     events = Events(client, system.name)
     time.sleep(0.3)
     done = subprocess.run([sys.executable, "-m", "services.bridge_ros2", str(NAV2 / "nav2.toml"), "--replay", str(bag),

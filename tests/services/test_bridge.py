@@ -18,11 +18,12 @@ from pathlib import Path
 import pytest
 import zenoh
 from rosbags.highlevel import AnyReader
-from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.rosbag2 import StoragePlugin
 from rosbags.typesys import Stores, get_typestore, get_types_from_msg
 
 from event_watch import Events
 from services.bridge_ros2 import Feed, replay_bag, start_bridge
+from services.bridge_ros2.record import BagRecorder, recorded_topics
 from services.bridge_ros2.service import Bridge
 from services.common.zenoh_config import session_config
 from services.simulator import Simulator
@@ -90,40 +91,6 @@ def test_one_subscription_covers_every_topic(spot_arm, style: KeyStyle):
 
 
 # -- live chain -----------------------------------------------------------------------------
-
-
-class Recorder:
-    """Every sample of the managers' topics with its arrival time: a ``ros2 bag record``."""
-
-    def __init__(self, session: zenoh.Session, system, style: KeyStyle = KeyStyle()):
-        self.samples: list[tuple[int, str, str, str, bytes]] = []  # ns, skillset, fqn, typename, CDR
-        self._lock = threading.Lock()
-        self._subs = []
-        for c in system.components:
-            topics = {t.topic: t for t in manager_topics(c.skillset)}
-
-            def on_sample(sample, c=c, topics=topics):
-                t = topics.get(style.topic(c.manager, str(sample.key_expr)) or "")
-                if t is not None:
-                    with self._lock:
-                        stamp = max(time.time_ns(), self.samples[-1][0] + 1 if self.samples else 0)
-                        self.samples.append((stamp, c.name, topic_fqn(c.manager, t.topic), t.typename,
-                                             sample.payload.to_bytes()))
-
-            self._subs.append(session.declare_subscriber(  # on Zenoh's thread: the arrival order across managers
-                style.all_topics(c.manager, c.skillset), zenoh.handlers.Callback(on_sample, indirect=False)))
-
-    def write(self, path: Path, plugin: StoragePlugin, system, typemap) -> Path:
-        stores = {c.name: build_typestore(c.skillset, typemap) for c in system.components}
-        with self._lock:
-            samples = list(self.samples)
-        with Writer(path, version=9, storage_plugin=plugin) as writer:
-            connections = {}
-            for stamp, ss, fqn, typename, data in samples:
-                if fqn not in connections:  # stores the generated message definitions
-                    connections[fqn] = writer.add_connection(fqn, typename, typestore=stores[ss])
-                writer.write(connections[fqn], stamp, data)
-        return path
 
 
 CHAIN = """
@@ -210,12 +177,15 @@ def view(ev: CanonicalEvent) -> tuple:
 
 
 def run_chain(sessions: Callable[[], zenoh.Session], spot_arm, style: KeyStyle = KeyStyle(),
-              bridge_style: KeyStyle | None = None) -> tuple[Events, Recorder]:
-    """Simulator, bridge and a watcher on three sessions from ``sessions``; the CHAIN scenario played."""
+              bridge_style: KeyStyle | None = None, bag: Path | None = None, storage: str = "mcap") -> Events:
+    """Simulator, bridge and a watcher on three sessions from ``sessions``; the CHAIN scenario played.  With
+    ``bag``, the watcher also records the managers' topics there (``skinet rosbag``'s recorder, a ``ros2 bag
+    record`` of the topics heard)."""
     system, typemap = spot_arm
     sim_session, bridge_session, watcher = sessions(), sessions(), sessions()
     events = Events(watcher, system.name)
-    recorder = Recorder(watcher, system, style)
+    recorder = None if bag is None else BagRecorder(watcher, bag, recorded_topics(system, typemap, {}, style),
+                                                    storage=storage, heard_only=True)
     sim = Simulator(sim_session, system, typemap, style=style)
     time.sleep(0.3)  # the watcher's subscriptions reach the router
     bridge = start_bridge(bridge_session, system, typemap, style=bridge_style or style, source=SOURCE)
@@ -226,9 +196,17 @@ def run_chain(sessions: Callable[[], zenoh.Session], spot_arm, style: KeyStyle =
     assert bridge.wait_statuses(sim.statuses_published())  # the bridge has caught up
     events.wait(lambda items: len(items) >= EXPECTED_COUNT)
     time.sleep(0.2)  # nothing more comes
+    if recorder is not None:
+        recorder.close()
     bridge.close()
     sim.close()
-    return events, recorder
+    return events
+
+
+def recorded(bag: Path) -> list[tuple[str, bytes]]:
+    """The messages of ``bag`` in their record order: (topic, CDR)."""
+    with AnyReader([bag]) as reader:
+        return [(conn.topic, bytes(raw)) for conn, _, raw in reader.messages()]
 
 
 def check_chain(events: Events, spot_arm) -> None:
@@ -246,7 +224,7 @@ def check_chain(events: Events, spot_arm) -> None:
 
 
 def test_simulator_to_bridge_exact_events(client_factory, spot_arm):
-    events, _ = run_chain(client_factory, spot_arm)
+    events = run_chain(client_factory, spot_arm)
     check_chain(events, spot_arm)
 
 
@@ -254,22 +232,23 @@ def test_one_shared_peer_session(spot_arm):
     """Embedded: simulator, bridge and their listeners on a single session (docs/semantics.md §1, §7)."""
     session = zenoh.open(session_config("peer", multicast_scouting=False))
     try:
-        events, _ = run_chain(lambda: session, spot_arm)
+        events = run_chain(lambda: session, spot_arm)
         check_chain(events, spot_arm)
     finally:
         session.close()
 
 
-def test_rmw_zenoh_chain(client_factory, spot_arm):
-    events, recorder = run_chain(client_factory, spot_arm, KeyStyle(rmw_zenoh=True, domain=1))
+def test_rmw_zenoh_chain(client_factory, spot_arm, tmp_path: Path):
+    events = run_chain(client_factory, spot_arm, KeyStyle(rmw_zenoh=True, domain=1), bag=tmp_path / "bag")
     check_chain(events, spot_arm)
-    assert recorder.samples and all(fqn.startswith(("/spot/", "/kinova/")) for _, _, fqn, _, _ in recorder.samples)
+    samples = recorded(tmp_path / "bag")
+    assert samples and all(fqn.startswith(("/spot/", "/kinova/")) for fqn, _ in samples)
 
 
 def test_rmw_zenoh_humble_managers_with_a_bridge_expecting_type_hashes(client_factory, spot_arm):
     """Humble managers use TypeHashNotSupported keys (ros2/rmw_zenoh#388): the bridge takes the
     status_request key from their liveliness tokens, so its request reaches them anyway."""
-    events, _ = run_chain(client_factory, spot_arm, KeyStyle(rmw_zenoh=True, domain=2, humble=True),
+    events = run_chain(client_factory, spot_arm, KeyStyle(rmw_zenoh=True, domain=2, humble=True),
                           bridge_style=KeyStyle(rmw_zenoh=True, domain=2))
     check_chain(events, spot_arm)
 
@@ -407,8 +386,8 @@ def test_a_late_history_token_is_no_restart(client_factory, spot_arm, monkeypatc
 @pytest.mark.parametrize("plugin", [StoragePlugin.SQLITE3, StoragePlugin.MCAP], ids=["sqlite3", "mcap"])
 def test_rosbag_replay_equals_live(client_factory, spot_arm, tmp_path: Path, plugin: StoragePlugin):
     system, typemap = spot_arm
-    events, recorder = run_chain(client_factory, spot_arm)
-    bag = recorder.write(tmp_path / f"session_{plugin.name.lower()}", plugin, system, typemap)
+    bag = tmp_path / f"session_{plugin.name.lower()}"
+    events = run_chain(client_factory, spot_arm, bag=bag, storage=plugin.name.lower())
     with AnyReader([bag]) as reader:  # the bag carries the generated definitions: readable without our store
         conn = next(c for c in reader.connections if c.topic == "/spot/spot_skillset_manager/spot_skillset/status")
         assert "spot_skillset_interfaces/SkillTeleopStatus skill_teleop" in conn.msgdef.data
@@ -423,9 +402,7 @@ def test_rosbag_replay_equals_live(client_factory, spot_arm, tmp_path: Path, plu
             e.model_copy(update={"epoch": 0}) for e in events.of(ss)]
         assert len({e.epoch for e in replayed} | {e.epoch for e in events.of(ss)}) == 2
     assert feed.counters.malformed == 0
-    # In real time the replay takes as long as the recording of the topics it follows (the bag's, not the
-    # recorder's samples: a late status may reach the recorder after the bag was written; requests and
-    # other unwatched topics may come first or last and are not waited for).
+    # In real time the replay takes as long as the recording of the topics it follows.
     watched = Feed(system, typemap, SOURCE).by_fqn()
     with AnyReader([bag]) as reader:
         stamps = [t for _, t, _ in reader.messages(connections=[c for c in reader.connections
@@ -454,12 +431,12 @@ def overtaken(samples: list[tuple[str, str, bytes]], routes: dict) -> list[tuple
     return out
 
 
-def test_statuses_that_overtake_their_responses(client_factory, spot_arm):
+def test_statuses_that_overtake_their_responses(client_factory, spot_arm, tmp_path: Path):
     """Through a gateway each topic has its own route: a status may come before its responses."""
     system, typemap = spot_arm
-    events, recorder = run_chain(client_factory, spot_arm)
+    run_chain(client_factory, spot_arm, bag=tmp_path / "bag")
     routes = Feed(system, typemap, SOURCE).by_fqn()
-    samples = [(ss, fqn, data) for _, ss, fqn, _, data in recorder.samples if fqn in routes]
+    samples = [(routes[fqn][0], fqn, data) for fqn, data in recorded(tmp_path / "bag") if fqn in routes]
     swapped = overtaken(samples, routes)
     assert sum(a != b for a, b in zip(samples, swapped)) >= 10  # 7 responses overtaken, and their statuses
 
@@ -721,7 +698,8 @@ def test_command_line_programs(router, client, spawn, watch, spot_arm, tmp_path:
     scenario = tmp_path / "chain.toml"
     scenario.write_text(CHAIN.replace('"spot_arm.toml"', f'"{REPO / "skillsets" / "spot_arm.toml"}"'))
     events = Events(client, system.name)
-    recorder = Recorder(client, system)
+    bag = tmp_path / "cli_bag"
+    recorder = BagRecorder(client, bag, recorded_topics(system, typemap, {}), heard_only=True)
     alive = watch(client, keys.alive(system.name, "bridge_ros2", "*"))
     bridge = spawn("services.bridge_ros2", str(REPO / "skillsets" / "spot_arm.toml"), "--instance", "cli", *zargs)
     alive.wait(lambda tokens: len(tokens) == 1, timeout=20)
@@ -733,7 +711,7 @@ def test_command_line_programs(router, client, spawn, watch, spot_arm, tmp_path:
     assert {e.source for e in got} == {"bridge_ros2/cli"}
     bridge.terminate()
     assert bridge.wait(timeout=10) == 0
-    bag = recorder.write(tmp_path / "cli_bag", StoragePlugin.MCAP, system, typemap)
+    recorder.close()
     replay = spawn("services.bridge_ros2", str(REPO / "skillsets" / "spot_arm.toml"), "--replay", str(bag),
                    "--source", "replayed", *zargs)
     assert replay.wait(timeout=30) == 0

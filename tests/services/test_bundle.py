@@ -28,25 +28,6 @@ def skinet(*args: str) -> subprocess.CompletedProcess:
                           timeout=300)
 
 
-def play_any(scenario_path: Path, router: str) -> list:
-    """A mission through the whole chain (a bound system's through its bindings) on a client of ``router``."""
-    from chains.chain import run_bound_chain, run_chain
-    from skinet.system.load import load_bindings, load_system, load_typemap
-    from skinet.files.read import read_text
-    from skinet.mission.scenario import parse_scenario
-
-    scenario = parse_scenario(read_text(scenario_path), str(scenario_path))
-    system_file = scenario_path.parent / scenario.system
-    system, _ = load_system(system_file)
-    session = open_client(router)
-    try:
-        if any(c.binding for c in system.components):
-            return run_bound_chain(system, load_bindings(system)[0], scenario, session=session)
-        return run_chain(system, load_typemap(system_file), scenario, session=session)
-    finally:
-        session.close()
-
-
 @contextlib.contextmanager
 def recording(router: str, path: Path, system: str = "spot_arm") -> Iterator[None]:
     """``skinet record SYSTEM --bundle PATH`` on a client of ``router``, subscribed (its liveliness token seen)
@@ -71,8 +52,7 @@ def recording(router: str, path: Path, system: str = "spot_arm") -> Iterator[Non
 
 def record(router: str, run: str | Path, path: Path, system: str = "spot_arm") -> list:
     with recording(router, path, system):
-        return (play(run, router, lambda r: None) if isinstance(run, str)
-                else play_any(run, router) if isinstance(run, Path) else run(router))
+        return play(run, router) if isinstance(run, (str, Path)) else run(router)
 
 
 @pytest.fixture(scope="module")
@@ -294,7 +274,7 @@ def test_incidents_are_written_around_the_violations_and_verify(router, client_f
     folder = tmp_path / "incidents"
     incidents = Incidents(client_factory(), bundle(system), folder, window=1.0)
     try:
-        play("unassisted", router, lambda r: None)
+        play("unassisted", router)
     finally:
         incidents.close()
     assert incidents.failed == 0 and incidents.written and sorted(folder.iterdir()) == sorted(incidents.written)

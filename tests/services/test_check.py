@@ -164,39 +164,39 @@ def test_unknown_names_and_bad_requests_get_one_line_errors(monitor_factory, ses
                         reply.state_reason), reply.state_reason
 
 
-def test_example_client_asks_before_every_start(router, session, spot_arm) -> None:
+def test_example_client_asks_before_every_start(router, session, client_factory, spot_arm) -> None:
     """examples/check_client.py against simulated managers, the bridge and a monitor."""
     import subprocess
     import sys
 
+    from chains.chain import embedded_services
     from services.bridge_ros2 import start_bridge
-    from services.monitor import start_monitor
     from services.simulator import Simulator
-    from tests.services.conftest import REPO, client_args, open_client
+    from tests.services.conftest import REPO, client_args
 
     system, typemap = spot_arm
-    services_session = open_client(router)
-    predictor = start_predictor(services_session, "example")  # allow needs a fresh prediction
-    monitor = start_monitor(services_session, system)
-    simulator = Simulator(services_session, system, typemap)
-    bridge = start_bridge(services_session, system, typemap)
+    services_session = client_factory()
+    # the predictor: allow needs a fresh prediction
+    with embedded_services(services_session, system, True) as (_, monitor, services):
+        simulator = Simulator(services_session, system, typemap)
+        services.append(simulator)
+        services.append(start_bridge(services_session, system, typemap))
 
-    def client(*commands: str) -> subprocess.CompletedProcess:
-        return subprocess.run([sys.executable, "examples/check_client.py", "skillsets/spot_arm.toml", *commands,
-                               *client_args(router)], cwd=REPO, capture_output=True, text=True, timeout=60)
+        def client(*commands: str) -> subprocess.CompletedProcess:
+            return subprocess.run([sys.executable, "examples/check_client.py", "skillsets/spot_arm.toml", *commands,
+                                   *client_args(router)], cwd=REPO, capture_output=True, text=True, timeout=60)
 
-    def running(skillset: str, skill: str) -> bool:
-        import time
+        def running(skillset: str, skill: str) -> bool:
+            import time
 
-        deadline = time.monotonic() + 5
-        while time.monotonic() < deadline:
-            if simulator.skill_status(skillset, skill)[0] and monitor.check(
-                    CheckRequest(skillset=skillset, transition=f"{skill}.interrupt")).enabled:
-                return True
-            time.sleep(0.02)
-        return False
+            deadline = time.monotonic() + 5
+            while time.monotonic() < deadline:
+                if simulator.skill_status(skillset, skill)[0] and monitor.check(
+                        CheckRequest(skillset=skillset, transition=f"{skill}.interrupt")).enabled:
+                    return True
+                time.sleep(0.02)
+            return False
 
-    try:
         out = client("spot:init_power.start")
         assert out.returncode == 0 and out.stdout.startswith("spot:init_power.start: sent (id "), out
         assert running("spot", "init_power")
@@ -214,12 +214,6 @@ def test_example_client_asks_before_every_start(router, session, spot_arm) -> No
         assert out.stdout.startswith("manipulator:arm_ready.start: sent (id ") and \
             out.stdout.rstrip().endswith("check: warn, action_guard explicit)"), out
         assert running("manipulator", "arm_ready")
-    finally:
-        bridge.close()
-        simulator.close()
-        monitor.close()
-        predictor.close()
-        services_session.close()
 
 
 @pytest.mark.parametrize("policy,decision", [(None, "warn"), ("strict", "deny")])

@@ -24,10 +24,10 @@ from pathlib import Path
 
 import pytest
 
-from chains.chain import run_chain
+from chains.chain import run_any_chain
 from services.dashboard.board import Board
 from services.monitor import start_monitor
-from skinet.system.load import load_system, load_typemap
+from skinet.system.load import load_system
 from skinet.files.read import read_text
 from skinet.mission.scenario import StepRecord, parse_scenario
 from skinet.wire.messages import LiveState, PilotStatus, PropertyVerdict, UnsafeReport, Verdicts
@@ -122,15 +122,16 @@ def screenshot(driver, tmp_path: Path, name: str, element: str | None = None) ->
     return path
 
 
-def play(run: str, router: str, on_record: Callable[[StepRecord], None]) -> list[StepRecord]:
-    """The mission ``run`` through simulator, bridge, monitor and predictor on a client of ``router``."""
-    path = MISSIONS / f"{run}.toml"
+def play(run: str | Path, router: str, on_record: Callable[[StepRecord], None] | None = None) -> list[StepRecord]:
+    """The mission ``run`` (a name in skillsets/missions, or a scenario file) through the whole chain (simulator,
+    bridge, monitor, predictor; a bound system's through its bindings) on a client of ``router``."""
+    path = run if isinstance(run, Path) else MISSIONS / f"{run}.toml"
     scenario = parse_scenario(read_text(path), str(path))
     system_file = path.parent / scenario.system
     system, _ = load_system(system_file)
     session = open_client(router)
     try:
-        return run_chain(system, load_typemap(system_file), scenario, session=session, on_record=on_record)
+        return run_any_chain(system, system_file, scenario, session=session, on_record=on_record)
     finally:
         session.close()
 

@@ -38,7 +38,7 @@ import pytest
 from chains.pilot_chain import _Watch, ask_goal
 from skinet.wire import keys
 from skinet.wire.messages import PilotGoalRequest, PilotStatus
-from tests.processes import Watched
+from tests.processes import Watched, start_module, stop_all
 from tests.services.conftest import REPO, client_args, open_client
 from tests.services.test_outage import Outage
 
@@ -89,7 +89,7 @@ class Rig:
 
     def start_robot(self) -> None:
         self.robots.append(Watched([sys.executable, "-m", "tests.services.robot_world", str(SYSTEM), "--connect",
-                                    self.endpoint, *self.rmw], REPO))
+                                    self.endpoint, *self.rmw]))
         self.robots[-1].wait_for(lambda text: "ready" in text, "the simulated robot ready", 60)
         self.note(f"robot started (pid {self.robots[-1].proc.pid})")
 
@@ -101,9 +101,7 @@ class Rig:
             "pilot": ("services.pilot", [str(SYSTEM), "--instance", "matrix", *self.rmw]),
         }[name]
         log = self.tmp / f"{name}-{len(self.logs)}.log"
-        with log.open("wb") as out:
-            self.procs[name] = subprocess.Popen([sys.executable, "-m", module, *args, *client_args(self.endpoint)],
-                                                cwd=REPO, stdout=out, stderr=subprocess.STDOUT)
+        self.procs[name] = start_module(module, *args, *client_args(self.endpoint), log=log)
         self.logs.append((name, log))
         self.note(f"{name} started (pid {self.procs[name].pid})")
 
@@ -138,19 +136,10 @@ class Rig:
         return "\n".join(lines)
 
     def close(self) -> None:
-        for proc in self.procs.values():
-            if proc.poll() is None:
-                proc.send_signal(signal.SIGTERM)
         for robot in self.robots:
             if robot.proc.poll() is None:
-                os.kill(robot.proc.pid, signal.SIGCONT)
-                robot.proc.send_signal(signal.SIGTERM)
-        for proc in [*self.procs.values(), *(r.proc for r in self.robots)]:
-            try:
-                proc.wait(10)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
+                os.kill(robot.proc.pid, signal.SIGCONT)  # a frozen one hears SIGTERM
+        stop_all([*(r.proc for r in self.robots), *self.procs.values()], timeout=10)
         self.watch.close()
         self.session.close()
         self.outage.close()

@@ -66,13 +66,6 @@ def doc_block(page: str, heading: str) -> list[str]:
 
 
 @pytest.fixture
-def robot(client_factory: Callable[[], zenoh.Session], spot_arm: tuple) -> Iterator[Robot]:
-    r = Robot(client_factory, *spot_arm)
-    yield r
-    r.close()
-
-
-@pytest.fixture
 def skills(robot: Robot) -> Iterator[Callable[..., World]]:
     """Starts the robot's skill implementations (:class:`World` options)."""
     started: list[World] = []

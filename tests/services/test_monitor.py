@@ -36,6 +36,7 @@ from skinet.wire.messages import (
     CanonicalEvent, LiveState, PredictRequest, StateSpaceReport, UnsafeReport, Verdicts,
 )
 from tests.bridge_side import BridgeSide as Events  # noqa: F401  (imported from here by other tests)
+from tests.processes import start_module, start_skinet, stop
 from tests.services.conftest import LivelinessWatch, client_args, free_port, open_client
 
 REPO = Path(__file__).resolve().parents[2]
@@ -99,23 +100,6 @@ def wait_until(predicate: Callable[[], bool], timeout: float, what: str) -> None
 
 def entries(report: UnsafeReport) -> list[tuple]:
     return sorted((e.skillset, e.transition, e.property, e.constraint, e.controllable) for e in report.unsafe)
-
-
-def spawn(args: list[str], log: Path) -> subprocess.Popen:
-    """A Python module as a child process in its own process group, output to ``log``."""
-    with open(log, "ab") as out:
-        return subprocess.Popen([sys.executable, "-m", *args], cwd=REPO, stdout=out, stderr=subprocess.STDOUT,
-                                start_new_session=True)
-
-
-def stop(proc: subprocess.Popen, sig: int = signal.SIGTERM, timeout: float = 5.0) -> int:
-    if proc.poll() is None:
-        proc.send_signal(sig)
-    try:
-        return proc.wait(timeout)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        return proc.wait(timeout)
 
 
 @pytest.fixture(scope="module")
@@ -308,7 +292,8 @@ def test_big_system_answered_within_the_budget_never_a_timeout(router, monitor_f
 def test_prediction_from_predictor_process(router, monitor_factory, session, system, tmp_path):
     reports = Reports(session)
     watch = LivelinessWatch(session, keys.alive("*", "predictor", "*"))
-    proc = spawn(["services.predictor", *client_args(router), "--instance", "proc1"], tmp_path / "predictor.log")
+    proc = start_module("services.predictor", *client_args(router), "--instance", "proc1",
+                        log=tmp_path / "predictor.log")
     try:
         watch.wait(lambda alive: keys.alive(keys.ANY_SYSTEM, "predictor", "proc1") in alive)
         monitor = monitor_factory(system)
@@ -388,7 +373,7 @@ def test_predictor_killed_mid_query_then_restarted(router, monitor_factory, sess
     # budget + grace (tests/services/test_hostile.py), and exploring this system may
     # outlast a small budget and take over a gigabyte.
     args = ["services.predictor", *client_args(router), "--grace", "60", "--memory-mb", "4096", "--instance"]
-    first = spawn([*args, "doomed"], tmp_path / "doomed.log")
+    first = start_module(*args, "doomed", log=tmp_path / "doomed.log")
     try:
         watch.wait(lambda alive: any(a.endswith("/doomed") for a in alive))
         monitor = monitor_factory(fleet, budget=5.0, query_timeout=30.0, retry=30.0)  # killed within the budget
@@ -404,7 +389,7 @@ def test_predictor_killed_mid_query_then_restarted(router, monitor_factory, sess
         watch.wait(lambda alive: not any(a.endswith("/doomed") for a in alive))
     finally:
         stop(first, signal.SIGKILL)
-    second = spawn([*args, "phoenix"], tmp_path / "phoenix.log")
+    second = start_module(*args, "phoenix", log=tmp_path / "phoenix.log")
     try:  # its liveliness token lifts the 30 s retry delay
         fresh = reports.wait("unsafe", lambda m: not m.prediction_stale, timeout=15)
         assert fresh.seq == 0 and monitor.predictor_stats.last_instance == "phoenix"
@@ -500,9 +485,7 @@ def test_skinet_run_once_prints_the_view():
 
 def test_skinet_run_listens_for_a_bridge_and_logs_changes(tmp_path):
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    proc = subprocess.Popen([sys.executable, "-m", "skinet_cli.main", "run", str(SYSTEM_FILE), "--listen", endpoint,
-                             "--no-multicast-scouting", "--duration", "15"], cwd=REPO, stdout=subprocess.PIPE,
-                            stderr=subprocess.STDOUT, text=True, start_new_session=True)
+    proc = start_skinet("run", str(SYSTEM_FILE), "--listen", endpoint, "--no-multicast-scouting", "--duration", "15")
     bridge = None
     try:
         assert proc.stdout is not None
@@ -547,9 +530,7 @@ def test_skinet_run_listens_for_a_bridge_and_logs_changes(tmp_path):
 
 def test_skinet_router_links_clients():
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    proc = subprocess.Popen([sys.executable, "-m", "skinet_cli.main", "router", "--listen", endpoint, "--no-auth",
-                             "--no-multicast-scouting"], cwd=REPO, stdout=subprocess.PIPE, text=True,
-                            start_new_session=True)
+    proc = start_skinet("router", "--listen", endpoint, "--no-auth", "--no-multicast-scouting")
     try:
         assert proc.stdout is not None and "listening on " + endpoint in proc.stdout.readline()
         a, b = open_client(endpoint), open_client(endpoint)
@@ -573,7 +554,7 @@ def test_monitor_process_serves_and_stops_cleanly(router, session, tmp_path):
     reports = Reports(session)
     watch = LivelinessWatch(session, keys.alive("spot_arm", "monitor", "*"))
     log = tmp_path / "monitor.log"
-    proc = spawn(["services.monitor", str(SYSTEM_FILE), *client_args(router), "--id", "m1"], log)
+    proc = start_module("services.monitor", str(SYSTEM_FILE), *client_args(router), "--id", "m1", log=log)
     try:
         watch.wait(lambda alive: keys.alive("spot_arm", "monitor", "m1") in alive)
         model = [r for r in session.get(keys.model("spot_arm"), timeout=5) if r.ok is not None]

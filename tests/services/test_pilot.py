@@ -8,7 +8,7 @@ import dataclasses
 import random
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 
 import pytest
 import zenoh
@@ -33,13 +33,6 @@ from tests.services.pilot_robot import WALK, Gui, Robot, ask_goal, goal
 MISSION = ["manipulator:arm_ready.start", "spot:init_power.start", "spot:stand_up.start",
            "manipulator:arm_RD_to_HP.start", "spot:go_to_waypoint.start"]
 ENDS = ["ready", "powered_on", "standing", "at_home", "arrived"]
-
-
-@pytest.fixture
-def robot(client_factory: Callable[[], zenoh.Session], spot_arm: tuple) -> Iterator[Robot]:
-    r = Robot(client_factory, *spot_arm)
-    yield r
-    r.close()
 
 
 def drive_until_running(robot: Robot, skill: str) -> PilotGoalReply:
@@ -143,11 +136,9 @@ def test_max_retries_failures_of_one_skill_end_the_goal_with_skill_and_mode(robo
 
 
 @pytest.fixture
-def quick(client_factory: Callable[[], zenoh.Session], spot_arm: tuple) -> Iterator[Robot]:
+def quick(robots: Callable[..., Robot]) -> Robot:
     """The robot with a monitor that calls a skillset lost after 0.5 s of silence."""
-    r = Robot(client_factory, *spot_arm, lost_after=0.5)
-    yield r
-    r.close()
+    return robots(lost_after=0.5)
 
 
 def test_a_skillset_not_live_pauses_the_pilot_until_it_is_live_again(quick: Robot, client_factory) -> None:

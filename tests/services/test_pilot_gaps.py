@@ -7,7 +7,7 @@ from __future__ import annotations
 import subprocess
 import sys
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 
 import pytest
 import zenoh
@@ -18,13 +18,6 @@ from skinet.wire.messages import MissedOutcome, PilotGoalRequest
 from tests.services.conftest import REPO, client_args
 from tests.services.pilot_robot import WALK, Gui, Robot, ask_goal, goal
 from tests.services.test_monitor import wait_until
-
-
-@pytest.fixture
-def robot(client_factory: Callable[[], zenoh.Session], spot_arm: tuple) -> Iterator[Robot]:
-    r = Robot(client_factory, *spot_arm)
-    yield r
-    r.close()
 
 
 def restart_monitor_while(robot: Robot, impl: World, skill: str) -> None:

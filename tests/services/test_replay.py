@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import json
 import re
-import signal
 import subprocess
 import sys
 import threading
@@ -35,6 +34,7 @@ from skinet.wire.log import Entry
 from skinet.wire.messages import MESSAGES, LiveState, ModelBundle
 from skinet_cli.record import decode_any
 from skinet_cli.timeline import load_log
+from tests.processes import start_skinet, stop
 from tests.services.conftest import REPO, client_args, free_port, open_client, open_router
 from tests.services.test_dashboard import browser, css, screenshot, until, wait_http  # noqa: F401 (fixture)
 
@@ -45,22 +45,9 @@ CHAIN_SPEED = 4.0  # the recorded run takes 28 s / 4 of mission time
 LAST_STEP = 14
 
 
-def skinet(*args: str, log: Path) -> subprocess.Popen:
-    """``skinet ARGS`` as a process, standard output and error into ``log``."""
-    with log.open("wb") as out:
-        return subprocess.Popen([sys.executable, "-m", "skinet_cli.main", *args], cwd=REPO, stdout=out,
-                                stderr=subprocess.STDOUT)
-
-
-def stop(proc: subprocess.Popen, log: Path) -> str:
+def stopped(proc: subprocess.Popen, log: Path) -> str:
     """SIGTERM ``proc``, wait for its exit (status 0 expected) and return what it printed."""
-    if proc.poll() is None:
-        proc.send_signal(signal.SIGTERM)
-    try:
-        code = proc.wait(timeout=20)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        raise
+    code = stop(proc, timeout=20)
     text = log.read_text(errors="replace")
     assert code == 0, text
     return text
@@ -92,7 +79,8 @@ def recording(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     router = open_router(endpoint)
     session = open_client(endpoint)
     logs = {fmt: folder / f"run.{fmt}" for fmt in ("jsonl", "mcap")}
-    recorders = {fmt: skinet("record", NAME, "-o", str(path), *client_args(endpoint), log=folder / f"record-{fmt}.out")
+    recorders = {fmt: start_skinet("record", NAME, "-o", str(path), *client_args(endpoint),
+                                   log=folder / f"record-{fmt}.out")
                  for fmt, path in logs.items()}
     try:
         wait_until(lambda: len([r for r in session.liveliness().get(keys.alive(NAME, "recorder", "*"), timeout=0.5)
@@ -110,7 +98,7 @@ def recording(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
         wait_until(done, "the last step in the recording")
         time.sleep(0.5)  # the MCAP recorder received it at the same time
     finally:
-        outputs = {fmt: stop(proc, folder / f"record-{fmt}.out") for fmt, proc in recorders.items()}
+        outputs = {fmt: stopped(proc, folder / f"record-{fmt}.out") for fmt, proc in recorders.items()}
         session.close()
         router.close()
     entries = {fmt: load_log(str(path)) for fmt, path in logs.items()}
@@ -141,11 +129,11 @@ def test_replay_publishes_the_recorded_run_as_its_monitor_did(recording: dict[st
 
     subscriber = session.declare_subscriber(f"skinet/{NAME}/**", on_sample)
     again = tmp_path / "again.jsonl"
-    recorder = skinet("record", NAME, "-o", str(again), *client_args(router), log=tmp_path / "record.out")
+    recorder = start_skinet("record", NAME, "-o", str(again), *client_args(router), log=tmp_path / "record.out")
     replay = None
     try:
         wait_token(session, keys.alive(NAME, "recorder", "*"))
-        replay = skinet("replay", str(log), "--speed", "4", *client_args(router), log=tmp_path / "replay.out")
+        replay = start_skinet("replay", str(log), "--speed", "4", *client_args(router), log=tmp_path / "replay.out")
         wait_until(lambda: len(received) >= len(expected), f"{len(expected)} messages", 60)
         time.sleep(0.3)  # nothing more comes
         with lock:
@@ -189,8 +177,8 @@ def test_replay_publishes_the_recorded_run_as_its_monitor_did(recording: dict[st
     finally:
         subscriber.undeclare()
         session.close()
-        out = stop(replay, tmp_path / "replay.out") if replay is not None else ""
-        stop(recorder, tmp_path / "record.out")
+        out = stopped(replay, tmp_path / "replay.out") if replay is not None else ""
+        stopped(recorder, tmp_path / "record.out")
     events = sum(e.type == "CanonicalEvent" for e in original)
     beats = sum(e.type == "Heartbeat" for e in original)  # the bridge's (docs/semantics.md §7): never replayed either
     lines = out.splitlines()
@@ -221,7 +209,7 @@ def test_a_demo_log_replays_as_a_live_state_with_whole_property_names(browser, t
     log.write_text("".join(line + "\n" for line in (tmp_path / "logs" / "unassisted.jsonl").read_text().splitlines()
                            if json.loads(line)["t"] <= 52.0))
     out = tmp_path / "replay.out"
-    proc = skinet("replay", str(log), "--speed", "0", "--dashboard", "0", log=out)
+    proc = start_skinet("replay", str(log), "--speed", "0", "--dashboard", "0", log=out)
     try:
         wait_until(lambda: "dashboard on http" in out.read_text(), "the dashboard's address")
         url = out.read_text().split("dashboard on ")[1].split()[0]
@@ -245,13 +233,13 @@ def test_a_demo_log_replays_as_a_live_state_with_whole_property_names(browser, t
             "return new Set([...r.getClientRects()].map((x) => Math.round(x.top))).size")
         assert lines == 1
     finally:
-        stop(proc, out)
+        stopped(proc, out)
 
 
 def test_replay_with_dashboard_shows_the_run_live(recording: dict[str, Path], browser, tmp_path: Path) -> None:
     """``--dashboard`` in one process (a peer session, no router): the page follows the replay step by step."""
     out = tmp_path / "replay.out"
-    proc = skinet("replay", str(recording["mcap"]), "--dashboard", "0", "--no-multicast-scouting", log=out)
+    proc = start_skinet("replay", str(recording["mcap"]), "--dashboard", "0", "--no-multicast-scouting", log=out)
     try:
         wait_until(lambda: "dashboard on http" in out.read_text(), "the dashboard's address")
         url = out.read_text().split("dashboard on ")[1].split()[0]
@@ -288,7 +276,7 @@ def test_replay_with_dashboard_shows_the_run_live(recording: dict[str, Path], br
         assert "not the live robot: no command check" in error[0]["text"]
         screenshot(browser, tmp_path, "dashboard-replay.png")
     finally:
-        stop(proc, out)
+        stopped(proc, out)
 
 
 def test_replay_refuses_to_mix_with_a_live_monitor(recording: dict[str, Path], router: str, tmp_path: Path) -> None:
@@ -322,7 +310,7 @@ def test_readme_lines_a_peer_replay_and_a_watch_connected_to_it(recording: dict[
     (no router); ``--linger`` ends the replay by itself."""
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     out = tmp_path / "replay.out"
-    proc = skinet("replay", str(recording["mcap"]), "--speed", "4", "--listen", endpoint, "--linger", "8",
+    proc = start_skinet("replay", str(recording["mcap"]), "--speed", "4", "--listen", endpoint, "--linger", "8",
                   "--no-multicast-scouting", log=out)
     try:
         wait_until(lambda: "messages published" in out.read_text(), "the end of the replay", 30)
@@ -333,7 +321,7 @@ def test_readme_lines_a_peer_replay_and_a_watch_connected_to_it(recording: dict[
         assert watch.stdout.startswith(f"SkiNet Live  system {NAME}  step {LAST_STEP}  last event ")
         assert proc.wait(timeout=30) == 0
     finally:
-        text = stop(proc, out)
+        text = stopped(proc, out)
     assert text.splitlines()[-1].endswith("; still answering late joiners for 8 s")
 
 

@@ -24,9 +24,10 @@ from skinet.wire import keys
 from skinet.wire.codec import decode, encode
 from skinet.wire.convert import statuses
 from skinet.wire.messages import PredictReply, PredictRequest
+from tests.processes import start_module, stop
 from tests.services.conftest import LivelinessWatch, client_args, open_client
 from tests.services.test_monitor import (
-    PAPER_STEPS, Events, Reports, _heavy_system, monitor_factory, session, spawn, stop, system, wait_until,
+    PAPER_STEPS, Events, Reports, _heavy_system, monitor_factory, session, system, wait_until,
 )
 
 __all__ = ["monitor_factory", "session", "system"]  # fixtures used here
@@ -43,8 +44,8 @@ def pool_of(router: str, session: zenoh.Session, tmp_path: Path):
     watch = LivelinessWatch(session, keys.alive("*", "predictor", "*"))
 
     def start(*names: str) -> dict[str, subprocess.Popen]:
-        started = {n: spawn(["services.predictor", *client_args(router), "--instance", n, "--fetch-timeout", "1"],
-                            tmp_path / f"{n}.log") for n in names}
+        started = {n: start_module("services.predictor", *client_args(router), "--instance", n, "--fetch-timeout", "1",
+                                   log=tmp_path / f"{n}.log") for n in names}
         procs.extend(started.values())
         for n in names:
             watch.wait_for(_token(n), timeout=15)

@@ -15,8 +15,8 @@ import threading
 
 import zenoh
 
+from chains.chain import embedded_services
 from services.monitor import start_monitor
-from services.predictor.service import start_predictor
 from skinet.system.load import load_system
 from skinet.wire import keys
 from tests.services.conftest import REPO, LivelinessWatch, client_args, open_client
@@ -27,39 +27,35 @@ STEPS = [("spot", "init_power.start"), ("spot", "init_power.success.powered_on")
          ("spot", "stand_up.success.standing")]
 
 
-def test_watch_in_a_pipe_prints_one_line_per_step(router: str, client: zenoh.Session) -> None:
+def test_watch_in_a_pipe_prints_one_line_per_step(router: str, client: zenoh.Session, client_factory) -> None:
     system = load_system(SYSTEM_FILE)[0]
-    session = open_client(router)
-    predictor = start_predictor(session, "watched")
-    monitor = start_monitor(session, system, budget=1.0)
-    events = Events(client)  # the bridge's side: the monitor is synced (a monitor still syncing is a line too)
-    alive = LivelinessWatch(client, keys.alive("spot_arm", "monitor", "*"))
-    proc = subprocess.Popen([sys.executable, "-m", "skinet_cli.main", "watch", "spot_arm", "--duration", "60",
-                             *client_args(router)], cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True)
-    printed: list[str] = []
-    reader = threading.Thread(target=lambda: printed.extend(iter(proc.stdout.readline, "")), daemon=True)  # type: ignore[union-attr]
-    reader.start()
-    try:
-        alive.wait(lambda names: bool(names))
-        wait_until(lambda: monitor.snapshot().state_space is not None, 20, "the first prediction")
-        # Step 0's line, written once the watcher has step 0 with its fresh prediction: sending step 1 before
-        # (a fixed pause, once) lost it when the watcher started late on a loaded machine.
-        wait_until(lambda: any(line.startswith("[0] ") for line in printed), 30, "the line of step 0")
-        for n, (skillset, transition) in enumerate(STEPS, 1):
-            events.send(skillset, transition)
-            # Its line comes once the watcher has the step's fresh prediction (the next step would write it
-            # as it is): the next event waits for it, however loaded the machine.
-            wait_until(lambda: any(line.startswith(f"[{n}] ") for line in printed), 20, f"the line of step {n}")
-    finally:
-        proc.terminate()
-        proc.wait(20)
-        reader.join(10)  # the pipe's last lines
-        err = proc.stderr.read()  # type: ignore[union-attr]
-        monitor.close()
-        predictor.close()
-        alive.close()
-        session.close()
+    with embedded_services(client_factory(), system, True, budget=1.0) as (_, monitor, _):
+        events = Events(client)  # the bridge's side: the monitor is synced (a monitor still syncing is a line too)
+        alive = LivelinessWatch(client, keys.alive("spot_arm", "monitor", "*"))
+        proc = subprocess.Popen([sys.executable, "-m", "skinet_cli.main", "watch", "spot_arm", "--duration", "60",
+                                 *client_args(router)], cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                text=True)
+        printed: list[str] = []
+        reader = threading.Thread(target=lambda: printed.extend(iter(proc.stdout.readline, "")),  # type: ignore[union-attr]
+                                  daemon=True)
+        reader.start()
+        try:
+            alive.wait(lambda names: bool(names))
+            wait_until(lambda: monitor.snapshot().state_space is not None, 20, "the first prediction")
+            # Step 0's line, written once the watcher has step 0 with its fresh prediction: sending step 1 before
+            # (a fixed pause, once) lost it when the watcher started late on a loaded machine.
+            wait_until(lambda: any(line.startswith("[0] ") for line in printed), 30, "the line of step 0")
+            for n, (skillset, transition) in enumerate(STEPS, 1):
+                events.send(skillset, transition)
+                # Its line comes once the watcher has the step's fresh prediction (the next step would write it
+                # as it is): the next event waits for it, however loaded the machine.
+                wait_until(lambda: any(line.startswith(f"[{n}] ") for line in printed), 20, f"the line of step {n}")
+        finally:
+            proc.terminate()
+            proc.wait(20)
+            reader.join(10)  # the pipe's last lines
+            err = proc.stderr.read()  # type: ignore[union-attr]
+            alive.close()
     out = "".join(printed)
     lines = out.splitlines()
     assert [int(re.match(r"\[(\d+)\]", line).group(1)) for line in lines] == [0, 1, 2, 3, 4], out + err
