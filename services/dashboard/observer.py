@@ -48,6 +48,7 @@ RESULTS: tuple[tuple[Callable[[str], str], type[BaseModel]], ...] = (
     (keys.state, LiveState), (keys.verdicts, Verdicts), (keys.unsafe, UnsafeReport),
     (keys.state_space, StateSpaceReport), (keys.divergences, Divergences), (keys.pilot_status, PilotStatus),
 )
+FOLLOW_UP = 0.5  # seconds after a monitor appeared that its last publications are asked again
 QUERY_TIMEOUT = 2.0
 
 
@@ -191,19 +192,30 @@ class Observer:
     # -- start-up and resynchronisation -------------------------------------------------
 
     def _sync(self) -> None:
-        """Fetch the model and the last publications whenever a monitor (re)appears."""
+        """Fetch the model and the last publications whenever a monitor (re)appears, and once more
+        ``FOLLOW_UP`` s later: a publication made while this session's subscriptions were still on their way
+        to the publisher's reaches neither them nor an answer given before it (a replay at speed 0 publishes
+        its whole run in that window); the second look gets the last ones."""
         while True:
             self._resync.wait()
             self._resync.clear()
-            if self._closed.is_set():
+            if self._closed.is_set() or not self._fetch_all():
                 return
-            try:
-                self._fetch(keys.model(self.name), ModelBundle)
-                for key, kind in RESULTS:
-                    self._fetch(key(self.name), kind)
-                self.fetched.set()
-            except zenoh.ZError:
-                return  # session closed under us
+            if self._resync.wait(FOLLOW_UP):
+                continue  # a new monitor or pilot came meanwhile: that round looks at once, and again later
+            if self._closed.is_set() or not self._fetch_all():
+                return
+
+    def _fetch_all(self) -> bool:
+        """The model and the last publications, asked once; False when the session was closed under us."""
+        try:
+            self._fetch(keys.model(self.name), ModelBundle)
+            for key, kind in RESULTS:
+                self._fetch(key(self.name), kind)
+        except zenoh.ZError:
+            return False
+        self.fetched.set()
+        return True
 
     def _fetch(self, key: str, kind: type[BaseModel]) -> None:
         for reply in self.session.get(key, timeout=QUERY_TIMEOUT):

@@ -223,6 +223,8 @@ def test_a_demo_log_replays_as_a_live_state_with_whole_property_names(browser, t
             "spot": "live", "manipulator": "live"}
         pilot = css(browser, "#services [data-service=pilot]")[0]  # none in a demo's run: off, not a failure
         assert (pilot["class"], pilot["text"]) == ("service off", "pilot: off")
+        until(browser, lambda d: css(d, "#goal-inputs")[0]["placeholder"] == "go_to_waypoint.target = ...",
+              "the placeholders of the model, which a view may get after the messages")
         placeholders = {e["id"]: e["placeholder"] for e in css(browser, "#goal-text, #goal-inputs, #check-command")}
         assert placeholders == {"goal-text": "reach spot:PowerOn\nrun spot:init_power",
                                 "goal-inputs": "go_to_waypoint.target = ...",
@@ -266,6 +268,8 @@ def test_replay_with_dashboard_shows_the_run_live(recording: dict[str, Path], br
                                                             "robot: times are the recording's.")
         assert css(browser, "#timeline .violation-label")
         # The examples name this system's skillsets, not the paper robot's (issue 32, item 7).
+        until(browser, lambda d: css(d, "#goal-text")[0]["placeholder"] == "reach base:Moving\nrun base:undock",
+              "the placeholders of the model, which a view may get after the messages")
         placeholders = {e["id"]: e["placeholder"] for e in css(browser, "#goal-text, #goal-inputs, #check-command")}
         assert placeholders == {"goal-text": "reach base:Moving\nrun base:undock",
                                 "goal-inputs": "no skill of this system takes inputs",
