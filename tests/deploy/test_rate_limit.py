@@ -236,10 +236,11 @@ def test_a_flooding_client_is_limited_while_another_gets_fresh_predictions(route
         assert fresh_quiet == steps_quiet
         assert fresh_flood == steps_flood, "the well-behaved client keeps every prediction"
         stats = monitor.predictor_stats
-        # Never refused.  A query on an instance key is sent with DROP congestion control (a dead link must
-        # not block the router), so the flood may cost it one query on a loaded machine; the freshness
-        # above shows that the next state's answer covered it.
-        assert stats.failed == 0 and stats.timed_out <= 1, stats
+        # Never refused, and every query answered.  A query on an instance key is sent with DROP congestion
+        # control (a dead link must not block the router), so on a loaded machine the flood may make a query
+        # time out before its answer comes (2 of 41 once, beside a CPU hog); the freshness above shows that
+        # every step's prediction still came within 2 s.
+        assert stats.failed == 0 and stats.answered == stats.sent, stats
         # The flooder: its burst and rate, then "rate limited" at once.
         # A burst beyond the client's share of the instance's 8 pending requests (4) is "busy".
         limited = f"rate limited: client '{FLOODER}' exceeds {rate} requests/s (burst {rate})"

@@ -573,17 +573,27 @@ function flatSteps(steps, out) {  // depth first, as the plan lists them: each s
   return out;
 }
 
-// The step the pilot is at: the one whose command is `next` (or, waiting for an outcome, the next wait), searched
-// from the one highlighted before, so the highlight moves on along the plan (and back on a retry).
+// The step the pilot is at: the one whose command is `next` (or, waiting for an outcome, the wait for a skill the
+// live state shows running, else the next wait), searched from the one highlighted before, so the highlight moves
+// on along the plan (and back on a retry).  Statuses are rendered once per frame: the short one that names the
+// command just sent may never be drawn, so a wait is found by its running skill, not by the step before it.
 function nextStep(p, flat) {
   if (!ACTIVE.includes(p.state)) return -1;
   const waiting = !p.next && ["waiting for outcome", "guiding", "driving"].includes(p.state);
   if (!p.next && !waiting) return plan.at;  // planning, paused: where it was
-  const same = (s) => (p.next ? s.skillset === p.next.skillset && s.action === p.next.transition : s.action === "wait");
   const from = Math.max(0, plan.at);
-  for (let k = from; k < flat.length; k++) if (same(flat[k])) return k;
-  for (let k = 0; k < from; k++) if (same(flat[k])) return k;
-  return -1;
+  const find = (same) => {
+    for (let k = from; k < flat.length; k++) if (same(flat[k])) return k;
+    for (let k = 0; k < from; k++) if (same(flat[k])) return k;
+    return -1;
+  };
+  if (waiting) {
+    const running = new Set(Object.entries((view.state && view.state.skillsets) || {})
+      .flatMap(([ss, s]) => (s.running || []).map((k) => `${ss}:${k}`)));
+    const k = find((s) => s.action === "wait" && running.has(`${s.skillset}:${(s.expect || "").split(".")[0]}`));
+    if (k >= 0) return k;
+  }
+  return find((s) => (p.next ? s.skillset === p.next.skillset && s.action === p.next.transition : s.action === "wait"));
 }
 
 function stepNodes(steps, flat) {
