@@ -73,6 +73,11 @@ class _Seen:
         self._subs = [session.declare_subscriber(keys.events(system, "*"), self._on_event),
                       session.declare_subscriber(keys.verdicts(system), self._on_verdicts)]
 
+    def last(self, skillset: str) -> int:
+        """The highest seq of ``skillset``'s events seen (-1: none)."""
+        with self.lock:
+            return max((e.seq for e in self.events if e.skillset == skillset), default=-1)
+
     def _on_event(self, sample: zenoh.Sample) -> None:
         event = decode(sample.payload.to_bytes(), CanonicalEvent)
         with self.lock:
@@ -116,6 +121,9 @@ def drive_goals(chain: BoundChain, mission: str, mission_name: str, *, duration:
             (chain.monitor.last_seq(name, source) or 0) >= ss.seq - 1 for name, ss in chain.bridge.feed.skillsets.items()
             if ss.seq), settle, "the last events applied")
         wait_until(lambda: seen.verdicts >= chain.monitor.snapshot().verdicts.seq, settle, "the last verdicts")
+        # The events come on a subscription of their own: a success may be heard here after the verdicts it caused.
+        wait_until(lambda: all(seen.last(name) >= ss.seq - 1 for name, ss in chain.bridge.feed.skillsets.items()
+                               if ss.seq), settle, "the last events seen")
         with seen.lock:
             transitions = [f"{e.skillset}:{e.transition}" for e in seen.events[first:] if e.transition]
             return PilotEnd(reply, status, list(actuator.sent), transitions, list(seen.violated))

@@ -80,6 +80,13 @@ return {seq: view.state ? view.state.seq : -1, fresh: !!view.unsafe && !view.uns
         violations: view.violations.filter(Boolean).length};"""
 
 
+class MovedOn(RuntimeError):
+    """The page drew a later step while it was photographed (a loaded machine at this speed)."""
+
+
+ATTEMPTS = 3  # photographs tried, each at half the speed of the one before, while the page moves on
+
+
 def photograph(output: Path, speed: float, step: int, width: int, timeout: float = 120.0) -> str:
     """Run the live demo, photograph its page at ``step`` into ``output``; returns what was photographed."""
     port = free_port()
@@ -105,8 +112,8 @@ def photograph(output: Path, speed: float, step: int, width: int, timeout: float
             time.sleep(0.05)
         png = page_png(driver, width)
         if driver.execute_script(SHOWN) != shown:
-            raise RuntimeError(f"the page moved on from step {shown['seq']} while it was photographed: run it again, "
-                               "or with a lower --speed")
+            raise MovedOn(f"the page moved on from step {shown['seq']} while it was photographed: run it again, "
+                          "or with a lower --speed")
     finally:
         if driver is not None:
             driver.quit()
@@ -127,7 +134,13 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--width", type=int, default=1400, help="page width in pixels (default: 1400)")
     args = p.parse_args(argv)
     try:
-        print(photograph(args.output, args.speed, args.step, args.width))
+        for attempt in range(ATTEMPTS):
+            try:
+                print(photograph(args.output, args.speed / 2 ** attempt, args.step, args.width))
+                break
+            except MovedOn:
+                if attempt == ATTEMPTS - 1:
+                    raise
     except (Unavailable, RuntimeError) as exc:
         print(f"tests/screenshot.py: error: {exc}", file=sys.stderr)
         return 1
