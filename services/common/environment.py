@@ -37,13 +37,7 @@ def _flag(text: str) -> bool:
 
 
 def _seconds_or_forever(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        value = float("nan")
-    if not (0 <= value < float("inf") or value == -1):
-        raise ValueError("expected a number of seconds >= 0, or -1 (forever)")
-    return value
+    return _number(text, lambda v: (0 <= v < float("inf") or v == -1), "expected a number of seconds >= 0, or -1 (forever)")
 
 
 def _count(text: str) -> int:
@@ -52,37 +46,31 @@ def _count(text: str) -> int:
     return int(text)
 
 
-def _positive_seconds(text: str) -> float:
+def _number(text: str, ok: Callable[[float], bool], expected: str) -> float:
+    """``text`` as a float that ``ok`` accepts, else ValueError(``expected``) (NaN and words are never ok)."""
     try:
         value = float(text)
     except ValueError:
-        value = float("nan")
-    if not 0 < value < float("inf"):
-        raise ValueError("expected a number of seconds > 0")
+        raise ValueError(expected) from None
+    if not ok(value):
+        raise ValueError(expected)
     return value
+
+
+def _positive_seconds(text: str) -> float:
+    return _number(text, lambda v: 0 < v < float("inf"), "expected a number of seconds > 0")
 
 
 def _budget(text: str) -> float:
     from skinet.wire.limits import MAX_BUDGET, MIN_BUDGET
 
-    try:
-        value = float(text)
-    except ValueError:
-        value = float("nan")
-    if not MIN_BUDGET <= value <= MAX_BUDGET:
-        raise ValueError(f"expected a number of seconds from {MIN_BUDGET:g} (the predictor's minimum budget) to "
-                         f"{MAX_BUDGET:g} (one day)")
-    return value
+    return _number(text, lambda v: MIN_BUDGET <= v <= MAX_BUDGET,
+                   f"expected a number of seconds from {MIN_BUDGET:g} (the predictor's minimum budget) to "
+                   f"{MAX_BUDGET:g} (one day)")
 
 
 def _probability(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        value = float("nan")
-    if not 0 <= value <= 1:
-        raise ValueError("expected a probability from 0 to 1")
-    return value
+    return _number(text, lambda v: 0 <= v <= 1, "expected a probability from 0 to 1")
 
 
 def _folder(text: str) -> str:
@@ -92,13 +80,7 @@ def _folder(text: str) -> str:
 
 
 def _seconds(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        value = float("nan")
-    if not 0 <= value < float("inf"):
-        raise ValueError("expected a number of seconds >= 0")
-    return value
+    return _number(text, lambda v: 0 <= v < float("inf"), "expected a number of seconds >= 0")
 
 
 def _published_port(text: str) -> str:
