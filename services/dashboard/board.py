@@ -162,7 +162,7 @@ class Board:
         return False
 
     def _verdicts(self, msg: Verdicts, initial: bool) -> list[Update]:
-        if not self._mine(msg, initial) or (initial and self.verdicts is not None):
+        if not self._mine(msg, initial) or (initial and self.verdicts is not None and self.verdicts.seq >= msg.seq):
             return []
         self.verdicts = msg
         out: list[Update] = [{"kind": "verdicts", "message": _json(msg)}]
