@@ -70,18 +70,20 @@ class _Seen:
         self.events: list[CanonicalEvent] = []
         self.violated: list[str] = []
         self.verdicts = -1  # seq of the last Verdicts seen
+        self._seqs: dict[str, int] = {}  # skillset -> the highest seq of its events seen
         self._subs = [session.declare_subscriber(keys.events(system, "*"), self._on_event),
                       session.declare_subscriber(keys.verdicts(system), self._on_verdicts)]
 
     def last(self, skillset: str) -> int:
         """The highest seq of ``skillset``'s events seen (-1: none)."""
         with self.lock:
-            return max((e.seq for e in self.events if e.skillset == skillset), default=-1)
+            return self._seqs.get(skillset, -1)
 
     def _on_event(self, sample: zenoh.Sample) -> None:
         event = decode(sample.payload.to_bytes(), CanonicalEvent)
         with self.lock:
             self.events.append(event)
+            self._seqs[event.skillset] = max(self._seqs.get(event.skillset, -1), event.seq)
 
     def _on_verdicts(self, sample: zenoh.Sample) -> None:
         verdicts = decode(sample.payload.to_bytes(), Verdicts)
