@@ -94,14 +94,24 @@ class StepLines:
     fresh; its sync states changed).  A step whose skillsets are not all live (docs/semantics.md §7) is a line of
     its own per set of sync states: at once when one is lost, after ``settle`` seconds otherwise
     (the seconds' syncing at start is no line), and the step's line is due again once they are
-    all live.  A step here is (epoch, seq, the skillsets not live with their states)."""
+    all live.  A step here is (epoch, seq, the skillsets not live with their states).
 
-    def __init__(self, out: TextIO, settle: float = 1.0):
-        self.out, self.settle = out, settle
+    A divergence, restart or violation line names its step: it is written after that step's line
+    (the monitor publishes its list and its verdicts on two keys, which may arrive in either order),
+    or after ``hold`` seconds if that line does not come."""
+
+    def __init__(self, out: TextIO, settle: float = 1.0, hold: float = 2.0):
+        self.out, self.settle, self.hold = out, settle, hold
         self.step: tuple | None = None  # (epoch, seq, states not live) of the step last seen
         self.line = ""
         self.written = True
         self.since = 0.0  # monotonic time the step was first seen
+        self.written_seq = -1  # the last step whose line was written
+        self.notes: deque[tuple[int | None, str, float]] = deque()  # (step or None, line, monotonic time noted)
+
+    def note(self, seq: int | None, line: str) -> None:
+        """A line of its own about step ``seq`` (None: about no step, written at once)."""
+        self.notes.append((seq, line, time.monotonic()))
 
     def see(self, step: tuple, line: str, final: bool) -> None:
         if step != self.step:
@@ -113,15 +123,30 @@ class StepLines:
             self.flush()
 
     def due(self, now: float) -> None:
-        """Write the line of a step whose skillsets have not all been live for ``settle`` seconds."""
+        """Write the line of a step whose skillsets have not all been live for ``settle`` seconds, then
+        the notes whose step was written or that waited ``hold`` seconds."""
         if self.step is not None and self.step[2] and now - self.since >= self.settle:
             self.flush()
+        self._notes(now)
 
-    def flush(self) -> None:
+    def flush(self, notes: bool = False) -> None:
+        """Write the step's line if not written yet (and every note waiting when ``notes``: the end)."""
         if not self.written:
             self.out.write(self.line + "\n")
-            self.out.flush()
             self.written = True
+            if self.step is not None:
+                self.written_seq = max(self.written_seq, self.step[1])
+        self._notes(None if notes else time.monotonic())
+        self.out.flush()
+
+    def _notes(self, now: float | None) -> None:
+        while self.notes:
+            seq, line, at = self.notes[0]
+            if not (now is None or seq is None or seq <= self.written_seq or now - at >= self.hold):
+                break  # in order: the later notes wait behind it
+            self.out.write(line + "\n")
+            self.notes.popleft()
+        self.out.flush()
 
 
 def watch(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
@@ -133,20 +158,20 @@ def watch(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     observer = Observer(session, args.system, client=client_name(config))
     tty = out.isatty()
     seen: deque[tuple[tuple, str, bool]] = deque()  # a pipe's (step, line, final), every update
-    noted: deque[str] = deque()  # a pipe's lines of divergences and restarts not written yet
+    noted: deque[tuple[int | None, str]] = deque()  # a pipe's (step, line) of divergences, restarts, pilot changes
     first = [True]  # the first list: a watch that joined late says how many it cannot list
     in_order = threading.Lock()  # the lines of the snapshot before those of later updates
     pilot_lines = StatusLines(say_mode=False)  # a pipe's line per change of the pilot's status
 
     def pilot(status: PilotStatus | None) -> None:
         if status is not None and pilot_lines.line(status) is not None:
-            noted.append(pilot_line(status))
+            noted.append((None, pilot_line(status)))
 
     def note(added: list[dict], older: int) -> None:
         if first[0] and older:
-            noted.append(f"({older} earlier divergences and manager restarts not listed)")
+            noted.append((None, f"({older} earlier divergences and manager restarts not listed)"))
         first[0] = False
-        noted.extend(divergence_line(d, loud=True) for d in added)
+        noted.extend((d["seq"], divergence_line(d, loud=True)) for d in added)
 
     def on_update(updates: list[dict]) -> None:  # on Zenoh's thread, the observer's lock held
         if not tty and not args.once:
@@ -193,12 +218,11 @@ def watch(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
                 shown = key
             while seen:
                 steps.see(*seen.popleft())
+            while noted:
+                steps.note(*noted.popleft())
             steps.due(time.monotonic())
-            if noted:
-                out.writelines(noted.popleft() + "\n" for _ in range(len(noted)))
-                out.flush()
             if done:
-                steps.flush()
+                steps.flush(notes=True)
                 return 0
             changed.wait(0.5)
     finally:

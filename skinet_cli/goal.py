@@ -366,8 +366,8 @@ class _Follower:
                 continue  # an earlier goal's, or an older copy
             seqs[status.pilot] = status.seq
             ours = ours or (status.pilot if status.goal_id == goal_id else "")
-            if status.pilot == ours:
-                gone = None
+            # a status does not bring a pilot back: one sent before its token went may come after it (CI saw
+            # the follow wait for ever); the look at the tokens after GONE_GRACE says whether it is there
             if status.goal_id > goal_id:
                 print(f"goal {goal_id} was replaced by goal {status.goal_id}"
                       + (f" of {status.client}" if status.client else ""), file=sys.stderr)

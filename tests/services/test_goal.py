@@ -22,6 +22,8 @@ from services.common.goals import NoPilot, ask_pilot, no_pilot_message, pilot_st
 from services.dashboard.goalbox import GoalFormError, Placed, goal_request, place
 from services.simulator.world import World
 from skinet.system.load import load_system
+from skinet.wire import keys
+from skinet.wire.codec import encode
 from skinet.wire.messages import PilotGoalRequest
 from tests.services.conftest import REPO, client_args, free_port, open_client, start_skinet
 from tests.services.pilot_robot import Robot
@@ -239,11 +241,18 @@ def test_ctrl_c_at_any_moment_leaves_no_goal_running(robot, router, delay: float
     assert status.commands == 0
 
 
-def test_the_pilot_stopping_ends_the_follow_with_exit_1(robot, router) -> None:
+@pytest.mark.parametrize("late_status", [False, True], ids=["", "a status after the token"])
+def test_the_pilot_stopping_ends_the_follow_with_exit_1(robot, router, late_status: bool) -> None:
+    """A status the pilot sent before its token went may arrive after it (CI once saw the follow wait for
+    ever then): sent here by hand, with the pilot's name and a later seq, after the pilot stopped."""
     proc = start_skinet("goal", "spot_arm", "reach spot:Standing", *client_args(router))
     try:
         robot.wait_pilot("guiding", 20)
+        last = robot.pilot.status
         robot.pilot.close()
+        if late_status:
+            time.sleep(1.0)  # the token's deletion reached the follow first
+            robot.observer.put(keys.pilot_status("spot_arm"), encode(last.model_copy(update={"seq": last.seq + 1})))
         out, _ = proc.communicate(timeout=60)
     finally:
         proc.kill()

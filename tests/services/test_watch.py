@@ -104,3 +104,28 @@ def test_watch_lists_divergences_and_a_late_joiner_gets_the_list_so_far(router: 
             proc.communicate(timeout=20)
         monitor.close()
         session.close()
+
+
+def test_a_pipe_writes_a_divergence_line_after_its_steps_line() -> None:
+    """The monitor's list and its verdicts travel on two keys: a violation at step 7 that arrives before
+    step 7's verdicts is written after step 7's line (CI saw them the other way round), and a line whose
+    step never comes is written after the hold."""
+    import io
+    import time
+
+    from chains.watch import StepLines
+
+    out = io.StringIO()
+    steps = StepLines(out, hold=2.0)
+    steps.see((1, 6, ()), "[6] six", final=True)
+    steps.note(7, "VIOLATION at step 7")
+    steps.note(None, "PILOT after it")  # in order: waits behind the violation
+    steps.due(time.monotonic())
+    assert out.getvalue() == "[6] six\n"
+    steps.see((1, 7, ()), "[7] seven", final=True)
+    assert out.getvalue() == "[6] six\n[7] seven\nVIOLATION at step 7\nPILOT after it\n"
+    steps.note(9, "RESTART at step 9")
+    steps.due(time.monotonic())
+    assert out.getvalue().endswith("PILOT after it\n")
+    steps.due(time.monotonic() + 2.0)
+    assert out.getvalue().endswith("PILOT after it\nRESTART at step 9\n")
