@@ -19,7 +19,10 @@ messages of a step).  The burst row gives the CPU time per event of each
 process, which on a small machine is what bounds the rate.
 
 The in-process monitor also runs without and with incident bundles and the Foxglove view on its session
-(alternated three times), target: p99 with them within 10 % of without.
+(alternated three times), target: p99 with them within 10 % of without.  Beside them runs the peer that
+sorts Foxglove's cost from Zenoh's: a process of its own subscribed to the monitor's five keys with a
+callback that does nothing (the cost any remote view puts on the monitor: the dashboard, ``skinet watch``);
+the Foxglove process's p99 is also given as a ratio to it.
 
     python benchmarks/bench_latency.py [--events 2000] [--burst 20000] [--profile] [--views-only]
 """
@@ -236,8 +239,12 @@ def with_views(n: int, rounds: int = 3) -> list[list[object]]:
                 folder = tempfile.TemporaryDirectory()
                 incidents = Incidents(session, bundle(system), Path(folder.name), window=30.0) \
                     if "incidents" in views else None
-                view = proc = None
-                if "another process" in views:
+                view = proc = client = None
+                if "bare" in views:
+                    proc = start([sys.executable, __file__, "--bare-subscriber", endpoint])
+                    wait_token(session, keys.alive("spot_arm", "bench-bare", "*"))
+                    time.sleep(1.0)  # its subscriptions reach this session, as the Foxglove process's do
+                elif "another process" in views:
                     port = free_port()
                     proc = start_module("services.foxglove", str(SYSTEM_FILE), "--port", str(port), "--mode", "peer",
                                         "-e", endpoint, "--no-multicast-scouting", "--wait", "0")
@@ -257,7 +264,7 @@ def with_views(n: int, rounds: int = 3) -> list[list[object]]:
                 if incidents is not None:
                     incidents.close()
                 if proc is not None:
-                    stop_all([client, proc])
+                    stop_all([p for p in (client, proc) if p is not None])
                 if view is not None:
                     stop_all([client])
                     view.close()
@@ -270,14 +277,31 @@ def with_views(n: int, rounds: int = 3) -> list[list[object]]:
     finally:
         session.close()
     p99 = {v: statistics.quantiles(s, n=100, method="inclusive")[98] for v, s in samples.items()}
-    base = p99[MODES[0]]
+    base, bare, fox = p99[MODES[0]], p99[MODES[1]], p99[MODES[3]]
     return [["in-process", f"monitor: event -> UnsafeReport, {MODES[0]}", *stats(samples[MODES[0]]), "baseline", ""],
             *[["in-process", f"  {m}", *stats(samples[m]), f"p99 <= {1.1 * base * 1e6:.0f}",
-               verdict(p99[m] <= 1.1 * base)] for m in MODES[1:]]]
+               verdict(p99[m] <= 1.1 * base)] for m in MODES[1:]],
+            ["in-process", "  skinet foxglove's p99 / the bare remote subscriber's", "", f"{fox / bare:.2f}", "",
+             "(peer)", ""]]
 
 
-MODES = ("no view", "with --incidents", "with skinet foxglove in another process (1 client)",
+MODES = ("no view", "with a bare remote subscriber of the monitor's keys (peer: any view's Zenoh cost)",
+         "with --incidents", "with skinet foxglove in another process (1 client)",
          "with the Foxglove view in process (1 client)")
+
+
+def bare_subscriber(endpoint: str) -> None:
+    """A process subscribed to the monitor's keys that does nothing with what it gets, until terminated."""
+    session = zenoh.open(session_config("peer", connect=[endpoint], multicast_scouting=False))
+    subs = [session.declare_subscriber(key("spot_arm"), lambda _sample: None)
+            for key in (keys.state, keys.verdicts, keys.unsafe, keys.state_space, keys.divergences)]
+    token = session.liveliness().declare_token(keys.alive("spot_arm", "bench-bare", "1"))
+    stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    stop.wait()
+    token.undeclare()
+    del subs
+    session.close()
 
 
 async def _fox_client(url: str, stop: threading.Event, aiohttp, json_, retry: bool = False) -> None:
@@ -437,9 +461,12 @@ def main() -> None:
                         help="only the rows without and with --incidents and the Foxglove view")
     parser.add_argument("--echo", help=argparse.SUPPRESS)
     parser.add_argument("--fox-client", help=argparse.SUPPRESS)
+    parser.add_argument("--bare-subscriber", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.echo:
         return echo_process(args.echo)
+    if args.bare_subscriber:
+        return bare_subscriber(args.bare_subscriber)
     if args.fox_client:  # a Foxglove client process subscribed to every channel, until terminated
         import json
 
