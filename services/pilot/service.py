@@ -32,7 +32,8 @@ the pilot's skill counts against the retries and holds the goal until ``resume``
 mode a command other than the one suggested is named; a ``run`` goal counts only a start
 with its inputs (the actuator hears the requests).  A cancel sends nothing: the skills the pilot
 started run on, unless it asks to interrupt them (``PilotGoalRequest.interrupt``); each is then
-interrupted as a command is sent (the check, one in flight), never a run someone else started
+interrupted as a command is sent (the check, one in flight), never a run someone else started,
+and given up (said so) when it cannot be sent within ``interrupt_wait`` s of the cancel
 (docs/pilot.md, *Cancelling*).  New goals are counted before they are
 parsed, and parsed and planned on a thread of their own, so cancels are answered meanwhile.
 
@@ -92,6 +93,7 @@ MAX_STATE = 1 << 20  # bytes of a LiveState or UnsafeReport read
 PENDING_GRACE = 0.5  # seconds a step's prediction may take before the pilot says it is paused for it
 RETRY_REFUSED = 1.0  # seconds before a check that gave no decision is asked again at the same step
 OUTCOME_TIMEOUT = PILOT_OUTCOME_TIMEOUT  # seconds a skill it started may run before its manager is asked its status
+INTERRUPT_WAIT = 30.0  # seconds after a cancel with interrupt within which an interrupt may still be sent
 MAX_NOTES = 16  # notes a status lists (the goal's last ones)
 
 
@@ -142,6 +144,7 @@ class _Goal:
     interrupts: dict[str, str] = field(default_factory=dict)  # after a cancel with interrupt: PilotStatus.interrupts
     interrupt_run: int = 0  # the monitor run (Pilot._runs) of that cancel: a restart loses track of the runs
     interrupt_due: float = 0.0  # when the interrupt sent must have shown its effect (monotonic)
+    interrupt_by: float = 0.0  # after this (monotonic), an interrupt not sent yet is given up
 
 
 def divergence_reason(st: LiveState) -> str:
@@ -172,9 +175,9 @@ class Pilot:
     def __init__(self, session: zenoh.Session, system: System, *, instance: str | None = None,
                  actuator: Actuator | None = None, response_timeout: float = 5.0, budget: float = 1.0,
                  client: str | None = None, typemap: Mapping[str, str] | None = None, style: KeyStyle = KeyStyle(),
-                 outcome_timeout: float = OUTCOME_TIMEOUT):
+                 outcome_timeout: float = OUTCOME_TIMEOUT, interrupt_wait: float = INTERRUPT_WAIT):
         self.session, self.system = session, system
-        self.outcome_timeout = outcome_timeout
+        self.outcome_timeout, self.interrupt_wait = outcome_timeout, interrupt_wait
         self.name = keys.check_chunk(system.name, "system name")
         self.instance = keys.check_chunk(instance or uuid.uuid4().hex[:8], "instance id")
         self.client = keys.check_chunk(client or keys.LOCAL_CLIENT, "client name")
@@ -908,6 +911,7 @@ class Pilot:
         if interrupt:
             g.interrupts = {name: "pending" for name, r in g.running.items() if r.ours}
             g.interrupt_run = self._runs
+            g.interrupt_by = time.monotonic() + self.interrupt_wait
             if not g.interrupts:
                 reason += "; no skill the pilot started runs: nothing to interrupt"
         self._end(g, "cancelled", reason, show=not g.interrupts)  # else the first status says what it interrupts
@@ -920,7 +924,11 @@ class Pilot:
         skillset, _, skill = name.partition(":")
         command = PilotCommand(skillset=skillset, transition=f"{skill}.interrupt")
 
-        def waiting(why: str = "") -> None:
+        def waiting(why: str = "") -> _Due | None:
+            if time.monotonic() >= g.interrupt_by:  # an interrupt long after the operator asked is not theirs
+                return self._interrupt_ends(g, name, "not interrupted", f"not interrupted: not sent within "
+                                            f"{self.interrupt_wait:g} s of the cancel" + (f" ({why})" if why else ""),
+                                            again=True)
             return self._show("cancelled", f"{g.reason}; interrupting {name}, which the pilot started"
                                            + (f": {why}" if why else ""), next_=command)
 
@@ -950,7 +958,9 @@ class Pilot:
         a = self._asked
         if a is not None and a[:3] == (g.id, st.seq, u) and time.monotonic() < a[3]:
             return waiting(self._refusal)
-        waiting()
+        if time.monotonic() >= g.interrupt_by:
+            return waiting()
+        self._show("cancelled", f"{g.reason}; interrupting {name}, which the pilot started", next_=command)
         return _Due(command, st.seq, g.id, u, interrupt=True)
 
     def _watch_interrupts(self, g: _Goal, skillset: str, transition: str, gap: bool) -> None:
@@ -1089,7 +1099,8 @@ def _cut(text: str, limit: int) -> str:
 def start_pilot(session: zenoh.Session, system: System, instance: str | None = None,
                 actuator: Actuator | None = None, response_timeout: float = 5.0, budget: float = 1.0,
                 client: str | None = None, typemap: Mapping[str, str] | None = None,
-                style: KeyStyle = KeyStyle(), outcome_timeout: float = OUTCOME_TIMEOUT) -> Pilot:
+                style: KeyStyle = KeyStyle(), outcome_timeout: float = OUTCOME_TIMEOUT,
+                interrupt_wait: float = INTERRUPT_WAIT) -> Pilot:
     """Start a pilot of ``system`` on ``session`` (which may be shared, docs/semantics.md §7).
 
     ``instance``: its id in the liveliness token and the status (default: random);
@@ -1099,7 +1110,9 @@ def start_pilot(session: zenoh.Session, system: System, instance: str | None = N
     seconds per goal; ``client``: its
     router login, the client chunk of its check queries (default ``local``); ``outcome_timeout``: seconds a
     skill it started may run without an outcome before its manager is asked for its status (and again
-    after as many seconds).
+    after as many seconds); ``interrupt_wait``: seconds after a cancel with interrupt within which an interrupt
+    may be sent (one that could not be, the monitor not vouching for its skillset say, is given up and said).
     """
     return Pilot(session, system, instance=instance, actuator=actuator, response_timeout=response_timeout,
-                 budget=budget, client=client, typemap=typemap, style=style, outcome_timeout=outcome_timeout)
+                 budget=budget, client=client, typemap=typemap, style=style, outcome_timeout=outcome_timeout,
+                 interrupt_wait=interrupt_wait)

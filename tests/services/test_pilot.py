@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 import random
+import re
 import threading
 import time
 from collections.abc import Callable
@@ -646,5 +647,30 @@ def test_an_interrupt_waits_for_a_live_skillset_and_gives_up_a_run_it_cannot_vou
         assert done.reason == ("cancelled by operator1; spot:stand_up not interrupted: the pilot cannot tell that the "
                                "run is the one it started (spot's state was taken from its manager anew)")
         assert (done.next, robot.actuator.sent) == (None, ["spot:init_power.start", "spot:stand_up.start"])
+    finally:
+        impl.close()
+
+
+def test_an_interrupt_that_cannot_be_sent_in_time_is_given_up_and_said(robots: Callable[..., Robot]) -> None:
+    """docs/pilot.md, *Cancelling*: the robot is silent when the goal is cancelled with interrupt; past the
+    pilot's interrupt wait (1 s here, 30 s by default) the interrupt is given up, with why, and never sent,
+    although spot comes back and stand_up still runs."""
+    robot = robots(lost_after=0.5, interrupt_wait=1.0)
+    impl = World(robot.sim, holding=[("spot", "stand_up")])
+    try:
+        reply = drive_until_running(robot, "stand_up")
+        robot.bridge.close()  # the robot goes silent
+        robot.statuses.first(lambda s: s.state == "paused" and "spot is lost: " in s.reason, what="lost")
+        assert ask_goal(robot.observer, PilotGoalRequest(system="spot_arm", op="cancel", interrupt=True)).accepted
+        done = robot.statuses.first(lambda s: s.interrupts.get("spot:stand_up") == "not interrupted",
+                                    what="given up")
+        assert re.fullmatch(r"cancelled by operator1; spot:stand_up not interrupted: not sent within 1 s of the "
+                            r"cancel \(spot is lost: .+\)", done.reason), done.reason
+        assert (done.goal_id, done.state, done.next) == (reply.goal_id, "cancelled", None)
+        robot.bridge = start_bridge(robot.sessions(), robot.system, robot.typemap)  # heard again
+        robot.wait_synced()
+        time.sleep(0.5)  # nothing is sent now
+        assert robot.actuator.sent == ["spot:init_power.start", "spot:stand_up.start"]
+        assert robot.sim.skill_status("spot", "stand_up")[0]
     finally:
         impl.close()
