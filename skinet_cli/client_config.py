@@ -66,7 +66,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def cmd_client_config(args: argparse.Namespace) -> int:
     from services.common.security import write_file
     from services.common.endpoints import check_endpoint
-    from services.secrets.handout import client_config, client_files
+    from services.common.client_files import client_config, client_files
     from skinet.errors import SkinetError
 
     check_endpoint(args.connect, "--connect")

@@ -257,7 +257,7 @@ def goal_config(args: argparse.Namespace, config: zenoh.Config) -> zenoh.Config 
     if not user:
         return None
     from services.common.zenoh_config import login, session_config
-    from services.secrets.handout import client_config, client_files
+    from services.common.client_files import client_config, client_files
 
     connect = json.loads(config.get_json("connect/endpoints") or "[]")
     if not connect:

@@ -155,7 +155,7 @@ def test_a_fifo_as_a_password_or_key_file_is_refused_not_waited_on(vault: Path, 
     import argparse
 
     from services.common.zenoh_config import login
-    from services.secrets.handout import client_files
+    from services.common.client_files import client_files
 
     os.mkfifo(tmp_path / "pw")
     with pytest.raises(SkinetError) as info:
