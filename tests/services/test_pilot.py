@@ -624,6 +624,15 @@ def test_a_cancel_with_interrupt_never_interrupts_a_skill_the_operator_started(r
         impl.close()
 
 
+def cancel_while_silent(robot: Robot) -> PilotGoalReply:
+    """The pilot's stand_up runs, the robot goes silent (spot lost), and the goal is cancelled with interrupt."""
+    reply = drive_until_running(robot, "stand_up")
+    robot.bridge.close()
+    robot.statuses.first(lambda s: s.state == "paused" and "spot is lost: " in s.reason, what="lost")
+    assert ask_goal(robot.observer, PilotGoalRequest(system="spot_arm", op="cancel", interrupt=True)).accepted
+    return reply
+
+
 def test_an_interrupt_waits_for_a_live_skillset_and_gives_up_a_run_it_cannot_vouch_for(quick: Robot,
                                                                                        client_factory) -> None:
     """The robot goes silent just as the goal is cancelled with interrupt: the interrupt waits (spot is not live),
@@ -632,10 +641,7 @@ def test_an_interrupt_waits_for_a_live_skillset_and_gives_up_a_run_it_cannot_vou
     robot = quick
     impl = World(robot.sim, holding=[("spot", "stand_up")])
     try:
-        reply = drive_until_running(robot, "stand_up")
-        robot.bridge.close()  # the robot goes silent
-        robot.statuses.first(lambda s: s.state == "paused" and "spot is lost: " in s.reason, what="lost")
-        assert ask_goal(robot.observer, PilotGoalRequest(system="spot_arm", op="cancel", interrupt=True)).accepted
+        cancel_while_silent(robot)
         waiting = robot.statuses.first(lambda s: s.state == "cancelled", what="cancelled")
         assert waiting.reason.startswith("cancelled by operator1; interrupting spot:stand_up, which the pilot "
                                          "started: spot is lost: "), waiting.reason
@@ -658,10 +664,7 @@ def test_an_interrupt_that_cannot_be_sent_in_time_is_given_up_and_said(robots: C
     robot = robots(lost_after=0.5, interrupt_wait=1.0)
     impl = World(robot.sim, holding=[("spot", "stand_up")])
     try:
-        reply = drive_until_running(robot, "stand_up")
-        robot.bridge.close()  # the robot goes silent
-        robot.statuses.first(lambda s: s.state == "paused" and "spot is lost: " in s.reason, what="lost")
-        assert ask_goal(robot.observer, PilotGoalRequest(system="spot_arm", op="cancel", interrupt=True)).accepted
+        reply = cancel_while_silent(robot)
         done = robot.statuses.first(lambda s: s.interrupts.get("spot:stand_up") == "not interrupted",
                                     what="given up")
         assert re.fullmatch(r"cancelled by operator1; spot:stand_up not interrupted: not sent within 1 s of the "
