@@ -330,6 +330,61 @@ async def _fox_client(url: str, stop: threading.Event, aiohttp, json_, retry: bo
                     return
 
 
+def views_through_router(n: int, rounds: int = 3) -> list[list[object]]:
+    """The deployed shape (compose.yaml): router, monitor process and this process as clients; this process
+    sends the events and subscribes to the monitor's five keys (the pilot and the views a deployment runs), and
+    measures event -> UnsafeReport without and with ``skinet foxglove`` connected to the router like any view
+    (one Foxglove client process subscribed to every channel), alternated ``rounds`` times; target: p99 with
+    it within 10 % of without."""
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    client = client_args(endpoint)
+    router = start_skinet("router", "--listen", endpoint, "--no-auth")  # loopback only
+    procs = [router]
+    modes = ("no Foxglove", "with skinet foxglove (1 client)")
+    samples: dict[str, list[float]] = {m: [] for m in modes}
+    try:
+        assert router.stdout is not None and "listening" in router.stdout.readline()
+        a = zenoh.open(session_config("client", connect=[endpoint], multicast_scouting=False))
+        try:
+            side = BridgeSide(a, "spot_arm", source="bench", model=load_system(SYSTEM_FILE)[0])
+            monitor = start_module("services.monitor", str(SYSTEM_FILE), *client, "--id", "bench",
+                                   "--log-level", "WARNING")
+            procs.append(monitor)
+            wait_token(a, keys.alive("spot_arm", "monitor", "bench"))
+            side.synced()
+            views = [a.declare_subscriber(key("spot_arm"), lambda _sample: None)
+                     for key in (keys.state, keys.verdicts, keys.state_space, keys.divergences)]
+            reports = Arrivals(a, keys.unsafe("spot_arm"))
+            payloads = events((n + 200) * rounds * len(modes))  # one monitor for all: its seqs go on
+            publishers = {k: a.declare_publisher(k, **BLOCK) for k in {k for k, _ in payloads}}
+            time.sleep(0.5)
+            for r in range(rounds):
+                for j, mode in enumerate(modes):
+                    run = payloads[(r * len(modes) + j) * (n + 200):]
+                    fox = []
+                    if "foxglove" in mode:
+                        port = free_port()
+                        fox = [start_module("services.foxglove", str(SYSTEM_FILE), "--port", str(port), *client,
+                                            "--wait", "5"),
+                               start([sys.executable, __file__, "--fox-client", f"ws://127.0.0.1:{port}"])]
+                        time.sleep(3.0)  # the view's start-up queries answered, its client subscribed
+                    samples[mode] += ping_pong(lambda i: publishers[run[i][0]].put(run[i][1]), reports, n)
+                    stop_all(fox)
+            reports.close()
+            del views
+            side.close()
+        finally:
+            a.close()
+    finally:
+        stop_all(procs)
+    p99 = {m: statistics.quantiles(v, n=100, method="inclusive")[98] for m, v in samples.items()}
+    base = p99[modes[0]]
+    return [["router", f"monitor process: event -> UnsafeReport, {modes[0]}", *stats(samples[modes[0]]), "baseline",
+             ""],
+            ["router", f"  {modes[1]}", *stats(samples[modes[1]]), f"p99 <= {1.1 * base * 1e6:.0f}",
+             verdict(p99[modes[1]] <= 1.1 * base)]]
+
+
 # -- across processes ------------------------------------------------------------------
 
 
@@ -475,6 +530,7 @@ def main() -> None:
         return asyncio.run(_fox_client(args.fox_client, threading.Event(), aiohttp, json, retry=True))
     rows = [] if args.views_only else in_process(args.events, args.profile)
     rows += with_views(args.events)
+    rows += views_through_router(args.events)
     if not args.views_only:
         rows += across_processes(args.events, args.burst)
     print(f"\nlatency over {args.events} events after 200 warm-up (µs), loopback, no predictor")
