@@ -925,7 +925,7 @@ class Pilot:
         command = PilotCommand(skillset=skillset, transition=f"{skill}.interrupt")
 
         def waiting(why: str = "") -> _Due | None:
-            if time.monotonic() >= g.interrupt_by:  # an interrupt long after the operator asked is not theirs
+            if state == "pending" and time.monotonic() >= g.interrupt_by:  # long after the ask: not the operator's
                 return self._interrupt_ends(g, name, "not interrupted", f"not interrupted: not sent within "
                                             f"{self.interrupt_wait:g} s of the cancel" + (f" ({why})" if why else ""),
                                             again=True)
