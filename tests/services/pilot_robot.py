@@ -125,10 +125,24 @@ class Robot:
         self.pilot: Pilot = start_pilot(pilot_session, pilot_system or system, instance="p1",
                                         actuator=pilot.pop("actuator", self.actuator), typemap=typemap, **pilot)
         self.observer = sessions()
-        self.statuses = Statuses(self.observer)
+        self.statuses = self._statuses()
         if monitor:
             self.wait_synced()
             self.wait_pilot("idle")
+
+    def _statuses(self) -> Statuses:
+        """The test's subscriber of the pilot's statuses, once the pilot's publisher knows of one: a client's
+        publisher sends only where the router said a subscriber is, and a run beside busy loops on both cores
+        once saw no status at all in 60 s.  Declared again if not matched within 10 s."""
+        for _ in range(3):
+            statuses = Statuses(self.observer)
+            deadline = time.monotonic() + 10.0
+            while time.monotonic() < deadline:
+                if self.pilot._pub.matching_status.matching:
+                    return statuses
+                time.sleep(0.05)
+            statuses._sub.undeclare()
+        pytest.fail("the pilot's status publisher never matched the test's subscriber (3 tries of 10 s)")
 
     def wait_pilot(self, state: str, timeout: float = 30.0) -> None:
         """Until the pilot's own last status is ``state``."""
