@@ -36,6 +36,7 @@ import pstats
 import os
 import signal
 import statistics
+import subprocess
 import sys
 import threading
 import time
@@ -245,10 +246,8 @@ def with_views(n: int, rounds: int = 3) -> list[list[object]]:
                     wait_token(session, keys.alive("spot_arm", "bench-bare", "*"))
                     time.sleep(1.0)  # its subscriptions reach this session, as the Foxglove process's do
                 elif "another process" in views:
-                    port = free_port()
-                    proc = start_module("services.foxglove", str(SYSTEM_FILE), "--port", str(port), "--mode", "peer",
-                                        "-e", endpoint, "--no-multicast-scouting", "--wait", "0")
-                    client = start([sys.executable, __file__, "--fox-client", f"ws://127.0.0.1:{port}"])  # apart
+                    proc, client = foxglove_processes("--mode", "peer", "-e", endpoint, "--no-multicast-scouting",
+                                                      "--wait", "0")
                     wait_token(session, keys.alive("spot_arm", "monitor", "*"))
                     time.sleep(1.0)  # the view's start-up queries answered before measuring
                 elif "Foxglove" in views:
@@ -290,11 +289,21 @@ MODES = ("no view", "with a bare remote subscriber of the monitor's keys (peer: 
          "with the Foxglove view in process (1 client)")
 
 
+MONITOR_KEYS = (keys.state, keys.verdicts, keys.unsafe, keys.state_space, keys.divergences)  # what it publishes
+
+
+def foxglove_processes(*zenoh_args: str) -> list[subprocess.Popen]:
+    """``skinet foxglove`` (with ``zenoh_args``) on a free port, and a Foxglove client process subscribed to every
+    channel (a process apart, as Foxglove is)."""
+    port = free_port()
+    return [start_module("services.foxglove", str(SYSTEM_FILE), "--port", str(port), *zenoh_args),
+            start([sys.executable, __file__, "--fox-client", f"ws://127.0.0.1:{port}"])]
+
+
 def bare_subscriber(endpoint: str) -> None:
     """A process subscribed to the monitor's keys that does nothing with what it gets, until terminated."""
     session = zenoh.open(session_config("peer", connect=[endpoint], multicast_scouting=False))
-    subs = [session.declare_subscriber(key("spot_arm"), lambda _sample: None)
-            for key in (keys.state, keys.verdicts, keys.unsafe, keys.state_space, keys.divergences)]
+    subs = [session.declare_subscriber(key("spot_arm"), lambda _sample: None) for key in MONITOR_KEYS]
     token = session.liveliness().declare_token(keys.alive("spot_arm", "bench-bare", "1"))
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
@@ -304,23 +313,19 @@ def bare_subscriber(endpoint: str) -> None:
     session.close()
 
 
-async def _fox_client(url: str, stop: threading.Event, aiohttp, json_, retry: bool = False) -> None:
-    """A Foxglove client subscribed to every channel, reading every message until ``stop``."""
+async def _fox_client(url: str, aiohttp, json_) -> None:
+    """A Foxglove client subscribed to every channel, reading every message until the server closes (or the
+    process is terminated); it tries to connect until the server listens."""
     async with aiohttp.ClientSession() as http:
         while True:
             try:
                 ws = await http.ws_connect(url, protocols=("foxglove.sdk.v1",))
                 break
             except aiohttp.ClientError:
-                if not retry or stop.is_set():
-                    raise
                 await asyncio.sleep(0.1)
         async with ws:
-            while not stop.is_set():
-                try:
-                    msg = await ws.receive(timeout=0.2)
-                except asyncio.TimeoutError:
-                    continue
+            while True:
+                msg = await ws.receive()
                 if msg.type == aiohttp.WSMsgType.TEXT:
                     op = json_.loads(msg.data)
                     if op["op"] == "advertise":
@@ -353,8 +358,8 @@ def views_through_router(n: int, rounds: int = 3) -> list[list[object]]:
             wait_token(a, keys.alive("spot_arm", "monitor", "bench"))
             side.synced()
             views = [a.declare_subscriber(key("spot_arm"), lambda _sample: None)
-                     for key in (keys.state, keys.verdicts, keys.state_space, keys.divergences)]
-            reports = Arrivals(a, keys.unsafe("spot_arm"))
+                     for key in MONITOR_KEYS if key is not keys.unsafe]
+            reports = Arrivals(a, keys.unsafe("spot_arm"))  # the fifth
             payloads = events((n + 200) * rounds * len(modes))  # one monitor for all: its seqs go on
             publishers = {k: a.declare_publisher(k, **BLOCK) for k in {k for k, _ in payloads}}
             time.sleep(0.5)
@@ -363,10 +368,7 @@ def views_through_router(n: int, rounds: int = 3) -> list[list[object]]:
                     run = payloads[(r * len(modes) + j) * (n + 200):]
                     fox = []
                     if "foxglove" in mode:
-                        port = free_port()
-                        fox = [start_module("services.foxglove", str(SYSTEM_FILE), "--port", str(port), *client,
-                                            "--wait", "5"),
-                               start([sys.executable, __file__, "--fox-client", f"ws://127.0.0.1:{port}"])]
+                        fox = foxglove_processes(*client, "--wait", "5")
                         time.sleep(3.0)  # the view's start-up queries answered, its client subscribed
                     samples[mode] += ping_pong(lambda i: publishers[run[i][0]].put(run[i][1]), reports, n)
                     stop_all(fox)
@@ -527,7 +529,7 @@ def main() -> None:
 
         import aiohttp
 
-        return asyncio.run(_fox_client(args.fox_client, threading.Event(), aiohttp, json, retry=True))
+        return asyncio.run(_fox_client(args.fox_client, aiohttp, json))
     rows = [] if args.views_only else in_process(args.events, args.profile)
     rows += with_views(args.events)
     rows += views_through_router(args.events)

@@ -136,8 +136,7 @@ class StepLines:
             self.written = True
             if self.step is not None:
                 self.written_seq = max(self.written_seq, self.step[1])
-        self._notes(None if notes else time.monotonic())
-        self.out.flush()
+        self._notes(None if notes else time.monotonic())  # flushes the output
 
     def _notes(self, now: float | None) -> None:
         while self.notes:

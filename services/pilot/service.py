@@ -959,8 +959,8 @@ class Pilot:
         if a is not None and a[:3] == (g.id, st.seq, u) and time.monotonic() < a[3]:
             return waiting(self._refusal)
         if time.monotonic() >= g.interrupt_by:
-            return waiting()
-        self._show("cancelled", f"{g.reason}; interrupting {name}, which the pilot started", next_=command)
+            return waiting()  # given up
+        waiting()
         return _Due(command, st.seq, g.id, u, interrupt=True)
 
     def _watch_interrupts(self, g: _Goal, skillset: str, transition: str, gap: bool) -> None:

@@ -8,14 +8,17 @@ child process writing into a pipe.
 
 from __future__ import annotations
 
+import io
 import re
 import subprocess
 import sys
 import threading
+import time
 
 import zenoh
 
 from chains.chain import embedded_services
+from chains.watch import StepLines
 from services.monitor import start_monitor
 from skinet.system.load import load_system
 from skinet.wire import keys
@@ -110,11 +113,6 @@ def test_a_pipe_writes_a_divergence_line_after_its_steps_line() -> None:
     """The monitor's list and its verdicts travel on two keys: a violation at step 7 that arrives before
     step 7's verdicts is written after step 7's line (CI saw them the other way round), and a line whose
     step never comes is written after the hold."""
-    import io
-    import time
-
-    from chains.watch import StepLines
-
     out = io.StringIO()
     steps = StepLines(out, hold=2.0)
     steps.see((1, 6, ()), "[6] six", final=True)
