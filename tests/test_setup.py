@@ -37,8 +37,9 @@ def _groups(*args: str) -> list[tuple[str, str]]:
                         "no:cacheprovider", "--setup-plan", *args], cwd=REPO, capture_output=True, text=True,
                        timeout=300)
     assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
-    # The workers name a grouped test ``NODEID@GROUP``; --setup-plan runs neither fixtures nor tests.
-    ids = [line.strip() for line in r.stdout.splitlines() if "::" in line]
+    # The workers name a grouped test ``NODEID@GROUP``; --setup-plan runs neither fixtures nor tests.  A test
+    # skipped at collection (no corpus beside a fresh clone) has a second line, ``[gwN] SKIPPED NODEID``.
+    ids = [line.strip() for line in r.stdout.splitlines() if "::" in line and not line.startswith("[gw")]
     return [(i.split("::")[0], i.rsplit("@", 1)[1] if "@" in i else "") for i in ids]
 
 
