@@ -145,6 +145,14 @@ def private(path: Path) -> None:
         os.close(fd)
 
 
+def new_password() -> str:
+    """A random 24-byte password (URL-safe base64) that does not start with ``-``: given after ``--password`` on a
+    command line, one that did would be taken for an option."""
+    while (password := secrets.token_urlsafe(24)).startswith("-"):
+        pass
+    return password
+
+
 def ensure_users(folder: Path, users: Iterable[str] = USERS, fixed: dict[str, str] | None = None,
                  password_files: bool = True) -> dict[str, str]:
     """``folder/users.txt`` and, with ``password_files``, ``folder/<user>.password`` for every
@@ -168,7 +176,7 @@ def ensure_users(folder: Path, users: Iterable[str] = USERS, fixed: dict[str, st
             changed = True
     for user in users:
         if user not in known:
-            known[user] = secrets.token_urlsafe(24)
+            known[user] = new_password()
             changed = True
         path = folder / f"{user}.password"
         if not password_files:
@@ -309,7 +317,7 @@ def ensure_fleet(folder: Path) -> str:
     ensure_tls(fleet, ["hub"])
     path = fleet / "hub.password"
     if not path.exists():
-        write_file(path, secrets.token_urlsafe(24).encode() + b"\n")
+        write_file(path, new_password().encode() + b"\n")
     private(path)
     return path.read_text().strip()
 

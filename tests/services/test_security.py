@@ -20,6 +20,7 @@ from pathlib import Path
 import pytest
 import zenoh
 
+from services.common import security
 from services.common.security import (
     USERS, ensure_tls, ensure_users, load_ca, make_ca, make_certificate, tls_connect_config,
 )
@@ -58,6 +59,15 @@ def test_secrets_are_made_once_and_kept(tmp_path: Path) -> None:
     assert modes(tmp_path) == {"users.txt": 0o600, **{f"{u}.password": 0o600 for u in USERS},
                                **{f"tls/{n}.{x}": 0o600 if x == "key" else 0o644
                                   for n in ("ca", "router", "monitor") for x in ("key", "pem")}}
+
+
+def test_no_password_starts_with_a_dash(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """``--password -x...`` would be taken for an option (a fresh machine's test run made one, 1 in 64 per user)."""
+    made = iter(["-dash", "_fine", "-again", "-more", "plain"] + [f"p{i}" for i in range(len(USERS) + 1)])
+    monkeypatch.setattr(security.secrets, "token_urlsafe", lambda n: next(made))
+    users = ensure_users(tmp_path)
+    assert [users[u] for u in USERS[:2]] == ["_fine", "plain"]
+    assert not any(p.startswith("-") for p in users.values())
 
 
 def test_looser_secret_files_of_older_versions_are_made_0600(tmp_path: Path) -> None:
