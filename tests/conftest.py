@@ -12,6 +12,7 @@ line of the summary that gives their number.
 from __future__ import annotations
 
 import os
+import signal
 from pathlib import Path
 
 import pytest
@@ -32,6 +33,12 @@ CORPUS_FIXTURES = frozenset({"corpus_dir", "corpus_skillset"})
 
 
 def pytest_configure(config: pytest.Config) -> None:
+    # A test run started in the background of a non-interactive shell (``make test &``, a CI runner's script)
+    # inherits SIGINT ignored, and so do the commands it starts: Python keeps an ignored SIGINT ignored, so a test's
+    # Ctrl-C (SIGINT sent to a command) would be lost until the command installs its own handler (a fresh
+    # machine's run saw ``skinet goal`` go on after one).  The tests play an operator's terminal: Ctrl-C acts.
+    if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
     config.addinivalue_line("markers", "corpus: reads the third-party test corpus ../shared/corpus (skipped, in one "
                                        "summary line, where it is absent)")
 
