@@ -18,6 +18,13 @@ from the observer's snapshot, taken under the observer's lock so that no update 
 lost or counted twice.  Translating, encoding (JSON, in Rust:
 ``pydantic_core.to_json``) and sending happen in a thread of this view, and a
 message of a channel no client subscribes to is translated but never encoded.
+That thread works in rounds, at most one per :data:`ROUND` (50 a second, as a
+display refreshes), each starting :data:`GATHER` after its first update (the
+step's other messages join it, and the view works after the monitor's burst
+rather than during it): of a channel of the live picture a round sends only its
+last message (the others are counted in ``coalesced``); log lines, violations
+and divergences are all sent, in order.  Incident bundles are written elsewhere
+(:mod:`services.foxglove.bundle`) and hold every message.
 """
 
 from __future__ import annotations
@@ -25,6 +32,7 @@ from __future__ import annotations
 import collections
 import logging
 import threading
+import time
 from typing import Any
 
 import foxglove
@@ -38,6 +46,8 @@ from skinet.errors import SkinetError
 from skinet.wire import foxglove as fx
 
 QUEUE = 10_000  # updates waiting for the server thread
+ROUND = 0.02  # seconds: at most one sending round per ROUND
+GATHER = 0.005  # seconds a round waits after its first update
 LATCHED = (fx.STATE, fx.VERDICTS, fx.UNSAFE, fx.STATE_SPACE, fx.PILOT, fx.SERIES)
 log = logging.getLogger("skinet.foxglove")
 
@@ -66,6 +76,7 @@ class FoxgloveView:
         self.sent = 0
         self.caught_up = 0  # times the view woke up from the observer's snapshot
         self.translated = 0  # observer updates translated
+        self.coalesced = 0  # messages of the live picture superseded within a round, not sent
         self._context = foxglove.Context()
         self._channels = {spec.topic: foxglove.Channel(spec.topic, schema=spec.schema, context=self._context)
                           for spec in fx.channels()}
@@ -141,22 +152,33 @@ class FoxgloveView:
     # -- the server thread ------------------------------------------------------------------
 
     def _run(self) -> None:
+        next_round = 0.0
         while True:
             with self._cond:
                 while not self._queue and not self._closed:
                     self._cond.wait()
                 if self._closed:
                     return
-                item = self._queue.popleft()
-            if isinstance(item, str):
-                last = self._last.get(item)
-                if last is not None:
-                    self._log(item, *last)
-            elif isinstance(item, tuple):
-                self._catch_up(item[1])
-            else:
-                self.translated += len(item)
-                self._send(self.translator.feed(item))
+            # The rest of the step's messages gather meanwhile, and the view works after the monitor's burst.
+            time.sleep(max(GATHER, next_round - time.monotonic()))
+            next_round = time.monotonic() + ROUND
+            with self._cond:
+                items = list(self._queue)
+                self._queue.clear()
+            outs: list[Out] = []
+            for item in items:
+                if isinstance(item, str):
+                    last = self._last.get(item)
+                    if last is not None:
+                        outs.append((item, *last))
+                elif isinstance(item, tuple):
+                    self._send(outs)
+                    outs = []
+                    self._catch_up(item[1])
+                else:
+                    self.translated += len(item)
+                    outs += self.translator.feed(item)
+            self._send(outs)
 
     def _catch_up(self, snapshot: Update) -> None:
         """Start again from the observer's ``snapshot``: the translator's counts and the channels' last messages
@@ -167,8 +189,14 @@ class FoxgloveView:
                       if topic in LATCHED}
 
     def _send(self, outs: list[Out]) -> None:
-        for topic, message, t in outs:
+        """Send one round's messages: of a channel of the live picture only its last (:data:`LATCHED`), of the
+        others (log lines, violations, divergences) every one, in order."""
+        last = {topic: i for i, (topic, _m, _t) in enumerate(outs) if topic in LATCHED}
+        for i, (topic, message, t) in enumerate(outs):
             if topic in LATCHED:
+                if last[topic] != i:
+                    self.coalesced += 1
+                    continue
                 self._last[topic] = (message, t)
             if self._channels[topic].has_sinks():  # else nobody subscribes: not even encoded
                 self._log(topic, message, t)

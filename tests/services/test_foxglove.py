@@ -193,3 +193,38 @@ def test_skinet_run_with_a_foxglove_port_in_use_stops_with_one_line() -> None:
     assert done.returncode == 1 and "Traceback" not in done.stderr
     assert done.stderr.startswith(f"skinet: error: --foxglove: cannot serve Foxglove on 127.0.0.1:{port}: ")
     assert len(done.stderr.splitlines()) == 1, done.stderr
+
+
+def test_a_burst_sends_the_last_state_of_each_round_and_a_log_line_for_every_step(router, client_factory) -> None:
+    """200 steps published at once: the live picture's channel gets the last state of each sending round (the others
+    are counted, never sent), the log one line per step, in order."""
+    from services.dashboard.observer import Observer
+    from services.foxglove.server import FoxgloveView
+    from skinet.system.load import load_system
+    from skinet.wire import keys
+    from skinet.wire.codec import encode
+    from skinet.wire.messages import LiveState
+    from tests.services.test_monitor import wait_until
+
+    observer = Observer(client_factory(), "spot_arm", load_system(SYSTEM_FILE)[0])
+    view = FoxgloveView(observer, "127.0.0.1", 0)
+    client = FoxgloveClient(view.url)
+    monitor = client_factory()
+    try:
+        wait_until(lambda: view._subscriptions == len(fx.channels()), 20, "every channel subscribed")
+        publisher = monitor.declare_publisher(keys.state("spot_arm"))
+        wait_until(lambda: publisher.matching_status.matching, 10, "the observer's subscriber")
+        for seq in range(1, 201):
+            publisher.put(encode(LiveState(system="spot_arm", seq=seq, stamp=1000.0 + seq, skillsets={},
+                                           event=f"spot:teleop.start#{seq}")))
+        client.wait(lambda c: any(m["message"].startswith("step 200: ") for m in c.on(fx.LOG)), "step 200's line")
+        steps = [m["message"] for m in client.on(fx.LOG) if m["message"].startswith("step ")]
+        assert steps == [f"step {seq}: spot:teleop.start#{seq}" for seq in range(1, 201)]
+        states = [m["seq"] for m in client.on(fx.STATE)]
+        assert states[-1] == 200 and states == sorted(states)
+        assert len(states) < 200 and len(states) + view.coalesced == 200, (len(states), view.coalesced)
+        assert client.invalid == []
+    finally:
+        client.close()
+        view.close()
+        observer.close()
