@@ -48,6 +48,7 @@ from skinet.wire import foxglove as fx
 QUEUE = 10_000  # updates waiting for the server thread
 ROUND = 0.02  # seconds: at most one sending round per ROUND
 GATHER = 0.005  # seconds a round waits after its first update
+HAND_BACK = 0.00005  # seconds of a round's work after which the interpreter is handed back
 LATCHED = (fx.STATE, fx.VERDICTS, fx.UNSAFE, fx.STATE_SPACE, fx.PILOT, fx.SERIES)
 log = logging.getLogger("skinet.foxglove")
 
@@ -77,6 +78,7 @@ class FoxgloveView:
         self.caught_up = 0  # times the view woke up from the observer's snapshot
         self.translated = 0  # observer updates translated
         self.coalesced = 0  # messages of the live picture superseded within a round, not sent
+        self._handed = 0.0  # when the round's thread last let the interpreter's other threads in
         self._context = foxglove.Context()
         self._channels = {spec.topic: foxglove.Channel(spec.topic, schema=spec.schema, context=self._context)
                           for spec in fx.channels()}
@@ -166,6 +168,7 @@ class FoxgloveView:
                 items = list(self._queue)
                 self._queue.clear()
             outs: list[Out] = []
+            self._handed = time.perf_counter()
             for item in items:
                 if isinstance(item, str):
                     last = self._last.get(item)
@@ -178,7 +181,15 @@ class FoxgloveView:
                 else:
                     self.translated += len(item)
                     outs += self.translator.feed(item)
+                self._hand_back()
             self._send(outs)
+
+    def _hand_back(self) -> None:
+        """Let the interpreter's other threads in after :data:`HAND_BACK` of work: in the monitor's process (``skinet
+        run --foxglove``) a round held at once would keep the monitor waiting up to Python's 5 ms switch interval."""
+        if time.perf_counter() - self._handed > HAND_BACK:
+            time.sleep(0)
+            self._handed = time.perf_counter()
 
     def _catch_up(self, snapshot: Update) -> None:
         """Start again from the observer's ``snapshot``: the translator's counts and the channels' last messages
@@ -200,6 +211,7 @@ class FoxgloveView:
                 self._last[topic] = (message, t)
             if self._channels[topic].has_sinks():  # else nobody subscribes: not even encoded
                 self._log(topic, message, t)
+                self._hand_back()
 
     def _log(self, topic: str, message: dict[str, Any], t: int) -> None:
         try:
