@@ -354,6 +354,33 @@ async def _fox_client(url: str, aiohttp, json_) -> None:
                     return
 
 
+def alternated(a: zenoh.Session, n: int, rounds: int, modes: tuple[str, ...],
+               start_views: Callable[[int], list[subprocess.Popen]], settle: float) -> dict[str, list[list[float]]]:
+    """Event -> UnsafeReport latencies through a monitor process already synced on ``a``, each of ``modes`` in turn
+    for ``rounds`` rounds: ``start_views(j)`` starts the processes of mode ``j`` (given 3 s to subscribe and ask,
+    stopped after its ``n`` events, then ``settle`` s).  ``a`` subscribes to the monitor's five keys, as a
+    deployment's pilot and views do; one monitor for all, its seqs going on."""
+    views = [a.declare_subscriber(key("spot_arm"), lambda _sample: None)
+             for key in MONITOR_KEYS if key is not keys.unsafe]
+    reports = Arrivals(a, keys.unsafe("spot_arm"))  # the fifth
+    payloads = events((n + 200) * rounds * len(modes))
+    publishers = {k: a.declare_publisher(k, **BLOCK) for k in {k for k, _ in payloads}}
+    per_round: dict[str, list[list[float]]] = {m: [] for m in modes}
+    time.sleep(0.5)
+    for r in range(rounds):
+        for j, mode in enumerate(modes):
+            run = payloads[(r * len(modes) + j) * (n + 200):]
+            procs = start_views(j)
+            if procs:
+                time.sleep(3.0)  # their subscriptions reached the routers, the view's start-up queries answered
+            per_round[mode].append(ping_pong(lambda i: publishers[run[i][0]].put(run[i][1]), reports, n))
+            stop_all(procs)
+            time.sleep(settle)
+    reports.close()
+    del views
+    return per_round
+
+
 def views_through_router(n: int, rounds: int = 3) -> list[list[object]]:
     """The deployed shape (compose.yaml): router, monitor process and this process as clients; this process
     sends the events and subscribes to the monitor's five keys (the pilot and the views a deployment runs), and
@@ -365,8 +392,6 @@ def views_through_router(n: int, rounds: int = 3) -> list[list[object]]:
     router = start_skinet("router", "--listen", endpoint, "--no-auth")  # loopback only
     procs = [router]
     modes = ("no Foxglove", "with skinet foxglove (1 client)")
-    samples: dict[str, list[float]] = {m: [] for m in modes}
-    per_round: dict[str, list[list[float]]] = {m: [] for m in modes}
     try:
         assert router.stdout is not None and "listening" in router.stdout.readline()
         a = zenoh.open(session_config("client", connect=[endpoint], multicast_scouting=False))
@@ -377,29 +402,14 @@ def views_through_router(n: int, rounds: int = 3) -> list[list[object]]:
             procs.append(monitor)
             wait_token(a, keys.alive("spot_arm", "monitor", "bench"))
             side.synced()
-            views = [a.declare_subscriber(key("spot_arm"), lambda _sample: None)
-                     for key in MONITOR_KEYS if key is not keys.unsafe]
-            reports = Arrivals(a, keys.unsafe("spot_arm"))  # the fifth
-            payloads = events((n + 200) * rounds * len(modes))  # one monitor for all: its seqs go on
-            publishers = {k: a.declare_publisher(k, **BLOCK) for k in {k for k, _ in payloads}}
-            time.sleep(0.5)
-            for r in range(rounds):
-                for j, mode in enumerate(modes):
-                    run = payloads[(r * len(modes) + j) * (n + 200):]
-                    fox = []
-                    if "foxglove" in mode:
-                        fox = foxglove_processes(*client, "--wait", "5")
-                        time.sleep(3.0)  # the view's start-up queries answered, its client subscribed
-                    per_round[mode].append(ping_pong(lambda i: publishers[run[i][0]].put(run[i][1]), reports, n))
-                    samples[mode] += per_round[mode][-1]
-                    stop_all(fox)
-            reports.close()
-            del views
+            per_round = alternated(a, n, rounds, modes,
+                                   lambda j: foxglove_processes(*client, "--wait", "5") if j else [], 0.0)
             side.close()
         finally:
             a.close()
     finally:
         stop_all(procs)
+    samples = {m: [x for r in per_round[m] for x in r] for m in modes}
     base, with_it = p99(samples[modes[0]]), p99(samples[modes[1]])
     return [["router", f"monitor process: event -> UnsafeReport, {modes[0]} ({spread(per_round[modes[0]])})",
              *stats(samples[modes[0]]), "baseline", ""],
@@ -424,8 +434,6 @@ def robot_and_ground(n: int, rounds: int = 6) -> list[list[object]]:
     e1, e2 = f"tcp/127.0.0.1:{free_port()}", f"tcp/127.0.0.1:{free_port()}"
     modes = ("no ground view", "ground station with a view (the dashboard's Zenoh cost)",
              "ground station with the view and skinet foxglove (1 client)")
-    samples: dict[str, list[float]] = {m: [] for m in modes}
-    per_round: dict[str, list[list[float]]] = {m: [] for m in modes}
     mine = os.sched_getaffinity(0)
     os.sched_setaffinity(0, {robot_cpu})
     procs = [start([*robot, sys.executable, "-m", "skinet_cli.main", "router", "--listen", e1, "--no-auth"]),
@@ -440,38 +448,27 @@ def robot_and_ground(n: int, rounds: int = 6) -> list[list[object]]:
                                 "--id", "bench", "--log-level", "WARNING"]))
             wait_token(a, keys.alive("spot_arm", "monitor", "bench"))
             side.synced()
-            views = [a.declare_subscriber(key("spot_arm"), lambda _sample: None)
-                     for key in MONITOR_KEYS if key is not keys.unsafe]
-            reports = Arrivals(a, keys.unsafe("spot_arm"))
-            payloads = events((n + 200) * rounds * len(modes))
-            publishers = {k: a.declare_publisher(k, **BLOCK) for k in {k for k, _ in payloads}}
-            time.sleep(0.5)
-            for r in range(rounds):
-                for j, mode in enumerate(modes):
-                    run = payloads[(r * len(modes) + j) * (n + 200):]
-                    there = []
-                    if j > 0:
-                        there.append(start([*ground, sys.executable, __file__, "--bare-subscriber", e2]))
-                        wait_token(a, keys.alive("spot_arm", "bench-bare", "*"))
-                    if j > 1:
-                        port = free_port()
-                        there += [start([*ground, sys.executable, "-m", "services.foxglove", str(SYSTEM_FILE), "--port",
-                                         str(port), *client_args(e2), "--wait", "5"]),
-                                  start([*ground, sys.executable, __file__, "--fox-client", f"ws://127.0.0.1:{port}"])]
-                    if there:
-                        time.sleep(3.0)  # subscriptions through both routers, the view's queries answered
-                    per_round[mode].append(ping_pong(lambda i: publishers[run[i][0]].put(run[i][1]), reports, n))
-                    samples[mode] += per_round[mode][-1]
-                    stop_all(there)
-                    time.sleep(0.5)  # their subscriptions undeclared
-            reports.close()
-            del views
+
+            def ground_views(j: int) -> list[subprocess.Popen]:
+                there = []
+                if j > 0:
+                    there.append(start([*ground, sys.executable, __file__, "--bare-subscriber", e2]))
+                    wait_token(a, keys.alive("spot_arm", "bench-bare", "*"))
+                if j > 1:
+                    port = free_port()
+                    there += [start([*ground, sys.executable, "-m", "services.foxglove", str(SYSTEM_FILE), "--port",
+                                     str(port), *client_args(e2), "--wait", "5"]),
+                              start([*ground, sys.executable, __file__, "--fox-client", f"ws://127.0.0.1:{port}"])]
+                return there
+
+            per_round = alternated(a, n, rounds, modes, ground_views, 0.5)  # 0.5 s: their subscriptions undeclared
             side.close()
         finally:
             a.close()
     finally:
         stop_all(procs)
         os.sched_setaffinity(0, mine)
+    samples = {m: [x for r in per_round[m] for x in r] for m in modes}
     base = p99(samples[modes[1]])
     return [["robot+ground", f"monitor process: event -> UnsafeReport, {modes[0]} ({spread(per_round[modes[0]])})",
              *stats(samples[modes[0]]), "(information)", ""],
