@@ -170,9 +170,9 @@ class FoxgloveView:
             outs: list[Out] = []
             self._handed = time.perf_counter()
             for item in items:
-                if isinstance(item, str):
+                if isinstance(item, str):  # a subscription: the channel's last message again, unless newer is due
                     last = self._last.get(item)
-                    if last is not None:
+                    if last is not None and all(topic != item for topic, _m, _t in outs):
                         outs.append((item, *last))
                 elif isinstance(item, tuple):
                     self._send(outs)
