@@ -445,3 +445,25 @@ def test_python_hint_is_the_interpreter_beside_the_script(monkeypatch: pytest.Mo
             assert (program.skinet(), program.python()) == expected
         finally:
             program.skinet.cache_clear()
+
+
+def test_sigusr1_prints_every_threads_stack_and_the_command_goes_on() -> None:
+    """What to send a hung command before killing it (docs/operator.md)."""
+    import signal
+
+    from tests.loopback import free_port
+    from tests.processes import start_skinet, stop
+
+    proc = start_skinet("router", "--listen", f"tcp/127.0.0.1:{free_port()}", "--no-auth")
+    try:
+        assert proc.stdout is not None and "listening" in proc.stdout.readline()
+        proc.send_signal(signal.SIGUSR1)
+        lines = []
+        while not any(line.startswith("Current thread 0x") for line in lines):
+            lines.append(proc.stdout.readline())
+            assert lines[-1], f"the output ended: {lines}"
+        assert lines[-1].endswith("(most recent call first):\n")
+        assert proc.stdout.readline().startswith('  File "'), lines  # its frames follow
+        assert proc.poll() is None
+    finally:
+        assert stop(proc) in (0, -signal.SIGTERM)

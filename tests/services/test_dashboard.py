@@ -16,6 +16,7 @@ import json
 import os
 import re
 import shutil
+import signal
 import socket
 import time
 import urllib.request
@@ -625,7 +626,14 @@ def test_live_demo_plays_the_mission_for_the_dashboard_and_watch(browser, tmp_pa
                                                   "views for 60 s")
     finally:
         proc.terminate()
-        out, err = proc.communicate(timeout=30)
+        try:
+            out, err = proc.communicate(timeout=30)
+        except subprocess.TimeoutExpired:  # once in three full runs of one session (0.3 s is usual): where it hangs
+            proc.send_signal(signal.SIGUSR1)
+            time.sleep(2)
+            proc.kill()
+            out, err = proc.communicate()
+            pytest.fail(f"skinet demo did not stop within 30 s of SIGTERM; its threads then:\n{err}")
     assert proc.returncode == 0, err
     lines = out.splitlines()
     assert lines[0] == f"== unassisted run ({MISSIONS / 'unassisted.toml'}), live at speed 10: 62 steps, system spot_arm"
