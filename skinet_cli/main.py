@@ -3,13 +3,10 @@
 from __future__ import annotations
 
 import argparse
-import faulthandler
 import importlib
 import json
 import os
-import signal
 import sys
-import threading
 import time
 from collections.abc import Sequence
 from dataclasses import replace
@@ -36,6 +33,7 @@ from services.common.environment import check_environment
 from services.common.options import ArgumentParser, count, load_live_system, print_warnings, state_marking
 from services.common.options import seconds as duration, time_budget
 from services.common.memory import add_memory_arg, memory_limit
+from services.common.stacks import stacks_on_sigusr1
 from chains.render import analysis_text, seconds, table
 
 DESCRIPTION = """\
@@ -126,11 +124,7 @@ def _command(argv: Sequence[str]) -> str:
 
 def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
-    if threading.current_thread() is threading.main_thread():  # a hung command: ``kill -USR1 PID`` shows where
-        try:
-            faulthandler.register(signal.SIGUSR1, file=sys.__stderr__, all_threads=True)
-        except (AttributeError, ValueError, OSError):  # no standard error file (embedded, closed)
-            pass
+    stacks_on_sigusr1()  # a hung command: ``kill -USR1 PID`` shows where
     try:
         parser = build_parser(_command(argv))
         args = parser.parse_args(argv)

@@ -14,6 +14,7 @@ import threading
 from collections.abc import Callable, Sequence
 
 from services.common.environment import check_environment
+from services.common.stacks import stacks_on_sigusr1
 from services.common.options import count, key_name, key_prefix
 from skinet.errors import SkinetError, SourceError
 from skinet.ros.keys import KeyStyle
@@ -74,6 +75,7 @@ def one_line_errors(prog: str) -> Callable[[Callable[[Sequence[str] | None], int
     def wrap(main: Callable[[Sequence[str] | None], int]) -> Callable[..., int]:
         @functools.wraps(main)
         def guarded(argv: Sequence[str] | None = None) -> int:
+            stacks_on_sigusr1()
             try:
                 check_environment()
                 return main(argv)

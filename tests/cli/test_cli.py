@@ -332,12 +332,13 @@ def test_lazy_command_runs_its_module(capsys: pytest.CaptureFixture[str]) -> Non
 
 def test_unsafe_imports_no_service_module() -> None:
     """Start-up (issue 10 (d)): no Zenoh, pydantic, web server, plotting, ROS type library (issue 33), chain or
-    service for `skinet unsafe` (only the options the services share and the chains' text helpers)."""
+    service for `skinet unsafe` (only the options the services share, SIGUSR1's stacks and the chains' text helpers)."""
     code = ("import sys; from skinet_cli.main import main; code = main(['unsafe', sys.argv[1]]); "
             "print(sorted({m.split('.')[0] for m in sys.modules} & {'zenoh', 'pydantic', 'aiohttp', 'matplotlib', "
             "'scipy', 'rosbags'} | {m for m in sys.modules if m.startswith(('services.', 'chains.')) and m not in "
             "('services.common', 'services.common.options', 'services.common.environment', "
-            "'services.common.memory', 'chains.render', 'chains.pilot_lines')})); raise SystemExit(code)")
+            "'services.common.memory', 'services.common.stacks', 'chains.render', 'chains.pilot_lines')})); "
+            "raise SystemExit(code)")
     done = subprocess.run([sys.executable, "-c", code, SYSTEM], cwd=ROOT, capture_output=True, text=True, timeout=60)
     assert done.returncode == 0, done.stderr
     assert done.stdout.splitlines()[-1] == "[]"
@@ -447,16 +448,25 @@ def test_python_hint_is_the_interpreter_beside_the_script(monkeypatch: pytest.Mo
             program.skinet.cache_clear()
 
 
-def test_sigusr1_prints_every_threads_stack_and_the_command_goes_on() -> None:
-    """What to send a hung command before killing it (docs/operator.md)."""
+@pytest.mark.parametrize("what", ["skinet router", "python -m services.monitor"])
+def test_sigusr1_prints_every_threads_stack_and_the_command_goes_on(what: str) -> None:
+    """What to send a hung command or service before killing it (docs/operator.md)."""
     import signal
 
     from tests.loopback import free_port
-    from tests.processes import start_skinet, stop
+    from tests.processes import start_module, start_skinet, stop
 
-    proc = start_skinet("router", "--listen", f"tcp/127.0.0.1:{free_port()}", "--no-auth")
+    listen = f"tcp/127.0.0.1:{free_port()}"
+    if what == "skinet router":
+        proc, ready = start_skinet("router", "--listen", listen, "--no-auth"), "listening"
+    else:
+        proc = start_module("services.monitor", "skillsets/spot_arm.toml", "--mode", "peer", "--listen", listen,
+                            "--no-multicast-scouting")
+        ready = "monitoring spot_arm"
     try:
-        assert proc.stdout is not None and "listening" in proc.stdout.readline()
+        assert proc.stdout is not None
+        while ready not in (line := proc.stdout.readline()):
+            assert line, f"{what} ended before '{ready}'"
         proc.send_signal(signal.SIGUSR1)
         lines = []
         while not any(line.startswith("Current thread 0x") for line in lines):
