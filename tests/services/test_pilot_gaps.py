@@ -103,8 +103,10 @@ def test_no_outcome_within_the_outcome_timeout_asks_the_manager_for_its_status(
         waiting = robot.statuses.first(lambda s: "status asked" in s.reason, what="a status request")
         assert waiting.reason == ("the outcome of spot:teleop (none seen within 0.5 s: status asked of its manager: "
                                   "spot:teleop)")
-        assert robot.sim.wait_handled("spot", topic, before + 1, timeout=30.0)
+        # the status is published under the pilot's lock, the request sent just after it: wait for the request
+        wait_until(lambda: bool(robot.actuator.asked), 30.0, "the pilot's status request")
         assert set(robot.actuator.asked) == {"spot"}
+        assert robot.sim.wait_handled("spot", topic, before + 1, timeout=30.0)
         assert robot.actuator.sent.count("spot:teleop.start") == 1
     finally:
         impl.close()
