@@ -23,12 +23,14 @@ The in-process monitor also runs without and with incident bundles and the Foxgl
 sorts Foxglove's cost from Zenoh's: a process of its own subscribed to the monitor's five keys with a
 callback that does nothing (the cost any remote view puts on the monitor: the dashboard, ``skinet watch``);
 the Foxglove process's p99 is also given as a ratio to it.  The deployed shape follows: a router, the
-monitor process and ``skinet foxglove`` as clients, all on both cores.  Last, the shape docs/foxglove.md
-recommends: the robot (router, monitor, this process) pinned to one core and a ground station (its own
-router linked to the robot's, a view) pinned to the other, without and with ``skinet foxglove`` there
-(alternated six times).
+monitor process and ``skinet foxglove`` as clients, all on both cores; then the same shape with the
+dashboard service running, without and with its ``--foxglove`` option (no Zenoh delivery added).  Last,
+the shape docs/foxglove.md recommends: the robot (router, monitor, this process) pinned to one core and a
+ground station (its own router linked to the robot's, a view) pinned to the other, without and with
+``skinet foxglove`` there (alternated six times).  These rows send their events back to back unless
+``--pace MS`` spaces them.
 
-    python benchmarks/bench_latency.py [--events 2000] [--burst 20000] [--profile] [--views-only]
+    python benchmarks/bench_latency.py [--events 2000] [--burst 20000] [--profile] [--views-only] [--pace MS]
 """
 
 from __future__ import annotations
@@ -126,11 +128,14 @@ class Arrivals:
         self._sub.undeclare()
 
 
-def ping_pong(send: Callable[[int], None], arrivals: Arrivals, n: int, warmup: int = 200) -> list[float]:
-    """Latency of ``n`` sends, one at a time, each waiting for its arrival."""
+def ping_pong(send: Callable[[int], None], arrivals: Arrivals, n: int, warmup: int = 200,
+              pace: float = 0.0) -> list[float]:
+    """Latency of ``n`` sends, one at a time, each waiting for its arrival, then ``pace`` s (untimed)."""
     out = []
     base = arrivals.count
     for i in range(warmup + n):
+        if pace:
+            time.sleep(pace)
         arrivals.expect(base + i + 1)
         t0 = time.perf_counter()
         send(i)
@@ -244,7 +249,7 @@ def in_process(n: int, profile: bool) -> list[list[object]]:
     return rows
 
 
-def with_views(n: int, rounds: int = 3) -> list[list[object]]:
+def with_views(n: int, rounds: int = 3, pace: float = 0.0) -> list[list[object]]:
     """The in-process monitor's event -> UnsafeReport latency without and with incident bundles (``--incidents``:
     the ring on the monitor's session) and the Foxglove view (an observer and its WebSocket server, one client
     subscribed to every channel) on the same session, alternated ``rounds`` times so that a busy machine loads
@@ -288,7 +293,7 @@ def with_views(n: int, rounds: int = 3) -> list[list[object]]:
                 publishers = {k: session.declare_publisher(k, **BLOCK) for k in {k for k, _ in payloads}}
                 reports = Arrivals(session, keys.unsafe("spot_arm"))
                 per_round[views].append(ping_pong(lambda i: publishers[payloads[i][0]].put(payloads[i][1]), reports,
-                                                  n))
+                                                  n, pace=pace))
                 reports.close()
                 if incidents is not None:
                     incidents.close()
@@ -365,7 +370,8 @@ async def _fox_client(url: str, aiohttp, json_) -> None:
 
 
 def alternated(a: zenoh.Session, n: int, rounds: int, modes: tuple[str, ...],
-               start_views: Callable[[int], list[subprocess.Popen]], settle: float) -> dict[str, list[list[float]]]:
+               start_views: Callable[[int], list[subprocess.Popen]], settle: float,
+               pace: float = 0.0) -> dict[str, list[list[float]]]:
     """Event -> UnsafeReport latencies through a monitor process already synced on ``a``, each of ``modes`` in turn
     for ``rounds`` rounds: ``start_views(j)`` starts the processes of mode ``j`` (given 3 s to subscribe and ask,
     stopped after its ``n`` events, then ``settle`` s).  ``a`` subscribes to the monitor's five keys, as a
@@ -383,7 +389,7 @@ def alternated(a: zenoh.Session, n: int, rounds: int, modes: tuple[str, ...],
             procs = start_views(j)
             if procs:
                 time.sleep(3.0)  # their subscriptions reached the routers, the view's start-up queries answered
-            per_round[mode].append(ping_pong(lambda i: publishers[run[i][0]].put(run[i][1]), reports, n))
+            per_round[mode].append(ping_pong(lambda i: publishers[run[i][0]].put(run[i][1]), reports, n, pace=pace))
             stop_all(procs)
             time.sleep(settle)
     reports.close()
@@ -391,7 +397,7 @@ def alternated(a: zenoh.Session, n: int, rounds: int, modes: tuple[str, ...],
     return per_round
 
 
-def views_through_router(n: int, rounds: int = 3) -> list[list[object]]:
+def views_through_router(n: int, rounds: int = 3, pace: float = 0.0) -> list[list[object]]:
     """The deployed shape (compose.yaml): router, monitor process and this process as clients; this process
     sends the events and subscribes to the monitor's five keys (the pilot and the views a deployment runs), and
     measures event -> UnsafeReport without and with ``skinet foxglove`` connected to the router like any view
@@ -413,7 +419,7 @@ def views_through_router(n: int, rounds: int = 3) -> list[list[object]]:
             wait_token(a, keys.alive("spot_arm", "monitor", "bench"))
             side.synced()
             per_round = alternated(a, n, rounds, modes,
-                                   lambda j: foxglove_processes(*client, "--wait", "5") if j else [], 0.0)
+                                   lambda j: foxglove_processes(*client, "--wait", "5") if j else [], 0.0, pace)
             side.close()
         finally:
             a.close()
@@ -424,7 +430,48 @@ def views_through_router(n: int, rounds: int = 3) -> list[list[object]]:
             rounds_row("router", f"  {modes[1]}", per_round[modes[1]], per_round[modes[0]])]
 
 
-def robot_and_ground(n: int, rounds: int = 6) -> list[list[object]]:
+def dashboard_with_foxglove(n: int, rounds: int = 6, pace: float = 0.0) -> list[list[object]]:
+    """The robot's own cores, served as docs/foxglove.md recommends there: the deployed shape (router, monitor
+    process, this process sending the events and subscribing to the monitor's five keys), with the dashboard
+    service running (``python -m services.dashboard``, no browser), without and with its ``--foxglove`` option
+    (one Foxglove client process subscribed to every channel), alternated ``rounds`` times; target: p99 with it
+    within 10 % of without.  The dashboard's observer feeds the Foxglove view: no Zenoh delivery is added, only
+    the view's rounds and its client."""
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    client = client_args(endpoint)
+    router = start_skinet("router", "--listen", endpoint, "--no-auth")  # loopback only
+    procs = [router]
+    modes = ("with the dashboard service", "with the dashboard service and its --foxglove (1 client)")
+    try:
+        assert router.stdout is not None and "listening" in router.stdout.readline()
+        a = zenoh.open(session_config("client", connect=[endpoint], multicast_scouting=False))
+        try:
+            side = BridgeSide(a, "spot_arm", source="bench", model=load_system(SYSTEM_FILE)[0])
+            procs.append(start_module("services.monitor", str(SYSTEM_FILE), *client, "--id", "bench",
+                                      "--log-level", "WARNING"))
+            wait_token(a, keys.alive("spot_arm", "monitor", "bench"))
+            side.synced()
+
+            def dashboard(j: int) -> list[subprocess.Popen]:
+                fox = ["--foxglove", str(free_port())] if j else []
+                there = [start_module("services.dashboard", str(SYSTEM_FILE), "--port", str(free_port()), *fox,
+                                      *client, "--wait", "5", "--log-level", "WARNING")]
+                if j:
+                    there.append(start([sys.executable, __file__, "--fox-client", f"ws://127.0.0.1:{fox[1]}"]))
+                return there
+
+            per_round = alternated(a, n, rounds, modes, dashboard, 0.5, pace)
+            side.close()
+        finally:
+            a.close()
+    finally:
+        stop_all(procs)
+    return [rounds_row("router", f"monitor process: event -> UnsafeReport, {modes[0]}", per_round[modes[0]],
+                       target="baseline"),
+            rounds_row("router", f"  {modes[1]}", per_round[modes[1]], per_round[modes[0]])]
+
+
+def robot_and_ground(n: int, rounds: int = 6, pace: float = 0.0) -> list[list[object]]:
     """The shape docs/foxglove.md recommends, two machines played by the two cores: the robot (its router, the
     monitor process, and this process sending the events and subscribing to the monitor's five keys) pinned to
     CPU 0, the ground station (a router linked to the robot's, a view there) pinned to CPU 1.  The view already
@@ -468,7 +515,7 @@ def robot_and_ground(n: int, rounds: int = 6) -> list[list[object]]:
                               start([*ground, sys.executable, __file__, "--fox-client", f"ws://127.0.0.1:{port}"])]
                 return there
 
-            per_round = alternated(a, n, rounds, modes, ground_views, 0.5)  # 0.5 s: their subscriptions undeclared
+            per_round = alternated(a, n, rounds, modes, ground_views, 0.5, pace)  # 0.5 s: subscriptions undeclared
             side.close()
         finally:
             a.close()
@@ -609,6 +656,9 @@ def main() -> None:
     parser.add_argument("--profile", action="store_true", help="cProfile the in-process monitor run")
     parser.add_argument("--views-only", action="store_true",
                         help="only the rows without and with --incidents and the Foxglove view")
+    parser.add_argument("--pace", type=float, default=0.0, metavar="MS",
+                        help="in the rows of the views, wait MS milliseconds (untimed) before each event: a robot's "
+                             "pace rather than back to back (default 0: the flood)")
     parser.add_argument("--echo", help=argparse.SUPPRESS)
     parser.add_argument("--fox-client", help=argparse.SUPPRESS)
     parser.add_argument("--bare-subscriber", help=argparse.SUPPRESS)
@@ -624,12 +674,17 @@ def main() -> None:
 
         return asyncio.run(_fox_client(args.fox_client, aiohttp, json))
     rows = [] if args.views_only else in_process(args.events, args.profile)
-    rows += with_views(args.events)
-    rows += views_through_router(args.events)
-    rows += robot_and_ground(args.events)
+    if args.pace < 0:
+        parser.error(f"argument --pace: {args.pace:g} is below 0")
+    pace = args.pace / 1000
+    rows += with_views(args.events, pace=pace)
+    rows += views_through_router(args.events, pace=pace)
+    rows += dashboard_with_foxglove(args.events, pace=pace)
+    rows += robot_and_ground(args.events, pace=pace)
     if not args.views_only:
         rows += across_processes(args.events, args.burst)
-    print(f"\nlatency over {args.events} events after 200 warm-up (µs), loopback, no predictor")
+    paced = f", the views' rows {args.pace:g} ms apart" if args.pace else ""
+    print(f"\nlatency over {args.events} events after 200 warm-up (µs), loopback, no predictor{paced}")
     print(table(["where", "path", "p50", "p99", "max", "target", ""], rows))
 
 

@@ -354,7 +354,7 @@ FOXGLOVE_START = 30.0  # seconds for the Foxglove view's process to say where it
 class FoxgloveProcess:
     """``python -m services.foxglove`` beside ``skinet run``: a process of its own, so that its Python work never
     holds the monitor's interpreter (benchmarks/bench_latency.py: in the same process, p99 several times the
-    monitor's; in another, within its noise)."""
+    monitor's; in another, what any remote view costs, docs/foxglove.md)."""
 
     proc: Any
     url: str
