@@ -397,70 +397,26 @@ def alternated(a: zenoh.Session, n: int, rounds: int, modes: tuple[str, ...],
     return per_round
 
 
-def views_through_router(n: int, rounds: int = 3, pace: float = 0.0) -> list[list[object]]:
-    """The deployed shape (compose.yaml): router, monitor process and this process as clients; this process
-    sends the events and subscribes to the monitor's five keys (the pilot and the views a deployment runs), and
-    measures event -> UnsafeReport without and with ``skinet foxglove`` connected to the router like any view
-    (one Foxglove client process subscribed to every channel), alternated ``rounds`` times; target: p99 with
-    it within 10 % of without."""
+def through_router(n: int, rounds: int, modes: tuple[str, str],
+                   start_views: Callable[[int, list[str]], list[subprocess.Popen]], settle: float,
+                   pace: float) -> list[list[object]]:
+    """The deployed shape (compose.yaml) on both cores: a loopback router, the monitor process and this process
+    as clients; :func:`alternated` over ``modes`` there (``start_views(j, client)``: mode ``j``'s processes,
+    ``client`` the flags that connect them to the router); the baseline row and the measured one."""
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    client = client_args(endpoint)
     router = start_skinet("router", "--listen", endpoint, "--no-auth")  # loopback only
     procs = [router]
-    modes = ("no Foxglove", "with skinet foxglove (1 client)")
     try:
         assert router.stdout is not None and "listening" in router.stdout.readline()
         a = zenoh.open(session_config("client", connect=[endpoint], multicast_scouting=False))
         try:
             side = BridgeSide(a, "spot_arm", source="bench", model=load_system(SYSTEM_FILE)[0])
-            monitor = start_module("services.monitor", str(SYSTEM_FILE), *client, "--id", "bench",
-                                   "--log-level", "WARNING")
-            procs.append(monitor)
-            wait_token(a, keys.alive("spot_arm", "monitor", "bench"))
-            side.synced()
-            per_round = alternated(a, n, rounds, modes,
-                                   lambda j: foxglove_processes(*client, "--wait", "5") if j else [], 0.0, pace)
-            side.close()
-        finally:
-            a.close()
-    finally:
-        stop_all(procs)
-    return [rounds_row("router", f"monitor process: event -> UnsafeReport, {modes[0]}", per_round[modes[0]],
-                       target="baseline"),
-            rounds_row("router", f"  {modes[1]}", per_round[modes[1]], per_round[modes[0]])]
-
-
-def dashboard_with_foxglove(n: int, rounds: int = 6, pace: float = 0.0) -> list[list[object]]:
-    """The robot's own cores, served as docs/foxglove.md recommends there: the deployed shape (router, monitor
-    process, this process sending the events and subscribing to the monitor's five keys), with the dashboard
-    service running (``python -m services.dashboard``, no browser), without and with its ``--foxglove`` option
-    (one Foxglove client process subscribed to every channel), alternated ``rounds`` times; target: p99 with it
-    within 10 % of without.  The dashboard's observer feeds the Foxglove view: no Zenoh delivery is added, only
-    the view's rounds and its client."""
-    endpoint = f"tcp/127.0.0.1:{free_port()}"
-    client = client_args(endpoint)
-    router = start_skinet("router", "--listen", endpoint, "--no-auth")  # loopback only
-    procs = [router]
-    modes = ("with the dashboard service", "with the dashboard service and its --foxglove (1 client)")
-    try:
-        assert router.stdout is not None and "listening" in router.stdout.readline()
-        a = zenoh.open(session_config("client", connect=[endpoint], multicast_scouting=False))
-        try:
-            side = BridgeSide(a, "spot_arm", source="bench", model=load_system(SYSTEM_FILE)[0])
-            procs.append(start_module("services.monitor", str(SYSTEM_FILE), *client, "--id", "bench",
+            procs.append(start_module("services.monitor", str(SYSTEM_FILE), *client_args(endpoint), "--id", "bench",
                                       "--log-level", "WARNING"))
             wait_token(a, keys.alive("spot_arm", "monitor", "bench"))
             side.synced()
-
-            def dashboard(j: int) -> list[subprocess.Popen]:
-                fox = ["--foxglove", str(free_port())] if j else []
-                there = [start_module("services.dashboard", str(SYSTEM_FILE), "--port", str(free_port()), *fox,
-                                      *client, "--wait", "5", "--log-level", "WARNING")]
-                if j:
-                    there.append(start([sys.executable, __file__, "--fox-client", f"ws://127.0.0.1:{fox[1]}"]))
-                return there
-
-            per_round = alternated(a, n, rounds, modes, dashboard, 0.5, pace)
+            per_round = alternated(a, n, rounds, modes, lambda j: start_views(j, client_args(endpoint)), settle,
+                                   pace)
             side.close()
         finally:
             a.close()
@@ -469,6 +425,35 @@ def dashboard_with_foxglove(n: int, rounds: int = 6, pace: float = 0.0) -> list[
     return [rounds_row("router", f"monitor process: event -> UnsafeReport, {modes[0]}", per_round[modes[0]],
                        target="baseline"),
             rounds_row("router", f"  {modes[1]}", per_round[modes[1]], per_round[modes[0]])]
+
+
+def views_through_router(n: int, rounds: int = 3, pace: float = 0.0) -> list[list[object]]:
+    """The deployed shape (:func:`through_router`): this process sends the events and subscribes to the
+    monitor's five keys (the pilot and the views a deployment runs), and measures event -> UnsafeReport without
+    and with ``skinet foxglove`` connected to the router like any view (one Foxglove client process subscribed
+    to every channel), alternated ``rounds`` times; target: p99 with it within 10 % of without."""
+    modes = ("no Foxglove", "with skinet foxglove (1 client)")
+    return through_router(n, rounds, modes, lambda j, client: foxglove_processes(*client, "--wait", "5") if j else [],
+                          0.0, pace)
+
+
+def dashboard_with_foxglove(n: int, rounds: int = 6, pace: float = 0.0) -> list[list[object]]:
+    """The robot's own cores, served as docs/foxglove.md recommends there: the deployed shape
+    (:func:`through_router`) with the dashboard service running (``python -m services.dashboard``, no browser),
+    without and with its ``--foxglove`` option (one Foxglove client process subscribed to every channel),
+    alternated ``rounds`` times; target: p99 with it within 10 % of without.  The dashboard's observer feeds the
+    Foxglove view: no Zenoh delivery is added, only the view's rounds and its client."""
+    modes = ("with the dashboard service", "with the dashboard service and its --foxglove (1 client)")
+
+    def dashboard(j: int, client: list[str]) -> list[subprocess.Popen]:
+        fox = ["--foxglove", str(free_port())] if j else []
+        there = [start_module("services.dashboard", str(SYSTEM_FILE), "--port", str(free_port()), *fox, *client,
+                              "--wait", "5", "--log-level", "WARNING")]
+        if j:
+            there.append(start([sys.executable, __file__, "--fox-client", f"ws://127.0.0.1:{fox[1]}"]))
+        return there
+
+    return through_router(n, rounds, modes, dashboard, 0.5, pace)
 
 
 def robot_and_ground(n: int, rounds: int = 6, pace: float = 0.0) -> list[list[object]]:
@@ -673,10 +658,10 @@ def main() -> None:
         import aiohttp
 
         return asyncio.run(_fox_client(args.fox_client, aiohttp, json))
-    rows = [] if args.views_only else in_process(args.events, args.profile)
     if args.pace < 0:
         parser.error(f"argument --pace: {args.pace:g} is below 0")
     pace = args.pace / 1000
+    rows = [] if args.views_only else in_process(args.events, args.profile)
     rows += with_views(args.events, pace=pace)
     rows += views_through_router(args.events, pace=pace)
     rows += dashboard_with_foxglove(args.events, pace=pace)
