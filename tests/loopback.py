@@ -1,18 +1,43 @@
 """A Zenoh router on 127.0.0.1 and its clients, as the tests and the benchmarks run a chain (multicast scouting off:
 they neither see nor disturb other Zenoh traffic on the machine; docs/deployment.md's layout, one router and
-clients).  Cost: a session each; a free port is one bind."""
+clients).  Cost: a session each; a free port is a bind or a few."""
 
 from __future__ import annotations
 
+import random
 import socket
+from pathlib import Path
 
 import zenoh
 
 from services.common.zenoh_config import session_config
 
 
+PICK = random.SystemRandom()  # not the tests' seeded random: parallel workers must not pick alike
+
+
+def _ephemeral_low() -> int:
+    """The lowest port the kernel gives outgoing connections (Linux: 32768 unless configured)."""
+    try:
+        return int(Path("/proc/sys/net/ipv4/ip_local_port_range").read_text().split()[0])
+    except (OSError, ValueError, IndexError):
+        return 32768
+
+
 def free_port() -> int:
-    """A TCP port on 127.0.0.1 that was free a moment ago."""
+    """A TCP port on 127.0.0.1 that was free a moment ago, below the kernel's ephemeral range: a port the kernel
+    picks (bind to 0) can be taken by any outgoing connection before its user binds it (seen once: a compose
+    stack's router port, taken in the seconds before compose bound it); this one only by another listener."""
+    low = _ephemeral_low()
+    if low > 11024:
+        for _ in range(100):
+            port = PICK.randrange(low - 10000, low)
+            with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+                try:
+                    s.bind(("127.0.0.1", port))
+                except OSError:
+                    continue
+                return port
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
