@@ -4,6 +4,7 @@ clients).  Cost: a session each; a free port is a bind or a few."""
 
 from __future__ import annotations
 
+import functools
 import random
 import socket
 from pathlib import Path
@@ -14,8 +15,10 @@ from services.common.zenoh_config import session_config
 
 
 PICK = random.SystemRandom()  # not the tests' seeded random: parallel workers must not pick alike
+SPAN = 10_000  # free ports are picked among the SPAN ports below the ephemeral range
 
 
+@functools.cache
 def _ephemeral_low() -> int:
     """The lowest port the kernel gives outgoing connections (Linux: 32768 unless configured)."""
     try:
@@ -29,9 +32,9 @@ def free_port() -> int:
     picks (bind to 0) can be taken by any outgoing connection before its user binds it (seen once: a compose
     stack's router port, taken in the seconds before compose bound it); this one only by another listener."""
     low = _ephemeral_low()
-    if low > 11024:
+    if low - SPAN > 1024:  # above the privileged ports
         for _ in range(100):
-            port = PICK.randrange(low - 10000, low)
+            port = PICK.randrange(low - SPAN, low)
             with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
                 try:
                     s.bind(("127.0.0.1", port))
