@@ -333,6 +333,10 @@ def test_a_manager_that_is_gone_pauses_the_pilot_with_no_command(client_factory,
     robot = Robot(client_factory, *spot_arm, style=KeyStyle(rmw_zenoh=True, domain=23))
     try:
         robot.sim.close()
+        # a goal asked before the loss reached the pilot would be planned from the live state it still had (a
+        # full run saw init_power.start sent so): the pilot's own state says spot is lost first
+        wait_until(lambda: (st := robot.pilot._state) is not None and "spot" in st.sync
+                   and st.sync["spot"].state == "lost", 30, "the pilot's live state shows spot lost")
         reply = ask_goal(robot.observer, goal("reach spot:Standing", mode="drive"))
         paused = robot.statuses.first(lambda s: s.goal_id == reply.goal_id and s.state == "paused" and
                                      "manager left" in s.reason, what="its manager left")
