@@ -18,7 +18,8 @@ publications (default) and with ``--no-express`` (Zenoh batches the three
 messages of a step).  The burst row gives the CPU time per event of each
 process, which on a small machine is what bounds the rate.
 
-The in-process monitor also runs without and with incident bundles and the Foxglove view on its session
+The in-process monitor also runs without and with incident bundles (``--incidents``, ``--rounds`` rounds of
+each, 12 by default, in a random order per round) and without and with the Foxglove view on its session
 (alternated three times), target: p99 with them within 10 % of without.  Beside them runs the peer that
 sorts Foxglove's cost from Zenoh's: a process of its own subscribed to the monitor's five keys with a
 callback that does nothing (the cost any remote view puts on the monitor: the dashboard, ``skinet watch``);
@@ -30,7 +31,8 @@ ground station (its own router linked to the robot's, a view) pinned to the othe
 ``skinet foxglove`` there (alternated six times).  These rows send their events back to back unless
 ``--pace MS`` spaces them.
 
-    python benchmarks/bench_latency.py [--events 2000] [--burst 20000] [--profile] [--views-only] [--pace MS]
+    python benchmarks/bench_latency.py [--events 2000] [--burst 20000] [--profile] [--views-only | --incidents-only]
+        [--rounds N] [--pace MS]
 """
 
 from __future__ import annotations
@@ -249,18 +251,54 @@ def in_process(n: int, profile: bool) -> list[list[object]]:
     return rows
 
 
-def with_views(n: int, rounds: int = 3, pace: float = 0.0) -> list[list[object]]:
-    """The in-process monitor's event -> UnsafeReport latency without and with incident bundles (``--incidents``:
-    the ring on the monitor's session) and the Foxglove view (an observer and its WebSocket server, one client
-    subscribed to every channel) on the same session, alternated ``rounds`` times so that a busy machine loads
-    both alike; target: p99 with them within 10 % of p99 without.  The Foxglove client is a process of its own,
-    as Foxglove is (in the monitor's process its JSON decoding would hold the monitor's interpreter)."""
+def with_incidents(n: int, rounds: int = 12, pace: float = 0.0) -> list[list[object]]:
+    """The in-process monitor's event -> UnsafeReport latency without and with ``--incidents`` (the ring the
+    monitor hands its messages to), ``rounds`` rounds of each in a random order per round (a fixed order gave
+    the second a few µs at p50 either way); target: p99 with it within 10 % of without."""
+    import random
     import tempfile
 
-    from services.dashboard.observer import Observer
-    from services.foxglove.server import FoxgloveView
     from services.monitor.incidents import Incidents
     from skinet.wire.convert import bundle
+
+    system = load_system(SYSTEM_FILE)[0]
+    session = zenoh.open(session_config("peer", listen=[f"tcp/127.0.0.1:{free_port()}"], multicast_scouting=False))
+    modes = ("no --incidents", "with --incidents")
+    per_round: dict[str, list[list[float]]] = {m: [] for m in modes}
+    try:
+        for _ in range(rounds):
+            for mode in random.sample(modes, len(modes)):
+                folder = tempfile.TemporaryDirectory()
+                incidents = Incidents(session, bundle(system), Path(folder.name)) if mode == modes[1] else None
+                monitor = start_monitor(session, system, tap=None if incidents is None else incidents.record)
+                side = BridgeSide(session, "spot_arm", source="bench", model=system)
+                payloads = events(n + 200)
+                publishers = {k: session.declare_publisher(k, **BLOCK) for k in {k for k, _ in payloads}}
+                reports = Arrivals(session, keys.unsafe("spot_arm"))
+                per_round[mode].append(ping_pong(lambda i: publishers[payloads[i][0]].put(payloads[i][1]), reports,
+                                                 n, pace=pace))
+                reports.close()
+                monitor.close()
+                if incidents is not None:
+                    incidents.close()
+                folder.cleanup()
+                side.close()
+                for p in publishers.values():
+                    p.undeclare()
+    finally:
+        session.close()
+    return [rounds_row("in-process", f"monitor: event -> UnsafeReport, {modes[0]}", per_round[modes[0]],
+                       target="baseline"),
+            rounds_row("in-process", f"  {modes[1]}", per_round[modes[1]], per_round[modes[0]])]
+
+
+def with_views(n: int, rounds: int = 3, pace: float = 0.0) -> list[list[object]]:
+    """The in-process monitor's event -> UnsafeReport latency without and with the Foxglove view (an observer and its
+    WebSocket server, one client subscribed to every channel) on the same session, alternated ``rounds`` times so
+    that a busy machine loads both alike; target: p99 with them within 10 % of p99 without.  The Foxglove client is a process of its own,
+    as Foxglove is (in the monitor's process its JSON decoding would hold the monitor's interpreter)."""
+    from services.dashboard.observer import Observer
+    from services.foxglove.server import FoxgloveView
 
     system = load_system(SYSTEM_FILE)[0]
     endpoint = f"tcp/127.0.0.1:{free_port()}"
@@ -271,9 +309,6 @@ def with_views(n: int, rounds: int = 3, pace: float = 0.0) -> list[list[object]]
             for views in MODES:
                 monitor = start_monitor(session, system)
                 side = BridgeSide(session, "spot_arm", source="bench", model=system)
-                folder = tempfile.TemporaryDirectory()
-                incidents = Incidents(session, bundle(system), Path(folder.name), window=30.0) \
-                    if "incidents" in views else None
                 view = proc = client = None
                 if "bare" in views:
                     proc = start([sys.executable, __file__, "--bare-subscriber", endpoint])
@@ -295,22 +330,19 @@ def with_views(n: int, rounds: int = 3, pace: float = 0.0) -> list[list[object]]
                 per_round[views].append(ping_pong(lambda i: publishers[payloads[i][0]].put(payloads[i][1]), reports,
                                                   n, pace=pace))
                 reports.close()
-                if incidents is not None:
-                    incidents.close()
                 if proc is not None:
                     stop_all([p for p in (client, proc) if p is not None])
                 if view is not None:
                     stop_all([client])
                     view.close()
                     observer.close()
-                folder.cleanup()
                 monitor.close()
                 side.close()
                 for p in publishers.values():
                     p.undeclare()
     finally:
         session.close()
-    bare, fox = p99(pooled(per_round[MODES[1]])), p99(pooled(per_round[MODES[3]]))
+    bare, fox = p99(pooled(per_round[MODES[1]])), p99(pooled(per_round[MODES[2]]))
     return [rounds_row("in-process", f"monitor: event -> UnsafeReport, {MODES[0]}", per_round[MODES[0]],
                        target="baseline"),
             *[rounds_row("in-process", f"  {m}", per_round[m], per_round[MODES[0]]) for m in MODES[1:]],
@@ -319,7 +351,7 @@ def with_views(n: int, rounds: int = 3, pace: float = 0.0) -> list[list[object]]
 
 
 MODES = ("no view", "with a bare remote subscriber of the monitor's keys (peer: any view's Zenoh cost)",
-         "with --incidents", "with skinet foxglove in another process (1 client)",
+         "with skinet foxglove in another process (1 client)",
          "with the Foxglove view in process (1 client)")
 
 
@@ -641,6 +673,10 @@ def main() -> None:
     parser.add_argument("--profile", action="store_true", help="cProfile the in-process monitor run")
     parser.add_argument("--views-only", action="store_true",
                         help="only the rows without and with --incidents and the Foxglove view")
+    parser.add_argument("--incidents-only", action="store_true",
+                        help="only the rows without and with --incidents")
+    parser.add_argument("--rounds", type=int, default=12, metavar="N",
+                        help="rounds of each configuration in the --incidents rows (default 12)")
     parser.add_argument("--pace", type=float, default=0.0, metavar="MS",
                         help="in the rows of the views, wait MS milliseconds (untimed) before each event: a robot's "
                              "pace rather than back to back (default 0: the flood)")
@@ -660,8 +696,17 @@ def main() -> None:
         return asyncio.run(_fox_client(args.fox_client, aiohttp, json))
     if args.pace < 0:
         parser.error(f"argument --pace: {args.pace:g} is below 0")
+    if args.rounds < 1:
+        parser.error(f"argument --rounds: {args.rounds} is below 1")
     pace = args.pace / 1000
+    if args.incidents_only:
+        rows = with_incidents(args.events, args.rounds, pace)
+        paced = f", {args.pace:g} ms apart" if args.pace else ""
+        print(f"\nlatency over {args.events} events after 200 warm-up (µs), in-process, no predictor{paced}")
+        print(table(["where", "path", "p50", "p99", "max", "target", ""], rows))
+        return None
     rows = [] if args.views_only else in_process(args.events, args.profile)
+    rows += with_incidents(args.events, args.rounds, pace)
     rows += with_views(args.events, pace=pace)
     rows += views_through_router(args.events, pace=pace)
     rows += dashboard_with_foxglove(args.events, pace=pace)

@@ -72,6 +72,7 @@ def run_chain(
     on_record: Callable[[StepRecord], None] | None = None,
     after: Callable[[list[StepRecord]], None] | None = None,
     shared_predictor: bool = False,
+    tap: Callable[[str, bytes], None] | None = None,
 ) -> list[StepRecord]:
     """Drive ``scenario`` through the whole chain and record what the monitor published.
 
@@ -85,8 +86,9 @@ def run_chain(
     monitor showed then, ``after`` with the records once the run is over, while
     every service still runs (``skinet demo --live`` keeps serving the views then).
     ``shared_predictor``: a predictor already serves ``session`` (:func:`shared_session`), start none.
+    ``tap``: the monitor's (``--incidents``' ring, :meth:`services.monitor.incidents.Incidents.record`).
     """
-    with embedded_services(session, system, predict and not shared_predictor) as (session, monitor, services):
+    with embedded_services(session, system, predict and not shared_predictor, tap=tap) as (session, monitor, services):
         external = simulator is not None
         if simulator is None:
             simulator = Simulator(session, system, typemap)

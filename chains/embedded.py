@@ -214,12 +214,12 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
             print(f"foxglove on {foxglove.url}", file=sys.stderr, flush=True)
         predictor = start_predictor(session, f"embedded-{os.getpid()}",  # before the monitor: it asks at once
                                     memory_limit=memory_limit(args), rate_limit=args.rate_limit)
-        monitor = start_monitor(session, system, budget=args.budget, check_policy=args.check_policy,
-                                client=client_name(config), check_rate_limit=args.check_rate_limit,
-                                lost_after=args.lost_after)
         from services.monitor.incidents import start_incidents
 
         incidents = start_incidents(session, system, args)
+        monitor = start_monitor(session, system, budget=args.budget, check_policy=args.check_policy,
+                                client=client_name(config), check_rate_limit=args.check_rate_limit,
+                                lost_after=args.lost_after, tap=None if incidents is None else incidents.record)
         if not args.no_pilot:
             from services.pilot import start_pilot
 
@@ -246,8 +246,6 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
         _follow(monitor, stop, args.duration, out)
         return 0
     finally:
-        if incidents is not None:
-            incidents.close()
         if dashboard is not None:
             dashboard.close()
             dashboard.observer.close()
@@ -257,6 +255,8 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
             pilot.close()
         if monitor is not None:
             monitor.close()
+        if incidents is not None:  # after the monitor: a pending bundle gets its last messages
+            incidents.close()
         if robot is not None:  # after the monitor, which would report the robot's bridge gone
             robot.close()
         session.close()

@@ -66,17 +66,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
     session = open_session(config)
+    incidents = None
     try:
+        incidents = start_incidents(session, system, args)
         monitor = start_monitor(session, system, instance_id=args.instance_id, budget=args.budget,
                                 query_timeout=args.query_timeout, stall=args.stall, express=args.express,
                                 check_policy=args.check_policy, client=client_name(config),
-                                check_rate_limit=args.check_rate_limit, lost_after=args.lost_after)
+                                check_rate_limit=args.check_rate_limit, lost_after=args.lost_after,
+                                tap=None if incidents is None else incidents.record)
         log.info("monitoring %s (model %s) as %s", system.name, monitor.digest, monitor.instance_id)
-        incidents = start_incidents(session, system, args)
         while not stop.wait(0.5):
             pass
-        if incidents is not None:
-            incidents.close()
         monitor.close()
         c = monitor.counters
         k = monitor.check_counters
@@ -88,6 +88,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                  c.restarts, c.resyncs, c.history, k.answered, k.errors, k.oversized, k.rate_limited, k.waited,
                  k.made_room)
     finally:
+        if incidents is not None:  # after the monitor: a pending bundle gets its last messages
+            incidents.close()
         session.close()
     return 0
 

@@ -1,18 +1,22 @@
 """``--incidents DIR``: incident bundles written around each incident of a live run (docs/foxglove.md).
 
-:class:`Incidents` subscribes to ``skinet/<system>/**`` on a session (the
-monitor's own: it sees what the monitor publishes and the events it receives)
-and keeps a ring of the last ``window`` seconds of raw payloads (key, bytes,
-receive time), at most :data:`MAX_ENTRIES` of them.  An incident is a property
+:class:`Incidents` keeps a ring of the last ``window`` seconds of raw payloads
+(key, bytes, receive time), at most :data:`MAX_ENTRIES` of them: the monitor
+hands it each event it receives and each message it publishes (:meth:`Incidents.record`
+is its ``tap``, called in the monitor's threads after the step's puts, with each message's time), and a
+subscriber of the session adds the pilots' statuses.  An incident is a property
 going from holding to failing (``Verdicts``), a new model divergence or manager
 restart (``Divergences``), or the pilot failing (``PilotStatus``).  ``window``
 seconds after the first incident, a bundle of the ring from ``window`` seconds
 before it to then is written by :class:`~services.foxglove.bundle.BundleSink`
 in its own thread (incidents in between go in the same bundle); written and
 failed bundles are counted and logged, never raised.  Cost on the event path:
-none in the publishing thread (samples go through a Zenoh ring channel to a
-thread of this writer), then one bounded deque append per sample; only verdicts,
-divergence lists and pilot statuses are decoded at once (the rest when a bundle is written).  Memory:
+three bounded deque appends per message, after the step's puts, and no object the
+garbage collector tracks; a verdicts payload is searched for a failing property
+(read in full only when it holds one), divergence lists and pilot statuses are
+decoded at once (the rest when a bundle is written).  No thread of this writer runs Python while
+no incident is pending: a ring drained by a thread of its own kept the monitor
+from the interpreter for up to Python's 5 ms switch interval (docs/performance.md).  Memory:
 at most :data:`MAX_ENTRIES` payloads (each under the codec's size limit;
 about 1 KB for the paper's system), whatever the window.  Disk: a bundle is
 written under a hidden ``.partial`` name and renamed when complete (a failed
@@ -50,13 +54,21 @@ from skinet.wire.messages import (
 
 RECORDED = {"events": CanonicalEvent, "state": LiveState, "verdicts": Verdicts, "unsafe": UnsafeReport,
             "state_space": StateSpaceReport, "divergences": Divergences, "pilot": PilotStatus}
-CHANNEL = 4096  # samples waiting for the ring's thread
-POLL = 0.05  # seconds between looks at an empty channel
 MAX_ENTRIES = 100_000  # payloads kept in the ring, whatever the window
+MAX_KEYS = 1024  # keys whose kind is remembered
+# A property that fails, as msgpack packs it (a fixstr key, then false): a Verdicts payload without these bytes has
+# every property holding.  A string that happens to hold them only costs a full read of the payload.
+HOLDS_FALSE = b"\xa5holds\xc2"
 MAX_FILES = 100  # default --incidents-max-files
 MAX_BYTES = 1 << 30  # default --incidents-max-bytes (1 GiB)
 PARTIAL = ".partial"  # suffix of a bundle being written (hidden: its name starts with a dot)
 log = logging.getLogger("skinet.incidents")
+
+
+def _kind(key: str) -> str:
+    """The kind of message a key of the system carries (``skinet/<system>/<kind>/...``)."""
+    parts = key.split("/")
+    return parts[2] if len(parts) > 2 else ""
 
 
 def _verdict_holds(payload: bytes) -> tuple[int, dict[str, bool]]:
@@ -85,7 +97,13 @@ class Incidents:
         self._name = re.compile(re.escape(self.system) + r"-\d{8}-\d{6}-\d{3}\.mcap")
         self._leftovers()
         self._cap()
-        self._ring: deque[tuple[str, bytes, float]] = deque(maxlen=MAX_ENTRIES)
+        # The ring as three deques, not one of tuples: appending a str, a bytes and a float allocates nothing the
+        # garbage collector tracks, so the ring adds no collection to the monitor's thread (a tuple per message did:
+        # +10 % on the event path's p99, docs/performance.md).
+        self._keys: deque[str] = deque(maxlen=MAX_ENTRIES)
+        self._payloads: deque[bytes] = deque(maxlen=MAX_ENTRIES)
+        self._times: deque[float] = deque(maxlen=MAX_ENTRIES)
+        self._kinds: dict[str, str] = {}  # key -> kind, for the few keys of the system
         self._lock = threading.Lock()
         self._holds: dict[str, bool] = {}
         self._noted: dict[str, int] = {}  # monitor run -> divergences noted
@@ -93,46 +111,36 @@ class Incidents:
         self._pending: tuple[float, list[str]] | None = None  # (first incident's time, what happened)
         self._wake = threading.Event()
         self._closed = False
-        # A ring channel, drained by a thread of this writer: no Python runs in the thread that published
-        # (a callback on the monitor's own session runs inside its put, on the event path); a backlog past
-        # CHANNEL drops the oldest samples.
-        self._stopping = threading.Event()
-        self._sub = session.declare_subscriber(f"{keys.ROOT}/{self.system}/**", zenoh.handlers.RingChannel(CHANNEL))
-        self._drain = threading.Thread(target=self._take, name="skinet-incidents-ring", daemon=True)
-        self._drain.start()
+        self._sub = session.declare_subscriber(keys.pilot_status(self.system), self._on_pilot)
         self._thread = threading.Thread(target=self._run, name="skinet-incidents", daemon=True)
         self._thread.start()
 
-    def _take(self) -> None:
-        # Polled: a thread blocked in recv() holds the subscriber, which then cannot be undeclared.
-        while not self._stopping.is_set():
-            sample = self._sub.try_recv()
-            if sample is None:
-                self._stopping.wait(POLL)
-            else:
-                self._on_sample(sample)
-
     def close(self) -> None:
         """Stop; a pending incident is written with what the ring holds now."""
-        self._stopping.set()
-        self._drain.join(timeout=5)
         undeclare(self._sub)
         self._closed = True
         self._wake.set()
         self._thread.join(timeout=30)
 
-    # -- the ring's thread: O(1) unless the sample may be an incident ------------------------
+    # -- the ring: O(1) unless the message may be an incident --------------------------------
 
-    def _on_sample(self, sample: zenoh.Sample) -> None:
-        if sample.kind != zenoh.SampleKind.PUT:
-            return
-        key, payload, t = str(sample.key_expr), sample.payload.to_bytes(), time.time()
-        kind = key.split("/")[2] if key.count("/") >= 2 else ""
+    def record(self, key: str, payload: bytes, t: float) -> None:
+        """Keep one message of the run received or published at wall time ``t`` (the monitor's tap: an event it
+        received, after its step's messages, or a message it published)."""
+        kind = self._kinds.get(key)
+        if kind is None:
+            kind = _kind(key)
+            if len(self._kinds) < MAX_KEYS:
+                self._kinds[key] = kind
         with self._lock:
-            self._ring.append((key, payload, t))
+            self._keys.append(key)
+            self._payloads.append(payload)
+            self._times.append(t)
             cutoff = t - self.window - 1.0
-            while self._ring and self._ring[0][2] < cutoff and self._pending is None:
-                self._ring.popleft()
+            while self._times and self._times[0] < cutoff and self._pending is None:
+                self._keys.popleft()
+                self._payloads.popleft()
+                self._times.popleft()
         what = self._incident(kind, payload)
         if what:
             with self._lock:
@@ -142,9 +150,16 @@ class Incidents:
                     self._pending[1].append(what)
             self._wake.set()
 
+    def _on_pilot(self, sample: zenoh.Sample) -> None:
+        if sample.kind == zenoh.SampleKind.PUT:
+            self.record(str(sample.key_expr), sample.payload.to_bytes(), time.time())
+
     def _incident(self, kind: str, payload: bytes) -> str | None:
         try:
             if kind == "verdicts":  # every step: read as plain msgpack (a model's validation costs more)
+                if HOLDS_FALSE not in payload:  # every property holds (no allocation: see HOLDS_FALSE)
+                    self._holds = {}
+                    return None
                 seq, holds = _verdict_holds(payload)
                 onsets = [name for name, ok in holds.items() if not ok and self._holds.get(name, True)]
                 self._holds = holds
@@ -187,8 +202,9 @@ class Incidents:
 
     def _write(self, t0: float, what: list[str]) -> None:
         with self._lock:
-            entries = [e for e in self._ring if e[2] >= t0 - self.window]
+            entries = [e for e in zip(self._keys, self._payloads, self._times) if e[2] >= t0 - self.window]
             self._pending = None
+        entries.sort(key=lambda e: e[2])  # an event comes to the ring after its step's messages
         stamp = time.strftime("%Y%m%d-%H%M%S", time.localtime(t0))
         path = self.folder / f"{self.system}-{stamp}-{int(t0 * 1000) % 1000:03d}.mcap"
         partial = path.with_name(f".{path.name}{PARTIAL}")
@@ -198,7 +214,7 @@ class Incidents:
                 sink = BundleSink(out, self.system, trigger="; ".join(what))
                 sink.write(keys.model(self.system, self.model.digest), self.model, t0)
                 for key, payload, t in entries:
-                    kind = RECORDED.get(key.split("/")[2] if key.count("/") >= 2 else "")
+                    kind = RECORDED.get(_kind(key))
                     if kind is None or (kind is PilotStatus and not key.endswith("/status")):
                         continue
                     try:

@@ -36,6 +36,11 @@ Model divergences and manager restarts are kept for the whole run
 (:mod:`services.monitor.divergences`, the last 256): published on
 ``keys.divergences`` when the list changes (at most every ``DIVERGENCES_PERIOD``
 seconds, the watchdog sending what a burst left) and answered on ``get``.
+
+A ``tap`` (``--incidents``' ring, :mod:`services.monitor.incidents`) is handed the key, bytes and wall time of
+each valid event received and of each message published, after the step's puts (an event after its step's
+messages, with the time it came): no subscriber of the monitor's own keys and no thread of its own compete
+with the event path.
 """
 
 from __future__ import annotations
@@ -46,6 +51,7 @@ import math
 import threading
 import time
 import uuid
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TypeVar
 
@@ -126,8 +132,10 @@ class Monitor:
                  budget: float = 1.0, query_timeout: float | None = None, retry: float = 0.5, stall: float = 0.5,
                  prediction_cache: int = 256, indirect: bool = True, express: bool = True,
                  check_policy: Policy | None = None, resync_timeout: float = 2.0, client: str = keys.LOCAL_CLIENT,
-                 check_rate_limit: float = CHECK_RATE_LIMIT, lost_after: float = BOUND):
+                 check_rate_limit: float = CHECK_RATE_LIMIT, lost_after: float = BOUND,
+                 tap: Callable[[str, bytes, float], None] | None = None):
         self.session, self.system = session, system
+        self._tap = tap
         self.instance_id = keys.check_chunk(instance_id or uuid.uuid4().hex[:8], "instance id")
         name = keys.check_chunk(system.name, "system name")
         others = _tokens(session, keys.alive(name, "monitor", "*"))
@@ -165,10 +173,9 @@ class Monitor:
         self.reasked = 0  # undecided predictions asked again
         self.resync_timeout, self.lost_after = resync_timeout, lost_after
         opts = dict(congestion_control=zenoh.CongestionControl.BLOCK, express=express)
-        self._pub = {k: session.declare_publisher(key, **opts) for k, key in (
-            ("state", keys.state(name)), ("verdicts", keys.verdicts(name)),
-            ("unsafe", keys.unsafe(name)), ("state_space", keys.state_space(name)),
-            ("divergences", keys.divergences(name)))}
+        self._keys = {"state": keys.state(name), "verdicts": keys.verdicts(name), "unsafe": keys.unsafe(name),
+                      "state_space": keys.state_space(name), "divergences": keys.divergences(name)}
+        self._pub = {k: session.declare_publisher(key, **opts) for k, key in self._keys.items()}
         self._predict = PredictionClient(session, system, self.digest, self._on_prediction, client=self.client,
                                          budget=budget, timeout=query_timeout, retry=retry, stall=stall)
         with self._lock:
@@ -295,6 +302,7 @@ class Monitor:
             with self._lock:
                 self._engine.counters.received += 1
             return
+        received = time.time()
         try:
             with self._lock:
                 if self._closed:
@@ -305,6 +313,8 @@ class Monitor:
                 resync = self._sync.hold(ev) or self._handle(ev)
                 self._note(ev, None, self._engine.seq)  # a restart is news even when its event is held or history
                 self._settle()
+            if self._tap is not None:  # after the step's puts, with the time it came
+                self._tapped(str(sample.key_expr), sample.payload.to_bytes(), received)
             if resync:
                 self._ask_resync(ev.skillset)
         except Exception:  # a bug must not stop the monitor
@@ -512,10 +522,12 @@ class Monitor:
                 unsafe = self._engine.refresh()
                 self._pub["unsafe"].put(unsafe)
                 self._last["unsafe"] = unsafe
+                self._tapped(self._keys["unsafe"], unsafe, time.time())
                 if reply.report is not None:
                     space = encode(reply.report)
                     self._pub["state_space"].put(space)
                     self._last["state_space"] = space
+                    self._tapped(self._keys["state_space"], space, time.time())
                 self._bump()
         except Exception:
             log.exception("error while applying a prediction")
@@ -721,11 +733,16 @@ class Monitor:
 
     def _publish(self, step: Step) -> None:
         """Publish a step built after :meth:`_sync_fields` (it carries the sync states of ``_sync_seen``)."""
-        for name, payload in (("state", step.live), ("verdicts", step.verdicts), ("unsafe", step.unsafe)):
+        published = (("state", step.live), ("verdicts", step.verdicts), ("unsafe", step.unsafe))
+        for name, payload in published:
             self._pub[name].put(payload)
             self._last[name] = payload
         self._sync_published = self._sync_seen
         self._bump()
+        if self._tap is not None:  # after every put: the tap costs the step's warning nothing
+            now = time.time()
+            for name, payload in published:
+                self._tapped(self._keys[name], payload, now)
 
     def _note(self, ev: CanonicalEvent, divergence: str | None, seq: int) -> None:
         """Keep ``ev`` in the divergence list if it diverged or follows a manager restart (lock held)."""
@@ -751,9 +768,20 @@ class Monitor:
         payload = self._divergences.payload(time.time())
         self._pub["divergences"].put(payload)
         self._last["divergences"] = payload
+        self._tapped(self._keys["divergences"], payload, time.time())
         self._divergences_due, self._divergences_sent = False, now
         self._divergences_published = self._divergences.total
         self._bump()
+
+    def _tapped(self, key: str, payload: bytes, t: float) -> None:
+        """Hand a message received or published at wall time ``t`` to the tap, if any; its failure is logged, never
+        raised."""
+        if self._tap is None:
+            return
+        try:
+            self._tap(key, payload, t)
+        except Exception:  # a bug of the tap must not cost the monitor an event
+            log.exception("error in the monitor's tap (--incidents)")
 
     def _sync_fields(self) -> None:
         """Give the engine the tracker's sync states for the next messages (and log what changed)."""

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
-import io
 import json
 import os
 import re
@@ -274,7 +273,7 @@ def test_incidents_are_written_around_the_violations_and_verify(router, client_f
     folder = tmp_path / "incidents"
     incidents = Incidents(client_factory(), bundle(system), folder, window=1.0)
     try:
-        play("unassisted", router)
+        play("unassisted", router, tap=incidents.record)
     finally:
         incidents.close()
     assert incidents.failed == 0 and incidents.written and sorted(folder.iterdir()) == sorted(incidents.written)
@@ -307,22 +306,18 @@ def _divergence(n: int) -> bytes:
 
 
 class Divergent:
-    """Publishes divergence lists, each one more incident, on ``session`` once ``incidents`` hears it."""
+    """Hands ``incidents`` divergence lists as a monitor would, each one more incident."""
 
-    def __init__(self, session, incidents) -> None:
-        from skinet.wire import keys
-        from tests.services.test_monitor import wait_until
-
+    def __init__(self, incidents) -> None:
         self.incidents, self.n = incidents, 0
-        self.publisher = session.declare_publisher(keys.divergences("spot_arm"))
-        wait_until(lambda: self.publisher.matching_status.matching, 10, "the incidents' subscriber")
 
     def incident(self) -> None:
         """One incident, and its bundle written or failed."""
+        from skinet.wire import keys
         from tests.services.test_monitor import wait_until
 
         done = len(self.incidents.written) + self.incidents.failed
-        self.publisher.put(_divergence(self.n))
+        self.incidents.record(keys.divergences("spot_arm"), _divergence(self.n), time.time())
         self.n += 1
         wait_until(lambda: len(self.incidents.written) + self.incidents.failed == done + 1, 20,
                    f"incident {self.n}'s bundle")
@@ -351,7 +346,7 @@ def test_the_incidents_folder_keeps_the_newest_bundles_and_never_a_partial_one(c
         # At start: the killed writer's partial bundle goes, and the oldest bundle (three are over the cap).
         assert incidents.removed == old[:1]
         assert sorted(p.name for p in folder.iterdir()) == sorted(p.name for p in [*old[1:], *others])
-        divergent = Divergent(client_factory(), incidents)
+        divergent = Divergent(incidents)
         divergent.incident()
         assert incidents.removed == old[:2]  # oldest first
         divergent.incident()
@@ -367,7 +362,7 @@ def test_the_incidents_folder_keeps_the_newest_bundles_and_never_a_partial_one(c
     incidents = Incidents(client_factory(), model, folder, window=0.05, max_bytes=1)
     try:
         assert incidents.removed == first[:1]
-        divergent = Divergent(client_factory(), incidents)
+        divergent = Divergent(incidents)
         divergent.n = 2
         divergent.incident()
         assert incidents.removed == first
@@ -394,10 +389,71 @@ def test_a_bundle_that_cannot_be_finished_leaves_no_file(client_factory, tmp_pat
     folder = tmp_path / "incidents"
     incidents = incidents_module.Incidents(client_factory(), bundle(load_system(SYSTEM_FILE)[0]), folder, window=0.05)
     try:
-        Divergent(client_factory(), incidents).incident()
+        Divergent(incidents).incident()
     finally:
         incidents.close()
     assert (incidents.failed, incidents.written, list(folder.iterdir())) == (1, [], [])
+
+
+def test_a_failing_property_is_found_in_a_verdicts_payload_by_its_bytes() -> None:
+    """The ring reads a Verdicts payload in full only when it holds msgpack's bytes of a failing property."""
+    from services.monitor.incidents import HOLDS_FALSE
+    from skinet.wire.codec import encode
+    from skinet.wire.messages import PropertyVerdict, Verdicts
+
+    def verdicts(*holds: bool) -> bytes:
+        return encode(Verdicts(system="spot_arm", seq=7, stamp=1.0, properties=[
+            PropertyVerdict(name=f"p{i}", holds=h) for i, h in enumerate(holds)]))
+
+    assert [HOLDS_FALSE in verdicts(*h) for h in [(True, True), (True, False), (False, True), ()]] == \
+        [False, True, True, False]
+
+
+def test_a_failed_pilot_is_an_incident_once_per_goal(client_factory, tmp_path) -> None:
+    """A pilot's statuses come from the session, not the monitor's tap: its failure of a goal triggers one bundle
+    holding its statuses; the same failure said again does not trigger another, the next goal's does."""
+    from mcap.reader import make_reader
+
+    from services.monitor.incidents import Incidents
+    from skinet.system.load import load_system
+    from skinet.wire import keys
+    from skinet.wire.codec import encode
+    from skinet.wire.convert import bundle
+    from skinet.wire.messages import PilotStatus
+    from tests.services.test_dashboard import SYSTEM_FILE
+    from tests.services.test_monitor import wait_until
+
+    folder = tmp_path / "incidents"
+    incidents = Incidents(client_factory(), bundle(load_system(SYSTEM_FILE)[0]), folder, window=0.05)
+    publisher = client_factory().declare_publisher(keys.pilot_status("spot_arm"))
+    try:
+        wait_until(lambda: publisher.matching_status.matching, 10, "the incidents' subscriber of pilot statuses")
+        seq = 0
+
+        def status(state: str, goal: int, reason: str = "") -> None:
+            nonlocal seq
+            seq += 1
+            publisher.put(encode(PilotStatus(system="spot_arm", pilot="p1", seq=seq, stamp=time.time(),
+                                             state=state, goal_id=goal, reason=reason)))
+
+        status("driving", 1)
+        status("failed", 1, "spot:init_power failed 3 times")
+        wait_until(lambda: len(incidents.written) == 1, 20, "the failed goal's bundle")
+        status("failed", 1, "spot:init_power failed 3 times")  # said again: the same incident
+        status("failed", 2, "no plan")
+        wait_until(lambda: len(incidents.written) == 2, 20, "the second goal's bundle")
+    finally:
+        publisher.undeclare()
+        incidents.close()
+    assert incidents.failed == 0 and len(incidents.written) == 2
+    triggers, states = [], []
+    for path in incidents.written:
+        with path.open("rb") as f:
+            reader = make_reader(f)
+            triggers.append({m.name: m.metadata for m in reader.iter_metadata()}["skinet"]["trigger"])
+            states.append([json.loads(m.data)["state"] for _, _, m in reader.iter_messages(topics=[fx.PILOT])])
+    assert triggers == ["pilot failed goal 1: spot:init_power failed 3 times", "pilot failed goal 2: no plan"]
+    assert states[0][:2] == ["driving", "failed"]
 
 
 def test_the_monitor_process_writes_an_incident_bundle_that_verifies(router, spawn, client_factory, tmp_path) -> None:

@@ -22,6 +22,7 @@ import time
 import urllib.request
 from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -123,16 +124,18 @@ def screenshot(driver, tmp_path: Path, name: str, element: str | None = None) ->
     return path
 
 
-def play(run: str | Path, router: str, on_record: Callable[[StepRecord], None] | None = None) -> list[StepRecord]:
+def play(run: str | Path, router: str, on_record: Callable[[StepRecord], None] | None = None,
+         **options: Any) -> list[StepRecord]:
     """The mission ``run`` (a name in skillsets/missions, or a scenario file) through the whole chain (simulator,
-    bridge, monitor, predictor; a bound system's through its bindings) on a client of ``router``."""
+    bridge, monitor, predictor; a bound system's through its bindings) on a client of ``router``; ``options`` are
+    the chain's."""
     path = run if isinstance(run, Path) else MISSIONS / f"{run}.toml"
     scenario = parse_scenario(read_text(path), str(path))
     system_file = path.parent / scenario.system
     system, _ = load_system(system_file)
     session = open_client(router)
     try:
-        return run_any_chain(system, system_file, scenario, session=session, on_record=on_record)
+        return run_any_chain(system, system_file, scenario, session=session, on_record=on_record, **options)
     finally:
         session.close()
 

@@ -427,6 +427,39 @@ def test_garbage_is_counted_and_later_events_processed(monitor_factory, session,
     assert (c.received, c.malformed, c.applied, c.errors) == (len(junk) + 1, len(junk), 1, 0)
 
 
+def test_the_tap_gets_each_steps_messages_then_its_event_and_cannot_cost_one(monitor_factory, session, system,
+                                                                          caplog):
+    """``tap`` (--incidents' ring) is handed the step's three messages once published, then the event with the
+    earlier time it came; a tap that raises is logged and the monitor goes on with every event."""
+    handed: list[tuple[str, bytes, float]] = []
+
+    def tap(key: str, payload: bytes, t: float) -> None:
+        handed.append((key, payload, t))
+        raise RuntimeError("a broken ring")
+
+    reports = Reports(session)
+    monitor = monitor_factory(system, tap=tap)
+    events = Events(session)
+    events.send("spot", "init_power.start")
+    events.send("spot", "init_power.success.powered_on")
+    reports.step(2)
+    assert monitor.counters.applied == 2 and monitor.counters.errors == 0
+    wait_until(lambda: sum(k.endswith("/events/spot") for k, _, _ in handed) == 2, 10, "both events tapped")
+    step_keys = ["skinet/spot_arm/state", "skinet/spot_arm/verdicts", "skinet/spot_arm/unsafe"]
+    # Handed: each event just after its step's messages; in time order, just before them.
+    handed_keys = [k for k, _, _ in handed]
+    at = [i for i, k in enumerate(handed_keys) if k.endswith("/events/spot")]
+    assert [handed_keys[i - 3:i] for i in at] == [step_keys, step_keys]
+    timed = sorted(handed, key=lambda h: h[2])
+    at = [i for i, (k, _, _) in enumerate(timed) if k.endswith("/events/spot")]
+    assert [decode(timed[i][1], CanonicalEvent).transition for i in at] == \
+        ["init_power.start", "init_power.success.powered_on"]
+    for step, i in enumerate(at, 1):
+        assert [k for k, _, _ in timed[i + 1:i + 4]] == step_keys
+        assert decode(timed[i + 3][1], UnsafeReport).seq == step
+    assert caplog.text.count("error in the monitor's tap (--incidents)") >= 8
+
+
 def test_duplicates_and_out_of_order_are_not_applied_twice(monitor_factory, session, system):
     reports = Reports(session)
     monitor = monitor_factory(system)
@@ -487,8 +520,12 @@ def test_skinet_run_once_prints_the_view():
 
 
 def test_skinet_run_listens_for_a_bridge_and_logs_changes(tmp_path):
+    """... and with ``--incidents`` its monitor hands the run to the ring: the divergence's bundle holds its event
+    and verifies."""
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    proc = start_skinet("run", str(SYSTEM_FILE), "--listen", endpoint, "--no-multicast-scouting", "--duration", "15")
+    folder = tmp_path / "incidents"
+    proc = start_skinet("run", str(SYSTEM_FILE), "--listen", endpoint, "--no-multicast-scouting", "--duration", "15",
+                        "--incidents", str(folder), "--incident-window", "1")
     bridge = None
     try:
         assert proc.stdout is not None
@@ -525,10 +562,23 @@ def test_skinet_run_listens_for_a_bridge_and_logs_changes(tmp_path):
                             r"'init_power.success.powered_on' is not enabled in the live marking\n", lines[-1]), lines
         assert lines[-2].startswith("[10] spot:init_power.success.powered_on#") and " DIVERGENCE: " in lines[-2]
         watch.close()
+        wait_until(lambda: any(p.suffix == ".mcap" and not p.name.startswith(".") for p in folder.iterdir()), 30,
+                   "the divergence's incident bundle")
     finally:
         if bridge is not None:
             bridge.close()
         assert stop(proc, signal.SIGINT) == 0
+    from mcap.reader import make_reader
+
+    [path] = list(folder.iterdir())
+    with path.open("rb") as f:
+        reader = make_reader(f)
+        trigger = {m.name: m.metadata for m in reader.iter_metadata()}["skinet"]["trigger"]
+        topics = [channel.topic for _, channel, _ in reader.iter_messages()]
+    assert trigger == "model divergence" and "/skinet/divergences" in topics
+    done = subprocess.run([sys.executable, "-m", "skinet_cli.main", "replay", str(path), "--verify"], cwd=REPO,
+                          capture_output=True, text=True, timeout=300)
+    assert (done.returncode, done.stdout) == (0, "0 differences\n"), done.stderr
 
 
 def test_skinet_router_links_clients():
