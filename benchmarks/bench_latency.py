@@ -251,6 +251,20 @@ def in_process(n: int, profile: bool) -> list[list[object]]:
     return rows
 
 
+def one_round(session: zenoh.Session, n: int, pace: float) -> list[float]:
+    """``n`` events' latencies (after 200 warm-up) to the UnsafeReport of the monitor on ``session``, one at a time,
+    ``pace`` s apart: the events' publishers and the reports' subscriber are declared for the round only."""
+    payloads = events(n + 200)
+    publishers = {k: session.declare_publisher(k, **BLOCK) for k in {k for k, _ in payloads}}
+    reports = Arrivals(session, keys.unsafe("spot_arm"))
+    try:
+        return ping_pong(lambda i: publishers[payloads[i][0]].put(payloads[i][1]), reports, n, pace=pace)
+    finally:
+        reports.close()
+        for p in publishers.values():
+            p.undeclare()
+
+
 def with_incidents(n: int, rounds: int = 12, pace: float = 0.0) -> list[list[object]]:
     """The in-process monitor's event -> UnsafeReport latency without and with ``--incidents`` (the ring the
     monitor hands its messages to), ``rounds`` rounds of each in a random order per round (a fixed order gave
@@ -272,19 +286,12 @@ def with_incidents(n: int, rounds: int = 12, pace: float = 0.0) -> list[list[obj
                 incidents = Incidents(session, bundle(system), Path(folder.name)) if mode == modes[1] else None
                 monitor = start_monitor(session, system, tap=None if incidents is None else incidents.record)
                 side = BridgeSide(session, "spot_arm", source="bench", model=system)
-                payloads = events(n + 200)
-                publishers = {k: session.declare_publisher(k, **BLOCK) for k in {k for k, _ in payloads}}
-                reports = Arrivals(session, keys.unsafe("spot_arm"))
-                per_round[mode].append(ping_pong(lambda i: publishers[payloads[i][0]].put(payloads[i][1]), reports,
-                                                 n, pace=pace))
-                reports.close()
+                per_round[mode].append(one_round(session, n, pace))
                 monitor.close()
                 if incidents is not None:
                     incidents.close()
                 folder.cleanup()
                 side.close()
-                for p in publishers.values():
-                    p.undeclare()
     finally:
         session.close()
     return [rounds_row("in-process", f"monitor: event -> UnsafeReport, {modes[0]}", per_round[modes[0]],
@@ -295,8 +302,8 @@ def with_incidents(n: int, rounds: int = 12, pace: float = 0.0) -> list[list[obj
 def with_views(n: int, rounds: int = 3, pace: float = 0.0) -> list[list[object]]:
     """The in-process monitor's event -> UnsafeReport latency without and with the Foxglove view (an observer and its
     WebSocket server, one client subscribed to every channel) on the same session, alternated ``rounds`` times so
-    that a busy machine loads both alike; target: p99 with them within 10 % of p99 without.  The Foxglove client is a process of its own,
-    as Foxglove is (in the monitor's process its JSON decoding would hold the monitor's interpreter)."""
+    that a busy machine loads both alike; target: p99 with them within 10 % of p99 without.  The Foxglove client is
+    a process of its own, as Foxglove is (in the monitor's process its JSON decoding would hold the monitor's interpreter)."""
     from services.dashboard.observer import Observer
     from services.foxglove.server import FoxgloveView
 
@@ -324,12 +331,7 @@ def with_views(n: int, rounds: int = 3, pace: float = 0.0) -> list[list[object]]
                     view = FoxgloveView(observer, "127.0.0.1", 0)
                     client = start([sys.executable, __file__, "--fox-client", view.url])
                     time.sleep(1.0)  # the client connected and subscribed before measuring
-                payloads = events(n + 200)
-                publishers = {k: session.declare_publisher(k, **BLOCK) for k in {k for k, _ in payloads}}
-                reports = Arrivals(session, keys.unsafe("spot_arm"))
-                per_round[views].append(ping_pong(lambda i: publishers[payloads[i][0]].put(payloads[i][1]), reports,
-                                                  n, pace=pace))
-                reports.close()
+                per_round[views].append(one_round(session, n, pace))
                 if proc is not None:
                     stop_all([p for p in (client, proc) if p is not None])
                 if view is not None:
@@ -338,8 +340,6 @@ def with_views(n: int, rounds: int = 3, pace: float = 0.0) -> list[list[object]]
                     observer.close()
                 monitor.close()
                 side.close()
-                for p in publishers.values():
-                    p.undeclare()
     finally:
         session.close()
     bare, fox = p99(pooled(per_round[MODES[1]])), p99(pooled(per_round[MODES[2]]))
