@@ -445,7 +445,11 @@ def test_router_restart_clients_reconnect(stack: tuple[Stack, str], observer: ze
         latest[0] = _latest_state(observer)
         return _all_in(latest[0], "syncing")
 
-    wait_until(unvouched, 30, "spot and manipulator syncing after the restart")
+    try:
+        wait_until(unvouched, 30, "spot and manipulator syncing after the restart")
+    except AssertionError as exc:  # say what the monitor showed instead (a run of session 15 timed out here)
+        shown = {k: (v.state, v.reason) for k, v in latest[0].sync.items()} if latest[0] is not None else None
+        raise AssertionError(f"{exc}; the monitor's last state shows {shown}") from None
     assert latest[0] is not None
     obs = MissionObserver(observer, after=latest[0].seq)  # no step can come before the mission's managers answer
     try:
