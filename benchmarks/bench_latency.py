@@ -439,7 +439,7 @@ def through_router(n: int, rounds: int, modes: tuple[str, str],
     router = start_skinet("router", "--listen", endpoint, "--no-auth")  # loopback only
     procs = [router]
     try:
-        assert router.stdout is not None and "listening" in router.stdout.readline()
+        listening(router)
         a = zenoh.open(session_config("client", connect=[endpoint], multicast_scouting=False))
         try:
             side = BridgeSide(a, "spot_arm", source="bench", model=load_system(SYSTEM_FILE)[0])
@@ -488,6 +488,17 @@ def dashboard_with_foxglove(n: int, rounds: int = 6, pace: float = 0.0) -> list[
     return through_router(n, rounds, modes, dashboard, 0.5, pace)
 
 
+def listening(router: subprocess.Popen) -> None:
+    """Read ``skinet router``'s output up to the line saying it listens (the warnings before it are shown); an
+    error if it ends first."""
+    assert router.stdout is not None
+    for line in router.stdout:
+        if "listening" in line:
+            return
+        print(line, end="", file=sys.stderr)
+    raise RuntimeError(f"the router ended ({router.wait()}) before listening")
+
+
 def robot_and_ground(n: int, rounds: int = 6, pace: float = 0.0) -> list[list[object]]:
     """The shape docs/foxglove.md recommends, two machines played by the two cores: the robot (its router, the
     monitor process, and this process sending the events and subscribing to the monitor's five keys) pinned to
@@ -507,11 +518,13 @@ def robot_and_ground(n: int, rounds: int = 6, pace: float = 0.0) -> list[list[ob
     modes = ("no ground view", "ground station with a view (the dashboard's Zenoh cost)",
              "ground station with the view and skinet foxglove (1 client)")
     os.sched_setaffinity(0, {robot_cpu})
-    procs = [start([*robot, sys.executable, "-m", "skinet_cli.main", "router", "--listen", e1, "--no-auth"]),
-             start([*ground, sys.executable, "-m", "skinet_cli.main", "router", "--listen", e2, "--connect", e1,
-                    "--no-auth"])]
+    procs = [start([*robot, sys.executable, "-m", "skinet_cli.main", "router", "--listen", e1, "--no-auth"])]
     try:
-        assert all(p.stdout is not None and "listening" in p.stdout.readline() for p in procs)
+        listening(procs[0])
+        # The ground's router once it links to the robot's (a warning would come first were the robot's not up).
+        procs.append(start([*ground, sys.executable, "-m", "skinet_cli.main", "router", "--listen", e2, "--connect",
+                            e1, "--no-auth"]))
+        listening(procs[1])
         a = zenoh.open(session_config("client", connect=[e1], multicast_scouting=False))
         try:
             side = BridgeSide(a, "spot_arm", source="bench", model=load_system(SYSTEM_FILE)[0])
@@ -570,7 +583,7 @@ def across_processes(n: int, burst: int) -> list[list[object]]:
     procs = [router]
     rows = []
     try:
-        assert router.stdout is not None and "listening" in router.stdout.readline()
+        listening(router)
         procs.append(start([sys.executable, __file__, "--echo", endpoint]))
         a = zenoh.open(session_config("client", connect=[endpoint], multicast_scouting=False))
         b = zenoh.open(session_config("client", connect=[endpoint], multicast_scouting=False))
