@@ -72,7 +72,7 @@ def run_chain(
     on_record: Callable[[StepRecord], None] | None = None,
     after: Callable[[list[StepRecord]], None] | None = None,
     shared_predictor: bool = False,
-    tap: Callable[[str, bytes], None] | None = None,
+    tap: Callable[[str, bytes, float], None] | None = None,
 ) -> list[StepRecord]:
     """Drive ``scenario`` through the whole chain and record what the monitor published.
 
