@@ -56,6 +56,7 @@ from common import table, verdict
 import msgpack  # noqa: E402
 import zenoh  # noqa: E402
 
+from services.common.options import count  # noqa: E402
 from services.common.zenoh_config import session_config  # noqa: E402
 from services.monitor import start_monitor  # noqa: E402
 from tests.bridge_side import BridgeSide  # noqa: E402
@@ -688,10 +689,10 @@ def main() -> None:
                         help="only the rows without and with --incidents and the Foxglove view")
     parser.add_argument("--incidents-only", action="store_true",
                         help="only the rows without and with --incidents")
-    parser.add_argument("--rounds", type=int, default=12, metavar="N",
+    parser.add_argument("--rounds", type=count(1), default=12, metavar="N",
                         help="rounds of each configuration in the --incidents rows (default 12)")
     parser.add_argument("--pace", type=float, default=0.0, metavar="MS",
-                        help="in the rows of the views, wait MS milliseconds (untimed) before each event: a robot's "
+                        help="in the rows of --incidents and the views, wait MS milliseconds (untimed) before each event: a robot's "
                              "pace rather than back to back (default 0: the flood)")
     parser.add_argument("--echo", help=argparse.SUPPRESS)
     parser.add_argument("--fox-client", help=argparse.SUPPRESS)
@@ -709,24 +710,18 @@ def main() -> None:
         return asyncio.run(_fox_client(args.fox_client, aiohttp, json))
     if args.pace < 0:
         parser.error(f"argument --pace: {args.pace:g} is below 0")
-    if args.rounds < 1:
-        parser.error(f"argument --rounds: {args.rounds} is below 1")
     pace = args.pace / 1000
-    if args.incidents_only:
-        rows = with_incidents(args.events, args.rounds, pace)
-        paced = f", {args.pace:g} ms apart" if args.pace else ""
-        print(f"\nlatency over {args.events} events after 200 warm-up (µs), in-process, no predictor{paced}")
-        print(table(["where", "path", "p50", "p99", "max", "target", ""], rows))
-        return None
-    rows = [] if args.views_only else in_process(args.events, args.profile)
+    only = args.views_only or args.incidents_only
+    rows = [] if only else in_process(args.events, args.profile)
     rows += with_incidents(args.events, args.rounds, pace)
-    rows += with_views(args.events, pace=pace)
-    rows += views_through_router(args.events, pace=pace)
-    rows += dashboard_with_foxglove(args.events, pace=pace)
-    rows += robot_and_ground(args.events, pace=pace)
-    if not args.views_only:
+    if not args.incidents_only:
+        rows += with_views(args.events, pace=pace)
+        rows += views_through_router(args.events, pace=pace)
+        rows += dashboard_with_foxglove(args.events, pace=pace)
+        rows += robot_and_ground(args.events, pace=pace)
+    if not only:
         rows += across_processes(args.events, args.burst)
-    paced = f", the views' rows {args.pace:g} ms apart" if args.pace else ""
+    paced = f", the rows of --incidents and the views {args.pace:g} ms apart" if args.pace else ""
     print(f"\nlatency over {args.events} events after 200 warm-up (µs), loopback, no predictor{paced}")
     print(table(["where", "path", "p50", "p99", "max", "target", ""], rows))
 

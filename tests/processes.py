@@ -37,6 +37,12 @@ def start_module(module: str, *args: str, log: Path | TextIO | None = None,
     return start([sys.executable, "-m", module, *args], log, env)
 
 
+def run_skinet(*args: str, timeout: float = 300.0) -> subprocess.CompletedProcess:
+    """``skinet ARGS`` run to its end from the repository root, its standard output and error captured as text."""
+    return subprocess.run([sys.executable, "-m", "skinet_cli.main", *args], cwd=REPO, capture_output=True, text=True,
+                          timeout=timeout)
+
+
 def start_skinet(*args: str, log: Path | TextIO | None = None) -> subprocess.Popen:
     """``skinet ARGS``, as :func:`start`."""
     return start_module("skinet_cli.main", *args, log=log)

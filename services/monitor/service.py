@@ -522,12 +522,12 @@ class Monitor:
                 unsafe = self._engine.refresh()
                 self._pub["unsafe"].put(unsafe)
                 self._last["unsafe"] = unsafe
-                self._tapped(self._keys["unsafe"], unsafe, time.time())
+                self._tapped(self._keys["unsafe"], unsafe)
                 if reply.report is not None:
                     space = encode(reply.report)
                     self._pub["state_space"].put(space)
                     self._last["state_space"] = space
-                    self._tapped(self._keys["state_space"], space, time.time())
+                    self._tapped(self._keys["state_space"], space)
                 self._bump()
         except Exception:
             log.exception("error while applying a prediction")
@@ -768,18 +768,18 @@ class Monitor:
         payload = self._divergences.payload(time.time())
         self._pub["divergences"].put(payload)
         self._last["divergences"] = payload
-        self._tapped(self._keys["divergences"], payload, time.time())
+        self._tapped(self._keys["divergences"], payload)
         self._divergences_due, self._divergences_sent = False, now
         self._divergences_published = self._divergences.total
         self._bump()
 
-    def _tapped(self, key: str, payload: bytes, t: float) -> None:
-        """Hand a message received or published at wall time ``t`` to the tap, if any; its failure is logged, never
-        raised."""
+    def _tapped(self, key: str, payload: bytes, t: float | None = None) -> None:
+        """Hand a message received or published at wall time ``t`` (default: now) to the tap, if any; its failure is
+        logged, never raised."""
         if self._tap is None:
             return
         try:
-            self._tap(key, payload, t)
+            self._tap(key, payload, time.time() if t is None else t)
         except Exception:  # a bug of the tap must not cost the monitor an event
             log.exception("error in the monitor's tap (--incidents)")
 

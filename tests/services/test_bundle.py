@@ -18,13 +18,9 @@ from pathlib import Path
 import pytest
 
 from skinet.wire import foxglove as fx
+from tests.processes import run_skinet as skinet
 from tests.services.conftest import REPO, LivelinessWatch, client_args, open_client
 from tests.services.test_dashboard import VIOLATIONS, play
-
-
-def skinet(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "skinet_cli.main", *args], cwd=REPO, capture_output=True, text=True,
-                          timeout=300)
 
 
 @contextlib.contextmanager

@@ -36,7 +36,7 @@ from skinet.wire.messages import (
     CanonicalEvent, LiveState, PredictRequest, StateSpaceReport, UnsafeReport, Verdicts,
 )
 from tests.bridge_side import BridgeSide as Events  # noqa: F401  (imported from here by other tests)
-from tests.processes import start_module, start_skinet, stop
+from tests.processes import run_skinet, start_module, start_skinet, stop
 from tests.services.conftest import LivelinessWatch, client_args, free_port, open_client
 
 REPO = Path(__file__).resolve().parents[2]
@@ -576,8 +576,7 @@ def test_skinet_run_listens_for_a_bridge_and_logs_changes(tmp_path):
         trigger = {m.name: m.metadata for m in reader.iter_metadata()}["skinet"]["trigger"]
         topics = [channel.topic for _, channel, _ in reader.iter_messages()]
     assert trigger == "model divergence" and "/skinet/divergences" in topics
-    done = subprocess.run([sys.executable, "-m", "skinet_cli.main", "replay", str(path), "--verify"], cwd=REPO,
-                          capture_output=True, text=True, timeout=300)
+    done = run_skinet("replay", str(path), "--verify")
     assert (done.returncode, done.stdout) == (0, "0 differences\n"), done.stderr
 
 
