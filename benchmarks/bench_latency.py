@@ -19,8 +19,10 @@ messages of a step).  The burst row gives the CPU time per event of each
 process, which on a small machine is what bounds the rate.
 
 The in-process monitor also runs without and with incident bundles (``--incidents``, ``--rounds`` rounds of
-each, 12 by default, in a random order per round) and without and with the Foxglove view on its session
-(alternated three times), target: p99 with them within 10 % of without.  Beside them runs the peer that
+each, 12 by default, in a random order per round) and without and with each Foxglove view (three rounds in a
+random order per round): on its session, in a process of its own through Zenoh, and ``skinet run
+--foxglove``'s, a process of its own fed through a pipe by the monitor (``--run-foxglove-only``: that one
+alone, ``--rounds`` rounds), target: p99 with them within 10 % of without.  Beside them runs the peer that
 sorts Foxglove's cost from Zenoh's: a process of its own subscribed to the monitor's five keys with a
 callback that does nothing (the cost any remote view puts on the monitor: the dashboard, ``skinet watch``);
 the Foxglove process's p99 is also given as a ratio to it.  The deployed shape follows: a router, the
@@ -31,8 +33,8 @@ ground station (its own router linked to the robot's, a view) pinned to the othe
 ``skinet foxglove`` there (alternated six times).  These rows send their events back to back unless
 ``--pace MS`` spaces them.
 
-    python benchmarks/bench_latency.py [--events 2000] [--burst 20000] [--profile] [--views-only | --incidents-only]
-        [--rounds N] [--pace MS]
+    python benchmarks/bench_latency.py [--events 2000] [--burst 20000] [--profile]
+        [--views-only | --incidents-only | --run-foxglove-only] [--rounds N] [--pace MS]
 """
 
 from __future__ import annotations
@@ -300,39 +302,60 @@ def with_incidents(n: int, rounds: int = 12, pace: float = 0.0) -> list[list[obj
             rounds_row("in-process", f"  {modes[1]}", per_round[modes[1]], per_round[modes[0]])]
 
 
-def with_views(n: int, rounds: int = 3, pace: float = 0.0) -> list[list[object]]:
-    """The in-process monitor's event -> UnsafeReport latency without and with the Foxglove view (an observer and its
-    WebSocket server, one client subscribed to every channel) on the same session, alternated ``rounds`` times so
-    that a busy machine loads both alike; target: p99 with them within 10 % of p99 without.  The Foxglove client is
-    a process of its own, as Foxglove is (in the monitor's process its JSON decoding would hold the monitor's interpreter)."""
+def with_views(n: int, rounds: int = 3, pace: float = 0.0, modes: tuple[str, ...] | None = None) -> list[list[object]]:
+    """The in-process monitor's event -> UnsafeReport latency without and with each view of ``modes`` (default
+    :data:`MODES`; the first is the baseline), ``rounds`` rounds of each in a random order per round, so that a
+    busy machine loads them alike; target: p99 with a view within 10 % of p99 without.  The Foxglove client is
+    a process of its own, as Foxglove is (in the monitor's process its JSON decoding would hold the monitor's
+    interpreter)."""
+    import random
+
     from services.dashboard.observer import Observer
+    from services.foxglove.feed import PipeFeed
     from services.foxglove.server import FoxgloveView
 
+    modes = MODES if modes is None else modes
     system = load_system(SYSTEM_FILE)[0]
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     session = zenoh.open(session_config("peer", listen=[endpoint], multicast_scouting=False))
-    per_round: dict[str, list[list[float]]] = {m: [] for m in MODES}
+    per_round: dict[str, list[list[float]]] = {m: [] for m in modes}
     try:
         for _ in range(rounds):
-            for views in MODES:
-                monitor = start_monitor(session, system)
+            for views in random.sample(modes, len(modes)):
+                feed = None
+                if "skinet run" in views:  # the monitor's tap writes to the view's pipe
+                    read, write = os.pipe()
+                    feed = PipeFeed("spot_arm", write)
+                monitor = start_monitor(session, system, tap=None if feed is None else feed.record)
                 side = BridgeSide(session, "spot_arm", source="bench", model=system)
                 view = proc = client = None
                 if "bare" in views:
                     proc = start([sys.executable, __file__, "--bare-subscriber", endpoint])
                     wait_token(session, keys.alive("spot_arm", "bench-bare", "*"))
                     time.sleep(1.0)  # its subscriptions reach this session, as the Foxglove process's do
+                elif feed is not None:
+                    port = free_port()
+                    proc = start_module("services.foxglove", str(SYSTEM_FILE), "--port", str(port), "--feed",
+                                        str(read), "--mode", "peer", "-e", endpoint, "--no-multicast-scouting",
+                                        "--wait", "0", pass_fds=(read,))
+                    os.close(read)
+                    client = start([sys.executable, __file__, "--fox-client", f"ws://127.0.0.1:{port}"])
+                    subscribed(client)
+                    time.sleep(1.0)  # the view's start-up queries answered before measuring
                 elif "another process" in views:
                     proc, client = foxglove_processes("--mode", "peer", "-e", endpoint, "--no-multicast-scouting",
                                                       "--wait", "0")
-                    wait_token(session, keys.alive("spot_arm", "monitor", "*"))
+                    subscribed(client)
                     time.sleep(1.0)  # the view's start-up queries answered before measuring
                 elif "Foxglove" in views:
                     observer = Observer(session, "spot_arm", system)
                     view = FoxgloveView(observer, "127.0.0.1", 0)
                     client = start([sys.executable, __file__, "--fox-client", view.url])
-                    time.sleep(1.0)  # the client connected and subscribed before measuring
+                    subscribed(client)
+                    time.sleep(1.0)  # the view's start-up queries answered before measuring
                 per_round[views].append(one_round(session, n, pace))
+                if feed is not None and feed.dropped:
+                    print(f"  ({views}: {feed.dropped} messages dropped in {feed.gaps} gaps)", file=sys.stderr)
                 if proc is not None:
                     stop_all([p for p in (client, proc) if p is not None])
                 if view is not None:
@@ -340,20 +363,26 @@ def with_views(n: int, rounds: int = 3, pace: float = 0.0) -> list[list[object]]
                     view.close()
                     observer.close()
                 monitor.close()
+                if feed is not None:
+                    feed.close()
                 side.close()
     finally:
         session.close()
-    bare, fox = p99(pooled(per_round[MODES[1]])), p99(pooled(per_round[MODES[2]]))
-    return [rounds_row("in-process", f"monitor: event -> UnsafeReport, {MODES[0]}", per_round[MODES[0]],
+    rows = [rounds_row("in-process", f"monitor: event -> UnsafeReport, {modes[0]}", per_round[modes[0]],
                        target="baseline"),
-            *[rounds_row("in-process", f"  {m}", per_round[m], per_round[MODES[0]]) for m in MODES[1:]],
-            ["in-process", "  skinet foxglove's p99 / the bare remote subscriber's", "", f"{fox / bare:.2f}", "",
-             "(peer)", ""]]
+            *[rounds_row("in-process", f"  {m}", per_round[m], per_round[modes[0]]) for m in modes[1:]]]
+    if MODES[1] in modes and MODES[2] in modes:
+        bare, fox = p99(pooled(per_round[MODES[1]])), p99(pooled(per_round[MODES[2]]))
+        rows.append(["in-process", "  skinet foxglove's p99 / the bare remote subscriber's", "", f"{fox / bare:.2f}",
+                     "", "(peer)", ""])
+    return rows
 
 
 MODES = ("no view", "with a bare remote subscriber of the monitor's keys (peer: any view's Zenoh cost)",
          "with skinet foxglove in another process (1 client)",
-         "with the Foxglove view in process (1 client)")
+         "with the Foxglove view in process (1 client)",
+         "with skinet run --foxglove's view (its own process, fed through a pipe; 1 client)")
+RUN_FOXGLOVE = (MODES[0], MODES[4])
 
 
 MONITOR_KEYS = (keys.state, keys.verdicts, keys.unsafe, keys.state_space, keys.divergences)  # what it publishes
@@ -365,6 +394,18 @@ def foxglove_processes(*zenoh_args: str) -> list[subprocess.Popen]:
     port = free_port()
     return [start_module("services.foxglove", str(SYSTEM_FILE), "--port", str(port), *zenoh_args),
             start([sys.executable, __file__, "--fox-client", f"ws://127.0.0.1:{port}"])]
+
+
+def subscribed(client: subprocess.Popen, timeout: float = 120.0) -> None:
+    """Until the Foxglove client process ``client`` (started without a log) subscribed to the view's channels: a
+    view's start-up (imports, compiled anew under PYTHONDONTWRITEBYTECODE) is not measured."""
+    deadline = time.monotonic() + timeout
+    for line in client.stdout:
+        if line.startswith("subscribed"):
+            return
+        if time.monotonic() > deadline:
+            break
+    raise RuntimeError("the Foxglove client process never subscribed")
 
 
 def bare_subscriber(endpoint: str) -> None:
@@ -398,6 +439,7 @@ async def _fox_client(url: str, aiohttp, json_) -> None:
                     if op["op"] == "advertise":
                         await ws.send_str(json_.dumps({"op": "subscribe", "subscriptions": [
                             {"id": c["id"], "channelId": c["id"]} for c in op["channels"]]}))
+                        print("subscribed", flush=True)  # to subscribed(): the view is serving, the client is in
                 elif msg.type in (aiohttp.WSMsgType.CLOSED, aiohttp.WSMsgType.ERROR):
                     return
 
@@ -689,8 +731,11 @@ def main() -> None:
                         help="only the rows without and with --incidents and the Foxglove view")
     parser.add_argument("--incidents-only", action="store_true",
                         help="only the rows without and with --incidents")
+    parser.add_argument("--run-foxglove-only", action="store_true",
+                        help="only the rows without and with skinet run --foxglove's view (fed through a pipe)")
     parser.add_argument("--rounds", type=count(1), default=12, metavar="N",
-                        help="rounds of each configuration in the --incidents rows (default 12)")
+                        help="rounds of each configuration in the --incidents and --run-foxglove-only rows "
+                             "(default 12)")
     parser.add_argument("--pace", type=float, default=0.0, metavar="MS",
                         help="in the rows of --incidents and the views, wait MS milliseconds (untimed) before each event: a robot's "
                              "pace rather than back to back (default 0: the flood)")
@@ -711,10 +756,13 @@ def main() -> None:
     if args.pace < 0:
         parser.error(f"argument --pace: {args.pace:g} is below 0")
     pace = args.pace / 1000
-    only = args.views_only or args.incidents_only
+    only = args.views_only or args.incidents_only or args.run_foxglove_only
     rows = [] if only else in_process(args.events, args.profile)
-    rows += with_incidents(args.events, args.rounds, pace)
-    if not args.incidents_only:
+    if args.run_foxglove_only:
+        rows += with_views(args.events, args.rounds, pace, RUN_FOXGLOVE)
+    else:
+        rows += with_incidents(args.events, args.rounds, pace)
+    if not (args.incidents_only or args.run_foxglove_only):
         rows += with_views(args.events, pace=pace)
         rows += views_through_router(args.events, pace=pace)
         rows += dashboard_with_foxglove(args.events, pace=pace)

@@ -36,6 +36,7 @@ from services.common.zenoh_config import (
     warn_on_stderr,
 )
 from services.monitor import Monitor, MonitorView, start_monitor
+from services.monitor.service import Tap
 from services.common.memory import memory_limit
 from services.common.options import load_live_system, require_properties, self_ending_options
 from skinet.files import program
@@ -51,6 +52,7 @@ if TYPE_CHECKING:
     import zenoh
 
     from services.dashboard.server import Dashboard
+    from services.foxglove.feed import PipeFeed
 
 CLEAR = "\x1b[H\x1b[J"  # cursor home, clear to end of screen
 
@@ -210,7 +212,7 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
                                         client_name(config), system)
             print(f"dashboard on {dashboard.url}", file=sys.stderr, flush=True)
         if getattr(args, "foxglove", None) is not None:  # a port in use stops the run too
-            foxglove = spawn_foxglove(args, mode, listening)
+            foxglove = spawn_foxglove(args, mode, listening, system.name)
             print(f"foxglove on {foxglove.url}", file=sys.stderr, flush=True)
         predictor = start_predictor(session, f"embedded-{os.getpid()}",  # before the monitor: it asks at once
                                     memory_limit=memory_limit(args), rate_limit=args.rate_limit)
@@ -219,7 +221,9 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
         incidents = start_incidents(session, system, args)
         monitor = start_monitor(session, system, budget=args.budget, check_policy=args.check_policy,
                                 client=client_name(config), check_rate_limit=args.check_rate_limit,
-                                lost_after=args.lost_after, tap=None if incidents is None else incidents.record)
+                                lost_after=args.lost_after,
+                                tap=taps(None if incidents is None else incidents.record,
+                                         None if foxglove is None else foxglove.feed.record))
         if not args.no_pilot:
             from services.pilot import start_pilot
 
@@ -350,16 +354,32 @@ def start_dashboard(session: zenoh.Session, name: str, host: str, port: int, cli
 FOXGLOVE_START = 30.0  # seconds for the Foxglove view's process to say where it serves
 
 
+def taps(*fns: Tap | None) -> Tap | None:
+    """The monitor's tap handing each message to every one of ``fns`` given (None: none given)."""
+    given = [f for f in fns if f is not None]
+    if len(given) < 2:
+        return given[0] if given else None
+    first, second = given
+
+    def both(key: str, payload: bytes, t: float = 0.0) -> None:
+        first(key, payload, t)
+        second(key, payload, t)
+    return both
+
+
 @dataclasses.dataclass
 class FoxgloveProcess:
     """``python -m services.foxglove`` beside ``skinet run``: a process of its own, so that its Python work never
     holds the monitor's interpreter (benchmarks/bench_latency.py: in the same process, p99 several times the
-    monitor's; in another, what any remote view costs, docs/foxglove.md)."""
+    monitor's), fed the monitor's results through a pipe (``feed``, the monitor's tap) rather than Zenoh (a
+    remote subscriber of the monitor's keys doubles its p99; :mod:`services.foxglove.feed`, docs/foxglove.md)."""
 
     proc: Any
     url: str
+    feed: PipeFeed
 
     def close(self) -> None:
+        self.feed.close()  # the view ends with its pipe; terminated too, in case it waits for something else
         self.proc.terminate()
         try:
             self.proc.wait(10)
@@ -367,11 +387,13 @@ class FoxgloveProcess:
             self.proc.kill()
 
 
-def spawn_foxglove(args: argparse.Namespace, mode: str, listening: list[str]) -> FoxgloveProcess:
+def spawn_foxglove(args: argparse.Namespace, mode: str, listening: list[str], system: str) -> FoxgloveProcess:
     """Start the Foxglove view of ``skinet run`` (a peer of its listen endpoint, or a client of the same router
-    with the same login); raises a one-line :class:`SkinetError` with the view's own error (port in use)."""
+    with the same login, for the model, the pilot and liveliness; the monitor's results of ``system`` through a
+    pipe); raises a one-line :class:`SkinetError` with the view's own error (port in use)."""
     import subprocess
 
+    from services.foxglove.feed import PipeFeed
     from skinet.errors import SkinetError
 
     zenoh_args = ["--no-multicast-scouting"]
@@ -386,11 +408,20 @@ def spawn_foxglove(args: argparse.Namespace, mode: str, listening: list[str]) ->
         for option in ("zenoh_config", "user", "password_file"):
             if getattr(args, option, None):
                 zenoh_args += [f"--{option.replace('_', '-')}", str(getattr(args, option))]
-    proc = subprocess.Popen([sys.executable, "-m", "services.foxglove", str(args.system), "--host", args.foxglove_host,
-                             "--port", str(args.foxglove), "--wait", "30", *zenoh_args],
-                            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
-                            env={**os.environ, **({"SKINET_ZENOH_PASSWORD": args.password}
-                                                  if getattr(args, "password", None) else {})})
+    read, write = os.pipe()
+    try:
+        proc = subprocess.Popen([sys.executable, "-m", "services.foxglove", str(args.system), "--host",
+                                 args.foxglove_host, "--port", str(args.foxglove), "--wait", "30", "--feed", str(read),
+                                 *zenoh_args],
+                                stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                                pass_fds=(read,), env={**os.environ, **({"SKINET_ZENOH_PASSWORD": args.password}
+                                                                       if getattr(args, "password", None) else {})})
+    except BaseException:
+        os.close(write)
+        raise
+    finally:
+        os.close(read)
+    feed = PipeFeed(system, write)
     lines: list[str] = []
     deadline = time.monotonic() + FOXGLOVE_START
     while time.monotonic() < deadline:
@@ -401,7 +432,8 @@ def spawn_foxglove(args: argparse.Namespace, mode: str, listening: list[str]) ->
         m = re.search(r" on (ws://\S+)", line)
         if line.startswith("skinet foxglove:") and m:
             threading.Thread(target=_drain, args=(proc.stderr,), daemon=True).start()
-            return FoxgloveProcess(proc, m.group(1))
+            return FoxgloveProcess(proc, m.group(1), feed)
+    feed.close()
     proc.kill()
     proc.wait()
     error = next((x for x in reversed(lines) if "error" in x), lines[-1] if lines else "it stopped at once")

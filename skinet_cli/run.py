@@ -38,7 +38,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     c.add_argument("--dashboard-host", default="127.0.0.1", help="address of --dashboard (default: 127.0.0.1)")
     c.add_argument("--foxglove", type=count(0, 65535), metavar="PORT",
                    help="also serve the system to Foxglove (WebSocket) on this port (0: a free one; see skinet "
-                        "foxglove)")
+                        "foxglove): a process of its own, fed the monitor's results through a pipe")
     c.add_argument("--foxglove-host", default="127.0.0.1", help="address of --foxglove (default: 127.0.0.1)")
     from services.monitor.incidents import add_incidents_args
 

@@ -17,24 +17,25 @@ REPO = Path(__file__).resolve().parents[1]
 
 
 def start(argv: Sequence[str], log: Path | TextIO | None = None, env: dict[str, str] | None = None,
-          cwd: Path = REPO) -> subprocess.Popen:
+          cwd: Path = REPO, pass_fds: Sequence[int] = ()) -> subprocess.Popen:
     """``argv`` as a process: its output (standard error too) appended to the file ``log``, written to the open
-    stream ``log``, or, without one, on a text pipe (``proc.stdout``) the caller reads."""
+    stream ``log``, or, without one, on a text pipe (``proc.stdout``) the caller reads; ``pass_fds``: file
+    descriptors it inherits (a pipe's end)."""
     if isinstance(log, Path):
         with log.open("ab") as out:
             return subprocess.Popen(list(argv), cwd=cwd, env=env, stdout=out, stderr=subprocess.STDOUT,
-                                    start_new_session=True)
+                                    start_new_session=True, pass_fds=pass_fds)
     if log is not None:
         return subprocess.Popen(list(argv), cwd=cwd, env=env, stdout=log, stderr=subprocess.STDOUT,
-                                start_new_session=True)
+                                start_new_session=True, pass_fds=pass_fds)
     return subprocess.Popen(list(argv), cwd=cwd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                            text=True, start_new_session=True)
+                            text=True, start_new_session=True, pass_fds=pass_fds)
 
 
 def start_module(module: str, *args: str, log: Path | TextIO | None = None,
-                 env: dict[str, str] | None = None) -> subprocess.Popen:
+                 env: dict[str, str] | None = None, pass_fds: Sequence[int] = ()) -> subprocess.Popen:
     """``python -m MODULE ARGS`` (a service: ``services.monitor``, ...), as :func:`start`."""
-    return start([sys.executable, "-m", module, *args], log, env)
+    return start([sys.executable, "-m", module, *args], log, env, pass_fds=pass_fds)
 
 
 def run_skinet(*args: str, timeout: float = 300.0) -> subprocess.CompletedProcess:

@@ -2,17 +2,17 @@
 
 from __future__ import annotations
 
-import argparse
 import sys
 from collections.abc import Sequence
 
 from services.common.cli import one_line_errors
+from services.common.options import ArgumentParser
 from services.dashboard.app import add_dashboard_args, serve
 from services.common.cli import stop_on_signals
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+def build_parser() -> ArgumentParser:
+    parser = ArgumentParser(
         prog="python -m services.dashboard",
         description="SkiNet Live dashboard: a web page showing a running system live (skillsets, properties, "
                     "unsafe commands with their kind, steps and witness, predictions, violations, timeline), "

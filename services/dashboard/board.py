@@ -63,6 +63,7 @@ class Board:
         self._index = 0  # points ever added (their "i")
         self._last_seq = -1
         self._holds: dict[str, bool] = {}
+        self._held_at: dict[str, int] = {}  # property -> the last step this view saw it hold (this epoch)
         self._pending: list[tuple[Verdicts | UnsafeReport, bool]] = []
         self.pilot: PilotStatus | None = None  # the pilot's last status (docs/semantics.md §8)
         self.divergences: OrderedDict[tuple[str, int], dict[str, Any]] = OrderedDict()  # (monitor, n) -> entry
@@ -133,7 +134,7 @@ class Board:
             # Else a restarted monitor; a get's answer says so when its publications were missed (link down).
             self.epoch += 1
             self.verdicts = self.unsafe = None
-            self._holds = {}
+            self._holds, self._held_at = {}, {}
             out.append({"kind": "restart", "epoch": self.epoch, "t": t})
         self._last_seq = msg.seq
         self.state = msg
@@ -169,11 +170,14 @@ class Board:
         now = {v.name: v.holds for v in msg.properties}
         point = self._point(msg.seq)
         for name, holds in now.items():
+            if holds:
+                self._held_at[name] = msg.seq
             if holds or self._holds.get(name) is False:
                 continue
             # Violated where this view knows nothing before (it joined late): not an onset at this step.
             joined = name not in self._holds and msg.seq > 0
-            if any(v["property"] == name and (v["seq"] == msg.seq or joined) and v.get("listed")
+            after = self._held_at.get(name, -1)  # a view that missed steps (a gap) sees the onset in the list
+            if any(v["property"] == name and v["seq"] > after and v["epoch"] == self.epoch and v.get("listed")
                    for v in self.violations):
                 continue  # the monitor's list named its onset already (its step, its event)
             v = {"n": len(self.violations), "property": name, "seq": msg.seq, "epoch": self.epoch,

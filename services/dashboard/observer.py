@@ -44,10 +44,13 @@ from skinet.wire.messages import (
 )
 
 Listener = Callable[[list[Update]], None]
-RESULTS: tuple[tuple[Callable[[str], str], type[BaseModel]], ...] = (
-    (keys.state, LiveState), (keys.verdicts, Verdicts), (keys.unsafe, UnsafeReport),
-    (keys.state_space, StateSpaceReport), (keys.divergences, Divergences), (keys.pilot_status, PilotStatus),
+# Asked in this order when catching up: the list first (a violation's onset at its own step, not at the one
+# shown), the state before the verdicts and report of its step.
+MONITOR_RESULTS: tuple[tuple[Callable[[str], str], type[BaseModel]], ...] = (
+    (keys.divergences, Divergences), (keys.state, LiveState), (keys.verdicts, Verdicts),
+    (keys.unsafe, UnsafeReport), (keys.state_space, StateSpaceReport),
 )
+RESULTS = (*MONITOR_RESULTS, (keys.pilot_status, PilotStatus))
 FOLLOW_UP = 0.5  # seconds after a monitor appeared that its last publications are asked again
 QUERY_TIMEOUT = 2.0
 
@@ -65,10 +68,13 @@ class Observer:
     """Follows ``system`` on ``session`` (which may be shared, e.g. ``skinet run``)."""
 
     def __init__(self, session: zenoh.Session, system: str, model: System | None = None, history: int = 5000,
-                 client: str = keys.LOCAL_CLIENT, goal_login: tuple[zenoh.Session, str] | None = None):
+                 client: str = keys.LOCAL_CLIENT, goal_login: tuple[zenoh.Session, str] | None = None,
+                 fed: bool = False):
         """``client``: the client chunk of its check queries, the session's router login
         (:func:`~services.common.zenoh_config.client_name`); ``goal_login``: the session and login the
-        goals are sent from, when not this session's (an operator's, beside an observer's)."""
+        goals are sent from, when not this session's (an operator's, beside an observer's); ``fed``: the
+        monitor's results (:data:`MONITOR_RESULTS`) come from elsewhere (:meth:`take`, :meth:`fetch_results`; a
+        pipe from ``skinet run``'s monitor, :mod:`services.foxglove.feed`), not from Zenoh."""
         self.session = session
         self._goal_login = goal_login
         self.name = keys.check_chunk(system, "system name")
@@ -83,7 +89,9 @@ class Observer:
         self._closed = threading.Event()
         self._monitor_seen = threading.Event()
         self.fetched = threading.Event()  # the last publications were asked for once (a view's first picture)
-        self._subs = [session.declare_subscriber(key(self.name), self._on_sample(kind)) for key, kind in RESULTS]
+        self._subscribed = RESULTS[len(MONITOR_RESULTS):] if fed else RESULTS
+        self._subs = [session.declare_subscriber(key(self.name), self._on_sample(kind))
+                      for key, kind in self._subscribed]
         live = session.liveliness()
         self._tokens = [live.declare_subscriber(k, self._on_token, history=True)
                         for k in (keys.alive(self.name, "*", "*"), keys.alive(keys.ANY_SYSTEM, "predictor", "*"))]
@@ -158,10 +166,12 @@ class Observer:
     def _on_sample(self, kind: type[BaseModel]) -> Callable[[zenoh.Sample], None]:
         def on_sample(sample: zenoh.Sample) -> None:
             if sample.kind == zenoh.SampleKind.PUT:
-                self._take(sample.payload.to_bytes(), kind, False)
+                self.take(sample.payload.to_bytes(), kind, False)
         return on_sample
 
-    def _take(self, payload: bytes, kind: type[BaseModel], initial: bool) -> None:
+    def take(self, payload: bytes, kind: type[BaseModel], initial: bool) -> None:
+        """One message of the system as ``kind`` (counted as malformed when it is not; ``initial``: it may be an
+        older copy of what is shown, e.g. an answer to a ``get``)."""
         try:
             message = decode(payload, kind)
         except DecodeError:
@@ -210,17 +220,27 @@ class Observer:
         """The model and the last publications, asked once; False when the session was closed under us."""
         try:
             self._fetch(keys.model(self.name), ModelBundle)
-            for key, kind in RESULTS:
+            for key, kind in self._subscribed:
                 self._fetch(key(self.name), kind)
         except zenoh.ZError:
             return False
         self.fetched.set()
         return True
 
+    def fetch_results(self) -> bool:
+        """The monitor's last results (:data:`MONITOR_RESULTS`), asked now, in the caller's thread (a fed observer
+        catching up); False when the session was closed under us."""
+        try:
+            for key, kind in MONITOR_RESULTS:
+                self._fetch(key(self.name), kind)
+        except zenoh.ZError:
+            return False
+        return True
+
     def _fetch(self, key: str, kind: type[BaseModel]) -> None:
         for reply in self.session.get(key, timeout=QUERY_TIMEOUT):
             if reply.ok is not None and not self._closed.is_set():
-                self._take(reply.ok.payload.to_bytes(), kind, True)
+                self.take(reply.ok.payload.to_bytes(), kind, True)
 
 
 def add_view_args(p: argparse.ArgumentParser, env: tuple[str, str], port: int, system_help: str) -> None:
@@ -290,7 +310,8 @@ class View:
 
 def observe(args: argparse.Namespace) -> View:
     """A served view of the system ``args.system`` names: the session of ``args``' Zenoh options and, with a
-    goal login (``args.goal_user``), a second session the observer sends goals from.  Raises a one-line
+    goal login (``args.goal_user``), a second session the observer sends goals from; with ``args.feed`` (a pipe
+    from ``skinet run``), an observer fed the monitor's results from elsewhere.  Raises a one-line
     :class:`SkinetError` (a bad system, a missing secret: before any session is opened; no router, a refused
     login)."""
     name, system = resolve_system(args.system)
@@ -303,7 +324,8 @@ def observe(args: argparse.Namespace) -> View:
         session.close()
         raise
     goal_login = None if goals is None or goal_session is None else (goal_session, client_name(goals))
-    observer = Observer(session, name, system, client=client_name(config), goal_login=goal_login)
+    observer = Observer(session, name, system, client=client_name(config), goal_login=goal_login,
+                        fed=getattr(args, "feed", None) is not None)
     return View(config, session, observer, goal_session)
 
 
@@ -311,9 +333,14 @@ def follow(observer: Observer, config: zenoh.Config, wait: float, stop: threadin
            log: logging.Logger) -> None:
     """Until ``stop``: warn once when no monitor shows up within ``wait`` seconds (an explicit endpoint still
     unreached is a one-line error instead)."""
-    if not observer.wait_monitor(wait) and not stop.is_set():
-        check_connected(observer.session, config)
-        log.warning("%s", no_monitor_message(observer.session, observer.name, config))
+    deadline = time.monotonic() + wait
+    while not observer.wait_monitor(min(0.1, max(deadline - time.monotonic(), 0.0))):
+        if stop.is_set():
+            return
+        if time.monotonic() >= deadline:
+            check_connected(observer.session, config)
+            log.warning("%s", no_monitor_message(observer.session, observer.name, config))
+            break
     stop.wait()
 
 

@@ -47,11 +47,18 @@ def serve(args: argparse.Namespace, stop: threading.Event) -> int:
     except SkinetError:
         view.close()
         raise
+    feed = None
+    if getattr(args, "feed", None) is not None:
+        from services.foxglove.feed import PipeReader
+
+        feed = PipeReader(args.feed, observer, stop)  # the end of the pipe ends the view
     print(f"skinet foxglove: system {observer.name} on {foxglove.url} (Foxglove: Open connection, Foxglove "
           "WebSocket; layout docs/foxglove-layout.json)", file=sys.stderr, flush=True)
     try:
         follow(observer, view.config, args.wait, stop, log)
     finally:
+        if feed is not None:
+            feed.close()
         foxglove.close()
         view.close()
     return 0

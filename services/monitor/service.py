@@ -78,6 +78,7 @@ from skinet.wire.messages import (
     StateSpaceReport, UnsafeReport, Verdicts,
 )
 
+Tap = Callable[[str, bytes, float], None]  # key, payload, wall time: Monitor(tap=...)
 log = logging.getLogger("skinet.monitor")
 _LOG_FIRST = 10  # log the first occurrences of each problem, then every 1000th
 MAX_EVENT = 64 << 10  # bytes; a canonical event or a heartbeat is a few hundred
@@ -133,7 +134,7 @@ class Monitor:
                  prediction_cache: int = 256, indirect: bool = True, express: bool = True,
                  check_policy: Policy | None = None, resync_timeout: float = 2.0, client: str = keys.LOCAL_CLIENT,
                  check_rate_limit: float = CHECK_RATE_LIMIT, lost_after: float = BOUND,
-                 tap: Callable[[str, bytes, float], None] | None = None):
+                 tap: Tap | None = None):
         self.session, self.system = session, system
         self._tap = tap
         self.instance_id = keys.check_chunk(instance_id or uuid.uuid4().hex[:8], "instance id")

@@ -738,6 +738,12 @@ PROCESS_CASES = [
      "to 65535"),
     (["-m", "services.simulator", SCENARIO, "--zenoh-config", "/no/such/zenoh.json5"], 1,
      "/no/such/zenoh.json5: error: cannot read file: No such file or directory"),
+    (["-m", "services.foxglove", SYSTEM, "--feed", "0"], 2,  # standard input, not a pipe (subprocess.run's default)
+     "python -m services.foxglove: error: argument --feed: expected the number of a pipe open in this process, got "
+     "'0' (see python -m services.foxglove --help)"),
+    (["-m", "services.dashboard", SYSTEM, "--port", "70000"], 2,
+     "python -m services.dashboard: error: argument --port/-p: expected an integer from 0 to 65535, got '70000' (see "
+     "python -m services.dashboard --help)"),
 ]
 
 

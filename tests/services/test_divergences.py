@@ -191,6 +191,37 @@ def test_the_board_keeps_each_monitor_runs_list_and_ignores_older_copies() -> No
     assert snap["divergences_older"] == 5
 
 
+def test_a_view_that_missed_steps_takes_each_onset_from_the_monitors_list_once() -> None:
+    """A view that saw the property hold, missed steps (its pipe was full, its link was down) and caught up (the
+    list first, then the last state and verdicts, as a catch-up asks them): the onset is at the monitor's step,
+    once, not at the step the catch-up shows; an earlier violation that ended is no excuse."""
+    from services.dashboard.board import Board
+    from services.monitor.violations import onset_reason
+    from skinet.wire.messages import PropertyVerdict, Verdicts
+
+    def step(seq: int, holds: bool, initial: bool = False) -> list[dict]:
+        return [*board.feed(LiveState(system="s", seq=seq, stamp=float(seq), skillsets={}, event=f"arm:x#{seq}"),
+                            float(seq), initial),
+                *board.feed(Verdicts(system="s", seq=seq, stamp=float(seq),
+                                     properties=[PropertyVerdict(name="p", holds=holds)]), float(seq), initial)]
+
+    def listed(*onsets: int) -> Divergences:
+        return Divergences(system="s", monitor="m", stamp=9.0, older=0, entries=[
+            Divergence(n=n, kind="violation", seq=seq, stamp=float(seq), skillset="arm", event=f"arm:x#{seq}",
+                       reason=onset_reason("p")) for n, seq in enumerate(onsets)])
+
+    board = Board("s")
+    step(1, True)
+    step(2, False)  # seen live: the onset at step 2
+    board.feed(listed(2), 2.0)
+    step(3, True)
+    # Steps 4 to 8 missed, the property violated again from step 6; the catch-up.
+    board.feed(listed(2, 6), 9.0, initial=True)
+    step(8, False, initial=True)
+    assert [(v["property"], v["seq"], v["event"], v.get("listed", False)) for v in board.violations] == [
+        ("p", 2, "arm:x#2", False), ("p", 6, "arm:x#6", True)]
+
+
 def test_a_violation_that_began_and_ended_is_listed_to_a_view_that_joins_later(router, client_factory) -> None:
     """Issue 30: a view that joined after the paper's violation (arm_ready started while teleop runs, step 10)
     had ended (step 11) never listed it; the monitor now keeps its onset in the run's list."""

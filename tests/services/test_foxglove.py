@@ -11,6 +11,7 @@ from __future__ import annotations
 import subprocess
 import sys
 from collections.abc import Callable, Iterator
+from pathlib import Path
 
 import pytest
 
@@ -164,6 +165,35 @@ def test_skinet_run_serves_foxglove_and_a_late_subscriber_gets_the_last_state() 
             client.close()
         proc.terminate()
         assert proc.wait(15) == 0
+
+
+def test_skinet_runs_foxglove_view_ends_with_it_even_when_killed() -> None:
+    """The view is fed through a pipe: killed, ``skinet run`` leaves no view holding the port."""
+    import signal
+
+    from tests.services.test_monitor import wait_until
+
+    port = free_port()
+    proc = subprocess.Popen([sys.executable, "-m", "skinet_cli.main", "run", str(SYSTEM_FILE), "--duration", "60",
+                             "--no-multicast-scouting", "--no-pilot", "--foxglove", str(port)], cwd=REPO,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    try:
+        assert proc.stderr.readline().strip() == f"foxglove on ws://127.0.0.1:{port}"
+        children = Path(f"/proc/{proc.pid}/task/{proc.pid}/children").read_text().split()
+        views = [int(c) for c in children if "services.foxglove" in Path(f"/proc/{c}/cmdline").read_text()]
+        assert len(views) == 1
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(10)
+
+        def gone() -> bool:  # ended: no such process, or a zombie its new parent has not reaped
+            try:
+                return "\nState:\tZ" in Path(f"/proc/{views[0]}/status").read_text()
+            except FileNotFoundError:
+                return True
+        wait_until(gone, 30, "the view's process gone with skinet run")
+    finally:
+        proc.kill()
+        proc.wait()
 
 
 def test_the_layout_opens_a_panel_on_every_channel_and_names_no_other_topic() -> None:
