@@ -227,6 +227,11 @@ class Observer:
         self.fetched.set()
         return True
 
+    def note(self, update: Update) -> None:
+        """Hand the listeners an update of the feeder's own (a fed view that skipped steps says so)."""
+        with self._lock:
+            self._emit([update])
+
     def fetch_results(self) -> bool:
         """The monitor's last results (:data:`MONITOR_RESULTS`), asked now, in the caller's thread (a fed observer
         catching up); False when the session was closed under us."""

@@ -5,7 +5,8 @@
 messages of the channels of :mod:`skinet.wire.foxglove`: the monitor's messages
 as they are, one message per violation and per divergence, the plot series per
 step, and ``foxglove.Log`` lines (one per step, per unsafe command newly warned
-about, per violation, per divergence and per pilot change).  Log times are the
+about, per violation, per divergence and per pilot change, and one for steps a
+view fed through a pipe did not show).  Log times are the
 messages' own stamps, so a bundle replays on the timeline of the run.  Pure: no
 I/O.  Cost: O(size of the update) per update; it keeps O(unsafe commands) to say
 which warnings are new.
@@ -126,6 +127,11 @@ class Translator:
                     f"; next {nxt['skillset']}:{nxt['transition']}" if nxt else "")
                 out.append(self._log(m["stamp"], fx.ERROR if m["state"] == "failed" else fx.INFO, text))
             return out
+        if kind == "skipped":  # services/foxglove/feed.py: the view fell behind a flood of steps
+            st = self._state or {}
+            return [self._log(st.get("stamp") or self.clock(), fx.WARNING,
+                              f"{u['steps']} steps before step {st.get('seq', '?')} not shown: more than "
+                              f"{u['most']} steps in {u['round'] * 1000:g} ms, the view shows the last of each round")]
         if kind == "restart":
             t = u.get("t") or self.clock()
             return [self._log(t, fx.WARNING, f"monitor restarted (run {u['epoch']} of this view)")]

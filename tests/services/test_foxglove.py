@@ -38,16 +38,9 @@ def foxglove(spawn: Callable, router: str) -> Iterator[Callable[[], FoxgloveClie
         c.close()
 
 
-def test_the_unassisted_run_in_foxglove_shows_each_violation_at_its_step(foxglove, router) -> None:
-    client = foxglove()
-    client.wait(lambda c: len(c.channels) == len(fx.channels()), "every channel advertised")
-    advertised = client.topics()
-    assert {t: (c["encoding"], c["schemaName"], c["schemaEncoding"]) for t, c in advertised.items()} == {
-        s.topic: ("json", s.schema_name, "jsonschema") for s in fx.channels()}
-    assert client.protocol == "foxglove.sdk.v1"
-    assert client.server_info is not None and client.server_info["name"] == "SkiNet Live spot_arm"
-    seen: list[tuple[str, int, str]] = []
-
+def violations_at_their_steps(client: FoxgloveClient, seen: list[tuple[str, int, str]]) -> Callable[[StepRecord], None]:
+    """A chain's ``on_record``: after each step of the unassisted run, wait for its series and for the violations so
+    far on ``client``; each new one goes to ``seen`` as (property, step, event)."""
     def after(record: StepRecord) -> None:
         client.wait(lambda c: any(m["seq"] == record.index for m in c.on(fx.SERIES)), f"the series of step "
                     f"{record.index}")
@@ -57,8 +50,19 @@ def test_the_unassisted_run_in_foxglove_shows_each_violation_at_its_step(foxglov
         if record.violations:
             v = client.on(fx.VIOLATIONS)[-1]
             seen.append((v["property"], v["seq"], v["event"].split("#")[0]))
+    return after
 
-    records = play("unassisted", router, after)
+
+def test_the_unassisted_run_in_foxglove_shows_each_violation_at_its_step(foxglove, router) -> None:
+    client = foxglove()
+    client.wait(lambda c: len(c.channels) == len(fx.channels()), "every channel advertised")
+    advertised = client.topics()
+    assert {t: (c["encoding"], c["schemaName"], c["schemaEncoding"]) for t, c in advertised.items()} == {
+        s.topic: ("json", s.schema_name, "jsonschema") for s in fx.channels()}
+    assert client.protocol == "foxglove.sdk.v1"
+    assert client.server_info is not None and client.server_info["name"] == "SkiNet Live spot_arm"
+    seen: list[tuple[str, int, str]] = []
+    records = play("unassisted", router, violations_at_their_steps(client, seen))
     assert seen == VIOLATIONS
     assert [(p, r.index) for r in records for p in r.violations] == [(p, i) for p, i, _ in VIOLATIONS]
     assert client.invalid == []
