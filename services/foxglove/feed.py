@@ -203,7 +203,7 @@ class PipeReader:
                 older = max(older - 1, 0)
                 if gap:
                     gap_at = time.monotonic()
-                elif data and gap_at is not None:
+                elif done and gap_at is not None:
                     gap_at = None  # the feed wrote the last of each kind it dropped: the present
                 elif gap_at is not None and time.monotonic() - gap_at > QUIET:
                     catch_up, gap_at = True, None  # the monitor went quiet meanwhile: ask it
