@@ -32,15 +32,6 @@ MISSION = [("spot", "init_power.start"), ("spot", "init_power.success.powered_on
            ("spot", "safe_poweroff.start"), ("spot", "safe_poweroff.success.powered_off")]
 
 
-def matched(session: zenoh.Session, key: str) -> bool:
-    """Whether a subscriber of ``key`` is reachable from ``session`` now."""
-    publisher = session.declare_publisher(key)
-    try:
-        return publisher.matching_status.matching
-    finally:
-        publisher.undeclare()
-
-
 def stop_feeding(reader: PipeReader | None, feed: PipeFeed, side: BridgeSide, monitor) -> None:
     """The end of a test of the pipe: its reader, its writer, the bridge's side, the monitor."""
     if reader is not None:
@@ -59,18 +50,19 @@ def test_the_view_shows_each_violation_at_its_step_with_no_subscriber_of_the_mon
                         *client_args(router), log=tmp_path / "view.log", pass_fds=(read,))
     os.close(read)
     client = FoxgloveClient(f"ws://127.0.0.1:{port}")
-    watcher = client_factory()
+    watcher = client_factory()  # its publishers learn of every subscriber of the monitor's keys the router knows
+    probes = {key.__name__: watcher.declare_publisher(key("spot_arm"))
+              for key in (keys.state, keys.verdicts, keys.unsafe, keys.state_space, keys.divergences)}
     try:
         client.wait(lambda c: len(c.channels) == len(fx.channels()), "every channel advertised")
         seen: list[tuple[str, int, str]] = []
         play("unassisted", router, violations_at_their_steps(client, seen), tap=feed.record)
         assert seen == VIOLATIONS
         assert feed.dropped == 0 and client.invalid == []
-        # The view asked for the monitor's results on no key: the monitor's puts reach no other process.
-        assert [k for k in (keys.state, keys.verdicts, keys.unsafe, keys.state_space, keys.divergences)
-                if matched(watcher, k("spot_arm"))] == []
-        unfed = Observer(client_factory(), "spot_arm")  # as skinet foxglove observes: the same check sees it
-        wait_until(lambda: matched(watcher, keys.verdicts("spot_arm")), 10, "an unfed observer's subscriber")
+        # The view subscribed to none of the monitor's results: the monitor's puts reach no other process.
+        assert [name for name, probe in probes.items() if probe.matching_status.matching] == []
+        unfed = Observer(client_factory(), "spot_arm")  # as skinet foxglove observes: the same probe sees it
+        wait_until(lambda: probes["verdicts"].matching_status.matching, 10, "an unfed observer's subscriber")
         unfed.close()
         feed.close()  # skinet run gone: its view ends with the pipe
         assert view.wait(20) == 0
