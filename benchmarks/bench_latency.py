@@ -318,6 +318,7 @@ def with_views(n: int, rounds: int = 3, pace: float = 0.0, modes: tuple[str, ...
     system = load_system(SYSTEM_FILE)[0]
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     session = zenoh.open(session_config("peer", listen=[endpoint], multicast_scouting=False))
+    peer = ("--mode", "peer", "-e", endpoint, "--no-multicast-scouting", "--wait", "0")  # a view's Zenoh flags
     per_round: dict[str, list[list[float]]] = {m: [] for m in modes}
     try:
         for _ in range(rounds):
@@ -334,17 +335,12 @@ def with_views(n: int, rounds: int = 3, pace: float = 0.0, modes: tuple[str, ...
                     wait_token(session, keys.alive("spot_arm", "bench-bare", "*"))
                     time.sleep(1.0)  # its subscriptions reach this session, as the Foxglove process's do
                 elif feed is not None:
-                    port = free_port()
-                    proc = start_module("services.foxglove", str(SYSTEM_FILE), "--port", str(port), "--feed",
-                                        str(read), "--mode", "peer", "-e", endpoint, "--no-multicast-scouting",
-                                        "--wait", "0", pass_fds=(read,))
+                    proc, client = foxglove_processes("--feed", str(read), *peer, pass_fds=(read,))
                     os.close(read)
-                    client = start([sys.executable, __file__, "--fox-client", f"ws://127.0.0.1:{port}"])
                     subscribed(client)
                     time.sleep(1.0)  # the view's start-up queries answered before measuring
                 elif "another process" in views:
-                    proc, client = foxglove_processes("--mode", "peer", "-e", endpoint, "--no-multicast-scouting",
-                                                      "--wait", "0")
+                    proc, client = foxglove_processes(*peer)
                     subscribed(client)
                     time.sleep(1.0)  # the view's start-up queries answered before measuring
                 elif "Foxglove" in views:
@@ -388,24 +384,29 @@ RUN_FOXGLOVE = (MODES[0], MODES[4])
 MONITOR_KEYS = (keys.state, keys.verdicts, keys.unsafe, keys.state_space, keys.divergences)  # what it publishes
 
 
-def foxglove_processes(*zenoh_args: str) -> list[subprocess.Popen]:
-    """``skinet foxglove`` (with ``zenoh_args``) on a free port, and a Foxglove client process subscribed to every
-    channel (a process apart, as Foxglove is)."""
+def foxglove_processes(*args: str, pass_fds: tuple[int, ...] = ()) -> list[subprocess.Popen]:
+    """``skinet foxglove`` (with ``args``, inheriting ``pass_fds``) on a free port, and a Foxglove client process
+    subscribed to every channel (a process apart, as Foxglove is)."""
     port = free_port()
-    return [start_module("services.foxglove", str(SYSTEM_FILE), "--port", str(port), *zenoh_args),
+    return [start_module("services.foxglove", str(SYSTEM_FILE), "--port", str(port), *args, pass_fds=pass_fds),
             start([sys.executable, __file__, "--fox-client", f"ws://127.0.0.1:{port}"])]
 
 
-def subscribed(client: subprocess.Popen, timeout: float = 120.0) -> None:
+def subscribed(client: subprocess.Popen) -> None:
     """Until the Foxglove client process ``client`` (started without a log) subscribed to the view's channels: a
     view's start-up (imports, compiled anew under PYTHONDONTWRITEBYTECODE) is not measured."""
-    deadline = time.monotonic() + timeout
-    for line in client.stdout:
-        if line.startswith("subscribed"):
+    wait_line(client, "subscribed", "the Foxglove client")
+
+
+def wait_line(proc: subprocess.Popen, text: str, what: str) -> None:
+    """Read the output of ``proc`` (started without a log) up to a line with ``text`` (the lines before it are
+    shown); an error if its output ends first."""
+    assert proc.stdout is not None
+    for line in proc.stdout:
+        if text in line:
             return
-        if time.monotonic() > deadline:
-            break
-    raise RuntimeError("the Foxglove client process never subscribed")
+        print(line, end="", file=sys.stderr)
+    raise RuntimeError(f"{what} ended ({proc.wait()}) before saying '{text}'")
 
 
 def bare_subscriber(endpoint: str) -> None:
@@ -532,14 +533,8 @@ def dashboard_with_foxglove(n: int, rounds: int = 6, pace: float = 0.0) -> list[
 
 
 def listening(router: subprocess.Popen) -> None:
-    """Read ``skinet router``'s output up to the line saying it listens (the warnings before it are shown); an
-    error if it ends first."""
-    assert router.stdout is not None
-    for line in router.stdout:
-        if "listening" in line:
-            return
-        print(line, end="", file=sys.stderr)
-    raise RuntimeError(f"the router ended ({router.wait()}) before listening")
+    """Until ``skinet router`` says it listens (the warnings before it are shown)."""
+    wait_line(router, "listening", "the router")
 
 
 def robot_and_ground(n: int, rounds: int = 6, pace: float = 0.0) -> list[list[object]]:

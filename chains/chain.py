@@ -29,7 +29,7 @@ import zenoh
 from services.bridge_ros2 import start_bridge
 from services.common.cli import default_instance_id
 from services.common.zenoh_config import session_config
-from services.monitor.service import MonitorView, start_monitor
+from services.monitor.service import MonitorView, Tap, start_monitor
 from services.predictor.service import start_predictor
 from services.simulator import Simulator
 from services.simulator.driver import StepRun
@@ -72,7 +72,7 @@ def run_chain(
     on_record: Callable[[StepRecord], None] | None = None,
     after: Callable[[list[StepRecord]], None] | None = None,
     shared_predictor: bool = False,
-    tap: Callable[[str, bytes, float], None] | None = None,
+    tap: Tap | None = None,
 ) -> list[StepRecord]:
     """Drive ``scenario`` through the whole chain and record what the monitor published.
 

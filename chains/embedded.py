@@ -355,16 +355,15 @@ FOXGLOVE_START = 30.0  # seconds for the Foxglove view's process to say where it
 
 
 def taps(*fns: Tap | None) -> Tap | None:
-    """The monitor's tap handing each message to every one of ``fns`` given (None: none given)."""
-    given = [f for f in fns if f is not None]
+    """The monitor's tap handing each message to every one of ``fns`` given, in order (None: none given)."""
+    given = tuple(f for f in fns if f is not None)
     if len(given) < 2:
         return given[0] if given else None
-    first, second = given
 
-    def both(key: str, payload: bytes, t: float = 0.0) -> None:
-        first(key, payload, t)
-        second(key, payload, t)
-    return both
+    def each(key: str, payload: bytes, t: float = 0.0) -> None:
+        for fn in given:
+            fn(key, payload, t)
+    return each
 
 
 @dataclasses.dataclass

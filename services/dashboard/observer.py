@@ -19,7 +19,7 @@ import logging
 import os
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -218,11 +218,7 @@ class Observer:
 
     def _fetch_all(self) -> bool:
         """The model and the last publications, asked once; False when the session was closed under us."""
-        try:
-            self._fetch(keys.model(self.name), ModelBundle)
-            for key, kind in self._subscribed:
-                self._fetch(key(self.name), kind)
-        except zenoh.ZError:
+        if not self._fetch_each(((keys.model, ModelBundle), *self._subscribed)):
             return False
         self.fetched.set()
         return True
@@ -235,8 +231,12 @@ class Observer:
     def fetch_results(self) -> bool:
         """The monitor's last results (:data:`MONITOR_RESULTS`), asked now, in the caller's thread (a fed observer
         catching up); False when the session was closed under us."""
+        return self._fetch_each(MONITOR_RESULTS)
+
+    def _fetch_each(self, asked: Sequence[tuple[Callable[[str], str], type[BaseModel]]]) -> bool:
+        """The last publication on each key of ``asked``, in order; False when the session was closed under us."""
         try:
-            for key, kind in MONITOR_RESULTS:
+            for key, kind in asked:
                 self._fetch(key(self.name), kind)
         except zenoh.ZError:
             return False

@@ -237,14 +237,13 @@ class PipeReader:
         if len(states) > STEPS_PER_ROUND:
             if not gap:  # the last step may lack its verdicts yet: it waits for the next round
                 used = frames[states[-1]][1] - HEADER.size
-                frames = frames[:states[-1]]
-            shown = [i for i, (kind, _, _) in enumerate(frames) if kind == STATE]
+                frames, states = frames[:states[-1]], states[:-1]
             frames = self._last_of_each(frames)
-            self.skipped += len(shown) - 1
+            self.skipped += len(states) - 1
             self.messages += len(frames)
             for kind, start, end in frames:
                 self.observer.take(buffer[start:end], self._kinds[kind], older)
-            self.observer.note({"kind": "skipped", "steps": len(shown) - 1, "most": STEPS_PER_ROUND,
+            self.observer.note({"kind": "skipped", "steps": len(states) - 1, "most": STEPS_PER_ROUND,
                                 "round": self._round})
             return used, gap
         for kind, start, end in frames:

@@ -782,7 +782,7 @@ class Monitor:
         try:
             self._tap(key, payload, time.time() if t is None else t)
         except Exception:  # a bug of the tap must not cost the monitor an event
-            log.exception("error in the monitor's tap (--incidents)")
+            log.exception("error in the monitor's tap (--incidents, --foxglove)")
 
     def _sync_fields(self) -> None:
         """Give the engine the tracker's sync states for the next messages (and log what changed)."""

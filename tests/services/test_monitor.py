@@ -457,7 +457,7 @@ def test_the_tap_gets_each_steps_messages_then_its_event_and_cannot_cost_one(mon
     for step, i in enumerate(at, 1):
         assert [k for k, _, _ in timed[i + 1:i + 4]] == step_keys
         assert decode(timed[i + 3][1], UnsafeReport).seq == step
-    assert caplog.text.count("error in the monitor's tap (--incidents)") >= 8
+    assert caplog.text.count("error in the monitor's tap (--incidents, --foxglove)") >= 8
 
 
 def test_duplicates_and_out_of_order_are_not_applied_twice(monitor_factory, session, system):
