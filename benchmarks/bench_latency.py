@@ -34,7 +34,7 @@ ground station (its own router linked to the robot's, a view) pinned to the othe
 ``--pace MS`` spaces them.
 
     python benchmarks/bench_latency.py [--events 2000] [--burst 20000] [--profile]
-        [--views-only | --incidents-only | --run-foxglove-only] [--rounds N] [--pace MS]
+        [--views-only | --incidents-only | --run-foxglove-only | --dashboard-only] [--rounds N] [--pace MS]
 """
 
 from __future__ import annotations
@@ -44,6 +44,7 @@ import asyncio
 import cProfile
 import pstats
 import os
+import random
 import signal
 import statistics
 import subprocess
@@ -272,7 +273,6 @@ def with_incidents(n: int, rounds: int = 12, pace: float = 0.0) -> list[list[obj
     """The in-process monitor's event -> UnsafeReport latency without and with ``--incidents`` (the ring the
     monitor hands its messages to), ``rounds`` rounds of each in a random order per round (a fixed order gave
     the second a few µs at p50 either way); target: p99 with it within 10 % of without."""
-    import random
     import tempfile
 
     from services.monitor.incidents import Incidents
@@ -308,7 +308,6 @@ def with_views(n: int, rounds: int = 3, pace: float = 0.0, modes: tuple[str, ...
     busy machine loads them alike; target: p99 with a view within 10 % of p99 without.  The Foxglove client is
     a process of its own, as Foxglove is (in the monitor's process its JSON decoding would hold the monitor's
     interpreter)."""
-    import random
 
     from services.dashboard.observer import Observer
     from services.foxglove.feed import PipeFeed
@@ -448,8 +447,8 @@ async def _fox_client(url: str, aiohttp, json_) -> None:
 def alternated(a: zenoh.Session, n: int, rounds: int, modes: tuple[str, ...],
                start_views: Callable[[int], list[subprocess.Popen]], settle: float,
                pace: float = 0.0) -> dict[str, list[list[float]]]:
-    """Event -> UnsafeReport latencies through a monitor process already synced on ``a``, each of ``modes`` in turn
-    for ``rounds`` rounds: ``start_views(j)`` starts the processes of mode ``j`` (given 3 s to subscribe and ask,
+    """Event -> UnsafeReport latencies through a monitor process already synced on ``a``, each of ``modes`` once
+    per round in a random order, for ``rounds`` rounds: ``start_views(j)`` starts the processes of mode ``j`` (given 3 s to subscribe and ask,
     stopped after its ``n`` events, then ``settle`` s).  ``a`` subscribes to the monitor's five keys, as a
     deployment's pilot and views do; one monitor for all, its seqs going on."""
     views = [a.declare_subscriber(key("spot_arm"), lambda _sample: None)
@@ -460,7 +459,8 @@ def alternated(a: zenoh.Session, n: int, rounds: int, modes: tuple[str, ...],
     per_round: dict[str, list[list[float]]] = {m: [] for m in modes}
     time.sleep(0.5)
     for r in range(rounds):
-        for j, mode in enumerate(modes):
+        for j in random.sample(range(len(modes)), len(modes)):  # no mode always after another
+            mode = modes[j]
             run = payloads[(r * len(modes) + j) * (n + 200):]
             procs = start_views(j)
             if procs:
@@ -527,6 +527,7 @@ def dashboard_with_foxglove(n: int, rounds: int = 6, pace: float = 0.0) -> list[
                               "--wait", "5", "--log-level", "WARNING")]
         if j:
             there.append(start([sys.executable, __file__, "--fox-client", f"ws://127.0.0.1:{fox[1]}"]))
+            subscribed(there[-1])
         return there
 
     return through_router(n, rounds, modes, dashboard, 0.5, pace)
@@ -728,9 +729,11 @@ def main() -> None:
                         help="only the rows without and with --incidents")
     parser.add_argument("--run-foxglove-only", action="store_true",
                         help="only the rows without and with skinet run --foxglove's view (fed through a pipe)")
+    parser.add_argument("--dashboard-only", action="store_true",
+                        help="only the rows without and with the dashboard service's --foxglove (--rounds rounds)")
     parser.add_argument("--rounds", type=count(1), default=12, metavar="N",
-                        help="rounds of each configuration in the --incidents and --run-foxglove-only rows "
-                             "(default 12)")
+                        help="rounds of each configuration in the --incidents, --run-foxglove-only and "
+                             "--dashboard-only rows (default 12)")
     parser.add_argument("--pace", type=float, default=0.0, metavar="MS",
                         help="in the rows of --incidents and the views, wait MS milliseconds (untimed) before each event: a robot's "
                              "pace rather than back to back (default 0: the flood)")
@@ -751,13 +754,15 @@ def main() -> None:
     if args.pace < 0:
         parser.error(f"argument --pace: {args.pace:g} is below 0")
     pace = args.pace / 1000
-    only = args.views_only or args.incidents_only or args.run_foxglove_only
+    only = args.views_only or args.incidents_only or args.run_foxglove_only or args.dashboard_only
     rows = [] if only else in_process(args.events, args.profile)
-    if args.run_foxglove_only:
+    if args.dashboard_only:
+        rows += dashboard_with_foxglove(args.events, args.rounds, pace)
+    elif args.run_foxglove_only:
         rows += with_views(args.events, args.rounds, pace, RUN_FOXGLOVE)
     else:
         rows += with_incidents(args.events, args.rounds, pace)
-    if not (args.incidents_only or args.run_foxglove_only):
+    if not (args.incidents_only or args.run_foxglove_only or args.dashboard_only):
         rows += with_views(args.events, pace=pace)
         rows += views_through_router(args.events, pace=pace)
         rows += dashboard_with_foxglove(args.events, pace=pace)

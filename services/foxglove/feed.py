@@ -6,7 +6,7 @@ twice the monitor's alone, docs/performance.md).  So ``skinet run`` hands its vi
 results through a pipe: :class:`PipeFeed` is a tap of the monitor (``Monitor(tap=...)``) and writes each
 result message as a frame (kind: 1 byte, length: 4 bytes, the msgpack payload), a step's three in one
 non-blocking write made without letting go of the interpreter (``os.write`` lets go, and the monitor's other
-threads then kept it from the monitor: p99 +50 µs); :class:`PipeReader`, in the view's process, wakes every :data:`ROUND`, reads what came and hands it to a fed
+threads then kept it from the monitor: p99 +50 µs); :class:`PipeReader`, in the view's process, wakes every :data:`~services.foxglove.translate.ROUND`, reads what came and hands it to a fed
 :class:`~services.dashboard.observer.Observer`.  Nobody sleeps on the pipe, so a write wakes nobody: the view
 reads after the monitor's steps, as a display refreshes.  Pilot statuses and liveliness stay on Zenoh.
 
@@ -14,8 +14,8 @@ The monitor never waits: the feed fills the pipe to a quarter of its size at mos
 :data:`PIPE_SIZE`, some 200 steps of the paper's mission at about 1.3 KiB each), so that a write always finds
 room and is never cut; a message that would go past it is dropped and counted, a gap mark is written in its
 place, and the next ones are dropped too until the reader has emptied the pipe.  To know how full the pipe is,
-the feed asks the kernel (``FIONREAD``) only when what it wrote since it last asked could have reached the
-budget, or while a gap lasts.  When it writes again, it first writes the last message of each kind it dropped:
+the feed asks the kernel (``FIONREAD``, through libc's ``ioctl``: ``fcntl.ioctl`` lets go of the interpreter
+too) only when what it wrote since it last asked could have reached the budget, or while a gap lasts.  When it writes again, it first writes the last message of each kind it dropped:
 the view is back in the present without asking anything of the monitor.  If the monitor stays quiet for
 :data:`QUIET` after a gap mark, the reader asks it for its last results (a Zenoh ``get``; what it reads in the
 next two rounds may then be older copies).  Only the log lines of the steps missed are lost (the monitor's list
@@ -25,14 +25,14 @@ have published before).  The end of the pipe (``skinet run`` gone, even killed) 
 The view's own work is about 90 µs of CPU per step: nothing at a robot's pace, most of a core back to back
 (about 1 700 steps a second), where it doubled the monitor's p99 on 2 shared cores whatever the view's priority
 (``SCHED_IDLE`` measured no better; docs/foxglove.md).  So a round that brings more than
-:data:`STEPS_PER_ROUND` steps (500 a second; a robot makes a few) hands the observer only the last of each kind
+:data:`~services.foxglove.translate.STEPS_PER_ROUND` steps (500 a second; a robot makes a few) hands the observer only the last of each kind
 up to its last complete step (the list of divergences first: it names the onset of every violation at its own
 step), and the view logs one line saying how many steps it did not show; the step still incomplete waits for the
-next round.  While such a flood lasts the rounds come every :data:`FLOOD_ROUND`, and the pipe overflows between
-them by design: the view's work is about 10 small rounds a second, whatever the rate.
+next round.  While such a flood lasts the rounds come every :data:`~services.foxglove.translate.FLOOD_ROUND`, and the pipe overflows between
+them by design: the view's work is about 4 small rounds a second, whatever the rate.
 
 Cost: one ``write`` system call per step in the monitor's thread (about 2 µs here), and no allocation the
-garbage collector tracks; in the view, one ``read`` per round and, past :data:`STEPS_PER_ROUND`, the decoding of
+garbage collector tracks; in the view, one ``read`` per round and, past :data:`~services.foxglove.translate.STEPS_PER_ROUND`, the decoding of
 five messages per round.
 """
 
@@ -47,28 +47,29 @@ import logging
 import os
 import stat
 import struct
-import sys
 import termios
 import threading
 import time
 
 from services.dashboard.observer import MONITOR_RESULTS, Observer
+from services.foxglove.translate import FLOOD_ROUND, ROUND, STEPS_PER_ROUND
 from skinet.wire.messages import LiveState, Verdicts
 
 HEADER = struct.Struct("<BI")  # kind (an index in MONITOR_RESULTS, or GAP), payload length
 GAP = 255
 GAP_MARK = HEADER.pack(GAP, 0)
 PIPE_SIZE = 1 << 20  # bytes the pipe is asked to hold (Linux's default limit for an unprivileged process)
-ROUND = 0.02  # seconds between the reader's rounds
-STEPS_PER_ROUND = 10  # past this many steps in a round (500 a second; a robot makes a few), the last of each kind
 QUIET = 0.5  # seconds after a gap mark with nothing written, after which the reader asks the monitor
-FLOOD_ROUND = 0.1  # seconds between the rounds while steps come faster (each shows its last step only)
 STATE = [kind for _, kind in MONITOR_RESULTS].index(LiveState)
 HELD = frozenset((STATE, [kind for _, kind in MONITOR_RESULTS].index(Verdicts)))  # written with their report
 log = logging.getLogger("skinet.foxglove")
-_write = ctypes.PyDLL(None, use_errno=True).write  # libc's write(2), called without letting go of the interpreter
+_libc = ctypes.PyDLL(None, use_errno=True)  # libc's functions, called without letting go of the interpreter
+_write = _libc.write
 _write.argtypes = (ctypes.c_int, ctypes.c_char_p, ctypes.c_size_t)
 _write.restype = ctypes.c_ssize_t
+_ioctl = _libc.ioctl  # fcntl.ioctl lets go of it, as os.write does
+_ioctl.argtypes = (ctypes.c_int, ctypes.c_ulong, ctypes.c_void_p)
+_ioctl.restype = ctypes.c_int
 
 
 class PipeFeed:
@@ -84,7 +85,7 @@ class PipeFeed:
             fcntl.fcntl(fd, fcntl.F_SETPIPE_SZ, PIPE_SIZE)
         self.budget = fcntl.fcntl(fd, fcntl.F_GETPIPE_SZ) // 4  # bytes the pipe is filled to, at most
         self._bound = 0  # bytes the pipe holds now, at most: what it held when last asked, plus what came since
-        self._asked = bytearray(4)
+        self._asked = ctypes.c_int(0)
         self._gap = False
         self._held: list[bytes] = []  # a step's frames before its report
         self._latest: dict[int, bytes] = {}  # kind -> the last frame dropped in the present gap
@@ -109,8 +110,7 @@ class PipeFeed:
             count, data = len(self._held), b"".join(self._held)
             try:
                 if self._gap or self._bound + len(data) > self.budget:  # else the pipe has room: not asked
-                    fcntl.ioctl(self._fd, termios.FIONREAD, self._asked)
-                    self._bound = int.from_bytes(self._asked, sys.byteorder)
+                    self._bound = self._unread()
                     if (self._gap and self._bound) or self._bound + len(data) > self.budget:
                         self.dropped += count  # and the next ones, until the reader took all, its gap mark too
                         for dropped in self._held:  # the last of each kind, written when the gap ends
@@ -132,6 +132,13 @@ class PipeFeed:
                 self._close()
             finally:
                 self._held.clear()
+
+    def _unread(self) -> int:
+        """The bytes in the pipe that the reader has not taken (``FIONREAD``), the interpreter held."""
+        if _ioctl(self._fd, termios.FIONREAD, ctypes.byref(self._asked)) < 0:
+            code = ctypes.get_errno()
+            raise OSError(code, os.strerror(code))
+        return self._asked.value
 
     def _send(self, data: bytes) -> None:
         """Write ``data`` whole, the interpreter held (``os.write`` hands it to the monitor's other threads, and
@@ -166,7 +173,7 @@ class PipeFeed:
 
 class PipeReader:
     """Feeds ``observer`` (made with ``fed=True``) from the pipe ``fd`` in a thread of its own, every
-    :data:`ROUND`; sets ``ended`` when the pipe's writer is gone or ``observer``'s session closed."""
+    :data:`~services.foxglove.translate.ROUND`; sets ``ended`` when the pipe's writer is gone or ``observer``'s session closed."""
 
     def __init__(self, fd: int, observer: Observer, ended: threading.Event):
         self.observer = observer
@@ -230,7 +237,7 @@ class PipeReader:
 
     def _frames(self, buffer: bytes, older: bool) -> tuple[int, bool]:
         """Hand ``buffer``'s whole frames to the observer, up to a gap mark, all of them or, past
-        :data:`STEPS_PER_ROUND` steps, the last of each kind (:meth:`_last_of_each`); (bytes used, whether a gap
+        :data:`~services.foxglove.translate.STEPS_PER_ROUND` steps, the last of each kind (:meth:`_last_of_each`); (bytes used, whether a gap
         came)."""
         frames, used, gap = self._split(buffer)
         states = [i for i, (kind, _, _) in enumerate(frames) if kind == STATE]

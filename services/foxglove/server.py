@@ -11,19 +11,28 @@ the live picture (state, verdicts, unsafe, state space, pilot, series) its last
 message is sent again.
 
 Cost.  The observer calls :meth:`FoxgloveView._on_updates` in Zenoh's thread with
-its lock held: there the view only appends to a bounded queue (:data:`QUEUE`; past it
-the oldest updates are dropped and counted), and while no client subscribes to any
+its lock held: there the view only adds them to the round being gathered
+(:class:`~services.foxglove.translate.Round`; past :data:`QUEUE` updates waiting, the
+oldest are dropped and counted), and while no client subscribes to any
 channel it does nothing at all: the first subscription starts the translator again
 from the observer's snapshot, taken under the observer's lock so that no update is
 lost or counted twice.  Translating, encoding (JSON, in Rust:
 ``pydantic_core.to_json``) and sending happen in a thread of this view, and a
 message of a channel no client subscribes to is translated but never encoded.
-That thread works in rounds, at most one per :data:`ROUND` (50 a second, as a
+That thread works in rounds, at most one per :data:`~services.foxglove.translate.ROUND` (50 a second, as a
 display refreshes), each starting :data:`GATHER` after its first update (the
 step's other messages join it, and the view works after the monitor's burst
 rather than during it): of a channel of the live picture a round sends only its
 last message (the others are counted in ``coalesced``); log lines, violations
-and divergences are all sent, in order.  Incident bundles are written elsewhere
+and divergences are all sent, in order.  A flood (more than
+:data:`~services.foxglove.translate.STEPS_PER_ROUND` steps in a round, 500 a second: a robot makes a few) is
+folded as it comes (:class:`~services.foxglove.translate.Round`): the round keeps the last of the live picture,
+every violation, divergence and pilot change, and logs one line for the steps not shown (counted in
+``skipped``); while it lasts the rounds come every :data:`~services.foxglove.translate.FLOOD_ROUND`.  The board
+behind the view saw every step, so no violation is lost.  Folding as the updates come, not in the round, is what
+keeps a flood cheap for the monitor: a round that translated a flood's updates held the view's interpreter for
+about 2 ms ten times a second, and the monitor's p99 grew by half (benchmarks/bench_latency.py,
+``--dashboard-only``; docs/performance.md).  Incident bundles are written elsewhere
 (:mod:`services.foxglove.bundle`) and hold every message.
 """
 
@@ -41,12 +50,11 @@ from pydantic_core import to_json
 
 from services.dashboard.board import Board, Update
 from services.dashboard.observer import Observer
-from services.foxglove.translate import Out, Translator
+from services.foxglove.translate import FLOOD_ROUND, ROUND, STEPS_PER_ROUND, Out, Round, Translator
 from skinet.errors import SkinetError
 from skinet.wire import foxglove as fx
 
-QUEUE = 10_000  # updates waiting for the server thread
-ROUND = 0.02  # seconds: at most one sending round per ROUND
+QUEUE = 10_000  # updates waiting for the server thread, at most
 GATHER = 0.005  # seconds a round waits after its first update
 HAND_BACK = 0.00005  # seconds of a round's work after which the interpreter is handed back
 LATCHED = (fx.STATE, fx.VERDICTS, fx.UNSAFE, fx.STATE_SPACE, fx.PILOT, fx.SERIES)
@@ -78,12 +86,15 @@ class FoxgloveView:
         self.caught_up = 0  # times the view woke up from the observer's snapshot
         self.translated = 0  # observer updates translated
         self.coalesced = 0  # messages of the live picture superseded within a round, not sent
+        self.skipped = 0  # steps of a flood not shown (Round)
         self._handed = 0.0  # when the round's thread last let the interpreter's other threads in
         self._context = foxglove.Context()
         self._channels = {spec.topic: foxglove.Channel(spec.topic, schema=spec.schema, context=self._context)
                           for spec in fx.channels()}
         self._last: dict[str, tuple[dict[str, Any], int]] = {}
-        self._queue: collections.deque[list[Update] | str | tuple[str, Update]] = collections.deque()
+        self._queue: collections.deque[Round | str | tuple[str, Update]] = collections.deque()
+        self._waiting = 0  # updates in the queue's rounds
+        self._length = ROUND  # seconds of the round being gathered
         self._cond = threading.Condition()
         self._closed = False
         self._subscriptions = 0  # (client, channel) pairs subscribed now
@@ -120,14 +131,25 @@ class FoxgloveView:
     # -- from the observer (its lock held: never block) -----------------------------------
 
     def _on_updates(self, updates: list[Update]) -> None:
-        if not self._idle:
-            self._put(updates)
-
-    def _put(self, item: list[Update] | str | tuple[str, Update]) -> None:
+        if self._idle:
+            return
         with self._cond:
-            if len(self._queue) >= QUEUE:
-                self._queue.popleft()
+            if not self._queue or not isinstance(self._queue[-1], Round):
+                self._queue.append(Round(STEPS_PER_ROUND, self._length))
+            gathered = self._queue[-1]
+            assert isinstance(gathered, Round)
+            before = len(gathered.updates)
+            gathered.add(updates)
+            self._waiting += len(gathered.updates) - before
+            while self._waiting > QUEUE:  # the view's thread stalled: its oldest updates go
+                oldest = next(item for item in self._queue if isinstance(item, Round) and item.updates)
+                oldest.updates.pop(0)
+                self._waiting -= 1
                 self.dropped += 1
+            self._cond.notify_all()
+
+    def _put(self, item: str | tuple[str, Update]) -> None:
+        with self._cond:
             self._queue.append(item)
             self._cond.notify_all()
 
@@ -163,10 +185,13 @@ class FoxgloveView:
                     return
             # The rest of the step's messages gather meanwhile, and the view works after the monitor's burst.
             time.sleep(max(GATHER, next_round - time.monotonic()))
-            next_round = time.monotonic() + ROUND
             with self._cond:
                 items = list(self._queue)
                 self._queue.clear()
+                self._waiting = 0
+                flood = any(isinstance(item, Round) and item.flood for item in items)
+                self._length = FLOOD_ROUND if flood else ROUND
+            next_round = time.monotonic() + self._length
             outs: list[Out] = []
             self._handed = time.perf_counter()
             for item in items:
@@ -179,8 +204,11 @@ class FoxgloveView:
                     outs = []
                     self._catch_up(item[1])
                 else:
-                    self.translated += len(item)
-                    outs += self.translator.feed(item)
+                    shown = item.shown()
+                    if item.flood:
+                        self.skipped += shown[-1]["steps"]
+                    self.translated += len(shown)
+                    outs += self.translator.feed(shown)
                 self._hand_back()
             self._send(outs)
 

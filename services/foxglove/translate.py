@@ -6,8 +6,10 @@ messages of the channels of :mod:`skinet.wire.foxglove`: the monitor's messages
 as they are, one message per violation and per divergence, the plot series per
 step, and ``foxglove.Log`` lines (one per step, per unsafe command newly warned
 about, per violation, per divergence and per pilot change, and one for steps a
-view fed through a pipe did not show).  Log times are the
-messages' own stamps, so a bundle replays on the timeline of the run.  Pure: no
+view did not show).  Log times are the
+messages' own stamps, so a bundle replays on the timeline of the run.
+:class:`Round` is a view's flood policy: past a few steps in one of its rounds, it shows the last of the live
+picture and every violation, divergence and pilot change, and says how many steps it did not show.  Pure: no
 I/O.  Cost: O(size of the update) per update; it keeps O(unsafe commands) to say
 which warnings are new.
 """
@@ -23,6 +25,61 @@ from skinet.wire import foxglove as fx
 from skinet.wire.messages import UnsafeEntry
 
 Out = tuple[str, dict[str, Any], int]  # (topic, JSON message, log time in ns)
+ROUND = 0.02  # seconds between a view's rounds (50 a second, as a display refreshes)
+STEPS_PER_ROUND = 10  # past this many steps in a round (500 a second; a robot makes a few), the last of each kind
+FLOOD_ROUND = 0.25  # seconds between a view's rounds while steps come faster (each shows its last step only)
+PICTURE = ("state", "verdicts", "unsafe", "state_space")  # board updates of which the last one is the picture
+UNSHOWN = ("point", "model", "alive")  # board updates a Translator ignores
+
+
+class Round:
+    """A view's round of board updates, folded as they come: all of them up to ``most`` steps; past it (a flood: a
+    robot makes a few steps a second) only the violations, divergences, pilot changes and restarts in order, and
+    the last state, verdicts, report and state space.  :meth:`shown` gives them, past ``most`` with a ``skipped``
+    note for the steps not shown (``length``: the round's length in seconds, for the note).  Cost: O(1) per
+    update once past ``most`` steps, so that a flood costs a view little in the thread that receives it."""
+
+    def __init__(self, most: int, length: float):
+        self.most = most
+        self.length = length
+        self.updates: list[dict[str, Any]] = []  # in order; past ``most`` steps, none of the live picture
+        self.steps = 0  # steps begun in this round
+        self._seq: int | None = None
+        self._last: dict[str, dict[str, Any]] = {}  # past ``most`` steps: the last of each kind of the picture
+
+    @property
+    def flood(self) -> bool:
+        return self.steps > self.most
+
+    def add(self, updates: Iterable[dict[str, Any]]) -> None:
+        for u in updates:
+            kind = u["kind"]
+            if kind == "state" and u["message"]["seq"] != self._seq:
+                self._seq = u["message"]["seq"]
+                self.steps += 1
+            if not self.flood:
+                self.updates.append(u)
+            elif kind in PICTURE:
+                self._last[kind] = u
+            elif kind not in UNSHOWN:
+                self.updates.append(u)
+
+    def shown(self) -> list[dict[str, Any]]:
+        if not self.flood:
+            return self.updates
+        last: dict[str, dict[str, Any]] = {}
+        kept = []
+        skipped = self.steps - 1
+        for u in self.updates:
+            if u["kind"] in PICTURE:
+                last[u["kind"]] = u
+            elif u["kind"] == "skipped":  # a pipe's reader already left steps out: one note for all
+                skipped += u["steps"]
+            elif u["kind"] not in UNSHOWN:
+                kept.append(u)
+        last.update(self._last)
+        return [*kept, *(last[k] for k in PICTURE if k in last),
+                {"kind": "skipped", "steps": skipped, "most": self.most, "round": self.length}]
 
 
 class Translator:
@@ -127,7 +184,7 @@ class Translator:
                     f"; next {nxt['skillset']}:{nxt['transition']}" if nxt else "")
                 out.append(self._log(m["stamp"], fx.ERROR if m["state"] == "failed" else fx.INFO, text))
             return out
-        if kind == "skipped":  # services/foxglove/feed.py: the view fell behind a flood of steps
+        if kind == "skipped":  # Round, or services/foxglove/feed.py: the view fell behind a flood of steps
             st = self._state or {}
             return [self._log(st.get("stamp") or self.clock(), fx.WARNING,
                               f"{u['steps']} steps before step {st.get('seq', '?')} not shown: more than "

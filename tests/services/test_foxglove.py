@@ -8,6 +8,7 @@ subscribes to every advertised channel and decodes each message against its sche
 
 from __future__ import annotations
 
+import contextlib
 import subprocess
 import sys
 from collections.abc import Callable, Iterator
@@ -229,36 +230,123 @@ def test_skinet_run_with_a_foxglove_port_in_use_stops_with_one_line() -> None:
     assert len(done.stderr.splitlines()) == 1, done.stderr
 
 
-def test_a_burst_sends_the_last_state_of_each_round_and_a_log_line_for_every_step(router, client_factory) -> None:
-    """200 steps published at once: the live picture's channel gets the last state of each sending round (the others
-    are counted, never sent), the log one line per step, in order."""
+def test_a_round_of_a_few_steps_sends_its_last_state_and_a_log_line_for_every_step(router, client_factory) -> None:
+    """STEPS_PER_ROUND steps in one round (a robot's pace gives far fewer): the live picture's channel gets the last
+    state only (the others counted, never sent), the log one line per step, in order."""
+    from services.foxglove.translate import STEPS_PER_ROUND
+    from skinet.wire.codec import encode
+    from skinet.wire.messages import LiveState
+
+    with one_round_view(client_factory) as (observer, view, client):
+        with view._cond:  # the view's thread takes nothing before the last step
+            for seq in range(1, STEPS_PER_ROUND + 1):
+                observer.take(encode(LiveState(system="spot_arm", seq=seq, stamp=1000.0 + seq, skillsets={},
+                                               event=f"spot:teleop.start#{seq}")), LiveState, False)
+        last = f"step {STEPS_PER_ROUND}: "
+        client.wait(lambda c: any(m["message"].startswith(last) for m in c.on(fx.LOG)), "the last step's line")
+        steps = [m["message"] for m in client.on(fx.LOG) if m["message"].startswith("step ")]
+        assert steps == [f"step {seq}: spot:teleop.start#{seq}" for seq in range(1, STEPS_PER_ROUND + 1)]
+        assert [m["seq"] for m in client.on(fx.STATE)] == [STEPS_PER_ROUND]
+        assert (view.coalesced, view.skipped, client.invalid) == (STEPS_PER_ROUND - 1, 0, [])
+
+
+def test_a_flood_shows_its_last_step_says_how_many_it_did_not_and_loses_no_violation(router, client_factory) -> None:
+    """The paper's unassisted run and two steps more, every result of the monitor in one round (a replay at full
+    speed): one state and one step line, the last; one line for the steps not shown; the violation that began and
+    ended among them on its channel at its own step (the board behind the view saw every step)."""
+    from services.dashboard.observer import MONITOR_RESULTS
+    from services.foxglove.translate import STEPS_PER_ROUND
+    from services.monitor import start_monitor
+    from skinet.system.load import load_system
+    from skinet.wire.codec import decode
+    from skinet.wire.messages import UnsafeReport
+    from tests.bridge_side import BridgeSide
+    from tests.services.test_monitor import AG, PAPER_STEPS, SG, wait_until
+
+    system = load_system(SYSTEM_FILE)[0]
+    kinds = {key("spot_arm"): kind for key, kind in MONITOR_RESULTS}
+    published: list[tuple[bytes, type]] = []
+    alone = client_factory()
+    monitor = start_monitor(alone, system, tap=lambda k, p, t=0.0: k in kinds and published.append((p, kinds[k])))
+    side = BridgeSide(alone, "spot_arm", model=system)
+    steps = [(s, t) for s, t, _, _ in PAPER_STEPS] + [("manipulator", "arm_ready.success.ready"),
+                                                       ("manipulator", "arm_RD_to_HP.start")]
+    try:
+        for skillset, transition in steps:
+            side.send(skillset, transition)
+        wait_until(lambda: any(kind is UnsafeReport and decode(p, kind).seq == len(steps) for p, kind in published),
+                   10, "the monitor's report of the last step")
+        taken = list(published)  # not the states the bridge's loss publishes at the end
+    finally:
+        side.close()
+        monitor.close()
+    last = len(steps)
+    with one_round_view(client_factory) as (observer, view, client):
+        with view._cond:
+            for payload, kind in taken:
+                observer.take(payload, kind, False)
+        skipped = observer.read(lambda b: len(b.points)) - 1
+        assert skipped > STEPS_PER_ROUND
+        client.wait(lambda c: any("not shown" in m["message"] for m in c.on(fx.LOG)), "the line of the steps not shown")
+        lines = [m["message"] for m in client.on(fx.LOG)]
+        busy = "spot control_mode at Busy while manipulator mutex at Busy"
+        assert [line.split("#")[0] if i < 2 else line for i, line in enumerate(lines)] == [
+            f"step 10: VIOLATED {AG} at manipulator:arm_ready.start", f"step {last}: manipulator:arm_RD_to_HP.start",
+            f"step {last}: unsafe spot:sit_down.start: explicit for {AG} — violates it at once: {busy}",
+            f"step {last}: unsafe spot:go_to_waypoint.start: explicit for {AG} — violates it at once: {busy}",
+            f"step {last}: unsafe spot:go_to_waypoint.start: explicit for {SG} — violates it at once: spot "
+            "go_to_waypoint runs while manipulator arm_status at Moving",
+            f"step {last}: unsafe spot:teleop.start: explicit for {AG} — violates it at once: {busy}",
+            f"{skipped} steps before step {last} not shown: more than {STEPS_PER_ROUND} steps in 20 ms, the view "
+            "shows the last of each round"]
+        assert [(v["property"], v["seq"]) for v in client.on(fx.VIOLATIONS)] == [(AG, 10)]
+        assert [m["seq"] for m in client.on(fx.STATE)] == [last]
+        assert (view.skipped, client.invalid) == (skipped, [])
+
+
+@contextlib.contextmanager
+def one_round_view(client_factory: Callable) -> Iterator[tuple]:
+    """A view of an observer fed by the test (``fed=True``: no monitor's key from Zenoh) and a client subscribed to
+    every channel; (observer, view, client).  Updates handed to the observer while the test holds ``view._cond``
+    make one round."""
     from services.dashboard.observer import Observer
     from services.foxglove.server import FoxgloveView
     from skinet.system.load import load_system
-    from skinet.wire import keys
-    from skinet.wire.codec import encode
-    from skinet.wire.messages import LiveState
     from tests.services.test_monitor import wait_until
 
-    observer = Observer(client_factory(), "spot_arm", load_system(SYSTEM_FILE)[0])
+    observer = Observer(client_factory(), "spot_arm", load_system(SYSTEM_FILE)[0], fed=True)
     view = FoxgloveView(observer, "127.0.0.1", 0)
     client = FoxgloveClient(view.url)
-    monitor = client_factory()
     try:
         wait_until(lambda: view._subscriptions == len(fx.channels()), 20, "every channel subscribed")
-        publisher = monitor.declare_publisher(keys.state("spot_arm"))
-        wait_until(lambda: publisher.matching_status.matching, 10, "the observer's subscriber")
-        for seq in range(1, 201):
-            publisher.put(encode(LiveState(system="spot_arm", seq=seq, stamp=1000.0 + seq, skillsets={},
-                                           event=f"spot:teleop.start#{seq}")))
-        client.wait(lambda c: any(m["message"].startswith("step 200: ") for m in c.on(fx.LOG)), "step 200's line")
-        steps = [m["message"] for m in client.on(fx.LOG) if m["message"].startswith("step ")]
-        assert steps == [f"step {seq}: spot:teleop.start#{seq}" for seq in range(1, 201)]
-        states = [m["seq"] for m in client.on(fx.STATE)]
-        assert states[-1] == 200 and states == sorted(states)
-        assert len(states) < 200 and len(states) + view.coalesced == 200, (len(states), view.coalesced)
-        assert client.invalid == []
+        yield observer, view, client
     finally:
         client.close()
         view.close()
         observer.close()
+
+
+def test_a_round_folds_a_flood_as_it_comes_and_counts_a_pipes_readers_steps_in_its_one_line() -> None:
+    """A Round past STEPS_PER_ROUND steps that holds a pipe reader's own note of 5 steps left out: the violation
+    and the pilot change in order, the last of the picture, one note for 5 + 10 steps; once past, it keeps no
+    update of the picture but the last of each kind."""
+    from services.foxglove.translate import STEPS_PER_ROUND, Round
+
+    def state(seq: int) -> dict:
+        return {"kind": "state", "message": {"seq": seq}}
+
+    few = Round(STEPS_PER_ROUND, 0.02)
+    steps = [state(seq) for seq in range(1, STEPS_PER_ROUND + 1)]
+    few.add(steps)
+    assert (few.flood, few.shown()) == (False, steps)
+    note = {"kind": "skipped", "steps": 5, "most": STEPS_PER_ROUND, "round": 0.02}
+    violation, pilot = {"kind": "violation", "violation": {"seq": 3}}, {"kind": "pilot", "message": {}}
+    verdicts = [{"kind": "verdicts", "message": {"seq": seq}} for seq in (2, 11, 12)]
+    flood = Round(STEPS_PER_ROUND, 0.1)
+    flood.add([note, state(1), state(2), verdicts[0], {"kind": "point", "point": {}}, violation, *steps[2:], pilot,
+               state(11), verdicts[1]])
+    flood.add([state(12), {"kind": "point", "point": {}}, verdicts[2]])
+    assert flood.flood and len(flood.updates) == STEPS_PER_ROUND + 5  # the 11th step on: the last of each kept
+    assert flood.shown() == [violation, pilot, state(12), verdicts[2],
+                             {"kind": "skipped", "steps": 5 + STEPS_PER_ROUND + 1, "most": STEPS_PER_ROUND,
+                              "round": 0.1}]
