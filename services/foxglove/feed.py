@@ -6,7 +6,8 @@ twice the monitor's alone, docs/performance.md).  So ``skinet run`` hands its vi
 results through a pipe: :class:`PipeFeed` is a tap of the monitor (``Monitor(tap=...)``) and writes each
 result message as a frame (kind: 1 byte, length: 4 bytes, the msgpack payload), a step's three in one
 non-blocking write made without letting go of the interpreter (``os.write`` lets go, and the monitor's other
-threads then kept it from the monitor: p99 +50 µs); :class:`PipeReader`, in the view's process, wakes every :data:`~services.foxglove.translate.ROUND`, reads what came and hands it to a fed
+threads then kept it from the monitor: p99 +50 µs); :class:`PipeReader`, in the view's process, wakes every
+:data:`~services.foxglove.translate.ROUND`, reads what came and hands it to a fed
 :class:`~services.dashboard.observer.Observer`.  Nobody sleeps on the pipe, so a write wakes nobody: the view
 reads after the monitor's steps, as a display refreshes.  Pilot statuses and liveliness stay on Zenoh.
 
@@ -15,25 +16,27 @@ The monitor never waits: the feed fills the pipe to a quarter of its size at mos
 room and is never cut; a message that would go past it is dropped and counted, a gap mark is written in its
 place, and the next ones are dropped too until the reader has emptied the pipe.  To know how full the pipe is,
 the feed asks the kernel (``FIONREAD``, through libc's ``ioctl``: ``fcntl.ioctl`` lets go of the interpreter
-too) only when what it wrote since it last asked could have reached the budget, or while a gap lasts.  When it writes again, it first writes the last message of each kind it dropped:
-the view is back in the present without asking anything of the monitor.  If the monitor stays quiet for
-:data:`QUIET` after a gap mark, the reader asks it for its last results (a Zenoh ``get``; what it reads in the
-next two rounds may then be older copies).  Only the log lines of the steps missed are lost (the monitor's list
-of divergences names each violation's onset, at its step).  The reader starts by asking the monitor too (it may
-have published before).  The end of the pipe (``skinet run`` gone, even killed) ends the view.
+too) only when what it wrote since it last asked could have reached the budget, or while a gap lasts.  When it
+writes again, it first writes the last message of each kind it dropped: the view is back in the present without
+asking anything of the monitor.  If the monitor stays quiet for :data:`QUIET` after a gap mark, the reader asks it
+for its last results (a Zenoh ``get``; what it reads in the next two rounds may then be older copies).  Only the
+log lines of the steps missed are lost (the monitor's list of divergences names each violation's onset, at its
+step).  The reader starts by asking the monitor too (it may have published before).  The end of the pipe
+(``skinet run`` gone, even killed) ends the view.
 
 The view's own work is about 90 µs of CPU per step: nothing at a robot's pace, most of a core back to back
 (about 1 700 steps a second), where it doubled the monitor's p99 on 2 shared cores whatever the view's priority
 (``SCHED_IDLE`` measured no better; docs/foxglove.md).  So a round that brings more than
-:data:`~services.foxglove.translate.STEPS_PER_ROUND` steps (500 a second; a robot makes a few) hands the observer only the last of each kind
-up to its last complete step (the list of divergences first: it names the onset of every violation at its own
-step), and the view logs one line saying how many steps it did not show; the step still incomplete waits for the
-next round.  While such a flood lasts the rounds come every :data:`~services.foxglove.translate.FLOOD_ROUND`, and the pipe overflows between
-them by design: the view's work is about 4 small rounds a second, whatever the rate.
+:data:`~services.foxglove.translate.STEPS_PER_ROUND` steps (500 a second; a robot makes a few) hands the observer
+only the last of each kind up to its last complete step (the list of divergences first: it names the onset of
+every violation at its own step), and the view logs one line saying how many steps it did not show; the step
+still incomplete waits for the next round.  While such a flood lasts the rounds come every
+:data:`~services.foxglove.translate.FLOOD_ROUND`, and the pipe overflows between them by design: the view's work
+is about 4 small rounds a second, whatever the rate.
 
 Cost: one ``write`` system call per step in the monitor's thread (about 2 µs here), and no allocation the
-garbage collector tracks; in the view, one ``read`` per round and, past :data:`~services.foxglove.translate.STEPS_PER_ROUND`, the decoding of
-five messages per round.
+garbage collector tracks; in the view, one ``read`` per round and, past
+:data:`~services.foxglove.translate.STEPS_PER_ROUND`, the decoding of five messages per round.
 """
 
 from __future__ import annotations
@@ -173,7 +176,8 @@ class PipeFeed:
 
 class PipeReader:
     """Feeds ``observer`` (made with ``fed=True``) from the pipe ``fd`` in a thread of its own, every
-    :data:`~services.foxglove.translate.ROUND`; sets ``ended`` when the pipe's writer is gone or ``observer``'s session closed."""
+    :data:`~services.foxglove.translate.ROUND`; sets ``ended`` when the pipe's writer is gone or ``observer``'s
+    session closed."""
 
     def __init__(self, fd: int, observer: Observer, ended: threading.Event):
         self.observer = observer
@@ -237,8 +241,8 @@ class PipeReader:
 
     def _frames(self, buffer: bytes, older: bool) -> tuple[int, bool]:
         """Hand ``buffer``'s whole frames to the observer, up to a gap mark, all of them or, past
-        :data:`~services.foxglove.translate.STEPS_PER_ROUND` steps, the last of each kind (:meth:`_last_of_each`); (bytes used, whether a gap
-        came)."""
+        :data:`~services.foxglove.translate.STEPS_PER_ROUND` steps, the last of each kind (:meth:`_last_of_each`);
+        (bytes used, whether a gap came)."""
         frames, used, gap = self._split(buffer)
         states = [i for i, (kind, _, _) in enumerate(frames) if kind == STATE]
         if len(states) > STEPS_PER_ROUND:

@@ -213,8 +213,9 @@ class FoxgloveView:
             self._send(outs)
 
     def _hand_back(self) -> None:
-        """Let the interpreter's other threads in after :data:`HAND_BACK` of work: in the monitor's process (``skinet
-        run --foxglove``) a round held at once would keep the monitor waiting up to Python's 5 ms switch interval."""
+        """Let the interpreter's other threads in after :data:`HAND_BACK` of work: in a process that also runs a
+        monitor (a view on its session) a round held at once would keep the monitor waiting up to Python's 5 ms
+        switch interval."""
         if time.perf_counter() - self._handed > HAND_BACK:
             time.sleep(0)
             self._handed = time.perf_counter()
