@@ -133,8 +133,7 @@ def test_a_flood_of_steps_shows_the_last_complete_step_and_each_onset_at_its_ste
     its own step (from the monitor's list); the step left for the next round comes then."""
     from chains.embedded import taps
     from services.common.zenoh_config import session_config
-    from services.foxglove.translate import STEPS_PER_ROUND
-    from services.foxglove.translate import Translator
+    from services.foxglove.translate import STEPS_PER_ROUND, Translator
     from tests.services.test_monitor import AG, PAPER_STEPS
 
     system = load_system(SYSTEM_FILE)[0]
