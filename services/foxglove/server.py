@@ -99,6 +99,7 @@ class FoxgloveView:
         self._closed = False
         self._subscriptions = 0  # (client, channel) pairs subscribed now
         self._idle = True  # no client subscribes to any channel: updates are dropped at once
+        self.busy = False  # the view's thread is translating or sending what it took from the queue
         observer.listen(self._on_updates)  # before the server: a first subscription finds it listening
         try:
             self.server = foxglove.start_server(name=f"SkiNet Live {observer.name}", host=host, port=port,
@@ -171,6 +172,10 @@ class FoxgloveView:
         def sleep(_board: Board) -> None:
             self._subscriptions = max(0, self._subscriptions - 1)  # a client gone: one call per subscription
             self._idle = self._subscriptions == 0
+            if self._idle:  # nobody to send to: what waits is dropped, the next client starts from a snapshot
+                with self._cond:
+                    self._queue.clear()
+                    self._waiting = 0
         self.observer.read(sleep)
 
     # -- the server thread ------------------------------------------------------------------
@@ -189,6 +194,7 @@ class FoxgloveView:
                 items = list(self._queue)
                 self._queue.clear()
                 self._waiting = 0
+                self.busy = bool(items)
                 flood = any(isinstance(item, Round) and item.flood for item in items)
                 self._length = FLOOD_ROUND if flood else ROUND
             next_round = time.monotonic() + self._length
@@ -203,7 +209,7 @@ class FoxgloveView:
                     self._send(outs)
                     outs = []
                     self._catch_up(item[1])
-                else:
+                elif not self._idle:  # else the last client left meanwhile: nobody to translate for
                     shown = item.shown()
                     if item.flood:
                         self.skipped += shown[-1]["steps"]
@@ -211,6 +217,7 @@ class FoxgloveView:
                     outs += self.translator.feed(shown)
                 self._hand_back()
             self._send(outs)
+            self.busy = False
 
     def _hand_back(self) -> None:
         """Let the interpreter's other threads in after :data:`HAND_BACK` of work: in a process that also runs a

@@ -111,7 +111,7 @@ def test_the_view_does_nothing_without_a_subscriber_and_wakes_up_where_the_run_i
         elif record.index == 33:
             clients[0].wait(lambda c: len(c.on(fx.VIOLATIONS)) == 1, "the violation of step 33")
             clients[0].close()
-            wait_until(lambda: view.idle, 10, "the view asleep")
+            wait_until(lambda: view.idle and not view.busy, 10, "the view asleep, done with what it had taken")
             translated.append(view.translated)
         elif record.index == 37:
             assert view.translated == translated[0]  # steps 34 to 37: nothing done
