@@ -336,17 +336,14 @@ def with_views(n: int, rounds: int = 3, pace: float = 0.0, modes: tuple[str, ...
                 elif feed is not None:
                     proc, client = foxglove_processes("--feed", str(read), *peer, pass_fds=(read,))
                     os.close(read)
-                    subscribed(client)
                     time.sleep(1.0)  # the view's start-up queries answered before measuring
                 elif "another process" in views:
                     proc, client = foxglove_processes(*peer)
-                    subscribed(client)
                     time.sleep(1.0)  # the view's start-up queries answered before measuring
                 elif "Foxglove" in views:
                     observer = Observer(session, "spot_arm", system)
                     view = FoxgloveView(observer, "127.0.0.1", 0)
-                    client = start([sys.executable, __file__, "--fox-client", view.url])
-                    subscribed(client)
+                    client = fox_client(view.url)
                     time.sleep(1.0)  # the view's start-up queries answered before measuring
                 per_round[views].append(one_round(session, n, pace))
                 if feed is not None and feed.dropped:
@@ -385,16 +382,19 @@ MONITOR_KEYS = (keys.state, keys.verdicts, keys.unsafe, keys.state_space, keys.d
 
 def foxglove_processes(*args: str, pass_fds: tuple[int, ...] = ()) -> list[subprocess.Popen]:
     """``skinet foxglove`` (with ``args``, inheriting ``pass_fds``) on a free port, and a Foxglove client process
-    subscribed to every channel (a process apart, as Foxglove is)."""
+    subscribed to every channel (:func:`fox_client`)."""
     port = free_port()
-    return [start_module("services.foxglove", str(SYSTEM_FILE), "--port", str(port), *args, pass_fds=pass_fds),
-            start([sys.executable, __file__, "--fox-client", f"ws://127.0.0.1:{port}"])]
+    view = start_module("services.foxglove", str(SYSTEM_FILE), "--port", str(port), *args, pass_fds=pass_fds)
+    return [view, fox_client(f"ws://127.0.0.1:{port}")]
 
 
-def subscribed(client: subprocess.Popen) -> None:
-    """Until the Foxglove client process ``client`` (started without a log) subscribed to the view's channels: a
-    view's start-up (imports, compiled anew under PYTHONDONTWRITEBYTECODE) is not measured."""
+def fox_client(url: str, prefix: tuple[str, ...] = ()) -> subprocess.Popen:
+    """A Foxglove client process (a process apart, as Foxglove is; ``prefix``: a command it runs under, e.g.
+    ``taskset``) of the view at ``url``, once it subscribed to every channel: a view's start-up (imports, compiled
+    anew under PYTHONDONTWRITEBYTECODE) is not measured."""
+    client = start([*prefix, sys.executable, __file__, "--fox-client", url])
     wait_line(client, "subscribed", "the Foxglove client")
+    return client
 
 
 def wait_line(proc: subprocess.Popen, text: str, what: str) -> None:
@@ -439,7 +439,7 @@ async def _fox_client(url: str, aiohttp, json_) -> None:
                     if op["op"] == "advertise":
                         await ws.send_str(json_.dumps({"op": "subscribe", "subscriptions": [
                             {"id": c["id"], "channelId": c["id"]} for c in op["channels"]]}))
-                        print("subscribed", flush=True)  # to subscribed(): the view is serving, the client is in
+                        print("subscribed", flush=True)  # to fox_client(): the view is serving, the client is in
                 elif msg.type in (aiohttp.WSMsgType.CLOSED, aiohttp.WSMsgType.ERROR):
                     return
 
@@ -448,9 +448,9 @@ def alternated(a: zenoh.Session, n: int, rounds: int, modes: tuple[str, ...],
                start_views: Callable[[int], list[subprocess.Popen]], settle: float,
                pace: float = 0.0) -> dict[str, list[list[float]]]:
     """Event -> UnsafeReport latencies through a monitor process already synced on ``a``, each of ``modes`` once
-    per round in a random order, for ``rounds`` rounds: ``start_views(j)`` starts the processes of mode ``j`` (given 3 s to subscribe and ask,
-    stopped after its ``n`` events, then ``settle`` s).  ``a`` subscribes to the monitor's five keys, as a
-    deployment's pilot and views do; one monitor for all, its seqs going on."""
+    per round in a random order, for ``rounds`` rounds: ``start_views(j)`` starts the processes of mode ``j``
+    (given 3 s to subscribe and ask, stopped after its ``n`` events, then ``settle`` s).  ``a`` subscribes to the
+    monitor's five keys, as a deployment's pilot and views do; one monitor for all, its seqs going on."""
     views = [a.declare_subscriber(key("spot_arm"), lambda _sample: None)
              for key in MONITOR_KEYS if key is not keys.unsafe]
     reports = Arrivals(a, keys.unsafe("spot_arm"))  # the fifth
@@ -458,10 +458,12 @@ def alternated(a: zenoh.Session, n: int, rounds: int, modes: tuple[str, ...],
     publishers = {k: a.declare_publisher(k, **BLOCK) for k in {k for k, _ in payloads}}
     per_round: dict[str, list[list[float]]] = {m: [] for m in modes}
     time.sleep(0.5)
-    for r in range(rounds):
+    runs = 0
+    for _ in range(rounds):
         for j in random.sample(range(len(modes)), len(modes)):  # no mode always after another
             mode = modes[j]
-            run = payloads[(r * len(modes) + j) * (n + 200):]
+            run = payloads[runs * (n + 200):]  # the events go on where the last run stopped, whatever the mode
+            runs += 1
             procs = start_views(j)
             if procs:
                 time.sleep(3.0)  # their subscriptions reached the routers, the view's start-up queries answered
@@ -526,8 +528,7 @@ def dashboard_with_foxglove(n: int, rounds: int = 6, pace: float = 0.0) -> list[
         there = [start_module("services.dashboard", str(SYSTEM_FILE), "--port", str(free_port()), *fox, *client,
                               "--wait", "5", "--log-level", "WARNING")]
         if j:
-            there.append(start([sys.executable, __file__, "--fox-client", f"ws://127.0.0.1:{fox[1]}"]))
-            subscribed(there[-1])
+            there.append(fox_client(f"ws://127.0.0.1:{fox[1]}"))
         return there
 
     return through_router(n, rounds, modes, dashboard, 0.5, pace)
@@ -581,7 +582,7 @@ def robot_and_ground(n: int, rounds: int = 6, pace: float = 0.0) -> list[list[ob
                     port = free_port()
                     there += [start([*ground, sys.executable, "-m", "services.foxglove", str(SYSTEM_FILE), "--port",
                                      str(port), *client_args(e2), "--wait", "5"]),
-                              start([*ground, sys.executable, __file__, "--fox-client", f"ws://127.0.0.1:{port}"])]
+                              fox_client(f"ws://127.0.0.1:{port}", tuple(ground))]
                 return there
 
             per_round = alternated(a, n, rounds, modes, ground_views, 0.5, pace)  # 0.5 s: subscriptions undeclared

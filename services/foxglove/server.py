@@ -135,10 +135,10 @@ class FoxgloveView:
         if self._idle:
             return
         with self._cond:
-            if not self._queue or not isinstance(self._queue[-1], Round):
-                self._queue.append(Round(STEPS_PER_ROUND, self._length))
-            gathered = self._queue[-1]
-            assert isinstance(gathered, Round)
+            gathered = self._queue[-1] if self._queue else None
+            if not isinstance(gathered, Round):  # a catch-up or a subscription's repeat ends the round before it
+                gathered = Round(STEPS_PER_ROUND, self._length)
+                self._queue.append(gathered)
             before = len(gathered.updates)
             gathered.add(updates)
             self._waiting += len(gathered.updates) - before
