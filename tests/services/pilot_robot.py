@@ -69,16 +69,31 @@ class Statuses(Messages[PilotStatus]):
 
     def __init__(self, session: zenoh.Session, system: str = "spot_arm"):
         super().__init__(session, keys.pilot_status(system), PilotStatus)
+        self.session, self.system = session, system
 
     def first(self, predicate: Callable[[PilotStatus], bool], timeout: float = 60.0, what: str = "") -> PilotStatus:
-        """The first status (from now on or already received) for which ``predicate`` holds."""
+        """The first status (from now on or already received) for which ``predicate`` holds.  On a
+        timeout it says the last status received and the one the pilot's queryable answers: a run of
+        session 18's received none at all while the publisher had matched the subscriber."""
         try:
             items = super().wait(lambda items: any(predicate(s) for s in items), timeout)
         except AssertionError:
             last = self.items[-1] if self.items else None
-            pytest.fail(f"no pilot status {what} within {timeout} s; last: "
-                        f"{None if last is None else (last.state, last.reason, last.next)}")
+            pytest.fail(f"no pilot status {what} within {timeout} s; {len(self.items)} received, last: "
+                        f"{None if last is None else (last.state, last.reason, last.next)}; the pilot's "
+                        f"queryable answers {self._asked()}")
         return next(s for s in items if predicate(s))
+
+    def _asked(self) -> object:
+        """The pilot's status as its queryable answers it now: (state, reason, next), or why there is none."""
+        try:
+            for reply in self.session.get(keys.pilot_status(self.system), timeout=5.0):
+                if reply.ok is not None:
+                    s = decode(reply.ok.payload.to_bytes(), PilotStatus)
+                    return s.state, s.reason, s.next
+            return "no answer"
+        except Exception as exc:  # a diagnosis only: the failure it explains is raised anyway
+            return f"no answer ({exc})"
 
     def state(self, state: str, goal: int | None = None, timeout: float = 60.0) -> PilotStatus:
         return self.first(lambda s: s.state == state and (goal is None or s.goal_id == goal), timeout,
