@@ -190,8 +190,17 @@ def rounds_row(where: str, label: str, rounds: list[list[float]], base: list[lis
     if base is None:
         return [where, f"{label} ({spread(rounds)})", *stats(samples), target, ""]
     limit = 1.1 * p99(pooled(base))
-    return [where, f"{label} ({spread(rounds)})", *stats(samples), f"p99 <= {limit * 1e6:.0f}",
+    return [where, f"{label} ({spread(rounds)}{paired(rounds, base)})", *stats(samples), f"p99 <= {limit * 1e6:.0f}",
             verdict(p99(samples) <= limit)]
+
+
+def paired(rounds: list[list[float]], base: list[list[float]]) -> str:
+    """The median over rounds of a round's p99 over the baseline's in the same round (each round runs every
+    configuration once, close in time): what the machine's moods between rounds do not move ('' unless the
+    rounds pair up)."""
+    if len(rounds) != len(base) or len(rounds) < 2:
+        return ""
+    return f"; per round / the baseline's: median {statistics.median(p99(r) / p99(b) for r, b in zip(rounds, base)):.2f}"
 
 
 def echo_entities(session: zenoh.Session) -> list:
@@ -374,7 +383,8 @@ MODES = ("no view", "with a bare remote subscriber of the monitor's keys (peer: 
          "with skinet foxglove in another process (1 client)",
          "with the Foxglove view in process (1 client)",
          "with skinet run --foxglove's view (its own process, fed through a pipe; 1 client)")
-RUN_FOXGLOVE = (MODES[0], MODES[4])
+CONTROL = "no view, again (the control: how far the baseline moves from itself in the same run)"
+RUN_FOXGLOVE = (MODES[0], CONTROL, MODES[4])
 
 
 MONITOR_KEYS = (keys.state, keys.verdicts, keys.unsafe, keys.state_space, keys.divergences)  # what it publishes

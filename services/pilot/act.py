@@ -14,7 +14,8 @@ a cancel request, a lifecycle transition, a topic message).
 
 An interrupt needs the running execution's id.  The manager's own
 ``SkillsetStatus`` says it: the actuator follows each manager's status topic and,
-when it has not seen one yet, asks for it (``status_request``) and waits a moment.
+when the last one it saw does not show the skill running (or it saw none), asks
+for it (``status_request``) and waits up to ``STATUS_WAIT`` for one that does.
 A start waits (up to ``REACT_WAIT``) for the manager's answer: the status showing
 its id, or a refusal (``ALREADY_RUNNING``, ``PRECONDITION_FAILURE``...), raised as
 :class:`Refused` since such a refusal changes nothing the monitor could show.
@@ -47,7 +48,7 @@ if TYPE_CHECKING:
     from skinet.ros.typestore import Typestore
 
 log = logging.getLogger("skinet.pilot")
-STATUS_WAIT = 1.0  # seconds an interrupt waits for a manager's status when it has seen none
+STATUS_WAIT = 1.0  # seconds an interrupt waits for a status showing its skill running, when the last does not
 REACT_WAIT = 1.0  # seconds a start waits for the manager's answer (its status, or a refusal) before it returns
 READY = 0  # SkillXStatus.state
 MAX_REQUESTS = 64  # start requests remembered per skill (their inputs, by execution id)
@@ -214,11 +215,18 @@ class ManagerActuator:
         return view is not None and view.id == id_
 
     def _running_id(self, c: Component, store: Typestore, skill: str) -> str:
-        """The id of ``skill``'s running execution, as the manager's last status shows it."""
+        """The id of ``skill``'s running execution, as the manager's last status shows it.  A last status that
+        shows it not running may predate its start (the monitor hears the start through the bridge, the actuator
+        the status on its own subscription): the actuator asks for the status and waits up to ``STATUS_WAIT``
+        for one that shows it running."""
+        def running() -> bool:
+            view = self._ids.get(c.name, {}).get(skill)
+            return view is not None and view.state != READY
+
         with self._lock:
-            if c.name not in self._ids:
+            if not running():
                 self._requests.put(c.name, *status_request(store, c.skillset))
-                self._lock.wait_for(lambda: c.name in self._ids, STATUS_WAIT)
+                self._lock.wait_for(running, STATUS_WAIT)
             view = self._ids.get(c.name, {}).get(skill)
         if view is None:
             raise ActError(f"the running id of {c.name}:{skill} is unknown: no status from {c.manager} "

@@ -21,6 +21,7 @@ from services.pilot import ActError
 from services.predictor.service import start_predictor
 from services.simulator.world import World
 from skinet.pilot.run import Outcomes
+from skinet.ros.derive import SkillView
 from skinet.ros.keys import KeyStyle
 from skinet.wire import keys
 from skinet.wire.codec import encode
@@ -416,6 +417,25 @@ def test_the_actuator_interrupts_with_the_running_id_its_manager_shows(robot: Ro
         assert actuator.send(PilotCommand(skillset="spot", transition="init_power.start")) == \
             "init_power.start (id 'p1-1') on spot/spot_skillset_manager/spot_skillset/skill/init_power/request"
         wait_until(lambda: robot.sim.skill_status("spot", "init_power") == (True, "p1-1"), 30, "started by the pilot")
+    finally:
+        gui.close()
+
+
+def test_an_interrupt_asks_again_when_the_last_status_it_saw_predates_the_start(robot: Robot) -> None:
+    """The last status the actuator saw shows the skill ready (it came before the start's, as a run of session
+    19's saw): the actuator asks the manager and interrupts the execution its answer shows running."""
+    gui = Gui(robot.observer, robot)
+    actuator = robot.actuator.inner.actuators["manager"]
+    try:
+        gui.start("spot", "init_power")
+        wait_until(lambda: actuator._ids.get("spot", {}).get("init_power") == SkillView(1, "gui-1"), 30,
+                   "the actuator sees init_power run")
+        with actuator._lock:  # the status before the start, as if the start's were still on its way
+            actuator._ids["spot"] = {**actuator._ids["spot"], "init_power": SkillView(0, "")}
+        sent = actuator.send(PilotCommand(skillset="spot", transition="init_power.interrupt"))
+        assert sent == "init_power.interrupt (running id 'gui-1') on spot/spot_skillset_manager/spot_skillset/skill/" \
+                       "init_power/interrupt"
+        wait_until(lambda: not robot.sim.skill_status("spot", "init_power")[0], 30, "init_power interrupted")
     finally:
         gui.close()
 
