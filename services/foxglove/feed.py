@@ -7,9 +7,11 @@ results through a pipe: :class:`PipeFeed` is a tap of the monitor (``Monitor(tap
 result message as a frame (kind: 1 byte, length: 4 bytes, the msgpack payload), a step's three in one
 non-blocking write made without letting go of the interpreter (``os.write`` lets go, and the monitor's other
 threads then kept it from the monitor: p99 +50 µs); :class:`PipeReader`, in the view's process, wakes every
-:data:`~services.foxglove.translate.ROUND`, reads what came and hands it to a fed
-:class:`~services.dashboard.observer.Observer`.  Nobody sleeps on the pipe, so a write wakes nobody: the view
-reads after the monitor's steps, as a display refreshes.  Pilot statuses and liveliness stay on Zenoh.
+:data:`~services.foxglove.translate.ROUND` while steps come, reads what came and hands it to a fed
+:class:`~services.dashboard.observer.Observer`.  While steps come nobody sleeps on the pipe, so a write wakes
+nobody: the view reads after the monitor's steps, as a display refreshes.  A round that finds the pipe empty
+sleeps on it instead, so the first write after a quiet spell wakes the view once, and an idle view does not
+wake 50 times a second.  Pilot statuses and liveliness stay on Zenoh.
 
 The monitor never waits: the feed fills the pipe to a quarter of its size at most (``budget``: 256 KiB of
 :data:`PIPE_SIZE`, some 200 steps of the paper's mission at about 1.3 KiB each), so that a write always finds
@@ -48,6 +50,7 @@ import errno
 import fcntl
 import logging
 import os
+import select
 import stat
 import struct
 import termios
@@ -63,6 +66,7 @@ GAP = 255
 GAP_MARK = HEADER.pack(GAP, 0)
 PIPE_SIZE = 1 << 20  # bytes the pipe is asked to hold (Linux's default limit for an unprivileged process)
 QUIET = 0.5  # seconds after a gap mark with nothing written, after which the reader asks the monitor
+IDLE_LOOK = 1.0  # seconds between the looks of a reader sleeping on an empty pipe at whether the view ended
 STATE = [kind for _, kind in MONITOR_RESULTS].index(LiveState)
 HELD = frozenset((STATE, [kind for _, kind in MONITOR_RESULTS].index(Verdicts)))  # written with their report
 log = logging.getLogger("skinet.foxglove")
@@ -176,8 +180,8 @@ class PipeFeed:
 
 class PipeReader:
     """Feeds ``observer`` (made with ``fed=True``) from the pipe ``fd`` in a thread of its own, every
-    :data:`~services.foxglove.translate.ROUND`; sets ``ended`` when the pipe's writer is gone or ``observer``'s
-    session closed."""
+    :data:`~services.foxglove.translate.ROUND` while steps come, else when the pipe holds something; sets
+    ``ended`` when the pipe's writer is gone or ``observer``'s session closed."""
 
     def __init__(self, fd: int, observer: Observer, ended: threading.Event):
         self.observer = observer
@@ -185,17 +189,26 @@ class PipeReader:
         self.gaps = 0
         self.messages = 0  # handed to the observer
         self.skipped = 0  # steps not shown: more than STEPS_PER_ROUND in a round
+        self.rounds = 0  # reads of the pipe
         self._skipped_seen = 0
         self._round = ROUND  # seconds before this round
         self._fd = fd
         self._kinds = [kind for _, kind in MONITOR_RESULTS]
+        self._wake = os.pipe()  # close() writes to it: the thread sleeping on the feed's pipe wakes
+        self._poll = select.poll()
+        for watched in (fd, self._wake[0]):
+            self._poll.register(watched, select.POLLIN)
         self._thread = threading.Thread(target=self._run, name="skinet-foxglove-feed", daemon=True)
         os.set_blocking(fd, False)
         self._thread.start()
 
     def close(self) -> None:
         self.ended.set()
+        with contextlib.suppress(OSError):  # the thread may have closed the other end already
+            os.write(self._wake[1], b"x")
         self._thread.join(timeout=5)
+        with contextlib.suppress(OSError):  # closed before
+            os.close(self._wake[1])
 
     def _run(self) -> None:
         buffer = b""
@@ -208,6 +221,7 @@ class PipeReader:
                         return
                     catch_up, older = False, 2  # this round's and the next: written before the answers
                 data, end = self._read()
+                self.rounds += 1
                 buffer += data
                 done, gap = self._frames(buffer, older > 0)
                 buffer = buffer[done:]
@@ -222,10 +236,22 @@ class PipeReader:
                     return
                 flood, self._skipped_seen = self.skipped != self._skipped_seen, self.skipped
                 self._round = FLOOD_ROUND if flood else ROUND
-                self.ended.wait(self._round)
+                if data or buffer or gap_at is not None or catch_up:
+                    self.ended.wait(self._round)
+                else:
+                    self._wait_for_data()
         finally:
             os.close(self._fd)
+            os.close(self._wake[0])
             self.ended.set()
+
+    def _wait_for_data(self) -> None:
+        """Sleep on the pipe until it holds something (or its writer is gone), :meth:`close` wakes the thread,
+        or :data:`IDLE_LOOK` passes (``ended`` may be set by another)."""
+        while not self.ended.is_set():
+            ready = self._poll.poll(IDLE_LOOK * 1000)
+            if any(fd == self._fd for fd, _ in ready) or any(fd == self._wake[0] for fd, _ in ready):
+                return
 
     def _read(self) -> tuple[bytes, bool]:
         """What the pipe holds now, and whether its writer is gone."""

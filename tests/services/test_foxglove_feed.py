@@ -9,12 +9,13 @@ from __future__ import annotations
 
 import os
 import threading
+import time
 from collections.abc import Callable
 
 import zenoh
 
 from services.dashboard.observer import Observer
-from services.foxglove.feed import PipeFeed, PipeReader
+from services.foxglove.feed import IDLE_LOOK, PipeFeed, PipeReader
 from services.monitor import start_monitor
 from skinet.system.load import load_system
 from skinet.wire import foxglove as fx
@@ -170,6 +171,32 @@ def test_a_flood_of_steps_shows_the_last_complete_step_and_each_onset_at_its_ste
     finally:
         stop_feeding(reader, feed, side, monitor)
         alone.close()
+
+
+def test_an_idle_reader_sleeps_on_the_pipe_and_the_first_write_wakes_it(client: zenoh.Session) -> None:
+    """With nothing written the reader reads the pipe once (at start), not every 20 ms; a write wakes it, and
+    close() wakes it at once."""
+    from skinet.wire.codec import encode
+    from skinet.wire.messages import UnsafeReport
+
+    read, write = os.pipe()
+    feed = PipeFeed("spot_arm", write)
+    observer = Observer(client, "spot_arm", fed=True)
+    reader = PipeReader(read, observer, threading.Event())
+    try:
+        wait_until(lambda: reader.rounds == 1, 10, "the first read")
+        time.sleep(1.5)  # 75 rounds of 20 ms
+        assert reader.rounds == 1
+        feed.record(keys.unsafe("spot_arm"), encode(UnsafeReport(system="spot_arm", seq=1, stamp=1.0, unsafe=[],
+                                                                 literal_count=0, prediction_stale=True)))
+        wait_until(lambda: reader.messages == 1, 10, "the report read")
+        started = time.monotonic()
+        reader.close()
+        assert not reader._thread.is_alive() and time.monotonic() - started < IDLE_LOOK
+    finally:
+        reader.close()
+        feed.close()
+        observer.close()
 
 
 def test_a_feed_whose_view_is_gone_stops_writing_and_never_raises() -> None:
