@@ -22,7 +22,8 @@ The in-process monitor also runs without and with incident bundles (``--incident
 each, 12 by default, in a random order per round) and without and with each Foxglove view (three rounds in a
 random order per round): on its session, in a process of its own through Zenoh, and ``skinet run
 --foxglove``'s, a process of its own fed through a pipe by the monitor (``--run-foxglove-only``: that one
-alone, ``--rounds`` rounds), target: p99 with them within 10 % of without.  Beside them runs the peer that
+alone beside the baseline measured twice, the control, ``--rounds`` rounds), target: p99 with them within 10 %
+of without; a row with as many rounds as its baseline also gives the median of its per-round ratio to it.  Beside them runs the peer that
 sorts Foxglove's cost from Zenoh's: a process of its own subscribed to the monitor's five keys with a
 callback that does nothing (the cost any remote view puts on the monitor: the dashboard, ``skinet watch``);
 the Foxglove process's p99 is also given as a ratio to it.  The deployed shape follows: a router, the
