@@ -27,7 +27,7 @@ of without; a row with as many rounds as its baseline also gives the median of i
 sorts Foxglove's cost from Zenoh's: a process of its own subscribed to the monitor's five keys with a
 callback that does nothing (the cost any remote view puts on the monitor: the dashboard, ``skinet watch``);
 the Foxglove process's p99 is also given as a ratio to it.  The deployed shape follows: a router, the
-monitor process and ``skinet foxglove`` as clients, all on both cores; then the same shape with the
+monitor process and ``skinet foxglove`` (or, instead, the peer) as clients, all on both cores; then the same shape with the
 dashboard service running, without and with its ``--foxglove`` option (no Zenoh delivery added).  Last,
 the shape docs/foxglove.md recommends: the robot (router, monitor, this process) pinned to one core and a
 ground station (its own router linked to the robot's, a view) pinned to the other, without and with
@@ -419,9 +419,10 @@ def wait_line(proc: subprocess.Popen, text: str, what: str) -> None:
     raise RuntimeError(f"{what} ended ({proc.wait()}) before saying '{text}'")
 
 
-def bare_subscriber(endpoint: str) -> None:
-    """A process subscribed to the monitor's keys that does nothing with what it gets, until terminated."""
-    session = zenoh.open(session_config("peer", connect=[endpoint], multicast_scouting=False))
+def bare_subscriber(endpoint: str, mode: str = "peer") -> None:
+    """A process subscribed to the monitor's keys that does nothing with what it gets, until terminated; a
+    ``mode`` session (a client of a router, as a deployment's views are; a peer of ``skinet run``'s session)."""
+    session = zenoh.open(session_config(mode, connect=[endpoint], multicast_scouting=False))
     subs = [session.declare_subscriber(key("spot_arm"), lambda _sample: None) for key in MONITOR_KEYS]
     token = session.liveliness().declare_token(keys.alive("spot_arm", "bench-bare", "1"))
     stop = threading.Event()
@@ -486,12 +487,12 @@ def alternated(a: zenoh.Session, n: int, rounds: int, modes: tuple[str, ...],
     return per_round
 
 
-def through_router(n: int, rounds: int, modes: tuple[str, str],
-                   start_views: Callable[[int, list[str]], list[subprocess.Popen]], settle: float,
+def through_router(n: int, rounds: int, modes: tuple[str, ...],
+                   start_views: Callable[[int, str], list[subprocess.Popen]], settle: float,
                    pace: float) -> list[list[object]]:
     """The deployed shape (compose.yaml) on both cores: a loopback router, the monitor process and this process
-    as clients; :func:`alternated` over ``modes`` there (``start_views(j, client)``: mode ``j``'s processes,
-    ``client`` the flags that connect them to the router); the baseline row and the measured one."""
+    as clients; :func:`alternated` over ``modes`` there (``start_views(j, endpoint)``: mode ``j``'s processes,
+    ``endpoint`` the router's); the baseline row (the first mode's) and one row for each of the others."""
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     router = start_skinet("router", "--listen", endpoint, "--no-auth")  # loopback only
     procs = [router]
@@ -504,8 +505,7 @@ def through_router(n: int, rounds: int, modes: tuple[str, str],
                                       "--log-level", "WARNING"))
             wait_token(a, keys.alive("spot_arm", "monitor", "bench"))
             side.synced()
-            per_round = alternated(a, n, rounds, modes, lambda j: start_views(j, client_args(endpoint)), settle,
-                                   pace)
+            per_round = alternated(a, n, rounds, modes, lambda j: start_views(j, endpoint), settle, pace)
             side.close()
         finally:
             a.close()
@@ -513,17 +513,26 @@ def through_router(n: int, rounds: int, modes: tuple[str, str],
         stop_all(procs)
     return [rounds_row("router", f"monitor process: event -> UnsafeReport, {modes[0]}", per_round[modes[0]],
                        target="baseline"),
-            rounds_row("router", f"  {modes[1]}", per_round[modes[1]], per_round[modes[0]])]
+            *[rounds_row("router", f"  {m}", per_round[m], per_round[modes[0]]) for m in modes[1:]]]
 
 
 def views_through_router(n: int, rounds: int = 3, pace: float = 0.0) -> list[list[object]]:
     """The deployed shape (:func:`through_router`): this process sends the events and subscribes to the
     monitor's five keys (the pilot and the views a deployment runs), and measures event -> UnsafeReport without
     and with ``skinet foxglove`` connected to the router like any view (one Foxglove client process subscribed
-    to every channel), alternated ``rounds`` times; target: p99 with it within 10 % of without."""
-    modes = ("no Foxglove", "with skinet foxglove (1 client)")
-    return through_router(n, rounds, modes, lambda j, client: foxglove_processes(*client, "--wait", "5") if j else [],
-                          0.0, pace)
+    to every channel), and with the peer instead (a process subscribed to the monitor's five keys through the
+    router that does nothing: any view's Zenoh cost there), alternated ``rounds`` times; target: p99 with them
+    within 10 % of without."""
+    modes = ("no Foxglove", "with skinet foxglove (1 client)",
+             "with a bare subscriber of the monitor's keys (peer: any view's Zenoh cost)")
+
+    def views(j: int, endpoint: str) -> list[subprocess.Popen]:
+        if j == 1:
+            return foxglove_processes(*client_args(endpoint), "--wait", "5")
+        return [start([sys.executable, __file__, "--bare-subscriber", endpoint, "--bare-mode", "client"])] \
+            if j == 2 else []
+
+    return through_router(n, rounds, modes, views, 0.0, pace)
 
 
 def dashboard_with_foxglove(n: int, rounds: int = 6, pace: float = 0.0) -> list[list[object]]:
@@ -534,9 +543,10 @@ def dashboard_with_foxglove(n: int, rounds: int = 6, pace: float = 0.0) -> list[
     Foxglove view: no Zenoh delivery is added, only the view's rounds and its client."""
     modes = ("with the dashboard service", "with the dashboard service and its --foxglove (1 client)")
 
-    def dashboard(j: int, client: list[str]) -> list[subprocess.Popen]:
+    def dashboard(j: int, endpoint: str) -> list[subprocess.Popen]:
         fox = ["--foxglove", str(free_port())] if j else []
-        there = [start_module("services.dashboard", str(SYSTEM_FILE), "--port", str(free_port()), *fox, *client,
+        there = [start_module("services.dashboard", str(SYSTEM_FILE), "--port", str(free_port()), *fox,
+                              *client_args(endpoint),
                               "--wait", "5", "--log-level", "WARNING")]
         if j:
             there.append(fox_client(f"ws://127.0.0.1:{fox[1]}"))
@@ -752,11 +762,12 @@ def main() -> None:
     parser.add_argument("--echo", help=argparse.SUPPRESS)
     parser.add_argument("--fox-client", help=argparse.SUPPRESS)
     parser.add_argument("--bare-subscriber", help=argparse.SUPPRESS)
+    parser.add_argument("--bare-mode", default="peer", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.echo:
         return echo_process(args.echo)
     if args.bare_subscriber:
-        return bare_subscriber(args.bare_subscriber)
+        return bare_subscriber(args.bare_subscriber, args.bare_mode)
     if args.fox_client:  # a Foxglove client process subscribed to every channel, until terminated
         import json
 
