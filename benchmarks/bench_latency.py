@@ -23,16 +23,16 @@ each, 12 by default, in a random order per round) and without and with each Foxg
 random order per round): on its session, in a process of its own through Zenoh, and ``skinet run
 --foxglove``'s, a process of its own fed through a pipe by the monitor (``--run-foxglove-only``: that one
 alone beside the baseline measured twice, the control, ``--rounds`` rounds), target: p99 with them within 10 %
-of without; a row with as many rounds as its baseline also gives the median of its per-round ratio to it.  Beside them runs the peer that
-sorts Foxglove's cost from Zenoh's: a process of its own subscribed to the monitor's five keys with a
-callback that does nothing (the cost any remote view puts on the monitor: the dashboard, ``skinet watch``);
-the Foxglove process's p99 is also given as a ratio to it.  The deployed shape follows: a router, the
-monitor process and ``skinet foxglove`` (or, instead, the peer) as clients, all on both cores; then the same shape with the
-dashboard service running, without and with its ``--foxglove`` option (no Zenoh delivery added).  Last,
-the shape docs/foxglove.md recommends: the robot (router, monitor, this process) pinned to one core and a
-ground station (its own router linked to the robot's, a view) pinned to the other, without and with
-``skinet foxglove`` there (alternated six times).  These rows send their events back to back unless
-``--pace MS`` spaces them.
+of without; a row with as many rounds as its baseline also gives the median of its per-round ratio to it.
+Beside them runs the peer that sorts Foxglove's cost from Zenoh's: a process of its own subscribed to the
+monitor's five keys with a callback that does nothing (the cost any remote view puts on the monitor: the
+dashboard, ``skinet watch``); the Foxglove process's p99 is also given as a ratio to it.  The deployed shape
+follows: a router, the monitor process and ``skinet foxglove`` (or, instead, the peer) as clients, all on
+both cores; then the same shape with the dashboard service running, without and with its ``--foxglove``
+option (no Zenoh delivery added).  Last, the shape docs/foxglove.md recommends: the robot (router, monitor,
+this process) pinned to one core and a ground station (its own router linked to the robot's, a view) pinned
+to the other, without and with ``skinet foxglove`` there (alternated six times).  These rows send their
+events back to back unless ``--pace MS`` spaces them.
 
     python benchmarks/bench_latency.py [--events 2000] [--burst 20000] [--profile]
         [--views-only | --incidents-only | --run-foxglove-only | --dashboard-only] [--rounds N] [--pace MS]
@@ -201,7 +201,8 @@ def paired(rounds: list[list[float]], base: list[list[float]]) -> str:
     rounds pair up)."""
     if len(rounds) != len(base) or len(rounds) < 2:
         return ""
-    return f"; per round / the baseline's: median {statistics.median(p99(r) / p99(b) for r, b in zip(rounds, base)):.2f}"
+    ratio = statistics.median(p99(r) / p99(b) for r, b in zip(rounds, base))
+    return f"; per round / the baseline's: median {ratio:.2f}"
 
 
 def echo_entities(session: zenoh.Session) -> list:
