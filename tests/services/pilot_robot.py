@@ -167,6 +167,17 @@ class Robot:
                 pytest.fail(f"the pilot is {self.pilot.status.state} ({self.pilot.status.reason}), not {state}")
             time.sleep(0.01)
 
+    def wait_pilot_step(self, timeout: float = 30.0) -> None:
+        """Until the pilot's own status is about the monitor's last step: a goal asked before may be planned from
+        an older one (the pilot hears the monitor's states through Zenoh; a run beside busy loops once saw a goal
+        planned from the step before the one the test had waited for)."""
+        deadline = time.monotonic() + timeout
+        while self.pilot.status.state_seq < self.monitor.snapshot().state.seq:
+            if time.monotonic() > deadline:
+                pytest.fail(f"the pilot's status is about step {self.pilot.status.state_seq}, the monitor's last "
+                            f"is {self.monitor.snapshot().state.seq}")
+            time.sleep(0.01)
+
     def start_monitor(self) -> None:
         self.monitor = start_monitor(self.sessions(), self.system, lost_after=self.lost_after)
 

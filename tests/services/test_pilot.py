@@ -559,6 +559,7 @@ def test_from_a_violation_the_goal_is_refused_naming_the_way_back_unless_it_asks
             gui.start(skillset, skill)
             wait_until(lambda: skill in robot.monitor.snapshot().state.skillsets[skillset].running, 30,
                        f"{skillset}:{skill} running")
+        robot.wait_pilot_step()
         refused = ask_goal(robot.observer, goal("reach spot:Standing", mode="drive"))
         assert not refused.accepted
         assert refused.reason.startswith("goal 'reach spot:Standing' has no plan from the live state: none: the robot "
