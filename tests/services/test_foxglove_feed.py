@@ -137,15 +137,20 @@ def test_a_flood_of_steps_shows_the_last_complete_step_and_each_onset_at_its_ste
     from chains.embedded import taps
     from services.common.zenoh_config import session_config
     from services.foxglove.translate import STEPS_PER_ROUND, Translator
+    from skinet.wire.codec import decode
+    from skinet.wire.messages import UnsafeReport
     from tests.services.test_monitor import AG, PAPER_STEPS
 
     system = load_system(SYSTEM_FILE)[0]
     read, write = os.pipe()
     feed = PipeFeed("spot_arm", write)
     states: list[bytes] = []
+    reports: list[bytes] = []  # tapped after the feed: the last one is in the pipe
     alone = zenoh.open(session_config("peer", multicast_scouting=False))  # the view's catch-up finds no monitor
     monitor = start_monitor(alone, system, tap=taps(feed.record, lambda k, p, t=0.0: k == keys.state("spot_arm")
-                                                                and states.append(p)))
+                                                                and states.append(p),
+                                                    lambda k, p, t=0.0: k == keys.unsafe("spot_arm")
+                                                                and reports.append(p)))
     side = BridgeSide(alone, "spot_arm", model=system)
     reader = None
     try:
@@ -153,7 +158,9 @@ def test_a_flood_of_steps_shows_the_last_complete_step_and_each_onset_at_its_ste
                                                            ("manipulator", "arm_RD_to_HP.start")]
         for skillset, transition in steps:
             side.send(skillset, transition)
-        wait_until(lambda: monitor.snapshot().state.seq == len(steps), 10, "the monitor's last step")
+        # The step's report is written after its snapshot: a reader started between them saw one more step apart.
+        wait_until(lambda: reports and decode(reports[-1], UnsafeReport).seq == len(steps), 10,
+                   "the monitor's last step in the pipe")
         assert len(states) > STEPS_PER_ROUND + 1
         observer = Observer(client_factory(), "spot_arm", system, fed=True)
         updates: list[dict] = []
