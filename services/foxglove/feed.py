@@ -249,8 +249,7 @@ class PipeReader:
         """Sleep on the pipe until it holds something (or its writer is gone), :meth:`close` wakes the thread,
         or :data:`IDLE_LOOK` passes (``ended`` may be set by another)."""
         while not self.ended.is_set():
-            ready = self._poll.poll(IDLE_LOOK * 1000)
-            if any(fd == self._fd for fd, _ in ready) or any(fd == self._wake[0] for fd, _ in ready):
+            if self._poll.poll(IDLE_LOOK * 1000):  # either of its two pipes
                 return
 
     def _read(self) -> tuple[bytes, bool]:

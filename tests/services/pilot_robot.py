@@ -18,6 +18,7 @@ import pytest
 import zenoh
 
 from services.bridge_ros2 import start_bridge
+from services.common.goals import pilot_status
 from services.common.requests import Requests
 from services.monitor import start_monitor
 from services.pilot import Actuator, Pilot, default_actuator, start_pilot
@@ -87,13 +88,10 @@ class Statuses(Messages[PilotStatus]):
     def _asked(self) -> object:
         """The pilot's status as its queryable answers it now: (state, reason, next), or why there is none."""
         try:
-            for reply in self.session.get(keys.pilot_status(self.system), timeout=5.0):
-                if reply.ok is not None:
-                    s = decode(reply.ok.payload.to_bytes(), PilotStatus)
-                    return s.state, s.reason, s.next
-            return "no answer"
+            s = pilot_status(self.session, self.system, timeout=5.0)
         except Exception as exc:  # a diagnosis only: the failure it explains is raised anyway
             return f"no answer ({exc})"
+        return "no answer" if s is None else (s.state, s.reason, s.next)
 
     def state(self, state: str, goal: int | None = None, timeout: float = 60.0) -> PilotStatus:
         return self.first(lambda s: s.state == state and (goal is None or s.goal_id == goal), timeout,
