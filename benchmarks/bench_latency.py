@@ -517,15 +517,17 @@ def through_router(n: int, rounds: int, modes: tuple[str, ...],
             *[rounds_row("router", f"  {m}", per_round[m], per_round[modes[0]]) for m in modes[1:]]]
 
 
-def views_through_router(n: int, rounds: int = 3, pace: float = 0.0) -> list[list[object]]:
+def views_through_router(n: int, rounds: int = 3, pace: float = 0.0, control: bool = False) -> list[list[object]]:
     """The deployed shape (:func:`through_router`): this process sends the events and subscribes to the
     monitor's five keys (the pilot and the views a deployment runs), and measures event -> UnsafeReport without
     and with ``skinet foxglove`` connected to the router like any view (one Foxglove client process subscribed
-    to every channel), and with the peer instead (a process subscribed to the monitor's five keys through the
-    router that does nothing: any view's Zenoh cost there), alternated ``rounds`` times; target: p99 with them
-    within 10 % of without."""
-    modes = ("no Foxglove", "with skinet foxglove (1 client)",
-             "with a bare subscriber of the monitor's keys (peer: any view's Zenoh cost)")
+    to every channel; it takes the monitor's feed, one message a round), and with a process subscribed to the
+    monitor's five keys through the router that does nothing instead (what a view of every message, such as the
+    dashboard, costs there), alternated ``rounds`` times (``control``: the baseline twice); target: p99 with
+    Foxglove within 10 % of without."""
+    modes = ("no Foxglove", "with skinet foxglove (1 client; the monitor's feed)",
+             "with a bare subscriber of the monitor's five keys (a view of every message)",
+             *((CONTROL,) if control else ()))
 
     def views(j: int, endpoint: str) -> list[subprocess.Popen]:
         if j == 1:
@@ -752,10 +754,13 @@ def main() -> None:
                         help="only the rows without and with --incidents")
     parser.add_argument("--run-foxglove-only", action="store_true",
                         help="only the rows without and with skinet run --foxglove's view (fed through a pipe)")
+    parser.add_argument("--router-only", action="store_true",
+                        help="only the rows without and with skinet foxglove on the robot's router, and the control "
+                             "(--rounds rounds)")
     parser.add_argument("--dashboard-only", action="store_true",
                         help="only the rows without and with the dashboard service's --foxglove (--rounds rounds)")
     parser.add_argument("--rounds", type=count(1), default=12, metavar="N",
-                        help="rounds of each configuration in the --incidents, --run-foxglove-only and "
+                        help="rounds of each configuration in the --incidents, --run-foxglove-only, --router-only and "
                              "--dashboard-only rows (default 12)")
     parser.add_argument("--pace", type=float, default=0.0, metavar="MS",
                         help="in the rows of --incidents and the views, wait MS milliseconds (untimed) before each event: a robot's "
@@ -778,15 +783,17 @@ def main() -> None:
     if args.pace < 0:
         parser.error(f"argument --pace: {args.pace:g} is below 0")
     pace = args.pace / 1000
-    only = args.views_only or args.incidents_only or args.run_foxglove_only or args.dashboard_only
+    only = args.views_only or args.incidents_only or args.run_foxglove_only or args.dashboard_only or args.router_only
     rows = [] if only else in_process(args.events, args.profile)
-    if args.dashboard_only:
+    if args.router_only:
+        rows += views_through_router(args.events, args.rounds, pace, control=True)
+    elif args.dashboard_only:
         rows += dashboard_with_foxglove(args.events, args.rounds, pace)
     elif args.run_foxglove_only:
         rows += with_views(args.events, args.rounds, pace, RUN_FOXGLOVE)
     else:
         rows += with_incidents(args.events, args.rounds, pace)
-    if not (args.incidents_only or args.run_foxglove_only or args.dashboard_only):
+    if not (args.incidents_only or args.run_foxglove_only or args.dashboard_only or args.router_only):
         rows += with_views(args.events, pace=pace)
         rows += views_through_router(args.events, pace=pace)
         rows += dashboard_with_foxglove(args.events, pace=pace)

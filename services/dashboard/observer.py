@@ -1,6 +1,6 @@
 """A read-only Zenoh observer of one system, feeding a :class:`Board` (docs/semantics.md §7).
 
-Subscribes to the monitor's five result keys, the pilot's status (docs/semantics.md §8) and to
+Subscribes to the monitor's five result keys (or to its feed, the same in rounds: the Foxglove view), the pilot's status (docs/semantics.md §8) and to
 the liveliness tokens of the system's services and of the predictors; when a
 monitor or a pilot appears (at start, or after a restart) it fetches the model
 bundle and the last publications (the monitor and the pilot answer ``get`` on
@@ -36,11 +36,12 @@ from services.monitor.check import parse_command
 from skinet.errors import SkinetError
 from skinet.system.model import System
 from skinet.wire import keys
-from skinet.wire.codec import DecodeError, decode, encode
+from skinet.wire.codec import DecodeError, decode, encode, validate
+from skinet.wire.limits import FEED_STEPS
 from skinet.wire.convert import system_from_bundle
 from skinet.wire.messages import (
-    CheckReply, Divergences, LiveState, ModelBundle, PilotGoalReply, PilotGoalRequest, PilotStatus, StateSpaceReport,
-    UnsafeReport, Verdicts,
+    CheckReply, Divergences, LiveState, ModelBundle, PilotGoalReply, PilotGoalRequest, PilotStatus, ResultFeed,
+    StateSpaceReport, UnsafeReport, Verdicts,
 )
 
 Listener = Callable[[list[Update]], None]
@@ -51,6 +52,9 @@ MONITOR_RESULTS: tuple[tuple[Callable[[str], str], type[BaseModel]], ...] = (
     (keys.unsafe, UnsafeReport), (keys.state_space, StateSpaceReport),
 )
 RESULTS = (*MONITOR_RESULTS, (keys.pilot_status, PilotStatus))
+FED: dict[str, type[BaseModel]] = {  # a ResultFeed's kinds
+    "divergences": Divergences, "state": LiveState, "verdicts": Verdicts, "unsafe": UnsafeReport,
+    "state_space": StateSpaceReport}
 FOLLOW_UP = 0.5  # seconds after a monitor appeared that its last publications are asked again
 QUERY_TIMEOUT = 2.0
 
@@ -69,12 +73,14 @@ class Observer:
 
     def __init__(self, session: zenoh.Session, system: str, model: System | None = None, history: int = 5000,
                  client: str = keys.LOCAL_CLIENT, goal_login: tuple[zenoh.Session, str] | None = None,
-                 fed: bool = False):
+                 fed: bool = False, feed: bool = False):
         """``client``: the client chunk of its check queries, the session's router login
         (:func:`~services.common.zenoh_config.client_name`); ``goal_login``: the session and login the
         goals are sent from, when not this session's (an operator's, beside an observer's); ``fed``: the
         monitor's results (:data:`MONITOR_RESULTS`) come from elsewhere (:meth:`take`, :meth:`fetch_results`; a
-        pipe from ``skinet run``'s monitor, :mod:`services.foxglove.feed`), not from Zenoh."""
+        pipe from ``skinet run``'s monitor, :mod:`services.foxglove.feed`), not from Zenoh; ``feed``: they come
+        in rounds on the monitor's feed key (:mod:`services.monitor.feed`: one Zenoh message per round, not one per
+        result), asked on the monitor's keys as usual when a monitor appears or a round was lost."""
         self.session = session
         self._goal_login = goal_login
         self.name = keys.check_chunk(system, "system name")
@@ -89,9 +95,16 @@ class Observer:
         self._closed = threading.Event()
         self._monitor_seen = threading.Event()
         self.fetched = threading.Event()  # the last publications were asked for once (a view's first picture)
-        self._subscribed = RESULTS[len(MONITOR_RESULTS):] if fed else RESULTS
-        self._subs = [session.declare_subscriber(key(self.name), self._on_sample(kind))
-                      for key, kind in self._subscribed]
+        self._asked = RESULTS[len(MONITOR_RESULTS):] if fed else RESULTS
+        self._feed_at: tuple[str, int] | None = None  # (monitor, seq) of the last round of the feed
+        self._fetching = False  # the last publications are being asked: a round may be older than their answers
+        self._feed_older = 0  # rounds after the last answers that may be older than them
+        self.feed_gaps = 0  # rounds of the feed lost (each asked the monitor's last results again)
+        self.fetches = 0  # times the model and the last publications were asked
+        subscribed = RESULTS[len(MONITOR_RESULTS):] if fed or feed else RESULTS
+        self._subs = [session.declare_subscriber(key(self.name), self._on_sample(kind)) for key, kind in subscribed]
+        if feed and not fed:
+            self._subs.append(session.declare_subscriber(keys.feed(self.name), self._on_feed))
         live = session.liveliness()
         self._tokens = [live.declare_subscriber(k, self._on_token, history=True)
                         for k in (keys.alive(self.name, "*", "*"), keys.alive(keys.ANY_SYSTEM, "predictor", "*"))]
@@ -184,6 +197,36 @@ class Observer:
                 return
             self._emit(self.board.feed(message, time.time(), initial))
 
+    def _on_feed(self, sample: zenoh.Sample) -> None:
+        """A round of the monitor's feed: its messages in order, as if they came on their keys; a round lost (its
+        seq jumps) asks the monitor's last results again."""
+        if sample.kind != zenoh.SampleKind.PUT:
+            return
+        try:
+            feed = decode(sample.payload.to_bytes(), ResultFeed)
+            messages = [validate(r.message, FED[r.kind]) for r in feed.results]
+        except DecodeError:
+            with self._lock:
+                self.malformed += 1
+            return
+        with self._lock:
+            if feed.system != self.name or any(m.system != self.name for m in messages):  # type: ignore[attr-defined]
+                self.malformed += 1
+                return
+            last, self._feed_at = self._feed_at, (feed.monitor, feed.seq)
+            lost = last is not None and last[0] == feed.monitor and feed.seq != last[1] + 1
+            older = self._fetching or self._feed_older > 0
+            self._feed_older = max(0, self._feed_older - 1)
+            now = time.time()
+            for message in messages:
+                self._emit(self.board.feed(message, now, older))
+            if feed.skipped:
+                self._emit([{"kind": "skipped", "steps": feed.skipped, "most": FEED_STEPS, "round": feed.round}])
+            if lost:
+                self.feed_gaps += 1
+        if lost:
+            self._resync.set()
+
     def _on_token(self, sample: zenoh.Sample) -> None:
         key, alive = str(sample.key_expr), sample.kind == zenoh.SampleKind.PUT
         with self._lock:
@@ -218,8 +261,14 @@ class Observer:
 
     def _fetch_all(self) -> bool:
         """The model and the last publications, asked once; False when the session was closed under us."""
-        if not self._fetch_each(((keys.model, ModelBundle), *self._subscribed)):
-            return False
+        self._fetching = True
+        try:
+            if not self._fetch_each(((keys.model, ModelBundle), *self._asked)):
+                return False
+        finally:
+            with self._lock:
+                self._fetching, self._feed_older = False, 2  # rounds put before the answers may come after them
+                self.fetches += 1
         self.fetched.set()
         return True
 
@@ -313,10 +362,11 @@ class View:
             self.goal_session.close()
 
 
-def observe(args: argparse.Namespace) -> View:
+def observe(args: argparse.Namespace, feed: bool = False) -> View:
     """A served view of the system ``args.system`` names: the session of ``args``' Zenoh options and, with a
     goal login (``args.goal_user``), a second session the observer sends goals from; with ``args.feed`` (a pipe
-    from ``skinet run``), an observer fed the monitor's results from elsewhere.  Raises a one-line
+    from ``skinet run``), an observer fed the monitor's results from elsewhere, else with ``feed`` one that takes
+    them in rounds from the monitor's feed key (the Foxglove view).  Raises a one-line
     :class:`SkinetError` (a bad system, a missing secret: before any session is opened; no router, a refused
     login)."""
     name, system = resolve_system(args.system)
@@ -330,7 +380,7 @@ def observe(args: argparse.Namespace) -> View:
         raise
     goal_login = None if goals is None or goal_session is None else (goal_session, client_name(goals))
     observer = Observer(session, name, system, client=client_name(config), goal_login=goal_login,
-                        fed=getattr(args, "feed", None) is not None)
+                        fed=getattr(args, "feed", None) is not None, feed=feed)
     return View(config, session, observer, goal_session)
 
 

@@ -40,7 +40,7 @@ def serve(args: argparse.Namespace, stop: threading.Event) -> int:
     """Serve until ``stop``; returns the exit status."""
     setup_logging(args)
     log = logging.getLogger("skinet.foxglove")
-    view = observe(args)
+    view = observe(args, feed=True)  # the monitor's results in rounds: the robot's router sends one message a round
     observer = view.observer
     try:
         foxglove = start_foxglove(observer, args.host, args.port)

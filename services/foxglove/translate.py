@@ -22,12 +22,13 @@ from typing import Any
 
 from skinet.verify.explain import warning_line
 from skinet.wire import foxglove as fx
+from skinet.wire.limits import FEED_FLOOD_ROUND, FEED_ROUND, FEED_STEPS
 from skinet.wire.messages import UnsafeEntry
 
 Out = tuple[str, dict[str, Any], int]  # (topic, JSON message, log time in ns)
-ROUND = 0.02  # seconds between a view's rounds (50 a second, as a display refreshes)
-STEPS_PER_ROUND = 10  # past this many steps in a round (500 a second; a robot makes a few), the last of each kind
-FLOOD_ROUND = 0.25  # seconds between a view's rounds while steps come faster (each shows its last step only)
+# Seconds between a view's rounds (50 a second); past STEPS_PER_ROUND steps in a round, the last of each kind,
+# and rounds every FLOOD_ROUND seconds while steps come faster: the monitor's feed keeps the same rhythm.
+ROUND, STEPS_PER_ROUND, FLOOD_ROUND = FEED_ROUND, FEED_STEPS, FEED_FLOOD_ROUND
 PICTURE = ("state", "verdicts", "unsafe", "state_space")  # board updates of which the last one is the picture
 UNSHOWN = ("point", "model", "alive")  # board updates a Translator ignores
 

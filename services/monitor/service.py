@@ -37,6 +37,10 @@ Model divergences and manager restarts are kept for the whole run
 ``keys.divergences`` when the list changes (at most every ``DIVERGENCES_PERIOD``
 seconds, the watchdog sending what a burst left) and answered on ``get``.
 
+The five result keys are also published in rounds on ``keys.feed`` (:mod:`services.monitor.feed`), only while
+someone subscribes to it: a view on the robot's own cores takes one Zenoh message per round instead of one per
+result.
+
 A ``tap`` (``--incidents``' ring, :mod:`services.monitor.incidents`) is handed the key, bytes and wall time of
 each valid event received and of each message published, after the step's puts (an event after its step's
 messages, with the time it came): no subscriber of the monitor's own keys and no thread of its own compete
@@ -66,6 +70,7 @@ from services.monitor.slots import FREE, fair_slot
 from services.monitor.divergences import DivergenceLog, event_name
 from services.monitor.violations import ViolationOnsets, onset_reason
 from services.monitor.engine import Counters, Engine, MarkingKey, Step
+from services.monitor.feed import Feeder
 from services.monitor.prediction import PredictionClient, PredictorStats
 from services.monitor.sync import BOUND, SYNCING, SyncTracker
 from skinet.errors import SourceError
@@ -177,6 +182,7 @@ class Monitor:
         self._keys = {"state": keys.state(name), "verdicts": keys.verdicts(name), "unsafe": keys.unsafe(name),
                       "state_space": keys.state_space(name), "divergences": keys.divergences(name)}
         self._pub = {k: session.declare_publisher(key, **opts) for k, key in self._keys.items()}
+        self._feed = Feeder(session, name, self.instance_id)  # the five, in rounds, for views on the robot
         self._predict = PredictionClient(session, system, self.digest, self._on_prediction, client=self.client,
                                          budget=budget, timeout=query_timeout, retry=retry, stall=stall)
         with self._lock:
@@ -276,6 +282,7 @@ class Monitor:
         undeclare(self._misses, self._sub, self._heartbeats, self._sources, self._predictors, self._twins,
                   self._queryable, self._check, *self._latest, self._token)
         self._predict.close()
+        self._feed.close()
         with self._lock:
             undeclare(*self._pub.values())
 
@@ -529,6 +536,9 @@ class Monitor:
                     self._pub["state_space"].put(space)
                     self._last["state_space"] = space
                     self._tapped(self._keys["state_space"], space)
+                    self._feed.add(("unsafe", unsafe), ("state_space", space))
+                else:
+                    self._feed.add(("unsafe", unsafe))
                 self._bump()
         except Exception:
             log.exception("error while applying a prediction")
@@ -740,6 +750,7 @@ class Monitor:
             self._last[name] = payload
         self._sync_published = self._sync_seen
         self._bump()
+        self._feed.add(*published)
         if self._tap is not None:  # after every put: the tap costs the step's warning nothing
             now = time.time()
             for name, payload in published:
@@ -770,6 +781,7 @@ class Monitor:
         self._pub["divergences"].put(payload)
         self._last["divergences"] = payload
         self._tapped(self._keys["divergences"], payload)
+        self._feed.add(("divergences", payload))
         self._divergences_due, self._divergences_sent = False, now
         self._divergences_published = self._divergences.total
         self._bump()

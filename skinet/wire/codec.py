@@ -33,6 +33,12 @@ def decode(payload: bytes, kind: type[M]) -> M:
         data = msgpack.unpackb(payload, raw=False, strict_map_key=True)
     except Exception as exc:  # msgpack raises several unrelated types
         raise DecodeError(f"not msgpack: {str(exc) or type(exc).__name__}") from None
+    return validate(data, kind)
+
+
+def validate(data: object, kind: type[M]) -> M:
+    """``data``, an unpacked payload (or a message within one, e.g. :class:`~skinet.wire.messages.ResultFeed`'s),
+    as ``kind``; raises :class:`DecodeError` with a one-line reason."""
     if not isinstance(data, dict):
         raise DecodeError(f"expected a map, got {type(data).__name__}")
     version = data.get("v")

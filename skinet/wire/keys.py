@@ -9,6 +9,7 @@ key                                       publisher           payload
 ``skinet/<system>/unsafe``                monitor             :class:`UnsafeReport`
 ``skinet/<system>/state_space``           monitor             :class:`StateSpaceReport`
 ``skinet/<system>/divergences``           monitor             :class:`Divergences`
+``skinet/<system>/feed``                  monitor             :class:`ResultFeed` (the five above, in rounds)
 ``skinet/<system>/predict/<client>``      predictor (query)   :class:`PredictRequest` -> :class:`PredictReply`
 ``skinet/<system>/predict/<client>/<i>``  one predictor ``i`` the same, after empty "working" replies
 ``skinet/<system>/model/<digest>``        monitor (query)     -> :class:`ModelBundle`
@@ -71,6 +72,10 @@ def state_space(system: str) -> str:
 
 def divergences(system: str) -> str:
     return f"{ROOT}/{system}/divergences"
+
+
+def feed(system: str) -> str:
+    return f"{ROOT}/{system}/feed"
 
 
 def predict(system: str, client: str) -> str:

@@ -338,6 +338,32 @@ class Divergences(_Message):
     entries: list[Divergence] = Field(default_factory=list, description="oldest first, numbered n = older, ...")
 
 
+class FedResult(BaseModel):
+    """One result of the monitor in a :class:`ResultFeed`."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    kind: Literal["divergences", "state", "verdicts", "unsafe", "state_space"] = Field(
+        description="the key it was published on: skinet/<system>/<kind>")
+    message: dict[str, Any] = Field(description="the message as published there: a Divergences, LiveState, "
+                                                "Verdicts, UnsafeReport or StateSpaceReport (its own schema)")
+
+
+class ResultFeed(_Message):
+    """The monitor's results in rounds, for views on the robot's own cores (docs/foxglove.md): published on
+    ``skinet/<system>/feed`` once per round while results come (every FEED_ROUND s, every FEED_FLOOD_ROUND s while
+    more than FEED_STEPS steps come in one; skinet/wire/limits.py), only while someone subscribes to it."""
+
+    system: str
+    monitor: str = Field(description="the monitor's instance id: a new one starts seq again")
+    seq: int = Field(ge=1, description="rounds this monitor published, +1 each: a gap is a round lost")
+    round: float = Field(ge=0, description="seconds the round gathered results")
+    skipped: int = Field(0, ge=0, description="steps of the round left out: past FEED_STEPS steps in a round "
+                                              "only the last result of each kind is kept (the divergence list "
+                                              "names the onset of every violation at its own step)")
+    results: list[FedResult] = Field(default_factory=list, description="in the order they were published, or "
+                                                                       "past FEED_STEPS the last of each kind")
+
+
 class PlanBranch(BaseModel):
     """Another result of a plan step (:class:`skinet.plan.Branch`): ``then`` is ``retry`` or ``continue``
     (at ``step``), ``route`` (its own ``steps``, then on at ``step``) or ``reached``."""
@@ -466,5 +492,5 @@ MESSAGES: dict[str, type[BaseModel]] = {
     m.__name__: m
     for m in (CanonicalEvent, LiveState, Verdicts, UnsafeReport, StateSpaceReport, ModelBundle, PredictRequest, PredictReply,
               CheckRequest, CheckReply, Heartbeat, Divergences, PilotGoalRequest, PilotGoalReply,
-              PilotStatus)
+              PilotStatus, ResultFeed)
 }

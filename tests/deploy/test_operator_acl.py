@@ -22,8 +22,8 @@ from deploy_support import REPO, SYSTEM, Tokens, acl_router_config, free_port, l
 from services.monitor import start_monitor
 from skinet.system.load import load_system
 from skinet.wire import keys
-from skinet.wire.codec import decode, encode
-from skinet.wire.messages import CheckReply, CheckRequest, Divergences
+from skinet.wire.codec import decode, encode, validate
+from skinet.wire.messages import CheckReply, CheckRequest, Divergences, ResultFeed
 from tests.services.test_monitor import Events
 
 SG_AT_RD = "violates it at once: spot go_to_waypoint runs while manipulator arm_status at RD"  # skinet.verify.explain
@@ -220,11 +220,15 @@ RESTARTED = "manager restarted (the manager (or its gateway) came back); same st
 
 def test_observers_receive_the_divergence_list_and_get_it_late(deployment: str) -> None:
     """Issue 27 item 4 through the shipped ACL: the monitor publishes its list of divergences and manager
-    restarts, an observer receives it, and one that asks later gets the list so far."""
+    restarts, an observer receives it (on its key, and in a round of the monitor's feed), and one that asks later
+    gets the list so far."""
     observer = login(deployment, "observer")
     lists: list[Divergences] = []
     sub = observer.declare_subscriber(keys.divergences(SYSTEM),
                                       lambda s: lists.append(decode(s.payload.to_bytes(), Divergences)))
+    rounds: list[ResultFeed] = []  # the monitor's feed: the same list, in a round
+    feed = observer.declare_subscriber(keys.feed(SYSTEM),
+                                       lambda s: rounds.append(decode(s.payload.to_bytes(), ResultFeed)))
     try:
         time.sleep(0.3)  # the subscription reaches the router
         standing = {"resources": {"power_status": "PowerOn", "posture": "Standing", "control_mode": "Idle"},
@@ -236,7 +240,11 @@ def test_observers_receive_the_divergence_list_and_get_it_late(deployment: str) 
         late = [decode(r.ok.payload.to_bytes(), Divergences) for r in observer.get(keys.divergences(SYSTEM), timeout=5)
                 if r.ok is not None]
         assert late == [lists[-1]]
+        wait_until(lambda: any(r.kind == "divergences" for f in rounds for r in f.results), 10, "the list in a round")
+        assert [validate(r.message, Divergences) for f in rounds for r in f.results if r.kind == "divergences"] == [
+            lists[-1]]
     finally:
+        feed.undeclare()
         sub.undeclare()
         observer.close()
 

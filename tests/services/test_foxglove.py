@@ -18,6 +18,7 @@ import pytest
 
 from skinet.mission.scenario import StepRecord
 from skinet.wire import foxglove as fx
+from skinet.wire import keys
 from tests.services.conftest import REPO, client_args, free_port
 from tests.services.foxglove_client import FoxgloveClient
 from tests.services.test_dashboard import SYSTEM_FILE, VIOLATIONS, play
@@ -54,8 +55,13 @@ def violations_at_their_steps(client: FoxgloveClient, seen: list[tuple[str, int,
     return after
 
 
-def test_the_unassisted_run_in_foxglove_shows_each_violation_at_its_step(foxglove, router) -> None:
+def test_the_unassisted_run_in_foxglove_shows_each_violation_at_its_step(foxglove, router, client_factory) -> None:
+    """Through Zenoh, the view takes the monitor's results in rounds from its feed: it subscribes to none of the
+    monitor's five result keys (a probe publisher on each sees no subscriber; one on the feed sees it)."""
     client = foxglove()
+    watcher = client_factory()  # its publishers learn of every subscriber the router knows
+    probes = {key.__name__: watcher.declare_publisher(key("spot_arm"))
+              for key in (keys.state, keys.verdicts, keys.unsafe, keys.state_space, keys.divergences, keys.feed)}
     client.wait(lambda c: len(c.channels) == len(fx.channels()), "every channel advertised")
     advertised = client.topics()
     assert {t: (c["encoding"], c["schemaName"], c["schemaEncoding"]) for t, c in advertised.items()} == {
@@ -79,6 +85,7 @@ def test_the_unassisted_run_in_foxglove_shows_each_violation_at_its_step(foxglov
         [(v["property"], v["seq"], v["event"]) for v in client.on(fx.VIOLATIONS)]]
     assert any(m["properties"] for m in client.on(fx.VERDICTS))
     assert client.on(fx.STATE_SPACE) and client.on(fx.STATE)[-1]["seq"] == records[-1].index
+    assert [name for name, probe in probes.items() if probe.matching_status.matching] == ["feed"]
 
 
 def test_the_view_does_nothing_without_a_subscriber_and_wakes_up_where_the_run_is(router, client_factory) -> None:

@@ -9,9 +9,10 @@ from skinet.system.model import System
 from skinet.verify.predict import forecast
 from skinet.wire.convert import bundle, marking_of, risks, state_space_report, statuses
 from skinet.wire.messages import (
-    CanonicalEvent, CheckReason, CheckReply, CheckRequest, Divergence, Divergences, Heartbeat, HeartbeatSkillset,
-    LiveState, MissedOutcome, PilotCommand, PilotGoalReply, PilotGoalRequest, PilotStatus, PlanBranch, PlanStep, PredictReply, PredictRequest, PropertyVerdict, RecoveryEntry, SkillsetStatus, SkillsetSync, UnsafeEntry,
-    UnsafeReport, Verdicts,
+    CanonicalEvent, CheckReason, CheckReply, CheckRequest, Divergence, Divergences, FedResult, Heartbeat,
+    HeartbeatSkillset, LiveState, MissedOutcome, PilotCommand, PilotGoalReply, PilotGoalRequest, PilotStatus, PlanBranch,
+    PlanStep, PredictReply, PredictRequest, PropertyVerdict, RecoveryEntry, ResultFeed, SkillsetStatus, SkillsetSync,
+    UnsafeEntry, UnsafeReport, Verdicts,
 )
 
 # Arm moving (mutex Busy): starting Spot would break action_guard in one step.
@@ -28,7 +29,7 @@ def sample_messages(system: System) -> dict[str, BaseModel]:
     report = state_space_report(system, fc, 1700000000.5)
     b = bundle(system)
     skillsets = statuses(system, marking)
-    return {
+    out: dict[str, BaseModel] = {
         "CanonicalEvent": CanonicalEvent(
             system=system.name, skillset="manipulator", seq=7, stamp=1700000000.25, source="bridge-1",
             transition="arm_ready.start", status=skillsets["manipulator"], info="ok id=3", restart=True,
@@ -96,6 +97,10 @@ def sample_messages(system: System) -> dict[str, BaseModel]:
                                    notes=["spot:teleop ended while the monitor was restarted: outcome unknown"],
                                    interrupts={"spot:stand_up": "sent", "manipulator:arm_ready": "not interrupted"}),
     }
+    out["ResultFeed"] = ResultFeed(system=system.name, monitor="m1", seq=4, round=0.25, skipped=12, results=[
+        FedResult(kind=kind, message=out[name].model_dump(mode="json"))
+        for kind, name in (("divergences", "Divergences"), ("state", "LiveState"), ("verdicts", "Verdicts"))])
+    return out
 
 
 _STEP = PlanStep(number="1", skillset="spot", action="init_power.start", branches=[
