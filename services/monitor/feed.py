@@ -89,13 +89,14 @@ class Feeder:
     def _run(self) -> None:
         while True:
             with self._cond:
-                while self._since is None and not self._closed:
-                    self._cond.wait()
-                if self._closed:
-                    return
-                due = self._since + self._length
-            time.sleep(max(0.0, due - time.monotonic()))
-            with self._cond:
+                while not self._closed:  # add() wakes it at a round's first result, close() at once
+                    if self._since is None:
+                        self._cond.wait()
+                        continue
+                    left = self._since + self._length - time.monotonic()
+                    if left <= 0:
+                        break
+                    self._cond.wait(left)
                 if self._closed:
                     return
                 flood = self._steps > FEED_STEPS
