@@ -12,13 +12,18 @@ steps it left out (the divergence list names the onset of every violation at its
 and while such a flood lasts the rounds come every :data:`~skinet.wire.limits.FEED_FLOOD_ROUND`.
 
 The monitor hands a step's results to :meth:`Feeder.add` after its puts; a thread of the feed publishes the
-round when it is due, and only while someone subscribes to the feed (Zenoh's matching status): with no view,
-nothing is encoded or sent, and ``seq`` counts the rounds published, so a subscriber that sees it jump knows it
-lost one (the rounds are sent with congestion control ``DROP``: the monitor never waits for a view).  The
+round when it is due.  All this only while someone subscribes to the feed (Zenoh's matching status, told by a
+listener): with no view, :meth:`Feeder.add` returns at once and nothing is gathered, encoded or sent.  A view
+that subscribes gets the rounds from the next result on; it asks the monitor's keys for the last results when
+it starts, and again half a second later (:data:`~services.dashboard.observer.FOLLOW_UP`), which covers the
+results the monitor made before it learnt of the subscriber.  ``seq`` counts the rounds published, so a
+subscriber that sees it jump knows it lost one (the rounds are sent with congestion control ``DROP``: the monitor
+never waits for a view).  The
 messages are spliced into the round as they were published (msgpack in msgpack), never decoded.
 
-Cost: in the monitor's thread, one list append per message under the feed's lock, and one wake-up of the
-feed's thread per round; in that thread, per round, the encoding of its messages' headers and one put.  The
+Cost: with no subscriber, one attribute read per call in the monitor's thread.  With one, in the monitor's
+thread, one list append per message under the feed's lock and one wake-up of the feed's thread per round; in
+that thread, per round, the encoding of its messages' headers and one put.  The
 round's memory is bounded: at most :data:`~skinet.wire.limits.FEED_STEPS` steps' messages, then one of each
 kind.
 """
@@ -55,12 +60,17 @@ class Feeder:
         self._closed = False
         self.seq = 0  # rounds published
         self.skipped = 0  # steps left out of the rounds published
-        self.unheard = 0  # rounds nobody subscribed to: not published
+        self.unheard = 0  # rounds gathered while someone subscribed, nobody subscribing when due: not published
+        self.heard = False  # someone subscribes to the feed (Zenoh's matching status): else add() does nothing
+        self._listener = self._pub.declare_matching_listener(self._on_matching)
+        self.heard = self._pub.matching_status.matching  # the listener tells changes only
         self._thread = threading.Thread(target=self._run, name="skinet-monitor-feed", daemon=True)
         self._thread.start()
 
     def add(self, *results: tuple[str, bytes]) -> None:
         """Results the monitor published at once (a step's state, verdicts and report), as (kind, payload)."""
+        if not self.heard:
+            return
         with self._cond:
             if self._closed:
                 return
@@ -78,12 +88,16 @@ class Feeder:
                 self._since = time.monotonic()
                 self._cond.notify()
 
+    def _on_matching(self, status: zenoh.MatchingStatus) -> None:
+        self.heard = status.matching
+
     def close(self) -> None:
         """Stop the feed's thread (what the round holds is not sent) and undeclare its publisher."""
         with self._cond:
             self._closed = True
             self._cond.notify()
         self._thread.join(timeout=2)
+        self._listener.undeclare()
         self._pub.undeclare()
 
     def _run(self) -> None:

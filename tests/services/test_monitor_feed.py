@@ -48,11 +48,11 @@ def test_the_feed_is_the_monitors_results_in_order_and_only_while_someone_subscr
     rounds: list[ResultFeed] = []
     try:
         side.send(*PAPER_STEPS[0][:2])
-        wait_until(lambda: feeder.unheard >= 1 and feeder._since is None, 10, "a round nobody subscribed to")
-        assert feeder.seq == 0
+        wait_until(lambda: monitor.counters.applied == 1, 10, "step 1")
+        assert (feeder.heard, feeder._since, feeder.seq, feeder.unheard) == (False, None, 0, 0)  # nothing gathered
         viewer = client_factory()
         sub = subscribe(viewer, rounds)
-        wait_until(lambda: feeder._pub.matching_status.matching, 10, "the feed's subscriber")
+        wait_until(lambda: feeder.heard, 10, "the feed's subscriber")
         for i, (skillset, transition, _, _) in enumerate(PAPER_STEPS[1:6], 2):
             side.send(skillset, transition)
             wait_until(lambda: any(k == "unsafe" and m["seq"] == i for k, m in fed(rounds)), 10, f"step {i}'s report")
@@ -62,12 +62,12 @@ def test_the_feed_is_the_monitors_results_in_order_and_only_while_someone_subscr
         assert [f.seq for f in rounds] == list(range(1, len(rounds) + 1)) == list(range(1, feeder.seq + 1))
         assert {(f.system, f.monitor, f.round, f.skipped) for f in rounds} == {
             ("spot_arm", monitor.instance_id, FEED_ROUND, 0)}
-        heard, unheard = feeder.seq, feeder.unheard
+        heard = feeder.seq
         sub.undeclare()
-        wait_until(lambda: not feeder._pub.matching_status.matching, 10, "the subscriber gone")
+        wait_until(lambda: not feeder.heard, 10, "the subscriber gone")
         side.send(*PAPER_STEPS[6][:2])
-        wait_until(lambda: feeder.unheard > unheard, 10, "a round after the subscriber left")
-        assert feeder.seq == heard
+        wait_until(lambda: monitor.counters.applied == 7, 10, "step 7")
+        assert (feeder._since, feeder.seq) == (None, heard)
     finally:
         side.close()
         monitor.close()
@@ -101,7 +101,7 @@ def test_a_flood_round_holds_the_last_of_each_kind_and_counts_the_steps_it_left_
     rounds: list[ResultFeed] = []
     subscribe(client_factory(), rounds)
     try:
-        wait_until(lambda: feeder._pub.matching_status.matching, 10, "the feed's subscriber")
+        wait_until(lambda: feeder.heard, 10, "the feed's subscriber")
         feeder.add(*taken)  # one call: one round
         wait_until(lambda: len(rounds) == 1, 10, "the flood's round")
         [flood] = rounds
@@ -136,7 +136,7 @@ def test_an_observer_of_the_feed_asks_the_monitor_again_when_a_round_is_lost(
     observer = Observer(client_factory(), "spot_arm", system, feed=True)
     try:
         wait_until(lambda: observer.fetches == 2, 10, "the observer's first look and its follow-up")
-        wait_until(lambda: monitor._feed._pub.matching_status.matching, 10, "the observer's subscriber")
+        wait_until(lambda: monitor._feed.heard, 10, "the observer's subscriber")
         side.send(*PAPER_STEPS[0][:2])
         wait_until(lambda: observer.read(lambda b: b.unsafe is not None and b.unsafe.seq == 1), 10, "step 1 fed")
         assert (observer.fetches, observer.feed_gaps, observer.malformed) == (2, 0, 0)
