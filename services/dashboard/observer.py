@@ -1,14 +1,14 @@
 """A read-only Zenoh observer of one system, feeding a :class:`Board` (docs/semantics.md §7).
 
-Subscribes to the monitor's five result keys (or to its feed, the same in rounds: the Foxglove view), the pilot's status (docs/semantics.md §8) and to
-the liveliness tokens of the system's services and of the predictors; when a
-monitor or a pilot appears (at start, or after a restart) it fetches the model
-bundle and the last publications (the monitor and the pilot answer ``get`` on
-their keys), so a view opened mid-mission is complete at once.  It publishes
-nothing and declares nothing a read-only ACL role refuses; goals go to the pilot
-only when the page sends one (:meth:`Observer.goal`), under the session's login.  Listeners get every update, called from Zenoh's threads with the
-observer's lock held: they must not block.  The served views (the dashboard, Foxglove) share their
-options and their start here (:func:`add_view_args`, :func:`observe`, :func:`follow`).
+Subscribes to the monitor's five result keys (or to its feed, the same in rounds: the Foxglove view), the
+pilot's status (docs/semantics.md §8) and to the liveliness tokens of the system's services and of the
+predictors; when a monitor or a pilot appears (at start, or after a restart) it fetches the model bundle and the
+last publications (the monitor and the pilot answer ``get`` on their keys), so a view opened mid-mission is
+complete at once.  It publishes nothing and declares nothing a read-only ACL role refuses; goals go to the pilot
+only when the page sends one (:meth:`Observer.goal`), under the session's login.  Listeners get every update,
+called from Zenoh's threads with the observer's lock held: they must not block.  The served views (the
+dashboard, Foxglove) share their options and their start here (:func:`add_view_args`, :func:`observe`,
+:func:`follow`).
 """
 
 from __future__ import annotations

@@ -18,14 +18,13 @@ that subscribes gets the rounds from the next result on; it asks the monitor's k
 it starts, and again half a second later (:data:`~services.dashboard.observer.FOLLOW_UP`), which covers the
 results the monitor made before it learnt of the subscriber.  ``seq`` counts the rounds published, so a
 subscriber that sees it jump knows it lost one (the rounds are sent with congestion control ``DROP``: the monitor
-never waits for a view).  The
-messages are spliced into the round as they were published (msgpack in msgpack), never decoded.
+never waits for a view).  The messages are spliced into the round as they were published (msgpack in msgpack),
+never decoded.
 
 Cost: with no subscriber, one attribute read per call in the monitor's thread.  With one, in the monitor's
 thread, one list append per message under the feed's lock and one wake-up of the feed's thread per round; in
-that thread, per round, the encoding of its messages' headers and one put.  The
-round's memory is bounded: at most :data:`~skinet.wire.limits.FEED_STEPS` steps' messages, then one of each
-kind.
+that thread, per round, the encoding of its messages' headers and one put.  The round's memory is bounded: at
+most :data:`~skinet.wire.limits.FEED_STEPS` steps' messages, then one of each kind.
 """
 
 from __future__ import annotations

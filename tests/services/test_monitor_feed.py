@@ -120,8 +120,9 @@ def test_a_flood_round_holds_the_last_of_each_kind_and_counts_the_steps_it_left_
         wait_until(lambda: len(rounds) == 2, 10, "the round after the flood's")
         feeder.add(*one_step)  # that round was no flood: back to FEED_ROUND
         wait_until(lambda: len(rounds) == 3, 10, "the next round")
+        step = ["state", "verdicts", "unsafe"]
         assert [(f.seq, f.round, f.skipped, [r.kind for r in f.results]) for f in rounds[1:]] == [
-            (2, FEED_FLOOD_ROUND, 0, ["state", "verdicts", "unsafe"]), (3, FEED_ROUND, 0, ["state", "verdicts", "unsafe"])]
+            (2, FEED_FLOOD_ROUND, 0, step), (3, FEED_ROUND, 0, step)]
         assert (feeder.seq, feeder.skipped, feeder.unheard) == (3, steps - 1, 0)
     finally:
         feeder.close()
