@@ -74,7 +74,8 @@ def test_log_line_rejects_what_is_not_a_message() -> None:
 
 GOOD_BODY = '{"v":1,"system":"s","seq":0,"stamp":0,"skillsets":{}}'
 TYPES = ("CanonicalEvent, CheckReply, CheckRequest, Divergences, Heartbeat, LiveState, ModelBundle, PilotGoalReply, "
-         "PilotGoalRequest, PilotStatus, PredictReply, PredictRequest, StateSpaceReport, UnsafeReport, Verdicts")
+         "PilotGoalRequest, PilotStatus, PredictReply, PredictRequest, ResultFeed, StateSpaceReport, UnsafeReport, "
+         "Verdicts")
 
 
 @pytest.mark.parametrize("line, error", [

@@ -1,4 +1,4 @@
-"""The monitor's results in rounds on ``skinet/<system>/feed`` (:class:`~skinet.wire.messages.ResultFeed`), for
+"""The monitor's results in rounds on ``skinet/<system>/@feed`` (:class:`~skinet.wire.messages.ResultFeed`), for
 views on the robot's own cores (docs/foxglove.md, *The monitor's feed*).
 
 Why: a view subscribed to the monitor's five result keys is one more Zenoh delivery of each of its messages,

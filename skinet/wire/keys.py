@@ -9,7 +9,7 @@ key                                       publisher           payload
 ``skinet/<system>/unsafe``                monitor             :class:`UnsafeReport`
 ``skinet/<system>/state_space``           monitor             :class:`StateSpaceReport`
 ``skinet/<system>/divergences``           monitor             :class:`Divergences`
-``skinet/<system>/feed``                  monitor             :class:`ResultFeed` (the five above, in rounds)
+``skinet/<system>/@feed``                 monitor             :class:`ResultFeed` (the five above, in rounds)
 ``skinet/<system>/predict/<client>``      predictor (query)   :class:`PredictRequest` -> :class:`PredictReply`
 ``skinet/<system>/predict/<client>/<i>``  one predictor ``i`` the same, after empty "working" replies
 ``skinet/<system>/model/<digest>``        monitor (query)     -> :class:`ModelBundle`
@@ -75,7 +75,9 @@ def divergences(system: str) -> str:
 
 
 def feed(system: str) -> str:
-    return f"{ROOT}/{system}/feed"
+    """A verbatim chunk (``@``): ``skinet/<system>/**`` does not match it, so a recorder's wildcard never makes
+    the monitor gather and send rounds; only a subscriber of this very key does."""
+    return f"{ROOT}/{system}/@feed"
 
 
 def predict(system: str, client: str) -> str:

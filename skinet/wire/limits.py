@@ -24,7 +24,7 @@ MAX_PREDICT_REQUEST = 1 << 16
 # pilot's --outcome-timeout.  The models give no skill a duration, so one bound serves all.
 PILOT_OUTCOME_TIMEOUT = 60.0
 
-# The rhythm of the views' rounds and of the monitor's feed (skinet/<system>/feed, docs/foxglove.md): a round
+# The rhythm of the views' rounds and of the monitor's feed (skinet/<system>/@feed, docs/foxglove.md): a round
 # every FEED_ROUND seconds while results come, as a display refreshes; past FEED_STEPS steps in one round (500 a
 # second: a robot makes a few) only the last result of each kind is kept, and while such a flood lasts the
 # rounds come every FEED_FLOOD_ROUND seconds.

@@ -350,7 +350,7 @@ class FedResult(BaseModel):
 
 class ResultFeed(_Message):
     """The monitor's results in rounds, for views on the robot's own cores (docs/foxglove.md): published on
-    ``skinet/<system>/feed`` once per round while results come (every FEED_ROUND s, every FEED_FLOOD_ROUND s while
+    ``skinet/<system>/@feed`` once per round while results come (every FEED_ROUND s, every FEED_FLOOD_ROUND s while
     more than FEED_STEPS steps come in one; skinet/wire/limits.py), only while someone subscribes to it."""
 
     system: str
