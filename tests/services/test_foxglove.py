@@ -261,33 +261,15 @@ def test_a_flood_shows_its_last_step_says_how_many_it_did_not_and_loses_no_viola
     """The paper's unassisted run and two steps more, every result of the monitor in one round (a replay at full
     speed): one state and one step line, the last; one line for the steps not shown; the violation that began and
     ended among them on its channel at its own step (the board behind the view saw every step)."""
-    from services.dashboard.observer import MONITOR_RESULTS
+    from services.dashboard.observer import FED
     from services.foxglove.translate import STEPS_PER_ROUND
-    from services.monitor import start_monitor
-    from skinet.system.load import load_system
     from skinet.wire.codec import decode
-    from skinet.wire.messages import UnsafeReport
-    from tests.bridge_side import BridgeSide
-    from tests.services.test_monitor import AG, PAPER_STEPS, SG, wait_until
+    from skinet.wire.messages import LiveState
+    from tests.services.test_monitor import AG, SG
+    from tests.services.test_monitor_feed import monitor_messages
 
-    system = load_system(SYSTEM_FILE)[0]
-    kinds = {key("spot_arm"): kind for key, kind in MONITOR_RESULTS}
-    published: list[tuple[bytes, type]] = []
-    alone = client_factory()
-    monitor = start_monitor(alone, system, tap=lambda k, p, t=0.0: k in kinds and published.append((p, kinds[k])))
-    side = BridgeSide(alone, "spot_arm", model=system)
-    steps = [(s, t) for s, t, _, _ in PAPER_STEPS] + [("manipulator", "arm_ready.success.ready"),
-                                                       ("manipulator", "arm_RD_to_HP.start")]
-    try:
-        for skillset, transition in steps:
-            side.send(skillset, transition)
-        wait_until(lambda: any(kind is UnsafeReport and decode(p, kind).seq == len(steps) for p, kind in published),
-                   10, "the monitor's report of the last step")
-        taken = list(published)  # not the states the bridge's loss publishes at the end
-    finally:
-        side.close()
-        monitor.close()
-    last = len(steps)
+    taken = [(payload, FED[name]) for name, payload in monitor_messages(client_factory)]
+    last = [decode(payload, kind).seq for payload, kind in taken if kind is LiveState][-1]
     with one_round_view(client_factory) as (observer, view, client):
         with view._cond:
             for payload, kind in taken:
