@@ -48,6 +48,12 @@ class ArgumentParser(argparse.ArgumentParser):
         self._within = True
         try:
             return self.parse_known_intermixed_args(args, namespace)
+        except AttributeError as exc:
+            # Ctrl-C inside Python 3.11's parse_known_intermixed_args breaks its clean-up (``save_nargs`` not
+            # set yet), which raises AttributeError over the KeyboardInterrupt: give the caller the Ctrl-C.
+            if isinstance(exc.__context__, KeyboardInterrupt):
+                raise exc.__context__ from None
+            raise
         finally:
             self._within = False
 

@@ -797,3 +797,16 @@ def test_missing_corpus_skips_only_the_tests_that_read_it_in_one_line(tmp_path: 
                        f"({tmp_path / 'shared' / 'corpus'}), absent here: put the project's shared/ folder beside the "
                        "repository to run these (CI has it)"], r.stdout
     assert r.stdout.splitlines()[-1].startswith("1 passed, 3 skipped in ")
+
+
+def test_ctrl_c_while_the_arguments_are_read_is_an_interruption_not_a_traceback(
+        monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    """Ctrl-C inside Python 3.11's ``parse_known_intermixed_args`` while it formats the usage, before it saved the
+    positionals' ``nargs``, broke its clean-up with an AttributeError over the KeyboardInterrupt: ``skinet goal``
+    printed that traceback and exited 1 (a full run's test_goal.py, once)."""
+    def interrupted(self: argparse.ArgumentParser) -> str:
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(argparse.ArgumentParser, "format_usage", interrupted)
+    assert skinet_main.main(["goal", "spot_arm", "reach spot:Standing"]) == 130
+    assert capsys.readouterr().err == "skinet: interrupted\n"
