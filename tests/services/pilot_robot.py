@@ -107,6 +107,32 @@ class Statuses(Messages[PilotStatus]):
             return out
 
 
+def matched_statuses(observer: zenoh.Session, pilot: Pilot, system: str = "spot_arm") -> Statuses:
+    """A subscriber of ``pilot``'s statuses on ``observer``, once the pilot's publisher knows of it: a client's
+    publisher sends only where the router said a subscriber is, so a status published before is never received
+    (a run beside busy loops on both cores once saw no status at all in 60 s; a full run, the Nav2 rig's first
+    'idle').  Declared again if not matched within 10 s.  Wait for what the pilot was before with
+    :func:`wait_pilot`."""
+    for _ in range(3):
+        statuses = Statuses(observer, system)
+        deadline = time.monotonic() + 10.0
+        while time.monotonic() < deadline:
+            if pilot._pub.matching_status.matching:
+                return statuses
+            time.sleep(0.05)
+        statuses._sub.undeclare()
+    pytest.fail("the pilot's status publisher never matched the test's subscriber (3 tries of 10 s)")
+
+
+def wait_pilot(pilot: Pilot, state: str, timeout: float = 30.0) -> None:
+    """Until ``pilot``'s own last status is ``state``."""
+    deadline = time.monotonic() + timeout
+    while pilot.status.state != state:
+        if time.monotonic() > deadline:
+            pytest.fail(f"the pilot is {pilot.status.state} ({pilot.status.reason}), not {state}")
+        time.sleep(0.01)
+
+
 def ask_goal(session: zenoh.Session, request: PilotGoalRequest | bytes | None, client: str = "operator1",
              system: str = "spot_arm") -> PilotGoalReply:
     """One goal request on the pilot's queryable, as ``client``."""
@@ -144,26 +170,10 @@ class Robot:
             self.wait_pilot("idle")
 
     def _statuses(self) -> Statuses:
-        """The test's subscriber of the pilot's statuses, once the pilot's publisher knows of one: a client's
-        publisher sends only where the router said a subscriber is, and a run beside busy loops on both cores
-        once saw no status at all in 60 s.  Declared again if not matched within 10 s."""
-        for _ in range(3):
-            statuses = Statuses(self.observer)
-            deadline = time.monotonic() + 10.0
-            while time.monotonic() < deadline:
-                if self.pilot._pub.matching_status.matching:
-                    return statuses
-                time.sleep(0.05)
-            statuses._sub.undeclare()
-        pytest.fail("the pilot's status publisher never matched the test's subscriber (3 tries of 10 s)")
+        return matched_statuses(self.observer, self.pilot)
 
     def wait_pilot(self, state: str, timeout: float = 30.0) -> None:
-        """Until the pilot's own last status is ``state``."""
-        deadline = time.monotonic() + timeout
-        while self.pilot.status.state != state:
-            if time.monotonic() > deadline:
-                pytest.fail(f"the pilot is {self.pilot.status.state} ({self.pilot.status.reason}), not {state}")
-            time.sleep(0.01)
+        wait_pilot(self.pilot, state, timeout)
 
     def wait_pilot_step(self, timeout: float = 30.0) -> None:
         """Until the pilot's own status is about the monitor's last step: a goal asked before may be planned from

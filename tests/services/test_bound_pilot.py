@@ -36,7 +36,7 @@ from skinet.ros.keys import KeyStyle
 from skinet_cli.main import main
 from tests.services.conftest import wait_queryable
 from tests.services.test_monitor import wait_until
-from tests.services.pilot_robot import Recording, Statuses, ask_goal, goal
+from tests.services.pilot_robot import Recording, Statuses, ask_goal, goal, matched_statuses, wait_pilot
 
 NAV2 = Path(__file__).resolve().parents[2] / "examples" / "nav2"
 FIRST = {"/battery_state": {"percentage": 0.15, "power_supply_status": 2}, "/emergency_stop": {"data": False}}
@@ -63,7 +63,8 @@ class Nav2:
             self.pilot = start_pilot(pilot_session, self.system, instance="p1", actuator=self.actuator,
                                      response_timeout=response_timeout)
         self.observer = sessions()
-        self.statuses = Statuses(self.observer, "nav2")
+        self.statuses = Statuses(self.observer, "nav2") if self.pilot is None else matched_statuses(
+            self.observer, self.pilot, "nav2")
         self.events = Events(self.observer, "nav2")
         self.robot.publish_topics(FIRST)
 
@@ -87,7 +88,7 @@ class Nav2:
 def nav2(client_factory: Callable[[], zenoh.Session], request: pytest.FixtureRequest) -> Iterator[Nav2]:
     style, end_goals = getattr(request, "param", (KeyStyle(), True))
     rig = Nav2(client_factory, style, end_goals)
-    rig.statuses.state("idle")
+    wait_pilot(rig.pilot, "idle")
     yield rig
     rig.close()
 
@@ -195,7 +196,7 @@ def test_an_action_server_that_accepts_and_then_says_nothing_fails_the_goal(
     """A stuck server: it accepts the goal, and no status ever shows it.  The goal fails naming that server."""
     rig = Nav2(client_factory, KeyStyle(), response_timeout=1.0)
     try:
-        rig.statuses.state("idle")
+        wait_pilot(rig.pilot, "idle")
         rig.robot.actions[("nav2", "undock_robot")].close()  # its queryables go; a stuck one takes its place
         stuck = ActionLogic(rig.bindings["nav2"].store, rig.bindings["nav2"].skill("undock_robot").type)
         server = client_factory().declare_queryable(
