@@ -52,9 +52,7 @@ MONITOR_RESULTS: tuple[tuple[Callable[[str], str], type[BaseModel]], ...] = (
     (keys.unsafe, UnsafeReport), (keys.state_space, StateSpaceReport),
 )
 RESULTS = (*MONITOR_RESULTS, (keys.pilot_status, PilotStatus))
-FED: dict[str, type[BaseModel]] = {  # a ResultFeed's kinds
-    "divergences": Divergences, "state": LiveState, "verdicts": Verdicts, "unsafe": UnsafeReport,
-    "state_space": StateSpaceReport}
+FED: dict[str, type[BaseModel]] = {key.__name__: kind for key, kind in MONITOR_RESULTS}  # a ResultFeed's kinds
 FOLLOW_UP = 0.5  # seconds after a monitor appeared that its last publications are asked again
 QUERY_TIMEOUT = 2.0
 

@@ -125,7 +125,7 @@ class Feeder:
 
     def _publish(self, results: list[tuple[str, bytes]], skipped: int, length: float) -> None:
         """One round as a :class:`~skinet.wire.messages.ResultFeed`, when someone subscribes to the feed."""
-        if not self._pub.matching_status.matching:
+        if not self.heard:
             self.unheard += 1
             return
         self.seq += 1

@@ -164,13 +164,10 @@ class Robot:
         self.pilot: Pilot = start_pilot(pilot_session, pilot_system or system, instance="p1",
                                         actuator=pilot.pop("actuator", self.actuator), typemap=typemap, **pilot)
         self.observer = sessions()
-        self.statuses = self._statuses()
+        self.statuses = matched_statuses(self.observer, self.pilot)
         if monitor:
             self.wait_synced()
             self.wait_pilot("idle")
-
-    def _statuses(self) -> Statuses:
-        return matched_statuses(self.observer, self.pilot)
 
     def wait_pilot(self, state: str, timeout: float = 30.0) -> None:
         wait_pilot(self.pilot, state, timeout)
