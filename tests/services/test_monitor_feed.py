@@ -16,7 +16,7 @@ from services.monitor import start_monitor
 from services.monitor.feed import Feeder
 from skinet.system.load import load_system
 from skinet.wire import keys
-from skinet.wire.codec import decode, validate
+from skinet.wire.codec import decode, encode, validate
 from skinet.wire.limits import FEED_FLOOD_ROUND, FEED_ROUND
 from skinet.wire.messages import Divergences, ResultFeed
 from tests.bridge_side import BridgeSide
@@ -157,6 +157,13 @@ def test_an_observer_of_the_feed_asks_the_monitor_again_when_a_round_is_lost(
         side.send(*PAPER_STEPS[2][:2])  # the next round follows the last: no gap from there
         wait_until(lambda: observer.read(lambda b: b.unsafe.seq) == 3, 10, "step 3 fed")
         assert (observer.feed_gaps, observer.malformed) == (1, 0)
+        # Bad rounds are counted and dropped: not msgpack, another system's (its seq no gap of this one's).
+        bad = client_factory().declare_publisher(keys.feed("spot_arm"))
+        wait_until(lambda: bad.matching_status.matching, 10, "the observer's subscriber, from the test")
+        bad.put(b"\xc1")
+        bad.put(encode(ResultFeed(system="other", monitor=monitor.instance_id, seq=1000, round=FEED_ROUND)))
+        wait_until(lambda: observer.malformed == 2, 10, "two bad rounds counted")
+        assert observer.feed_gaps == 1 and observer.read(lambda b: b.unsafe.seq) == 3
     finally:
         observer.close()
         side.close()
