@@ -214,8 +214,9 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
         if getattr(args, "foxglove", None) is not None:  # a port in use stops the run too
             foxglove = spawn_foxglove(args, mode, listening, system.name)
             print(f"foxglove on {foxglove.url}", file=sys.stderr, flush=True)
+        limit = memory_limit(args)  # the whole process's: the predictor's and the pilot's
         predictor = start_predictor(session, f"embedded-{os.getpid()}",  # before the monitor: it asks at once
-                                    memory_limit=memory_limit(args), rate_limit=args.rate_limit)
+                                    memory_limit=limit, rate_limit=args.rate_limit)
         from services.monitor.incidents import start_incidents
 
         incidents = start_incidents(session, system, args)
@@ -229,7 +230,7 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
 
             pilot = start_pilot(session, system, instance=f"embedded-{os.getpid()}", client=client_name(config),
                                 typemap=load_typemap(args.system), style=key_style(args),
-                                outcome_timeout=args.outcome_timeout)
+                                outcome_timeout=args.outcome_timeout, memory_limit=limit)
         if simulate:
             from chains.simulated import start_simulated_robot
 

@@ -56,7 +56,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     add_policy_arg(c)
     add_lost_after_arg(c)
     add_rate_args(c)
-    add_memory_arg(c)
+    add_memory_arg(c, "; the embedded pilot's plans are then unknown, and a goal is rejected with why")
     ros = c.add_argument_group("the robot's ROS 2 keys (the pilot's commands, the printed bridge command)")
     add_ros_key_args(ros)
     _zenoh_args(c, "endpoint on which a bridge, watch, dashboard or check in another process can connect "

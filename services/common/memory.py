@@ -8,10 +8,10 @@ from skinet.system.load import load_memory_limit, parse_size
 from skinet.verify.explore import DEFAULT_MEMORY_LIMIT
 
 
-def add_memory_arg(c: argparse.ArgumentParser) -> None:
+def add_memory_arg(c: argparse.ArgumentParser, also: str = "") -> None:
     c.add_argument("--memory-limit", type=memory_size, metavar="SIZE",
                    help="peak memory of the whole process, e.g. 512MiB (default: the system file's "
-                        "[system] memory_limit, else 1GiB); beyond it the answer is truncated, never refused")
+                        f"[system] memory_limit, else 1GiB); beyond it the answer is truncated, never refused{also}")
 
 
 def memory_size(text: str) -> int:

@@ -73,6 +73,7 @@ from skinet.plan import Command, Goal, Plan, Planner, Reached, parse_goal, parse
 from skinet.plan.goalfile import count_goals
 from skinet.ros.keys import KeyStyle
 from skinet.system.model import System
+from skinet.verify.explore import DEFAULT_MEMORY_LIMIT
 from skinet.wire import keys
 from skinet.wire.codec import DecodeError, decode, encode
 from skinet.wire.limits import MAX_BUDGET
@@ -175,7 +176,8 @@ class Pilot:
     def __init__(self, session: zenoh.Session, system: System, *, instance: str | None = None,
                  actuator: Actuator | None = None, response_timeout: float = 5.0, budget: float = 1.0,
                  client: str | None = None, typemap: Mapping[str, str] | None = None, style: KeyStyle = KeyStyle(),
-                 outcome_timeout: float = OUTCOME_TIMEOUT, interrupt_wait: float = INTERRUPT_WAIT):
+                 outcome_timeout: float = OUTCOME_TIMEOUT, interrupt_wait: float = INTERRUPT_WAIT,
+                 memory_limit: int | None = DEFAULT_MEMORY_LIMIT):
         self.session, self.system = session, system
         self.outcome_timeout, self.interrupt_wait = outcome_timeout, interrupt_wait
         self.name = keys.check_chunk(system.name, "system name")
@@ -183,11 +185,13 @@ class Pilot:
         self.client = keys.check_chunk(client or keys.LOCAL_CLIENT, "client name")
         if not 0 < budget <= MAX_BUDGET:  # a NaN fails too
             raise ValueError(f"planning budget {budget:g} s is not from 0 to {MAX_BUDGET:g} s (one day)")
+        if memory_limit is not None and memory_limit <= 0:
+            raise ValueError(f"memory limit {memory_limit} bytes is not positive")
         self.response_timeout, self.budget = response_timeout, budget
         self.typemap = dict(typemap or {})
         self.actuator: Actuator = actuator if actuator is not None else default_actuator(
             session, system, typemap, style, instance=f"pilot-{self.instance}")
-        self.planner = Planner(system)
+        self.planner = Planner(system, memory_limit=memory_limit)
         self._names = {name: {t.name for t in net.transitions} for name, net in system.nets.items()}
         self._lock = threading.Lock()
         self._wake = threading.Event()
@@ -1100,7 +1104,7 @@ def start_pilot(session: zenoh.Session, system: System, instance: str | None = N
                 actuator: Actuator | None = None, response_timeout: float = 5.0, budget: float = 1.0,
                 client: str | None = None, typemap: Mapping[str, str] | None = None,
                 style: KeyStyle = KeyStyle(), outcome_timeout: float = OUTCOME_TIMEOUT,
-                interrupt_wait: float = INTERRUPT_WAIT) -> Pilot:
+                interrupt_wait: float = INTERRUPT_WAIT, memory_limit: int | None = DEFAULT_MEMORY_LIMIT) -> Pilot:
     """Start a pilot of ``system`` on ``session`` (which may be shared, docs/semantics.md §7).
 
     ``instance``: its id in the liveliness token and the status (default: random);
@@ -1111,8 +1115,10 @@ def start_pilot(session: zenoh.Session, system: System, instance: str | None = N
     router login, the client chunk of its check queries (default ``local``); ``outcome_timeout``: seconds a
     skill it started may run without an outcome before its manager is asked for its status (and again
     after as many seconds); ``interrupt_wait``: seconds after a cancel with interrupt within which an interrupt
-    may be sent (one that could not be, the monitor not vouching for its skillset say, is given up and said).
+    may be sent (one that could not be, the monitor not vouching for its skillset say, is given up and said);
+    ``memory_limit``: bytes of the whole process's resident memory past which a plan stops, ``unknown`` (None: no
+    limit; a process that hosts other services counts their memory too: give it theirs, as ``skinet run`` does).
     """
     return Pilot(session, system, instance=instance, actuator=actuator, response_timeout=response_timeout,
                  budget=budget, client=client, typemap=typemap, style=style, outcome_timeout=outcome_timeout,
-                 interrupt_wait=interrupt_wait)
+                 interrupt_wait=interrupt_wait, memory_limit=memory_limit)

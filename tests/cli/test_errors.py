@@ -522,6 +522,8 @@ def _cases() -> list[Case]:
           "argument --response-timeout: " + seconds.format("-1"))
     usage(pilot, "--outcome-timeout", (SYSTEM, "--outcome-timeout", "inf"),
           "argument --outcome-timeout: " + seconds.format("inf"))
+    usage(pilot, "--memory-limit", (SYSTEM, "--memory-limit", "0MiB"),
+          "argument --memory-limit: not a size: '0MiB' (e.g. 1GiB, 512MiB, 2GB)")
     usage(mon, "--id", (SYSTEM, "--id", "a b"), f"argument --id: instance id 'a b' {not_a_key}")
     usage(mon, "--budget", (SYSTEM, "--budget", "-1"), "argument --budget: " + budget.format("-1"))
     usage(mon, "--budget", (SYSTEM, "--budget", "0.049"), "argument --budget: " + budget.format("0.049"))

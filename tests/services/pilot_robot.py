@@ -34,6 +34,7 @@ from skinet.wire.messages import PilotCommand, PilotGoalReply, PilotGoalRequest,
 from tests.event_watch import Messages
 
 WALK = {"go_to_waypoint": {"target": {"x": 12.0, "y": 3.5, "z": 0.0}}}
+LAST_REPLY: list[PilotGoalReply] = []  # the last reply ask_goal received in this process, for a timeout's diagnosis
 
 
 class Recording:
@@ -80,9 +81,11 @@ class Statuses(Messages[PilotStatus]):
             items = super().wait(lambda items: any(predicate(s) for s in items), timeout)
         except AssertionError:
             last = self.items[-1] if self.items else None
+            reply = LAST_REPLY[0] if LAST_REPLY else None
             pytest.fail(f"no pilot status {what} within {timeout} s; {len(self.items)} received, last: "
                         f"{None if last is None else (last.state, last.reason, last.next)}; the pilot's "
-                        f"queryable answers {self._asked()}")
+                        f"queryable answers {self._asked()}; the last goal reply: "
+                        f"{None if reply is None else (reply.accepted, reply.goal_id, reply.reason)}")
         return next(s for s in items if predicate(s))
 
     def _asked(self) -> object:
@@ -139,7 +142,8 @@ def ask_goal(session: zenoh.Session, request: PilotGoalRequest | bytes | None, c
     payload = request if isinstance(request, (bytes, type(None))) else encode(request)
     replies = list(session.get(keys.pilot_goal(system, client), payload=payload, timeout=10.0))
     assert len(replies) == 1 and replies[0].ok is not None, replies
-    return decode(replies[0].ok.payload.to_bytes(), PilotGoalReply)
+    LAST_REPLY[:] = [decode(replies[0].ok.payload.to_bytes(), PilotGoalReply)]
+    return LAST_REPLY[0]
 
 
 def goal(*goals: str, **fields: Any) -> PilotGoalRequest:
@@ -161,6 +165,9 @@ class Robot:
             self.start_monitor()
         pilot_session = sessions()
         self.actuator = Recording(default_actuator(pilot_session, system, typemap, style, instance="p1"))
+        # The planner's memory limit is the whole process's: here that is a test worker holding every test before
+        # (a full run's worker went past 1 GiB, and the pilot answered a goal 'unknown' on memory).
+        pilot.setdefault("memory_limit", None)
         self.pilot: Pilot = start_pilot(pilot_session, pilot_system or system, instance="p1",
                                         actuator=pilot.pop("actuator", self.actuator), typemap=typemap, **pilot)
         self.observer = sessions()

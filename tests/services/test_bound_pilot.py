@@ -61,7 +61,7 @@ class Nav2:
             pilot_session = sessions()
             self.actuator = Recording(default_actuator(pilot_session, self.system, style=style))  # type: ignore[arg-type]
             self.pilot = start_pilot(pilot_session, self.system, instance="p1", actuator=self.actuator,
-                                     response_timeout=response_timeout)
+                                     response_timeout=response_timeout, memory_limit=None)  # see pilot_robot.Robot
         self.observer = sessions()
         self.statuses = Statuses(self.observer, "nav2") if self.pilot is None else matched_statuses(
             self.observer, self.pilot, "nav2")

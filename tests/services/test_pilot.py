@@ -46,7 +46,6 @@ def drive_until_running(robot: Robot, skill: str) -> PilotGoalReply:
 
 
 def test_drive_reaches_a_mission_with_exactly_the_planned_commands(robot: Robot) -> None:
-    system = robot.system
     impl = World(robot.sim)
     try:
         reply = ask_goal(robot.observer, goal("reach manipulator:RD", "run spot:go_to_waypoint", inputs=WALK,
@@ -456,6 +455,7 @@ def test_a_command_the_check_denies_is_a_defect_never_sent(client_factory, spot_
         gui.start("manipulator", "arm_ready")
         robot.statuses.first(lambda s: s.state == "idle" and s.state_seq == 2, what="the arm ready")
         reply = ask_goal(robot.observer, goal("run spot:go_to_waypoint", inputs=WALK, mode="drive"))
+        assert reply.accepted, reply.reason
         paused = robot.statuses.first(lambda s: s.denied == 1, what="a denied command")
         assert (paused.state, paused.next.transition) == ("paused", "go_to_waypoint.start")
         assert paused.reason.startswith(f"the check answered deny for spot:go_to_waypoint.start at step "
@@ -517,6 +517,23 @@ def test_a_planning_budget_past_one_day_is_refused(budget: float) -> None:
     with pytest.raises(ValueError) as info:
         Pilot(None, system, budget=budget)  # type: ignore[arg-type]
     assert str(info.value) == f"planning budget {budget:g} s is not from 0 to 86400 s (one day)"
+
+
+def test_past_its_memory_limit_the_pilot_answers_unknown_and_takes_no_goal(robots) -> None:
+    """The limit is the whole process's resident memory (a pilot inside ``skinet run`` gets the run's
+    ``--memory-limit``): past it no plan is promised, and the goal is refused with why, never followed."""
+    robot = robots(memory_limit=1 << 20)  # any process is past 1 MiB
+    reply = ask_goal(robot.observer, goal("reach spot:Standing", mode="drive"))
+    assert (reply.accepted, reply.goal_id) == (False, 0)
+    assert reply.reason == ("goal 'reach spot:Standing' has no plan from the live state: unknown: the memory limit "
+                            "(1 MiB, the whole process) was reached before the fixpoints ended (0 markings, "
+                            "exploration cut by the memory)"), reply.reason
+    assert (robot.pilot.status.state, robot.actuator.sent) == ("idle", [])
+    from services.pilot.service import Pilot
+
+    with pytest.raises(ValueError) as info:
+        Pilot(None, robot.system, memory_limit=0)  # type: ignore[arg-type]
+    assert str(info.value) == "memory limit 0 bytes is not positive"
 
 
 def test_a_huge_mission_is_refused_by_its_goal_count_and_a_cancel_right_after_is_answered(robot: Robot) -> None:

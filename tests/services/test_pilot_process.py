@@ -124,3 +124,14 @@ def test_skinet_run_simulate_docks_the_nav2_robot_through_its_binding() -> None:
             "rate 0, seed 0)") in lines, lines
     assert done.returncode == 0, done.stdout + done.stderr
     assert done.stdout.splitlines()[-1] == "reached \u2014 2 commands sent", done.stdout
+
+
+def test_skinet_runs_memory_limit_is_its_pilots() -> None:
+    """The pilot that ``skinet run`` embeds plans within the run's ``--memory-limit`` (the whole process's, as the
+    predictor's): past it the goal is refused with why, never followed.  Before, it kept its own 1 GiB."""
+    _, done = simulate_and_drive(["skillsets/spot_arm.toml", "--memory-limit", "1MiB"], "spot_arm",
+                                 ["reach spot:Standing"])
+    assert (done.returncode, done.stdout) == (2, ""), done.stdout + done.stderr
+    assert done.stderr == ("goal rejected by the pilot: goal 'reach spot:Standing' has no plan from the live state: "
+                           "unknown: the memory limit (1 MiB, the whole process) was reached before the fixpoints "
+                           "ended (0 markings, exploration cut by the memory)\n")
