@@ -214,7 +214,7 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
         if getattr(args, "foxglove", None) is not None:  # a port in use stops the run too
             foxglove = spawn_foxglove(args, mode, listening, system.name)
             print(f"foxglove on {foxglove.url}", file=sys.stderr, flush=True)
-        limit = memory_limit(args)  # the whole process's: the predictor's and the pilot's
+        limit = memory_limit(args)  # the predictor's workers share it; the pilot's is this whole process's
         predictor = start_predictor(session, f"embedded-{os.getpid()}",  # before the monitor: it asks at once
                                     memory_limit=limit, rate_limit=args.rate_limit)
         from services.monitor.incidents import start_incidents

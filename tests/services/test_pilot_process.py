@@ -127,8 +127,8 @@ def test_skinet_run_simulate_docks_the_nav2_robot_through_its_binding() -> None:
 
 
 def test_skinet_runs_memory_limit_is_its_pilots() -> None:
-    """The pilot that ``skinet run`` embeds plans within the run's ``--memory-limit`` (the whole process's, as the
-    predictor's): past it the goal is refused with why, never followed.  Before, it kept its own 1 GiB."""
+    """The pilot that ``skinet run`` embeds plans within the run's ``--memory-limit`` (the run's whole process):
+    past it the goal is refused with why, never followed.  Before, it kept its own 1 GiB."""
     _, done = simulate_and_drive(["skillsets/spot_arm.toml", "--memory-limit", "1MiB"], "spot_arm",
                                  ["reach spot:Standing"])
     assert (done.returncode, done.stdout) == (2, ""), done.stdout + done.stderr
