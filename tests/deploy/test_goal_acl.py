@@ -32,7 +32,7 @@ def deployment() -> Iterator[tuple[str, object]]:
     router = zenoh.open(acl_router_config(endpoint))
     session, reader = login(endpoint, "pilot"), login(endpoint, "observer")
     pilot = start_pilot(session, load_system(SYSTEM_FILE)[0], instance="p1", client="pilot",
-                        typemap=load_typemap(SYSTEM_FILE), memory_limit=None)  # a test worker's memory is not its
+                        typemap=load_typemap(SYSTEM_FILE), memory_limit=None)  # see tests/services/pilot_robot.py
     tokens = Tokens(reader)
     try:
         wait_until(lambda: bool(tokens.of("pilot")), 10, "the pilot's liveliness token")

@@ -175,7 +175,7 @@ def test_only_the_pilot_login_answers_goals_and_only_operators_ask(acl_router: s
         time.sleep(0.3)
         assert ask("operator", goal) == []  # no impostor answers
         pilot = start_pilot(servers["pilot"], system, instance="p1", client="pilot",
-                            typemap=load_typemap(SYSTEM_FILE), memory_limit=None)  # a test worker's memory is not its
+                            typemap=load_typemap(SYSTEM_FILE), memory_limit=None)  # see tests/services/pilot_robot.py
         try:
             wait_until(lambda: _replies(sessions["reader"], keys.pilot_status(SYSTEM)) != [], 5, "the pilot's status")
             for user in ("observer", "reader", "robot", "bridge", "monitor", "pilot"):
