@@ -10,7 +10,7 @@ from services.common.ratelimit import add_rate_args
 from services.common.zenoh_config import add_login_args
 from services.monitor.check import add_policy_arg
 from services.monitor.sync import add_lost_after_arg
-from services.common.memory import add_memory_arg
+from services.common.memory import TRUNCATED, add_memory_arg
 from services.common.options import (
     add_no_properties_arg, add_outcome_timeout_arg, add_self_ending_args, budget, count, seconds,
 )
@@ -56,7 +56,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     add_policy_arg(c)
     add_lost_after_arg(c)
     add_rate_args(c)
-    add_memory_arg(c, "; the embedded pilot's plans are then unknown, and a goal is rejected with why")
+    add_memory_arg(c, f"{TRUNCATED}; the embedded pilot's plans are then unknown, and a goal is rejected with why")
     ros = c.add_argument_group("the robot's ROS 2 keys (the pilot's commands, the printed bridge command)")
     add_ros_key_args(ros)
     _zenoh_args(c, "endpoint on which a bridge, watch, dashboard or check in another process can connect "

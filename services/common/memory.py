@@ -1,4 +1,5 @@
-"""The ``--memory-limit`` option shared by ``skinet explore/unsafe/ctl/run`` (docs/semantics.md §6.1)."""
+"""The ``--memory-limit`` option shared by ``skinet explore/unsafe/ctl/plan/run`` and the pilot (docs/semantics.md
+§6.1)."""
 
 from __future__ import annotations
 
@@ -8,10 +9,14 @@ from skinet.system.load import load_memory_limit, parse_size
 from skinet.verify.explore import DEFAULT_MEMORY_LIMIT
 
 
-def add_memory_arg(c: argparse.ArgumentParser, also: str = "") -> None:
+TRUNCATED = "beyond it the answer is truncated, never refused"
+
+
+def add_memory_arg(c: argparse.ArgumentParser, beyond: str = TRUNCATED) -> None:
+    """``--memory-limit``; ``beyond`` says what the command does past it."""
     c.add_argument("--memory-limit", type=memory_size, metavar="SIZE",
                    help="peak memory of the whole process, e.g. 512MiB (default: the system file's "
-                        f"[system] memory_limit, else 1GiB); beyond it the answer is truncated, never refused{also}")
+                        f"[system] memory_limit, else 1GiB); {beyond}")
 
 
 def memory_size(text: str) -> int:

@@ -9,7 +9,7 @@ from collections.abc import Sequence
 from services.common.cli import (
     add_instance_arg, add_log_arg, add_ros_key_args, key_style, one_line_errors, setup_logging,
 )
-from services.common.memory import memory_limit, memory_size
+from services.common.memory import add_memory_arg, memory_limit
 from services.common.zenoh_config import add_zenoh_args, client_name, config_from_args, open_session
 from services.common.cli import stop_on_signals
 from services.pilot.service import start_pilot
@@ -33,9 +33,7 @@ def build_parser() -> ArgumentParser:
     add_instance_arg(p)
     p.add_argument("--budget", type=budget(), default=1.0,
                    help="planning budget per goal, seconds (default: 1); past it the plan is unknown and the goal fails")
-    p.add_argument("--memory-limit", type=memory_size, metavar="SIZE",
-                   help="resident memory of the process past which a plan stops, e.g. 512MiB (default: the system "
-                        "file's [system] memory_limit, else 1GiB); past it the plan is unknown and the goal fails")
+    add_memory_arg(p, "past it the plan is unknown and the goal fails")
     p.add_argument("--response-timeout", type=seconds(), default=5.0,
                    help="seconds a manager has to react to a command before the goal fails (default: 5)")
     add_outcome_timeout_arg(p)
